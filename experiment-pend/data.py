@@ -1,0 +1,34 @@
+"""Task 2, the ideal pendulum: H(q, p) = 3(1 - cos q) + p^2.
+
+Dynamics dq/dt = 2p, dp/dt = -3 sin q. The paper writes 2mgl(1 - cos q) + l^2 p^2 / (2m) with
+m = l = 1, g = 3; the published numbers come from the code's H, kept here.
+"""
+import torch
+
+from hnn.datasets import ring_dataset
+
+RADIUS_RANGE = (1.3, 2.3)   # phase-space radius of the start states (the paper calls it an energy range)
+T_SPAN = (0.0, 3.0)
+TIMESCALE = 15              # points per time unit: 45 points on [0, 3]
+NOISE_STD = 0.1
+
+
+def hamiltonian(x):
+    """H of states ``x = [q, p]``, a tensor of shape ``(batch, 2)``; returns ``(batch,)``."""
+    q, p = x[..., 0], x[..., 1]
+    return 3 * (1 - torch.cos(q)) + p ** 2
+
+
+def dynamics(x: torch.Tensor) -> torch.Tensor:
+    """Hamilton's equations, ``(batch, 2) -> (batch, 2)``: (dH/dp, -dH/dq) = (2p, -3 sin q)."""
+    q, p = x[..., 0], x[..., 1]
+    return torch.stack([2 * p, -3 * torch.sin(q)], dim=-1)
+
+
+def get_dataset(seed: int = 0, samples: int = 50, test_split: float = 0.5, noise_std: float = NOISE_STD) -> dict:
+    """``samples`` noisy trajectories of 45 points on [0, 3]; the first half train, the rest test.
+
+    Returns float32 ``x``, ``dxdt``, ``test_x``, ``test_dxdt``, each (1125, 2) by default, plus
+    the grid step ``dt`` and ``t_eval``.
+    """
+    return ring_dataset(dynamics, seed, samples, T_SPAN, TIMESCALE, RADIUS_RANGE, noise_std, test_split)

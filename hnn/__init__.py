@@ -1,0 +1,26 @@
+"""Hamiltonian Neural Networks (Greydanus, Dzamba & Yosinski, 2019): models, integrators,
+the training loop, the paper's metrics, and saved runs.
+
+    import hnn
+    model = hnn.HNN(2, hnn.MLP(2, 200, 2))
+    stats = hnn.train(model, x, dxdt)
+    traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
+"""
+from .integrate import DivergenceError, rk4_step, rollout
+from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
+from .models import HNN, MLP, build_model, get_nonlinearity, permutation_tensor
+from .runs import load_run, run_dir, run_experiment, save_run
+from .tasks import available_tasks, load_task
+from .training import train
+from . import cli
+from .evaluation import PROTOCOLS, EnergyProtocol, evaluate_energy, get_protocol
+
+__all__ = [
+    "HNN", "MLP", "build_model", "get_nonlinearity", "permutation_tensor",
+    "rollout", "rk4_step", "DivergenceError",
+    "train",
+    "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
+    "run_experiment", "run_dir", "save_run", "load_run",
+    "load_task", "available_tasks",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "cli",
+]

@@ -1,0 +1,118 @@
+"""A run: train one model from parsed flags, and save / load it.
+
+A run folder ``<save_dir>/<name>-<label>-seed<seed>/`` holds ``model.tar`` (state dict and
+args; loads with ``weights_only=True``), ``args.json`` and ``metrics.json``, each written
+atomically (a crash never leaves a half-written file behind).
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .integrate import rk4_step
+from .metrics import derivative_loss
+from .models import build_model
+from .training import train
+
+_DTYPES = {"float32": torch.float32, "float64": torch.float64}
+
+
+def atomic_write(path, write) -> None:
+    """Call ``write(tmp_path)`` then rename onto ``path``, so readers never see a partial file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_json(path, obj) -> None:
+    """``obj`` as indented JSON at ``path``, atomically."""
+    atomic_write(path, lambda tmp: Path(tmp).write_text(json.dumps(obj, indent=2) + "\n"))
+
+
+def run_label(args) -> str:
+    return ("baseline" if args.baseline else "hnn") + ("-rk4" if getattr(args, "use_rk4", False) else "")
+
+
+def run_dir(args) -> Path:
+    """Where the run for these args lives: ``<save_dir>/<name>-<label>-seed<seed>``."""
+    return Path(args.save_dir) / f"{args.name}-{run_label(args)}-seed{args.seed}"
+
+
+def model_from_args(args: dict) -> torch.nn.Module:
+    """The untrained model that a run with these args trains."""
+    model = build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"], args["baseline"],
+                        args["field_type"])
+    return model.to(dtype=_DTYPES[args.get("dtype", "float32")])
+
+
+def run_experiment(args, dataset: dict) -> Path:
+    """Train the model that ``args`` describe on ``dataset`` and save the run; returns its folder.
+
+    ``dataset`` holds ``x``, ``dxdt``, ``test_x``, ``test_dxdt`` (``(rows, input_dim)`` arrays)
+    and, for ``--use_rk4``, ``dt`` (the time step of its trajectories).
+    """
+    for key in ("x", "dxdt", "test_x", "test_dxdt"):
+        if key not in dataset:
+            raise KeyError(f"dataset lacks {key!r}; a task's get_dataset must return x, dxdt, test_x, test_dxdt")
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    model = model_from_args(vars(args)).to(args.device)
+    predict = None
+    if args.use_rk4:
+        if "dt" not in dataset:
+            raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")
+        dt = float(dataset["dt"])
+        predict = lambda x: rk4_step(model.time_derivative, x, dt) / dt  # noqa: E731
+    stats = train(model, dataset["x"], dataset["dxdt"], dataset["test_x"], dataset["test_dxdt"],
+                  total_steps=args.total_steps, learn_rate=args.learn_rate, weight_decay=args.weight_decay,
+                  batch_size=args.batch_size, seed=args.seed, print_every=args.print_every,
+                  verbose=args.verbose, predict=predict)
+    train_loss = derivative_loss(model, dataset["x"], dataset["dxdt"])
+    test_loss = derivative_loss(model, dataset["test_x"], dataset["test_dxdt"])
+    if args.verbose:
+        print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
+              f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
+    metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
+               "test_loss": test_loss[0], "test_loss_se": test_loss[1],
+               "train_seconds": stats["seconds"], "history": stats}
+    return save_run(run_dir(args), model, vars(args), metrics)
+
+
+def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Path:
+    """Write ``model.tar``, ``args.json`` and ``metrics.json`` into ``directory`` atomically."""
+    directory = Path(directory)
+    args = {k: v for k, v in args.items()}
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    atomic_write(directory / "model.tar", lambda tmp: torch.save({"state_dict": state, "args": args}, tmp))
+    write_json(directory / "args.json", args)
+    write_json(directory / "metrics.json", metrics)
+    return directory
+
+
+def load_run(directory) -> tuple[torch.nn.Module, dict, dict]:
+    """``(model in eval mode, args, metrics)`` of a saved run."""
+    directory = Path(directory)
+    ckpt = directory / "model.tar"
+    if not ckpt.exists():
+        raise FileNotFoundError(f"no checkpoint at {ckpt}; train it first (see the task's train.py)")
+    try:
+        blob = torch.load(ckpt, map_location="cpu", weights_only=True)
+    except Exception as err:
+        raise RuntimeError(f"checkpoint {ckpt} is unreadable ({err}); delete the run folder and retrain") from err
+    model = model_from_args(blob["args"])
+    model.load_state_dict(blob["state_dict"])
+    metrics_path = directory / "metrics.json"
+    metrics = json.loads(metrics_path.read_text()) if metrics_path.exists() else {}
+    return model.eval(), blob["args"], metrics

@@ -1,0 +1,109 @@
+"""The one training loop every task uses: Adam on the L2 loss of dx/dt."""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Callable
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+
+def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
+    """``a`` as a ``(rows, width)`` tensor, or a ValueError that names the problem and the fix."""
+    t = torch.as_tensor(np.asarray(a) if not torch.is_tensor(a) else a).detach()
+    if t.dim() != 2:
+        raise ValueError(f"{name} must have shape (rows, dim), got {tuple(t.shape)}")
+    if width is not None and t.shape[1] != width:
+        raise ValueError(f"{name} has {t.shape[1]} columns but the model expects input_dim={width}; "
+                         "check --input_dim against the dataset")
+    if not torch.is_floating_point(t):
+        t = t.to(dtype)
+    bad = ~torch.isfinite(t)
+    if bad.any():
+        rows = torch.nonzero(bad.any(dim=1)).flatten()
+        raise ValueError(f"{name} has {int(bad.sum())} NaN/inf values (first in row {int(rows[0])}, "
+                         f"{len(rows)} rows affected); clean or drop those rows before training")
+    return t.to(dtype=dtype, device=device)
+
+
+def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
+          weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
+          verbose: bool = False, test_every: int | None = None, predict: Callable | None = None,
+          progress: bool | None = None) -> dict:
+    """Fit ``model.time_derivative`` to ``dxdt`` with Adam; returns the stats.
+
+    Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
+    is None, else a fresh random minibatch (without replacement) each step, with a test batch
+    of the same size. The test loss is measured every ``test_every`` steps (default
+    ``print_every``) and at the last step, without the double-backward graph: the original
+    measured it every step with that graph, which was a third of its training time.
+
+    Args:
+        x, dxdt: training states and their time derivatives, ``(rows, dim)``, arrays or tensors.
+        test_x, test_dxdt: optional held-out pair of the same width.
+        seed: seeds the minibatch sampler (the model's init is seeded by its builder).
+        predict: ``x -> prediction`` compared with ``dxdt``; default ``model.time_derivative``.
+        progress: show a progress bar; default when stderr is a terminal and not ``verbose``.
+
+    Returns:
+        ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
+        one train loss per step, and the test losses at ``test_steps`` (empty without test data).
+    """
+    if total_steps < 0 or int(total_steps) != total_steps:
+        raise ValueError(f"total_steps must be a non-negative integer, got {total_steps!r}")
+    if batch_size is not None and batch_size < 1:
+        raise ValueError(f"batch_size must be positive or None (full batch), got {batch_size!r}")
+    param = next(model.parameters())
+    width = getattr(model, "input_dim", None)
+    kw = dict(width=width, dtype=param.dtype, device=param.device)
+    x, dxdt = check_data("x", x, **kw), check_data("dxdt", dxdt, **kw)
+    if len(x) != len(dxdt):
+        raise ValueError(f"x has {len(x)} rows but dxdt has {len(dxdt)}")
+    has_test = test_x is not None
+    if has_test:
+        test_x, test_dxdt = check_data("test_x", test_x, **kw), check_data("test_dxdt", test_dxdt, **kw)
+        if len(test_x) != len(test_dxdt):
+            raise ValueError(f"test_x has {len(test_x)} rows but test_dxdt has {len(test_dxdt)}")
+    predict = predict or model.time_derivative
+    if test_every is None:
+        test_every = print_every
+    if test_every < 1 or print_every < 1:
+        raise ValueError(f"print_every and test_every must be positive, got {print_every}, {test_every}")
+    # the fused kernel updates all parameters in one pass: the foreach one cost ~1 ms a step here
+    optim = torch.optim.Adam(model.parameters(), lr=learn_rate, weight_decay=weight_decay,
+                             fused=param.device.type in ("cpu", "cuda"))
+    gen = torch.Generator().manual_seed(seed)
+    test_gen = torch.Generator().manual_seed(seed + 1)
+    stats = {"train_loss": [], "test_loss": [], "test_steps": []}
+    if progress is None:
+        progress = not verbose and sys.stderr.isatty()
+    model.train()
+    start = time.perf_counter()
+    for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
+        if batch_size is None or batch_size >= len(x):
+            xb, yb = x, dxdt
+        else:
+            ix = torch.randperm(len(x), generator=gen)[:batch_size]
+            xb, yb = x[ix], dxdt[ix]
+        loss = (yb - predict(xb)).pow(2).mean()
+        loss.backward()
+        optim.step()
+        optim.zero_grad(set_to_none=True)
+        stats["train_loss"].append(loss.item())
+        if has_test and (step % test_every == 0 or step == total_steps):
+            if batch_size is None or batch_size >= len(test_x):
+                tx, ty = test_x, test_dxdt
+            else:
+                ix = torch.randperm(len(test_x), generator=test_gen)[:batch_size]
+                tx, ty = test_x[ix], test_dxdt[ix]
+            with torch.no_grad():
+                stats["test_loss"].append((ty - predict(tx)).pow(2).mean().item())
+            stats["test_steps"].append(step)
+        if verbose and step % print_every == 0:
+            test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
+            print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
+    model.eval()
+    stats["seconds"] = time.perf_counter() - start
+    return stats
