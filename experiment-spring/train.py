@@ -1,4 +1,4 @@
-"""Train the baseline or the HNN on the ideal mass-spring, H = q^2 + p^2 (the original's flags and defaults).
+"""Train the baseline or the HNN on task 1, the ideal mass-spring (the original's flags and defaults).
 
     python experiment-spring/train.py --verbose              # HNN
     python experiment-spring/train.py --verbose --baseline   # baseline
@@ -10,12 +10,15 @@ import hnn
 HERE = Path(__file__).resolve().parent
 
 
+def parse_args(argv=None):
+    return hnn.cli.make_parser("Task 1: the ideal mass-spring, H = q^2 + p^2", name="spring", input_dim=2,
+                               weight_decay=1e-4, save_dir=str(HERE)).parse_args(argv)
+
+
 def main(argv=None):
-    parser = hnn.cli.make_parser("Task 1: the ideal mass-spring, H = q^2 + p^2", name="spring", input_dim=2, weight_decay=1e-4,
-                                 save_dir=str(HERE))
-    args = parser.parse_args(argv)
-    data = hnn.load_task("spring")
-    return hnn.run_experiment(args, data.get_dataset(seed=args.seed))
+    """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
+    args = parse_args(argv)
+    return hnn.run_experiment(args, hnn.load_task("spring").get_dataset(seed=args.seed))
 
 
 if __name__ == "__main__":

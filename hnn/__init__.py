@@ -9,7 +9,7 @@ the training loop, the paper's metrics, and saved runs.
 from .integrate import DivergenceError, rk4_step, rollout
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, build_model, get_nonlinearity, permutation_tensor
-from .runs import load_run, run_dir, run_experiment, save_run
+from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import available_tasks, load_task
 from .training import train
 from . import cli
@@ -20,7 +20,7 @@ __all__ = [
     "rollout", "rk4_step", "DivergenceError",
     "train",
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
-    "run_experiment", "run_dir", "save_run", "load_run",
+    "run_experiment", "run_dir", "save_run", "load_run", "find_run",
     "load_task", "available_tasks",
     "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "cli",
 ]

@@ -55,15 +55,17 @@ def _solve_ivp(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, at
     def fun(time, y):
         nonlocal nfev
         nfev += 1
-        x = torch.from_numpy(y.reshape(batch, dim)).to(dtype=dtype, device=device)
+        x = torch.from_numpy(y.reshape(batch, dim))
+        if x.dtype != dtype or x.device != device:
+            x = x.to(dtype=dtype, device=device)
         dxdt = f(x).detach()
         if dxdt.shape != x.shape:
             raise ValueError(f"f must map (batch, dim) = {tuple(x.shape)} to the same shape, got {tuple(dxdt.shape)}")
-        bad = ~torch.isfinite(dxdt).all(dim=1)
-        if bad.any():
-            rows = torch.nonzero(bad).flatten().tolist()
+        out = dxdt.cpu().numpy().reshape(-1)
+        if not np.isfinite(out).all():
+            rows = np.nonzero(~np.isfinite(out.reshape(batch, dim)).all(axis=1))[0].tolist()
             raise _divergence("solve_ivp: non-finite dx/dt", rows, [float(time)] * len(rows))
-        return dxdt.cpu().numpy().astype(np.float64, copy=False).reshape(-1)
+        return out
 
     y0 = x0.detach().cpu().numpy().astype(np.float64).reshape(-1)
     with torch.no_grad():

@@ -50,6 +50,24 @@ def run_dir(args) -> Path:
     return Path(args.save_dir) / f"{args.name}-{run_label(args)}-seed{args.seed}"
 
 
+# flags that change what is printed, never what is trained
+_DISPLAY_ONLY = ("verbose",)
+
+
+def find_run(args) -> Path | None:
+    """The saved run for exactly these args (display-only flags aside), or None."""
+    directory = run_dir(args)
+    try:
+        saved = json.loads((directory / "args.json").read_text())
+    except (OSError, ValueError):
+        return None
+    wanted = {k: v for k, v in vars(args).items() if k not in _DISPLAY_ONLY}
+    saved = {k: v for k, v in saved.items() if k not in _DISPLAY_ONLY}
+    if saved != wanted or not (directory / "model.tar").exists() or not (directory / "metrics.json").exists():
+        return None
+    return directory
+
+
 def model_from_args(args: dict) -> torch.nn.Module:
     """The untrained model that a run with these args trains."""
     model = build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"], args["baseline"],

@@ -1,0 +1,325 @@
+"""Time our implementation against the same work done the way the original code did it.
+
+    python analysis/benchmark.py                 # 5 interleaved rounds of every job
+    python analysis/benchmark.py --quick         # 1 round, fewer training steps and trials
+    python analysis/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
+
+Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
+
+1. ``data``: the 50-trajectory dataset. Ours integrates all trajectories in one batched
+   ``solve_ivp`` call. The original called ``solve_ivp`` once per trajectory and then
+   evaluated the derivative targets one point at a time in Python.
+2. ``train``: 2001 full-batch Adam steps of the HNN (lr 1e-3, weight decay 1e-4) from the
+   same initial weights. Ours uses the closed-form input gradient of the tanh MLP, the fused
+   Adam kernel and measures the test loss every 200 steps without a graph. The original took
+   the input gradient with ``autograd.grad(..., create_graph=True)`` and measured the test
+   loss on the full test set at every step, also with ``create_graph=True``, so each step
+   built a second double-backward graph that was never used.
+3. ``eval``: the energy MSE of one trained HNN over 15 start states (corrected protocol:
+   t in [0, 20], 100 points, RK45 rtol 1e-12). Ours integrates the 15 trials in one batched
+   call, for the truth and for the model. The original called ``solve_ivp`` once per trial
+   for the truth and once per trial for the model, evaluating the model on one state at a
+   time (a float32 [1, 2] tensor with requires_grad, autograd with create_graph=True) for
+   every one of the thousands of RK45 stages.
+
+The "original" side is a small re-enactment written here (the ``_original_*`` functions),
+not the original code itself; it does the original's work in the original's way on today's
+libraries. Each job runs ours, original, ours, original, ... for ``--repeats`` rounds; the
+table gives the median seconds of each and the ratio original / ours. Each job also checks
+that the two ways give the same numbers to a stated tolerance; the exit code is 1 if any
+check fails. Timings on a shared or busy machine are noisy: rerun on an idle one.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+import scipy
+import torch
+from scipy.integrate import solve_ivp
+
+import hnn
+from hnn.evaluation import _start_states
+from hnn.runs import write_json
+
+HIDDEN = 200
+LEARN_RATE = 1e-3
+WEIGHT_DECAY = 1e-4
+# Max abs difference of the dataset arrays. Both sides integrate at rtol 1e-10 but with solve_ivp's
+# default atol 1e-6, which dominates for |q|, |p| <= 1: each side is a few 1e-6 off the exact
+# solution (recorded in the JSON), and batched vs per-trajectory step control makes them differ
+# by as much. The noise and the split are identical.
+DATA_TOL = 1e-5
+TRAIN_REL_TOL = 0.02     # relative difference of the final full-set train losses
+EVAL_REL_TOL = 0.01      # relative difference of the energy MSEs
+
+
+# --------------------------------------------------------------------------- helpers
+
+def _timed(fn):
+    start = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - start, out
+
+
+def _interleave(ours, original, repeats: int):
+    """Run ours, original, ours, original, ... ``repeats`` times; seconds of each and the last outputs."""
+    t_ours, t_orig = [], []
+    out_ours = out_orig = None
+    for _ in range(repeats):
+        dt, out_ours = _timed(ours)
+        t_ours.append(dt)
+        dt, out_orig = _timed(original)
+        t_orig.append(dt)
+    return t_ours, t_orig, out_ours, out_orig
+
+
+def _summary(t_ours, t_orig) -> dict:
+    m_ours, m_orig = statistics.median(t_ours), statistics.median(t_orig)
+    return {"seconds_ours": t_ours, "seconds_original": t_orig,
+            "median_ours": m_ours, "median_original": m_orig, "ratio_original_over_ours": m_orig / m_ours}
+
+
+def _check(name: str, value: float, tolerance: float, detail: dict | None = None) -> dict:
+    ok = bool(np.isfinite(value) and value <= tolerance)
+    return {"name": name, "value": float(value), "tolerance": tolerance, "passed": ok, **(detail or {})}
+
+
+def _rel_diff(a: float, b: float) -> float:
+    return abs(a - b) / max(abs(a), abs(b), 1e-300)
+
+
+def _spring_dynamics_np(t, y):
+    """The true spring field in numpy: (dq/dt, dp/dt) = (2p, -2q)."""
+    return np.array([2 * y[1], -2 * y[0]])
+
+
+def _original_time_derivative(model: hnn.HNN, x: torch.Tensor) -> torch.Tensor:
+    """The original HNN's field: ``grad F2 @ M.T`` by autograd with ``create_graph=True`` (x requires grad)."""
+    F = model.differentiable_model(x)
+    dF2 = torch.autograd.grad(F[:, 1].sum(), x, create_graph=True)[0]
+    return dF2 @ model.M.T
+
+
+# --------------------------------------------------------------------------- job 1: data
+
+def _ours_data(task) -> dict:
+    return task.get_dataset(seed=0)
+
+
+def _original_data(seed: int = 0, samples: int = 50, test_split: float = 0.5, noise_std: float = 0.1) -> dict:
+    """One ``solve_ivp`` per trajectory, targets point by point, noise after, concatenate, split."""
+    rng = np.random.RandomState(seed)
+    t_eval = np.linspace(0, 3, 30)
+    xs, dxs = [], []
+    for _ in range(samples):
+        y0 = rng.rand(2) * 2 - 1
+        radius = rng.rand() * 0.9 + 0.1
+        y0 = y0 / np.sqrt((y0 ** 2).sum()) * radius
+        sol = solve_ivp(_spring_dynamics_np, (0, 3), y0, t_eval=t_eval, rtol=1e-10)
+        q, p = sol.y[0], sol.y[1]
+        dydt = np.stack([_spring_dynamics_np(None, y) for y in sol.y.T]).T
+        q = q + rng.randn(*q.shape) * noise_std
+        p = p + rng.randn(*p.shape) * noise_std
+        xs.append(np.stack([q, p]).T)
+        dxs.append(dydt.T)
+    x, dx = np.concatenate(xs), np.concatenate(dxs)
+    split = int(len(x) * (1 - test_split))
+    return {"x": x[:split], "dxdt": dx[:split], "test_x": x[split:], "test_dxdt": dx[split:]}
+
+
+def _exact_error(d: dict, samples: int = 50, points: int = 30) -> float:
+    """Max abs error of the clean states behind the targets against the exact spring solution."""
+    dx = np.concatenate([d["dxdt"], d["test_dxdt"]]).astype(np.float64).reshape(samples, points, 2)
+    clean = np.stack([-dx[..., 1] / 2, dx[..., 0] / 2], axis=-1)      # (q, p) from (2p, -2q)
+    t = np.linspace(0, 3, points)
+    c, s = np.cos(2 * t), np.sin(2 * t)
+    q0, p0 = clean[:, :1, 0], clean[:, :1, 1]
+    exact = np.stack([q0 * c + p0 * s, p0 * c - q0 * s], axis=-1)
+    return float(np.abs(clean - exact).max())
+
+
+def job_data(task, repeats: int) -> tuple[dict, dict]:
+    t_ours, t_orig, ours, orig = _interleave(lambda: _ours_data(task), _original_data, repeats)
+    diffs = {k: float(np.abs(ours[k].astype(np.float64) - orig[k]).max()) for k in ("x", "dxdt", "test_x", "test_dxdt")}
+    shapes_ok = all(ours[k].shape == orig[k].shape for k in diffs)
+    check = _check("dataset arrays, max |ours - original|", max(diffs.values()) if shapes_ok else np.inf,
+                   DATA_TOL, {"per_array": diffs, "exact_solution_error_ours": _exact_error(ours),
+                              "exact_solution_error_original": _exact_error(orig)})
+    return {**_summary(t_ours, t_orig), "checks": [check]}, ours
+
+
+# --------------------------------------------------------------------------- job 2: training
+
+def _ours_train(d: dict, steps: int):
+    torch.manual_seed(0)
+    model = hnn.build_model(2, HIDDEN)
+    stats = hnn.train(model, d["x"], d["dxdt"], d["test_x"], d["test_dxdt"], total_steps=steps,
+                      learn_rate=LEARN_RATE, weight_decay=WEIGHT_DECAY, progress=False)
+    return model, stats
+
+
+def _original_train(d: dict, steps: int):
+    """The original loop: autograd double backprop, default Adam, full test loss with its graph every step."""
+    torch.manual_seed(0)
+    model = hnn.build_model(2, HIDDEN)
+    optim = torch.optim.Adam(model.parameters(), LEARN_RATE, weight_decay=WEIGHT_DECAY)
+    x = torch.tensor(d["x"], requires_grad=True, dtype=torch.float32)
+    test_x = torch.tensor(d["test_x"], requires_grad=True, dtype=torch.float32)
+    dxdt = torch.tensor(d["dxdt"], dtype=torch.float32)
+    test_dxdt = torch.tensor(d["test_dxdt"], dtype=torch.float32)
+    stats = {"train_loss": [], "test_loss": []}
+    for _ in range(steps + 1):
+        loss = ((dxdt - _original_time_derivative(model, x)) ** 2).mean()
+        loss.backward()
+        optim.step()
+        optim.zero_grad()
+        test_loss = ((test_dxdt - _original_time_derivative(model, test_x)) ** 2).mean()
+        stats["train_loss"].append(loss.item())
+        stats["test_loss"].append(test_loss.item())
+    return model, stats
+
+
+def job_train(d: dict, steps: int, repeats: int) -> tuple[dict, hnn.HNN]:
+    t_ours, t_orig, (m_ours, _), (m_orig, _) = _interleave(
+        lambda: _ours_train(d, steps), lambda: _original_train(d, steps), repeats)
+    loss_ours = hnn.derivative_loss(m_ours, d["x"], d["dxdt"])[0]
+    loss_orig = hnn.derivative_loss(m_orig, d["x"], d["dxdt"])[0]
+    test_ours = hnn.derivative_loss(m_ours, d["test_x"], d["test_dxdt"])[0]
+    test_orig = hnn.derivative_loss(m_orig, d["test_x"], d["test_dxdt"])[0]
+    check = _check("final full-set train loss, relative difference", _rel_diff(loss_ours, loss_orig),
+                   TRAIN_REL_TOL, {"ours": loss_ours, "original": loss_orig,
+                                   "test_loss_ours": test_ours, "test_loss_original": test_orig})
+    return {**_summary(t_ours, t_orig), "optimizer_steps": steps + 1, "checks": [check]}, m_ours
+
+
+# --------------------------------------------------------------------------- job 3: energy MSE
+
+def _ours_eval(task, model, protocol) -> float:
+    return hnn.evaluate_energy(task, {"hnn": model}, protocol)["hnn"]["mse"]
+
+
+def _original_eval(model, protocol) -> tuple[float, int]:
+    """Per trial: truth by ``solve_ivp`` in numpy, model by ``solve_ivp`` one [1, 2] state per call."""
+    calls = 0
+
+    def fun(t, y):
+        nonlocal calls
+        calls += 1
+        x = torch.tensor(y, requires_grad=True, dtype=torch.float32).view(1, 2)
+        return _original_time_derivative(model, x).data.numpy().reshape(-1)
+
+    t_span = list(protocol.t_span)
+    t_eval = np.linspace(t_span[0], t_span[1], protocol.num_points)
+    per_trial = []
+    for x0 in _start_states(protocol):
+        truth = solve_ivp(_spring_dynamics_np, t_span, x0, t_eval=t_eval, rtol=protocol.rtol).y
+        pred = solve_ivp(fun, t_span, x0, t_eval=t_eval, rtol=protocol.rtol).y
+        e_true, e_pred = (truth ** 2).sum(0), (pred ** 2).sum(0)
+        per_trial.append(np.mean((e_true - e_pred) ** 2))
+    return float(np.mean(per_trial)), calls
+
+
+def job_eval(task, model, protocol, repeats: int) -> dict:
+    if protocol.energy != "hamiltonian" or protocol.time_rescale:
+        raise ValueError("the original-style evaluation here uses H = q^2 + p^2 and no time rescaling")
+    t_ours, t_orig, mse_ours, (mse_orig, calls) = _interleave(
+        lambda: _ours_eval(task, model, protocol), lambda: _original_eval(model, protocol), repeats)
+    check = _check("energy MSE, relative difference", _rel_diff(mse_ours, mse_orig), EVAL_REL_TOL,
+                   {"ours": mse_ours, "original": mse_orig})
+    return {**_summary(t_ours, t_orig), "protocol": dataclasses.asdict(protocol),
+            "original_model_calls": calls, "checks": [check]}
+
+
+# --------------------------------------------------------------------------- main
+
+JOBS = ("data", "train", "eval")
+LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spring HNN ({steps} Adam steps)",
+          "eval": "eval: energy MSE, one HNN ({trials} trials)"}
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeats", type=int, default=None, help="interleaved rounds per job (default 5; 1 with --quick)")
+    parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
+    parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
+    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of data,train,eval")
+    args = parser.parse_args(argv)
+    args.jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]
+    bad = [j for j in args.jobs if j not in JOBS]
+    if bad or not args.jobs:
+        parser.error(f"--jobs must be a comma list of {','.join(JOBS)}; got {bad or 'nothing'}")
+    if args.repeats is None:
+        args.repeats = 1 if args.quick else 5
+    if args.repeats < 1:
+        parser.error("--repeats must be at least 1")
+    return args
+
+
+def _table(results: dict, steps: int, trials: int) -> str:
+    lines = ["| job | ours (median s) | original style (median s) | original / ours | check | result |",
+             "| --- | ---: | ---: | ---: | --- | --- |"]
+    for job, r in results.items():
+        checks = "; ".join(f"{c['name']} = {c['value']:.3g} (tol {c['tolerance']:g})" for c in r["checks"])
+        verdict = "pass" if all(c["passed"] for c in r["checks"]) else "FAIL"
+        lines.append(f"| {LABELS[job].format(steps=steps + 1, trials=trials)} | {r['median_ours']:.3f} | "
+                     f"{r['median_original']:.3f} | {r['ratio_original_over_ours']:.1f}x | {checks} | {verdict} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    steps = 200 if args.quick else 2000
+    protocol = hnn.get_protocol("spring", "corrected")
+    if args.quick:
+        protocol = dataclasses.replace(protocol, num_trials=5)
+    env = {"torch": torch.__version__, "torch_threads": torch.get_num_threads(), "numpy": np.__version__,
+           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine()}
+    print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
+          f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
+
+    task = hnn.load_task("spring")   # loading the task module is not part of the work compared
+    results, dataset, model = {}, None, None
+    if "data" in args.jobs:
+        results["data"], dataset = job_data(task, args.repeats)
+        print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
+              flush=True)
+    if dataset is None and ("train" in args.jobs or "eval" in args.jobs):
+        dataset = task.get_dataset(seed=0)
+    if "train" in args.jobs:
+        results["train"], model = job_train(dataset, steps, args.repeats)
+        print(f"train done: ours {results['train']['median_ours']:.3f} s, "
+              f"original {results['train']['median_original']:.3f} s", flush=True)
+    if "eval" in args.jobs:
+        if model is None:   # trained once, outside the timed region
+            model, _ = _ours_train(dataset, steps)
+        results["eval"] = job_eval(task, model, protocol, args.repeats)
+        print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
+              f"original {results['eval']['median_original']:.3f} s", flush=True)
+
+    table = _table(results, steps, protocol.num_trials)
+    print()
+    print(table)
+    failed = [f"{job}: {c['name']}" for job, r in results.items() for c in r["checks"] if not c["passed"]]
+    for job, r in results.items():
+        for c in r["checks"]:
+            extra = {k: v for k, v in c.items() if k not in ("name", "value", "tolerance", "passed")}
+            print(f"check {job}: {c['name']} = {c['value']:.3e} (tolerance {c['tolerance']:g}) "
+                  f"{'pass' if c['passed'] else 'FAIL'} {extra}")
+    write_json(args.out, {"environment": env, "repeats": args.repeats, "quick": args.quick,
+                          "total_steps": steps, "jobs": results, "table": table,
+                          "all_checks_passed": not failed})
+    print(f"\nwrote {args.out}")
+    if failed:
+        print("FAILED checks: " + "; ".join(failed), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

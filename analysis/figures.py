@@ -1,0 +1,207 @@
+"""The paper's figures for the 1-DOF tasks (spring, pend), as plain plotting functions.
+
+    field_figure(task, system, models, dataset, path)   # data, true / baseline / HNN vector fields
+    integration_figure(task, system, models, path)      # paths, coordinate MSE, learned H, true energy
+    energy_figure(task, result, path)                   # output of hnn.evaluate_energy, per trial
+
+``system`` is a task's data module (``dynamics`` and ``hamiltonian`` on float64 ``(batch, 2)``
+tensors); ``models`` is ``{"baseline": HNN, "hnn": HNN}``. Each function writes one PNG
+atomically and returns its path. States are ``x = [q, p]``; trajectories are ``(T, 2)`` arrays.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+
+import hnn  # noqa: E402
+from hnn.runs import atomic_write  # noqa: E402
+
+# From the original notebooks (reference sections 4.3 and 5.3).
+FIELD_SETTINGS = {
+    "spring": {"lim": 1.2, "gridsize": 10, "x0": (1.0, 0.0), "t_span": (0.0, 30.0), "num_points": 2000},
+    "pend": {"lim": 2.6, "gridsize": 10, "x0": (2.1, 0.0), "t_span": (0.0, 28.0), "num_points": 1000},
+}
+INTEGRATION_SETTINGS = {
+    "spring": {"x0": (1.0, 0.0), "t_span": (0.0, 20.0), "num_points": 2000},
+    "pend": {"x0": (2.1, 0.0), "t_span": (0.0, 20.0), "num_points": 2000},
+}
+COLORS = {"truth": "black", "baseline": "tab:red", "hnn": "tab:blue"}
+NAMES = {"truth": "Ground truth", "baseline": "Baseline NN", "hnn": "Hamiltonian NN"}
+DPI = 150
+
+
+def _settings(table: dict, task: str) -> dict:
+    if task not in table:
+        raise ValueError(f"no figure settings for task {task!r}; have {sorted(table)}")
+    return table[task]
+
+
+def _dtype(model) -> torch.dtype:
+    return next(model.parameters()).dtype
+
+
+def _field(f, x: torch.Tensor, dtype=torch.float64) -> np.ndarray:
+    """``f`` at the states ``x`` ``(N, 2)``, evaluated in ``dtype`` without grad; ``(N, 2)`` float64."""
+    with torch.no_grad():
+        return f(x.to(dtype)).to(torch.float64).numpy()
+
+
+def _rollout(f, x0, t: np.ndarray, dtype=torch.float64):
+    """``(trajectory (T, 2) float64 or None, error message or None)``; a divergence is reported, not raised."""
+    try:
+        with torch.no_grad():
+            traj = hnn.rollout(f, torch.tensor([x0], dtype=dtype), t, rtol=1e-12)
+        return traj[0].to(torch.float64).numpy(), None
+    except hnn.DivergenceError as err:
+        return None, str(err).split(":")[0] + ": diverged"
+
+
+def _note(ax, text: str) -> None:
+    """A boxed message in the middle of a panel (used where a trajectory could not be drawn)."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=8, wrap=True,
+            bbox={"facecolor": "white", "edgecolor": "gray", "alpha": 0.9})
+
+
+def _time_path(ax, traj: np.ndarray, t: np.ndarray, cmap="viridis"):
+    """Draw ``traj`` ``(T, 2)`` as segments coloured by ``t`` ``(T,)``; returns the LineCollection."""
+    segments = np.stack([traj[:-1], traj[1:]], axis=1)
+    lines = LineCollection(segments, cmap=cmap, norm=plt.Normalize(t[0], t[-1]), linewidths=2)
+    lines.set_array((t[:-1] + t[1:]) / 2)
+    ax.add_collection(lines)
+    return lines
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI, bbox_inches="tight"))
+    plt.close(fig)
+    return path
+
+
+def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
+    """Four phase-plane panels: training data over the true field, then the true, baseline and HNN
+    fields (quiver on a ``gridsize x gridsize`` grid) each with its trajectory from ``x0``, coloured by time.
+
+    ``dataset["x"]`` holds the training states, ``(rows, 2)``.
+    """
+    s = _settings(FIELD_SETTINGS, task)
+    lim, n = s["lim"], s["gridsize"]
+    axis = torch.linspace(-lim, lim, n, dtype=torch.float64)
+    qq, pp = torch.meshgrid(axis, axis, indexing="xy")
+    grid = torch.stack([qq.reshape(-1), pp.reshape(-1)], dim=1)             # (n*n, 2)
+    t = np.linspace(*s["t_span"], s["num_points"])
+    data_x = np.asarray(dataset["x"], dtype=np.float64).reshape(-1, 2)
+
+    panels = [("Data", system.dynamics, torch.float64, None),
+              ("Ground truth", system.dynamics, torch.float64, "truth"),
+              ("Baseline NN", models["baseline"].time_derivative, _dtype(models["baseline"]), "baseline"),
+              ("Hamiltonian NN", models["hnn"].time_derivative, _dtype(models["hnn"]), "hnn")]
+    fig, axes = plt.subplots(1, 4, figsize=(16, 4.3), constrained_layout=True)
+    lines = None
+    for ax, (title, f, dtype, label) in zip(axes, panels):
+        uv = _field(f, grid, dtype)
+        ax.quiver(grid[:, 0], grid[:, 1], uv[:, 0], uv[:, 1], color="0.45", pivot="mid", width=0.006)
+        if label is None:
+            ax.scatter(data_x[:, 0], data_x[:, 1], s=4, color="tab:orange", alpha=0.6, label="training data")
+            ax.legend(loc="upper right", fontsize=8)
+        else:
+            traj, err = _rollout(f, s["x0"], t, dtype)
+            if traj is None:
+                _note(ax, f"trajectory from x0={s['x0']}\n{err}")
+            else:
+                lines = _time_path(ax, traj, t)
+        ax.set(title=title, xlabel="q", ylabel="p", xlim=(-lim * 1.1, lim * 1.1), ylim=(-lim * 1.1, lim * 1.1))
+        ax.set_aspect("equal")
+    if lines is not None:
+        fig.colorbar(lines, ax=axes, shrink=0.8, label="t")
+    fig.suptitle(f"{task}: vector fields and trajectories from x0 = {s['x0']}")
+    return _save(fig, path)
+
+
+def integration_figure(task: str, system, models: dict, path) -> Path:
+    """Four panels for one rollout from ``x0`` on ``t`` ``(T,)``: (a) phase-plane paths of truth,
+    baseline and HNN; (b) coordinate MSE vs time, mean over (q, p) of the squared error vs truth;
+    (c) the HNN's learned H along each path; (d) the true energy ``system.hamiltonian`` along each path.
+    """
+    s = _settings(INTEGRATION_SETTINGS, task)
+    t = np.linspace(*s["t_span"], s["num_points"])
+    paths, errors = {}, {}
+    for label, f, dtype in [("truth", system.dynamics, torch.float64),
+                            ("baseline", models["baseline"].time_derivative, _dtype(models["baseline"])),
+                            ("hnn", models["hnn"].time_derivative, _dtype(models["hnn"]))]:
+        paths[label], errors[label] = _rollout(f, s["x0"], t, dtype)
+    drawn = {k: v for k, v in paths.items() if v is not None}
+    hnn_model = models["hnn"]
+
+    fig, axes = plt.subplots(1, 4, figsize=(17, 4), constrained_layout=True)
+    for label, traj in drawn.items():
+        style = {"color": COLORS[label], "label": NAMES[label], "lw": 1.2 if label == "truth" else 1.5}
+        if label == "truth":
+            style["ls"] = "--"
+        axes[0].plot(traj[:, 0], traj[:, 1], **style)
+        if label != "truth" and "truth" in drawn:
+            axes[1].plot(t, ((traj - drawn["truth"]) ** 2).mean(axis=1), **style)
+        with torch.no_grad():
+            learned_h = hnn_model.hamiltonian(torch.from_numpy(traj).to(_dtype(hnn_model)))
+            true_h = system.hamiltonian(torch.from_numpy(traj))
+        axes[2].plot(t, learned_h.to(torch.float64).numpy(), **style)
+        axes[3].plot(t, true_h.numpy(), **style)
+    failed = [f"{NAMES[k]}: {e}" for k, e in errors.items() if e]
+    if failed:
+        _note(axes[0], "\n".join(failed))
+    axes[0].plot(*s["x0"], "o", color="black", ms=4)
+    axes[0].set(title="Predictions", xlabel="q", ylabel="p")
+    axes[0].set_aspect("equal", adjustable="datalim")
+    axes[1].set(title="MSE between coordinates", xlabel="t", ylabel="mean over (q, p) of squared error")
+    axes[2].set(title="HNN-conserved quantity", xlabel="t", ylabel="learned H (HNN's F2)")
+    axes[3].set(title="Total energy", xlabel="t", ylabel="true H")
+    axes[0].legend(fontsize=8, loc="upper right")
+    fig.suptitle(f"{task}: integration from x0 = {s['x0']}, t in [{t[0]:g}, {t[-1]:g}] ({len(t)} points)")
+    return _save(fig, path)
+
+
+def energy_figure(task: str, result: dict, path) -> Path:
+    """Energy over time for each trial of ``hnn.evaluate_energy``'s ``result``: truth vs every model.
+
+    Uses ``result["energy_truth"]`` and ``result[label]["energy"]`` (each ``(trials, T)``) against
+    ``result["t_truth"]`` ``(trials, T)``: the points the MSE compares. Under the paper's spring
+    protocol the models' own clock runs ``time_rescale`` faster; that is stated in the title.
+    """
+    protocol = result["protocol"]
+    labels = [k for k, v in result.items() if k != "protocol" and isinstance(v, dict) and "mse" in v]
+    e_true, t_truth = np.asarray(result["energy_truth"]), np.asarray(result["t_truth"])
+    trials = e_true.shape[0]
+    ncols = min(5, trials)
+    nrows = -(-trials // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.4 * nrows), squeeze=False,
+                             constrained_layout=True)
+    for i, ax in enumerate(axes.flat):
+        if i >= trials:
+            ax.axis("off")
+            continue
+        ax.plot(t_truth[i], e_true[i], color=COLORS["truth"], ls="--", lw=1.2, label=NAMES["truth"])
+        for label in labels:
+            ax.plot(t_truth[i], np.asarray(result[label]["energy"])[i], color=COLORS.get(label),
+                    lw=1.2, label=NAMES.get(label, label))
+        ax.set_title(f"trial {i}, x0 = ({result['x0'][i][0]:.2f}, {result['x0'][i][1]:.2f})"
+                     if "x0" in result else f"trial {i}", fontsize=8)
+        ax.tick_params(labelsize=7)
+        if i % ncols == 0:
+            ax.set_ylabel("q^2 + p^2" if protocol.get("energy") == "q2+p2" else "true H", fontsize=8)
+        if i // ncols == nrows - 1:
+            ax.set_xlabel("t (truth clock)", fontsize=8)
+    handles, names = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=9)
+    scores = ", ".join(f"{NAMES.get(k, k)} MSE {result[k]['mse']:.3e}"
+                       + (f" ± {result[k]['mse_se']:.1e}" if "mse_se" in result[k] else "") for k in labels)
+    quirk = (f"; models' clock x{protocol['time_rescale']:g} (paper quirk)"
+             if protocol.get("time_rescale") else "")
+    fig.suptitle(f"{task}, energy protocol '{protocol['name']}' (energy = {protocol.get('energy')}{quirk})\n{scores}")
+    return _save(fig, path)

@@ -1,0 +1,157 @@
+"""The HNN's vector field against analytic Hamiltonians, and the closed form against autograd."""
+import math
+
+import pytest
+import torch
+
+import hnn
+from hnn.models import _input_gradient
+
+
+class ExactH(torch.nn.Module):
+    """Stands in for the MLP: outputs (F1, F2) = (0, H(x)) for a known H."""
+
+    def __init__(self, H):
+        super().__init__()
+        self.H = H
+        self.dummy = torch.nn.Parameter(torch.zeros(()))  # models are expected to have parameters
+
+    def forward(self, x):
+        return torch.stack([torch.zeros_like(x[:, 0]), self.H(x)], dim=1)
+
+
+def _grid(n=64):
+    g = torch.linspace(-2.5, 2.5, n, dtype=torch.float64)
+    q, p = torch.meshgrid(g, g, indexing="ij")
+    return torch.stack([q.flatten(), p.flatten()], dim=1)
+
+
+@pytest.mark.parametrize("task, analytic", [
+    ("spring", lambda q, p: torch.stack([2 * p, -2 * q], 1)),
+    ("pend", lambda q, p: torch.stack([2 * p, -3 * torch.sin(q)], 1)),
+])
+def test_symplectic_gradient_of_exact_hamiltonian(task, analytic):
+    system = hnn.load_task(task)
+    model = hnn.HNN(2, ExactH(system.hamiltonian))
+    x = _grid()
+    expected = analytic(x[:, 0], x[:, 1])
+    torch.testing.assert_close(model.time_derivative(x), expected, rtol=1e-14, atol=1e-14)
+    with torch.no_grad():
+        torch.testing.assert_close(model.time_derivative(x), expected, rtol=1e-14, atol=1e-14)
+    # the task's own dynamics agree with its Hamiltonian
+    torch.testing.assert_close(system.dynamics(x), expected, rtol=1e-14, atol=1e-14)
+
+
+def test_four_dimensional_canonical_field():
+    # H = |q|^2 / 2 + |p|^2 / 2 in 2 degrees of freedom: dq/dt = p, dp/dt = -q, componentwise
+    model = hnn.HNN(4, ExactH(lambda x: 0.5 * (x ** 2).sum(1)))
+    x = torch.randn(10, 4, dtype=torch.float64)
+    torch.testing.assert_close(model.time_derivative(x), torch.cat([x[:, 2:], -x[:, :2]], 1))
+
+
+@pytest.mark.parametrize("field_type", ["solenoidal", "conservative", "both"])
+@pytest.mark.parametrize("dim", [2, 4])
+def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim):
+    model = hnn.build_model(dim, 32, field_type=field_type).double()
+    net = model.differentiable_model
+    x = torch.randn(50, dim, dtype=torch.float64, requires_grad=True)
+    target = torch.randn(50, dim, dtype=torch.float64)
+
+    def reference(x):
+        out = net(x)
+        fields = []
+        if field_type != "solenoidal":
+            fields.append(torch.autograd.grad(out[:, 0].sum(), x, create_graph=True)[0])
+        if field_type != "conservative":
+            g = torch.autograd.grad(out[:, 1].sum(), x, create_graph=True)[0]
+            fields.append(torch.cat([g[:, dim // 2:], -g[:, :dim // 2]], 1))
+        return sum(fields)
+
+    ours, ref = model.time_derivative(x), reference(x)
+    torch.testing.assert_close(ours, ref, rtol=1e-12, atol=1e-13)
+    params = list(model.parameters()) + [x]
+    g_ours = torch.autograd.grad(((ours - target) ** 2).sum(), params)
+    g_ref = torch.autograd.grad(((ref - target) ** 2).sum(), params)
+    for a, b in zip(g_ours, g_ref):
+        torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-12)
+
+
+def test_closed_form_is_used_and_gradcheck():
+    # gradcheck compares the hand-written backward with finite differences, in float64
+    net = hnn.MLP(2, 6, 2).double()
+    x = torch.randn(5, 2, dtype=torch.float64, requires_grad=True)
+    W1, b1, W2, b2, W3 = (p.detach().clone().requires_grad_(True) for p in net.parameters())
+    from hnn.models import _TanhMLPInputGradient
+    assert torch.autograd.gradcheck(lambda *a: _TanhMLPInputGradient.apply(*a), (x, W1, b1, W2, b2, W3[1]))
+
+
+def test_time_derivative_modes():
+    model = hnn.build_model(2, 16)
+    x = torch.randn(8, 2)
+    with torch.no_grad():
+        out = model.time_derivative(x)
+    assert out.shape == (8, 2) and not out.requires_grad
+    out = model.time_derivative(x)           # grad mode: differentiable w.r.t. the weights
+    out.sum().backward()
+    assert all(p.grad is not None for p in model.differentiable_model.linear2.parameters())
+    z = torch.randn(8, 2, requires_grad=True)  # and w.r.t. an input that carries a graph
+    (model.time_derivative(z * 2) ** 2).sum().backward()
+    assert z.grad is not None and torch.isfinite(z.grad).all()
+
+
+def test_time_derivative_finite_for_large_and_tiny_inputs():
+    model = hnn.build_model(2, 32).double()
+    for scale in (1e-30, 1e-8, 1.0, 1e4, 1e12):
+        x = torch.randn(16, 2, dtype=torch.float64) * scale
+        out = model.time_derivative(x)
+        assert torch.isfinite(out).all(), scale
+    # far from the data tanh saturates: the field goes to zero, not to NaN
+    assert model.time_derivative(torch.full((1, 2), 1e12, dtype=torch.float64)).abs().max() < 1e-6
+
+
+def test_baseline_predicts_dxdt_directly():
+    model = hnn.build_model(4, 16, baseline=True)
+    x = torch.randn(3, 4)
+    torch.testing.assert_close(model.time_derivative(x), model.differentiable_model(x))
+    with pytest.raises(ValueError, match="no Hamiltonian"):
+        model.hamiltonian(x)
+
+
+def test_mlp_is_the_papers():
+    net = hnn.MLP(2, 200, 2)
+    assert net.linear3.bias is None
+    w = net.linear2.weight
+    torch.testing.assert_close(w @ w.T, torch.eye(200), atol=1e-5, rtol=0)   # orthogonal init
+    assert math.isclose(float(hnn.permutation_tensor(2)[0, 1]), 1.0)
+
+
+def test_bad_input_gives_clear_errors():
+    model = hnn.build_model(2, 8)
+    with pytest.raises(ValueError, match=r"expected x of shape \(batch, 2\), got \(5, 3\)"):
+        model.time_derivative(torch.randn(5, 3))
+    with pytest.raises(ValueError, match=r"got \(2,\)"):
+        model.time_derivative(torch.randn(2))
+    with pytest.raises(ValueError, match="unknown nonlinearity 'gelu2'"):
+        hnn.MLP(2, 8, 2, nonlinearity="gelu2")
+    with pytest.raises(ValueError, match="unknown field_type 'curl'"):
+        hnn.HNN(2, hnn.MLP(2, 8, 2), field_type="curl")
+    with pytest.raises(ValueError, match="even input_dim"):
+        hnn.HNN(3, hnn.MLP(3, 8, 2))
+    with pytest.raises(ValueError, match="must output"):
+        hnn.HNN(2, hnn.MLP(2, 8, 3))
+    with pytest.raises(ValueError, match="must output"):
+        hnn.HNN(2, torch.nn.Linear(2, 3)).time_derivative(torch.randn(4, 2))
+    with pytest.warns(UserWarning, match="second derivative"):
+        hnn.build_model(2, 8, nonlinearity="relu")
+
+
+def test_autograd_path_for_other_nonlinearities_agrees_with_finite_differences():
+    net = hnn.MLP(2, 16, 2, nonlinearity="softplus").double()
+    x = torch.randn(4, 2, dtype=torch.float64)
+    g = _input_gradient(net, x, 1, create_graph=False)
+    eps = 1e-6
+    for j in range(2):
+        e = torch.zeros(2, dtype=torch.float64)
+        e[j] = eps
+        fd = (net(x + e)[:, 1] - net(x - e)[:, 1]) / (2 * eps)
+        torch.testing.assert_close(g[:, j], fd, rtol=1e-6, atol=1e-8)

@@ -1,0 +1,81 @@
+"""The training loop, the train.py scripts end to end, and saved runs."""
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import hnn
+
+
+def test_train_fits_a_spring_and_reports_history(spring):
+    d = spring.get_dataset(seed=0, noise_std=0.0)
+    model = hnn.build_model(2, 32)
+    stats = hnn.train(model, d["x"], d["dxdt"], d["test_x"], d["test_dxdt"], total_steps=300, learn_rate=1e-2,
+                      print_every=100)
+    assert len(stats["train_loss"]) == 301                      # total_steps + 1, as the original
+    assert stats["test_steps"] == [0, 100, 200, 300]
+    assert stats["train_loss"][-1] < 0.02 * stats["train_loss"][0]
+    assert stats["test_loss"][-1] < 0.02 * stats["test_loss"][0]
+
+
+def test_minibatches_are_seeded(spring):
+    d = spring.get_dataset(seed=0)
+    runs = []
+    for _ in range(2):
+        torch.manual_seed(0)
+        model = hnn.build_model(2, 16)
+        runs.append(hnn.train(model, d["x"], d["dxdt"], total_steps=20, batch_size=50, seed=3)["train_loss"])
+    assert runs[0] == runs[1]
+
+
+def test_bad_training_data_is_named():
+    model = hnn.build_model(2, 8)
+    x = np.zeros((10, 2), dtype=np.float32)
+    bad = x.copy()
+    bad[4, 1] = np.nan
+    with pytest.raises(ValueError, match=r"dxdt has 1 NaN/inf values \(first in row 4"):
+        hnn.train(model, x, bad, total_steps=1)
+    with pytest.raises(ValueError, match="x has 3 columns but the model expects input_dim=2"):
+        hnn.train(model, np.zeros((10, 3)), np.zeros((10, 3)), total_steps=1)
+    with pytest.raises(ValueError, match="x has 10 rows but dxdt has 9"):
+        hnn.train(model, x, x[:9], total_steps=1)
+    with pytest.raises(ValueError, match=r"shape \(rows, dim\)"):
+        hnn.train(model, np.zeros(10), np.zeros(10), total_steps=1)
+
+
+@pytest.mark.parametrize("task", ["spring", "pend"])
+@pytest.mark.parametrize("extra", [[], ["--baseline"], ["--use_rk4"]])
+def test_train_script_end_to_end(task, extra, tmp_path, capsys):
+    trainer = hnn.load_task(task, "train")
+    run = trainer.main(["--total_steps", "5", "--print_every", "2", "--verbose", "--save_dir", str(tmp_path)] + extra)
+    out = capsys.readouterr().out
+    assert "step 4, train_loss" in out and "Final train loss" in out and "Final test loss" in out
+    label = "baseline" if "--baseline" in extra else "hnn-rk4" if "--use_rk4" in extra else "hnn"
+    assert run == tmp_path / f"{task}-{label}-seed0"
+    args = json.loads((run / "args.json").read_text())
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert args["total_steps"] == 5 and args["weight_decay"] == 1e-4
+    assert len(metrics["history"]["train_loss"]) == 6 and metrics["test_loss"] > 0
+    model, saved_args, _ = hnn.load_run(run)                    # weights_only=True inside
+    assert saved_args == args and model.baseline == ("--baseline" in extra)
+    assert not list(tmp_path.rglob("*.tmp"))                     # atomic writes leave nothing behind
+
+
+def test_runs_are_reused_only_for_identical_args(tmp_path):
+    trainer = hnn.load_task("spring", "train")
+    argv = ["--total_steps", "2", "--save_dir", str(tmp_path)]
+    assert hnn.find_run(trainer.parse_args(argv)) is None
+    run = trainer.main(argv)
+    assert hnn.find_run(trainer.parse_args(argv)) == run
+    assert hnn.find_run(trainer.parse_args(argv + ["--verbose"])) == run        # display only
+    assert hnn.find_run(trainer.parse_args(argv[:1] + ["3"] + argv[2:])) is None
+    assert hnn.find_run(trainer.parse_args(argv + ["--learn_rate", "0.01"])) is None
+
+
+def test_unreadable_checkpoint_says_what_to_do(tmp_path):
+    (tmp_path / "model.tar").write_bytes(b"not a checkpoint")
+    with pytest.raises(RuntimeError, match="delete the run folder and retrain"):
+        hnn.load_run(tmp_path)
+    with pytest.raises(FileNotFoundError, match="train it first"):
+        hnn.load_run(tmp_path / "missing")
