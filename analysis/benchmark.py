@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import datetime
 import platform
 import statistics
 import sys
@@ -46,6 +47,8 @@ from scipy.integrate import solve_ivp
 import hnn
 from hnn.evaluation import _start_states
 from hnn.runs import write_json
+
+import readme
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -148,7 +151,7 @@ def job_data(task, repeats: int) -> tuple[dict, dict]:
     t_ours, t_orig, ours, orig = _interleave(lambda: _ours_data(task), _original_data, repeats)
     diffs = {k: float(np.abs(ours[k].astype(np.float64) - orig[k]).max()) for k in ("x", "dxdt", "test_x", "test_dxdt")}
     shapes_ok = all(ours[k].shape == orig[k].shape for k in diffs)
-    check = _check("dataset arrays, max |ours - original|", max(diffs.values()) if shapes_ok else np.inf,
+    check = _check("dataset arrays, max abs difference", max(diffs.values()) if shapes_ok else np.inf,
                    DATA_TOL, {"per_array": diffs, "exact_solution_error_ours": _exact_error(ours),
                               "exact_solution_error_original": _exact_error(orig)})
     return {**_summary(t_ours, t_orig), "checks": [check]}, ours
@@ -249,6 +252,7 @@ def parse_args(argv=None):
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
     parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of data,train,eval")
+    parser.add_argument("--update-readme", action="store_true", help="paste the table into README.md's benchmark section")
     args = parser.parse_args(argv)
     args.jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]
     bad = [j for j in args.jobs if j not in JOBS]
@@ -315,6 +319,11 @@ def main(argv=None) -> int:
                           "total_steps": steps, "jobs": results, "table": table,
                           "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
+    if args.update_readme:
+        command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
+        readme.update_section("benchmark", f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, "
+                              f"{env['torch_threads']} threads, {args.repeats} interleaved rounds:\n\n{table}")
+        print("updated README.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)
         return 1

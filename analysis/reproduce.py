@@ -27,12 +27,12 @@ import torch
 import figures
 import hnn
 from hnn.runs import atomic_write, write_json
+import readme
 from paper_numbers import PAPER
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))
 QUICK_STEPS = 300
-README_BEGIN, README_END = "<!-- results:begin -->", "<!-- results:end -->"
 
 
 def _commit() -> str:
@@ -119,16 +119,6 @@ def tables_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def update_readme(tables: str) -> None:
-    readme = hnn.tasks.repo_root() / "README.md"
-    text = readme.read_text()
-    if README_BEGIN not in text or README_END not in text:
-        raise ValueError(f"{readme} has no {README_BEGIN} ... {README_END} section to update")
-    head, rest = text.split(README_BEGIN, 1)
-    tail = rest.split(README_END, 1)[1]
-    atomic_write(readme, lambda tmp: Path(tmp).write_text(f"{head}{README_BEGIN}\n{tables}{README_END}{tail}"))
-
-
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task present)")
@@ -174,7 +164,7 @@ def main(argv=None) -> dict:
     print("\n" + tables)
     print(f"total {results['seconds']['total']:.1f} s; wrote {out / 'results.json'}, {out / 'tables.md'}")
     if args.update_readme:
-        update_readme(tables)
+        readme.update_section("results", tables)
         print("updated README.md")
     return results
 

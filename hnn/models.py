@@ -82,17 +82,20 @@ def permutation_tensor(n: int, assume_canonical_coords: bool = True) -> torch.Te
     return m
 
 
-def _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w):
-    """dF/dx for F = w . tanh(W2 tanh(W1 x + b1) + b2), and the intermediates its backward needs."""
+def _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved: bool = True):
+    """dF/dx for F = w . tanh(W2 tanh(W1 x + b1) + b2), and (if ``saved``) what its backward needs."""
     h1 = nn.functional.linear(x, W1, b1).tanh_()
     h2 = nn.functional.linear(h1, W2, b2).tanh_()
     one = h1.new_ones(())
     s1 = torch.addcmul(one, h1, h1, value=-1)    # tanh' = 1 - tanh^2, in one pass
     s2 = torch.addcmul(one, h2, h2, value=-1)
-    W2w = w[:, None] * W2                        # folds the output weights into W2 (no N x H broadcast)
-    g_h1 = s2 @ W2w                              # dF/dh1
+    if saved:
+        W2w = w[:, None] * W2                    # folds the output weights into W2 (no N x H broadcast)
+        g_h1 = s2 @ W2w                          # dF/dh1
+    else:                                        # evaluation, often a small batch: scale the rows instead
+        W2w, g_h1 = None, (s2 * w) @ W2
     g_a1 = g_h1 * s1                             # dF/da1
-    return g_a1 @ W1, (h1, h2, s1, s2, g_h1, g_a1, W2w)
+    return g_a1 @ W1, ((h1, h2, s1, s2, g_h1, g_a1, W2w) if saved else ())
 
 
 class _TanhMLPInputGradient(torch.autograd.Function):
@@ -132,10 +135,10 @@ class _TanhMLPInputGradient(torch.autograd.Function):
 def _input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
     """d(model(x)[:, k])/dx, ``(batch, input_dim)``: closed form for a tanh MLP, else autograd."""
     if type(model) is MLP and model.nonlinearity_name == "tanh":
-        params = (model.linear1.weight, model.linear1.bias, model.linear2.weight, model.linear2.bias,
-                  model.linear3.weight[k])
+        l1, l2 = model.linear1, model.linear2
+        params = (l1.weight, l1.bias, l2.weight, l2.bias, model.linear3.weight[k])
         if not torch.is_grad_enabled():     # evaluation: skip the autograd node (~0.1 ms a call)
-            return _tanh_mlp_input_gradient(x, *params)[0]
+            return _tanh_mlp_input_gradient(x, *params, saved=False)[0]
         return _TanhMLPInputGradient.apply(x, *params)
     with torch.enable_grad():
         x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
