@@ -96,7 +96,7 @@ def run_experiment(args, dataset: dict) -> Path:
     stats = train(model, dataset["x"], dataset["dxdt"], dataset["test_x"], dataset["test_dxdt"],
                   total_steps=args.total_steps, learn_rate=args.learn_rate, weight_decay=args.weight_decay,
                   batch_size=args.batch_size, seed=args.seed, print_every=args.print_every,
-                  verbose=args.verbose, predict=predict)
+                  verbose=args.verbose, input_noise=getattr(args, "input_noise", 0.0), predict=predict)
     train_loss = derivative_loss(model, dataset["x"], dataset["dxdt"])
     test_loss = derivative_loss(model, dataset["test_x"], dataset["test_dxdt"])
     if args.verbose:

@@ -30,8 +30,8 @@ def check_data(name: str, a, width: int | None = None, dtype=torch.float32, devi
 
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
-          verbose: bool = False, test_every: int | None = None, predict: Callable | None = None,
-          progress: bool | None = None) -> dict:
+          verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
+          predict: Callable | None = None, progress: bool | None = None) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` with Adam; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -43,7 +43,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     Args:
         x, dxdt: training states and their time derivatives, ``(rows, dim)``, arrays or tensors.
         test_x, test_dxdt: optional held-out pair of the same width.
-        seed: seeds the minibatch sampler (the model's init is seeded by its builder).
+        seed: seeds the minibatch sampler and the input noise (the model's init is seeded by its
+            builder).
+        input_noise: std of Gaussian noise added to each training batch's inputs x, fresh each
+            step (0: none). The original 2-body script added it to the prediction instead.
         predict: ``x -> prediction`` compared with ``dxdt``; default ``model.time_derivative``.
         progress: show a progress bar; default when stderr is a terminal and not ``verbose``.
 
@@ -53,6 +56,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     """
     if total_steps < 0 or int(total_steps) != total_steps:
         raise ValueError(f"total_steps must be a non-negative integer, got {total_steps!r}")
+    if not input_noise >= 0:
+        raise ValueError(f"input_noise must be a non-negative std, got {input_noise!r}")
     if batch_size is not None and batch_size < 1:
         raise ValueError(f"batch_size must be positive or None (full batch), got {batch_size!r}")
     param = next(model.parameters())
@@ -87,6 +92,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         else:
             ix = torch.randperm(len(x), generator=gen)[:batch_size]
             xb, yb = x[ix], dxdt[ix]
+        if input_noise:
+            xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
         loss = (yb - predict(xb)).pow(2).mean()
         loss.backward()
         optim.step()
