@@ -10,6 +10,7 @@ atomically and returns its path. States are ``x = [q, p]``; trajectories are ``(
 """
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -60,7 +61,7 @@ def _rollout(f, x0, t: np.ndarray, dtype=torch.float64):
             traj = hnn.rollout(f, torch.tensor([x0], dtype=dtype), t, rtol=1e-12)
         return traj[0].to(torch.float64).numpy(), None
     except hnn.DivergenceError as err:
-        return None, str(err).split(":")[0] + ": diverged"
+        return None, textwrap.fill(f"diverged: {err}", 40, max_lines=4, placeholder=" ...")
 
 
 def _note(ax, text: str) -> None:
@@ -72,7 +73,7 @@ def _note(ax, text: str) -> None:
 def _time_path(ax, traj: np.ndarray, t: np.ndarray, cmap="viridis"):
     """Draw ``traj`` ``(T, 2)`` as segments coloured by ``t`` ``(T,)``; returns the LineCollection."""
     segments = np.stack([traj[:-1], traj[1:]], axis=1)
-    lines = LineCollection(segments, cmap=cmap, norm=plt.Normalize(t[0], t[-1]), linewidths=2)
+    lines = LineCollection(segments, cmap=cmap, norm=plt.Normalize(t[0], t[-1]), linewidths=1.5)
     lines.set_array((t[:-1] + t[1:]) / 2)
     ax.add_collection(lines)
     return lines
@@ -109,12 +110,11 @@ def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
         uv = _field(f, grid, dtype)
         ax.quiver(grid[:, 0], grid[:, 1], uv[:, 0], uv[:, 1], color="0.45", pivot="mid", width=0.006)
         if label is None:
-            ax.scatter(data_x[:, 0], data_x[:, 1], s=4, color="tab:orange", alpha=0.6, label="training data")
-            ax.legend(loc="upper right", fontsize=8)
+            ax.scatter(data_x[:, 0], data_x[:, 1], s=4, color="tab:orange", alpha=0.6)
         else:
             traj, err = _rollout(f, s["x0"], t, dtype)
             if traj is None:
-                _note(ax, f"trajectory from x0={s['x0']}\n{err}")
+                _note(ax, f"trajectory from x0 = {s['x0']}\n{err}")
             else:
                 lines = _time_path(ax, traj, t)
         ax.set(title=title, xlabel="q", ylabel="p", xlim=(-lim * 1.1, lim * 1.1), ylim=(-lim * 1.1, lim * 1.1))
@@ -144,7 +144,7 @@ def integration_figure(task: str, system, models: dict, path) -> Path:
     for label, traj in drawn.items():
         style = {"color": COLORS[label], "label": NAMES[label], "lw": 1.2 if label == "truth" else 1.5}
         if label == "truth":
-            style["ls"] = "--"
+            style.update(ls="--", zorder=3)   # on top: a good HNN path would hide it
         axes[0].plot(traj[:, 0], traj[:, 1], **style)
         if label != "truth" and "truth" in drawn:
             axes[1].plot(t, ((traj - drawn["truth"]) ** 2).mean(axis=1), **style)
@@ -153,7 +153,7 @@ def integration_figure(task: str, system, models: dict, path) -> Path:
             true_h = system.hamiltonian(torch.from_numpy(traj))
         axes[2].plot(t, learned_h.to(torch.float64).numpy(), **style)
         axes[3].plot(t, true_h.numpy(), **style)
-    failed = [f"{NAMES[k]}: {e}" for k, e in errors.items() if e]
+    failed = [f"{NAMES[k]} {e}" for k, e in errors.items() if e]
     if failed:
         _note(axes[0], "\n".join(failed))
     axes[0].plot(*s["x0"], "o", color="black", ms=4)

@@ -4,6 +4,10 @@ Each task has the paper's protocol (what produced the published numbers, quirks 
 and a corrected one. A protocol says how the start states are drawn, the time span and grid,
 the solver tolerance, which function is called "energy", and any time rescaling.
 
+Start states come from a box (spring, pend: each coordinate in [0.2, 1] in absolute value),
+from the task's own sampler seeded 0..14 (2-body, 3-body), or are the first state of the
+measured test segment (real pendulum, compared with the measurements themselves).
+
 The paper's spring protocol rescales the models' time by 1.09 after integrating the truth, and
 the rescaling compounds across trials: trial i (0-based) compares the truth on
 [0, 21.8 * 1.09^i] with the models on [0, 21.8 * 1.09^(i+1)], point by point. The paper's
@@ -28,15 +32,19 @@ class EnergyProtocol:
         energy: ``'q2+p2'`` (the sum of squares, as the paper's notebooks) or ``'hamiltonian'``
             (the task's true H).
         time_rescale: the paper's spring quirk (1.09, compounding per trial); None for none.
-        x0: ``'box'``: each coordinate ~ U[-0.8, 0.8] plus 0.2 sign, so |coordinate| in [0.2, 1].
-        seed: seeds ``numpy.random.RandomState`` for the start states (the original continued
-            the notebook's stream instead, so its exact draws cannot be reproduced).
+        x0: ``'box'``: each coordinate ~ U[-0.8, 0.8] plus 0.2 sign, so |coordinate| in [0.2, 1],
+            from ``RandomState(seed)`` (the original continued the notebook's stream instead, so
+            its exact draws cannot be reproduced); ``'seeds'``: ``system.initial_state(i)`` for
+            i = 0 .. num_trials - 1; ``'test_segment'``: the measured test trajectory of the
+            dataset is the truth, started from its first state on its own (uneven) times, and
+            the ± comes from 5 contiguous chunks of its time steps.
     """
     name: str
     t_span: tuple[float, float] = (0.0, 20.0)
     num_points: int = 100
     num_trials: int = 15
     rtol: float = 1e-12
+    atol: float = 1e-6          # solve_ivp's default, which every original notebook kept
     energy: str = "hamiltonian"
     time_rescale: float | None = None
     x0: str = "box"
@@ -47,8 +55,12 @@ class EnergyProtocol:
         quirks = []
         if self.time_rescale:
             quirks.append(f"model time x{self.time_rescale} compounding per trial")
-        return (f"{self.name}: {self.num_trials} trials, t in [{self.t_span[0]:g}, {self.t_span[1]:g}], "
-                f"{self.num_points} points, RK45 rtol {self.rtol:g}, energy = {self.energy}"
+        if self.x0 == "test_segment":
+            where = "the measured test segment, its own times"
+        else:
+            where = (f"{self.num_trials} trials ({'seeds 0..' + str(self.num_trials - 1) if self.x0 == 'seeds' else 'box'}),"
+                     f" t in [{self.t_span[0]:g}, {self.t_span[1]:g}], {self.num_points} points")
+        return (f"{self.name}: {where}, RK45 rtol {self.rtol:g} atol {self.atol:g}, energy = {self.energy}"
                 + (f", {'; '.join(quirks)}" if quirks else ""))
 
 
@@ -62,6 +74,14 @@ PROTOCOLS = {
         "paper": EnergyProtocol("paper", energy="q2+p2"),
         "corrected": EnergyProtocol("corrected"),
     },
+    "real": {
+        # the notebook passed no tolerance: solve_ivp's rtol 1e-3, loose enough to add error
+        "paper": EnergyProtocol("paper", x0="test_segment", rtol=1e-3),
+        "corrected": EnergyProtocol("corrected", x0="test_segment", rtol=1e-9, atol=1e-9),
+    },
+    # the paper's n-body protocols already use the physical energy; nothing to correct
+    "2body": {"paper": EnergyProtocol("paper", x0="seeds", t_span=(0.0, 25.0), num_points=500, rtol=1e-9)},
+    "3body": {"paper": EnergyProtocol("paper", x0="seeds", t_span=(0.0, 3.0), num_points=500, rtol=1e-9)},
 }
 
 
@@ -73,10 +93,13 @@ def get_protocol(task: str, name: str = "paper") -> EnergyProtocol:
                          f"{ {t: sorted(p) for t, p in PROTOCOLS.items()} }") from None
 
 
-def _start_states(protocol: EnergyProtocol) -> np.ndarray:
-    rng = np.random.RandomState(protocol.seed)
+def _start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:
+    """``(num_trials, dim)`` start states of a ``'box'`` or ``'seeds'`` protocol."""
+    if protocol.x0 == "seeds":
+        return np.stack([np.asarray(system.initial_state(i), dtype=np.float64) for i in range(protocol.num_trials)])
     if protocol.x0 != "box":
         raise ValueError(f"unknown start-state rule {protocol.x0!r}")
+    rng = np.random.RandomState(protocol.seed)
     x0 = np.empty((protocol.num_trials, 2))
     for i in range(protocol.num_trials):
         y = (rng.rand(2) * 2 - 1) * 0.8
@@ -93,43 +116,69 @@ def _energy(system, protocol: EnergyProtocol, x: torch.Tensor) -> np.ndarray:
     raise ValueError(f"unknown energy {protocol.energy!r}; use 'q2+p2' or 'hamiltonian'")
 
 
-def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int, rtol: float) -> torch.Tensor:
+def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int, protocol) -> torch.Tensor:
     """Trajectories of per-trial length ``durations`` in one batched call.
 
     Trial i integrates dx/ds = T_i f(x) on s in [0, 1], which is x(T_i s): one shared grid
     for trials whose time spans differ.
     """
     scale = torch.as_tensor(durations, dtype=x0.dtype)[:, None]
-    return rollout(lambda x: scale * f(x), x0, np.linspace(0.0, 1.0, num_points), rtol=rtol)
+    return rollout(lambda x: scale * f(x), x0, np.linspace(0.0, 1.0, num_points), rtol=protocol.rtol,
+                   atol=protocol.atol)
 
 
-def evaluate_energy(system, models: dict, protocol: EnergyProtocol) -> dict:
+def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dict | None = None) -> dict:
     """Run ``protocol`` on the true ``system`` (a task's data module) and each model.
 
     Args:
-        system: has ``dynamics(x)`` and ``hamiltonian(x)`` on ``(batch, 2)`` tensors.
+        system: has ``hamiltonian(x)`` on ``(batch, dim)`` tensors, and ``dynamics(x)`` (or,
+            for ``'seeds'`` protocols, ``initial_state(seed)``) as the protocol needs.
         models: ``{label: model}``; each model's ``time_derivative`` is integrated in the
             model's own dtype, as the original did (float32).
+        dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).
 
     Returns:
-        ``{'protocol': {...}, 'x0': ..., 't_truth': (trials, T), 'truth': (trials, T, 2),
-        'energy_truth': (trials, T), and per label: 'traj', 'energy', 'mse', 'mse_se'}``.
+        ``{'protocol': {...}, 'x0': ..., 't_truth': (trials, T), 'truth': (trials, T, dim),
+        'energy_truth': (trials, T), and per label: 'traj', 'energy', 'mse', 'mse_se'}``
+        (trials = 1 for a test segment).
     """
-    x0 = torch.as_tensor(_start_states(protocol), dtype=torch.float64)
+    if protocol.x0 == "test_segment":
+        return _evaluate_segment(system, models, protocol, dataset)
+    x0 = torch.as_tensor(_start_states(protocol, system), dtype=torch.float64)
     t0, t1 = protocol.t_span
     trials = np.arange(protocol.num_trials)
     rescale = protocol.time_rescale or 1.0
     # the compounding rescale: truth spans grow by rescale^i, the models' by rescale^(i+1)
     truth_spans = (t1 - t0) * (rescale ** trials if protocol.time_rescale else np.ones_like(trials, float))
     model_spans = truth_spans * rescale
-    truth = _rollout_scaled(system.dynamics, x0, truth_spans, protocol.num_points, protocol.rtol)
+    truth = _rollout_scaled(system.dynamics, x0, truth_spans, protocol.num_points, protocol)
     e_true = _energy(system, protocol, truth)
     out = {"protocol": asdict(protocol), "x0": x0.numpy(), "truth": truth.numpy(), "energy_truth": e_true,
            "t_truth": t0 + truth_spans[:, None] * np.linspace(0, 1, protocol.num_points)}
     for label, model in models.items():
         dtype = next(model.parameters()).dtype
-        traj = _rollout_scaled(model.time_derivative, x0.to(dtype), model_spans, protocol.num_points, protocol.rtol)
+        traj = _rollout_scaled(model.time_derivative, x0.to(dtype), model_spans, protocol.num_points, protocol)
         e_model = _energy(system, protocol, traj)
         mse, se = energy_mse(e_true, e_model, protocol.splits)
         out[label] = {"traj": traj.to(torch.float64).numpy(), "energy": e_model, "mse": mse, "mse_se": se}
+    return out
+
+
+def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: dict | None) -> dict:
+    """The real pendulum's protocol: integrate from the first measured test state over the
+    measured times and compare energies step by step (± over contiguous time chunks)."""
+    if dataset is None or "test_t" not in dataset:
+        raise ValueError("a 'test_segment' protocol needs the task's dataset with test_x and test_t")
+    measured = torch.as_tensor(np.asarray(dataset["test_x"]), dtype=torch.float64)
+    t = np.asarray(dataset["test_t"], dtype=np.float64)
+    t = t - t[0]
+    e_true = _energy(system, protocol, measured)
+    out = {"protocol": asdict(protocol), "x0": measured[:1].numpy(), "truth": measured[None].numpy(),
+           "energy_truth": e_true[None], "t_truth": t[None]}
+    for label, model in models.items():
+        dtype = next(model.parameters()).dtype
+        traj = rollout(model.time_derivative, measured[:1].to(dtype), t, rtol=protocol.rtol, atol=protocol.atol)[0]
+        e_model = _energy(system, protocol, traj)
+        mse, se = energy_mse(e_true, e_model, protocol.splits)
+        out[label] = {"traj": traj.to(torch.float64).numpy()[None], "energy": e_model[None], "mse": mse, "mse_se": se}
     return out

@@ -46,7 +46,7 @@ def _divergence(message: str, bad_rows, times) -> DivergenceError:
 
 
 def _solve_ivp(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
-               scipy_method: str = "RK45", stats: dict | None = None) -> torch.Tensor:
+               scipy_method: str = "RK45", max_norm: float | None = 1e6, stats: dict | None = None) -> torch.Tensor:
     """scipy's adaptive solver on the flattened batch: one call, one batched ``f`` per stage."""
     batch, dim = x0.shape
     dtype, device = x0.dtype, x0.device
@@ -55,6 +55,9 @@ def _solve_ivp(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, at
     def fun(time, y):
         nonlocal nfev
         nfev += 1
+        if max_norm is not None and not np.abs(y).max() <= max_norm:
+            rows = np.nonzero(~(np.abs(y.reshape(batch, dim)) <= max_norm).all(axis=1))[0].tolist()
+            raise _divergence(f"solve_ivp: states beyond max_norm={max_norm:g}", rows, [float(time)] * len(rows))
         x = torch.from_numpy(y.reshape(batch, dim))
         if x.dtype != dtype or x.device != device:
             x = x.to(dtype=dtype, device=device)
@@ -88,17 +91,20 @@ def rk4_step(f: Field, x: torch.Tensor, dt) -> torch.Tensor:
     return dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
-def _rk4(f: Field, x0: torch.Tensor, t: np.ndarray, dt: float | None = None,
+def _rk4(f: Field, x0: torch.Tensor, t: np.ndarray, dt: float | None = None, max_norm: float | None = 1e6,
          stats: dict | None = None) -> torch.Tensor:
     """Fixed-step RK4; each interval of ``t_eval`` is cut into equal steps no longer than ``|dt|``.
 
-    Runs in the caller's grad mode, so a rollout can be differentiated when wanted.
+    Runs in the caller's grad mode, so a rollout can be differentiated when wanted. Rows are
+    independent, so a row that blows up is recorded (first time it is non-finite or beyond
+    ``max_norm``) and the others finish; then the error names them all.
     """
     if dt is not None and not (dt > 0 and math.isfinite(dt)):
         raise ValueError(f"rk4 needs a positive finite dt, got {dt!r}")
     out = [x0]
     x = x0
     nfev = 0
+    first_bad = torch.full((len(x0),), float("nan"), dtype=torch.float64)
     for k in range(len(t) - 1):
         span = t[k + 1] - t[k]
         n = 1 if dt is None else max(1, math.ceil(abs(span) / dt - 1e-9))
@@ -106,16 +112,20 @@ def _rk4(f: Field, x0: torch.Tensor, t: np.ndarray, dt: float | None = None,
         for _ in range(n):
             x = x + rk4_step(f, x, h)
             nfev += 4
+        bad = ~torch.isfinite(x).all(dim=1)
+        if max_norm is not None:
+            bad |= ~(x.detach().abs() <= max_norm).all(dim=1)
+        new = bad & torch.isnan(first_bad)
+        if new.any():
+            first_bad[new] = float(t[k + 1])
+            x = torch.where(bad[:, None], torch.zeros_like(x), x)   # keep the dead rows from overflowing
         out.append(x)
     if stats is not None:
         stats["nfev"] = nfev
-    traj = torch.stack(out, dim=1)
-    finite = torch.isfinite(traj).all(dim=2)
-    if not finite.all():
-        bad = torch.nonzero(~finite.all(dim=1)).flatten().tolist()
-        first = [float(t[int(torch.nonzero(~finite[i]).min())]) for i in bad]
-        raise _divergence(f"rk4 (dt={dt})", bad, first)
-    return traj
+    diverged = torch.nonzero(~torch.isnan(first_bad)).flatten().tolist()
+    if diverged:
+        raise _divergence(f"rk4 (dt={dt}, max_norm={max_norm})", diverged, first_bad[diverged].tolist())
+    return torch.stack(out, dim=1)
 
 
 _METHODS = {"solve_ivp": _solve_ivp, "rk4": _rk4}
@@ -133,14 +143,15 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch
         method: ``'solve_ivp'`` (scipy, adaptive; options ``rtol``, ``atol``,
             ``scipy_method='RK45'|'DOP853'|...``) or ``'rk4'`` (fixed step in torch; option ``dt``,
             default one step per ``t_eval`` interval). Both accept ``stats={}``, filled with
-            ``nfev``, the number of batched evaluations of ``f``.
+            ``nfev``, the number of batched evaluations of ``f``, and ``max_norm`` (default
+            1e6; None to disable): a state with a component beyond it counts as blown up.
 
     Returns:
         ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
 
     Raises:
-        DivergenceError: when states or derivatives become non-finite, naming the trajectories
-            and times (never a silent NaN).
+        DivergenceError: when states or derivatives become non-finite or states exceed
+            ``max_norm``, naming the trajectories and times (never a silent NaN).
     """
     if method not in _METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {sorted(_METHODS)}")

@@ -1,0 +1,33 @@
+"""Train the baseline or the HNN on task 3, the real pendulum (the original's flags and defaults).
+
+    python experiment-real/train.py --verbose              # HNN
+    python experiment-real/train.py --verbose --baseline   # baseline
+
+Needs the Schmidt & Lipson (2009) measurements: real_pend_h_1.txt or invar_datasets.zip in
+--data_dir DIR, else in $HNN_DATA_DIR, else in <repo>/data. Weight decay 1e-5 is the original
+code's hard-coded value (the paper says 1e-4); training is full batch (445 rows).
+"""
+from pathlib import Path
+
+import hnn
+
+HERE = Path(__file__).resolve().parent
+
+
+def parse_args(argv=None):
+    parser = hnn.cli.make_parser("Task 3: the real pendulum (Schmidt & Lipson 2009 measurements)", name="real",
+                                 input_dim=2, weight_decay=1e-5, save_dir=str(HERE))
+    parser.add_argument("--data_dir", type=str, default=None,
+                        help="folder holding real_pend_h_1.txt or invar_datasets.zip; "
+                             "default: $HNN_DATA_DIR, else <repo>/data")
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
+    args = parse_args(argv)
+    return hnn.run_experiment(args, hnn.load_task("real").get_dataset(data_dir=args.data_dir))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+"""Rollouts at the extremes: long horizons of untrained models, and blow-ups reported."""
+import numpy as np
+import pytest
+import torch
+
+import hnn
+
+
+def test_untrained_hnn_long_rollout_stays_finite_and_conserves_its_own_hamiltonian():
+    # any HNN conserves its learned H exactly in continuous time: a property of the symplectic field
+    torch.manual_seed(1)
+    model = hnn.build_model(8, 64).double()
+    x0 = torch.randn(4, 8, dtype=torch.float64)
+    traj = hnn.rollout(model.time_derivative, x0, np.linspace(0, 500, 201), rtol=1e-10, atol=1e-10)
+    assert torch.isfinite(traj).all()
+    H = model.hamiltonian(traj.reshape(-1, 8)).reshape(4, -1)
+    assert (H - H[:, :1]).abs().max() < 1e-6 * H.abs().max()
+
+
+def test_untrained_baseline_long_rollout_drifts_but_is_finite():
+    torch.manual_seed(1)
+    base = hnn.build_model(2, 64, baseline=True).double()
+    traj = hnn.rollout(base.time_derivative, torch.ones(3, 2, dtype=torch.float64), np.linspace(0, 1000, 101))
+    assert torch.isfinite(traj).all() and traj.shape == (3, 101, 2)
+
+
+@pytest.mark.parametrize("method, options", [("solve_ivp", {}), ("rk4", {"dt": 0.01})])
+def test_exploding_states_are_reported_with_trajectory_and_time(method, options):
+    # dx/dt = lambda x grows like exp(lambda t): rows with lambda = 20 pass 1e6 near t = 0.7,
+    # the row with lambda = -1 decays and must not be named
+    rates = torch.tensor([[20.0, 20.0], [-1.0, -1.0], [20.0, 0.0]], dtype=torch.float64)
+    f = lambda x: rates * x  # noqa: E731
+    with pytest.raises(hnn.DivergenceError, match="diverged") as info:
+        hnn.rollout(f, torch.ones(3, 2, dtype=torch.float64), np.linspace(0, 2, 41), method=method, **options)
+    assert 0 in info.value.trajectories and 1 not in info.value.trajectories
+    assert all(0.5 < t < 1.0 for t in info.value.times)
+    # the same rollout is fine when the caller allows larger states
+    out = hnn.rollout(f, torch.ones(3, 2, dtype=torch.float64), np.linspace(0, 1, 11), method=method,
+                      max_norm=None, **options)
+    assert torch.isfinite(out).all()
+
+
+def test_step_size_past_rk4_stability_limit_is_reported(spring):
+    # RK4 on the spring (eigenvalues +-2i) is stable for dt * 2 < 2.83; dt = 1.6 gives 3.2: growth
+    x0 = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
+    fine = hnn.rollout(spring.dynamics, x0, np.linspace(0, 200, 2001), method="rk4", dt=0.01)
+    assert (spring.hamiltonian(fine[0]) - 1).abs().max() < 1e-6
+    with pytest.raises(hnn.DivergenceError, match="rk4"):
+        hnn.rollout(spring.dynamics, x0, np.linspace(0, 2000, 1251), method="rk4", dt=1.6)
