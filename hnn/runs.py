@@ -20,6 +20,8 @@ from .models import build_model
 from .training import train
 
 _DTYPES = {"float32": torch.float32, "float64": torch.float64}
+_UMASK = os.umask(0)
+os.umask(_UMASK)
 
 
 def atomic_write(path, write) -> None:
@@ -30,6 +32,7 @@ def atomic_write(path, write) -> None:
     os.close(fd)
     try:
         write(tmp)
+        os.chmod(tmp, 0o666 & ~_UMASK)     # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
