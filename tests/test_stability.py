@@ -24,7 +24,7 @@ def test_untrained_baseline_long_rollout_drifts_but_is_finite():
     assert torch.isfinite(traj).all() and traj.shape == (3, 101, 2)
 
 
-@pytest.mark.parametrize("method, options", [("solve_ivp", {}), ("rk4", {"dt": 0.01})])
+@pytest.mark.parametrize("method, options", [("solve_ivp", {}), ("dopri5", {}), ("rk4", {"dt": 0.01})])
 def test_exploding_states_are_reported_with_trajectory_and_time(method, options):
     # dx/dt = lambda x grows like exp(lambda t): rows with lambda = 20 pass 1e6 near t = 0.7,
     # the row with lambda = -1 decays and must not be named
