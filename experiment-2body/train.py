@@ -21,13 +21,15 @@ def parse_args(argv=None):
                         help="std of Gaussian noise added to each training batch's inputs x (the original "
                              "declared it type=int, so only whole numbers parsed, and added the noise to the "
                              "predicted derivatives instead)")
+    hnn.nbody.add_dataset_flags(parser)
     return parser.parse_args(argv)
 
 
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, hnn.load_task("2body").get_dataset(seed=args.seed, save_dir=args.save_dir))
+    return hnn.run_experiment(args, hnn.load_task("2body").get_dataset(seed=args.seed, save_dir=args.save_dir,
+                                                                      min_separation=args.min_separation))
 
 
 if __name__ == "__main__":

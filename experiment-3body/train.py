@@ -14,15 +14,18 @@ HERE = Path(__file__).resolve().parent
 
 
 def parse_args(argv=None):
-    return hnn.cli.make_parser("Task 4b: three bodies under Newtonian gravity (G = 1, unit masses)",
-                               name="3body", input_dim=12, weight_decay=1e-4, total_steps=10000,
-                               batch_size=600, save_dir=str(HERE)).parse_args(argv)
+    parser = hnn.cli.make_parser("Task 4b: three bodies under Newtonian gravity (G = 1, unit masses)",
+                                 name="3body", input_dim=12, weight_decay=1e-4, total_steps=10000,
+                                 batch_size=600, save_dir=str(HERE))
+    hnn.nbody.add_dataset_flags(parser)
+    return parser.parse_args(argv)
 
 
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, hnn.load_task("3body").get_dataset(seed=args.seed, save_dir=args.save_dir))
+    return hnn.run_experiment(args, hnn.load_task("3body").get_dataset(seed=args.seed, save_dir=args.save_dir,
+                                                                      min_separation=args.min_separation))
 
 
 if __name__ == "__main__":

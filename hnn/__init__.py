@@ -12,7 +12,7 @@ from .models import HNN, MLP, build_model, get_nonlinearity, permutation_tensor
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import available_tasks, load_task
 from .training import train
-from . import cli
+from . import cli, nbody
 from .evaluation import PROTOCOLS, EnergyProtocol, evaluate_energy, get_protocol
 
 __all__ = [

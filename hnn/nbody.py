@@ -145,6 +145,13 @@ def angular_momentum(x: torch.Tensor) -> torch.Tensor:
     return (q[..., 0] * p[..., 1] - q[..., 1] * p[..., 0]).sum(-1)
 
 
+def add_dataset_flags(parser) -> None:
+    """The orbit tasks' dataset flag(s) for a ``train.py`` parser."""
+    parser.add_argument("--min_separation", type=float, default=MIN_SEPARATION,
+                        help="redraw orbits whose bodies come closer than this (close encounters); "
+                             "0 keeps them all, as the original did")
+
+
 def min_separation(x: torch.Tensor) -> torch.Tensor:
     """The smallest distance between two bodies, shape ``(...)`` (inf for one body)."""
     if num_bodies(x) < 2:
