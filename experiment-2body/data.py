@@ -10,7 +10,6 @@ circular orbit about the centre of mass, (-pos_y, pos_x) / (2 |pos|^1.5), scaled
 1 + 0.05 N(0, 1) per orbit; body 1 is minus body 0, so the centre of mass and the total
 momentum are zero.
 """
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -55,18 +54,4 @@ def get_dataset(seed: int = 0, save_dir=HERE, **params) -> dict:
     ``resampled_close_encounter``, or failed integrations, ``resampled_failed``). Cached in
     ``save_dir`` under a hash of all the params and the seed.
     """
-    unknown = set(params) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown dataset params {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    p = {**DEFAULTS, **params, "seed": seed, "version": nbody.DATASET_VERSION}
-    sampler = partial(random_config, orbit_noise=p["orbit_noise"], min_radius=p["min_radius"],
-                      max_radius=p["max_radius"])
-
-    def build():
-        return nbody.orbit_dataset(sampler, seed, p["num_trials"], p["num_points"], tuple(p["t_span"]),
-                                   test_split=p["test_split"], rtol=p["rtol"], atol=p["atol"],
-                                   min_separation=p["min_separation"])
-
-    return nbody.get_cached_dataset(save_dir, NAME, p, build, describe=lambda d: (
-        f"{p['num_trials']} orbits ({d['resampled']} resampled: {d['resampled_close_encounter']} close "
-        f"encounters below {p['min_separation']:g}, {d['resampled_failed']} failed integrations)"))
+    return nbody.task_dataset(NAME, random_config, DEFAULTS, ("orbit_noise", "min_radius", "max_radius"), seed, save_dir, params)

@@ -10,7 +10,6 @@ degrees; the circular-orbit velocities (body 1's position turned by 90 degrees, 
 3^(-1/4) / r^1.5, turned by 120 and 240 degrees for the others), each multiplied
 component-wise by 1 + 0.2 U[-1, 1]^2, so the total momentum is not exactly zero.
 """
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -67,17 +66,4 @@ def get_dataset(seed: int = 0, save_dir=HERE, **params) -> dict:
     ``resampled_close_encounter``, or failed integrations, ``resampled_failed``). Cached in
     ``save_dir`` under a hash of all the params and the seed.
     """
-    unknown = set(params) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown dataset params {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    p = {**DEFAULTS, **params, "seed": seed, "version": nbody.DATASET_VERSION}
-    sampler = partial(random_config, nu=p["nu"], min_radius=p["min_radius"], max_radius=p["max_radius"])
-
-    def build():
-        return nbody.orbit_dataset(sampler, seed, p["num_trials"], p["num_points"], tuple(p["t_span"]),
-                                   test_split=p["test_split"], rtol=p["rtol"], atol=p["atol"],
-                                   min_separation=p["min_separation"])
-
-    return nbody.get_cached_dataset(save_dir, NAME, p, build, describe=lambda d: (
-        f"{p['num_trials']} orbits ({d['resampled']} resampled: {d['resampled_close_encounter']} close "
-        f"encounters below {p['min_separation']:g}, {d['resampled_failed']} failed integrations)"))
+    return nbody.task_dataset(NAME, random_config, DEFAULTS, ("nu", "min_radius", "max_radius"), seed, save_dir, params)

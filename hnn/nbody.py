@@ -458,3 +458,23 @@ def get_cached_dataset(path_dir, name: str, params: dict, build: Callable[[], di
     what = describe(data) if describe else "the dataset"
     print(f"{name}: generated {what} in {seconds:.1f} s; cached at {path}")
     return data
+
+
+def task_dataset(name: str, random_config: Callable, defaults: dict, sampler_keys: tuple[str, ...], seed: int,
+                 save_dir, params: dict) -> dict:
+    """An orbit task's cached dataset: ``defaults`` overridden by ``params``, the start states from
+    ``random_config(rng, **{k: value for k in sampler_keys})``, generated and cached as above."""
+    unknown = set(params) - set(defaults)
+    if unknown:
+        raise TypeError(f"unknown dataset params {sorted(unknown)}; known: {sorted(defaults)}")
+    p = {**defaults, **params, "seed": seed, "version": DATASET_VERSION}
+    sampler = functools.partial(random_config, **{k: p[k] for k in sampler_keys})
+
+    def build():
+        return orbit_dataset(sampler, seed, p["num_trials"], p["num_points"], tuple(p["t_span"]),
+                             test_split=p["test_split"], rtol=p["rtol"], atol=p["atol"],
+                             min_separation=p["min_separation"])
+
+    return get_cached_dataset(save_dir, name, p, build, describe=lambda d: (
+        f"{p['num_trials']} orbits ({d['resampled']} resampled: {d['resampled_close_encounter']} close "
+        f"encounters below {p['min_separation']:g}, {d['resampled_failed']} failed integrations)"))
