@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", default="2body", choices=("2body", "3body"))
-    p.add_argument("--trials", type=int, default=200, help="orbits per generation")
+    p.add_argument("--trials", type=int, default=None, help="orbits per generation; default: the task's dataset (1000 / 5000)")
     p.add_argument("--points", type=int, default=None, help="points per orbit; default: the task's (50 / 20)")
     p.add_argument("--repeats", type=int, default=3, help="interleaved rounds; the table gives medians")
     p.add_argument("--rtol", type=float, default=1e-9)
@@ -84,6 +84,7 @@ def main(argv=None) -> int:
 
     data = hnn.load_task(args.task)
     points = args.points or data.DEFAULTS["num_points"]
+    args.trials = args.trials or data.DEFAULTS["num_trials"]
     t_span = tuple(data.DEFAULTS["t_span"])
     rng = np.random.RandomState(args.seed)
     x0 = np.stack([data.random_config(rng) for _ in range(args.trials)])

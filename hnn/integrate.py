@@ -160,8 +160,10 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
     call on that row, so one hard trajectory no longer sets the step of the whole batch (as it
     does in ``'solve_ivp'``, whose norm is the RMS over the batch). Outputs at ``t_eval`` come
     from the method's 4th-order dense output, as in scipy. All rows advance in lockstep
-    iterations; ``f`` always sees the whole batch (finished rows take zero-length steps), so
-    row ``i`` is always trajectory ``i``.
+    iterations; once a quarter of them have finished, the finished ones are dropped, so ``f``
+    sees only rows still running: it must treat rows independently (true of dynamics and of
+    models), and a ``f`` that keeps per-trajectory state must carry each row's identity in the
+    state itself.
     """
     batch, dim = x0.shape
     num_t = len(t)
@@ -197,19 +199,24 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
     P = torch.tensor(_DP_P, dtype=x0.dtype)
     t_end = torch.tensor(float(t[-1]), dtype=torch.float64)
     for _ in range(max_iterations):
-        if done.all():
+        live = int((~done).sum())
+        if live == 0:
             break
+        if live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
+            keep = ~done
+            y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
+            K = torch.empty((7, live, dim), dtype=x0.dtype)
         gap = (t_end - tc).abs()
         clipped = prop >= gap                         # this step ends on the last time
         h = torch.where(done, torch.zeros_like(prop), torch.minimum(prop, gap)) * direction
         hx = h.to(y.dtype)[:, None]
         K[0] = k1
         for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
-            stage = torch.addcmul(y, hx, (A[s, :s] @ K[:s].reshape(s, -1)).reshape(batch, dim))
+            stage = torch.addcmul(y, hx, (A[s, :s] @ K[:s].reshape(s, -1)).reshape(-1, dim))
             K[s] = f(stage).detach()
         nfev += 6
         y_new = stage
-        err = hx * (E @ K.reshape(7, -1)).reshape(batch, dim)
+        err = hx * (E @ K.reshape(7, -1)).reshape(-1, dim)
         scale = atol + rtol * torch.maximum(y.abs(), y_new.abs())
         err_norm = (err / scale).pow(2).mean(1).sqrt().to(torch.float64)
         finite = torch.isfinite(y_new).all(1) & torch.isfinite(K[6]).all(1) & torch.isfinite(err_norm)
@@ -219,7 +226,7 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
         too_small = ~done & finite & (err_norm > 1) & (h.abs() <= 10 * eps * tc.abs().clamp(min=1.0))
         for mask in (blown, too_small):
             if mask.any():
-                bad_time[mask] = tc[mask]
+                bad_time[rows[mask]] = tc[mask]
                 done |= mask
         accept = ~done & (err_norm <= 1)
         acc = accept[:, None]
@@ -232,10 +239,10 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
                 due = accept & ~done & (direction * (tn - t_new) <= 1e-12 * t_end.abs().clamp(min=1.0))
                 if not due.any():
                     break
-                i = rows[due]
+                i = torch.nonzero(due).flatten()
                 sigma = ((tn[i] - tc[i]) / h[i]).to(y.dtype)
                 powers = torch.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4], dim=1)   # (n, 4)
-                out[i, nxt[i]] = y[i] + hx[i] * (Q[i] @ powers[:, :, None])[..., 0]
+                out[rows[i], nxt[i]] = y[i] + hx[i] * (Q[i] @ powers[:, :, None])[..., 0]
                 nxt[i] += 1
                 done |= nxt >= num_t
         y = torch.where(acc, y_new, y)

@@ -190,8 +190,11 @@ class _Guard:
     Records each trajectory's closest approach over all evaluated states (every stage of every
     step, so an encounter between two output samples is not missed; stages of rejected steps
     can only make it more cautious). A trajectory that comes closer than ``threshold`` is
-    frozen (zero derivative) from then on, so its encounter neither shrinks the shared step
-    of the batch nor blows up: it is discarded and redrawn afterwards.
+    frozen (zero derivative) from then on, so its encounter neither shrinks its steps forever
+    nor blows up: it is discarded and redrawn afterwards.
+
+    The integrator drops finished rows, so each state carries its trajectory's index as one
+    extra last column (with zero derivative): ``with_ids`` adds it, the guard reads it.
     """
 
     def __init__(self, batch: int, threshold: float):
@@ -199,20 +202,31 @@ class _Guard:
         self.closest2 = torch.full((batch,), math.inf, dtype=torch.float64)
         self.frozen = torch.zeros(batch, dtype=torch.bool)
 
+    @staticmethod
+    def with_ids(x0: np.ndarray) -> torch.Tensor:
+        """``(n, 4B)`` start states with their row index as column 4B: ``(n, 4B + 1)``."""
+        return torch.from_numpy(np.concatenate([x0, np.arange(len(x0), dtype=x0.dtype)[:, None]], axis=1))
+
     @property
     def closest(self) -> torch.Tensor:
         """Each trajectory's closest approach so far (NaN if a state was NaN)."""
         return self.closest2.sqrt()
 
-    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+    def __call__(self, state: torch.Tensor) -> torch.Tensor:
+        x, ids = state[:, :-1], state[:, -1].long()
         dxdt, r2 = _field(x)
+        frozen = self.frozen[ids]
         if r2.shape[1]:
             nearest = r2.amin(dim=1).to(torch.float64)
-            self.closest2 = torch.minimum(self.closest2, nearest)       # NaN sticks, and counts as close
-            self.frozen |= ~(nearest >= self.threshold2)
-        if self.frozen.any():
-            dxdt = torch.where(self.frozen.unsqueeze(1), torch.zeros_like(dxdt), dxdt)
-        return dxdt
+            closest = self.closest2[ids]
+            self.closest2[ids] = torch.minimum(closest, nearest)   # NaN sticks, and counts as close
+            frozen |= ~(nearest >= self.threshold2)
+            self.frozen[ids] = frozen
+        out = torch.zeros_like(state)
+        out[:, :-1] = dxdt
+        if frozen.any():
+            out[frozen] = 0.0
+        return out
 
 
 def _integrate(x0: np.ndarray, t_eval: np.ndarray, rtol: float, atol: float, threshold: float,
@@ -222,13 +236,17 @@ def _integrate(x0: np.ndarray, t_eval: np.ndarray, rtol: float, atol: float, thr
 
     ``rollout(method='dopri5')`` controls each trajectory's step with its own error norm, as one
     scipy RK45 call per trajectory would, so a hard orbit neither sets the step of the others
-    nor gets a looser tolerance. If the batched call fails, the culprits it names (or else the two halves) are retried
-    apart, down to single trajectories.
+    nor gets a looser tolerance. If the batched call fails, the culprits it names (or else the
+    two halves) are retried apart, down to single trajectories.
     """
     n = len(x0)
     guard = _Guard(n, threshold)
+    # the id column's error is always 0 but counts in the RMS over dim + 1 components: shrinking
+    # both tolerances by sqrt(dim / (dim + 1)) gives exactly the norm of the 4B real components
+    shrink = math.sqrt(x0.shape[1] / (x0.shape[1] + 1))
     try:
-        traj = rollout(guard, torch.from_numpy(x0), t_eval, method="dopri5", rtol=rtol, atol=atol).numpy()
+        traj = rollout(guard, _Guard.with_ids(x0), t_eval, method="dopri5", rtol=rtol * shrink,
+                       atol=atol * shrink).numpy()[..., :-1]
     except DivergenceError as err:
         if n == 1:
             reasons[0], closest[0] = 2, float(guard.closest[0])
@@ -252,7 +270,7 @@ def _integrate(x0: np.ndarray, t_eval: np.ndarray, rtol: float, atol: float, thr
 def sample_orbits(sample_config: Callable[[np.random.RandomState], np.ndarray], num_trials: int,
                   num_points: int, t_span: tuple[float, float], rng: np.random.RandomState,
                   rtol: float = 1e-9, atol: float = 1e-6, min_separation: float = MIN_SEPARATION,
-                  max_resamples: int | None = None, chunk_size: int = 500) -> Orbits:
+                  max_resamples: int | None = None, chunk_size: int = 5000) -> Orbits:
     """``num_trials`` clean trajectories of ``num_points`` times on ``t_span``, integrated in batches.
 
     Draws ``num_trials`` states with ``sample_config(rng)`` (each ``(4B,)``, in order, so the

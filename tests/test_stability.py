@@ -26,16 +26,16 @@ def test_untrained_baseline_long_rollout_drifts_but_is_finite():
 
 @pytest.mark.parametrize("method, options", [("solve_ivp", {}), ("dopri5", {}), ("rk4", {"dt": 0.01})])
 def test_exploding_states_are_reported_with_trajectory_and_time(method, options):
-    # dx/dt = lambda x grows like exp(lambda t): rows with lambda = 20 pass 1e6 near t = 0.7,
-    # the row with lambda = -1 decays and must not be named
-    rates = torch.tensor([[20.0, 20.0], [-1.0, -1.0], [20.0, 0.0]], dtype=torch.float64)
-    f = lambda x: rates * x  # noqa: E731
+    # positive components grow like exp(20 t) and pass 1e6 near t = 0.69; negative ones decay to 0.
+    # Rows 0 and 2 blow up, row 1 must not be named (f treats rows independently, as required)
+    x0 = torch.tensor([[1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]], dtype=torch.float64)
+    f = lambda x: torch.where(x > 0, 20 * x, -x)  # noqa: E731
     with pytest.raises(hnn.DivergenceError, match="diverged") as info:
-        hnn.rollout(f, torch.ones(3, 2, dtype=torch.float64), np.linspace(0, 2, 41), method=method, **options)
+        hnn.rollout(f, x0, np.linspace(0, 2, 41), method=method, **options)
     assert 0 in info.value.trajectories and 1 not in info.value.trajectories
     assert all(0.5 < t < 1.0 for t in info.value.times)
     # the same rollout is fine when the caller allows larger states
-    out = hnn.rollout(f, torch.ones(3, 2, dtype=torch.float64), np.linspace(0, 1, 11), method=method,
+    out = hnn.rollout(f, x0, np.linspace(0, 1, 11), method=method,
                       max_norm=None, **options)
     assert torch.isfinite(out).all()
 
