@@ -22,5 +22,5 @@ __all__ = [
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "run_experiment", "run_dir", "save_run", "load_run", "find_run",
     "load_task", "available_tasks",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "cli",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "cli", "nbody",
 ]

@@ -20,7 +20,6 @@ import functools
 import hashlib
 import json
 import math
-import os
 import time
 import warnings
 from dataclasses import dataclass, field
