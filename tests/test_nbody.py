@@ -8,7 +8,7 @@ import torch
 from scipy.integrate import solve_ivp
 
 import hnn
-from hnn import nbody
+from hnn import cache, nbody
 
 
 @pytest.fixture(scope="module")
@@ -254,16 +254,16 @@ def _builder(calls, value=1.0):
 def test_cache_reuses_the_file_for_the_same_params(tmp_path, capsys):
     calls = []
     params = {"seed": 0, "num_trials": 10, "t_span": (0.0, 20.0)}
-    first = nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
+    first = cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
     assert "toy: generated" in capsys.readouterr().out
-    again = nbody.get_cached_dataset(tmp_path, "toy", dict(params), _builder(calls))
+    again = cache.get_cached_dataset(tmp_path, "toy", dict(params), _builder(calls))
     assert len(calls) == 1 and capsys.readouterr().out == ""
     for data in (first, again):
         assert data["dt"] == 0.5 and isinstance(data["dt"], float) and data["resampled"] == 2
         assert isinstance(data["resampled"], int) and data["x"].dtype == np.float32
     np.testing.assert_array_equal(first["x"], again["x"])
     (path,) = tmp_path.glob("toy-*.npz")
-    assert path == nbody.cache_path(tmp_path, "toy", params)
+    assert path == cache.cache_path(tmp_path, "toy", params)
     with np.load(path) as f:                                       # the params travel inside the file
         assert json.loads(str(f["__params__"])) == {"seed": 0, "num_trials": 10, "t_span": [0.0, 20.0]}
     assert not list(tmp_path.glob(".*"))                           # no temporary file left behind
@@ -272,30 +272,30 @@ def test_cache_reuses_the_file_for_the_same_params(tmp_path, capsys):
 def test_cache_regenerates_for_a_new_seed_or_param_and_says_which(tmp_path, capsys):
     calls = []
     params = {"seed": 0, "num_trials": 10}
-    nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
+    cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
     capsys.readouterr()
-    nbody.get_cached_dataset(tmp_path, "toy", {"seed": 1, "num_trials": 10}, _builder(calls, 2.0))
+    cache.get_cached_dataset(tmp_path, "toy", {"seed": 1, "num_trials": 10}, _builder(calls, 2.0))
     out = capsys.readouterr().out
     assert len(calls) == 2 and "differs in seed (cached 0, requested 1)" in out and "generated" in out
-    nbody.get_cached_dataset(tmp_path, "toy", {"seed": 0, "num_trials": 20}, _builder(calls))
+    cache.get_cached_dataset(tmp_path, "toy", {"seed": 0, "num_trials": 20}, _builder(calls))
     assert len(calls) == 3 and "num_trials (cached 10, requested 20)" in capsys.readouterr().out
     assert len(list(tmp_path.glob("toy-*.npz"))) == 3
     # the seed-0 file still serves seed 0
-    assert nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))["x"][0, 0] == 1.0
+    assert cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))["x"][0, 0] == 1.0
     assert len(calls) == 3
 
 
 def test_cache_with_other_params_under_its_name_is_reported_and_rebuilt(tmp_path):
     calls = []
     params = {"seed": 0, "num_trials": 10}
-    path = nbody.cache_path(tmp_path, "toy", params)
-    nbody._save(path, {"seed": 0, "num_trials": 99}, {"x": np.zeros(2)})   # e.g. copied over by hand
+    path = cache.cache_path(tmp_path, "toy", params)
+    cache._save(path, {"seed": 0, "num_trials": 99}, {"x": np.zeros(2)})   # e.g. copied over by hand
     with pytest.warns(UserWarning, match=r"num_trials \(cached 99, requested 10\); regenerating"):
-        data = nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
+        data = cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
     assert len(calls) == 1 and data["x"].shape == (3, 4)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
+        cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
     assert len(calls) == 1
 
 
@@ -303,14 +303,14 @@ def test_cache_with_other_params_under_its_name_is_reported_and_rebuilt(tmp_path
 def test_a_corrupt_cache_is_reported_and_rebuilt(tmp_path, damage):
     calls = []
     params = {"seed": 0}
-    path = nbody.cache_path(tmp_path, "toy", params)
-    nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
+    path = cache.cache_path(tmp_path, "toy", params)
+    cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
     blob = path.read_bytes()
     path.write_bytes(b"not an npz at all" if damage == "garbage" else blob[: len(blob) // 2])
     with pytest.warns(UserWarning, match="unreadable"):
-        data = nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
+        data = cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))
     assert len(calls) == 2 and data["x"].shape == (3, 4)
-    nbody.get_cached_dataset(tmp_path, "toy", params, _builder(calls))       # the rebuilt file is good
+    cache.get_cached_dataset(tmp_path, "toy", params, _builder(calls))       # the rebuilt file is good
     assert len(calls) == 2
 
 
