@@ -14,7 +14,7 @@ def _optional_int(text: str):
 
 def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, weight_decay: float,
                 total_steps: int = 2000, batch_size: int | None = None, learn_rate: float = 1e-3,
-                hidden_dim: int = 200) -> argparse.ArgumentParser:
+                hidden_dim: int = 200, rk4_help: str | None = None) -> argparse.ArgumentParser:
     """The shared flags with one task's defaults; a task may add flags of its own."""
     p = argparse.ArgumentParser(description=description,
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -32,10 +32,9 @@ def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, w
     p.add_argument("--print_every", type=int, default=200, help="print (and test) every N steps")
     p.add_argument("--name", type=str, default=name, help="run name, the prefix of the run folder")
     p.add_argument("--baseline", action="store_true", help="train the baseline (an MLP predicting dx/dt directly)")
-    p.add_argument("--use_rk4", action="store_true",
-                   help="fit the RK4 average slope of the learned field over one data time step dt, "
-                        "(x(t+dt) - x(t))/dt of one RK4 step, to the true dx/dt (the original crashed "
-                        "on this flag); default: fit dx/dt itself")
+    p.add_argument("--use_rk4", action="store_true", help=rk4_help or (
+        "fit the RK4 average slope of the learned field over one data time step dt, (x(t+dt) - x(t))/dt "
+        "of one RK4 step, to the true dx/dt (the original crashed on this flag); default: fit dx/dt itself"))
     p.add_argument("--verbose", action="store_true", help="print the loss every print_every steps")
     p.add_argument("--field_type", type=str, default="solenoidal",
                    help="solenoidal (Hamiltonian), conservative, or both")

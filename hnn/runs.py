@@ -16,7 +16,7 @@ import torch
 
 from .integrate import rk4_step
 from .metrics import derivative_loss
-from .models import build_model
+from .models import PixelHNN, build_model
 from .training import train
 
 _DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -53,8 +53,8 @@ def run_dir(args) -> Path:
     return Path(args.save_dir) / f"{args.name}-{run_label(args)}-seed{args.seed}"
 
 
-# flags that change what is printed, never what is trained
-_DISPLAY_ONLY = ("verbose",)
+# flags that change what is printed or how fast, never what is trained
+_DISPLAY_ONLY = ("verbose", "render_workers", "no_eval")
 
 
 def find_run(args) -> Path | None:
@@ -72,7 +72,11 @@ def find_run(args) -> Path | None:
 
 
 def model_from_args(args: dict) -> torch.nn.Module:
-    """The untrained model that a run with these args trains."""
+    """The untrained model that a run with these args trains (a ``PixelHNN`` when they name a ``latent_dim``)."""
+    if "latent_dim" in args:
+        model = PixelHNN(args["input_dim"], args["latent_dim"], args["hidden_dim"], args["nonlinearity"],
+                         args["baseline"], args["field_type"], args.get("ae_nonlinearity", "relu"))
+        return model.to(dtype=_DTYPES[args.get("dtype", "float32")])
     model = build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"], args["baseline"],
                         args["field_type"])
     return model.to(dtype=_DTYPES[args.get("dtype", "float32")])

@@ -31,7 +31,7 @@ def check_data(name: str, a, width: int | None = None, dtype=torch.float32, devi
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
-          predict: Callable | None = None, progress: bool | None = None) -> dict:
+          predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` with Adam; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -48,6 +48,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         input_noise: std of Gaussian noise added to each training batch's inputs x, fresh each
             step (0: none). The original 2-body script added it to the prediction instead.
         predict: ``x -> prediction`` compared with ``dxdt``; default ``model.time_derivative``.
+        loss: ``(x, y) -> per-sample or scalar loss`` replacing the L2 loss of ``predict``, for
+            models with an objective of their own (the pixel task passes ``x``, ``x_next``).
         progress: show a progress bar; default when stderr is a terminal and not ``verbose``.
 
     Returns:
@@ -72,6 +74,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         if len(test_x) != len(test_dxdt):
             raise ValueError(f"test_x has {len(test_x)} rows but test_dxdt has {len(test_dxdt)}")
     predict = predict or model.time_derivative
+    if loss is None:
+        loss = lambda xb, yb: (yb - predict(xb)).pow(2)  # noqa: E731
     if test_every is None:
         test_every = print_every
     if test_every < 1 or print_every < 1:
@@ -94,11 +98,11 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             xb, yb = x[ix], dxdt[ix]
         if input_noise:
             xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
-        loss = (yb - predict(xb)).pow(2).mean()
-        loss.backward()
+        batch_loss = loss(xb, yb).mean()
+        batch_loss.backward()
         optim.step()
         optim.zero_grad(set_to_none=True)
-        stats["train_loss"].append(loss.item())
+        stats["train_loss"].append(batch_loss.item())
         if has_test and (step % test_every == 0 or step == total_steps):
             if batch_size is None or batch_size >= len(test_x):
                 tx, ty = test_x, test_dxdt
@@ -106,7 +110,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 ix = torch.randperm(len(test_x), generator=test_gen)[:batch_size]
                 tx, ty = test_x[ix], test_dxdt[ix]
             with torch.no_grad():
-                stats["test_loss"].append((ty - predict(tx)).pow(2).mean().item())
+                stats["test_loss"].append(loss(tx, ty).mean().item())
             stats["test_steps"].append(step)
         if verbose and step % print_every == 0:
             test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""

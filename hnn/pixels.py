@@ -1,0 +1,286 @@
+"""The pixel pendulum's machinery: train a ``PixelHNN`` from flags, and its energy metric.
+
+    run = run_pixel_experiment(args, dataset)          # trains, saves, returns the run folder
+    result = evaluate_pixel_energy(system, models, get_pixel_protocol("paper"), dataset)
+
+The energy metric, as the paper's notebook reconstructs it (reference section 9.6): a fresh
+200-frame gym trajectory (seed 1, start angle in (pi/11, pi/10)); each model encodes its first
+pixel pair, integrates its latent field, decodes every latent to pixels, encodes them again,
+and maps the latents linearly to (q, p) (a map fitted per model on its training latents); the
+energy 1.9 (1 - cos q) + p^2 of that path against the truth's, squared, mean ± the batch-means
+standard error over 5 chunks of 40 frames. The original encoded the baseline's pixels with the
+HNN's encoder; here every model uses its own.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .integrate import rollout
+from .metrics import energy_mse, mean_and_se
+from .runs import atomic_write, model_from_args, run_dir, save_run
+from .training import train
+
+
+def pixel_loss(model, x, x_next, chunk: int = 4000) -> tuple[float, float]:
+    """The final train/test number: the per-sample combined loss over all rows, mean ± std/sqrt(rows)."""
+    param = next(model.parameters())
+    x = torch.as_tensor(x, dtype=param.dtype, device=param.device)
+    x_next = torch.as_tensor(x_next, dtype=param.dtype, device=param.device)
+    with torch.no_grad():
+        per_sample = torch.cat([model.loss(x[i:i + chunk], x_next[i:i + chunk]) for i in range(0, len(x), chunk)])
+    return mean_and_se(per_sample)
+
+
+def run_pixel_experiment(args, dataset: dict) -> Path:
+    """Train the ``PixelHNN`` (or its baseline) that ``args`` describe and save the run.
+
+    ``dataset`` holds ``pixels``, ``next_pixels`` and their ``test_`` twins, ``(rows, 2 side^2)``.
+    """
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    model = model_from_args(vars(args)).to(args.device)
+    noise = torch.Generator().manual_seed(args.seed + 2)
+
+    def loss(x, x_next):
+        return model.loss(x, x_next, input_noise=args.input_noise, use_rk4=args.use_rk4, generator=noise)
+
+    stats = train(model, dataset["pixels"], dataset["next_pixels"], dataset["test_pixels"],
+                  dataset["test_next_pixels"], total_steps=args.total_steps, learn_rate=args.learn_rate,
+                  weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
+                  print_every=args.print_every, verbose=args.verbose, loss=loss)
+    train_loss = pixel_loss(model, dataset["pixels"], dataset["next_pixels"])
+    test_loss = pixel_loss(model, dataset["test_pixels"], dataset["test_next_pixels"])
+    if args.verbose:
+        print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
+              f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
+    metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
+               "test_loss": test_loss[0], "test_loss_se": test_loss[1],
+               "train_seconds": stats["seconds"], "history": stats}
+    return save_run(run_dir(args), model, vars(args), metrics)
+
+
+@dataclass(frozen=True)
+class PixelProtocol:
+    """How the pixel energy MSE is measured.
+
+    Attributes:
+        t_end, num_points: the latent path is sampled at ``linspace(0, t_end, num_points)``
+            (time in frames); the paper used t_end = 196 for 200 frames, 0.98 of a frame apart.
+        coords: ``'next_state'``: the truth at row k is the state one step after the pair's
+            second frame (the original's off-by-one); ``'pair_state'``: the state that frame shows.
+        prepend_truth: replace the model's first point by the true one (the paper's notebook).
+        latent_map: ``'adam'``: a linear layer fitted by Adam (lr 1e-3, 4000 steps, batches of
+            400, as the notebook); ``'lstsq'``: the exact least-squares affine map.
+        energy: ``'paper'``: 1.9 (1 - cos q) + p^2; ``'true'``: 1.875 (1 - cos q) + p^2, the
+            conserved quantity of the pendulum gym simulates.
+    """
+    name: str
+    t_end: float = 196.0
+    num_points: int = 200
+    rtol: float = 1e-3
+    atol: float = 1e-6
+    coords: str = "next_state"
+    prepend_truth: bool = True
+    latent_map: str = "adam"
+    energy: str = "paper"
+    seed: int = 1
+    min_angle: float = math.pi / 11
+    max_angle: float = math.pi / 10
+    splits: int = 5
+
+    def describe(self) -> str:
+        return (f"{self.name}: one gym trajectory (seed {self.seed}, |q0| in ({self.min_angle:.3f}, "
+                f"{self.max_angle:.3f})), {self.num_points} frames on t in [0, {self.t_end:g}] frames, "
+                f"RK45 rtol {self.rtol:g} atol {self.atol:g}, truth = {self.coords}, latent map {self.latent_map}, "
+                f"energy = {self.energy}" + (", first point = truth" if self.prepend_truth else ""))
+
+
+PIXEL_PROTOCOLS = {
+    "paper": PixelProtocol("paper"),
+    "corrected": PixelProtocol("corrected", t_end=199.0, rtol=1e-9, atol=1e-9, coords="pair_state",
+                               prepend_truth=False, latent_map="lstsq", energy="true"),
+}
+
+
+def get_pixel_protocol(name: str = "paper") -> PixelProtocol:
+    if name not in PIXEL_PROTOCOLS:
+        raise ValueError(f"unknown pixel protocol {name!r}; choose one of {sorted(PIXEL_PROTOCOLS)}")
+    return PIXEL_PROTOCOLS[name]
+
+
+def fit_latent_map(latents, coords, how: str = "adam", seed: int = 0):
+    """An affine map latents ``(rows, 2)`` -> coords ``(rows, 2)``; returns ``z -> coords`` on float64 tensors."""
+    z = torch.as_tensor(latents, dtype=torch.float64)
+    c = torch.as_tensor(coords, dtype=torch.float64)
+    if how == "lstsq":
+        design = torch.cat([z, torch.ones(len(z), 1, dtype=z.dtype)], dim=1)
+        sol = torch.linalg.lstsq(design, c).solution
+        return lambda u: torch.cat([u.to(torch.float64), torch.ones(len(u), 1, dtype=torch.float64)], dim=1) @ sol
+    if how != "adam":
+        raise ValueError(f"latent_map must be 'adam' or 'lstsq', got {how!r}")
+    gen = torch.Generator().manual_seed(seed)
+    torch.manual_seed(seed)
+    layer = torch.nn.Linear(z.shape[1], c.shape[1]).to(torch.float32)
+    optim = torch.optim.Adam(layer.parameters(), lr=1e-3)
+    z32, c32 = z.float(), c.float()
+    for _ in range(4000):
+        ix = torch.randint(len(z32), (400,), generator=gen)
+        loss = (layer(z32[ix]) - c32[ix]).pow(2).mean()
+        loss.backward()
+        optim.step()
+        optim.zero_grad(set_to_none=True)
+    layer = layer.double().requires_grad_(False)
+    return lambda u: layer(u.to(torch.float64))
+
+
+def test_trajectory(system, protocol: PixelProtocol, render_size: int = 500) -> dict:
+    """The evaluation trajectory: ``pixels`` ``(num_points, 2 side^2)`` and its true ``coords``."""
+    raw = system.sample_frames(seed=protocol.seed, trials=1, timesteps=protocol.num_points + 3,
+                               min_angle=protocol.min_angle, max_angle=protocol.max_angle,
+                               render_size=render_size, workers=1)
+    rows = system.pair_rows(raw["frames"], raw["states"])
+    return {"pixels": rows["pixels"], "coords": rows["coords" if protocol.coords == "next_state" else "pair_coords"]}
+
+
+def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6) -> torch.Tensor:
+    """The latent path ``(len(t_eval), latent_dim)`` from the encoded first pixel pair ``pixels[:1]``."""
+    param = next(model.parameters())
+    with torch.no_grad():
+        z0 = model.encode(torch.as_tensor(pixels[:1], dtype=param.dtype))
+    return rollout(model.time_derivative, z0, t_eval, method="solve_ivp", rtol=rtol, atol=atol)[0]
+
+
+def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset: dict,
+                          trajectory: dict | None = None) -> dict:
+    """Energy MSE of each model in ``models`` (``{label: PixelHNN}``) under ``protocol``.
+
+    ``dataset`` is the task's training set (for the latent maps); ``trajectory`` the output of
+    ``test_trajectory`` (rendered when None). Returns ``{label: {mse, mse_se, energy, coords,
+    decoded}, 'truth': {energy, coords}, 'protocol': ...}``.
+    """
+    trajectory = trajectory or test_trajectory(system, protocol)
+    energy_fn = system.hamiltonian if protocol.energy == "paper" else system.true_hamiltonian
+    true_coords = torch.as_tensor(trajectory["coords"], dtype=torch.float64)
+    e_true = energy_fn(true_coords)
+    out = {"truth": {"energy": e_true.numpy(), "coords": true_coords.numpy()}, "protocol": asdict(protocol)}
+    t_eval = np.linspace(0.0, protocol.t_end, protocol.num_points)
+    fit_coords = dataset["coords" if protocol.coords == "next_state" else "pair_coords"]
+    for label, model in models.items():
+        param = next(model.parameters())
+        with torch.no_grad():
+            latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
+                                 for i in range(0, len(dataset["pixels"]), 4000)])
+        to_coords = fit_latent_map(latents, fit_coords, protocol.latent_map)
+        z = latent_path(model, trajectory["pixels"], t_eval, protocol.rtol, protocol.atol)
+        with torch.no_grad():
+            decoded = model.decode(z.to(param.dtype))
+            coords = to_coords(model.encode(decoded))     # its own encoder (the original used the HNN's)
+        if protocol.prepend_truth:
+            coords[0] = true_coords[0]
+        e_pred = energy_fn(coords)
+        mse, se = energy_mse(e_true, e_pred, protocol.splits)
+        out[label] = {"mse": mse, "mse_se": se, "energy": e_pred.numpy(), "coords": coords.numpy(),
+                      "latents": z.double().numpy(), "decoded": decoded.numpy()}
+    return out
+
+
+def add_energy_path(model, z0, t_first: float = 50.0, t_push: float = 1.8, t_last: float = 60.0,
+                    num_points: int = 500) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's "add energy" demo in latent space: follow the HNN's symplectic field for
+    ``t_first`` frames, the plain gradient of its H (uphill) for ``t_push``, then the symplectic
+    field again for ``t_last``; points spread in proportion to time. Returns ``(t, z)``,
+    ``(T,)`` and ``(T, latent_dim)``."""
+    if model.baseline:
+        raise ValueError("the add-energy demo needs an HNN (a baseline has no H to climb)")
+    param = next(model.parameters())
+
+    def uphill(z):
+        with torch.enable_grad():
+            z = z.detach().requires_grad_(True)
+            return torch.autograd.grad(model.hamiltonian(z).sum(), z)[0]
+
+    spans = (t_first, t_push, t_last)
+    counts = [max(2, round(num_points * s / sum(spans))) for s in spans]
+    z = torch.as_tensor(np.asarray(z0, dtype=np.float64).reshape(1, -1), dtype=param.dtype)
+    ts, zs, offset = [], [], 0.0
+    for field, span, count, rtol in ((model.time_derivative, t_first, counts[0], 1e-6), (uphill, t_push, counts[1], 1e-12),
+                                     (model.time_derivative, t_last, counts[2], 1e-6)):
+        t = np.linspace(0.0, span, count)
+        path = rollout(field, z, t, method="solve_ivp", rtol=rtol, atol=1e-9)[0]
+        ts.append(t + offset)
+        zs.append(path.double().numpy())
+        z, offset = path[-1:].to(param.dtype), offset + span
+    return np.concatenate(ts), np.concatenate(zs)
+
+
+def _to_uint8(pixels: np.ndarray, side: int, scale: int) -> np.ndarray:
+    """The first frame of each pair ``(T, 2 side^2)`` as ``(T, side*scale, side*scale)`` uint8 (0..0.5 -> 0..255)."""
+    frames = np.asarray(pixels)[:, :side * side].reshape(-1, side, side)
+    frames = np.clip(frames * 2.0, 0.0, 1.0) * 255
+    return np.kron(frames, np.ones((scale, scale))).astype(np.uint8)
+
+
+def write_gif(panels: dict, path, side: int = 28, scale: int = 4, ms_per_frame: int = 50) -> Path:
+    """An animated GIF of panels side by side: ``{title: pixels (T, 2 side^2)}``, all of the same T."""
+    import imageio.v3 as iio
+
+    lengths = {len(v) for v in panels.values()}
+    if len(lengths) != 1:
+        raise ValueError(f"all panels need the same number of frames, got {lengths}")
+    strips = [_to_uint8(v, side, scale) for v in panels.values()]
+    gap = np.full((strips[0].shape[0], side * scale, 4), 255, dtype=np.uint8)   # a white divider
+    movie = np.concatenate([x for s in strips for x in (s, gap)][:-1], axis=2)
+    path = Path(path)
+    atomic_write(path, lambda tmp: iio.imwrite(tmp, movie, extension=".gif", duration=ms_per_frame, loop=0))
+    return path
+
+
+def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500, verbose: bool = True) -> dict:
+    """After training: both energy protocols into the run's ``metrics.json``, the rollout's decoded
+    frames into ``rollout.npz``, and GIFs (truth vs this model; truth vs baseline vs HNN once both
+    runs of this seed exist in the same folder; the add-energy demo for an HNN). Returns the metrics."""
+    from .paper import PAPER
+    from .runs import load_run, write_json
+
+    directory = Path(directory)
+    model, args, metrics = load_run(directory)
+    label = "baseline" if args["baseline"] else "hnn"
+    for name, protocol in PIXEL_PROTOCOLS.items():
+        result = evaluate_pixel_energy(system, {label: model}, protocol, dataset,
+                                       test_trajectory(system, protocol, render_size))
+        metrics[f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
+        if name == "paper":
+            paper_result = result
+    write_json(directory / "metrics.json", metrics)
+    truth = test_trajectory(system, PIXEL_PROTOCOLS["corrected"], render_size)["pixels"]
+    decoded = paper_result[label]["decoded"]
+    atomic_write(directory / "rollout.npz", lambda tmp: np.savez_compressed(
+        open(tmp, "wb"), truth=truth.astype(np.float32), decoded=decoded.astype(np.float32)))
+    write_gif({"truth": truth, label: decoded}, directory / f"truth-vs-{label}.gif")
+    other = directory.parent / directory.name.replace(label, "hnn" if label == "baseline" else "baseline", 1)
+    if (other / "rollout.npz").exists():
+        with np.load(other / "rollout.npz") as f:
+            pair = {label: decoded, "other": f["decoded"]}
+        order = ("baseline", "hnn") if label == "baseline" else ("other", "hnn")
+        panels = {"truth": truth, **{k: (pair[k] if k in pair else pair["other"]) for k in order}}
+        write_gif(panels, directory.parent / f"{args['name']}-compare-seed{args['seed']}.gif")
+    if label == "hnn":
+        t, z = add_energy_path(model, paper_result[label]["latents"][0])
+        with torch.no_grad():
+            frames = model.decode(torch.as_tensor(z, dtype=next(model.parameters()).dtype)).numpy()
+        write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
+    if verbose:
+        paper = PAPER["pixels"]
+        print(f"{'metric':24s} {'paper':>24s} {'ours':>24s}")
+        for key, title in (("train_loss", "train loss"), ("test_loss", "test loss"), ("energy_mse_paper", "energy MSE")):
+            ours = metrics[key] if isinstance(metrics[key], list) else [metrics[key], metrics[key + "_se"]]
+            ref = paper[key.replace("_paper", "")][label]
+            print(f"{title + ' (' + label + ')':24s} {ref[0]:.4e} ± {ref[1]:.1e}  {ours[0]:.4e} ± {ours[1]:.1e}")
+        print(f"energy MSE, corrected protocol: {metrics['energy_mse_corrected'][0]:.4e} ± "
+              f"{metrics['energy_mse_corrected'][1]:.1e}; GIFs in {directory}")
+    return metrics
