@@ -242,7 +242,7 @@ def test_midpoint_non_convergence_is_reported(spring):
     assert isinstance(info.value, hnn.DivergenceError)
     stats = {}
     hnn.rollout(spring.dynamics, x0, np.linspace(0, 15, 11), method="midpoint", dt=0.5, stats=stats)
-    assert stats["max_step_iterations"] < 100 and stats["nfev"] == stats["iterations"] + 30
+    assert stats["max_step_iterations"] < 100 and stats["nfev"] == stats["iterations"] + 1   # one Euler guess, then the last increments
 
 
 @pytest.mark.parametrize("method", hnn.SYMPLECTIC_METHODS)
