@@ -6,6 +6,7 @@ Every method integrates the whole batch together, evaluating ``f`` once per stag
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Callable
 
 import numpy as np
@@ -264,7 +265,20 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
     return out
 
 
-_METHODS = {"solve_ivp": _solve_ivp, "rk4": _rk4, "dopri5": _dopri5}
+from .symplectic import SYMPLECTIC_METHODS, symplectic_rollout  # noqa: E402  (it uses DivergenceError above)
+
+_METHODS = {"solve_ivp": _solve_ivp, "rk4": _rk4, "dopri5": _dopri5,
+            **{m: (lambda f, x0, t, _m=m, **kw: symplectic_rollout(f, x0, t, _m, **kw)) for m in SYMPLECTIC_METHODS}}
+
+
+def _check_tolerance(method: str, dtype: torch.dtype, options: dict) -> None:
+    """Warn when an adaptive method is asked for a relative accuracy ``dtype`` cannot deliver."""
+    rtol = options.get("rtol")
+    eps = torch.finfo(dtype).eps
+    if method in ("solve_ivp", "dopri5") and rtol is not None and rtol < 100 * eps:
+        # f is evaluated in dtype: its rounding (~eps relative) caps the accuracy of every stage
+        warnings.warn(f"{method}: rtol={rtol:g} is tighter than {dtype} can honour (100 * eps = {100 * eps:.3g}); "
+                      f"the error will stall near eps: use rtol >= {100 * eps:.3g} or float64 states", stacklevel=3)
 
 
 def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch.Tensor:
@@ -279,17 +293,28 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch
         method: ``'solve_ivp'`` (scipy, adaptive; options ``rtol``, ``atol``,
             ``scipy_method='RK45'|'DOP853'|...``), ``'dopri5'`` (the same RK45 in torch with one
             step size per trajectory, each controlled as in its own scipy call; options ``rtol``,
-            ``atol``), or ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
-            ``t_eval`` interval). Both accept ``stats={}``, filled with
-            ``nfev``, the number of batched evaluations of ``f``, and ``max_norm`` (default
+            ``atol``), ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
+            ``t_eval`` interval), or the symplectic fixed-step methods of ``hnn.symplectic``
+            (option ``dt`` as for rk4): ``'leapfrog'`` (Stormer-Verlet; exact only for
+            separable H = T(p) + V(q), e.g. true dynamics), ``'midpoint'`` (implicit midpoint,
+            for any H, the choice for learned models; options ``tol`` (default 1e-12 in float64,
+            8 eps in float32) and ``max_iter`` (100) of its fixed-point iteration) and
+            ``'yoshida4'`` (order 4; option ``base='leapfrog'|'midpoint'``). All accept
+            ``stats={}``, filled with ``nfev``, the number of batched evaluations of ``f`` (and
+            for the midpoint ``iterations`` and ``max_step_iterations``), and ``max_norm`` (default
             1e6; None to disable): a state with a component beyond it counts as blown up.
+            Fixed-step methods take ``t_eval`` in either direction (backwards for reversibility).
 
     Returns:
         ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
 
     Raises:
         DivergenceError: when states or derivatives become non-finite or states exceed
-            ``max_norm``, naming the trajectories and times (never a silent NaN).
+            ``max_norm``, naming the trajectories and times (never a silent NaN);
+            ``hnn.ConvergenceError`` (a subclass) when the midpoint iteration does not converge.
+
+    Warns (``UserWarning``) when ``rtol`` (solve_ivp, dopri5) is below 100 eps of ``x0``'s dtype
+    or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
     """
     if method not in _METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {sorted(_METHODS)}")
@@ -303,4 +328,5 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch
     if not torch.isfinite(x0).all():
         rows = torch.nonzero(~torch.isfinite(x0).all(dim=1)).flatten().tolist()
         raise ValueError(f"x0 has non-finite values in rows {rows[:10]}")
+    _check_tolerance(method, x0.dtype, options)
     return _METHODS[method](f, x0, _as_t_eval(t_eval), **options)
