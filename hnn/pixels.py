@@ -13,6 +13,7 @@ HNN's encoder; here every model uses its own.
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -155,6 +156,11 @@ def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6) -
     return rollout(model.time_derivative, z0, t_eval, method="solve_ivp", rtol=rtol, atol=atol)[0]
 
 
+def _float64(model):
+    """A float64 copy of ``model``: tight tolerances are then limited by the solver, not by float32 rounding."""
+    return copy.deepcopy(model).to(torch.float64)
+
+
 def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset: dict,
                           trajectory: dict | None = None) -> dict:
     """Energy MSE of each model in ``models`` (``{label: PixelHNN}``) under ``protocol``.
@@ -171,6 +177,8 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
     t_eval = np.linspace(0.0, protocol.t_end, protocol.num_points)
     fit_coords = dataset["coords" if protocol.coords == "next_state" else "pair_coords"]
     for label, model in models.items():
+        if protocol.name != "paper":
+            model = _float64(model)     # the paper evaluated its float32 models as they are
         param = next(model.parameters())
         with torch.no_grad():
             latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
@@ -197,6 +205,7 @@ def add_energy_path(model, z0, t_first: float = 50.0, t_push: float = 1.8, t_las
     ``(T,)`` and ``(T, latent_dim)``."""
     if model.baseline:
         raise ValueError("the add-energy demo needs an HNN (a baseline has no H to climb)")
+    model = _float64(model)
     param = next(model.parameters())
 
     def uphill(z):
@@ -272,7 +281,7 @@ def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500,
     if label == "hnn":
         t, z = add_energy_path(model, paper_result[label]["latents"][0])
         with torch.no_grad():
-            frames = model.decode(torch.as_tensor(z, dtype=next(model.parameters()).dtype)).numpy()
+            frames = model.decode(torch.as_tensor(z, dtype=next(model.parameters()).dtype)).float().numpy()
         write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
     if verbose:
         paper = PAPER["pixels"]
