@@ -1,9 +1,10 @@
 """The one training loop every task uses: Adam on the L2 loss of dx/dt."""
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 import torch
@@ -26,6 +27,22 @@ def check_data(name: str, a, width: int | None = None, dtype=torch.float32, devi
         raise ValueError(f"{name} has {int(bad.sum())} NaN/inf values (first in row {int(rows[0])}, "
                          f"{len(rows)} rows affected); clean or drop those rows before training")
     return t.to(dtype=dtype, device=device)
+
+
+_PROGRESS_CALLBACKS: list[Callable[[int, int], None]] = []
+
+
+@contextlib.contextmanager
+def report_progress(callback: Callable[[int, int], None]) -> Iterator[None]:
+    """Inside this block every ``train`` call reports ``callback(steps_done, steps_total)`` after
+    each optimizer step, so a caller can follow a run it starts through a task's ``train.py``
+    (whose ``main(argv)`` takes no callback). The callback must be cheap: it runs every step.
+    """
+    _PROGRESS_CALLBACKS.append(callback)
+    try:
+        yield
+    finally:
+        _PROGRESS_CALLBACKS.remove(callback)
 
 
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
@@ -85,6 +102,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     if progress is None:
         progress = not verbose and sys.stderr.isatty()
     model.train()
+    callbacks = list(_PROGRESS_CALLBACKS)
     start = time.perf_counter()
     for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
         if batch_size is None or batch_size >= len(x):
@@ -99,6 +117,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         optim.step()
         optim.zero_grad(set_to_none=True)
         stats["train_loss"].append(loss.item())
+        for callback in callbacks:
+            callback(step + 1, total_steps + 1)
         if has_test and (step % test_every == 0 or step == total_steps):
             if batch_size is None or batch_size >= len(test_x):
                 tx, ty = test_x, test_dxdt
