@@ -144,16 +144,18 @@ class _Progress:
             return
         self.last = now
         done = self.finished + sum(step for step, _ in self.active.values())
-        runs = ", ".join(f"{key} {step}/{total}" for key, (step, total) in self.active.items()) or "-"
+        runs = ", ".join(f"{key} {step}/{total}" if step else f"{key} starting (data)"
+                         for key, (step, total) in self.active.items()) or "-"
         if self.bar is not None:
             self.bar.n = done
             self.bar.set_description_str(runs, refresh=False)
             self.bar.refresh()
             return
         elapsed = now - self.start
-        remaining = elapsed * (self.total - done) / done if done else math.nan
+        # too few steps for a rate: no estimate yet
+        remaining = _fmt_seconds(elapsed * (self.total - done) / done) if done >= 0.02 * self.total else "?"
         print(f"  progress {100 * done / self.total:3.0f}% ({done}/{self.total} steps), elapsed "
-              f"{_fmt_seconds(elapsed)}, remaining ~{_fmt_seconds(remaining) if done else '?'}: {runs}", flush=True)
+              f"{_fmt_seconds(elapsed)}, remaining ~{remaining}: {runs}", flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

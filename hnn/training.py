@@ -65,7 +65,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         input_noise: std of Gaussian noise added to each training batch's inputs x, fresh each
             step (0: none). The original 2-body script added it to the prediction instead.
         predict: ``x -> prediction`` compared with ``dxdt``; default ``model.time_derivative``.
-        progress: show a progress bar; default when stderr is a terminal and not ``verbose``.
+        progress: show a progress bar; default when stderr is a terminal, not ``verbose``, and no
+            ``report_progress`` callback is active (its caller shows progress its own way).
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -99,10 +100,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     gen = torch.Generator().manual_seed(seed)
     test_gen = torch.Generator().manual_seed(seed + 1)
     stats = {"train_loss": [], "test_loss": [], "test_steps": []}
-    if progress is None:
-        progress = not verbose and sys.stderr.isatty()
-    model.train()
     callbacks = list(_PROGRESS_CALLBACKS)
+    if progress is None:    # a report_progress caller draws its own display
+        progress = not verbose and not callbacks and sys.stderr.isatty()
+    model.train()
     start = time.perf_counter()
     for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
         if batch_size is None or batch_size >= len(x):
