@@ -429,6 +429,8 @@ def _check(args) -> None:
         raise SystemExit(f"--seeds must be at least 1, got {args.seeds}")
     if args.steps is not None and args.steps < 0:
         raise SystemExit(f"--steps must be a non-negative number of training steps, got {args.steps}")
+    if args.update_readme and (args.quick or args.steps is not None):
+        raise SystemExit("--update-readme pastes full-settings results into README.md; drop --quick / --steps")
     for task in args.tasks or []:
         if task not in hnn.available_tasks():
             raise SystemExit(f"unknown or missing task {task!r}; available: {hnn.available_tasks()}")
