@@ -1,8 +1,9 @@
-"""The paper's figures for the 1-DOF tasks (spring, pend), as plain plotting functions.
+"""The paper's figures for the 1-DOF tasks (spring, pend, real), as plain plotting functions.
 
     field_figure(task, system, models, dataset, path)   # data, true / baseline / HNN vector fields
     integration_figure(task, system, models, path)      # paths, coordinate MSE, learned H, true energy
     energy_figure(task, result, path)                   # output of hnn.evaluate_energy, per trial
+    real_figure(task, models, dataset, energy, path)    # real pendulum: data arrows, learned fields, energy
 
 ``system`` is a task's data module (``dynamics`` and ``hamiltonian`` on float64 ``(batch, 2)``
 tensors); ``models`` is ``{"baseline": HNN, "hnn": HNN}``. Each function writes one PNG
@@ -204,4 +205,43 @@ def energy_figure(task: str, result: dict, path) -> Path:
     quirk = (f"; models' clock x{protocol['time_rescale']:g} (paper quirk)"
              if protocol.get("time_rescale") else "")
     fig.suptitle(f"{task}, energy protocol '{protocol['name']}' (energy = {protocol.get('energy')}{quirk})\n{scores}")
+    return _save(fig, path)
+
+
+def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, path) -> Path:
+    """The real pendulum, which has no known true field: (a) the measured states with the
+    measured derivatives (forward differences) as arrows; (b, c) the baseline and HNN fields on a
+    grid spanning the data, over the data; (d) the energy along the measured test segment,
+    measured vs each model's rollout from its first state (``energy`` is the paper protocol's
+    ``hnn.evaluate_energy`` result; the panel is left out when it is None).
+    """
+    x = np.asarray(dataset["x"], dtype=np.float64)
+    dxdt = np.asarray(dataset["dxdt"], dtype=np.float64)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    pad = 0.1 * (hi - lo)
+    n = 12
+    qq, pp = np.meshgrid(np.linspace(lo[0] - pad[0], hi[0] + pad[0], n), np.linspace(lo[1] - pad[1], hi[1] + pad[1], n))
+    grid = torch.from_numpy(np.stack([qq.ravel(), pp.ravel()], axis=1))
+    panels = 4 if energy is not None else 3
+    fig, axes = plt.subplots(1, panels, figsize=(4.3 * panels, 4.2), constrained_layout=True)
+    # each arrow is the measured derivative times 0.1 s, drawn in data units
+    axes[0].quiver(x[::2, 0], x[::2, 1], dxdt[::2, 0], dxdt[::2, 1], color="tab:orange", angles="xy",
+                   scale_units="xy", scale=10.0, width=0.003)
+    axes[0].set(title="Data: measured states, derivative x 0.1 s")
+    for ax, label in zip(axes[1:3], ("baseline", "hnn")):
+        uv = _field(models[label].time_derivative, grid, _dtype(models[label]))
+        ax.quiver(grid[:, 0], grid[:, 1], uv[:, 0], uv[:, 1], color="0.45", pivot="mid", angles="xy", width=0.005)
+        ax.scatter(x[:, 0], x[:, 1], s=3, color="tab:orange", alpha=0.5)
+        ax.set(title=NAMES[label])
+    for ax in axes[:3]:
+        ax.set(xlabel="q (angle)", ylabel="p (angular velocity)")
+    if energy is not None:
+        t = np.asarray(energy["t_truth"])[0]
+        axes[3].plot(t, np.asarray(energy["energy_truth"])[0], color=COLORS["truth"], ls="--", label="Measured")
+        for label in ("baseline", "hnn"):
+            axes[3].plot(t, np.asarray(energy[label]["energy"])[0], color=COLORS[label], label=NAMES[label])
+        axes[3].set(title="Energy on the test segment", xlabel="t (s, from the segment's start)",
+                    ylabel="2.4 (1 - cos q) + p^2")
+        axes[3].legend(fontsize=8)
+    fig.suptitle(f"{task}: measured pendulum (Schmidt & Lipson 2009), data and learned fields")
     return _save(fig, path)

@@ -28,7 +28,7 @@ def parse_args(argv=None):
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, hnn.load_task("2body").get_dataset(seed=args.seed, save_dir=args.save_dir,
+    return hnn.run_experiment(args, lambda: hnn.load_task("2body").get_dataset(seed=args.seed, save_dir=args.save_dir,
                                                                       min_separation=args.min_separation))
 
 

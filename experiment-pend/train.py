@@ -18,7 +18,7 @@ def parse_args(argv=None):
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, hnn.load_task("pend").get_dataset(seed=args.seed))
+    return hnn.run_experiment(args, lambda: hnn.load_task("pend").get_dataset(seed=args.seed))
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ def parse_args(argv=None):
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, hnn.load_task("real").get_dataset(data_dir=args.data_dir))
+    return hnn.run_experiment(args, lambda: hnn.load_task("real").get_dataset(data_dir=args.data_dir))
 
 
 if __name__ == "__main__":

@@ -1,9 +1,10 @@
 """The one training loop every task uses: Adam on the L2 loss of dx/dt."""
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 import torch
@@ -28,6 +29,22 @@ def check_data(name: str, a, width: int | None = None, dtype=torch.float32, devi
     return t.to(dtype=dtype, device=device)
 
 
+_PROGRESS_CALLBACKS: list[Callable[[int, int], None]] = []
+
+
+@contextlib.contextmanager
+def report_progress(callback: Callable[[int, int], None]) -> Iterator[None]:
+    """Inside this block every ``train`` call reports ``callback(steps_done, steps_total)`` after
+    each optimizer step, so a caller can follow a run it starts through a task's ``train.py``
+    (whose ``main(argv)`` takes no callback). The callback must be cheap: it runs every step.
+    """
+    _PROGRESS_CALLBACKS.append(callback)
+    try:
+        yield
+    finally:
+        _PROGRESS_CALLBACKS.remove(callback)
+
+
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
@@ -50,7 +67,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         predict: ``x -> prediction`` compared with ``dxdt``; default ``model.time_derivative``.
         loss: ``(x, y) -> per-sample or scalar loss`` replacing the L2 loss of ``predict``, for
             models with an objective of their own (the pixel task passes ``x``, ``x_next``).
-        progress: show a progress bar; default when stderr is a terminal and not ``verbose``.
+        progress: show a progress bar; default when stderr is a terminal, not ``verbose``, and no
+            ``report_progress`` callback is active (its caller shows progress its own way).
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -86,8 +104,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     gen = torch.Generator().manual_seed(seed)
     test_gen = torch.Generator().manual_seed(seed + 1)
     stats = {"train_loss": [], "test_loss": [], "test_steps": []}
-    if progress is None:
-        progress = not verbose and sys.stderr.isatty()
+    callbacks = list(_PROGRESS_CALLBACKS)
+    if progress is None:    # a report_progress caller draws its own display
+        progress = not verbose and not callbacks and sys.stderr.isatty()
     model.train()
     # Weights that only weight decay moves (e.g. those of pixels that are always dark) shrink
     # into denormal floats, and CPU arithmetic on denormals is many times slower: the pixel task
@@ -107,6 +126,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         optim.step()
         optim.zero_grad(set_to_none=True)
         stats["train_loss"].append(batch_loss.item())
+        for callback in callbacks:
+            callback(step + 1, total_steps + 1)
         if has_test and (step % test_every == 0 or step == total_steps):
             if batch_size is None or batch_size >= len(test_x):
                 tx, ty = test_x, test_dxdt

@@ -1,0 +1,130 @@
+"""analysis/reproduce.py: the table writer, the reuse rule, one task end to end, and --jobs."""
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ANALYSIS = Path(__file__).resolve().parent.parent / "analysis"
+sys.path.insert(0, str(ANALYSIS))
+
+import reproduce  # noqa: E402
+import task_hooks  # noqa: E402
+
+TINY = 20          # training steps of the end-to-end runs
+
+
+def _row(train, test, energy):
+    """One task's row of results.json: (mean, ±) pairs for both models."""
+    return {label: {"train_loss": list(train[label]), "test_loss": list(test[label]),
+                    "energy_mse_paper": list(energy[label])} for label in ("baseline", "hnn")}
+
+
+@pytest.fixture
+def results():
+    """A hand-made results dict against the paper's spring numbers (paper_numbers.PAPER)."""
+    # spring paper: train baseline 3.7134e-02 ± 1.9143e-03, hnn 3.6933e-02 ± 1.9128e-03
+    #               test baseline 3.6656e-02 ± 1.8652e-03, energy hnn 3.8416e-04 ± 6.53e-05
+    edge = 3.7134e-02 + 1.9143e-03          # exactly at the paper's ±: within
+    train = {"baseline": (edge, 1e-3), "hnn": (3.6933e-02 - 1.9128e-03 * 1.01, 1e-3)}   # within, better
+    test = {"baseline": (3.6656e-02 + 1.8652e-03 * 1.01, 1e-3), "hnn": (3.5928e-02, 1e-3)}  # worse, within
+    energy = {"baseline": (1.7077e-01, 1e-2), "hnn": (3.8416e-04 - 6.53e-05, 1e-5)}        # within, within (edge)
+    return {"meta": {"command": "python analysis/reproduce.py --quick", "date": "2026-01-01", "commit": "abc",
+                     "seed": 0, "seeds": [0], "mode": "QUICK smoke run", "quick": True, "steps": 300,
+                     "torch": "x", "available": ["spring", "pend"]},
+            "tasks": {"spring": _row(train, test, energy)},
+            "skipped": {"pend": "no data"},
+            "seconds": {"tasks": {"spring": {"data": 0.5, "train": {"baseline": 1.0, "hnn": 2.0},
+                                             "evaluate": 3.0, "figures": 4.0}},
+                        "training": 3.5, "evaluation": 7.0, "total": 10.5, "jobs": 1, "threads_per_job": 1}}
+
+
+def _cell(table: str, title: str, label: str) -> str:
+    """The 'ours' cell of the spring row for ``label`` in the table headed ``title``."""
+    section = table.split(f"**{title}**", 1)[1]
+    row = next(line for line in section.splitlines() if line.startswith(f"| spring | {label} |"))
+    return row.split("|")[4].strip()
+
+
+def test_compare_edges():
+    assert reproduce.compare((1.1, 0.0), (1.0, 0.1)) == "within"        # 1.1 - 1.0 > 0.1 in floats
+    assert reproduce.compare((0.9, 0.0), (1.0, 0.1)) == "within"
+    assert reproduce.compare((1.1000001, 0.0), (1.0, 0.1)) == "worse"
+    assert reproduce.compare((0.8999999, 0.0), (1.0, 0.1)) == "better"
+    assert reproduce.compare(None, (1.0, 0.1)) is None
+
+
+def test_tables_marks_missing_and_stages(results):
+    table = reproduce.tables_markdown(results)
+    marks = reproduce.MARKS
+    assert _cell(table, "Train loss", "baseline").endswith(marks["within"])    # exactly at the ±
+    assert _cell(table, "Train loss", "hnn").endswith(marks["better"])
+    assert _cell(table, "Test loss", "baseline").endswith(marks["worse"])
+    assert _cell(table, "Test loss", "hnn").endswith(marks["within"])
+    assert _cell(table, "Energy MSE", "baseline").endswith(marks["within"])
+    assert _cell(table, "Energy MSE", "hnn").endswith(marks["within"])
+    assert reproduce.LEGEND in table and "QUICK" in table.splitlines()[0]
+    assert "| 1.05x |" in table                                  # the ratio column stays
+    # tasks absent from the checkout are listed; a present one without data is reported as skipped
+    missing = next(line for line in table.splitlines() if line.startswith("Not yet in this checkout"))
+    assert "real" in missing and "2body" in missing and "pixels" in missing and "spring" not in missing
+    assert "Skipped pend" in table
+    assert "| spring | 0.5 | 1.0 | 2.0 | 3.0 | 4.0 |" in table and "total 10.5 s" in table
+
+
+def test_unknown_task_gets_the_default_hooks():
+    hooks = task_hooks.hooks_for("pixels-not-registered")
+    assert hooks is task_hooks.DEFAULT and hooks.evaluate is task_hooks.energy_protocols
+    assert task_hooks.hooks_for("3body").cost > task_hooks.hooks_for("spring").cost
+
+
+def test_train_or_reuse(tmp_path):
+    first, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=3)
+    assert not reused and (first / "model.tar").exists()
+    metrics = json.loads((first / "metrics.json").read_text())
+    assert metrics["data_seconds"] > 0 and metrics["train_seconds"] > 0
+    stamp = (first / "model.tar").stat().st_mtime_ns
+    again, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=3)
+    assert reused and again == first and (first / "model.tar").stat().st_mtime_ns == stamp
+    seen = []
+    _, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=4, progress=lambda s, t: seen.append((s, t)))
+    assert not reused and seen[-1] == (5, 5) and len(seen) == 5       # retrained: other --total_steps
+    _, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=4, extra_argv=["--learn_rate", "0.002"])
+    assert not reused                                                   # other --learn_rate
+    assert json.loads((first / "args.json").read_text())["learn_rate"] == 0.002
+
+
+def _losses(results: dict) -> dict:
+    return {(task, label): (row[label]["train_loss"], row[label]["test_loss"])
+            for task, row in results["tasks"].items() for label in ("baseline", "hnn")}
+
+
+def test_quick_end_to_end_and_jobs(tmp_path):
+    """One task end to end (results.json, tables.md, figures), then --jobs 2 on fresh runs.
+
+    Both layouts train with one thread per process (the tests run with OMP_NUM_THREADS=1 and
+    --jobs 2 gives each of the 2 workers cores // 2 >= 1), so the same seed gives the same
+    floating-point operations and the numbers must agree exactly.
+    """
+    one = reproduce.main(["--quick", "--steps", str(TINY), "--tasks", "spring", "--out", str(tmp_path / "a")])
+    out = tmp_path / "a"
+    saved = json.loads((out / "results.json").read_text())
+    assert saved["meta"]["quick"] and "QUICK" in saved["meta"]["mode"] and saved["meta"]["steps"] == TINY
+    assert saved["tasks"]["spring"]["hnn"]["total_steps"] == TINY
+    seconds = saved["seconds"]
+    assert {"data", "train", "evaluate", "figures"} <= set(seconds["tasks"]["spring"])
+    assert seconds["total"] >= seconds["training"] > 0
+    numbers = saved["tasks"]["spring"]["figure_numbers"]
+    assert len(numbers["reversibility"]["error"]["hnn"]) == len(numbers["reversibility"]["T"])
+    assert numbers["energy_bump"]["H_after"] > numbers["energy_bump"]["H_before"]   # the bump adds energy
+    assert (out / "tables.md").read_text().startswith("**QUICK")
+    for name in ("fields", "integration", "energy-paper", "energy-corrected", "energy-bump", "reversibility"):
+        path = out / "figures" / f"spring-{name}.png"
+        assert path.stat().st_size > 10_000, path
+
+    two = reproduce.main(["--quick", "--steps", str(TINY), "--tasks", "spring", "--out", str(tmp_path / "b"),
+                          "--jobs", "2", "--no-figures"])
+    assert two["seconds"]["jobs"] == 2 and (tmp_path / "b" / "logs").is_dir()
+    assert _losses(two) == _losses(one)
+    for label in ("baseline", "hnn"):
+        assert two["tasks"]["spring"][label]["energy_mse_paper"] == one["tasks"]["spring"][label]["energy_mse_paper"]
