@@ -1,6 +1,6 @@
 """The paper's "other mischief" for 1-DOF tasks: the energy bump and time reversibility.
 
-    energy_bump(model, x0, settings)          # flow, climb grad H, flow again: the learned H steps up
+    hnn.energy_bump(model, x0, ...)           # flow, climb grad H, flow again: the learned H steps up
     reversibility(models, x0, horizons)       # forward T then backward T: |x_back - x0| per model
     mischief_figures(task, system, models, x0, fig_dir)   # both, as PNGs, and their numbers
 
@@ -32,43 +32,6 @@ REVERSE_TOL = {"rtol": 1e-6, "atol": 1e-8}
 
 def _float64(model: torch.nn.Module) -> torch.nn.Module:
     return copy.deepcopy(model).to(torch.float64).eval()
-
-
-def gradient_of_h(model):
-    """``x -> dH/dx`` ``(batch, 2n)`` of an HNN's learned H = F2: the direction in which H grows fastest."""
-    def grad(x: torch.Tensor) -> torch.Tensor:
-        with torch.enable_grad():
-            x = x.detach().requires_grad_(True)
-            return torch.autograd.grad(model.hamiltonian(x).sum(), x)[0].detach()
-    return grad
-
-
-def energy_bump(model, x0, t_flow: float = BUMP["t_flow"], t_bump: float = BUMP["t_bump"],
-                points: int = BUMP["points"]) -> dict:
-    """Integrate the HNN's symplectic field for ``t_flow``, then ``dx/dt = dH/dx`` for ``t_bump``,
-    then the symplectic field for ``t_flow`` again. Returns ``t`` ``(T,)``, ``x`` ``(T, 2n)``,
-    ``stage`` ``(T,)`` (0, 1, 2), the learned ``H`` along the path, and the mean and spread of H
-    in the two flow stages (equal spreads near 0 and a higher mean after: the bump stays).
-    """
-    model = _float64(model)
-    x = torch.tensor([x0], dtype=torch.float64)
-    pieces, times, stages, t_start = [], [], [], 0.0
-    for stage, (f, span) in enumerate([(model.time_derivative, t_flow), (gradient_of_h(model), t_bump),
-                                       (model.time_derivative, t_flow)]):
-        n = points if stage != 1 else max(20, points // 10)
-        t = np.linspace(0.0, span, n)
-        with torch.no_grad():
-            traj = hnn.rollout(f, x, t, rtol=1e-10, atol=1e-10)[0]
-        pieces.append(traj.numpy())
-        times.append(t_start + t)
-        stages.append(np.full(n, stage))
-        x, t_start = traj[-1:], t_start + span
-    xs, ts, st = np.concatenate(pieces), np.concatenate(times), np.concatenate(stages)
-    with torch.no_grad():
-        h = model.hamiltonian(torch.from_numpy(xs)).numpy()
-    before, after = h[st == 0], h[st == 2]
-    return {"t": ts, "x": xs, "stage": st, "H": h, "H_before": float(before.mean()), "H_after": float(after.mean()),
-            "H_spread_before": float(np.ptp(before)), "H_spread_after": float(np.ptp(after))}
 
 
 def reversibility(models: dict, x0, horizons=HORIZONS, rtol: float = REVERSE_TOL["rtol"],
@@ -159,7 +122,7 @@ def reversibility_figure(task: str, models: dict, x0, horizons, errors: dict, pa
 
 def mischief_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
     """``<task>-energy-bump.png`` and ``<task>-reversibility.png``; returns their numbers."""
-    bump = energy_bump(models["hnn"], x0)
+    bump = hnn.evaluation.energy_bump(models["hnn"], x0, **BUMP)
     bump_figure(task, system, bump, Path(fig_dir) / f"{task}-energy-bump.png")
     errors = reversibility(models, x0)
     reversibility_figure(task, models, x0, HORIZONS, errors, Path(fig_dir) / f"{task}-reversibility.png")

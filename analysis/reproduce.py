@@ -179,7 +179,7 @@ def _train_in_process(jobs: list[dict], progress: _Progress) -> dict:
         try:
             directory, _ = train_or_reuse(job["task"], job["label"], job["runs_dir"], job["seed"], job["steps"],
                                           job["extra_argv"], progress=lambda s, t, key=key: progress.update(key, s, t))
-        except FileNotFoundError as err:    # a task whose data are missing; reported by the caller
+        except (FileNotFoundError, ImportError) as err:   # missing data or optional packages; reported by the caller
             progress.finish(key, job["total"], f"  {job['task']:7s} {job['label']:8s} seed {job['seed']} failed: {err}")
             done[key] = err
             continue
@@ -206,7 +206,15 @@ def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Pa
         try:
             while queue or running:
                 while queue and len(running) < n:
-                    job = queue.pop(0)
+                    # a run whose sibling (same task and seed) is still making their shared dataset
+                    # waits, so that dataset is generated once and not twice at the same time
+                    ready = [j for j in queue if not any(
+                        r["task"] == j["task"] and r["seed"] == j["seed"] and "step" not in _read_status(s)
+                        for r, _, s, _, _ in running.values())]
+                    if not ready:
+                        break
+                    job = ready[0]
+                    queue.remove(job)
                     key = _run_key(job)
                     status = Path(status_dir) / f"{key.replace('/', '-')}.json"
                     log = open(log_dir / f"{key.replace('/', '-')}.log", "w")
@@ -230,8 +238,9 @@ def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Pa
                     if proc.returncode == 0 and state.get("done"):
                         done[key] = Path(state["run"])
                         progress.finish(key, job["total"], _summary(job, done[key], job["wall"]))
-                    elif state.get("type") == "FileNotFoundError":
-                        done[key] = FileNotFoundError(state["error"])
+                    elif state.get("type") in ("FileNotFoundError", "ImportError", "ModuleNotFoundError"):
+                        done[key] = (ImportError if "Import" in state["type"] or "Module" in state["type"]
+                                     else FileNotFoundError)(state["error"])
                         progress.finish(key, job["total"], f"  {job['task']:7s} {job['label']:8s} seed "
                                                            f"{job['seed']} failed: {state['error']}")
                     else:
@@ -387,7 +396,7 @@ def tables_markdown(results: dict) -> str:
             lines.append(f"- {task}, {text}")
     skipped = results.get("skipped", {})
     for task in skipped:
-        lines += ["", f"Skipped {task}: its data were not found (see the README for where to put them)."]
+        lines += ["", f"Skipped {task}: {skipped[task]}"]
     present = meta.get("available", hnn.available_tasks())
     missing = [t for t in hnn.tasks.TASKS if t not in present]
     if missing:
@@ -469,7 +478,8 @@ def main(argv=None) -> dict:
     # 1. which runs exist already (same args), which must be trained
     runs, jobs = {}, []
     for task in tasks:
-        extra = task_hooks.hooks_for(task).quick_argv if args.quick else ()
+        hooks = task_hooks.hooks_for(task)
+        extra = hooks.train_argv + (hooks.quick_argv if args.quick else ())
         for seed in seeds:
             for label in MODELS:
                 job = {"task": task, "label": label, "seed": seed, "runs_dir": out / "runs", "steps": steps,
@@ -514,7 +524,7 @@ def main(argv=None) -> dict:
             for seed in seeds:
                 figs = None if args.no_figures or seed != args.seed else out / "figures"
                 per_seed[str(seed)] = evaluate_task(task, {label: runs[k] for label, k in keys[seed].items()}, figs)
-        except FileNotFoundError as err:   # a task whose data live outside the repository (real) and are missing
+        except (FileNotFoundError, ImportError) as err:   # its data (real) or packages (pixels) are missing
             print(f"  {task:7s} SKIPPED: {err}", flush=True)
             results.setdefault("skipped", {})[task] = str(err)
             continue

@@ -2,11 +2,11 @@
 
 Training is the same for every task (its ``experiment-<task>/train.py``, with ``--save_dir``,
 ``--seed``, ``--baseline`` and ``--total_steps``). Evaluation and figures differ, so each task
-has a ``TaskHooks`` entry in ``HOOKS``; a task without one (a new task, such as ``pixels``)
+has a ``TaskHooks`` entry in ``HOOKS``; a task without one (a new task)
 gets ``DEFAULT``: the energy MSE under its protocols in ``hnn.PROTOCOLS`` (none if it has
 none) and one energy-over-time figure per protocol. To plug a task in, add::
 
-    HOOKS["pixels"] = TaskHooks(evaluate=my_evaluate, figures=my_figures, cost=20.0)
+    HOOKS["mytask"] = TaskHooks(evaluate=my_evaluate, figures=my_figures, cost=20.0)
 
 with
 
@@ -20,6 +20,7 @@ with
 - ``load(directory) -> (model, args, metrics)``: reads one saved run (default ``hnn.load_run``).
 - ``cost``: the relative wall time of one full training run, so ``--jobs N`` starts the longest first.
 - ``quick_argv``: extra ``train.py`` flags for ``--quick`` (e.g. a smaller dataset).
+- ``train_argv``: extra ``train.py`` flags for every run.
 
 ``system`` is the task's data module (``hnn.load_task(task)``) and ``models`` is
 ``{"baseline": model, "hnn": model}``.
@@ -36,6 +37,7 @@ import figures
 import hnn
 import mischief
 import orbit_figures
+import pixel_figures
 
 
 def energy_protocols(task: str, system, models: dict) -> dict:
@@ -92,6 +94,7 @@ class TaskHooks:
     load: Callable = hnn.load_run
     cost: float = 1.0
     quick_argv: tuple[str, ...] = field(default_factory=tuple)
+    train_argv: tuple[str, ...] = field(default_factory=tuple)
 
 
 DEFAULT = TaskHooks()
@@ -103,6 +106,11 @@ HOOKS = {
     "real": TaskHooks(figures=real_figures, cost=8),
     "2body": TaskHooks(figures=nbody_figures, cost=60),
     "3body": TaskHooks(figures=nbody_figures, cost=90),
+    # train.py's own evaluation is skipped: reproduce evaluates both models together; --quick
+    # renders 50 trajectories instead of 200
+    "pixels": TaskHooks(evaluate=pixel_figures.pixel_energy, figures=pixel_figures.pixel_figures,
+                        load=pixel_figures.load_run, cost=250, quick_argv=("--trials", "50"),
+                        train_argv=("--no_eval",)),
 }
 
 

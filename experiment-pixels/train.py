@@ -8,6 +8,7 @@ a small .npz in --save_dir. After training, the energy MSE is measured on a fres
 (both protocols, printed beside the paper's numbers) and GIFs are written into the run folder.
 Weight decay 1e-5 is the original's hard-coded value.
 """
+import time
 from pathlib import Path
 
 import hnn
@@ -39,9 +40,10 @@ def main(argv=None):
     """Train one model, then measure its energy MSE; returns its run folder."""
     args = parse_args(argv)
     system = hnn.load_task("pixels")
+    tic = time.perf_counter()
     dataset = system.get_dataset(seed=args.seed, save_dir=args.save_dir, workers=args.render_workers,
                                  render_size=args.render_size, trials=args.trials, timesteps=args.timesteps)
-    directory = hnn.pixels.run_pixel_experiment(args, dataset)
+    directory = hnn.pixels.run_pixel_experiment(args, dataset, data_seconds=time.perf_counter() - tic)
     if not args.no_eval:
         hnn.pixels.evaluate_pixel_run(directory, system, dataset, args.render_size, verbose=True)
     return directory

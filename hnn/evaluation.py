@@ -15,6 +15,7 @@ pendulum protocol calls q^2 + p^2 the energy. The corrected protocols drop both 
 """
 from __future__ import annotations
 
+import copy
 import warnings
 from dataclasses import asdict, dataclass
 
@@ -187,3 +188,47 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
         mse, se = energy_mse(e_true, e_model, protocol.splits)
         out[label] = {"traj": traj.to(torch.float64).numpy()[None], "energy": e_model[None], "mse": mse, "mse_se": se}
     return out
+
+
+def gradient_of_h(model):
+    """``x -> dH/dx`` ``(batch, 2n)`` of an HNN's learned H: the direction in which H grows fastest."""
+    def grad(x: torch.Tensor) -> torch.Tensor:
+        with torch.enable_grad():
+            x = x.detach().requires_grad_(True)
+            return torch.autograd.grad(model.hamiltonian(x).sum(), x)[0].detach()
+    return grad
+
+
+def energy_bump(model, x0, t_flow: float = 6.0, t_bump: float = 0.1, t_after: float | None = None,
+                points: int = 300, rtol: float = 1e-10, atol: float = 1e-10) -> dict:
+    """The paper's "add energy" experiment: follow the HNN's symplectic field for ``t_flow``, then
+    the plain gradient of its H, dx/dt = dH/dx, for ``t_bump``, then the symplectic field again
+    for ``t_after`` (default ``t_flow``). Runs on a float64 copy of ``model`` (anything with
+    ``time_derivative``, ``hamiltonian`` and ``baseline``: an HNN or a PixelHNN's latent).
+
+    Returns ``t`` ``(T,)``, ``x`` ``(T, 2n)``, ``stage`` ``(T,)`` (0, 1, 2), the learned ``H``
+    along the path, and its mean and spread in the two flow stages (spreads near 0 and a higher
+    mean after: the bump stays).
+    """
+    if getattr(model, "baseline", False):
+        raise ValueError("the energy bump needs an HNN: a baseline has no H to climb")
+    model = copy.deepcopy(model).to(torch.float64).eval()
+    x = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(1, -1))
+    t_after = t_flow if t_after is None else t_after
+    pieces, times, stages, t_start = [], [], [], 0.0
+    for stage, (f, span) in enumerate([(model.time_derivative, t_flow), (gradient_of_h(model), t_bump),
+                                       (model.time_derivative, t_after)]):
+        n = points if stage != 1 else max(20, points // 10)
+        t = np.linspace(0.0, span, n)
+        with torch.no_grad():
+            traj = rollout(f, x, t, rtol=rtol, atol=atol)[0]
+        pieces.append(traj.numpy())
+        times.append(t_start + t)
+        stages.append(np.full(n, stage))
+        x, t_start = traj[-1:], t_start + span
+    xs, ts, st = np.concatenate(pieces), np.concatenate(times), np.concatenate(stages)
+    with torch.no_grad():
+        h = model.hamiltonian(torch.from_numpy(xs)).numpy()
+    before, after = h[st == 0], h[st == 2]
+    return {"t": ts, "x": xs, "stage": st, "H": h, "H_before": float(before.mean()), "H_after": float(after.mean()),
+            "H_spread_before": float(np.ptp(before)), "H_spread_after": float(np.ptp(after))}

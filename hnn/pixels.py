@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .evaluation import energy_bump
 from .integrate import rollout
 from .metrics import energy_mse, mean_and_se
 from .runs import atomic_write, model_from_args, run_dir, save_run
@@ -37,10 +38,11 @@ def pixel_loss(model, x, x_next, chunk: int = 4000) -> tuple[float, float]:
     return mean_and_se(per_sample)
 
 
-def run_pixel_experiment(args, dataset: dict) -> Path:
+def run_pixel_experiment(args, dataset: dict, data_seconds: float | None = None) -> Path:
     """Train the ``PixelHNN`` (or its baseline) that ``args`` describe and save the run.
 
-    ``dataset`` holds ``pixels``, ``next_pixels`` and their ``test_`` twins, ``(rows, 2 side^2)``.
+    ``dataset`` holds ``pixels``, ``next_pixels`` and their ``test_`` twins, ``(rows, 2 side^2)``;
+    ``data_seconds`` (the time it took to load or render) is saved in ``metrics.json``.
     """
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
@@ -61,7 +63,7 @@ def run_pixel_experiment(args, dataset: dict) -> Path:
               f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
     metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
                "test_loss": test_loss[0], "test_loss_se": test_loss[1],
-               "train_seconds": stats["seconds"], "history": stats}
+               "data_seconds": data_seconds, "train_seconds": stats["seconds"], "history": stats}
     return save_run(run_dir(args), model, vars(args), metrics)
 
 
@@ -106,6 +108,11 @@ PIXEL_PROTOCOLS = {
     "corrected": PixelProtocol("corrected", t_end=199.0, rtol=1e-9, atol=1e-9, coords="pair_state",
                                prepend_truth=False, latent_map="lstsq", energy="true"),
 }
+
+
+# the paper's add-energy demo in latent time (frames): flow 50, climb grad H for 1.8, flow 60;
+# 500 points in all, spread in proportion to time
+ADD_ENERGY = {"t_flow": 50.0, "t_bump": 1.8, "t_after": 60.0, "points": 450, "rtol": 1e-9, "atol": 1e-9}
 
 
 def get_pixel_protocol(name: str = "paper") -> PixelProtocol:
@@ -173,7 +180,8 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
     energy_fn = system.hamiltonian if protocol.energy == "paper" else system.true_hamiltonian
     true_coords = torch.as_tensor(trajectory["coords"], dtype=torch.float64)
     e_true = energy_fn(true_coords)
-    out = {"truth": {"energy": e_true.numpy(), "coords": true_coords.numpy()}, "protocol": asdict(protocol)}
+    out = {"truth": {"energy": e_true.numpy(), "coords": true_coords.numpy(), "pixels": trajectory["pixels"]},
+           "protocol": asdict(protocol)}
     t_eval = np.linspace(0.0, protocol.t_end, protocol.num_points)
     fit_coords = dataset["coords" if protocol.coords == "next_state" else "pair_coords"]
     for label, model in models.items():
@@ -195,36 +203,6 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
         out[label] = {"mse": mse, "mse_se": se, "energy": e_pred.numpy(), "coords": coords.numpy(),
                       "latents": z.double().numpy(), "decoded": decoded.numpy()}
     return out
-
-
-def add_energy_path(model, z0, t_first: float = 50.0, t_push: float = 1.8, t_last: float = 60.0,
-                    num_points: int = 500) -> tuple[np.ndarray, np.ndarray]:
-    """The paper's "add energy" demo in latent space: follow the HNN's symplectic field for
-    ``t_first`` frames, the plain gradient of its H (uphill) for ``t_push``, then the symplectic
-    field again for ``t_last``; points spread in proportion to time. Returns ``(t, z)``,
-    ``(T,)`` and ``(T, latent_dim)``."""
-    if model.baseline:
-        raise ValueError("the add-energy demo needs an HNN (a baseline has no H to climb)")
-    model = _float64(model)
-    param = next(model.parameters())
-
-    def uphill(z):
-        with torch.enable_grad():
-            z = z.detach().requires_grad_(True)
-            return torch.autograd.grad(model.hamiltonian(z).sum(), z)[0]
-
-    spans = (t_first, t_push, t_last)
-    counts = [max(2, round(num_points * s / sum(spans))) for s in spans]
-    z = torch.as_tensor(np.asarray(z0, dtype=np.float64).reshape(1, -1), dtype=param.dtype)
-    ts, zs, offset = [], [], 0.0
-    for field, span, count, rtol in ((model.time_derivative, t_first, counts[0], 1e-6), (uphill, t_push, counts[1], 1e-12),
-                                     (model.time_derivative, t_last, counts[2], 1e-6)):
-        t = np.linspace(0.0, span, count)
-        path = rollout(field, z, t, method="solve_ivp", rtol=rtol, atol=1e-9)[0]
-        ts.append(t + offset)
-        zs.append(path.double().numpy())
-        z, offset = path[-1:].to(param.dtype), offset + span
-    return np.concatenate(ts), np.concatenate(zs)
 
 
 def _to_uint8(pixels: np.ndarray, side: int, scale: int) -> np.ndarray:
@@ -279,9 +257,9 @@ def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500,
         panels = {"truth": truth, **{k: (pair[k] if k in pair else pair["other"]) for k in order}}
         write_gif(panels, directory.parent / f"{args['name']}-compare-seed{args['seed']}.gif")
     if label == "hnn":
-        t, z = add_energy_path(model, paper_result[label]["latents"][0])
+        bump = energy_bump(model, paper_result[label]["latents"][0], **ADD_ENERGY)
         with torch.no_grad():
-            frames = model.decode(torch.as_tensor(z, dtype=next(model.parameters()).dtype)).float().numpy()
+            frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
         write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
     if verbose:
         paper = PAPER["pixels"]

@@ -112,36 +112,38 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     # into denormal floats, and CPU arithmetic on denormals is many times slower: the pixel task
     # slowed from 28 to over 100 ms a step by step 3000. Flush them to zero while training.
     flushed = torch.set_flush_denormal(True)
-    start = time.perf_counter()
-    for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
-        if batch_size is None or batch_size >= len(x):
-            xb, yb = x, dxdt
-        else:
-            ix = torch.randperm(len(x), generator=gen)[:batch_size]
-            xb, yb = x[ix], dxdt[ix]
-        if input_noise:
-            xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
-        batch_loss = loss(xb, yb).mean()
-        batch_loss.backward()
-        optim.step()
-        optim.zero_grad(set_to_none=True)
-        stats["train_loss"].append(batch_loss.item())
-        for callback in callbacks:
-            callback(step + 1, total_steps + 1)
-        if has_test and (step % test_every == 0 or step == total_steps):
-            if batch_size is None or batch_size >= len(test_x):
-                tx, ty = test_x, test_dxdt
+    try:
+        start = time.perf_counter()
+        for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
+            if batch_size is None or batch_size >= len(x):
+                xb, yb = x, dxdt
             else:
-                ix = torch.randperm(len(test_x), generator=test_gen)[:batch_size]
-                tx, ty = test_x[ix], test_dxdt[ix]
-            with torch.no_grad():
-                stats["test_loss"].append(loss(tx, ty).mean().item())
-            stats["test_steps"].append(step)
-        if verbose and step % print_every == 0:
-            test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
-            print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
+                ix = torch.randperm(len(x), generator=gen)[:batch_size]
+                xb, yb = x[ix], dxdt[ix]
+            if input_noise:
+                xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
+            batch_loss = loss(xb, yb).mean()
+            batch_loss.backward()
+            optim.step()
+            optim.zero_grad(set_to_none=True)
+            stats["train_loss"].append(batch_loss.item())
+            for callback in callbacks:
+                callback(step + 1, total_steps + 1)
+            if has_test and (step % test_every == 0 or step == total_steps):
+                if batch_size is None or batch_size >= len(test_x):
+                    tx, ty = test_x, test_dxdt
+                else:
+                    ix = torch.randperm(len(test_x), generator=test_gen)[:batch_size]
+                    tx, ty = test_x[ix], test_dxdt[ix]
+                with torch.no_grad():
+                    stats["test_loss"].append(loss(tx, ty).mean().item())
+                stats["test_steps"].append(step)
+            if verbose and step % print_every == 0:
+                test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
+                print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
+    finally:
+        if flushed:
+            torch.set_flush_denormal(False)    # torch's default again
     model.eval()
     stats["seconds"] = time.perf_counter() - start
-    if flushed:
-        torch.set_flush_denormal(False)    # torch's default again
     return stats

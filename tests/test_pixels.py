@@ -202,14 +202,14 @@ def test_train_script_end_to_end(tmp_path, system):
 def test_add_energy_raises_the_learned_energy():
     torch.manual_seed(0)
     model = PixelHNN(8, 2, 16).double()
-    t, z = hnn.pixels.add_energy_path(model, [0.5, 0.0], t_first=5.0, t_push=0.5, t_last=5.0, num_points=60)
-    H = model.hamiltonian(torch.as_tensor(z)).detach().numpy()
-    first, last = t <= 5.0, t >= 5.5
-    # the symplectic phases keep H; the gradient phase climbs it
-    assert np.ptp(H[first]) < 1e-5 and np.ptp(H[last]) < 1e-5
-    assert H[last].mean() > H[first].mean() + 1e-3
+    bump = hnn.energy_bump(model, [0.5, 0.0], t_flow=5.0, t_bump=0.5, t_after=5.0, points=60)
+    H, stage = bump["H"], bump["stage"]
+    # the symplectic phases keep the latent H; the gradient phase climbs it
+    assert np.ptp(H[stage == 0]) < 1e-6 and np.ptp(H[stage == 2]) < 1e-6
+    assert bump["H_after"] > bump["H_before"] + 1e-3
+    np.testing.assert_allclose(bump["t"][-1], 10.5)
     with pytest.raises(ValueError, match="needs an HNN"):
-        hnn.pixels.add_energy_path(PixelHNN(8, 2, 16, baseline=True), [0.5, 0.0])
+        hnn.energy_bump(PixelHNN(8, 2, 16, baseline=True), [0.5, 0.0])
 
 
 def test_other_tasks_never_import_gymnasium():
