@@ -127,6 +127,8 @@ def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Pa
     """Write ``model.tar``, ``args.json`` and ``metrics.json`` into ``directory`` atomically."""
     directory = Path(directory)
     args = {k: v for k, v in args.items()}
+    # the float reduction order, hence the last bits of every number, depends on the thread count
+    metrics = {**metrics, "torch_threads": torch.get_num_threads()}
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
     atomic_write(directory / "model.tar", lambda tmp: torch.save({"state_dict": state, "args": args}, tmp))
     write_json(directory / "args.json", args)
