@@ -2,6 +2,7 @@
 
     python analysis/benchmark_pixels.py                  # render the full dataset, 300 steps per model
     python analysis/benchmark_pixels.py --steps 10000    # the full training of both models
+    python analysis/benchmark_pixels.py --update-readme  # paste the table into README.md
 
 Renders the 200 x 103 frames afresh into a temporary folder (gymnasium, ``--workers``
 processes), builds the training arrays, then trains the HNN and the baseline for ``--steps``
@@ -13,6 +14,8 @@ each). Prints a Markdown table and writes JSON to --out. Timings on a busy machi
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import datetime
 import platform
 import resource
@@ -27,6 +30,7 @@ import torch
 import hnn
 from hnn.models import PixelHNN
 from hnn.runs import write_json
+import readme
 
 FULL_STEPS = 10001
 
@@ -42,6 +46,7 @@ def time_training(data: dict, baseline: bool, steps: int, seed: int = 0) -> dict
     x, x_next = torch.as_tensor(data["pixels"]), torch.as_tensor(data["next_pixels"])
     optim = torch.optim.Adam(model.parameters(), lr=1e-3, weight_decay=1e-5, fused=True)
     gen = torch.Generator().manual_seed(seed)
+    torch.set_flush_denormal(True)      # as hnn.train does
     times, losses = [], []
     for _ in range(steps):
         tic = time.perf_counter()
@@ -64,9 +69,11 @@ def main(argv=None) -> dict:
     p.add_argument("--workers", type=int, default=None, help="rendering processes (default: the cores)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="JSON path (default results/benchmark_pixels.json)")
+    p.add_argument("--update-readme", action="store_true", help="paste the table into README.md")
     args = p.parse_args(argv)
     system = hnn.load_task("pixels")
     out = args.out or hnn.tasks.repo_root() / "results" / "benchmark_pixels.json"
+    data_workers = args.workers or os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as tmp:
         tic = time.perf_counter()
         data = system.get_dataset(seed=args.seed, save_dir=tmp, workers=args.workers)
@@ -85,10 +92,16 @@ def main(argv=None) -> dict:
               f"full {FULL_STEPS} steps ~ {t['full_training_s_estimate']:.0f} s |" for label, t in train.items()),
             f"| dataset in memory | {arrays_mib:.0f} MiB | cache file {cache_mib:.1f} MiB |",
             f"| peak resident memory | {result['peak_rss_mib']:.0f} MiB | after the data: {peak_after_data:.0f} MiB |"]
-    print(f"Pixel task, {result['threads']} torch threads, torch {torch.__version__}\n\n| stage | time / size | note |\n"
-          "| --- | --- | --- |\n" + "\n".join(rows))
+    command = " ".join(["python analysis/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
+    text = (f"`{command}` on {result['date']}, {result['threads']} torch threads, torch {torch.__version__}, "
+            f"rendering in {data_workers} processes:\n\n| stage | time / size | note |\n| --- | --- | --- |\n"
+            + "\n".join(rows))
+    print(text)
     write_json(out, result)
     print(f"wrote {out}")
+    if args.update_readme:
+        readme.update_section("benchmark-pixels", text)
+        print("updated README.md")
     return result
 
 

@@ -55,6 +55,9 @@ TASKS = {
     "pend": {"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8},
     "2body": {"T": 3.0, "dts": (0.2, 0.1, 0.03, 0.01, 0.002), "batch": 8},
     "3body": {"T": 1.0, "dts": (0.05, 0.02, 0.01, 0.003, 0.0005), "batch": 4},
+    # the true pendulum in seconds; its models move a latent state in frames (20 a second), so
+    # their horizon and steps are scaled by "model_time"
+    "pixels": {"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8, "model_time": 20.0},
 }
 QUICK_TASKS = ("spring", "pend", "2body")
 # a model's field costs ~0.1-0.3 ms a call (vs ~0.02 ms for a true one) and the error of a learned
@@ -67,6 +70,8 @@ def _start_states(task: str, system, batch: int) -> torch.Tensor:
     """``(batch, dim)`` float64 start states inside each task's training distribution."""
     if hasattr(system, "initial_state"):            # the orbits: the energy-MSE trials' states
         return torch.tensor(np.stack([system.initial_state(s) for s in range(batch)]), dtype=torch.float64)
+    if task == "pixels":                            # gym's own start states, |q| < pi/6
+        return torch.tensor(system.canonical(system.sample_starts(0, batch)), dtype=torch.float64)
     lo, hi = system.RADIUS_RANGE
     rng = np.random.RandomState(0)
     r = np.linspace(lo, hi, batch)
@@ -110,7 +115,9 @@ def _timed_rollout(f, x0, t, options, repeats: int):
 
 def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
     """{label: (field per dtype, energy function, kind)} for the true system and each saved model."""
-    fields = {"true": ({name: system.dynamics for name in DTYPES}, system.hamiltonian, "true")}
+    # the exactly conserved H where the task's own energy is a fit (pixels: 1.9 vs 1.875)
+    true_h = getattr(system, "true_hamiltonian", system.hamiltonian)
+    fields = {"true": ({name: system.dynamics for name in DTYPES}, true_h, "true", None)}
     if runs is None:
         return fields
     trainer = hnn.load_task(task, "train")
@@ -124,12 +131,24 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
         model = hnn.load_run(found)[0]
         per_dtype = {name: copy.deepcopy(model).to(dtype).time_derivative for name, dtype in DTYPES.items()}
         model64 = copy.deepcopy(model).double()
-        energy = system.hamiltonian if label == "baseline" else model64.hamiltonian
-        fields[label] = (per_dtype, energy, "model")
+        x0 = None
+        if isinstance(model, hnn.PixelHNN):
+            # a latent model: its start states are the encoded first frames of training trials, and a
+            # baseline's latent has no energy to track
+            data = system.get_dataset(seed=0, save_dir=runs)
+            rows = np.arange(TASKS[task]["batch"]) * (data["params"]["timesteps"] - 3)
+            with torch.no_grad():
+                x0 = model64.encode(torch.as_tensor(data["pixels"][rows], dtype=torch.float64))
+            energy = None if label == "baseline" else model64.hamiltonian
+        else:
+            energy = system.hamiltonian if label == "baseline" else model64.hamiltonian
+        fields[label] = (per_dtype, energy, "model", x0)
     return fields
 
 
-def _energy_drift(energy, traj: torch.Tensor) -> float:
+def _energy_drift(energy, traj: torch.Tensor) -> float | None:
+    if energy is None:          # a latent without a Hamiltonian (the pixel baseline)
+        return None
     batch, steps, dim = traj.shape
     with torch.no_grad():
         H = energy(traj.double().reshape(-1, dim)).reshape(batch, steps)
@@ -139,13 +158,15 @@ def _energy_drift(energy, traj: torch.Tensor) -> float:
 def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes: list) -> list[dict]:
     system = hnn.load_task(task)
     cfg = TASKS[task]
-    x0 = _start_states(task, system, cfg["batch"])
-    t = np.linspace(0, cfg["T"], 51)
+    true_x0 = _start_states(task, system, cfg["batch"])
     rows = []
-    for label, (per_dtype, energy, kind) in _fields(task, system, runs, notes).items():
+    for label, (per_dtype, energy, kind, x0) in _fields(task, system, runs, notes).items():
+        scale = cfg.get("model_time", 1.0) if kind == "model" else 1.0
+        x0 = true_x0 if x0 is None else x0
+        t = np.linspace(0, cfg["T"] * scale, 51)
         with torch.no_grad():
             ref = hnn.rollout(per_dtype["float64"], x0, t, scipy_method="DOP853", rtol=1e-12, atol=1e-12)
-        for method, options in _settings(kind, quick, cfg["dts"]):
+        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"])):
             for dname, dtype in DTYPES.items():
                 rtol = options.get("rtol")
                 if rtol is not None and rtol < 100 * torch.finfo(dtype).eps:

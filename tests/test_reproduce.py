@@ -4,6 +4,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 ANALYSIS = Path(__file__).resolve().parent.parent / "analysis"
 sys.path.insert(0, str(ANALYSIS))
@@ -102,11 +103,18 @@ def _losses(results: dict) -> dict:
 def test_quick_end_to_end_and_jobs(tmp_path):
     """One task end to end (results.json, tables.md, figures), then --jobs 2 on fresh runs.
 
-    Both layouts train with one thread per process (the tests run with OMP_NUM_THREADS=1 and
-    --jobs 2 gives each of the 2 workers cores // 2 >= 1), so the same seed gives the same
-    floating-point operations and the numbers must agree exactly.
+    Both layouts train with one thread per process (this process is set to one thread here, and
+    --jobs = the cores gives each worker cores // jobs = 1), so the same seed gives the same
+    floating-point operations and the numbers must agree exactly. (The thread count changes the
+    order of float sums, so runs at different thread counts differ in the last bits, and
+    training amplifies that.)
     """
-    one = reproduce.main(["--quick", "--steps", str(TINY), "--tasks", "spring", "--out", str(tmp_path / "a")])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        one = reproduce.main(["--quick", "--steps", str(TINY), "--tasks", "spring", "--out", str(tmp_path / "a")])
+    finally:
+        torch.set_num_threads(threads)
     out = tmp_path / "a"
     saved = json.loads((out / "results.json").read_text())
     assert saved["meta"]["quick"] and "QUICK" in saved["meta"]["mode"] and saved["meta"]["steps"] == TINY
@@ -122,9 +130,29 @@ def test_quick_end_to_end_and_jobs(tmp_path):
         path = out / "figures" / f"spring-{name}.png"
         assert path.stat().st_size > 10_000, path
 
+    jobs = max(2, reproduce._cores())
     two = reproduce.main(["--quick", "--steps", str(TINY), "--tasks", "spring", "--out", str(tmp_path / "b"),
-                          "--jobs", "2", "--no-figures"])
-    assert two["seconds"]["jobs"] == 2 and (tmp_path / "b" / "logs").is_dir()
+                          "--jobs", str(jobs), "--no-figures"])
+    assert two["seconds"]["jobs"] == jobs and two["seconds"]["threads_per_job"] == 1 and (tmp_path / "b" / "logs").is_dir()
     assert _losses(two) == _losses(one)
     for label in ("baseline", "hnn"):
         assert two["tasks"]["spring"][label]["energy_mse_paper"] == one["tasks"]["spring"][label]["energy_mse_paper"]
+
+
+def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monkeypatch):
+    import readme
+    results["meta"]["cores"] = 2
+    text = readme.timing_text(results)
+    assert text.startswith("`python analysis/reproduce.py --quick` on 2026-01-01")
+    assert "| spring | 0.5 | 1.0 | 2.0 | 3.0 | 4.0 |" in text and "total 10.5 s" in text
+    (tmp_path / "README.md").write_text("a\n<!-- full-run:begin -->\nold\n<!-- full-run:end -->\nb\n")
+    (tmp_path / "experiment-x").mkdir()
+    monkeypatch.setenv("HNN_REPO", str(tmp_path))
+    saved = tmp_path / "results.json"
+    saved.write_text(json.dumps(results))
+    readme.main(["timing", str(saved)])
+    content = (tmp_path / "README.md").read_text()
+    assert "old" not in content and "| spring | 0.5 |" in content and content.endswith("<!-- full-run:end -->\nb\n")
+    results["seconds"]["tasks"] = {}
+    with pytest.raises(ValueError, match="no stage times"):
+        readme.timing_text(results)
