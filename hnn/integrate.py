@@ -5,7 +5,6 @@ Every method integrates the whole batch together, evaluating ``f`` once per stag
 """
 from __future__ import annotations
 
-import math
 import warnings
 from typing import Callable
 
@@ -90,43 +89,6 @@ def rk4_step(f: Field, x: torch.Tensor, dt) -> torch.Tensor:
     k3 = f(x + dt / 2 * k2)
     k4 = f(x + dt * k3)
     return dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-
-def _rk4(f: Field, x0: torch.Tensor, t: np.ndarray, dt: float | None = None, max_norm: float | None = 1e6,
-         stats: dict | None = None) -> torch.Tensor:
-    """Fixed-step RK4; each interval of ``t_eval`` is cut into equal steps no longer than ``|dt|``.
-
-    Runs in the caller's grad mode, so a rollout can be differentiated when wanted. Rows are
-    independent, so a row that blows up is recorded (first time it is non-finite or beyond
-    ``max_norm``) and the others finish; then the error names them all.
-    """
-    if dt is not None and not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"rk4 needs a positive finite dt, got {dt!r}")
-    out = [x0]
-    x = x0
-    nfev = 0
-    first_bad = torch.full((len(x0),), float("nan"), dtype=torch.float64)
-    for k in range(len(t) - 1):
-        span = t[k + 1] - t[k]
-        n = 1 if dt is None else max(1, math.ceil(abs(span) / dt - 1e-9))
-        h = span / n
-        for _ in range(n):
-            x = x + rk4_step(f, x, h)
-            nfev += 4
-        bad = ~torch.isfinite(x).all(dim=1)
-        if max_norm is not None:
-            bad |= ~(x.detach().abs() <= max_norm).all(dim=1)
-        new = bad & torch.isnan(first_bad)
-        if new.any():
-            first_bad[new] = float(t[k + 1])
-            x = torch.where(bad[:, None], torch.zeros_like(x), x)   # keep the dead rows from overflowing
-        out.append(x)
-    if stats is not None:
-        stats["nfev"] = nfev
-    diverged = torch.nonzero(~torch.isnan(first_bad)).flatten().tolist()
-    if diverged:
-        raise _divergence(f"rk4 (dt={dt}, max_norm={max_norm})", diverged, first_bad[diverged].tolist())
-    return torch.stack(out, dim=1)
 
 
 # Dormand-Prince 5(4): the tableau of scipy's RK45, with a step size per trajectory
@@ -265,10 +227,11 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
     return out
 
 
-from .symplectic import SYMPLECTIC_METHODS, symplectic_rollout  # noqa: E402  (it uses DivergenceError above)
+from .symplectic import SYMPLECTIC_METHODS, fixed_step_rollout  # noqa: E402  (it uses DivergenceError above)
 
-_METHODS = {"solve_ivp": _solve_ivp, "rk4": _rk4, "dopri5": _dopri5,
-            **{m: (lambda f, x0, t, _m=m, **kw: symplectic_rollout(f, x0, t, _m, **kw)) for m in SYMPLECTIC_METHODS}}
+_METHODS = {"solve_ivp": _solve_ivp, "dopri5": _dopri5,
+            **{m: (lambda f, x0, t, _m=m, **kw: fixed_step_rollout(f, x0, t, _m, **kw))
+               for m in ("rk4",) + SYMPLECTIC_METHODS}}
 
 
 def _check_tolerance(method: str, dtype: torch.dtype, options: dict) -> None:

@@ -15,6 +15,8 @@ All three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vec
 
 Steps are fixed: each interval of ``t_eval`` is cut into equal steps no longer than ``dt``
 (default one step per interval), signed like ``t_eval`` so integration runs backwards too.
+``rollout(method='rk4')`` (classic, not symplectic) runs through the same driver,
+``fixed_step_rollout``, so every fixed-step method reports blow-ups the same way.
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ import warnings
 import numpy as np
 import torch
 
-from .integrate import DivergenceError, _divergence
+from .integrate import DivergenceError, _divergence, rk4_step
 
 # Yoshida (1990): a symmetric composition S(w1 h) S(w0 h) S(w1 h) of a symmetric order-2 step S
 # is order 4 when 2 w1 + w0 = 1 (consistency) and 2 w1^3 + w0^3 = 0 (the h^3 error cancels), so
@@ -109,6 +111,20 @@ class _Midpoint:
         self.last = None
 
 
+class _RK4:
+    """The classic (non-symplectic) RK4 step, run by the same fixed-step driver."""
+
+    def __init__(self, f):
+        self.f, self.nfev = f, 0
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        self.nfev += 4
+        return x + rk4_step(self.f, x, h)
+
+    def reset(self, x: torch.Tensor) -> None:
+        pass
+
+
 class _Yoshida:
     """Yoshida's order-4 composition of a symmetric base step."""
 
@@ -139,6 +155,8 @@ def _make_stepper(method: str, f, dim: int, dtype: torch.dtype, tol, max_iter: i
                           f"{default_tol(dtype):.3g} or float64 states", stacklevel=4)
         if not (isinstance(max_iter, int) and max_iter >= 1):
             raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    if method == "rk4":
+        return _RK4(f)
     if method == "leapfrog":
         return _Leapfrog(f, dim)
     if method == "midpoint":
@@ -146,10 +164,11 @@ def _make_stepper(method: str, f, dim: int, dtype: torch.dtype, tol, max_iter: i
     return _Yoshida(_Leapfrog(f, dim) if base == "leapfrog" else _Midpoint(f, dim, tol, max_iter))
 
 
-def symplectic_rollout(f, x0: torch.Tensor, t: np.ndarray, method: str, dt: float | None = None,
+def fixed_step_rollout(f, x0: torch.Tensor, t: np.ndarray, method: str, dt: float | None = None,
                        max_norm: float | None = 1e6, tol: float | None = None, max_iter: int = 100,
                        base: str | None = None, stats: dict | None = None) -> torch.Tensor:
-    """``(batch, len(t), dim)`` by fixed steps of ``method`` (see the module docstring).
+    """``(batch, len(t), dim)`` by fixed steps of ``method`` (the symplectic ones of the module
+    docstring, or ``'rk4'``).
 
     ``dt`` (positive, units of t) caps the step; the sign comes from ``t``. ``tol`` and
     ``max_iter`` control the midpoint iteration (also yoshida4 with ``base='midpoint'``).
