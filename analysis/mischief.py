@@ -9,7 +9,6 @@ the curves show the fields, not float32 rounding. States are ``x = [q, p]`` ``(b
 """
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import matplotlib
@@ -30,10 +29,6 @@ HORIZONS = (1.0, 2.0, 5.0, 10.0, 20.0)
 REVERSE_TOL = {"rtol": 1e-6, "atol": 1e-8}
 
 
-def _float64(model: torch.nn.Module) -> torch.nn.Module:
-    return copy.deepcopy(model).to(torch.float64).eval()
-
-
 def reversibility(models: dict, x0, horizons=HORIZONS, rtol: float = REVERSE_TOL["rtol"],
                   atol: float = REVERSE_TOL["atol"]) -> dict:
     """For each model and each T in ``horizons``: integrate ``dx/dt = f(x)`` from ``x0`` for T,
@@ -43,7 +38,7 @@ def reversibility(models: dict, x0, horizons=HORIZONS, rtol: float = REVERSE_TOL
     x0 = torch.tensor([x0], dtype=torch.float64)
     out = {}
     for label, model in models.items():
-        f = _float64(model).time_derivative
+        f = hnn.evaluation.float64_copy(model).time_derivative
         errors = []
         for horizon in horizons:
             try:
@@ -59,7 +54,7 @@ def reversibility(models: dict, x0, horizons=HORIZONS, rtol: float = REVERSE_TOL
 
 def _paths_there_and_back(model, x0, horizon: float, points: int = 400):
     """``(forward (T, 2), backward (T, 2))`` paths for the figure, or ``(None, None)`` on divergence."""
-    f = _float64(model).time_derivative
+    f = hnn.evaluation.float64_copy(model).time_derivative
     t = np.linspace(0.0, horizon, points)
     try:
         with torch.no_grad():

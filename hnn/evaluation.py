@@ -190,6 +190,12 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     return out
 
 
+def float64_copy(model: torch.nn.Module) -> torch.nn.Module:
+    """A float64 copy of ``model`` in eval mode: tight tolerances are then limited by the solver,
+    not by float32 rounding of the trained weights."""
+    return copy.deepcopy(model).to(torch.float64).eval()
+
+
 def gradient_of_h(model):
     """``x -> dH/dx`` ``(batch, 2n)`` of an HNN's learned H: the direction in which H grows fastest."""
     def grad(x: torch.Tensor) -> torch.Tensor:
@@ -212,7 +218,7 @@ def energy_bump(model, x0, t_flow: float = 6.0, t_bump: float = 0.1, t_after: fl
     """
     if getattr(model, "baseline", False):
         raise ValueError("the energy bump needs an HNN: a baseline has no H to climb")
-    model = copy.deepcopy(model).to(torch.float64).eval()
+    model = float64_copy(model)
     x = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(1, -1))
     t_after = t_flow if t_after is None else t_after
     pieces, times, stages, t_start = [], [], [], 0.0

@@ -13,7 +13,7 @@ HNN's encoder; here every model uses its own.
 """
 from __future__ import annotations
 
-import copy
+import functools
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .evaluation import energy_bump
+from .evaluation import energy_bump, float64_copy
 from .integrate import rollout
 from .metrics import energy_mse, mean_and_se
-from .runs import atomic_write, model_from_args, run_dir, save_run
+from .runs import atomic_write, finish_run, model_from_args
 from .training import train
 
 
@@ -56,15 +56,8 @@ def run_pixel_experiment(args, dataset: dict, data_seconds: float | None = None)
                   dataset["test_next_pixels"], total_steps=args.total_steps, learn_rate=args.learn_rate,
                   weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
                   print_every=args.print_every, verbose=args.verbose, loss=loss)
-    train_loss = pixel_loss(model, dataset["pixels"], dataset["next_pixels"])
-    test_loss = pixel_loss(model, dataset["test_pixels"], dataset["test_next_pixels"])
-    if args.verbose:
-        print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
-              f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
-    metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
-               "test_loss": test_loss[0], "test_loss_se": test_loss[1],
-               "data_seconds": data_seconds, "train_seconds": stats["seconds"], "history": stats}
-    return save_run(run_dir(args), model, vars(args), metrics)
+    return finish_run(args, model, stats, pixel_loss(model, dataset["pixels"], dataset["next_pixels"]),
+                      pixel_loss(model, dataset["test_pixels"], dataset["test_next_pixels"]), data_seconds)
 
 
 @dataclass(frozen=True)
@@ -147,12 +140,18 @@ def fit_latent_map(latents, coords, how: str = "adam", seed: int = 0):
 
 
 def test_trajectory(system, protocol: PixelProtocol, render_size: int = 500) -> dict:
-    """The evaluation trajectory: ``pixels`` ``(num_points, 2 side^2)`` and its true ``coords``."""
-    raw = system.sample_frames(seed=protocol.seed, trials=1, timesteps=protocol.num_points + 3,
-                               min_angle=protocol.min_angle, max_angle=protocol.max_angle,
-                               render_size=render_size, workers=1)
-    rows = system.pair_rows(raw["frames"], raw["states"])
-    return {"pixels": rows["pixels"], "coords": rows["coords" if protocol.coords == "next_state" else "pair_coords"]}
+    """The evaluation trajectory as ``system.pair_rows`` gives it: ``pixels`` ``(num_points, 2 side^2)``,
+    ``coords`` and ``pair_coords``. Rendered once per setting: both protocols share the frames."""
+    return _render_trajectory(system, protocol.seed, protocol.num_points, protocol.min_angle, protocol.max_angle,
+                              render_size)
+
+
+@functools.lru_cache(maxsize=4)
+def _render_trajectory(system, seed: int, num_points: int, min_angle: float, max_angle: float,
+                       render_size: int) -> dict:
+    raw = system.sample_frames(seed=seed, trials=1, timesteps=num_points + 3, min_angle=min_angle,
+                               max_angle=max_angle, render_size=render_size, workers=1)
+    return system.pair_rows(raw["frames"], raw["states"])
 
 
 def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6) -> torch.Tensor:
@@ -161,11 +160,6 @@ def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6) -
     with torch.no_grad():
         z0 = model.encode(torch.as_tensor(pixels[:1], dtype=param.dtype))
     return rollout(model.time_derivative, z0, t_eval, method="solve_ivp", rtol=rtol, atol=atol)[0]
-
-
-def _float64(model):
-    """A float64 copy of ``model``: tight tolerances are then limited by the solver, not by float32 rounding."""
-    return copy.deepcopy(model).to(torch.float64)
 
 
 def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset: dict,
@@ -178,7 +172,8 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
     """
     trajectory = trajectory or test_trajectory(system, protocol)
     energy_fn = system.hamiltonian if protocol.energy == "paper" else system.true_hamiltonian
-    true_coords = torch.as_tensor(trajectory["coords"], dtype=torch.float64)
+    true_coords = torch.as_tensor(trajectory["coords" if protocol.coords == "next_state" else "pair_coords"],
+                                  dtype=torch.float64)
     e_true = energy_fn(true_coords)
     out = {"truth": {"energy": e_true.numpy(), "coords": true_coords.numpy(), "pixels": trajectory["pixels"]},
            "protocol": asdict(protocol)}
@@ -186,7 +181,7 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
     fit_coords = dataset["coords" if protocol.coords == "next_state" else "pair_coords"]
     for label, model in models.items():
         if protocol.name != "paper":
-            model = _float64(model)     # the paper evaluated its float32 models as they are
+            model = float64_copy(model)     # the paper evaluated its float32 models as they are
         param = next(model.parameters())
         with torch.no_grad():
             latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
@@ -244,7 +239,7 @@ def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500,
         if name == "paper":
             paper_result = result
     write_json(directory / "metrics.json", metrics)
-    truth = test_trajectory(system, PIXEL_PROTOCOLS["corrected"], render_size)["pixels"]
+    truth = paper_result["truth"]["pixels"]
     decoded = paper_result[label]["decoded"]
     atomic_write(directory / "rollout.npz", lambda tmp: np.savez_compressed(
         open(tmp, "wb"), truth=truth.astype(np.float32), decoded=decoded.astype(np.float32)))

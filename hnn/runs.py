@@ -112,8 +112,13 @@ def run_experiment(args, dataset) -> Path:
                   total_steps=args.total_steps, learn_rate=args.learn_rate, weight_decay=args.weight_decay,
                   batch_size=args.batch_size, seed=args.seed, print_every=args.print_every,
                   verbose=args.verbose, input_noise=getattr(args, "input_noise", 0.0), predict=predict)
-    train_loss = derivative_loss(model, dataset["x"], dataset["dxdt"])
-    test_loss = derivative_loss(model, dataset["test_x"], dataset["test_dxdt"])
+    return finish_run(args, model, stats, derivative_loss(model, dataset["x"], dataset["dxdt"]),
+                      derivative_loss(model, dataset["test_x"], dataset["test_dxdt"]), data_seconds)
+
+
+def finish_run(args, model, stats: dict, train_loss, test_loss, data_seconds: float | None = None) -> Path:
+    """Print (with ``--verbose``) and save a trained run: its final ``(mean, ±)`` train and test
+    losses, the seconds of its data and of its loop, and the loss history ``stats``."""
     if args.verbose:
         print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
               f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
