@@ -44,7 +44,7 @@ def reversibility(models: dict, x0, horizons=HORIZONS, rtol: float = REVERSE_TOL
             try:
                 with torch.no_grad():
                     ahead = hnn.rollout(f, x0, [0.0, horizon], rtol=rtol, atol=atol)[:, -1]
-                    back = hnn.rollout(lambda x: -f(x), ahead, [0.0, horizon], rtol=rtol, atol=atol)[:, -1]
+                    back = hnn.rollout(lambda x, f=f: -f(x), ahead, [0.0, horizon], rtol=rtol, atol=atol)[:, -1]
                 errors.append(float((back - x0).norm()))
             except hnn.DivergenceError:
                 errors.append(None)

@@ -247,7 +247,7 @@ def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Pa
                         tail = "".join(Path(log.name).read_text().splitlines(keepends=True)[-15:])
                         raise RuntimeError(f"training {key} failed (exit {proc.returncode}); the end of {log.name}:\n{tail}")
         finally:
-            for job, proc, status, log, tic in running.values():
+            for _job, proc, _status, log, _tic in running.values():
                 proc.kill()
                 proc.wait()
                 log.close()

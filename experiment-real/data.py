@@ -7,11 +7,14 @@ Experimental Data", Science 324(5923):81-85, 2009. The inputs are x = (theta, om
 targets are forward finite differences of x over the actual time steps. The first ~4/5 of the
 trajectory trains, the rest tests.
 
-The data are not shipped with the code: point at a folder holding ``real_pend_h_1.txt`` or
-``invar_datasets.zip`` with ``--data_dir DIR`` or ``HNN_DATA_DIR=DIR`` (default ``<repo>/data``).
+The measurements ship beside this file (``real_pend_h_1.txt``; its provenance, citation and
+checksum are in ``DATA.md`` here). Another copy, the text file or the authors' archive
+``invar_datasets.zip`` holding it, is read from ``--data_dir DIR`` or ``HNN_DATA_DIR=DIR``.
+Every copy is checked against the published file's SHA-256 after parsing.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import zipfile
@@ -20,14 +23,15 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 import torch
 
-from hnn.tasks import repo_root
-
+HERE = Path(__file__).resolve().parent
 DATA_FILE = "real_pend_h_1.txt"
 ZIP_FILE = "invar_datasets.zip"
 ENV_VAR = "HNN_DATA_DIR"
 NOMINAL_DT = 1.0 / 6.0      # the sampling step of the measurements (the original's dt for --use_rk4)
 HEADER = ("o", "v")          # the file's header names its two state columns: o = theta, v = omega
 NUM_COLUMNS = 4              # trial, t, theta, omega
+# SHA-256 of the published file (the zip member is the same bytes); see DATA.md
+SHA256 = "45d92988198b89a5933f5a53e67aa819d06937516f71a462ac09e1307d8b3411"
 
 SOURCE = ('the supplementary data "invar_datasets" of M. Schmidt and H. Lipson, "Distilling Free-Form '
           'Natural Laws from Experimental Data", Science 324:81 (2009)')
@@ -53,7 +57,7 @@ def _default_dir() -> tuple[Path, str]:
     env = os.environ.get(ENV_VAR, "").strip()
     if env:
         return Path(env).expanduser(), f"from {ENV_VAR}"
-    return repo_root() / "data", "the default; neither --data_dir nor HNN_DATA_DIR was given"
+    return HERE, "the copy shipped with the task; neither --data_dir nor HNN_DATA_DIR was given"
 
 
 def _zip_member(archive: zipfile.ZipFile) -> str | None:
@@ -70,7 +74,7 @@ def find_data(data_dir=None) -> Path:
     """The measurements file: ``real_pend_h_1.txt``, or else ``invar_datasets.zip`` holding it.
 
     Searches ``data_dir`` if given, else the folder in the environment variable ``HNN_DATA_DIR``,
-    else ``<repo>/data``. ``data_dir`` may also name one of the two files itself. Raises
+    else this task's folder (the shipped copy). ``data_dir`` may also name one of the two files itself. Raises
     ``FileNotFoundError`` saying where it looked and where the data come from.
     """
     if data_dir is not None and str(data_dir).strip():
@@ -100,17 +104,17 @@ def find_data(data_dir=None) -> Path:
     raise FileNotFoundError(
         f"the real-pendulum measurements {DATA_FILE} were not found: searched the folder {folder} "
         f"({origin}) for {DATA_FILE} or {ZIP_FILE} containing it{detail}. "
-        f"The data come from {SOURCE}, in the supplementary archive {ZIP_FILE}; they are not part of "
-        f"this repository. Put {DATA_FILE} or {ZIP_FILE} in a folder and point at it with "
-        f"--data_dir DIR or {ENV_VAR}=DIR (default: <repo>/data).")
+        f"The data come from {SOURCE}, in the supplementary archive {ZIP_FILE}, and a copy ships as "
+        f"experiment-real/{DATA_FILE}: restore it (git checkout -- experiment-real/{DATA_FILE}), or put "
+        f"{DATA_FILE} or {ZIP_FILE} in a folder and point at it with --data_dir DIR or {ENV_VAR}=DIR.")
 
 
 # ----------------------------------------------------------------------------------------------
 # reading it
 
 
-def _read_text(path: Path) -> tuple[str, str]:
-    """The file's text and the name to quote in errors (``archive.zip:member`` for a zip member)."""
+def _read_text(path: Path) -> tuple[bytes, str]:
+    """The file's bytes and the name to quote in errors (``archive.zip:member`` for a zip member)."""
     if path.suffix == ".zip":
         try:
             with zipfile.ZipFile(path) as archive:
@@ -122,11 +126,26 @@ def _read_text(path: Path) -> tuple[str, str]:
             raise ValueError(f"{path} is not a readable zip archive ({err})") from err
     else:
         raw, label = path.read_bytes(), str(path)
+    return raw, label
+
+
+def _decode(raw: bytes, label: str) -> str:
     try:
-        return raw.decode("ascii"), label
+        return raw.decode("ascii")
     except UnicodeDecodeError as err:
         raise ValueError(f"{label}: not an ASCII text file ({err}); expected the {DATA_FILE} "
-                         f"table of {SOURCE}") from err
+                         f"table of {SOURCE}") from None
+
+
+def _check_sha256(raw: bytes, label: str) -> None:
+    """Well-formed but not the published bytes: a truncated, edited or re-encoded copy."""
+    digest = hashlib.sha256(raw).hexdigest()
+    if digest != SHA256:
+        raise ValueError(
+            f"{label}: SHA-256 {digest} is not the published file's {SHA256}, so it is a changed copy "
+            f"(edited, truncated or with converted line endings) of {SOURCE}. Restore the shipped copy "
+            f"(git checkout -- experiment-real/{DATA_FILE}) or point --data_dir at an unchanged one; to "
+            "read other measurements in the same format on purpose, call load_measurements(..., verify=False).")
 
 
 def _parse(text: str, label: str) -> tuple[np.ndarray, np.ndarray]:
@@ -171,16 +190,21 @@ def _parse(text: str, label: str) -> tuple[np.ndarray, np.ndarray]:
     return table[:, 1].copy(), table[:, 2:4].copy()
 
 
-def load_measurements(data_dir=None) -> tuple[np.ndarray, np.ndarray]:
+def load_measurements(data_dir=None, verify: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The measured trajectory: times ``t`` ``(N,)`` in seconds and states ``x`` ``(N, 2)`` = (theta, omega).
 
     Both float64. Reads ``real_pend_h_1.txt`` or its copy inside ``invar_datasets.zip``
-    (see ``find_data``); a malformed file raises ``ValueError`` naming the file and the line.
+    (see ``find_data``); a malformed file raises ``ValueError`` naming the file and the line,
+    and (with ``verify``) a well-formed file whose SHA-256 is not the published one raises too.
     """
-    return _parse(*_read_text(find_data(data_dir)))
+    raw, label = _read_text(find_data(data_dir))
+    parsed = _parse(_decode(raw, label), label)
+    if verify:
+        _check_sha256(raw, label)
+    return parsed
 
 
-def get_dataset(data_dir=None, test_split: float = 0.8) -> dict:
+def get_dataset(data_dir=None, test_split: float = 0.8, verify: bool = True) -> dict:
     """The original's dataset: inputs x = (theta, omega), targets their forward differences.
 
     dx[i] = (x[i+1] - x[i]) / (t[i+1] - t[i]) over the actual time steps (1/6 s, or 1/3 s and
@@ -195,7 +219,7 @@ def get_dataset(data_dir=None, test_split: float = 0.8) -> dict:
     """
     if not 0.0 < test_split < 1.0:
         raise ValueError(f"test_split is the train fraction and must lie in (0, 1), got {test_split}")
-    t, x = load_measurements(data_dir)
+    t, x = load_measurements(data_dir, verify)
     dxdt = (x[1:] - x[:-1]) / (t[1:] - t[:-1])[:, None]
     x, t = x[:-1], t[:-1]
     n = len(x)

@@ -90,7 +90,7 @@ class _Midpoint:
         else:                               # the last increment, rescaled: off by O(h^2) too, and free
             x1 = x + (h / self.last[0]) * self.last[1]
         scale = x.detach().abs().clamp(min=1.0)
-        for k in range(1, self.max_iter + 1):
+        for k in range(1, self.max_iter + 1):  # noqa: B007 (k counts the iterations after the loop)
             x_next = x + h * self.f((x + x1) / 2)
             self.nfev += 1
             delta = (x_next.detach() - x1.detach()).abs()

@@ -1,6 +1,6 @@
 """Task 3, the real pendulum: finding and parsing the measurements, the dataset, the physics in it, training."""
+import hashlib
 import json
-import os
 import re
 import shutil
 import zipfile
@@ -12,13 +12,26 @@ import torch
 
 import hnn
 
-SHARED = Path(os.environ["HNN_DATA_DIR"])          # set by conftest.py
 HEADER = "%o v\r\n"
 
 
 @pytest.fixture
 def real():
     return hnn.load_task("real")
+
+
+@pytest.fixture
+def shipped(real):
+    """The copy of the measurements that ships with the task."""
+    return Path(real.__file__).parent / real.DATA_FILE
+
+
+def make_zip(path, data_bytes, member):
+    """``invar_datasets.zip`` at ``path`` holding ``data_bytes`` as ``member`` (and a decoy member)."""
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr(str(Path(member).parent / "pendulum_h_1.txt").lstrip("./"), "% o v\r\n")
+        archive.writestr(member, data_bytes)
+    return path
 
 
 def row(trial, t, theta, omega):
@@ -36,12 +49,21 @@ def good_rows(n=6):
 
 # ---------------------------------------------------------------------------- finding the file
 
-def test_finds_the_text_file_through_the_env_var(real):
-    assert real.find_data() == SHARED / real.DATA_FILE
+def test_default_is_the_shipped_copy_with_the_published_checksum(real, shipped, monkeypatch):
+    monkeypatch.delenv("HNN_DATA_DIR", raising=False)
+    assert real.find_data() == shipped
+    assert hashlib.sha256(shipped.read_bytes()).hexdigest() == real.SHA256
+    assert shipped.stat().st_size == 57274 and shipped.read_bytes().count(b"\r\n") == 557   # CRLF kept
 
 
-def test_text_file_and_zip_give_identical_arrays(real, tmp_path):
-    shutil.copy(SHARED / real.ZIP_FILE, tmp_path / real.ZIP_FILE)
+def test_finds_the_text_file_through_the_env_var(real, shipped, tmp_path, monkeypatch):
+    shutil.copy(shipped, tmp_path / real.DATA_FILE)
+    monkeypatch.setenv("HNN_DATA_DIR", str(tmp_path))
+    assert real.find_data() == tmp_path / real.DATA_FILE
+
+
+def test_text_file_and_zip_give_identical_arrays(real, shipped, tmp_path):
+    make_zip(tmp_path / real.ZIP_FILE, shipped.read_bytes(), real.DATA_FILE)
     assert real.find_data(tmp_path) == tmp_path / real.ZIP_FILE
     t_zip, x_zip = real.load_measurements(tmp_path)
     t_txt, x_txt = real.load_measurements()
@@ -52,30 +74,36 @@ def test_text_file_and_zip_give_identical_arrays(real, tmp_path):
     assert t_txt[0] == 5.0 and t_txt[-1] == 99.5
 
 
-def test_text_file_wins_over_the_zip_and_data_dir_wins_over_the_env_var(real, tmp_path):
-    shutil.copy(SHARED / real.ZIP_FILE, tmp_path / real.ZIP_FILE)
-    shutil.copy(SHARED / real.DATA_FILE, tmp_path / real.DATA_FILE)
+def test_text_file_wins_over_the_zip_and_data_dir_wins_over_the_env_var(real, shipped, tmp_path, monkeypatch):
+    make_zip(tmp_path / real.ZIP_FILE, shipped.read_bytes(), real.DATA_FILE)
+    shutil.copy(shipped, tmp_path / real.DATA_FILE)
+    monkeypatch.setenv("HNN_DATA_DIR", str(tmp_path / "elsewhere"))
     assert real.find_data(tmp_path) == tmp_path / real.DATA_FILE
     assert real.find_data(str(tmp_path)) == tmp_path / real.DATA_FILE
 
 
-def test_zip_with_the_member_in_a_subfolder(real, tmp_path):
-    with zipfile.ZipFile(tmp_path / real.ZIP_FILE, "w") as archive:
-        archive.writestr("invar_datasets/pendulum_h_1.txt", "% o v\r\n")
-        archive.writestr(f"invar_datasets/{real.DATA_FILE}", (SHARED / real.DATA_FILE).read_bytes())
+def test_zip_with_the_member_in_a_subfolder(real, shipped, tmp_path):
+    make_zip(tmp_path / real.ZIP_FILE, shipped.read_bytes(), f"invar_datasets/{real.DATA_FILE}")
     t, x = real.load_measurements(tmp_path)
     t_txt, x_txt = real.load_measurements()
     np.testing.assert_array_equal(t, t_txt)
     np.testing.assert_array_equal(x, x_txt)
 
 
-def test_default_folder_is_repo_data(real, tmp_path, monkeypatch):
-    monkeypatch.delenv("HNN_DATA_DIR")
-    monkeypatch.setenv("HNN_REPO", str(tmp_path))
-    (tmp_path / "experiment-real").mkdir()
-    (tmp_path / "data").mkdir()
-    shutil.copy(SHARED / real.DATA_FILE, tmp_path / "data" / real.DATA_FILE)
-    assert real.find_data() == tmp_path / "data" / real.DATA_FILE
+@pytest.mark.parametrize("change", ["one digit", "LF line endings", "last row dropped"])
+def test_a_changed_copy_fails_the_checksum(real, shipped, tmp_path, change):
+    data = shipped.read_bytes()
+    if change == "one digit":
+        data = data.replace(b"e-001", b"e-002", 1)
+    elif change == "LF line endings":
+        data = data.replace(b"\r\n", b"\n")
+    else:
+        data = data[:data.rstrip().rfind(b"\r\n") + 2]
+    (tmp_path / real.DATA_FILE).write_bytes(data)
+    with pytest.raises(ValueError, match=rf"SHA-256 [0-9a-f]{{64}} is not the published file's {real.SHA256}"):
+        real.load_measurements(tmp_path)
+    t, _ = real.load_measurements(tmp_path, verify=False)          # parses; only the bytes differ
+    assert len(t) == (555 if change == "last row dropped" else 556)
 
 
 def test_missing_file_says_where_it_looked_and_how_to_point_at_it(real, tmp_path, monkeypatch):
@@ -112,7 +140,7 @@ def test_zip_without_the_member_is_not_found(real, tmp_path):
 def test_malformed_file_names_the_line(real, tmp_path, lines, match):
     path = write(tmp_path / real.DATA_FILE, "".join(lines))
     with pytest.raises(ValueError, match=match) as err:
-        real.load_measurements(tmp_path)
+        real.load_measurements(tmp_path, verify=False)
     assert str(path) in str(err.value)
 
 
@@ -121,7 +149,7 @@ def test_good_small_file_parses_with_lf_or_crlf(real, tmp_path):
     for name, body in (("crlf", text), ("lf", text.replace("\r\n", "\n"))):
         (tmp_path / name).mkdir()
         write(tmp_path / name / real.DATA_FILE, body)
-        t, x = real.load_measurements(tmp_path / name)
+        t, x = real.load_measurements(tmp_path / name, verify=False)
         np.testing.assert_allclose(t, 5 + np.arange(5) / 6)
         np.testing.assert_allclose(x, np.stack([0.1 * np.arange(5), -0.2 * np.arange(5)], 1))
 
@@ -130,7 +158,7 @@ def test_malformed_zip_member_names_archive_and_line(real, tmp_path):
     with zipfile.ZipFile(tmp_path / real.ZIP_FILE, "w") as archive:
         archive.writestr(real.DATA_FILE, HEADER + "".join(good_rows(3)) + "  0.0  5.6  abc  0.1 \r\n")
     with pytest.raises(ValueError, match=rf"invar_datasets.zip:{real.DATA_FILE}: line 5"):
-        real.load_measurements(tmp_path)
+        real.load_measurements(tmp_path, verify=False)
 
 
 # ---------------------------------------------------------------------------- the dataset
@@ -214,12 +242,12 @@ def test_train_script_end_to_end(extra, tmp_path, capsys):
     assert saved_args == args and model.baseline == ("--baseline" in extra)
 
 
-def test_train_script_data_dir_flag(tmp_path, monkeypatch):
+def test_train_script_data_dir_flag(real, shipped, tmp_path, monkeypatch):
     trainer = hnn.load_task("real", "train")
     monkeypatch.setenv("HNN_DATA_DIR", str(tmp_path / "nowhere"))
     argv = ["--total_steps", "1", "--save_dir", str(tmp_path / "runs")]
     with pytest.raises(FileNotFoundError, match="HNN_DATA_DIR"):
         trainer.main(argv)
-    shutil.copy(SHARED / "invar_datasets.zip", tmp_path / "invar_datasets.zip")
+    make_zip(tmp_path / real.ZIP_FILE, shipped.read_bytes(), real.DATA_FILE)
     run = trainer.main(argv + ["--data_dir", str(tmp_path)])
     assert json.loads((run / "args.json").read_text())["data_dir"] == str(tmp_path)
