@@ -252,7 +252,8 @@ def parse_args(argv=None):
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
     parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of data,train,eval")
-    parser.add_argument("--update-readme", action="store_true", help="paste the table into README.md's benchmark section")
+    parser.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+                        help="write the generated section of docs/speed.md")
     args = parser.parse_args(argv)
     args.jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]
     bad = [j for j in args.jobs if j not in JOBS]
@@ -319,11 +320,11 @@ def main(argv=None) -> int:
                           "total_steps": steps, "jobs": results, "table": table,
                           "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
-    if args.update_readme:
+    if args.update_docs:
         command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
         readme.update_section("benchmark", f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, "
                               f"{env['torch_threads']} threads, {args.repeats} interleaved rounds:\n\n{table}")
-        print("updated README.md")
+        print("updated docs/speed.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)
         return 1

@@ -2,7 +2,7 @@
 
     python analysis/benchmark_pixels.py                  # render the full dataset, 300 steps per model
     python analysis/benchmark_pixels.py --steps 10000    # the full training of both models
-    python analysis/benchmark_pixels.py --update-readme  # paste the table into README.md
+    python analysis/benchmark_pixels.py --update-docs  # write the table into docs/speed.md
 
 Renders the 200 x 103 frames afresh into a temporary folder (gymnasium, ``--workers``
 processes), builds the training arrays, then trains the HNN and the baseline for ``--steps``
@@ -69,7 +69,8 @@ def main(argv=None) -> dict:
     p.add_argument("--workers", type=int, default=None, help="rendering processes (default: the cores)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="JSON path (default results/benchmark_pixels.json)")
-    p.add_argument("--update-readme", action="store_true", help="paste the table into README.md")
+    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+                        help="write the generated section of docs/speed.md")
     args = p.parse_args(argv)
     system = hnn.load_task("pixels")
     out = args.out or hnn.tasks.repo_root() / "results" / "benchmark_pixels.json"
@@ -99,9 +100,9 @@ def main(argv=None) -> dict:
     print(text)
     write_json(out, result)
     print(f"wrote {out}")
-    if args.update_readme:
+    if args.update_docs:
         readme.update_section("benchmark-pixels", text)
-        print("updated README.md")
+        print("updated docs/speed.md")
     return result
 
 

@@ -83,8 +83,21 @@ def _time_path(ax, traj: np.ndarray, t: np.ndarray, cmap="viridis"):
     return lines
 
 
+# prefixed to every figure's title while set (reproduce.py --quick sets "QUICK ..."), so a smoke
+# run's pictures are never mistaken for the paper's settings
+STAMP = {"text": ""}
+
+
+def set_stamp(text: str) -> None:
+    """Prefix ``text`` to the title of every figure saved from now on ('' to stop)."""
+    STAMP["text"] = text
+
+
 def _save(fig, path) -> Path:
     path = Path(path)
+    if STAMP["text"]:
+        old = fig._suptitle.get_text() if fig._suptitle is not None else ""
+        fig.suptitle(f"{STAMP['text']}\n{old}" if old else STAMP["text"])
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI, bbox_inches="tight"))
     plt.close(fig)
     return path

@@ -19,7 +19,7 @@ import imageio.v2 as imageio  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from figures import COLORS, NAMES, _save  # noqa: E402
+from figures import COLORS, NAMES, STAMP, _save  # noqa: E402
 from hnn.runs import atomic_write  # noqa: E402
 
 BODY_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
@@ -103,7 +103,7 @@ def orbit_gif(task: str, result: dict, path, frames: int = GIF["frames"], fps: i
             for body, (line, dot) in enumerate(bodies):
                 line.set_data(qx[first:i + 1, body], qy[first:i + 1, body])
                 dot.set_data([qx[i, body]], [qy[i, body]])
-        title.set_text(f"{task}, t = {t[i]:.2f}")
+        title.set_text(f"{STAMP['text']} {task}, t = {t[i]:.2f}".strip())
         fig.canvas.draw()
         images.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)

@@ -1,33 +1,85 @@
-"""Paste generated text into README.md between ``<!-- NAME:begin -->`` and ``<!-- NAME:end -->``.
+"""Generated pages: text pasted between ``<!-- NAME:begin -->`` and ``<!-- NAME:end -->`` of
+README.md or a page of docs/, and the curated figures in docs/figures/.
 
-The README's results, timing and benchmark sections are written only this way, never by hand:
+Every generated section is written only this way, never by hand, by the command that measures it:
 
-    python analysis/readme.py timing results-fresh/results.json   # the stage times of a saved run
+    python analysis/reproduce.py --update-docs        # docs/results.md, the README's headline, docs/figures/
+    python analysis/benchmark.py --update-docs        # docs/speed.md
+    python analysis/speed_accuracy.py --update-docs   # docs/integrators.md
+    python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
 """
 import argparse
 import json
+import shutil
 from pathlib import Path
 
 import hnn
 from hnn.runs import atomic_write
 
+# section name -> the page (relative to the repository) that holds it
+PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
+         "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
+         "speed-accuracy": "docs/integrators.md"}
+# the few figures the README shows (about 1.2 MB in all), copied from a full run's figures/
+CURATED = ("spring-fields.png", "real-fields.png", "2body-orbits.png", "3body-orbits.png",
+           "pixels-compare-static.png")
+
 
 def update_section(name: str, text: str) -> Path:
-    readme = hnn.tasks.repo_root() / "README.md"
+    """Replace section ``name`` of its page (``PAGES``) with ``text``; returns the page."""
+    page = hnn.tasks.repo_root() / PAGES.get(name, "README.md")
     begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
-    content = readme.read_text()
+    content = page.read_text() if page.exists() else ""
     if begin not in content or end not in content:
-        raise ValueError(f"{readme} has no {begin} ... {end} section to update")
+        raise ValueError(f"{page} has no {begin} ... {end} section to update; add the two markers where it goes")
     head, rest = content.split(begin, 1)
     tail = rest.split(end, 1)[1]
-    atomic_write(readme, lambda tmp: Path(tmp).write_text(f"{head}{begin}\n{text.rstrip()}\n{end}{tail}"))
-    return readme
+    atomic_write(page, lambda tmp: Path(tmp).write_text(f"{head}{begin}\n{text.rstrip()}\n{end}{tail}"))
+    return page
+
+
+def update_results(tables: str, headline: str, fig_dir: Path | None) -> list[Path]:
+    """docs/results.md, the README's headline table and (from ``fig_dir``) docs/figures/."""
+    written = [update_section("results", tables), update_section("headline", headline)]
+    if fig_dir is not None:
+        target = hnn.tasks.repo_root() / "docs" / "figures"
+        target.mkdir(parents=True, exist_ok=True)
+        for name in CURATED:
+            if (Path(fig_dir) / name).exists():
+                atomic_write(target / name, lambda tmp, name=name: shutil.copyfile(Path(fig_dir) / name, tmp))
+                written.append(target / name)
+    return written
+
+
+def _s(value) -> str:
+    return "" if value is None else f"{value:.1f}"
+
+
+def stage_table(results: dict) -> list[str]:
+    """Markdown lines: the seconds of each stage per task, and the wall times."""
+    seconds = results.get("seconds", {})
+    if not seconds.get("tasks"):
+        return []
+    jobs = seconds.get("jobs", 1)
+    lines = ["**Time per stage** (seconds in this invocation; data = dataset load or generation inside "
+             "train.py, train = the training loop, summed over seeds; reused = a saved run with the same args)", "",
+             "| task | data | train baseline | train hnn | evaluate | figures |",
+             "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for task, s in seconds["tasks"].items():
+        train = [_s(s["train"].get(label)) if label in s["train"] else "reused" for label in ("baseline", "hnn")]
+        lines.append(f"| {task} | {_s(s.get('data')) if s.get('data') is not None else 'reused'} | "
+                     f"{train[0]} | {train[1]} | {_s(s.get('evaluate'))} | {_s(s.get('figures'))} |")
+    overlap = f"{jobs} worker processes of {seconds.get('threads_per_job')} threads, so runs overlap" if jobs > 1 \
+        else "in this process"
+    lines += ["", f"Wall time: training {_s(seconds.get('training'))} s ({overlap}), evaluation and figures "
+                  f"{_s(seconds.get('evaluation'))} s, total {_s(seconds.get('total'))} s."]
+    return lines
+
+
 
 
 def timing_text(results: dict) -> str:
     """The stage-time table of a ``reproduce.py`` results dict, with the command that made it."""
-    from reproduce import stage_table
-
     meta = results["meta"]
     lines = stage_table(results)
     if not lines:
@@ -41,8 +93,8 @@ def main(argv=None) -> None:
     p.add_argument("what", choices=["timing"], help="timing: the full-run section from a results.json")
     p.add_argument("results", type=Path, help="a results.json written by analysis/reproduce.py")
     args = p.parse_args(argv)
-    update_section("full-run", timing_text(json.loads(args.results.read_text())))
-    print(f"updated the full-run section of README.md from {args.results}")
+    page = update_section("full-run", timing_text(json.loads(args.results.read_text())))
+    print(f"updated the full-run section of {page} from {args.results}")
 
 
 if __name__ == "__main__":

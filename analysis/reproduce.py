@@ -4,7 +4,7 @@ its figures, for every task in this checkout.
     python analysis/reproduce.py                      # full settings, results/
     python analysis/reproduce.py --quick              # smoke run (300 steps), results-quick/
     python analysis/reproduce.py --jobs 2             # two training processes, one thread each
-    python analysis/reproduce.py --tasks spring --update-readme
+    python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
 
 Trains each model through its task's own ``train.py`` (reusing a saved run only when its args
 match exactly), in this process or in ``--jobs N`` worker processes (longest runs first), with
@@ -35,9 +35,11 @@ from tqdm.auto import tqdm
 
 import hnn
 from hnn.runs import atomic_write, write_json
+import figures
 import readme
+from readme import stage_table
 import task_hooks
-from paper_numbers import PAPER
+from hnn.paper import PAPER
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))
@@ -126,10 +128,11 @@ class _Progress:
         self.active[key] = (step, total)
         self._render()
 
-    def finish(self, key: str, total: int, line: str) -> None:
+    def finish(self, key: str, total: int, line: str | None) -> None:
         self.active.pop(key, None)
         self.finished += total
-        self.write(line)
+        if line:
+            self.write(line)
         self._render(force=True)
 
     def write(self, line: str) -> None:
@@ -163,25 +166,41 @@ class _Progress:
 
 
 def _run_key(job: dict) -> str:
-    return f"{job['task']}/{job['label']}/seed{job['seed']}"
+    return f"{job['row']}/{job['label']}/seed{job['seed']}"
 
 
 def _summary(job: dict, directory: Path, wall: float) -> str:
-    return f"  {job['task']:7s} {job['label']:8s} seed {job['seed']} trained {directory} ({wall:.1f} s)"
+    return f"  {job['row']:11s} {job['label']:8s} seed {job['seed']} trained {directory} ({wall:.1f} s)"
+
+
+# what a run raises when its task cannot run here: missing data or optional packages
+_CANNOT_RUN = (FileNotFoundError, ImportError)
+
+
+def _failed(job: dict, err: Exception, failed_tasks: dict, progress) -> Exception:
+    """Record a run that cannot run here; its task's reason is printed once per job, not per run."""
+    if job["task"] not in failed_tasks:
+        failed_tasks[job["task"]] = err
+        progress.write(f"  {job['task']:11s} cannot run here, skipping all its runs: {err}")
+    return failed_tasks[job["task"]]
 
 
 def _train_in_process(jobs: list[dict], progress: _Progress) -> dict:
     """Train ``jobs`` one after another here; ``{key: folder or exception}``."""
-    done = {}
+    done, failed_tasks = {}, {}
     for job in jobs:
         key, tic = _run_key(job), time.perf_counter()
+        if job["task"] in failed_tasks:
+            done[key] = failed_tasks[job["task"]]
+            progress.finish(key, job["total"], None)
+            continue
         progress.update(key, 0, job["total"])
         try:
             directory, _ = train_or_reuse(job["task"], job["label"], job["runs_dir"], job["seed"], job["steps"],
                                           job["extra_argv"], progress=lambda s, t, key=key: progress.update(key, s, t))
-        except (FileNotFoundError, ImportError) as err:   # missing data or optional packages; reported by the caller
-            progress.finish(key, job["total"], f"  {job['task']:7s} {job['label']:8s} seed {job['seed']} failed: {err}")
-            done[key] = err
+        except _CANNOT_RUN as err:
+            done[key] = _failed(job, err, failed_tasks, progress)
+            progress.finish(key, job["total"], None)
             continue
         job["wall"] = time.perf_counter() - tic
         progress.finish(key, job["total"], _summary(job, directory, job["wall"]))
@@ -200,16 +219,20 @@ def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Pa
     package_root = str(Path(hnn.__file__).resolve().parent.parent)
     env["PYTHONPATH"] = os.pathsep.join([package_root] + [p for p in [os.environ.get("PYTHONPATH")] if p])
     queue = sorted(jobs, key=lambda j: task_hooks.hooks_for(j["task"]).cost * j["total"], reverse=True)
-    running, done = {}, {}
+    running, done, failed_tasks = {}, {}, {}
     log_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="hnn-progress-") as status_dir:
         try:
             while queue or running:
+                for job in [j for j in queue if j["task"] in failed_tasks]:
+                    queue.remove(job)
+                    done[_run_key(job)] = failed_tasks[job["task"]]
+                    progress.finish(_run_key(job), job["total"], None)
                 while queue and len(running) < n:
-                    # a run whose sibling (same task and seed) is still making their shared dataset
+                    # a run whose sibling (same row and seed) is still making their shared dataset
                     # waits, so that dataset is generated once and not twice at the same time
                     ready = [j for j in queue if not any(
-                        r["task"] == j["task"] and r["seed"] == j["seed"] and "step" not in _read_status(s)
+                        r["row"] == j["row"] and r["seed"] == j["seed"] and "step" not in _read_status(s)
                         for r, _, s, _, _ in running.values())]
                     if not ready:
                         break
@@ -239,10 +262,10 @@ def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Pa
                         done[key] = Path(state["run"])
                         progress.finish(key, job["total"], _summary(job, done[key], job["wall"]))
                     elif state.get("type") in ("FileNotFoundError", "ImportError", "ModuleNotFoundError"):
-                        done[key] = (ImportError if "Import" in state["type"] or "Module" in state["type"]
-                                     else FileNotFoundError)(state["error"])
-                        progress.finish(key, job["total"], f"  {job['task']:7s} {job['label']:8s} seed "
-                                                           f"{job['seed']} failed: {state['error']}")
+                        err = (ImportError if "Import" in state["type"] or "Module" in state["type"]
+                               else FileNotFoundError)(state["error"])
+                        done[key] = _failed(job, err, failed_tasks, progress)
+                        progress.finish(key, job["total"], None)
                     else:
                         tail = "".join(Path(log.name).read_text().splitlines(keepends=True)[-15:])
                         raise RuntimeError(f"training {key} failed (exit {proc.returncode}); the end of {log.name}:\n{tail}")
@@ -333,31 +356,6 @@ def _across_seeds(row: dict, label: str, key: str) -> str:
     return f"{np.mean(values):.4e} ± {np.std(values, ddof=1) / np.sqrt(len(values)):.2e} (n={len(values)})"
 
 
-def _s(value) -> str:
-    return "" if value is None else f"{value:.1f}"
-
-
-def stage_table(results: dict) -> list[str]:
-    """Markdown lines: the seconds of each stage per task, and the wall times."""
-    seconds = results.get("seconds", {})
-    if not seconds.get("tasks"):
-        return []
-    jobs = seconds.get("jobs", 1)
-    lines = ["**Time per stage** (seconds in this invocation; data = dataset load or generation inside "
-             "train.py, train = the training loop, summed over seeds; reused = a saved run with the same args)", "",
-             "| task | data | train baseline | train hnn | evaluate | figures |",
-             "| --- | ---: | ---: | ---: | ---: | ---: |"]
-    for task, s in seconds["tasks"].items():
-        train = [_s(s["train"].get(label)) if label in s["train"] else "reused" for label in MODELS]
-        lines.append(f"| {task} | {_s(s.get('data')) if s.get('data') is not None else 'reused'} | "
-                     f"{train[0]} | {train[1]} | {_s(s.get('evaluate'))} | {_s(s.get('figures'))} |")
-    overlap = f"{jobs} worker processes of {seconds.get('threads_per_job')} threads, so runs overlap" if jobs > 1 \
-        else "in this process"
-    lines += ["", f"Wall time: training {_s(seconds.get('training'))} s ({overlap}), evaluation and figures "
-                  f"{_s(seconds.get('evaluation'))} s, total {_s(seconds.get('total'))} s."]
-    return lines
-
-
 def tables_markdown(results: dict) -> str:
     """The three tables, ours beside the paper's, and the stage times, from a results dict (``results.json``)."""
     meta = results["meta"]
@@ -374,7 +372,7 @@ def tables_markdown(results: dict) -> str:
                   f"| --- | --- | --- | --- | --- |{' --- |' if seeds else ''}"]
         for task, row in results["tasks"].items():
             for label in MODELS:
-                paper, ours = PAPER.get(task, {}).get(key, {}).get(label), row[label].get(key)
+                paper, ours = PAPER.get(row.get("task", task), {}).get(key, {}).get(label), row[label].get(key)
                 extra = f" {_across_seeds(row, label, key)} |" if seeds else ""
                 lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper)} | "
                              f"{_ratio(ours, paper)} |{extra}")
@@ -385,13 +383,18 @@ def tables_markdown(results: dict) -> str:
               "| --- | --- | --- | --- | --- | --- |" + (" --- |" if seeds else "")]
     for task, row in results["tasks"].items():
         for label in MODELS:
-            paper = PAPER.get(task, {}).get("energy_mse", {}).get(label)
+            paper = PAPER.get(row.get("task", task), {}).get("energy_mse", {}).get(label)
             ours, fixed = row[label].get("energy_mse_paper"), row[label].get("energy_mse_corrected")
             extra = f" {_across_seeds(row, label, 'energy_mse_paper')} |" if seeds else ""
             lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper)} | {_ratio(ours, paper)} | "
                          f"{_fmt(fixed) if fixed else 'same as paper'} |{extra}")
+    notes = [f"- **{task}**: {row['note']}" for task, row in results["tasks"].items() if row.get("note")]
+    if notes:
+        lines += ["", "Rows beyond the paper's setting (compared with the paper's row of the same task):"] + notes
     lines += ["", "Protocols:"]
     for task, row in results["tasks"].items():
+        if row.get("note"):
+            continue
         for text in row.get("protocols", {}).values():
             lines.append(f"- {task}, {text}")
     skipped = results.get("skipped", {})
@@ -407,12 +410,33 @@ def tables_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def headline_markdown(results: dict) -> str:
+    """The README's short table: test loss and energy MSE (paper's protocol) at the first seed, beside the paper's."""
+    meta = results["meta"]
+    lines = [f"Seed {meta['seed']}, full settings, `{meta['command']}` (commit {meta['commit']}, {meta['date']}); "
+             f"{LEGEND} All numbers, seeds and protocols: [docs/results.md](docs/results.md).", "",
+             "| task | model | test loss, paper | test loss, ours | energy MSE, paper | energy MSE, ours |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for name, row in results["tasks"].items():
+        paper = PAPER.get(row.get("task", name), {})
+        for label in MODELS:
+            cells = []
+            for key, ours_key in (("test_loss", "test_loss"), ("energy_mse", "energy_mse_paper")):
+                ref, ours = paper.get(key, {}).get(label), row[label].get(ours_key)
+                verdict = compare(ours, ref)
+                cells += ["n/a" if ref is None else f"{ref[0]:.3g}",
+                          "n/a" if ours is None else f"{ours[0]:.3g}" + (f" {MARKS[verdict]}" if verdict else "")]
+            lines.append(f"| {name} | {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 # ----------------------------------------------------------------------------------------------
 # the command
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="reproduce.py", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task present)")
     p.add_argument("--quick", action="store_true",
                    help=f"smoke run: {QUICK_STEPS} training steps per model (or --steps), output in results-quick/")
@@ -427,22 +451,25 @@ def _parser() -> argparse.ArgumentParser:
                    help="training processes: 1 trains here, one run after another; N > 1 runs N worker "
                         "processes with cores // N threads each, longest runs first; evaluation stays here")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
-    p.add_argument("--update-readme", action="store_true", help="paste tables.md into README.md's results section")
+    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+                   help="write docs/results.md from tables.md, the README's headline table, and the curated "
+                        "figures in docs/figures/ (full settings only)")
     return p
 
 
-def _check(args) -> None:
+def _check(parser: argparse.ArgumentParser, args) -> None:
+    """Bad values exit with one ``error:`` line (code 2) that names the value and the fix."""
     if args.jobs < 1:
-        raise SystemExit(f"--jobs must be at least 1 (1 = train in this process), got {args.jobs}")
+        parser.error(f"--jobs {args.jobs}: must be at least 1 (1 = train in this process)")
     if args.seeds < 1:
-        raise SystemExit(f"--seeds must be at least 1, got {args.seeds}")
+        parser.error(f"--seeds {args.seeds}: must be at least 1")
     if args.steps is not None and args.steps < 0:
-        raise SystemExit(f"--steps must be a non-negative number of training steps, got {args.steps}")
-    if args.update_readme and (args.quick or args.steps is not None):
-        raise SystemExit("--update-readme pastes full-settings results into README.md; drop --quick / --steps")
+        parser.error(f"--steps {args.steps}: must be a non-negative number of training steps")
+    if args.update_docs and (args.quick or args.steps is not None):
+        parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick / --steps")
     for task in args.tasks or []:
         if task not in hnn.available_tasks():
-            raise SystemExit(f"unknown or missing task {task!r}; available: {hnn.available_tasks()}")
+            parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.available_tasks())}")
 
 
 def _metrics(directory: Path) -> dict:
@@ -452,110 +479,172 @@ def _metrics(directory: Path) -> dict:
         return {}
 
 
-def main(argv=None) -> dict:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    args = _parser().parse_args(argv)
-    _check(args)
-    root = hnn.tasks.repo_root()
-    out = args.out or root / ("results-quick" if args.quick else "results")
-    tasks = args.tasks or hnn.available_tasks()
-    steps = args.steps if args.steps is not None else (QUICK_STEPS if args.quick else None)
-    if args.quick:
-        mode = f"QUICK smoke run, {steps} steps per model: not the paper's settings"
-    else:
-        mode = "full settings" if steps is None else f"{steps} steps per model: not the paper's settings"
-    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}; output {out}", flush=True)
-    seeds = list(range(args.seed, args.seed + args.seeds))
-    results = {"meta": {"command": " ".join(["python analysis/reproduce.py"] + argv),
-                        "date": datetime.date.today().isoformat(), "commit": _commit(), "seed": args.seed,
-                        "seeds": seeds, "mode": mode, "quick": args.quick, "steps": steps, "jobs": args.jobs,
-                        "torch": torch.__version__, "numpy": np.__version__, "scipy": scipy.__version__,
-                        "python": platform.python_version(), "threads": torch.get_num_threads(), "cores": _cores(),
-                        "available": hnn.available_tasks()},
-               "tasks": {}, "seconds": {"tasks": {}, "runs": {}}}
-    start = time.perf_counter()
+def table_rows(tasks: list[str], quick: bool) -> list[dict]:
+    """The rows of the tables: each task in the paper's setting, then its variants (``task_hooks``).
 
-    # 1. which runs exist already (same args), which must be trained
-    runs, jobs = {}, []
+    A row is ``{"row": name, "task": task, "extra_argv": train.py flags, "note": why or None}``.
+    """
+    rows = []
     for task in tasks:
         hooks = task_hooks.hooks_for(task)
-        extra = hooks.train_argv + (hooks.quick_argv if args.quick else ())
+        extra = list(hooks.train_argv) + (list(hooks.quick_argv) if quick else [])
+        rows.append({"row": task, "task": task, "extra_argv": extra, "note": None})
+        for suffix, (argv, why) in hooks.variants.items():
+            name = f"{task}-{suffix}"
+            rows.append({"row": name, "task": task, "extra_argv": extra + list(argv) + ["--name", name], "note": why})
+    return rows
+
+
+def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None) -> tuple[dict, list[dict]]:
+    """``(runs saved already with the same args {key: folder}, jobs to train)``."""
+    runs, jobs = {}, []
+    for spec in rows:
         for seed in seeds:
             for label in MODELS:
-                job = {"task": task, "label": label, "seed": seed, "runs_dir": out / "runs", "steps": steps,
-                       "extra_argv": list(extra)}
-                argv_run = _train_argv(task, label, out / "runs", seed, steps, extra)
-                found = _find(task, argv_run)
+                job = {**spec, "label": label, "seed": seed, "runs_dir": runs_dir, "steps": steps}
+                argv = _train_argv(spec["task"], label, runs_dir, seed, steps, spec["extra_argv"])
+                found = _find(spec["task"], argv)
                 if found:
                     runs[_run_key(job)] = found
-                    print(f"  {task:7s} {label:8s} seed {seed} reused {found}", flush=True)
+                    print(f"  {spec['row']:11s} {label:8s} seed {seed} reused {found}", flush=True)
                 else:
-                    jobs.append(dict(job, total=_total_steps(task, argv_run)))
+                    jobs.append(dict(job, total=_total_steps(spec["task"], argv)))
+    return runs, jobs
 
-    # 2. train what is missing
-    tic = time.perf_counter()
+
+def train_jobs(jobs: list[dict], n_jobs: int, log_dir: Path) -> tuple[dict, dict]:
+    """Train ``jobs`` (here, or in ``n_jobs`` workers); ``({key: folder or exception}, seconds)``."""
+    tic, runs = time.perf_counter(), {}
     if jobs:
         progress = _Progress(sum(job["total"] for job in jobs))
         try:
-            if args.jobs == 1:
-                runs.update(_train_in_process(jobs, progress))
+            if n_jobs == 1:
+                runs = _train_in_process(jobs, progress)
             else:
-                runs.update(_train_in_workers(jobs, args.jobs, progress, out / "logs"))
+                runs = _train_in_workers(jobs, n_jobs, progress, log_dir)
         finally:
             progress.close()
-    results["seconds"].update(training=time.perf_counter() - tic, jobs=args.jobs,
-                              threads_per_job=max(1, _cores() // args.jobs) if args.jobs > 1 else torch.get_num_threads())
-    trained = {_run_key(job): job for job in jobs}
-    for key, job in trained.items():
+    seconds = {"training": time.perf_counter() - tic, "jobs": n_jobs,
+               "threads_per_job": max(1, _cores() // n_jobs) if n_jobs > 1 else torch.get_num_threads(), "runs": {}}
+    for job in jobs:
+        key = _run_key(job)
         if isinstance(runs.get(key), Path):
             m = _metrics(runs[key])
-            results["seconds"]["runs"][key] = {"data": m.get("data_seconds"), "train": m.get("train_seconds"),
-                                               "wall": job.get("wall")}
+            seconds["runs"][key] = {"data": m.get("data_seconds"), "train": m.get("train_seconds"),
+                                    "wall": job.get("wall")}
+    return runs, seconds
 
-    # 3. evaluate and draw, task by task, here
-    tic = time.perf_counter()
-    for task in tasks:
-        keys = {seed: {label: f"{task}/{label}/seed{seed}" for label in MODELS} for seed in seeds}
-        failed = [runs[k] for by_label in keys.values() for k in by_label.values() if isinstance(runs[k], Exception)]
-        per_seed = {}
-        try:
-            if failed:
-                raise failed[0]
-            for seed in seeds:
-                figs = None if args.no_figures or seed != args.seed else out / "figures"
-                per_seed[str(seed)] = evaluate_task(task, {label: runs[k] for label, k in keys[seed].items()}, figs)
-        except (FileNotFoundError, ImportError) as err:   # its data (real) or packages (pixels) are missing
-            print(f"  {task:7s} SKIPPED: {err}", flush=True)
-            results.setdefault("skipped", {})[task] = str(err)
+
+def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
+    """One row's seconds: dataset, training per model (summed over seeds), evaluation, figures."""
+    stage = {"data": None, "train": {}, "evaluate": 0.0, "figures": 0.0}
+    for seed, by_label in keys.items():
+        for label, key in by_label.items():
+            timing = run_seconds.get(key)
+            if timing:
+                stage["data"] = (stage["data"] or 0.0) + (timing["data"] or 0.0)
+                stage["train"][label] = stage["train"].get(label, 0.0) + (timing["train"] or 0.0)
+        for part in ("evaluate", "figures"):
+            stage[part] += per_seed[str(seed)]["seconds"][part]
+    return stage
+
+
+def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict, fig_dir: Path | None) -> None:
+    """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
+    each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
+    for spec in rows:
+        name, task = spec["row"], spec["task"]
+        if task in results.get("skipped", {}):
             continue
-        row = dict(per_seed[str(args.seed)])
+        keys = {seed: {label: f"{name}/{label}/seed{seed}" for label in MODELS} for seed in seeds}
+        failed = [runs[k] for by_label in keys.values() for k in by_label.values() if isinstance(runs[k], Exception)]
+        if failed:
+            results.setdefault("skipped", {})[task] = str(failed[0])
+            print(f"  {task:11s} SKIPPED (the reason is above)", flush=True)
+            continue
+        per_seed = {}
+        for seed in seeds:
+            figs = fig_dir if fig_dir is not None and seed == seeds[0] and spec["note"] is None else None
+            per_seed[str(seed)] = evaluate_task(task, {label: runs[k] for label, k in keys[seed].items()}, figs)
+        row = dict(per_seed[str(seeds[0])], task=task, note=spec["note"])
         if len(per_seed) > 1:
             row["per_seed"] = per_seed
-        stage = {"data": None, "train": {}, "evaluate": 0.0, "figures": 0.0}
-        for seed, by_label in keys.items():
-            for label, key in by_label.items():
-                timing = results["seconds"]["runs"].get(key)
-                if timing:
-                    stage["data"] = (stage["data"] or 0.0) + (timing["data"] or 0.0)
-                    stage["train"][label] = stage["train"].get(label, 0.0) + (timing["train"] or 0.0)
-            for part in ("evaluate", "figures"):
-                stage[part] += per_seed[str(seed)]["seconds"][part]
+        stage = _stage_seconds(keys, per_seed, results["seconds"]["runs"])
         row.pop("seconds", None)
-        results["tasks"][task] = row
-        results["seconds"]["tasks"][task] = stage
-        print(f"  {task:7s} evaluated ({stage['evaluate']:.1f} s)"
-              + (f", figures ({stage['figures']:.1f} s)" if not args.no_figures else ""), flush=True)
-    results["seconds"]["evaluation"] = time.perf_counter() - tic
-    results["seconds"]["total"] = time.perf_counter() - start
+        results["tasks"][name] = row
+        results["seconds"]["tasks"][name] = stage
+        print(f"  {name:11s} evaluated ({stage['evaluate']:.1f} s)"
+              + (f", figures ({stage['figures']:.1f} s)" if fig_dir is not None and spec["note"] is None else ""),
+              flush=True)
+
+
+def portable_command(argv: list[str]) -> str:
+    """The command as a reader can rerun it: paths inside the checkout made relative to it, and
+    other absolute paths (one machine's folders) shown as ``DIR``."""
+    root, words = hnn.tasks.repo_root().resolve(), []
+    for word in argv:
+        path = Path(word)
+        if path.is_absolute():
+            word = os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
+        words.append(word)
+    return " ".join(["python analysis/reproduce.py"] + words)
+
+
+def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:
+    return {"command": portable_command(argv), "date": datetime.date.today().isoformat(),
+            "commit": _commit(), "seed": args.seed, "seeds": seeds, "mode": mode, "quick": args.quick,
+            "steps": steps, "jobs": args.jobs, "torch": torch.__version__, "numpy": np.__version__,
+            "scipy": scipy.__version__, "python": platform.python_version(), "threads": torch.get_num_threads(),
+            "cores": _cores(), "available": hnn.available_tasks()}
+
+
+def _mode(args) -> tuple[str, int | None]:
+    steps = args.steps if args.steps is not None else (QUICK_STEPS if args.quick else None)
+    if args.quick:
+        return f"QUICK smoke run, {steps} steps per model: not the paper's settings", steps
+    return ("full settings" if steps is None else f"{steps} steps per model: not the paper's settings"), steps
+
+
+def write_outputs(results: dict, out: Path, update_docs: bool, figures_drawn: bool) -> None:
+    """``results.json`` and ``tables.md`` in ``out``; with ``update_docs`` also the docs pages, the
+    README's headline table and the curated figures."""
     write_json(out / "results.json", results)
     tables = tables_markdown(results)
     atomic_write(out / "tables.md", lambda tmp: Path(tmp).write_text(tables))
     print("\n" + tables)
-    print(f"{'QUICK smoke run: ' if args.quick else ''}total {results['seconds']['total']:.1f} s; "
-          f"wrote {out / 'results.json'}, {out / 'tables.md'}" + ("" if args.no_figures else f", {out / 'figures'}/"))
-    if args.update_readme:
-        readme.update_section("results", tables)
-        print("updated README.md")
+    print(f"{'QUICK smoke run: ' if results['meta']['quick'] else ''}total {results['seconds']['total']:.1f} s; "
+          f"wrote {out / 'results.json'}, {out / 'tables.md'}" + (f", {out / 'figures'}/" if figures_drawn else ""))
+    if update_docs:
+        for path in readme.update_results(tables, headline_markdown(results), out / "figures" if figures_drawn else None):
+            print(f"updated {path}")
+
+
+def main(argv=None) -> dict:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    _check(parser, args)
+    out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
+    tasks = args.tasks or hnn.available_tasks()
+    mode, steps = _mode(args)
+    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}; output {out}", flush=True)
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
+    start = time.perf_counter()
+    rows = table_rows(tasks, args.quick)
+    runs, jobs = plan(rows, seeds, out / "runs", steps)
+    trained, seconds = train_jobs(jobs, args.jobs, out / "logs")
+    runs.update(trained)
+    results["seconds"].update(seconds)
+    tic = time.perf_counter()
+    figures.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
+    try:
+        evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures")
+    finally:
+        figures.set_stamp("")
+    results["seconds"]["evaluation"] = time.perf_counter() - tic
+    results["seconds"]["total"] = time.perf_counter() - start
+    write_outputs(results, out, args.update_docs, not args.no_figures)
     return results
 
 

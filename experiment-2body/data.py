@@ -24,7 +24,7 @@ NUM_BODIES = 2
 ORBIT_NOISE = 5e-2          # std of the one velocity scale factor per orbit
 MIN_RADIUS, MAX_RADIUS = 0.5, 1.5   # range of each coordinate of body 0's position
 DEFAULTS = {"num_trials": 1000, "num_points": 50, "t_span": [0.0, 20.0], "test_split": 0.2,
-            "rtol": 1e-9, "atol": 1e-6, "min_separation": nbody.MIN_SEPARATION,
+            "rtol": 1e-9, "atol": 1e-6, "min_separation": nbody.TASK_MIN_SEPARATION,
             "orbit_noise": ORBIT_NOISE, "min_radius": MIN_RADIUS, "max_radius": MAX_RADIUS}
 
 

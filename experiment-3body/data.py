@@ -24,7 +24,7 @@ NUM_BODIES = 3
 NU = 2e-1                           # amplitude of the per-component velocity noise
 MIN_RADIUS, MAX_RADIUS = 0.9, 1.2   # distance of each body from the centre
 DEFAULTS = {"num_trials": 5000, "num_points": 20, "t_span": [0.0, 5.0], "test_split": 0.2,
-            "rtol": 1e-9, "atol": 1e-6, "min_separation": nbody.MIN_SEPARATION,
+            "rtol": 1e-9, "atol": 1e-6, "min_separation": nbody.TASK_MIN_SEPARATION,
             "nu": NU, "min_radius": MIN_RADIUS, "max_radius": MAX_RADIUS}
 
 

@@ -1,23 +1,24 @@
-"""The README's "bring your own system" example, run as written, then checked physically."""
+"""The "bring your own system" example of docs/python.md, run as written, then checked physically."""
 import re
 
 import numpy as np
 import torch
 
 import hnn
-from conftest import REPO
+
+PAGE = hnn.tasks.repo_root() / "docs" / "python.md"
 
 
 def _readme_example() -> str:
-    text = (REPO / "README.md").read_text()
+    text = PAGE.read_text()
     match = re.search(r"<!-- example: custom-system -->\s*```python\n(.*?)```", text, re.S)
-    assert match, "README.md lost its custom-system example"
+    assert match, f"{PAGE} lost its custom-system example"
     return match.group(1)
 
 
 def test_readme_custom_system_example_learns_and_conserves_the_true_energy():
     scope = {}
-    exec(compile(_readme_example(), "README.md:custom-system", "exec"), scope)
+    exec(compile(_readme_example(), "docs/python.md:custom-system", "exec"), scope)
     H, field, x, dxdt, model, x0, t_eval, traj = (scope[k] for k in
                                                   ("H", "field", "x", "dxdt", "model", "x0", "t_eval", "traj"))
     assert traj.shape == (2, len(t_eval), 2)

@@ -365,7 +365,7 @@ def test_default_dataset_sizes(two, three):
 @pytest.mark.parametrize("task, rows, test_rows", [("2body", 50000, 10000), ("3body", 100000, 20000)])
 def test_full_datasets(task, rows, test_rows, tmp_path):
     data = hnn.load_task(task)
-    d = data.get_dataset(seed=0, save_dir=tmp_path)
+    d = data.get_dataset(seed=0, save_dir=tmp_path, min_separation=nbody.MIN_SEPARATION)
     assert len(d["x"]) + len(d["test_x"]) == rows and len(d["test_x"]) == test_rows
     assert d["resampled"] == d["resampled_close_encounter"] + d["resampled_failed"]
     assert d["resampled"] < 0.05 * rows / data.DEFAULTS["num_points"]         # 0 (2-body), ~3% (3-body)
@@ -382,4 +382,7 @@ def test_train_flags_have_the_original_defaults():
     assert (three.input_dim, three.batch_size, three.total_steps, three.weight_decay, three.name) == (
         12, 600, 10000, 1e-4, "3body")
     assert two.input_noise == 0.0 and not hasattr(three, "input_noise")
+    # the original kept close encounters; the cleaned dataset is opt-in
+    assert two.min_separation == three.min_separation == 0.0
+    assert hnn.load_task("2body").DEFAULTS["min_separation"] == hnn.load_task("3body").DEFAULTS["min_separation"] == 0.0
     assert hnn.load_task("2body", "train").parse_args(["--input_noise", "0.05"]).input_noise == 0.05

@@ -6,6 +6,8 @@ from pathlib import Path
 import pytest
 import torch
 
+import hnn
+
 ANALYSIS = Path(__file__).resolve().parent.parent / "analysis"
 sys.path.insert(0, str(ANALYSIS))
 
@@ -145,14 +147,78 @@ def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monke
     text = readme.timing_text(results)
     assert text.startswith("`python analysis/reproduce.py --quick` on 2026-01-01")
     assert "| spring | 0.5 | 1.0 | 2.0 | 3.0 | 4.0 |" in text and "total 10.5 s" in text
-    (tmp_path / "README.md").write_text("a\n<!-- full-run:begin -->\nold\n<!-- full-run:end -->\nb\n")
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "speed.md").write_text("a\n<!-- full-run:begin -->\nold\n<!-- full-run:end -->\nb\n")
     (tmp_path / "experiment-x").mkdir()
     monkeypatch.setenv("HNN_REPO", str(tmp_path))
     saved = tmp_path / "results.json"
     saved.write_text(json.dumps(results))
     readme.main(["timing", str(saved)])
-    content = (tmp_path / "README.md").read_text()
+    content = (tmp_path / "docs" / "speed.md").read_text()
     assert "old" not in content and "| spring | 0.5 |" in content and content.endswith("<!-- full-run:end -->\nb\n")
     results["seconds"]["tasks"] = {}
     with pytest.raises(ValueError, match="no stage times"):
         readme.timing_text(results)
+
+
+def test_variant_rows_train_under_their_own_name_and_keep_the_papers_numbers(tmp_path, monkeypatch, capsys):
+    hooks = task_hooks.HOOKS["spring"]
+    variant = {"wide": (("--hidden_dim", "16"), "a narrower net, for the test")}
+    monkeypatch.setitem(task_hooks.HOOKS, "spring", task_hooks.TaskHooks(figures=hooks.figures, cost=hooks.cost,
+                                                                         variants=variant))
+    results = reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(tmp_path)])
+    assert list(results["tasks"]) == ["spring", "spring-wide"]
+    row = results["tasks"]["spring-wide"]
+    assert row["task"] == "spring" and row["note"] == "a narrower net, for the test"
+    assert (tmp_path / "runs" / "spring-wide-hnn-seed0").is_dir()
+    assert json.loads((tmp_path / "runs" / "spring-wide-hnn-seed0" / "args.json").read_text())["hidden_dim"] == 16
+    table = (tmp_path / "tables.md").read_text()
+    assert "| spring-wide | hnn | 3.5928e-02 ± 1.83e-03 |" in table          # the paper's spring number beside it
+    assert "- **spring-wide**: a narrower net, for the test" in table
+
+
+def test_a_task_that_cannot_run_is_reported_once(tmp_path, monkeypatch, capsys):
+    real = hnn.load_task("real")
+    monkeypatch.setenv("HNN_DATA_DIR", str(tmp_path / "nowhere"))
+    results = reproduce.main(["--quick", "--steps", "2", "--seeds", "2", "--tasks", "real", "--no-figures",
+                              "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert out.count("were not found") == 1 + 1          # once when it failed, once in the printed tables
+    assert "real" in results["skipped"] and real.DATA_FILE in results["skipped"]["real"]
+    assert not results["tasks"]
+
+
+def test_quick_figures_say_quick_in_their_titles(tmp_path):
+    import figures
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots()
+    fig.suptitle("spring: fields")
+    figures.set_stamp("QUICK smoke run")
+    try:
+        figures._save(fig, tmp_path / "a.png")
+    finally:
+        figures.set_stamp("")
+    assert fig._suptitle.get_text() == "QUICK smoke run\nspring: fields" and (tmp_path / "a.png").stat().st_size > 0
+    fig, ax = plt.subplots()
+    figures._save(fig, tmp_path / "b.png")
+    assert fig._suptitle is None                          # no stamp outside quick runs
+
+
+def test_the_recorded_command_names_no_folder_of_this_machine(tmp_path):
+    root = hnn.tasks.repo_root()
+    command = reproduce.portable_command(["--out", str(root / "results-x"), "--jobs", "2", "--out", str(tmp_path)])
+    assert command == "python analysis/reproduce.py --out results-x --jobs 2 --out DIR"
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--jobs", "0"], "--jobs 0: must be at least 1"),
+    (["--tasks", "nosuch"], "--tasks nosuch: no such task here"),
+    (["--quick", "--update-docs"], "drop --quick"),
+])
+def test_bad_values_exit_with_one_error_line(argv, match, capsys):
+    with pytest.raises(SystemExit) as info:
+        reproduce.main(argv)
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and match in err
+    assert [line for line in err.splitlines() if "error:" in line] == [err.splitlines()[-1]]
+    assert "Traceback" not in err
