@@ -75,6 +75,7 @@ def test_runs_are_reused_only_for_identical_args(tmp_path):
 
 def test_unreadable_checkpoint_says_what_to_do(tmp_path):
     (tmp_path / "model.tar").write_bytes(b"not a checkpoint")
+    (tmp_path / "complete.json").write_text('{"files": ["model.tar"]}')
     with pytest.raises(RuntimeError, match="delete the run folder and retrain"):
         hnn.load_run(tmp_path)
     with pytest.raises(FileNotFoundError, match="train it first"):
