@@ -13,6 +13,7 @@ HNN's encoder; here every model uses its own.
 """
 from __future__ import annotations
 
+import argparse
 import functools
 import math
 from dataclasses import asdict, dataclass
@@ -24,7 +25,7 @@ import torch
 from .evaluation import energy_bump, float64_copy
 from .integrate import rollout
 from .metrics import energy_mse, mean_and_se
-from .runs import atomic_write, finish_run, model_from_args
+from .runs import atomic_write, finish_run, model_from_args, run_dir
 from .training import train
 
 
@@ -222,6 +223,17 @@ def write_gif(panels: dict, path, side: int = 28, scale: int = 4, ms_per_frame: 
     return path
 
 
+def _save_rollout(path, truth: np.ndarray, decoded: np.ndarray) -> None:
+    """Both ``(T, 2 side^2)`` frame arrays, as float32, into an .npz archive at ``path``."""
+    with open(path, "wb") as f:     # given a name, np.savez would append ".npz" to atomic_write's temp name
+        np.savez_compressed(f, truth=truth.astype(np.float32), decoded=decoded.astype(np.float32))
+
+
+def _sibling_run_name(args: dict) -> str:
+    """The folder name of the run whose args are ``args`` with ``baseline`` flipped."""
+    return run_dir(argparse.Namespace(**{**args, "baseline": not args["baseline"]})).name
+
+
 def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500, verbose: bool = True) -> dict:
     """After training: both energy protocols into the run's ``metrics.json``, the rollout's decoded
     frames into ``rollout.npz``, and GIFs (truth vs this model; truth vs baseline vs HNN once both
@@ -241,10 +253,9 @@ def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500,
     write_json(directory / "metrics.json", metrics)
     truth = paper_result["truth"]["pixels"]
     decoded = paper_result[label]["decoded"]
-    atomic_write(directory / "rollout.npz", lambda tmp: np.savez_compressed(
-        open(tmp, "wb"), truth=truth.astype(np.float32), decoded=decoded.astype(np.float32)))
+    atomic_write(directory / "rollout.npz", lambda tmp: _save_rollout(tmp, truth, decoded))
     write_gif({"truth": truth, label: decoded}, directory / f"truth-vs-{label}.gif")
-    other = directory.parent / directory.name.replace(label, "hnn" if label == "baseline" else "baseline", 1)
+    other = directory.parent / _sibling_run_name(args)
     if (other / "rollout.npz").exists():
         with np.load(other / "rollout.npz") as f:
             pair = {label: decoded, "other": f["decoded"]}

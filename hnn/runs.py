@@ -1,13 +1,17 @@
 """A run: train one model from parsed flags, and save / load it.
 
 A run folder ``<save_dir>/<name>-<label>-seed<seed>/`` holds ``model.tar`` (state dict and
-args; loads with ``weights_only=True``), ``args.json`` and ``metrics.json``, each written
-atomically (a crash never leaves a half-written file behind).
+args; loads with ``weights_only=True``), ``args.json``, ``metrics.json`` and, written last,
+``complete.json``. The folder is written as a whole: filled under a hidden temporary name
+beside it, then renamed into place, so a crash leaves the complete old run, the complete new
+one, or no folder, never a checkpoint of one run beside the args of another. Later files
+(a pixel run's ``rollout.npz`` and GIFs) are added to the finished folder one by one.
 """
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -54,6 +58,55 @@ def run_dir(args) -> Path:
     return Path(args.save_dir) / f"{args.name}-{run_label(args)}-seed{args.seed}"
 
 
+# written last into a run folder: one without it is an interrupted save (or predates this mark)
+COMPLETE = "complete.json"
+
+
+def _fill_then_move_in(path: Path, fill) -> None:
+    """Call ``fill(tmp)`` on a new hidden sibling folder ``.<name>.tmp-*``, then rename it to ``path``.
+
+    A folder already at ``path`` is renamed aside to ``.<name>.old-*`` first and deleted after,
+    so a crash at any moment leaves at ``path`` the old folder, the new one or nothing.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{path.name}.tmp-"
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=prefix))
+    aside = path.parent / f".{path.name}.old-{tmp.name[len(prefix):]}"   # unique while tmp exists
+    try:
+        os.chmod(tmp, 0o777 & ~_UMASK)     # mkdtemp makes 0700; give the folder the usual permissions
+        fill(tmp)
+        _move_in(tmp, path, aside)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _move_in(tmp: Path, path: Path, aside: Path) -> None:
+    """Rename folder ``tmp`` to ``path``, replacing (via ``aside``) any folder there."""
+    try:
+        os.rename(path, aside)
+        replaced = True
+    except FileNotFoundError:
+        replaced = False
+    try:
+        os.rename(tmp, path)
+    except BaseException:
+        if replaced:
+            os.rename(aside, path)    # the old run back where it was
+        raise
+    if replaced:
+        shutil.rmtree(aside, ignore_errors=True)
+
+
+def _is_complete(directory: Path) -> bool:
+    """Whether ``directory`` holds a completion mark and every file it lists."""
+    try:
+        files = json.loads((directory / COMPLETE).read_text())["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return all((directory / name).is_file() for name in files)
+
+
 # flags that change what is printed or how fast, never what is trained
 _DISPLAY_ONLY = ("verbose", "render_workers", "no_eval")
 
@@ -67,7 +120,7 @@ def find_run(args) -> Path | None:
         return None
     wanted = {k: v for k, v in vars(args).items() if k not in _DISPLAY_ONLY}
     saved = {k: v for k, v in saved.items() if k not in _DISPLAY_ONLY}
-    if saved != wanted or not (directory / "model.tar").exists() or not (directory / "metrics.json").exists():
+    if saved != wanted or not _is_complete(directory):
         return None
     return directory
 
@@ -129,15 +182,21 @@ def finish_run(args, model, stats: dict, train_loss, test_loss, data_seconds: fl
 
 
 def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Path:
-    """Write ``model.tar``, ``args.json`` and ``metrics.json`` into ``directory`` atomically."""
+    """Write ``model.tar``, ``args.json``, ``metrics.json`` and last ``complete.json`` as a new
+    folder ``directory``, replacing any folder there only once all are written."""
     directory = Path(directory)
     args = {k: v for k, v in args.items()}
     # the float reduction order, hence the last bits of every number, depends on the thread count
     metrics = {**metrics, "torch_threads": torch.get_num_threads()}
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
-    atomic_write(directory / "model.tar", lambda tmp: torch.save({"state_dict": state, "args": args}, tmp))
-    write_json(directory / "args.json", args)
-    write_json(directory / "metrics.json", metrics)
+
+    def fill(tmp: Path) -> None:
+        torch.save({"state_dict": state, "args": args}, tmp / "model.tar")
+        write_json(tmp / "args.json", args)
+        write_json(tmp / "metrics.json", metrics)
+        write_json(tmp / COMPLETE, {"files": ["model.tar", "args.json", "metrics.json"]})
+
+    _fill_then_move_in(directory, fill)
     return directory
 
 
@@ -147,6 +206,9 @@ def load_run(directory) -> tuple[torch.nn.Module, dict, dict]:
     ckpt = directory / "model.tar"
     if not ckpt.exists():
         raise FileNotFoundError(f"no checkpoint at {ckpt}; train it first (see the task's train.py)")
+    if not _is_complete(directory):
+        raise RuntimeError(f"run folder {directory} lacks {COMPLETE} or a file it lists: its save was interrupted "
+                           "(or it predates whole-folder saves); delete the run folder and retrain")
     try:
         blob = torch.load(ckpt, map_location="cpu", weights_only=True)
     except Exception as err:

@@ -45,6 +45,12 @@ def report_progress(callback: Callable[[int, int], None]) -> Iterator[None]:
         _PROGRESS_CALLBACKS.remove(callback)
 
 
+def _flushes_denormals() -> bool:
+    """Whether this thread's float arithmetic flushes denormals to zero now (torch has no getter)."""
+    tiny = torch.full((1,), torch.finfo(torch.float32).tiny)    # the smallest normal float32
+    return bool((tiny / 2 == 0).item())                          # half of it is denormal, or 0 when flushed
+
+
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
@@ -111,7 +117,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     # Weights that only weight decay moves (e.g. those of pixels that are always dark) shrink
     # into denormal floats, and CPU arithmetic on denormals is many times slower: the pixel task
     # slowed from 28 to over 100 ms a step by step 3000. Flush them to zero while training.
-    flushed = torch.set_flush_denormal(True)
+    was_flushing = _flushes_denormals()
+    torch.set_flush_denormal(True)
     try:
         start = time.perf_counter()
         for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
@@ -142,8 +149,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
                 print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
     finally:
-        if flushed:
-            torch.set_flush_denormal(False)    # torch's default again
+        torch.set_flush_denormal(was_flushing)    # the caller's setting, whatever it was
     model.eval()
     stats["seconds"] = time.perf_counter() - start
     return stats

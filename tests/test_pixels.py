@@ -199,6 +199,23 @@ def test_train_script_end_to_end(tmp_path, system):
     assert hnn.find_run(trainer.parse_args(argv + ["--verbose", "--render_workers", "2"])) == hnn_run
 
 
+def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, system):
+    # the baseline first: the HNN run, evaluated second, must find the baseline's rollout by its args
+    trainer = hnn.load_task("pixels", "train")
+    argv = ["--save_dir", str(tmp_path), "--name", "myhnn", "--trials", "5", "--timesteps", "14",
+            "--total_steps", "5", "--batch_size", "16", "--render_workers", "1"]
+    base_run = trainer.main(argv + ["--baseline"])
+    assert not (tmp_path / "myhnn-compare-seed0.gif").exists()
+    hnn_run = trainer.main(argv)
+    assert (base_run.name, hnn_run.name) == ("myhnn-baseline-seed0", "myhnn-hnn-seed0")
+    assert (tmp_path / "myhnn-compare-seed0.gif").stat().st_size > 1000
+    with np.load(hnn_run / "rollout.npz") as f:
+        assert f["truth"].dtype == np.float32 and f["truth"].shape == f["decoded"].shape
+    args = {"name": "myhnn", "save_dir": "x", "seed": 2, "baseline": False, "use_rk4": True}
+    assert hnn.pixels._sibling_run_name(args) == "myhnn-baseline-rk4-seed2"
+    assert hnn.pixels._sibling_run_name({**args, "baseline": True}) == "myhnn-hnn-rk4-seed2"
+
+
 def test_add_energy_raises_the_learned_energy():
     torch.manual_seed(0)
     model = PixelHNN(8, 2, 16).double()

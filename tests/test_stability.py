@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 import torch
+from scipy.integrate import solve_ivp
 
 import hnn
 
@@ -17,11 +18,49 @@ def test_untrained_hnn_long_rollout_stays_finite_and_conserves_its_own_hamiltoni
     assert (H - H[:, :1]).abs().max() < 1e-6 * H.abs().max()
 
 
-def test_untrained_baseline_long_rollout_drifts_but_is_finite():
+def _numpy_baseline_field(model):
+    """dx/dt of a baseline's tanh MLP, W3 tanh(W2 tanh(W1 x + b1) + b2), from its weights in numpy:
+    ``(t, x (dim,)) -> (dim,)`` for scipy's ``solve_ivp``."""
+    W1, b1, W2, b2, W3 = (p.detach().numpy() for p in model.differentiable_model.parameters())
+    return lambda _, x: W3 @ np.tanh(W2 @ np.tanh(W1 @ x + b1) + b2)
+
+
+def test_untrained_baseline_long_rollout_drifts_off_where_an_independent_solver_puts_it():
+    # a baseline field is no symplectic gradient: nothing keeps its states on a closed orbit, and
+    # where its tanh layers saturate the field is nearly constant, so states run off at a steady pace
     torch.manual_seed(1)
     base = hnn.build_model(2, 64, baseline=True).double()
-    traj = hnn.rollout(base.time_derivative, torch.ones(3, 2, dtype=torch.float64), np.linspace(0, 1000, 101))
-    assert torch.isfinite(traj).all() and traj.shape == (3, 101, 2)
+    x0 = np.array([[1.0, 1.0], [-2.0, 0.5], [0.3, -3.0]])
+    t = np.linspace(0, 1000, 101)
+    field = _numpy_baseline_field(base)
+    truth = np.stack([solve_ivp(field, (0, 1000), row, method="DOP853", t_eval=t, rtol=1e-12, atol=1e-12).y.T
+                      for row in x0])
+    tight = hnn.rollout(base.time_derivative, torch.tensor(x0), t, rtol=1e-10, atol=1e-10).numpy()
+    np.testing.assert_allclose(tight, truth, rtol=0, atol=1e-6)
+    loose = hnn.rollout(base.time_derivative, torch.tensor(x0), t).numpy()        # the default rtol 1e-3
+    assert np.isfinite(loose).all() and np.abs(loose - truth).max() < 1e-3 * np.abs(truth).max()
+    # the drift: hundreds of units away by t = 1000, as far in the last quarter as in the one before
+    assert (np.linalg.norm(truth[:, -1] - x0, axis=1) > 200).all()
+    last, before = (np.linalg.norm(truth[:, b] - truth[:, a], axis=1) for a, b in ((75, 100), (50, 75)))
+    np.testing.assert_allclose(last, before, rtol=0.01)
+
+
+@pytest.mark.parametrize("dt", [0.05, 0.1, 0.2])
+def test_rk4_energy_drifts_secularly_by_its_amplification_factor(spring, dt):
+    # the spring in z = q + ip is dz/dt = -2iz, and H = |z|^2. One RK4 step multiplies z by
+    # R(-2i dt), R(w) = 1 + w + w^2/2 + w^3/6 + w^4/24, so every step scales H by exactly
+    # |R(iy)|^2 = 1 - y^6/72 + y^8/576 (y = 2 dt): a loss growing with the number of steps,
+    # where the true flow keeps H and a symplectic method's error stays bounded
+    x0 = torch.tensor([[1.0, 0.0], [0.3, -0.4]], dtype=torch.float64)
+    steps = np.array([0, 100, 1000, 10000])
+    traj = hnn.rollout(spring.dynamics, x0, steps * dt, method="rk4", dt=dt)
+    ratio = (spring.hamiltonian(traj) / spring.hamiltonian(x0)[:, None]).numpy()
+    y = 2 * dt
+    per_step = 1 - y ** 6 / 72 + y ** 8 / 576
+    np.testing.assert_allclose(ratio, np.tile(per_step ** steps, (2, 1)), rtol=1e-10, atol=0)
+    # secular: log H falls in proportion to the steps, 100 times as far in 10000 steps as in 100
+    assert (ratio[:, 1:] < 1).all()
+    np.testing.assert_allclose(np.log(ratio[:, 3]) / np.log(ratio[:, 1]), 100, rtol=1e-6)
 
 
 @pytest.mark.parametrize("method, options", [("solve_ivp", {}), ("dopri5", {}), ("rk4", {"dt": 0.01})])

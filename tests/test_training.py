@@ -29,6 +29,21 @@ def test_minibatches_are_seeded(spring):
     assert runs[0] == runs[1]
 
 
+@pytest.mark.parametrize("before", [True, False])
+def test_train_restores_the_callers_denormal_flushing(before):
+    model = hnn.build_model(2, 8)
+    x = np.random.RandomState(0).randn(20, 2).astype(np.float32)
+    tiny = torch.finfo(torch.float32).tiny                       # the smallest normal float32
+    if not torch.set_flush_denormal(before):
+        pytest.skip("this CPU cannot flush denormals")
+    try:
+        hnn.train(model, x, x, total_steps=2)
+        assert (torch.full((1,), tiny) / 2 == 0).item() == before    # half of it is denormal unless flushed
+        assert hnn.training._flushes_denormals() == before
+    finally:
+        torch.set_flush_denormal(False)
+
+
 def test_bad_training_data_is_named():
     model = hnn.build_model(2, 8)
     x = np.zeros((10, 2), dtype=np.float32)
@@ -75,6 +90,7 @@ def test_runs_are_reused_only_for_identical_args(tmp_path):
 
 def test_unreadable_checkpoint_says_what_to_do(tmp_path):
     (tmp_path / "model.tar").write_bytes(b"not a checkpoint")
+    (tmp_path / "complete.json").write_text('{"files": ["model.tar"]}')
     with pytest.raises(RuntimeError, match="delete the run folder and retrain"):
         hnn.load_run(tmp_path)
     with pytest.raises(FileNotFoundError, match="train it first"):

@@ -1,0 +1,175 @@
+"""Run folders are written as a whole: an interrupted save never mixes two runs."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+import hnn
+import hnn.runs
+
+REPO = Path(__file__).resolve().parent.parent
+_UMASK = hnn.runs._UMASK
+
+
+def _args(save_dir, steps: int):
+    """The spring task's flags of a run with ``--total_steps steps``; every ``steps`` shares one folder."""
+    return hnn.load_task("spring", "train").parse_args(["--save_dir", str(save_dir), "--total_steps", str(steps),
+                                                         "--hidden_dim", "8"])
+
+
+def _save(args, fill: float):
+    """A small model with every parameter ``fill``, saved as the run of ``args``; returns its folder."""
+    model = hnn.runs.model_from_args(vars(args))
+    with torch.no_grad():
+        for p in model.parameters():
+            p.fill_(fill)
+    return hnn.save_run(hnn.run_dir(args), model, vars(args), {"train_loss": fill})
+
+
+def _snapshot(directory: Path) -> dict:
+    """``{file name: bytes}`` of a folder."""
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
+
+
+def _hidden(save_dir: Path) -> list[str]:
+    return sorted(p.name for p in save_dir.iterdir() if p.name.startswith("."))
+
+
+def _assert_old_run_intact(old, new, before: dict) -> None:
+    run = hnn.run_dir(old)
+    assert _snapshot(run) == before
+    assert hnn.find_run(old) == run and hnn.find_run(new) is None
+    model, args, metrics = hnn.load_run(run)
+    assert args["total_steps"] == old.total_steps and metrics["train_loss"] == 0.25
+    assert all((p == 0.25).all() for p in model.parameters())
+
+
+@pytest.mark.parametrize("failing", ["args.json", "metrics.json", hnn.runs.COMPLETE])
+def test_a_save_failing_between_files_leaves_the_old_run(failing, tmp_path, monkeypatch):
+    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    before = _snapshot(_save(old, 0.25))
+    real = hnn.runs.write_json
+
+    def write_json(path, obj):
+        if Path(path).name == failing:
+            raise OSError("disk full")
+        real(path, obj)
+
+    monkeypatch.setattr(hnn.runs, "write_json", write_json)
+    with pytest.raises(OSError, match="disk full"):
+        _save(new, 0.5)
+    _assert_old_run_intact(old, new, before)
+    assert _hidden(tmp_path) == []                     # the half-filled folder is removed
+
+
+def test_a_failed_move_puts_the_old_run_back(tmp_path, monkeypatch):
+    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    before = _snapshot(_save(old, 0.25))
+    real = os.rename
+
+    def rename(src, dst):
+        if ".tmp-" in Path(src).name:
+            raise OSError("rename refused")
+        real(src, dst)
+
+    monkeypatch.setattr(hnn.runs.os, "rename", rename)
+    with pytest.raises(OSError, match="rename refused"):
+        _save(new, 0.5)
+    monkeypatch.undo()
+    _assert_old_run_intact(old, new, before)
+    assert _hidden(tmp_path) == []
+
+
+# a child process that saves the run of --total_steps 3 over the one of 2, and is SIGKILLed when
+# `kill_at` happens: before the last file is written, or between moving the old folder aside and
+# moving the new one in
+_KILLED_SAVE = """
+import os, signal, sys
+from pathlib import Path
+import hnn, hnn.runs, torch
+save_dir, kill_at = sys.argv[1], sys.argv[2]
+real_write, real_rename = hnn.runs.write_json, os.rename
+
+def write_json(path, obj):
+    if Path(path).name == kill_at:
+        os.kill(os.getpid(), signal.SIGKILL)
+    real_write(path, obj)
+
+def rename(src, dst):
+    real_rename(src, dst)
+    if kill_at == "aside" and ".old-" in Path(dst).name:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+hnn.runs.write_json, os.rename = write_json, rename
+args = hnn.load_task("spring", "train").parse_args(["--save_dir", save_dir, "--total_steps", "3",
+                                                         "--hidden_dim", "8"])
+hnn.save_run(hnn.run_dir(args), hnn.build_model(2, 8), vars(args), {"train_loss": 0.5})
+"""
+
+
+def _killed_save(save_dir: Path, kill_at: str) -> None:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", _KILLED_SAVE, str(save_dir), kill_at], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == -9, proc.stderr          # killed, not finished nor failed
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
+@pytest.mark.parametrize("kill_at", ["metrics.json", hnn.runs.COMPLETE])
+def test_a_save_killed_between_files_leaves_the_old_run(kill_at, tmp_path):
+    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    before = _snapshot(_save(old, 0.25))
+    _killed_save(tmp_path, kill_at)
+    _assert_old_run_intact(old, new, before)
+    leftover = _hidden(tmp_path)
+    assert len(leftover) == 1 and leftover[0].startswith(".spring-hnn-seed0.tmp-")   # never looked at
+    # a later save of the new args replaces the old run, whatever was left over
+    run = _save(new, 0.5)
+    assert hnn.find_run(new) == run and hnn.find_run(old) is None
+    assert hnn.load_run(run)[1]["total_steps"] == 3 and _hidden(tmp_path) == leftover
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
+def test_a_save_killed_between_the_renames_leaves_no_run(tmp_path):
+    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    before = _snapshot(_save(old, 0.25))
+    _killed_save(tmp_path, "aside")
+    # nothing at the run's path: both args train anew; the old run waits whole in .old-*
+    assert not hnn.run_dir(old).exists()
+    assert hnn.find_run(old) is None and hnn.find_run(new) is None
+    [aside] = [p for p in tmp_path.iterdir() if ".old-" in p.name]
+    assert _snapshot(aside) == before
+    run = _save(new, 0.5)
+    assert hnn.find_run(new) == run and hnn.find_run(old) is None
+
+
+def test_a_save_replaces_the_old_run_whole_with_ordinary_permissions(tmp_path):
+    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    run = _save(old, 0.25)
+    (run / "rollout.npz").write_bytes(b"of the old model")     # written after a save, as pixel runs do
+    assert hnn.find_run(old) == run
+    assert _save(new, 0.5) == run
+    assert sorted(p.name for p in run.iterdir()) == ["args.json", hnn.runs.COMPLETE, "metrics.json", "model.tar"]
+    assert hnn.find_run(new) == run and hnn.find_run(old) is None and _hidden(tmp_path) == []
+    model, args, metrics = hnn.load_run(run)
+    assert args == json.loads(json.dumps(vars(new))) and metrics["train_loss"] == 0.5
+    assert all((p == 0.5).all() for p in model.parameters())
+    assert run.stat().st_mode & 0o777 == 0o777 & ~_UMASK
+    assert all(p.stat().st_mode & 0o777 == 0o666 & ~_UMASK for p in run.iterdir())
+    # files added after the save keep the run complete
+    hnn.runs.write_json(run / "metrics.json", {**metrics, "energy_mse": 1.0})
+    assert hnn.find_run(new) == run
+
+
+@pytest.mark.parametrize("damage", ["no mark", "file missing"])
+def test_an_incomplete_folder_is_neither_reused_nor_loaded(damage, tmp_path):
+    args = _args(tmp_path, 2)
+    run = _save(args, 0.25)
+    (run / (hnn.runs.COMPLETE if damage == "no mark" else "metrics.json")).unlink()
+    assert hnn.find_run(args) is None
+    with pytest.raises(RuntimeError, match="interrupted.*delete the run folder and retrain"):
+        hnn.load_run(run)
