@@ -3,7 +3,10 @@
 Training amplifies the last bits of every float sum, and those depend on the thread count and on
 the CPU kernels torch picks (AVX-512 or AVX2), so the test pins one thread and every threshold is
 set from the spread measured by ``python analysis/regression_spread.py --kernels default avx2``
-(seeds 0-4 x threads 1, 2 x AVX-512, AVX2 kernels: 20 trainings of each model), with its margin.
+(seeds 0-4 x threads 1, 2 x torch's AVX-512 and AVX2 kernels on an AVX-512 CPU: 20 trainings of
+each model), with its margin. Seeds stand in for the last-bit changes of other machines: the
+thread count moved seed 0's HNN energy MSE by 1.9x, while ATEN_CPU_CAPABILITY=avx2 changed
+nothing here (the matrix products do not follow it), so the seeds' spread is the wider, safer one.
 """
 import pytest
 import torch
@@ -34,12 +37,12 @@ def energy(spring_runs):
 
 
 def test_spring_losses_match_the_paper(spring_runs):
-    # measured: every loss of the 20 trainings lies within 11% of the paper's (seed 2's test
-    # losses are the farthest; seed 0's within 0.5%); 15% leaves room for other kernels
+    # measured: every loss of the 20 trainings lies within 12.3% of the paper's (seed 2's test
+    # losses are the farthest; seed 0's all within 0.2%); 20% is 1.6x the worst seed
     for label, run in spring_runs.items():
         _, _, metrics = hnn.load_run(run)
         for key in ("train_loss", "test_loss"):
-            assert metrics[key] == pytest.approx(PAPER["spring"][key][label][0], rel=0.15), (label, key)
+            assert metrics[key] == pytest.approx(PAPER["spring"][key][label][0], rel=0.20), (label, key)
 
 
 def test_spring_hnn_conserves_energy_far_better_than_the_baseline(energy):
@@ -52,9 +55,10 @@ def test_spring_hnn_conserves_energy_far_better_than_the_baseline(energy):
 
 
 def test_spring_energy_mse_near_the_paper(energy):
-    # the paper's protocol lands within a factor of 3 of the published numbers (measured over the
-    # 20 trainings: baseline 0.8x-1.4x, HNN 0.3x-1.9x of the paper's)
+    # measured over the 20 trainings, as a multiple of the paper's number: baseline 0.46x-3.59x,
+    # HNN 0.38x-2.21x (seed 0: baseline 1.03x, HNN 0.66x at one thread and 1.25x at two); the band
+    # [1/6, 6] keeps 1.7x margin on the widest of them
     r = energy["paper"]
     for label in ("baseline", "hnn"):
         paper = PAPER["spring"]["energy_mse"][label][0]
-        assert paper / 3 < r[label]["mse"] < paper * 3, (label, r[label]["mse"], paper)
+        assert paper / 6 < r[label]["mse"] < paper * 6, (label, r[label]["mse"], paper)
