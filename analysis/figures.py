@@ -26,7 +26,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 import hnn  # noqa: E402
 from hnn.runs import atomic_write  # noqa: E402
 
-# From the original notebooks (reference sections 4.3 and 5.3).
+# From the original notebooks (see docs/original.md).
 FIELD_SETTINGS = {
     "spring": {"lim": 1.2, "gridsize": 10, "x0": (1.0, 0.0), "t_span": (0.0, 30.0), "num_points": 2000},
     "pend": {"lim": 2.6, "gridsize": 10, "x0": (2.1, 0.0), "t_span": (0.0, 28.0), "num_points": 1000},

@@ -1,7 +1,7 @@
 """Newtonian gravity of B bodies in the plane, and the batched generator of orbit datasets.
 
 Units: G = 1 and every mass is 1, so momentum = velocity. A state is one row of width 4B in the
-canonical ordering of the original code (section 8.1 of the reference),
+canonical ordering of the original code (docs/original.md),
 
     x = [qx_1..qx_B, qy_1..qy_B, px_1..px_B, py_1..py_B],
 

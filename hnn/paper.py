@@ -1,6 +1,6 @@
 """The published numbers (the original README, one run each at seed 0): mean and its ±.
 
-Source: the facts of the paper and its original code (reference section 10). The paper's Table 1 shows
+Source: the original README and the paper (docs/original.md describes how each was measured). The paper's Table 1 shows
 the same values scaled (x10^3; 2-body x10^6; pixel losses x10^5; Table 2, 3-body, x10^2).
 """
 

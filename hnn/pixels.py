@@ -3,7 +3,7 @@
     run = run_pixel_experiment(args, dataset)          # trains, saves, returns the run folder
     result = evaluate_pixel_energy(system, models, get_pixel_protocol("paper"), dataset)
 
-The energy metric, as the paper's notebook reconstructs it (reference section 9.6): a fresh
+The energy metric, reconstructed from the paper's notebooks (the final one is lost; docs/original.md): a fresh
 200-frame gym trajectory (seed 1, start angle in (pi/11, pi/10)); each model encodes its first
 pixel pair, integrates its latent field, decodes every latent to pixels, encodes them again,
 and maps the latents linearly to (q, p) (a map fitted per model on its training latents); the
