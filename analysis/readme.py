@@ -85,7 +85,7 @@ def timing_text(results: dict) -> str:
     if not lines:
         raise ValueError("these results hold no stage times (was anything trained?)")
     return "\n".join([f"`{meta['command']}` on {meta['date']} (commit {meta['commit']}, {meta['mode']}, "
-                      f"{meta['cores']} cores, torch {meta['torch']}):", ""] + lines) + "\n"
+                      f"{meta['cores']} cores{', ' + meta['cpu'] if meta.get('cpu') else ''}, torch {meta['torch']}):", ""] + lines) + "\n"
 
 
 def main(argv=None) -> None:

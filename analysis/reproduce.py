@@ -327,7 +327,10 @@ def _fmt(pair) -> str:
 
 
 def _ratio(ours, paper) -> str:
-    return "" if ours is None or paper is None else f"{ours[0] / paper[0]:.2f}x"
+    if ours is None or paper is None:
+        return ""
+    ratio = ours[0] / paper[0]
+    return f"{ratio:.2f}x" if ratio >= 0.01 else f"{ratio:.1e}x"
 
 
 def compare(ours, paper) -> str | None:
@@ -595,7 +598,7 @@ def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None)
             "commit": _commit(), "seed": args.seed, "seeds": seeds, "mode": mode, "quick": args.quick,
             "steps": steps, "jobs": args.jobs, "torch": torch.__version__, "numpy": np.__version__,
             "scipy": scipy.__version__, "python": platform.python_version(), "threads": torch.get_num_threads(),
-            "cores": _cores(), "available": hnn.available_tasks()}
+            "cores": _cores(), "cpu": torch.backends.cpu.get_cpu_capability(), "available": hnn.available_tasks()}
 
 
 def _mode(args) -> tuple[str, int | None]:
