@@ -17,7 +17,7 @@ def parse_args(argv=None):
     parser = hnn.cli.make_parser("Task 4: two bodies under Newtonian gravity (G = 1, unit masses)", name="2body",
                                  input_dim=8, weight_decay=0.0, total_steps=10000, batch_size=200,
                                  save_dir=str(HERE))
-    parser.add_argument("--input_noise", type=float, default=0.0,
+    parser.add_argument("--input_noise", type=hnn.cli.nonnegative_float, default=0.0,
                         help="std of Gaussian noise added to each training batch's inputs x (the original "
                              "declared it type=int, so only whole numbers parsed, and added the noise to the "
                              "predicted derivatives instead)")
@@ -33,4 +33,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    hnn.cli.run_main(main)

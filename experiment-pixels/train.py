@@ -13,6 +13,7 @@ from pathlib import Path
 
 import hnn
 import hnn.pixels
+from hnn.cli import int_at_least, nonnegative_float
 
 HERE = Path(__file__).resolve().parent
 
@@ -21,16 +22,20 @@ def parse_args(argv=None):
     parser = hnn.cli.make_parser("Task 5: a pendulum seen only through 28x28 gymnasium renders", name="pixels",
                                  input_dim=2 * 28 * 28, weight_decay=1e-5, total_steps=10000, batch_size=200,
                                  save_dir=str(HERE), rk4_help="step the latent by one RK4 step per frame "
-                                 "instead of the paper's Euler step")
-    parser.add_argument("--latent_dim", type=int, default=2, help="width of the latent state z = [q, p]")
-    parser.add_argument("--input_noise", type=float, default=0.0,
+                                 "instead of the paper's Euler step", state="input (two 28x28 frames side by side)")
+    parser.add_argument("--latent_dim", type=int_at_least(2, even=True, why=" (z = [q, p])"), default=2,
+                        help="width of the latent state z = [q, p]")
+    parser.add_argument("--input_noise", type=nonnegative_float, default=0.0,
                         help="std of Gaussian noise added to the latent z before the latent field")
-    parser.add_argument("--ae_nonlinearity", type=str, default="relu", help="activation of the autoencoder")
-    parser.add_argument("--trials", type=int, default=200, help="rendered trajectories (the first 20%% test)")
-    parser.add_argument("--timesteps", type=int, default=103, help="frames per trajectory (each gives timesteps - 3 rows)")
-    parser.add_argument("--render_size", type=int, default=500,
+    parser.add_argument("--ae_nonlinearity", type=str, default="relu", choices=hnn.models.NONLINEARITIES,
+                        help="activation of the autoencoder")
+    parser.add_argument("--trials", type=int_at_least(5, why=" (the first 20% of them are the test set)"),
+                        default=200, help="rendered trajectories (the first 20%% test)")
+    parser.add_argument("--timesteps", type=int_at_least(4, why=" (each trajectory gives timesteps - 3 rows)"),
+                        default=103, help="frames per trajectory (each gives timesteps - 3 rows)")
+    parser.add_argument("--render_size", type=int_at_least(1), default=500,
                         help="side of gym's square render in pixels (the crop scales with it)")
-    parser.add_argument("--render_workers", type=int, default=None,
+    parser.add_argument("--render_workers", type=int_at_least(1), default=None,
                         help="processes that render frames (default: the cores); the frames do not depend on it")
     parser.add_argument("--no_eval", action="store_true", help="skip the energy metric and the GIFs after training")
     return parser.parse_args(argv)
@@ -50,4 +55,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    hnn.cli.run_main(main)

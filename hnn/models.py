@@ -21,6 +21,7 @@ _NONLINEARITIES = {
     "elu": nn.functional.elu,
     "swish": lambda x: x * torch.sigmoid(x),
 }
+NONLINEARITIES = tuple(_NONLINEARITIES)   # the names get_nonlinearity knows, for --nonlinearity choices
 # Piecewise-linear activations: their second derivative is zero almost everywhere, so the
 # symplectic gradient of an HNN built on them is piecewise constant in x and the training
 # signal through d(dH/dx)/dtheta is poor.

@@ -108,7 +108,7 @@ def _is_complete(directory: Path) -> bool:
 
 
 # flags that change what is printed or how fast, never what is trained
-_DISPLAY_ONLY = ("verbose", "render_workers", "no_eval")
+_DISPLAY_ONLY = ("verbose", "render_workers", "no_eval", "debug")
 
 
 def find_run(args) -> Path | None:

@@ -1,0 +1,181 @@
+"""The command line of every train.py: a bad flag or value is one ``error:`` line and exit code 2,
+never a traceback; ``--debug`` shows it; a good run prints where it was saved.
+
+Most parse errors are checked in-process (argparse raises SystemExit); a handful run the
+script as a subprocess, the way a user does.
+"""
+import os
+import subprocess
+import sys
+
+import pytest
+
+import hnn
+from hnn.runs import find_run
+
+REPO = hnn.tasks.repo_root()
+
+
+def _error_lines(err: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith("error:")]
+
+
+def _assert_one_error(err: str, *names: str) -> str:
+    """The single ``error:`` line of stderr ``err``, checked to name each of ``names``."""
+    lines = _error_lines(err)
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    for name in names:
+        assert name in lines[0], lines[0]
+    return lines[0]
+
+
+# ----------------------------------------------------------------------------------------------
+# parse errors, in-process
+
+BAD_FLAGS = [
+    ("spring", ["--nonlinearity", "foo"], ["'foo'", "tanh", "swish"]),
+    ("spring", ["--input_dim", "3"], ["--input_dim: 3 does not match", "spring task", "width 2", "pass --input_dim 2"]),
+    ("pend", ["--input_dim", "4"], ["4", "pend task", "width 2"]),
+    ("real", ["--input_dim", "1"], ["1", "real task", "width 2"]),
+    ("2body", ["--input_dim", "2"], ["2", "2body task", "width 8", "pass --input_dim 8"]),
+    ("3body", ["--input_dim", "8"], ["8", "3body task", "width 12"]),
+    ("pixels", ["--input_dim", "2"], ["2", "pixels task", "width 1568"]),
+    ("spring", ["--input_dim", "two"], ["'two'", "pass --input_dim 2"]),
+    ("spring", ["--total_steps", "-5"], ["--total_steps", "'-5'", ">= 0"]),
+    ("spring", ["--hidden_dim", "0"], ["--hidden_dim", "'0'", ">= 1"]),
+    ("spring", ["--learn_rate", "0"], ["--learn_rate", "'0'", "> 0"]),
+    ("pend", ["--learn_rate", "-1e-3"], ["--learn_rate", "'-1e-3'"]),
+    ("pend", ["--learn_rate", "nan"], ["--learn_rate", "'nan'"]),
+    ("spring", ["--print_every", "0"], ["--print_every", "'0'", ">= 1"]),
+    ("spring", ["--weight_decay", "-1e-4"], ["--weight_decay", "'-1e-4'", ">= 0"]),
+    ("2body", ["--batch_size", "-3"], ["--batch_size", "'-3'", "none/0/full"]),
+    ("spring", ["--field_type", "sideways"], ["'sideways'", "solenoidal", "conservative", "both"]),
+    ("spring", ["--seed", "-1"], ["--seed", "'-1'"]),
+    ("spring", ["--device", "gpu0"], ["'gpu0'", "cpu"]),
+    ("spring", ["--dtype", "float16"], ["'float16'", "float64"]),
+    ("spring", ["--no_such_flag"], ["--no_such_flag"]),
+    ("2body", ["--input_noise", "-0.1"], ["--input_noise", "'-0.1'"]),
+    ("pixels", ["--latent_dim", "3"], ["--latent_dim", "'3'", "even"]),
+    ("pixels", ["--latent_dim", "0"], ["--latent_dim", "'0'"]),
+    ("pixels", ["--trials", "4"], ["--trials", "'4'", ">= 5"]),
+    ("pixels", ["--timesteps", "3"], ["--timesteps", "'3'", ">= 4"]),
+    ("pixels", ["--render_size", "0"], ["--render_size", "'0'", ">= 1"]),
+    ("pixels", ["--render_workers", "0"], ["--render_workers", "'0'"]),
+    ("pixels", ["--ae_nonlinearity", "foo"], ["--ae_nonlinearity", "'foo'", "relu"]),
+]
+
+
+@pytest.mark.parametrize("task, argv, names", BAD_FLAGS, ids=lambda v: " ".join(v) if isinstance(v, list) else v)
+def test_bad_flag_is_one_error_line(task, argv, names, capsys):
+    with pytest.raises(SystemExit) as info:
+        hnn.load_task(task, "train").parse_args(argv)
+    assert info.value.code == 2
+    _assert_one_error(capsys.readouterr().err, *names)
+
+
+@pytest.mark.parametrize("task, width", [("spring", 2), ("pend", 2), ("real", 2), ("2body", 8), ("3body", 12),
+                                         ("pixels", 1568)])
+def test_defaults_and_the_task_width_parse(task, width):
+    parse = hnn.load_task(task, "train").parse_args
+    assert parse([]).input_dim == width
+    assert parse(["--input_dim", str(width)]).input_dim == width
+    assert parse([]).debug is False
+
+
+def test_good_values_keep_their_meaning():
+    parse = hnn.load_task("spring", "train").parse_args
+    for text in ("none", "0", "full", "FULL"):
+        assert parse(["--batch_size", text]).batch_size is None
+    assert parse(["--batch_size", "32"]).batch_size == 32
+    for name in hnn.models.NONLINEARITIES:
+        assert parse(["--nonlinearity", name]).nonlinearity == name
+    args = parse(["--total_steps", "0", "--weight_decay", "0", "--learn_rate", "1e-2", "--field_type", "both",
+                  "--device", "cpu"])
+    assert (args.total_steps, args.weight_decay, args.learn_rate, args.field_type) == (0, 0.0, 1e-2, "both")
+    assert hnn.load_task("pixels", "train").parse_args(["--latent_dim", "4", "--trials", "5"]).latent_dim == 4
+
+
+# ----------------------------------------------------------------------------------------------
+# the run_main handler, in-process
+
+
+def _raises(err):
+    def main(argv):
+        raise err
+    return main
+
+
+def test_run_main_turns_an_input_error_into_one_line(capsys):
+    with pytest.raises(SystemExit) as info:
+        hnn.cli.run_main(_raises(ValueError("bad value 7\n  for --thing; pass 8")), [])
+    assert info.value.code == 2
+    assert capsys.readouterr().err == "error: bad value 7 for --thing; pass 8\n"
+
+
+@pytest.mark.parametrize("flag", ["--debug", "--deb"])
+def test_run_main_debug_reraises(flag):
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        hnn.cli.run_main(_raises(FileNotFoundError("nowhere")), ["--seed", "1", flag])
+
+
+def test_run_main_leaves_bugs_alone():
+    with pytest.raises(ZeroDivisionError):
+        hnn.cli.run_main(_raises(ZeroDivisionError("a bug, not bad input")), [])
+
+
+def test_run_main_prints_the_run_folder(tmp_path, capsys):
+    assert hnn.cli.run_main(lambda argv: tmp_path / "run", []) == tmp_path / "run"
+    assert capsys.readouterr().out == f"saved the run to {tmp_path / 'run'}\n"
+
+
+def test_main_raises_for_programs_and_debug_does_not_change_the_run(tmp_path):
+    with pytest.raises(FileNotFoundError, match=str(tmp_path)):
+        hnn.load_task("real", "train").main(["--data_dir", str(tmp_path)])
+    trainer = hnn.load_task("spring", "train")
+    argv = ["--total_steps", "0", "--save_dir", str(tmp_path)]
+    run = trainer.main(argv)
+    assert find_run(trainer.parse_args(argv + ["--debug"])) == run
+
+
+# ----------------------------------------------------------------------------------------------
+# the scripts, as a user runs them
+
+
+def _run(script: str, *argv: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"}
+    return subprocess.run([sys.executable, f"experiment-{script}/train.py", *argv], cwd=REPO, env=env, check=False,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("task, argv, names", [
+    ("spring", ["--nonlinearity", "foo"], ["'foo'"]),
+    ("spring", ["--input_dim", "3"], ["--input_dim: 3 does not", "width 2"]),
+    ("pixels", ["--latent_dim", "3"], ["--latent_dim", "'3'"]),
+])
+def test_script_bad_flag(task, argv, names):
+    out = _run(task, *argv)
+    assert out.returncode == 2
+    _assert_one_error(out.stderr, *names)
+
+
+def test_script_missing_real_data(tmp_path):
+    out = _run("real", "--data_dir", str(tmp_path), "--save_dir", str(tmp_path))
+    assert out.returncode == 2
+    line = _assert_one_error(out.stderr, str(tmp_path), "real_pend_h_1.txt", "--data_dir")
+    assert out.stderr.splitlines() == [line]
+
+
+def test_script_missing_real_data_debug_shows_the_traceback(tmp_path):
+    out = _run("real", "--data_dir", str(tmp_path), "--save_dir", str(tmp_path), "--debug")
+    assert out.returncode not in (0, 2)
+    assert "Traceback" in out.stderr and "FileNotFoundError" in out.stderr
+    assert not _error_lines(out.stderr)
+
+
+def test_script_prints_the_saved_run(tmp_path):
+    out = _run("spring", "--total_steps", "2", "--save_dir", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    folder = tmp_path / "spring-hnn-seed0"
+    assert out.stdout.splitlines()[-1] == f"saved the run to {folder}"
+    assert (folder / "model.tar").exists()
