@@ -438,8 +438,7 @@ def headline_markdown(results: dict) -> str:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="reproduce.py", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = hnn.cli.Parser(prog="reproduce.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task present)")
     p.add_argument("--quick", action="store_true",
                    help=f"smoke run: {QUICK_STEPS} training steps per model (or --steps), output in results-quick/")

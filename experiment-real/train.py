@@ -3,8 +3,8 @@
     python experiment-real/train.py --verbose              # HNN
     python experiment-real/train.py --verbose --baseline   # baseline
 
-Needs the Schmidt & Lipson (2009) measurements: real_pend_h_1.txt or invar_datasets.zip in
---data_dir DIR, else in $HNN_DATA_DIR, else in <repo>/data. Weight decay 1e-5 is the original
+Trains on the Schmidt & Lipson (2009) measurements that ship beside this file (DATA.md), or on
+another copy (real_pend_h_1.txt or invar_datasets.zip) in --data_dir DIR or $HNN_DATA_DIR. Weight decay 1e-5 is the original
 code's hard-coded value (the paper says 1e-4); training is full batch (445 rows).
 """
 from pathlib import Path
@@ -19,7 +19,7 @@ def parse_args(argv=None):
                                  input_dim=2, weight_decay=1e-5, save_dir=str(HERE))
     parser.add_argument("--data_dir", type=str, default=None,
                         help="folder holding real_pend_h_1.txt or invar_datasets.zip; "
-                             "default: $HNN_DATA_DIR, else <repo>/data")
+                             "default: $HNN_DATA_DIR, else the copy shipped in experiment-real/")
     return parser.parse_args(argv)
 
 

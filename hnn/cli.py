@@ -35,7 +35,7 @@ def _one_line(text) -> str:
     return " ".join(str(text).split())
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``."""
 
     def __init__(self, *args, **kwargs):
@@ -143,7 +143,7 @@ def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, w
     the only value ``--input_dim`` accepts; ``state`` says what that width measures, for the
     error message.
     """
-    p = _Parser(description=description, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p = Parser(description=description, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--input_dim", type=_fixed_width(input_dim, name, state), default=input_dim,
                    help=f"width of the {state} (fixed by the task)")
     p.add_argument("--hidden_dim", type=int_at_least(1), default=hidden_dim, help="hidden units per layer of the MLP")

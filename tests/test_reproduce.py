@@ -220,5 +220,5 @@ def test_bad_values_exit_with_one_error_line(argv, match, capsys):
         reproduce.main(argv)
     err = capsys.readouterr().err
     assert info.value.code == 2 and match in err
-    assert [line for line in err.splitlines() if "error:" in line] == [err.splitlines()[-1]]
+    assert [line for line in err.splitlines() if line.startswith("error:")] == [err.splitlines()[-1]]
     assert "Traceback" not in err
