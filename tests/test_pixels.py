@@ -11,8 +11,8 @@ import hnn
 import hnn.pixels
 from hnn.models import MLPAutoencoder, PixelHNN
 
-pytest.importorskip("gymnasium")
-pytest.importorskip("pygame")
+pytest.importorskip("gymnasium", reason="the pixel task renders with gymnasium: pip install -e '.[pixels]'")
+pytest.importorskip("pygame", reason="gymnasium renders the pendulum with pygame: pip install -e '.[pixels]'")
 
 
 @pytest.fixture(scope="module")
