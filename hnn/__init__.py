@@ -7,7 +7,7 @@ the training loop, the paper's metrics, and saved runs.
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
 """
 from .integrate import DivergenceError, rk4_step, rollout
-from .symplectic import SYMPLECTIC_METHODS, YOSHIDA_WEIGHTS, ConvergenceError
+from .fixed_step import SYMPLECTIC_METHODS, YOSHIDA_WEIGHTS, ConvergenceError
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
 from .runs import find_run, load_run, run_dir, run_experiment, save_run

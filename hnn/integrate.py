@@ -227,7 +227,7 @@ def _dopri5(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol:
     return out
 
 
-from .symplectic import SYMPLECTIC_METHODS, fixed_step_rollout  # noqa: E402  (it uses DivergenceError above)
+from .fixed_step import SYMPLECTIC_METHODS, fixed_step_rollout  # noqa: E402  (it uses DivergenceError above)
 
 _METHODS = {"solve_ivp": _solve_ivp, "dopri5": _dopri5,
             **{m: (lambda f, x0, t, _m=m, **kw: fixed_step_rollout(f, x0, t, _m, **kw))

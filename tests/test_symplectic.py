@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import hnn
-import hnn.symplectic
+import hnn.fixed_step
 
 SPRING_OMEGA = 2.0          # the repo's spring: H = q^2 + p^2, dq/dt = 2p, dp/dt = -2q
 PEND_SEPARATRIX_H = 6.0     # the repo's pendulum: H = 3(1 - cos q) + p^2; H = 6 at the upright rest
@@ -45,7 +45,7 @@ def test_a_perturbed_yoshida_weight_fails_the_order_check(monkeypatch):
     # 2 w1 + w0 = 1 still holds, so the composition stays consistent and symmetric (order 2), but
     # 2 w1^3 + w0^3 != 0: the h^3 term no longer cancels. The order check must see it.
     w1 = hnn.YOSHIDA_WEIGHTS[0] + 0.05
-    monkeypatch.setattr(hnn.symplectic, "YOSHIDA_WEIGHTS", (w1, 1 - 2 * w1, w1))
+    monkeypatch.setattr(hnn.fixed_step, "YOSHIDA_WEIGHTS", (w1, 1 - 2 * w1, w1))
     slope = order_of("yoshida4")
     assert abs(slope - 4) > 0.3 and abs(slope - 2) < 0.3, slope
 
