@@ -1,6 +1,7 @@
-"""Fixed-step symplectic integrators in torch: leapfrog, implicit midpoint and Yoshida's 4th order.
+"""Fixed-step integrators in torch: classic RK4 and the symplectic leapfrog, implicit midpoint and
+Yoshida's 4th order, all run by one driver, ``fixed_step_rollout``.
 
-All three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vector field
+The symplectic three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vector field
 ``f(x) -> dxdt`` alone, and are reached through ``hnn.rollout(..., method=...)``:
 
 - ``'leapfrog'`` (Stormer-Verlet, kick-drift-kick), order 2, two ``f`` calls a step. It reads
@@ -15,18 +16,25 @@ All three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vec
 
 Steps are fixed: each interval of ``t_eval`` is cut into equal steps no longer than ``dt``
 (default one step per interval), signed like ``t_eval`` so integration runs backwards too.
-``rollout(method='rk4')`` (classic, not symplectic) runs through the same driver,
-``fixed_step_rollout``, so every fixed-step method reports blow-ups the same way.
+``'rk4'`` (classic, order 4, not symplectic) runs through the same driver, so every
+fixed-step method reports blow-ups the same way.
+
+Each method is a ``Stepper``: ``step(x, h)`` advances the batch by one step of size ``h``; the
+driver cuts ``t_eval`` into steps and checks the states. ``hnn.solvers`` registers the steppers
+by name, so a new fixed-step method is a ``Stepper`` subclass and one ``register_solver`` call.
 """
 from __future__ import annotations
 
 import math
 import warnings
+from typing import Callable
 
 import numpy as np
 import torch
 
-from .integrate import DivergenceError, _divergence, rk4_step
+from .errors import ConvergenceError, divergence_error
+
+Field = Callable[[torch.Tensor], torch.Tensor]
 
 # Yoshida (1990): a symmetric composition S(w1 h) S(w0 h) S(w1 h) of a symmetric order-2 step S
 # is order 4 when 2 w1 + w0 = 1 (consistency) and 2 w1^3 + w0^3 = 0 (the h^3 error cancels), so
@@ -34,28 +42,71 @@ from .integrate import DivergenceError, _divergence, rk4_step
 _CBRT2 = 2.0 ** (1.0 / 3.0)
 YOSHIDA_WEIGHTS = (1.0 / (2.0 - _CBRT2), -_CBRT2 / (2.0 - _CBRT2), 1.0 / (2.0 - _CBRT2))
 
-SYMPLECTIC_METHODS = ("leapfrog", "midpoint", "yoshida4")
-
-
-class ConvergenceError(DivergenceError):
-    """The implicit midpoint's fixed-point iteration did not converge; ``trajectories``, ``times`` say where.
-
-    A ``DivergenceError``, so code that catches failed rollouts catches this one too.
-    """
-
 
 def default_tol(dtype: torch.dtype) -> float:
     """The midpoint iteration's default tolerance: 1e-12 in float64, a few ulps in float32."""
     return max(1e-12, 8 * torch.finfo(dtype).eps)
 
 
-class _Leapfrog:
+def rk4_step(f: Field, x: torch.Tensor, dt) -> torch.Tensor:
+    """The classic RK4 increment ``x(t + dt) - x(t)`` of dx/dt = f(x); ``dt`` a float or ``(batch, 1)``."""
+    k1 = f(x)
+    k2 = f(x + dt / 2 * k1)
+    k3 = f(x + dt / 2 * k2)
+    k4 = f(x + dt * k3)
+    return dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+class Stepper:
+    """One fixed-step method on a batch ``x`` of shape ``(batch, dim)``: all the driver sees of it.
+
+    A subclass implements ``step`` and counts its batched calls of ``f`` in ``nfev``. Every
+    stepper is built as ``Stepper(f, dim, dtype, tol=, max_iter=, base=)``: ``rollout`` accepts
+    the midpoint's options for every fixed-step method, and explicit methods ignore them.
+    """
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, **options):
+        self.f, self.nfev = f, 0
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        """``x`` ``(batch, dim)`` one step of (signed) size ``h`` later."""
+        raise NotImplementedError
+
+    def reset(self, x: torch.Tensor) -> None:
+        """Forget what is carried from step to step: rows of ``x`` were replaced."""
+
+    def take_failed(self) -> torch.Tensor | None:
+        """``(batch,)`` rows whose implicit equation was not solved since the last call; None if none can fail."""
+        return None
+
+    def stats(self) -> dict:
+        """What ``rollout(stats={})`` reports: ``nfev``, the number of batched ``f`` calls."""
+        return {"nfev": self.nfev}
+
+    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
+        """The error for ``rows`` whose implicit step failed at ``times``, ``others`` rows having diverged besides."""
+        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
+        also = f" ({others} other trajectories diverged)" if others else ""
+        return ConvergenceError(f"{method}: the implicit step did not converge for {len(rows)} trajectories: "
+                                f"{shown}{also}. Reduce dt.", rows, times)
+
+
+class RK4(Stepper):
+    """The classic (non-symplectic) RK4 step."""
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        self.nfev += 4
+        return x + rk4_step(self.f, x, h)
+
+
+class Leapfrog(Stepper):
     """Kick-drift-kick; keeps dp/dt at the current q between calls (exact for separable H)."""
 
-    def __init__(self, f, dim: int):
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, **options):
         if dim % 2:
             raise ValueError(f"leapfrog needs x = [q, p] of even dimension, got dim={dim}; use method='midpoint'")
-        self.f, self.n, self.nfev, self.accel = f, dim // 2, 0, None
+        super().__init__(f, dim, dtype)
+        self.n, self.accel = dim // 2, None
 
     def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
         n = self.n
@@ -70,16 +121,36 @@ class _Leapfrog:
         return torch.cat([q_new, p_half + (h / 2) * self.accel], dim=1)
 
     def reset(self, x: torch.Tensor) -> None:
-        """Forget the cached dp/dt (call after rows of ``x`` were replaced)."""
-        self.accel = None
+        self.accel = None         # the cached dp/dt belongs to the replaced rows too
 
 
-class _Midpoint:
+def _checked_tol(tol: float | None, dtype: torch.dtype) -> float:
+    """The midpoint's ``tol`` (default ``default_tol``), refused unless positive and finite;
+    warns below the dtype's eps, which the iteration cannot reach."""
+    if tol is None:
+        tol = default_tol(dtype)
+    if not (tol > 0 and math.isfinite(tol)):
+        raise ValueError(f"midpoint needs a positive finite tol, got {tol!r}")
+    if tol < torch.finfo(dtype).eps:
+        # stacklevel 5: rollout's caller, past _checked_tol, Midpoint, the driver and rollout (for
+        # yoshida4's base, one frame deeper: rollout)
+        warnings.warn(f"midpoint tol={tol:g} is below the machine epsilon of {dtype} "
+                      f"({torch.finfo(dtype).eps:.3g}): the iteration cannot reach it; use tol >= "
+                      f"{default_tol(dtype):.3g} or float64 states", stacklevel=5)
+    return tol
+
+
+class Midpoint(Stepper):
     """Implicit midpoint by fixed-point iteration, started from the previous increment (Euler at first)."""
 
-    def __init__(self, f, dim: int, tol: float, max_iter: int):
-        self.f, self.tol, self.max_iter = f, tol, max_iter
-        self.nfev = self.iterations = self.max_step_iterations = 0
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, tol: float | None = None, max_iter: int = 100,
+                 **options):
+        super().__init__(f, dim, dtype)
+        self.tol = _checked_tol(tol, dtype)
+        if not (isinstance(max_iter, int) and max_iter >= 1):
+            raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+        self.max_iter = max_iter
+        self.iterations = self.max_step_iterations = 0
         self.failed = None          # (batch,) rows whose iteration did not converge in the current interval
         self.last = None            # (h, x1 - x) of the previous step: the next step's first guess
 
@@ -110,26 +181,41 @@ class _Midpoint:
     def reset(self, x: torch.Tensor) -> None:
         self.last = None
 
+    def take_failed(self) -> torch.Tensor | None:
+        failed, self.failed = self.failed, None
+        return failed
 
-class _RK4:
-    """The classic (non-symplectic) RK4 step, run by the same fixed-step driver."""
+    def stats(self) -> dict:
+        # iterations: fixed-point iterations over all steps; max_step_iterations: the most in one step
+        return {"nfev": self.nfev, "iterations": self.iterations, "max_step_iterations": self.max_step_iterations}
 
-    def __init__(self, f):
-        self.f, self.nfev = f, 0
-
-    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
-        self.nfev += 4
-        return x + rk4_step(self.f, x, h)
-
-    def reset(self, x: torch.Tensor) -> None:
-        pass
+    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
+        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
+        also = f" ({others} other trajectories diverged)" if others else ""
+        return ConvergenceError(
+            f"{method}: the implicit midpoint iteration did not converge to tol={self.tol:g} in "
+            f"max_iter={self.max_iter} iterations for {len(rows)} trajectories: {shown}{also}. The fixed-point "
+            "iteration needs dt * (Lipschitz constant of f) < 2: reduce dt (or raise max_iter).", rows, times)
 
 
-class _Yoshida:
-    """Yoshida's order-4 composition of a symmetric base step."""
+_YOSHIDA_BASES = {"leapfrog": Leapfrog, "midpoint": Midpoint}
 
-    def __init__(self, base):
-        self.base = base
+
+class Yoshida4(Stepper):
+    """Yoshida's order-4 composition of a symmetric order-2 base: ``base='leapfrog'`` (default) or ``'midpoint'``.
+
+    The base does the work: its state, failures and counts are the composition's.
+    """
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, base: str | None = None, **options):
+        base = base or "leapfrog"
+        if base not in _YOSHIDA_BASES:
+            raise ValueError(f"yoshida4's base must be 'leapfrog' or 'midpoint', got {base!r}")
+        self.base = _YOSHIDA_BASES[base](f, dim, dtype, **options)     # no state of its own
+
+    @property
+    def nfev(self) -> int:
+        return self.base.nfev
 
     def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
         for w in YOSHIDA_WEIGHTS:
@@ -139,36 +225,33 @@ class _Yoshida:
     def reset(self, x: torch.Tensor) -> None:
         self.base.reset(x)
 
+    def take_failed(self) -> torch.Tensor | None:
+        return self.base.take_failed()
 
-def _make_stepper(method: str, f, dim: int, dtype: torch.dtype, tol, max_iter: int, base: str | None):
-    base = base or "leapfrog"
-    if method == "yoshida4" and base not in ("leapfrog", "midpoint"):
-        raise ValueError(f"yoshida4's base must be 'leapfrog' or 'midpoint', got {base!r}")
-    if method == "midpoint" or (method == "yoshida4" and base == "midpoint"):
-        if tol is None:
-            tol = default_tol(dtype)
-        if not (tol > 0 and math.isfinite(tol)):
-            raise ValueError(f"midpoint needs a positive finite tol, got {tol!r}")
-        if tol < torch.finfo(dtype).eps:
-            warnings.warn(f"midpoint tol={tol:g} is below the machine epsilon of {dtype} "
-                          f"({torch.finfo(dtype).eps:.3g}): the iteration cannot reach it; use tol >= "
-                          f"{default_tol(dtype):.3g} or float64 states", stacklevel=4)
-        if not (isinstance(max_iter, int) and max_iter >= 1):
-            raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
-    if method == "rk4":
-        return _RK4(f)
-    if method == "leapfrog":
-        return _Leapfrog(f, dim)
-    if method == "midpoint":
-        return _Midpoint(f, dim, tol, max_iter)
-    return _Yoshida(_Leapfrog(f, dim) if base == "leapfrog" else _Midpoint(f, dim, tol, max_iter))
+    def stats(self) -> dict:
+        return self.base.stats()
+
+    def convergence_error(self, *args) -> ConvergenceError:
+        return self.base.convergence_error(*args)
 
 
-def fixed_step_rollout(f, x0: torch.Tensor, t: np.ndarray, method: str, dt: float | None = None,
-                       max_norm: float | None = 1e6, tol: float | None = None, max_iter: int = 100,
-                       base: str | None = None, stats: dict | None = None) -> torch.Tensor:
-    """``(batch, len(t), dim)`` by fixed steps of ``method`` (the symplectic ones of the module
-    docstring, or ``'rk4'``).
+def _steps(span: float, dt: float | None) -> int:
+    """How many equal steps no longer than ``dt`` cover ``span`` (1 without ``dt``)."""
+    return 1 if dt is None else max(1, math.ceil(abs(span) / dt - 1e-9))
+
+
+def _blown(x: torch.Tensor, max_norm: float | None) -> torch.Tensor:
+    """``(batch,)`` rows of ``x`` that are non-finite or have a component beyond ``max_norm``."""
+    bad = ~torch.isfinite(x).all(dim=1)
+    if max_norm is not None:
+        bad |= ~(x.detach().abs() <= max_norm).all(dim=1)
+    return bad
+
+
+def fixed_step_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, method: str, stepper: type[Stepper],
+                       dt: float | None = None, max_norm: float | None = 1e6, tol: float | None = None,
+                       max_iter: int = 100, base: str | None = None, stats: dict | None = None) -> torch.Tensor:
+    """``(batch, len(t), dim)`` by fixed steps of ``stepper`` (a ``Stepper`` class), called ``method`` in messages.
 
     ``dt`` (positive, units of t) caps the step; the sign comes from ``t``. ``tol`` and
     ``max_iter`` control the midpoint iteration (also yoshida4 with ``base='midpoint'``).
@@ -179,28 +262,23 @@ def fixed_step_rollout(f, x0: torch.Tensor, t: np.ndarray, method: str, dt: floa
     """
     if dt is not None and not (dt > 0 and math.isfinite(dt)):
         raise ValueError(f"{method} needs a positive finite dt (the direction comes from t_eval), got {dt!r}")
-    stepper = _make_stepper(method, f, x0.shape[1], x0.dtype, tol, max_iter, base)
-    core = stepper.base if isinstance(stepper, _Yoshida) else stepper     # the order-2 step doing the work
+    stepper = stepper(f, x0.shape[1], x0.dtype, tol=tol, max_iter=max_iter, base=base)
     out, x = [x0], x0
     first_bad = torch.full((len(x0),), float("nan"), dtype=torch.float64)
     not_converged = torch.full((len(x0),), float("nan"), dtype=torch.float64)
     for k in range(len(t) - 1):
         span = t[k + 1] - t[k]
-        n = 1 if dt is None else max(1, math.ceil(abs(span) / dt - 1e-9))
-        h = span / n
+        n = _steps(span, dt)
         for _ in range(n):
-            x = stepper.step(x, h)
-        bad = ~torch.isfinite(x).all(dim=1)
-        if max_norm is not None:
-            bad |= ~(x.detach().abs() <= max_norm).all(dim=1)
-        if isinstance(core, _Midpoint) and core.failed is not None:
+            x = stepper.step(x, span / n)
+        bad = _blown(x, max_norm)
+        stuck = torch.zeros_like(bad)
+        failed = stepper.take_failed()
+        if failed is not None:
             # an iteration that failed to converge is the cause, whatever the state did next
-            stuck = core.failed & torch.isnan(not_converged) & torch.isnan(first_bad)
+            stuck = failed & torch.isnan(not_converged) & torch.isnan(first_bad)
             not_converged[stuck] = float(t[k + 1])
-            bad &= ~core.failed
-            core.failed = None
-        else:
-            stuck = torch.zeros_like(bad)
+            bad &= ~failed
         new = bad & torch.isnan(first_bad) & torch.isnan(not_converged)
         first_bad[new] = float(t[k + 1])
         if (new | stuck).any():
@@ -208,21 +286,17 @@ def fixed_step_rollout(f, x0: torch.Tensor, t: np.ndarray, method: str, dt: floa
             stepper.reset(x)
         out.append(x)
     if stats is not None:
-        stats["nfev"] = core.nfev
-        if isinstance(core, _Midpoint):
-            stats["iterations"] = core.iterations                  # fixed-point iterations, all steps
-            stats["max_step_iterations"] = core.max_step_iterations
+        stats.update(stepper.stats())
+    _raise_failures(stepper, method, dt, max_norm, first_bad, not_converged)
+    return torch.stack(out, dim=1)
+
+
+def _raise_failures(stepper: Stepper, method: str, dt, max_norm, first_bad: torch.Tensor,
+                    not_converged: torch.Tensor) -> None:
+    """Raise ``ConvergenceError`` for rows stuck in an implicit step, else ``DivergenceError`` for blown ones."""
     diverged = torch.nonzero(~torch.isnan(first_bad)).flatten().tolist()
     stuck = torch.nonzero(~torch.isnan(not_converged)).flatten().tolist()
     if stuck:
-        times = not_converged[stuck].tolist()
-        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(stuck[:10], times[:10]))
-        also = f" ({len(diverged)} other trajectories diverged)" if diverged else ""
-        raise ConvergenceError(
-            f"{method}: the implicit midpoint iteration did not converge to tol={core.tol:g} in "
-            f"max_iter={max_iter} iterations for {len(stuck)} trajectories: {shown}{also}. The fixed-point "
-            "iteration needs dt * (Lipschitz constant of f) < 2: reduce dt (or raise max_iter).", stuck, times)
+        raise stepper.convergence_error(method, stuck, not_converged[stuck].tolist(), len(diverged))
     if diverged:
-        raise _divergence(f"{method} (dt={dt}, max_norm={max_norm})", diverged, first_bad[diverged].tolist())
-    return torch.stack(out, dim=1)
-
+        raise divergence_error(f"{method} (dt={dt}, max_norm={max_norm})", diverged, first_bad[diverged].tolist())

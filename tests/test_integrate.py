@@ -14,7 +14,7 @@ def spring_solution(x0, t):
     return np.stack([q0 * c + p0 * s, p0 * c - q0 * s], axis=-1)
 
 
-def test_rk4_converges_at_order_four(spring):
+def test_rk4_converges_at_its_declared_order(spring):
     x0 = torch.tensor([[1.0, 0.0], [0.3, -0.7]], dtype=torch.float64)
     t = np.linspace(0, 5, 6)
     exact = spring_solution(x0.numpy(), t)
@@ -24,7 +24,7 @@ def test_rk4_converges_at_order_four(spring):
         traj = hnn.rollout(spring.dynamics, x0, t, method="rk4", dt=dt).numpy()
         errors.append(np.abs(traj - exact).max())
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
-    assert np.all(np.abs(orders - 4) < 0.15), orders
+    assert np.all(np.abs(orders - hnn.get_solver("rk4").order) < 0.15), orders
 
 
 def test_solve_ivp_batched_equals_per_trajectory_scipy(pend):
@@ -124,3 +124,25 @@ def test_dopri5_matches_the_analytic_spring_and_runs_backwards(spring):
     back = hnn.rollout(spring.dynamics, torch.as_tensor(traj[:, -1]), t[::-1].copy(), method="dopri5",
                        rtol=1e-11, atol=1e-12)
     np.testing.assert_allclose(back[:, -1].numpy(), x0.numpy(), atol=1e-8)
+
+
+# ---------------------------------------------------------------- the registry of solvers
+
+def test_the_registry_names_every_method_and_refuses_unknown_and_duplicate_ones():
+    assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "rk4", "leapfrog", "midpoint", "yoshida4"}
+    assert hnn.SYMPLECTIC_METHODS == ("leapfrog", "midpoint", "yoshida4")
+    assert [n for n, s in hnn.SOLVERS.items() if s.adaptive] == ["solve_ivp", "dopri5"]
+    with pytest.raises(ValueError, match=r"unknown method 'euler9'; choose one of \['dopri5', 'leapfrog'"):
+        hnn.get_solver("euler9")
+    with pytest.raises(ValueError, match="already registered"):
+        hnn.register_solver(hnn.get_solver("rk4"))
+    with pytest.raises(TypeError, match="needs a hnn.Solver"):
+        hnn.register_solver("rk4")
+    assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "rk4", "leapfrog", "midpoint", "yoshida4"}
+
+
+def test_solvers_describe_themselves_for_reports():
+    assert hnn.get_solver("solve_ivp").describe({}) == "RK45"
+    assert hnn.get_solver("solve_ivp").describe({"scipy_method": "DOP853"}) == "DOP853"
+    assert hnn.get_solver("dopri5").describe({}) == "dopri5"
+    assert hnn.get_solver("yoshida4").describe({"base": "midpoint", "dt": 0.01}) == "yoshida4 base midpoint dt 0.01"
