@@ -271,24 +271,32 @@ def fixed_step_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, method: str, s
         n = _steps(span, dt)
         for _ in range(n):
             x = stepper.step(x, span / n)
-        bad = _blown(x, max_norm)
-        stuck = torch.zeros_like(bad)
-        failed = stepper.take_failed()
-        if failed is not None:
-            # an iteration that failed to converge is the cause, whatever the state did next
-            stuck = failed & torch.isnan(not_converged) & torch.isnan(first_bad)
-            not_converged[stuck] = float(t[k + 1])
-            bad &= ~failed
-        new = bad & torch.isnan(first_bad) & torch.isnan(not_converged)
-        first_bad[new] = float(t[k + 1])
-        if (new | stuck).any():
-            x = torch.where((new | stuck)[:, None], torch.zeros_like(x), x)   # keep the dead rows from overflowing
-            stepper.reset(x)
+        x = _retire_failed_rows(stepper, x, float(t[k + 1]), max_norm, first_bad, not_converged)
         out.append(x)
     if stats is not None:
         stats.update(stepper.stats())
     _raise_failures(stepper, method, dt, max_norm, first_bad, not_converged)
     return torch.stack(out, dim=1)
+
+
+def _retire_failed_rows(stepper: Stepper, x: torch.Tensor, time: float, max_norm: float | None,
+                        first_bad: torch.Tensor, not_converged: torch.Tensor) -> torch.Tensor:
+    """``x`` with the rows that failed by ``time`` zeroed; each row's first failure time is
+    written into ``first_bad`` (blew up) or ``not_converged`` (its implicit step failed), both ``(batch,)``."""
+    bad = _blown(x, max_norm)
+    stuck = torch.zeros_like(bad)
+    failed = stepper.take_failed()
+    if failed is not None:
+        # an iteration that failed to converge is the cause, whatever the state did next
+        stuck = failed & torch.isnan(not_converged) & torch.isnan(first_bad)
+        not_converged[stuck] = time
+        bad &= ~failed
+    new = bad & torch.isnan(first_bad) & torch.isnan(not_converged)
+    first_bad[new] = time
+    if (new | stuck).any():
+        x = torch.where((new | stuck)[:, None], torch.zeros_like(x), x)   # keep the dead rows from overflowing
+        stepper.reset(x)
+    return x
 
 
 def _raise_failures(stepper: Stepper, method: str, dt, max_norm, first_bad: torch.Tensor,
