@@ -6,8 +6,11 @@ the training loop, the paper's metrics, and saved runs.
     stats = hnn.train(model, x, dxdt)
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
 """
-from .integrate import DivergenceError, rk4_step, rollout
-from .symplectic import SYMPLECTIC_METHODS, YOSHIDA_WEIGHTS, ConvergenceError
+from .errors import ConvergenceError, DivergenceError
+from .integrate import rk4_step, rollout
+from .fixed_step import YOSHIDA_WEIGHTS
+from .solvers import SOLVERS, SYMPLECTIC_METHODS, Solver, get_solver, register_solver
+from . import symplectic  # noqa: F401  (the old name of hnn.fixed_step, still importable as hnn.symplectic)
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
@@ -19,6 +22,7 @@ from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy,
 __all__ = [
     "HNN", "MLP", "MLPAutoencoder", "PixelHNN", "build_model", "get_nonlinearity", "permutation_tensor",
     "rollout", "rk4_step", "DivergenceError", "ConvergenceError", "SYMPLECTIC_METHODS", "YOSHIDA_WEIGHTS",
+    "SOLVERS", "Solver", "get_solver", "register_solver",
     "train",
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "run_experiment", "run_dir", "save_run", "load_run", "find_run",

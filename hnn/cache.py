@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .runs import atomic_write
+from .io import atomic_write
 
 _PARAMS_KEY = "__params__"
 

@@ -24,6 +24,7 @@ import torch
 
 from .integrate import rollout
 from .metrics import energy_mse
+from .solvers import get_solver
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,12 @@ class EnergyProtocol:
             i = 0 .. num_trials - 1; ``'test_segment'``: the measured test trajectory of the
             dataset is the truth, started from its first state on its own (uneven) times, and
             the ± comes from 5 contiguous chunks of its time steps.
+        method: the integrator, a name in ``hnn.SOLVERS``; ``dataclasses.replace(protocol,
+            method='dopri5')`` swaps it and nothing else. ``rtol``/``atol`` go to adaptive methods.
+        options: the method's other ``rollout`` options, e.g. ``{'scipy_method': 'DOP853'}``
+            (a dict is stored as sorted ``(name, value)`` pairs, so protocols stay hashable). Box
+            and seeds protocols integrate in the rescaled time s = t / span in [0, 1], so a
+            fixed-step ``dt`` is a fraction of the span (default: one step per output point).
     """
     name: str
     t_span: tuple[float, float] = (0.0, 20.0)
@@ -52,6 +59,25 @@ class EnergyProtocol:
     x0: str = "box"
     seed: int = 0
     splits: int = 5
+    method: str = "solve_ivp"
+    options: tuple[tuple[str, object], ...] = ()
+
+    def __post_init__(self):
+        get_solver(self.method)             # an unknown method fails here, naming the known ones
+        if isinstance(self.options, dict):  # stored as sorted pairs: the protocol stays frozen and hashable
+            object.__setattr__(self, "options", tuple(sorted(self.options.items())))
+
+    def rollout_options(self) -> dict:
+        """The keywords ``hnn.rollout`` gets: ``method``, its ``options``, and the protocol's
+        ``rtol``/``atol`` if the method is adaptive (a fixed-step one has none)."""
+        tolerances = {"rtol": self.rtol, "atol": self.atol} if get_solver(self.method).adaptive else {}
+        return {"method": self.method, **tolerances, **dict(self.options)}
+
+    def _integrator(self) -> str:
+        """E.g. ``'RK45 rtol 1e-12 atol 1e-06'`` (solve_ivp's default), ``'rk4 dt 0.01'``."""
+        solver = get_solver(self.method)
+        name = solver.describe(dict(self.options))
+        return f"{name} rtol {self.rtol:g} atol {self.atol:g}" if solver.adaptive else name
 
     def describe(self) -> str:
         quirks = []
@@ -62,7 +88,7 @@ class EnergyProtocol:
         else:
             where = (f"{self.num_trials} trials ({'seeds 0..' + str(self.num_trials - 1) if self.x0 == 'seeds' else 'box'}),"
                      f" t in [{self.t_span[0]:g}, {self.t_span[1]:g}], {self.num_points} points")
-        return (f"{self.name}: {where}, RK45 rtol {self.rtol:g} atol {self.atol:g}, energy = {self.energy}"
+        return (f"{self.name}: {where}, {self._integrator()}, energy = {self.energy}"
                 + (f", {'; '.join(quirks)}" if quirks else ""))
 
 
@@ -122,19 +148,29 @@ def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int,
     """Trajectories of per-trial length ``durations`` in one batched call.
 
     Trial i integrates dx/ds = T_i f(x) on s in [0, 1], which is x(T_i s): one shared grid
-    for trials whose time spans differ.
+    for trials whose time spans differ. Equal spans share one ``(1, 1)`` scale, which any method
+    can use; unequal ones (the paper's spring rescale) tie a scale to each row, so they need a
+    method that passes every row to every call of ``f`` (not dopri5, which drops finished rows).
     """
-    scale = torch.as_tensor(durations, dtype=x0.dtype)[:, None]
-    return _protocol_rollout(lambda x: scale * f(x), x0, np.linspace(0.0, 1.0, num_points), protocol)
+    same = bool(np.all(durations == durations[0]))
+    scale = torch.as_tensor(durations[:1] if same else durations, dtype=x0.dtype)[:, None]
+
+    def scaled(x: torch.Tensor) -> torch.Tensor:
+        if len(scale) not in (1, len(x)):
+            raise ValueError(f"protocol {protocol.name!r} scales each trial's time differently, but "
+                             f"{protocol.method} passed {len(x)} of the {len(scale)} rows to f: use a method "
+                             "that keeps every row together (solve_ivp or a fixed-step one)")
+        return scale * f(x)
+    return _protocol_rollout(scaled, x0, np.linspace(0.0, 1.0, num_points), protocol)
 
 
 def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol) -> torch.Tensor:
-    """``rollout`` at the protocol's tolerances, without the float32-tolerance warning."""
+    """``rollout`` by the protocol's integrator and tolerances, without the float32-tolerance warning."""
     with warnings.catch_warnings():
         # the protocols ask float32 models for tight tolerances, as the original did: what that
         # costs in accuracy is a property of the protocol, not news at every evaluation
         warnings.filterwarnings("ignore", message=".*tighter than torch.float32", category=UserWarning)
-        return rollout(f, x0, t_eval, rtol=protocol.rtol, atol=protocol.atol)
+        return rollout(f, x0, t_eval, **protocol.rollout_options())
 
 
 def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dict | None = None) -> dict:

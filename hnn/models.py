@@ -60,9 +60,34 @@ class MLP(nn.Module):
             nn.init.orthogonal_(layer.weight)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        # _tanh_mlp_input_gradient differentiates this function by hand: edit both together
+        # (tests/test_models.py compares the two)
         h = self._act(self.linear1(x))
         h = self._act(self.linear2(h))
         return self.linear3(h)
+
+    def input_gradient(self, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
+        """d(self(x)[:, k])/dx, ``(batch, input_dim)``: in closed form when ``_closed_form_applies``
+        (about 2x faster training), else by autograd; with ``create_graph`` it can be differentiated."""
+        if not self._closed_form_applies():
+            return _autograd_input_gradient(self, x, k, create_graph)
+        l1, l2 = self.linear1, self.linear2
+        params = (l1.weight, l1.bias, l2.weight, l2.bias, self.linear3.weight[k])
+        if not torch.is_grad_enabled():     # evaluation: skip the autograd node (~0.1 ms a call)
+            return _tanh_mlp_input_gradient(x, *params, saved=False)[0]
+        return _TanhMLPInputGradient.apply(x, *params)
+
+    def _closed_form_applies(self) -> bool:
+        """Whether ``self(x)`` is the network the closed form differentiates: ``MLP.forward`` as
+        defined above (not overridden by a subclass, nor replaced on the class or the instance
+        since), tanh, plain linear layers and no forward hooks. Anything else gets autograd."""
+        return (type(self).forward is _CLOSED_FORM_FORWARD and "forward" not in vars(self)
+                and self._act is torch.tanh and not (self._forward_hooks or self._forward_pre_hooks)
+                and all(type(layer) is nn.Linear for layer in (self.linear1, self.linear2, self.linear3)))
+
+
+# the forward the closed form was written for, taken at import: a forward patched in later differs
+_CLOSED_FORM_FORWARD = MLP.forward
 
 
 def permutation_tensor(n: int, assume_canonical_coords: bool = True) -> torch.Tensor:
@@ -136,13 +161,15 @@ class _TanhMLPInputGradient(torch.autograd.Function):
 
 
 def _input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
-    """d(model(x)[:, k])/dx, ``(batch, input_dim)``: closed form for a tanh MLP, else autograd."""
-    if type(model) is MLP and model.nonlinearity_name == "tanh":
-        l1, l2 = model.linear1, model.linear2
-        params = (l1.weight, l1.bias, l2.weight, l2.bias, model.linear3.weight[k])
-        if not torch.is_grad_enabled():     # evaluation: skip the autograd node (~0.1 ms a call)
-            return _tanh_mlp_input_gradient(x, *params, saved=False)[0]
-        return _TanhMLPInputGradient.apply(x, *params)
+    """d(model(x)[:, k])/dx, ``(batch, input_dim)``: an ``MLP`` computes its own (closed form when
+    it applies), any other network goes through autograd."""
+    if isinstance(model, MLP):
+        return model.input_gradient(x, k, create_graph)
+    return _autograd_input_gradient(model, x, k, create_graph)
+
+
+def _autograd_input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
+    """d(model(x)[:, k])/dx by autograd, ``(batch, input_dim)``; ``model`` must output ``(batch, 2)``."""
     with torch.enable_grad():
         x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
         out = model(x_in)

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from .integrate import rk4_step
+from .io import atomic_write, write_json  # noqa: F401  (hnn.runs.atomic_write, as before)
 from .metrics import derivative_loss
 from .models import PixelHNN, build_model
 from .training import train
@@ -27,26 +28,6 @@ from .training import train
 _DTYPES = {"float32": torch.float32, "float64": torch.float64}
 _UMASK = os.umask(0)
 os.umask(_UMASK)
-
-
-def atomic_write(path, write) -> None:
-    """Call ``write(tmp_path)`` then rename onto ``path``, so readers never see a partial file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.chmod(tmp, 0o666 & ~_UMASK)     # mkstemp makes 0600; give the file the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_json(path, obj) -> None:
-    """``obj`` as indented JSON at ``path``, atomically."""
-    atomic_write(path, lambda tmp: Path(tmp).write_text(json.dumps(obj, indent=2) + "\n"))
 
 
 def run_label(args) -> str:

@@ -5,6 +5,7 @@ import pytest
 import torch
 
 import hnn
+import hnn.models
 from hnn.models import _input_gradient
 
 
@@ -83,6 +84,65 @@ def test_closed_form_is_used_and_gradcheck():
     W1, b1, W2, b2, W3 = (p.detach().clone().requires_grad_(True) for p in net.parameters())
     from hnn.models import _TanhMLPInputGradient
     assert torch.autograd.gradcheck(lambda *a: _TanhMLPInputGradient.apply(*a), (x, W1, b1, W2, b2, W3[1]))
+
+
+def _closed_form_calls(monkeypatch) -> list:
+    """Spy on the closed form: the returned list grows by one per call (either grad mode)."""
+    calls, real = [], hnn.models._tanh_mlp_input_gradient
+
+    def spy(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(hnn.models, "_tanh_mlp_input_gradient", spy)
+    return calls
+
+
+def _autograd_field(net, x):
+    """The symplectic gradient of F2 = net(x)[:, 1] by plain autograd, 2-D: ``(batch, 2)``."""
+    x = x.detach().requires_grad_(True)
+    g = torch.autograd.grad(net(x)[:, 1].sum(), x)[0]
+    return torch.cat([g[:, 1:], -g[:, :1]], 1)
+
+
+@pytest.mark.parametrize("grad_mode", [True, False])
+def test_an_edited_mlp_forward_falls_back_to_autograd(monkeypatch, grad_mode):
+    calls = _closed_form_calls(monkeypatch)
+    torch.manual_seed(0)
+    model = hnn.build_model(2, 16).double()
+    x = torch.randn(5, 2, dtype=torch.float64)
+    with torch.set_grad_enabled(grad_mode):
+        fast = model.time_derivative(x)
+    assert len(calls) == 1                                   # the unedited MLP takes the closed form
+    torch.testing.assert_close(fast, _autograd_field(model.differentiable_model, x), rtol=1e-10, atol=1e-10)
+    unedited = hnn.MLP.forward
+    monkeypatch.setattr(hnn.MLP, "forward", lambda self, x: 2 * unedited(self, x))
+    with torch.set_grad_enabled(grad_mode):
+        edited = model.time_derivative(x)
+    assert len(calls) == 1                                   # not again: the closed form is the old network's
+    torch.testing.assert_close(edited, _autograd_field(model.differentiable_model, x), rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(edited, 2 * fast, rtol=1e-10, atol=1e-10)
+
+
+def test_subclasses_hooks_and_other_activations_fall_back_to_autograd(monkeypatch):
+    calls = _closed_form_calls(monkeypatch)
+
+    class Shifted(hnn.MLP):
+        def forward(self, x):
+            return super().forward(x + 0.5)
+
+    class Named(hnn.MLP):
+        """A subclass that leaves forward alone keeps the closed form."""
+
+    x = torch.randn(5, 2, dtype=torch.float64)
+    hooked = hnn.MLP(2, 8, 2).double()
+    hooked.register_forward_hook(lambda module, inputs, out: out ** 2)
+    for net in (Shifted(2, 8, 2).double(), hooked, hnn.MLP(2, 8, 2, nonlinearity="softplus").double()):
+        field = hnn.HNN(2, net).time_derivative(x)
+        torch.testing.assert_close(field, _autograd_field(net, x), rtol=1e-12, atol=1e-12)
+    assert calls == []
+    net = Named(2, 8, 2).double()
+    torch.testing.assert_close(hnn.HNN(2, net).time_derivative(x), _autograd_field(net, x), rtol=1e-10, atol=1e-10)
+    assert len(calls) == 1
 
 
 def test_time_derivative_modes():

@@ -1,0 +1,35 @@
+"""The errors of a failed rollout, in one module every integrator imports (and nothing else).
+
+``DivergenceError`` names the trajectories and times that blew up; ``ConvergenceError`` (a
+subclass) says an implicit step's iteration did not converge. Both are also ``hnn.<name>``.
+"""
+from __future__ import annotations
+
+
+class DivergenceError(FloatingPointError):
+    """A rollout produced non-finite states. ``trajectories`` and ``times`` say which and when."""
+
+    def __init__(self, message: str, trajectories=(), times=()):
+        super().__init__(message)
+        self.trajectories = list(trajectories)
+        self.times = list(times)
+
+
+class ConvergenceError(DivergenceError):
+    """The implicit midpoint's fixed-point iteration did not converge; ``trajectories``, ``times`` say where.
+
+    A ``DivergenceError``, so code that catches failed rollouts catches this one too.
+    """
+
+
+def divergence_error(message: str, bad_rows, times) -> DivergenceError:
+    """The ``DivergenceError`` of a rollout whose rows ``bad_rows`` blew up at ``times`` (same length).
+
+    The message names the first ten as ``#row at t=time`` and how to avoid the blow-up.
+    """
+    rows = [int(i) for i in bad_rows]
+    shown = ", ".join(f"#{i} at t={t:.4g}" for i, t in zip(rows[:10], times[:10]))
+    more = f" (+{len(rows) - 10} more)" if len(rows) > 10 else ""
+    return DivergenceError(
+        f"{message}: {len(rows)} trajectories diverged: {shown}{more}. Reduce the step size or tolerance, "
+        "or check that the initial states lie where the model was trained.", rows, list(times))

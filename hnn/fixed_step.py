@@ -1,0 +1,310 @@
+"""Fixed-step integrators in torch: classic RK4 and the symplectic leapfrog, implicit midpoint and
+Yoshida's 4th order, all run by one driver, ``fixed_step_rollout``.
+
+The symplectic three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vector field
+``f(x) -> dxdt`` alone, and are reached through ``hnn.rollout(..., method=...)``:
+
+- ``'leapfrog'`` (Stormer-Verlet, kick-drift-kick), order 2, two ``f`` calls a step. It reads
+  only the ``q`` half of ``f`` at states where ``p`` has just changed and only the ``p`` half
+  where ``q`` has, so it is exact (symplectic, reversible) only for separable H = T(p) + V(q),
+  as in every task's true dynamics. A learned HNN's H is generally not separable: use
+  ``'midpoint'`` for learned models.
+- ``'midpoint'`` (implicit midpoint rule), order 2, symplectic and symmetric for any H:
+  ``x1 = x0 + dt f((x0 + x1) / 2)``, solved by fixed-point iteration to ``tol``.
+- ``'yoshida4'``: three steps of a symmetric order-2 base (leapfrog or midpoint) with the
+  weights w1, w0, w1 below, order 4, still symplectic and symmetric.
+
+Steps are fixed: each interval of ``t_eval`` is cut into equal steps no longer than ``dt``
+(default one step per interval), signed like ``t_eval`` so integration runs backwards too.
+``'rk4'`` (classic, order 4, not symplectic) runs through the same driver, so every
+fixed-step method reports blow-ups the same way.
+
+Each method is a ``Stepper``: ``step(x, h)`` advances the batch by one step of size ``h``; the
+driver cuts ``t_eval`` into steps and checks the states. ``hnn.solvers`` registers the steppers
+by name, so a new fixed-step method is a ``Stepper`` subclass and one ``register_solver`` call.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Callable
+
+import numpy as np
+import torch
+
+from .errors import ConvergenceError, divergence_error
+
+Field = Callable[[torch.Tensor], torch.Tensor]
+
+# Yoshida (1990): a symmetric composition S(w1 h) S(w0 h) S(w1 h) of a symmetric order-2 step S
+# is order 4 when 2 w1 + w0 = 1 (consistency) and 2 w1^3 + w0^3 = 0 (the h^3 error cancels), so
+# w0 = -2^(1/3) w1 and w1 (2 - 2^(1/3)) = 1. Read at call time, so a test can perturb them.
+_CBRT2 = 2.0 ** (1.0 / 3.0)
+YOSHIDA_WEIGHTS = (1.0 / (2.0 - _CBRT2), -_CBRT2 / (2.0 - _CBRT2), 1.0 / (2.0 - _CBRT2))
+
+
+def default_tol(dtype: torch.dtype) -> float:
+    """The midpoint iteration's default tolerance: 1e-12 in float64, a few ulps in float32."""
+    return max(1e-12, 8 * torch.finfo(dtype).eps)
+
+
+def rk4_step(f: Field, x: torch.Tensor, dt) -> torch.Tensor:
+    """The classic RK4 increment ``x(t + dt) - x(t)`` of dx/dt = f(x); ``dt`` a float or ``(batch, 1)``."""
+    k1 = f(x)
+    k2 = f(x + dt / 2 * k1)
+    k3 = f(x + dt / 2 * k2)
+    k4 = f(x + dt * k3)
+    return dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+class Stepper:
+    """One fixed-step method on a batch ``x`` of shape ``(batch, dim)``: all the driver sees of it.
+
+    A subclass implements ``step`` and counts its batched calls of ``f`` in ``nfev``. Every
+    stepper is built as ``Stepper(f, dim, dtype, tol=, max_iter=, base=)``: ``rollout`` accepts
+    the midpoint's options for every fixed-step method, and explicit methods ignore them.
+    """
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, **options):
+        self.f, self.nfev = f, 0
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        """``x`` ``(batch, dim)`` one step of (signed) size ``h`` later."""
+        raise NotImplementedError
+
+    def reset(self, x: torch.Tensor) -> None:
+        """Forget what is carried from step to step: rows of ``x`` were replaced."""
+
+    def take_failed(self) -> torch.Tensor | None:
+        """``(batch,)`` rows whose implicit equation was not solved since the last call; None if none can fail."""
+        return None
+
+    def stats(self) -> dict:
+        """What ``rollout(stats={})`` reports: ``nfev``, the number of batched ``f`` calls."""
+        return {"nfev": self.nfev}
+
+    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
+        """The error for ``rows`` whose implicit step failed at ``times``, ``others`` rows having diverged besides."""
+        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
+        also = f" ({others} other trajectories diverged)" if others else ""
+        return ConvergenceError(f"{method}: the implicit step did not converge for {len(rows)} trajectories: "
+                                f"{shown}{also}. Reduce dt.", rows, times)
+
+
+class RK4(Stepper):
+    """The classic (non-symplectic) RK4 step."""
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        self.nfev += 4
+        return x + rk4_step(self.f, x, h)
+
+
+class Leapfrog(Stepper):
+    """Kick-drift-kick; keeps dp/dt at the current q between calls (exact for separable H)."""
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, **options):
+        if dim % 2:
+            raise ValueError(f"leapfrog needs x = [q, p] of even dimension, got dim={dim}; use method='midpoint'")
+        super().__init__(f, dim, dtype)
+        self.n, self.accel = dim // 2, None
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        n = self.n
+        q, p = x[:, :n], x[:, n:]
+        if self.accel is None:
+            self.accel = self.f(x)[:, n:]
+            self.nfev += 1
+        p_half = p + (h / 2) * self.accel
+        q_new = q + h * self.f(torch.cat([q, p_half], dim=1))[:, :n]      # dq/dt at p_half
+        self.accel = self.f(torch.cat([q_new, p_half], dim=1))[:, n:]     # dp/dt at q_new
+        self.nfev += 2
+        return torch.cat([q_new, p_half + (h / 2) * self.accel], dim=1)
+
+    def reset(self, x: torch.Tensor) -> None:
+        self.accel = None         # the cached dp/dt belongs to the replaced rows too
+
+
+def _checked_tol(tol: float | None, dtype: torch.dtype) -> float:
+    """The midpoint's ``tol`` (default ``default_tol``), refused unless positive and finite;
+    warns below the dtype's eps, which the iteration cannot reach."""
+    if tol is None:
+        tol = default_tol(dtype)
+    if not (tol > 0 and math.isfinite(tol)):
+        raise ValueError(f"midpoint needs a positive finite tol, got {tol!r}")
+    if tol < torch.finfo(dtype).eps:
+        # stacklevel 5: rollout's caller, past _checked_tol, Midpoint, the driver and rollout (for
+        # yoshida4's base, one frame deeper: rollout)
+        warnings.warn(f"midpoint tol={tol:g} is below the machine epsilon of {dtype} "
+                      f"({torch.finfo(dtype).eps:.3g}): the iteration cannot reach it; use tol >= "
+                      f"{default_tol(dtype):.3g} or float64 states", stacklevel=5)
+    return tol
+
+
+class Midpoint(Stepper):
+    """Implicit midpoint by fixed-point iteration, started from the previous increment (Euler at first)."""
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, tol: float | None = None, max_iter: int = 100,
+                 **options):
+        super().__init__(f, dim, dtype)
+        self.tol = _checked_tol(tol, dtype)
+        if not (isinstance(max_iter, int) and max_iter >= 1):
+            raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+        self.max_iter = max_iter
+        self.iterations = self.max_step_iterations = 0
+        self.failed = None          # (batch,) rows whose iteration did not converge in the current interval
+        self.last = None            # (h, x1 - x) of the previous step: the next step's first guess
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        if self.last is None:
+            x1 = x + h * self.f(x)          # explicit Euler: off by O(h^2)
+            self.nfev += 1
+        else:                               # the last increment, rescaled: off by O(h^2) too, and free
+            x1 = x + (h / self.last[0]) * self.last[1]
+        scale = x.detach().abs().clamp(min=1.0)
+        for k in range(1, self.max_iter + 1):  # noqa: B007 (k counts the iterations after the loop)
+            x_next = x + h * self.f((x + x1) / 2)
+            self.nfev += 1
+            delta = (x_next.detach() - x1.detach()).abs()
+            x1 = x_next
+            # converged where the update is below tol (relative to max(|x|, 1)); non-finite rows are
+            # not "unconverged": the divergence check reports them
+            ok = ((delta <= self.tol * scale) | ~torch.isfinite(delta)).all(dim=1)
+            if ok.all():
+                break
+        else:
+            self.failed = ~ok if self.failed is None else self.failed | ~ok
+        self.iterations += k
+        self.max_step_iterations = max(self.max_step_iterations, k)
+        self.last = (h, (x1 - x).detach())     # detached: the converged x1 does not depend on the guess
+        return x1
+
+    def reset(self, x: torch.Tensor) -> None:
+        self.last = None
+
+    def take_failed(self) -> torch.Tensor | None:
+        failed, self.failed = self.failed, None
+        return failed
+
+    def stats(self) -> dict:
+        # iterations: fixed-point iterations over all steps; max_step_iterations: the most in one step
+        return {"nfev": self.nfev, "iterations": self.iterations, "max_step_iterations": self.max_step_iterations}
+
+    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
+        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
+        also = f" ({others} other trajectories diverged)" if others else ""
+        return ConvergenceError(
+            f"{method}: the implicit midpoint iteration did not converge to tol={self.tol:g} in "
+            f"max_iter={self.max_iter} iterations for {len(rows)} trajectories: {shown}{also}. The fixed-point "
+            "iteration needs dt * (Lipschitz constant of f) < 2: reduce dt (or raise max_iter).", rows, times)
+
+
+_YOSHIDA_BASES = {"leapfrog": Leapfrog, "midpoint": Midpoint}
+
+
+class Yoshida4(Stepper):
+    """Yoshida's order-4 composition of a symmetric order-2 base: ``base='leapfrog'`` (default) or ``'midpoint'``.
+
+    The base does the work: its state, failures and counts are the composition's.
+    """
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, base: str | None = None, **options):
+        base = base or "leapfrog"
+        if base not in _YOSHIDA_BASES:
+            raise ValueError(f"yoshida4's base must be 'leapfrog' or 'midpoint', got {base!r}")
+        self.base = _YOSHIDA_BASES[base](f, dim, dtype, **options)     # no state of its own
+
+    @property
+    def nfev(self) -> int:
+        return self.base.nfev
+
+    def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
+        for w in YOSHIDA_WEIGHTS:
+            x = self.base.step(x, w * h)
+        return x
+
+    def reset(self, x: torch.Tensor) -> None:
+        self.base.reset(x)
+
+    def take_failed(self) -> torch.Tensor | None:
+        return self.base.take_failed()
+
+    def stats(self) -> dict:
+        return self.base.stats()
+
+    def convergence_error(self, *args) -> ConvergenceError:
+        return self.base.convergence_error(*args)
+
+
+def _steps(span: float, dt: float | None) -> int:
+    """How many equal steps no longer than ``dt`` cover ``span`` (1 without ``dt``)."""
+    return 1 if dt is None else max(1, math.ceil(abs(span) / dt - 1e-9))
+
+
+def _blown(x: torch.Tensor, max_norm: float | None) -> torch.Tensor:
+    """``(batch,)`` rows of ``x`` that are non-finite or have a component beyond ``max_norm``."""
+    bad = ~torch.isfinite(x).all(dim=1)
+    if max_norm is not None:
+        bad |= ~(x.detach().abs() <= max_norm).all(dim=1)
+    return bad
+
+
+def fixed_step_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, method: str, stepper: type[Stepper],
+                       dt: float | None = None, max_norm: float | None = 1e6, tol: float | None = None,
+                       max_iter: int = 100, base: str | None = None, stats: dict | None = None) -> torch.Tensor:
+    """``(batch, len(t), dim)`` by fixed steps of ``stepper`` (a ``Stepper`` class), called ``method`` in messages.
+
+    ``dt`` (positive, units of t) caps the step; the sign comes from ``t``. ``tol`` and
+    ``max_iter`` control the midpoint iteration (also yoshida4 with ``base='midpoint'``).
+    Runs in the caller's grad mode, so a step can be differentiated (e.g. its Jacobian).
+    Rows blowing up (non-finite, or a component beyond ``max_norm``) are recorded at the first
+    ``t`` sample where they are found and the others finish; then ``DivergenceError`` names them.
+    A midpoint iteration that does not converge raises ``ConvergenceError`` the same way.
+    """
+    if dt is not None and not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"{method} needs a positive finite dt (the direction comes from t_eval), got {dt!r}")
+    stepper = stepper(f, x0.shape[1], x0.dtype, tol=tol, max_iter=max_iter, base=base)
+    out, x = [x0], x0
+    first_bad = torch.full((len(x0),), float("nan"), dtype=torch.float64)
+    not_converged = torch.full((len(x0),), float("nan"), dtype=torch.float64)
+    for k in range(len(t) - 1):
+        span = t[k + 1] - t[k]
+        n = _steps(span, dt)
+        for _ in range(n):
+            x = stepper.step(x, span / n)
+        x = _retire_failed_rows(stepper, x, float(t[k + 1]), max_norm, first_bad, not_converged)
+        out.append(x)
+    if stats is not None:
+        stats.update(stepper.stats())
+    _raise_failures(stepper, method, dt, max_norm, first_bad, not_converged)
+    return torch.stack(out, dim=1)
+
+
+def _retire_failed_rows(stepper: Stepper, x: torch.Tensor, time: float, max_norm: float | None,
+                        first_bad: torch.Tensor, not_converged: torch.Tensor) -> torch.Tensor:
+    """``x`` with the rows that failed by ``time`` zeroed; each row's first failure time is
+    written into ``first_bad`` (blew up) or ``not_converged`` (its implicit step failed), both ``(batch,)``."""
+    bad = _blown(x, max_norm)
+    stuck = torch.zeros_like(bad)
+    failed = stepper.take_failed()
+    if failed is not None:
+        # an iteration that failed to converge is the cause, whatever the state did next
+        stuck = failed & torch.isnan(not_converged) & torch.isnan(first_bad)
+        not_converged[stuck] = time
+        bad &= ~failed
+    new = bad & torch.isnan(first_bad) & torch.isnan(not_converged)
+    first_bad[new] = time
+    if (new | stuck).any():
+        x = torch.where((new | stuck)[:, None], torch.zeros_like(x), x)   # keep the dead rows from overflowing
+        stepper.reset(x)
+    return x
+
+
+def _raise_failures(stepper: Stepper, method: str, dt, max_norm, first_bad: torch.Tensor,
+                    not_converged: torch.Tensor) -> None:
+    """Raise ``ConvergenceError`` for rows stuck in an implicit step, else ``DivergenceError`` for blown ones."""
+    diverged = torch.nonzero(~torch.isnan(first_bad)).flatten().tolist()
+    stuck = torch.nonzero(~torch.isnan(not_converged)).flatten().tolist()
+    if stuck:
+        raise stepper.convergence_error(method, stuck, not_converged[stuck].tolist(), len(diverged))
+    if diverged:
+        raise divergence_error(f"{method} (dt={dt}, max_norm={max_norm})", diverged, first_bad[diverged].tolist())
