@@ -30,7 +30,9 @@ import torch
 import hnn
 from hnn.models import PixelHNN
 from hnn.runs import write_json
-import readme
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import readme  # noqa: E402
 
 FULL_STEPS = 10001
 

@@ -93,7 +93,8 @@ def set_stamp(text: str) -> None:
     STAMP["text"] = text
 
 
-def _save(fig, path) -> Path:
+def save_figure(fig, path) -> Path:
+    """Write ``fig`` as a PNG at ``path`` atomically (its title stamped while ``set_stamp`` is on), then close it."""
     path = Path(path)
     if STAMP["text"]:
         old = fig._suptitle.get_text() if fig._suptitle is not None else ""
@@ -139,7 +140,7 @@ def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
     if lines is not None:
         fig.colorbar(lines, ax=axes, shrink=0.8, label="t")
     fig.suptitle(f"{task}: vector fields and trajectories from x0 = {s['x0']}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def integration_figure(task: str, system, models: dict, path) -> Path:
@@ -181,7 +182,7 @@ def integration_figure(task: str, system, models: dict, path) -> Path:
     axes[3].set(title="Total energy", xlabel="t", ylabel="true H")
     axes[0].legend(fontsize=8, loc="upper right")
     fig.suptitle(f"{task}: integration from x0 = {s['x0']}, t in [{t[0]:g}, {t[-1]:g}] ({len(t)} points)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def energy_figure(task: str, result: dict, path) -> Path:
@@ -221,7 +222,7 @@ def energy_figure(task: str, result: dict, path) -> Path:
     quirk = (f"; models' clock x{protocol['time_rescale']:g} (paper quirk)"
              if protocol.get("time_rescale") else "")
     fig.suptitle(f"{task}, energy protocol '{protocol['name']}' (energy = {protocol.get('energy')}{quirk})\n{scores}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, path) -> Path:
@@ -260,4 +261,4 @@ def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, pat
                     ylabel="2.4 (1 - cos q) + p^2")
         axes[3].legend(fontsize=8)
     fig.suptitle(f"{task}: measured pendulum (Schmidt & Lipson 2009), data and learned fields")
-    return _save(fig, path)
+    return save_figure(fig, path)

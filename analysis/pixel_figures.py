@@ -25,7 +25,7 @@ import torch  # noqa: E402
 
 import hnn  # noqa: E402
 import hnn.pixels  # noqa: E402
-from figures import COLORS, NAMES, _save  # noqa: E402
+from hnn_analysis.figures import COLORS, NAMES, save_figure  # noqa: E402
 
 SIDE = 28
 
@@ -55,7 +55,7 @@ def compare_static(result: dict, path, every: int = 6, upto: int = 100) -> Path:
     ax.set_xlabel("frame")
     ax.set_ylabel("q (rad), decoded then mapped linearly")
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def energy_plot(result: dict, path) -> Path:
@@ -69,7 +69,7 @@ def energy_plot(result: dict, path) -> Path:
     ax.set_ylabel("energy 1.9 (1 - cos q) + p^2")
     ax.set_title("Pixel pendulum: energy of the decoded paths")
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def phase_space(models: dict, dataset: dict, path, points: int = 3000) -> Path:
@@ -93,7 +93,7 @@ def phase_space(models: dict, dataset: dict, path, points: int = 3000) -> Path:
         ax.set_ylabel("latent z_p")
         ax.set_title(f"{NAMES[label]}: latents" + ("" if model.baseline else " and learned H")
                      + " (colour: true q)", fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def add_energy(model, z0, gif_path, png_path) -> dict:
@@ -113,7 +113,7 @@ def add_energy(model, z0, gif_path, png_path) -> dict:
     ax1.set_xlabel("time (frames)")
     ax1.set_ylabel("learned H")
     ax1.set_title(f"H {bump['H_before']:.3g} -> {bump['H_after']:.3g}", fontsize=10)
-    _save(fig, png_path)
+    save_figure(fig, png_path)
     return {k: bump[k] for k in ("H_before", "H_after", "H_spread_before", "H_spread_after")}
 
 

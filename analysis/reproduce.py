@@ -34,12 +34,12 @@ import torch
 from tqdm.auto import tqdm
 
 import hnn
-from hnn.runs import atomic_write, write_json
-import figures
-import readme
-from readme import stage_table
-import task_hooks
 from hnn.paper import PAPER
+from hnn.runs import atomic_write, write_json
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import figures, readme, task_hooks  # noqa: E402
+from hnn_analysis.readme import stage_table  # noqa: E402
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))

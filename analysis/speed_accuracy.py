@@ -44,7 +44,8 @@ import torch
 import hnn
 from hnn.runs import atomic_write, write_json
 
-import readme
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import readme  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)

@@ -36,11 +36,8 @@ from typing import Callable
 
 import numpy as np
 
-import figures
 import hnn
-import mischief
-import orbit_figures
-import pixel_figures
+from hnn_analysis import figures, mischief, orbit_figures, pixel_figures
 
 
 def energy_protocols(task: str, system, models: dict) -> dict:

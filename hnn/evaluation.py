@@ -95,7 +95,7 @@ def get_protocol(task: str, name: str = "paper") -> EnergyProtocol:
                          f"{ {t: sorted(p) for t, p in PROTOCOLS.items()} }") from None
 
 
-def _start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:
+def start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:
     """``(num_trials, dim)`` start states of a ``'box'`` or ``'seeds'`` protocol."""
     if protocol.x0 == "seeds":
         return np.stack([np.asarray(system.initial_state(i), dtype=np.float64) for i in range(protocol.num_trials)])
@@ -154,7 +154,7 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     """
     if protocol.x0 == "test_segment":
         return _evaluate_segment(system, models, protocol, dataset)
-    x0 = torch.as_tensor(_start_states(protocol, system), dtype=torch.float64)
+    x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64)
     t0, t1 = protocol.t_span
     trials = np.arange(protocol.num_trials)
     rescale = protocol.time_rescale or 1.0

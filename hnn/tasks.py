@@ -30,15 +30,28 @@ def available_tasks() -> list[str]:
     return [t for t in TASKS if (root / f"experiment-{t}" / "data.py").exists()]
 
 
-def load_task(name: str, module: str = "data") -> ModuleType:
-    """``experiment-<name>/<module>.py`` as a module (cached, so each is loaded once)."""
-    path = repo_root() / f"experiment-{name}" / f"{module}.py"
-    if not path.exists():
-        raise ValueError(f"unknown task {name!r} (no {path}); available: {available_tasks()}")
-    mod_name = f"hnn_task_{name}_{module}"
-    if mod_name in sys.modules:
-        return sys.modules[mod_name]
-    spec = importlib.util.spec_from_file_location(mod_name, path)
+ANALYSIS = "hnn_analysis"   # the import name of the checkout's analysis/ folder (pyproject maps it)
+
+
+def import_analysis() -> ModuleType:
+    """The analysis package ``hnn_analysis``: the ``analysis/`` folder beside this ``hnn`` when there
+    is one (a checkout, installed or not), else the installed package.
+
+    ``pip install -e .`` maps the name to the folder; this also covers a checkout run without that
+    install, or installed before the mapping existed. The commands in ``analysis/`` call it before
+    importing each other, so ``python analysis/<command>.py`` works either way.
+    """
+    if ANALYSIS not in sys.modules:
+        folder = Path(__file__).resolve().parent.parent / "analysis"
+        if (folder / "__init__.py").is_file():
+            _load(ANALYSIS, folder / "__init__.py", package=folder)
+    return importlib.import_module(ANALYSIS)
+
+
+def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:
+    """The file ``path`` executed as module ``mod_name`` (a package searching ``package`` if given)."""
+    locations = None if package is None else [str(package)]
+    spec = importlib.util.spec_from_file_location(mod_name, path, submodule_search_locations=locations)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[mod_name] = mod
     try:
@@ -47,3 +60,14 @@ def load_task(name: str, module: str = "data") -> ModuleType:
         del sys.modules[mod_name]
         raise
     return mod
+
+
+def load_task(name: str, module: str = "data") -> ModuleType:
+    """``experiment-<name>/<module>.py`` as a module (cached, so each is loaded once)."""
+    path = repo_root() / f"experiment-{name}" / f"{module}.py"
+    if not path.exists():
+        raise ValueError(f"unknown task {name!r} (no {path}); available: {available_tasks()}")
+    mod_name = f"hnn_task_{name}_{module}"
+    if mod_name in sys.modules:
+        return sys.modules[mod_name]
+    return _load(mod_name, path)

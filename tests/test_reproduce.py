@@ -1,18 +1,11 @@
 """analysis/reproduce.py: the table writer, the reuse rule, one task end to end, and --jobs."""
 import json
-import sys
-from pathlib import Path
 
 import pytest
 import torch
 
 import hnn
-
-ANALYSIS = Path(__file__).resolve().parent.parent / "analysis"
-sys.path.insert(0, str(ANALYSIS))
-
-import reproduce  # noqa: E402
-import task_hooks  # noqa: E402
+from hnn_analysis import figures, readme, reproduce, task_hooks
 
 TINY = 20          # training steps of the end-to-end runs
 
@@ -142,7 +135,6 @@ def test_quick_end_to_end_and_jobs(tmp_path):
 
 
 def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monkeypatch):
-    import readme
     results["meta"]["cores"] = 2
     text = readme.timing_text(results)
     assert text.startswith("`python analysis/reproduce.py --quick` on 2026-01-01")
@@ -189,18 +181,17 @@ def test_a_task_that_cannot_run_is_reported_once(tmp_path, monkeypatch, capsys):
 
 
 def test_quick_figures_say_quick_in_their_titles(tmp_path):
-    import figures
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots()
     fig.suptitle("spring: fields")
     figures.set_stamp("QUICK smoke run")
     try:
-        figures._save(fig, tmp_path / "a.png")
+        figures.save_figure(fig, tmp_path / "a.png")
     finally:
         figures.set_stamp("")
     assert fig._suptitle.get_text() == "QUICK smoke run\nspring: fields" and (tmp_path / "a.png").stat().st_size > 0
     fig, ax = plt.subplots()
-    figures._save(fig, tmp_path / "b.png")
+    figures.save_figure(fig, tmp_path / "b.png")
     assert fig._suptitle is None                          # no stamp outside quick runs
 
 
