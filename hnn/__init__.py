@@ -10,10 +10,11 @@ from .integrate import DivergenceError, rk4_step, rollout
 from .symplectic import SYMPLECTIC_METHODS, YOSHIDA_WEIGHTS, ConvergenceError
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
+from .objectives import DerivativeObjective, Objective, PixelObjective
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import available_tasks, load_task
 from .training import train
-from . import cli, nbody, pixels
+from . import cli, nbody, objectives, pixels
 from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
 
 __all__ = [
@@ -22,6 +23,7 @@ __all__ = [
     "train",
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "run_experiment", "run_dir", "save_run", "load_run", "find_run",
+    "Objective", "DerivativeObjective", "PixelObjective",
     "load_task", "available_tasks",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "pixels",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "objectives", "pixels",
 ]

@@ -1,6 +1,5 @@
-"""The pixel pendulum's machinery: train a ``PixelHNN`` from flags, and its energy metric.
+"""The pixel pendulum's energy metric (a run trains with ``hnn.run_experiment(args, data, hnn.PixelObjective(...))``).
 
-    run = run_pixel_experiment(args, dataset)          # trains, saves, returns the run folder
     result = evaluate_pixel_energy(system, models, get_pixel_protocol("paper"), dataset)
 
 The energy metric, reconstructed from the paper's notebooks (the final one is lost; docs/original.md): a fresh
@@ -24,41 +23,8 @@ import torch
 
 from .evaluation import energy_bump, float64_copy
 from .integrate import rollout
-from .metrics import energy_mse, mean_and_se
-from .runs import atomic_write, finish_run, model_from_args, run_dir
-from .training import train
-
-
-def pixel_loss(model, x, x_next, chunk: int = 4000) -> tuple[float, float]:
-    """The final train/test number: the per-sample combined loss over all rows, mean ± std/sqrt(rows)."""
-    param = next(model.parameters())
-    x = torch.as_tensor(x, dtype=param.dtype, device=param.device)
-    x_next = torch.as_tensor(x_next, dtype=param.dtype, device=param.device)
-    with torch.no_grad():
-        per_sample = torch.cat([model.loss(x[i:i + chunk], x_next[i:i + chunk]) for i in range(0, len(x), chunk)])
-    return mean_and_se(per_sample)
-
-
-def run_pixel_experiment(args, dataset: dict, data_seconds: float | None = None) -> Path:
-    """Train the ``PixelHNN`` (or its baseline) that ``args`` describe and save the run.
-
-    ``dataset`` holds ``pixels``, ``next_pixels`` and their ``test_`` twins, ``(rows, 2 side^2)``;
-    ``data_seconds`` (the time it took to load or render) is saved in ``metrics.json``.
-    """
-    torch.manual_seed(args.seed)
-    np.random.seed(args.seed)
-    model = model_from_args(vars(args)).to(args.device)
-    noise = torch.Generator().manual_seed(args.seed + 2)
-
-    def loss(x, x_next):
-        return model.loss(x, x_next, input_noise=args.input_noise, use_rk4=args.use_rk4, generator=noise)
-
-    stats = train(model, dataset["pixels"], dataset["next_pixels"], dataset["test_pixels"],
-                  dataset["test_next_pixels"], total_steps=args.total_steps, learn_rate=args.learn_rate,
-                  weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
-                  print_every=args.print_every, verbose=args.verbose, loss=loss)
-    return finish_run(args, model, stats, pixel_loss(model, dataset["pixels"], dataset["next_pixels"]),
-                      pixel_loss(model, dataset["test_pixels"], dataset["test_next_pixels"]), data_seconds)
+from .metrics import energy_mse
+from .runs import atomic_write, run_dir
 
 
 @dataclass(frozen=True)

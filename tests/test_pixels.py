@@ -194,6 +194,8 @@ def test_train_script_end_to_end(tmp_path, system):
         assert (run / f"truth-vs-{label}.gif").stat().st_size > 1000
         model, args, _ = hnn.load_run(run)
         assert isinstance(model, PixelHNN) and model.baseline == (label == "baseline")
+        assert args["model"] == f"pixel-{label}" and args["dataset_cache_key"].startswith("pixels-frames-")
+        assert (tmp_path / args["dataset_cache_key"]).is_file()          # the frames it trained on
     assert (hnn_run / "add-energy.gif").exists()
     assert (tmp_path / "pixels-compare-seed0.gif").exists()
     assert hnn.find_run(trainer.parse_args(argv + ["--verbose", "--render_workers", "2"])) == hnn_run
