@@ -26,24 +26,19 @@ from matplotlib.collections import LineCollection  # noqa: E402
 import hnn  # noqa: E402
 from hnn.runs import atomic_write  # noqa: E402
 
-# From the original notebooks (see docs/original.md).
-FIELD_SETTINGS = {
-    "spring": {"lim": 1.2, "gridsize": 10, "x0": (1.0, 0.0), "t_span": (0.0, 30.0), "num_points": 2000},
-    "pend": {"lim": 2.6, "gridsize": 10, "x0": (2.1, 0.0), "t_span": (0.0, 28.0), "num_points": 1000},
-}
-INTEGRATION_SETTINGS = {
-    "spring": {"x0": (1.0, 0.0), "t_span": (0.0, 20.0), "num_points": 2000},
-    "pend": {"x0": (2.1, 0.0), "t_span": (0.0, 20.0), "num_points": 2000},
-}
 COLORS = {"truth": "black", "baseline": "tab:red", "hnn": "tab:blue"}
 NAMES = {"truth": "Ground truth", "baseline": "Baseline NN", "hnn": "Hamiltonian NN"}
 DPI = 150
 
 
-def _settings(table: dict, task: str) -> dict:
-    if task not in table:
-        raise ValueError(f"no figure settings for task {task!r}; have {sorted(table)}")
-    return table[task]
+def phase_settings(task: str, figure: str) -> dict:
+    """The settings of ``figure`` (``'fields'``, ``'integration'``) from the task's ``task.py``:
+    its ``figure_settings[figure]`` with the shared start state ``x0`` (the original notebooks' values)."""
+    settings = hnn.task_spec(task).figure_settings
+    if figure not in settings:
+        raise ValueError(f"task {task!r} has no {figure!r} figure settings: add figure_settings="
+                         f"{{'x0': ..., '{figure}': {{...}}}} to its task.py")
+    return {"x0": tuple(settings["x0"]), **settings[figure]}
 
 
 def _dtype(model) -> torch.dtype:
@@ -104,13 +99,14 @@ def save_figure(fig, path) -> Path:
     return path
 
 
-def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
+def field_figure(task: str, system, models: dict, dataset: dict, path, settings: dict | None = None) -> Path:
     """Four phase-plane panels: training data over the true field, then the true, baseline and HNN
     fields (quiver on a ``gridsize x gridsize`` grid) each with its trajectory from ``x0``, coloured by time.
 
-    ``dataset["x"]`` holds the training states, ``(rows, 2)``.
+    ``dataset["x"]`` holds the training states, ``(rows, 2)``; ``settings`` (``lim``, ``gridsize``,
+    ``x0``, ``t_span``, ``num_points``) default to ``phase_settings(task, "fields")``.
     """
-    s = _settings(FIELD_SETTINGS, task)
+    s = settings or phase_settings(task, "fields")
     lim, n = s["lim"], s["gridsize"]
     axis = torch.linspace(-lim, lim, n, dtype=torch.float64)
     qq, pp = torch.meshgrid(axis, axis, indexing="xy")
@@ -143,12 +139,13 @@ def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
     return save_figure(fig, path)
 
 
-def integration_figure(task: str, system, models: dict, path) -> Path:
+def integration_figure(task: str, system, models: dict, path, settings: dict | None = None) -> Path:
     """Four panels for one rollout from ``x0`` on ``t`` ``(T,)``: (a) phase-plane paths of truth,
     baseline and HNN; (b) coordinate MSE vs time, mean over (q, p) of the squared error vs truth;
     (c) the HNN's learned H along each path; (d) the true energy ``system.hamiltonian`` along each path.
+    ``settings`` (``x0``, ``t_span``, ``num_points``) default to ``phase_settings(task, "integration")``.
     """
-    s = _settings(INTEGRATION_SETTINGS, task)
+    s = settings or phase_settings(task, "integration")
     t = np.linspace(*s["t_span"], s["num_points"])
     paths, errors = {}, {}
     for label, f, dtype in [("truth", system.dynamics, torch.float64),

@@ -115,13 +115,21 @@ def reversibility_figure(task: str, models: dict, x0, horizons, errors: dict, pa
     return save_figure(fig, path)
 
 
-def mischief_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
-    """``<task>-energy-bump.png`` and ``<task>-reversibility.png``; returns their numbers."""
+def energy_bump_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
+    """``<task>-energy-bump.png`` of the HNN from ``x0``; returns ``{"energy_bump": its numbers}``."""
     bump = hnn.evaluation.energy_bump(models["hnn"], x0, **BUMP)
     bump_figure(task, system, bump, Path(fig_dir) / f"{task}-energy-bump.png")
+    numbers = {k: bump[k] for k in ("H_before", "H_after", "H_spread_before", "H_spread_after")}
+    return {"energy_bump": {**numbers, "x0": list(x0), **BUMP}}
+
+
+def reversibility_figures(task: str, models: dict, x0, fig_dir: Path) -> dict:
+    """``<task>-reversibility.png`` of every model from ``x0``; returns ``{"reversibility": its numbers}``."""
     errors = reversibility(models, x0)
     reversibility_figure(task, models, x0, HORIZONS, errors, Path(fig_dir) / f"{task}-reversibility.png")
-    numbers = {k: bump[k] for k in ("H_before", "H_after", "H_spread_before", "H_spread_after")}
-    numbers.update(x0=list(x0), **BUMP)
-    return {"energy_bump": numbers,
-            "reversibility": {"x0": list(x0), "T": list(HORIZONS), **REVERSE_TOL, "error": errors}}
+    return {"reversibility": {"x0": list(x0), "T": list(HORIZONS), **REVERSE_TOL, "error": errors}}
+
+
+def mischief_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
+    """``<task>-energy-bump.png`` and ``<task>-reversibility.png``; returns their numbers."""
+    return {**energy_bump_figures(task, system, models, x0, fig_dir), **reversibility_figures(task, models, x0, fig_dir)}

@@ -12,7 +12,6 @@ import functools
 from pathlib import Path
 
 import hnn
-import hnn.pixels
 from hnn.cli import int_at_least, nonnegative_float
 
 HERE = Path(__file__).resolve().parent
@@ -57,7 +56,8 @@ def main(argv=None):
     data = functools.cache(lambda: dataset(args))      # rendered or read once, for training and evaluation
     directory = hnn.run_experiment(args, data, OBJECTIVE)
     if not args.no_eval:
-        hnn.pixels.evaluate_pixel_run(directory, hnn.load_task("pixels"), data(), args.render_size, verbose=True)
+        metric = hnn.load_task("pixels", "metric")
+        metric.evaluate_pixel_run(directory, hnn.load_task("pixels"), data(), args.render_size, verbose=True)
     return directory
 
 

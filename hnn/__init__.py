@@ -12,9 +12,10 @@ from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
 from .objectives import DerivativeObjective, Objective, PixelObjective
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
-from .tasks import available_tasks, load_task
+from .tasks import TaskSpec, available_tasks, load_task, task_spec
 from .training import train
-from . import cli, nbody, objectives, pixels
+from .gifs import write_gif
+from . import cli, nbody, objectives, paper
 from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
 
 __all__ = [
@@ -24,6 +25,6 @@ __all__ = [
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "run_experiment", "run_dir", "save_run", "load_run", "find_run",
     "Objective", "DerivativeObjective", "PixelObjective",
-    "load_task", "available_tasks",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "objectives", "pixels",
+    "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "objectives", "paper",
 ]

@@ -1,5 +1,6 @@
 """Energy-MSE evaluation protocols, as data, and the one function that runs them.
 
+Each task declares its protocols in its ``task.py`` (``hnn.PROTOCOLS[task]`` collects them).
 Each task has the paper's protocol (what produced the published numbers, quirks included)
 and a corrected one. A protocol says how the start states are drawn, the time span and grid,
 the solver tolerance, which function is called "energy", and any time rescaling.
@@ -24,6 +25,7 @@ import torch
 
 from .integrate import rollout
 from .metrics import energy_mse
+from .tasks import PROTOCOLS
 
 
 @dataclass(frozen=True)
@@ -66,28 +68,8 @@ class EnergyProtocol:
                 + (f", {'; '.join(quirks)}" if quirks else ""))
 
 
-PROTOCOLS = {
-    "spring": {
-        # the notebook's t_span [0, 20] is scaled in place to [0, 21.8] before the metric cell
-        "paper": EnergyProtocol("paper", t_span=(0.0, 21.8), energy="q2+p2", time_rescale=1.09),
-        "corrected": EnergyProtocol("corrected"),
-    },
-    "pend": {
-        "paper": EnergyProtocol("paper", energy="q2+p2"),
-        "corrected": EnergyProtocol("corrected"),
-    },
-    "real": {
-        # the notebook passed no tolerance: solve_ivp's rtol 1e-3, loose enough to add error
-        "paper": EnergyProtocol("paper", x0="test_segment", rtol=1e-3),
-        "corrected": EnergyProtocol("corrected", x0="test_segment", rtol=1e-9, atol=1e-9),
-    },
-    # the paper's n-body protocols already use the physical energy; nothing to correct
-    "2body": {"paper": EnergyProtocol("paper", x0="seeds", t_span=(0.0, 25.0), num_points=500, rtol=1e-9)},
-    "3body": {"paper": EnergyProtocol("paper", x0="seeds", t_span=(0.0, 3.0), num_points=500, rtol=1e-9)},
-}
-
-
 def get_protocol(task: str, name: str = "paper") -> EnergyProtocol:
+    """Protocol ``name`` of ``task``, as its ``task.py`` declares it (``hnn.PROTOCOLS[task][name]``)."""
     try:
         return PROTOCOLS[task][name]
     except KeyError:
