@@ -129,14 +129,14 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
             notes.append(f"{task} {label}: no saved run at {hnn.run_dir(args)} (train it with analysis/reproduce.py); skipped")
             print(f"  {task} {label}: not found at {hnn.run_dir(args)}, skipped", flush=True)
             continue
-        model = hnn.load_run(found)[0]
+        model, saved_args, _ = hnn.load_run(found)
         per_dtype = {name: copy.deepcopy(model).to(dtype).time_derivative for name, dtype in DTYPES.items()}
         model64 = copy.deepcopy(model).double()
         x0 = None
         if isinstance(model, hnn.PixelHNN):
             # a latent model: its start states are the encoded first frames of training trials, and a
             # baseline's latent has no energy to track
-            data = system.get_dataset(seed=0, save_dir=runs)
+            data = hnn.tasks.run_dataset(task, saved_args)       # the frames the run trained on
             rows = np.arange(TASKS[task]["batch"]) * (data["params"]["timesteps"] - 3)
             with torch.no_grad():
                 x0 = model64.encode(torch.as_tensor(data["pixels"][rows], dtype=torch.float64))

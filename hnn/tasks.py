@@ -20,6 +20,7 @@ import importlib.util
 import math
 import os
 import sys
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -135,12 +136,18 @@ PAPER = _FromSpecs("paper")
 
 def run_dataset(task: str, args: dict) -> dict:
     """The dataset a saved run of ``task`` trained on: its ``train.py``'s ``dataset(args)`` on the
-    run's saved ``args`` (so evaluation sees that run's seed, files and sizes, not the defaults)."""
+    run's saved ``args`` (so evaluation sees that run's seed, files and sizes, not the defaults).
+    Warns when the run recorded another cache file than the one the dataset now comes from."""
     trainer = load_task(task, "train")
     if not hasattr(trainer, "dataset"):
         raise AttributeError(f"experiment-{task}/train.py has no dataset(args): add the function that "
                              "builds the dataset a run with those flags trains on")
-    return trainer.dataset(argparse.Namespace(**args))
+    data = trainer.dataset(argparse.Namespace(**args))
+    recorded = args.get("dataset_cache_key")
+    if recorded and data.get("cache_key") != recorded:
+        warnings.warn(f"{task}: the run trained on the cached dataset {recorded}, but its args now give "
+                      f"{data.get('cache_key')} (was the dataset generator changed?)", stacklevel=2)
+    return data
 
 
 ANALYSIS = "hnn_analysis"   # the import name of the checkout's analysis/ folder (pyproject maps it)

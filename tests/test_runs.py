@@ -3,6 +3,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -185,8 +186,13 @@ def test_args_json_records_the_model_kind_and_the_dataset_cache(task, extra, kin
     run = hnn.load_task(task, "train").main(["--total_steps", "1", "--save_dir", str(tmp_path)] + extra)
     saved = json.loads((run / "args.json").read_text())
     assert saved["model"] == kind
-    if cached:       # the .npz the run trained on, beside the run
+    if cached:       # the .npz the run trained on, beside the run, is what evaluation rebuilds from its args
         assert saved["dataset_cache_key"].startswith(f"{task}-") and (tmp_path / saved["dataset_cache_key"]).is_file()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert hnn.tasks.run_dataset(task, saved)["cache_key"] == saved["dataset_cache_key"]
+        with pytest.warns(UserWarning, match="trained on the cached dataset 2body-old.npz"):
+            hnn.tasks.run_dataset(task, {**saved, "dataset_cache_key": "2body-old.npz"})
     else:
         assert saved["dataset_cache_key"] is None
     assert hnn.load_run(run)[1] == saved
