@@ -45,10 +45,11 @@ import torch
 from scipy.integrate import solve_ivp
 
 import hnn
-from hnn.evaluation import _start_states
-from hnn.runs import write_json
+from hnn.evaluation import start_states
+from hnn.io import write_json
 
-import readme
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import readme  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -220,7 +221,7 @@ def _original_eval(model, protocol) -> tuple[float, int]:
     t_span = list(protocol.t_span)
     t_eval = np.linspace(t_span[0], t_span[1], protocol.num_points)
     per_trial = []
-    for x0 in _start_states(protocol):
+    for x0 in start_states(protocol):
         truth = solve_ivp(_spring_dynamics_np, t_span, x0, t_eval=t_eval, rtol=protocol.rtol).y
         pred = solve_ivp(fun, t_span, x0, t_eval=t_eval, rtol=protocol.rtol).y
         e_true, e_pred = (truth ** 2).sum(0), (pred ** 2).sum(0)

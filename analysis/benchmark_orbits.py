@@ -34,7 +34,7 @@ from scipy.integrate import solve_ivp
 
 import hnn
 from hnn import nbody
-from hnn.runs import write_json
+from hnn.io import write_json
 
 # Max abs difference of the two sides' states. atol 1e-6 bounds the local error of each of some
 # hundred steps, so each side is up to a few 1e-4 off the exact orbit (measured against DOP853 at

@@ -29,8 +29,10 @@ import torch
 
 import hnn
 from hnn.models import PixelHNN
-from hnn.runs import write_json
-import readme
+from hnn.io import write_json
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import readme  # noqa: E402
 
 FULL_STEPS = 10001
 

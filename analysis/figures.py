@@ -24,26 +24,21 @@ import torch  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn.runs import atomic_write  # noqa: E402
+from hnn.io import atomic_write  # noqa: E402
 
-# From the original notebooks (see docs/original.md).
-FIELD_SETTINGS = {
-    "spring": {"lim": 1.2, "gridsize": 10, "x0": (1.0, 0.0), "t_span": (0.0, 30.0), "num_points": 2000},
-    "pend": {"lim": 2.6, "gridsize": 10, "x0": (2.1, 0.0), "t_span": (0.0, 28.0), "num_points": 1000},
-}
-INTEGRATION_SETTINGS = {
-    "spring": {"x0": (1.0, 0.0), "t_span": (0.0, 20.0), "num_points": 2000},
-    "pend": {"x0": (2.1, 0.0), "t_span": (0.0, 20.0), "num_points": 2000},
-}
 COLORS = {"truth": "black", "baseline": "tab:red", "hnn": "tab:blue"}
 NAMES = {"truth": "Ground truth", "baseline": "Baseline NN", "hnn": "Hamiltonian NN"}
 DPI = 150
 
 
-def _settings(table: dict, task: str) -> dict:
-    if task not in table:
-        raise ValueError(f"no figure settings for task {task!r}; have {sorted(table)}")
-    return table[task]
+def phase_settings(task: str, figure: str) -> dict:
+    """The settings of ``figure`` (``'fields'``, ``'integration'``) from the task's ``task.py``:
+    its ``figure_settings[figure]`` with the shared start state ``x0`` (the original notebooks' values)."""
+    settings = hnn.task_spec(task).figure_settings
+    if figure not in settings:
+        raise ValueError(f"task {task!r} has no {figure!r} figure settings: add figure_settings="
+                         f"{{'x0': ..., '{figure}': {{...}}}} to its task.py")
+    return {"x0": tuple(settings["x0"]), **settings[figure]}
 
 
 def _dtype(model) -> torch.dtype:
@@ -93,7 +88,8 @@ def set_stamp(text: str) -> None:
     STAMP["text"] = text
 
 
-def _save(fig, path) -> Path:
+def save_figure(fig, path) -> Path:
+    """Write ``fig`` as a PNG at ``path`` atomically (its title stamped while ``set_stamp`` is on), then close it."""
     path = Path(path)
     if STAMP["text"]:
         old = fig._suptitle.get_text() if fig._suptitle is not None else ""
@@ -103,13 +99,14 @@ def _save(fig, path) -> Path:
     return path
 
 
-def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
+def field_figure(task: str, system, models: dict, dataset: dict, path, settings: dict | None = None) -> Path:
     """Four phase-plane panels: training data over the true field, then the true, baseline and HNN
     fields (quiver on a ``gridsize x gridsize`` grid) each with its trajectory from ``x0``, coloured by time.
 
-    ``dataset["x"]`` holds the training states, ``(rows, 2)``.
+    ``dataset["x"]`` holds the training states, ``(rows, 2)``; ``settings`` (``lim``, ``gridsize``,
+    ``x0``, ``t_span``, ``num_points``) default to ``phase_settings(task, "fields")``.
     """
-    s = _settings(FIELD_SETTINGS, task)
+    s = settings or phase_settings(task, "fields")
     lim, n = s["lim"], s["gridsize"]
     axis = torch.linspace(-lim, lim, n, dtype=torch.float64)
     qq, pp = torch.meshgrid(axis, axis, indexing="xy")
@@ -139,15 +136,16 @@ def field_figure(task: str, system, models: dict, dataset: dict, path) -> Path:
     if lines is not None:
         fig.colorbar(lines, ax=axes, shrink=0.8, label="t")
     fig.suptitle(f"{task}: vector fields and trajectories from x0 = {s['x0']}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def integration_figure(task: str, system, models: dict, path) -> Path:
+def integration_figure(task: str, system, models: dict, path, settings: dict | None = None) -> Path:
     """Four panels for one rollout from ``x0`` on ``t`` ``(T,)``: (a) phase-plane paths of truth,
     baseline and HNN; (b) coordinate MSE vs time, mean over (q, p) of the squared error vs truth;
     (c) the HNN's learned H along each path; (d) the true energy ``system.hamiltonian`` along each path.
+    ``settings`` (``x0``, ``t_span``, ``num_points``) default to ``phase_settings(task, "integration")``.
     """
-    s = _settings(INTEGRATION_SETTINGS, task)
+    s = settings or phase_settings(task, "integration")
     t = np.linspace(*s["t_span"], s["num_points"])
     paths, errors = {}, {}
     for label, f, dtype in [("truth", system.dynamics, torch.float64),
@@ -181,7 +179,7 @@ def integration_figure(task: str, system, models: dict, path) -> Path:
     axes[3].set(title="Total energy", xlabel="t", ylabel="true H")
     axes[0].legend(fontsize=8, loc="upper right")
     fig.suptitle(f"{task}: integration from x0 = {s['x0']}, t in [{t[0]:g}, {t[-1]:g}] ({len(t)} points)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def energy_figure(task: str, result: dict, path) -> Path:
@@ -221,7 +219,7 @@ def energy_figure(task: str, result: dict, path) -> Path:
     quirk = (f"; models' clock x{protocol['time_rescale']:g} (paper quirk)"
              if protocol.get("time_rescale") else "")
     fig.suptitle(f"{task}, energy protocol '{protocol['name']}' (energy = {protocol.get('energy')}{quirk})\n{scores}")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, path) -> Path:
@@ -260,4 +258,4 @@ def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, pat
                     ylabel="2.4 (1 - cos q) + p^2")
         axes[3].legend(fontsize=8)
     fig.suptitle(f"{task}: measured pendulum (Schmidt & Lipson 2009), data and learned fields")
-    return _save(fig, path)
+    return save_figure(fig, path)

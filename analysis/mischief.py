@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-from figures import COLORS, NAMES, _save  # noqa: E402
+from hnn_analysis.figures import COLORS, NAMES, save_figure  # noqa: E402
 
 # flow for t_flow, climb the gradient of the learned H for t_bump, flow again for t_flow
 BUMP = {"t_flow": 6.0, "t_bump": 0.1, "points": 300}
@@ -86,7 +86,7 @@ def bump_figure(task: str, system, bump: dict, path) -> Path:
     axes[1].set(title=f"learned H: {bump['H_before']:.3g} before, {bump['H_after']:.3g} after",
                 xlabel="t", ylabel="learned H (HNN's F2)")
     fig.suptitle(f"{task}: energy bump, following the gradient of the learned H for a short time")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def reversibility_figure(task: str, models: dict, x0, horizons, errors: dict, path) -> Path:
@@ -112,16 +112,24 @@ def reversibility_figure(task: str, models: dict, x0, horizons, errors: dict, pa
     axes[1].legend(fontsize=7)
     fig.suptitle(f"{task}: time reversibility from x0 = ({x0[0]:.3g}, {x0[1]:.3g}), "
                  f"RK45 rtol {REVERSE_TOL['rtol']:g} atol {REVERSE_TOL['atol']:g}")
-    return _save(fig, path)
+    return save_figure(fig, path)
+
+
+def energy_bump_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
+    """``<task>-energy-bump.png`` of the HNN from ``x0``; returns ``{"energy_bump": its numbers}``."""
+    bump = hnn.evaluation.energy_bump(models["hnn"], x0, **BUMP)
+    bump_figure(task, system, bump, Path(fig_dir) / f"{task}-energy-bump.png")
+    numbers = {k: bump[k] for k in ("H_before", "H_after", "H_spread_before", "H_spread_after")}
+    return {"energy_bump": {**numbers, "x0": list(x0), **BUMP}}
+
+
+def reversibility_figures(task: str, models: dict, x0, fig_dir: Path) -> dict:
+    """``<task>-reversibility.png`` of every model from ``x0``; returns ``{"reversibility": its numbers}``."""
+    errors = reversibility(models, x0)
+    reversibility_figure(task, models, x0, HORIZONS, errors, Path(fig_dir) / f"{task}-reversibility.png")
+    return {"reversibility": {"x0": list(x0), "T": list(HORIZONS), **REVERSE_TOL, "error": errors}}
 
 
 def mischief_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
     """``<task>-energy-bump.png`` and ``<task>-reversibility.png``; returns their numbers."""
-    bump = hnn.evaluation.energy_bump(models["hnn"], x0, **BUMP)
-    bump_figure(task, system, bump, Path(fig_dir) / f"{task}-energy-bump.png")
-    errors = reversibility(models, x0)
-    reversibility_figure(task, models, x0, HORIZONS, errors, Path(fig_dir) / f"{task}-reversibility.png")
-    numbers = {k: bump[k] for k in ("H_before", "H_after", "H_spread_before", "H_spread_after")}
-    numbers.update(x0=list(x0), **BUMP)
-    return {"energy_bump": numbers,
-            "reversibility": {"x0": list(x0), "T": list(HORIZONS), **REVERSE_TOL, "error": errors}}
+    return {**energy_bump_figures(task, system, models, x0, fig_dir), **reversibility_figures(task, models, x0, fig_dir)}

@@ -19,8 +19,8 @@ import imageio.v2 as imageio  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from figures import COLORS, NAMES, STAMP, _save  # noqa: E402
-from hnn.runs import atomic_write  # noqa: E402
+from hnn_analysis.figures import COLORS, NAMES, STAMP, save_figure  # noqa: E402
+from hnn.io import atomic_write  # noqa: E402
 
 BODY_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
 GIF = {"frames": 48, "fps": 12, "dpi": 60, "trail": 25}
@@ -71,7 +71,7 @@ def orbit_figure(task: str, result: dict, path) -> Path:
     energy.set(title="Total energy", xlabel="t", ylabel="true H")
     energy.legend(fontsize=8)
     fig.suptitle(f"{task}: one configuration (the energy protocol's seed-0 start), t in [{t[0]:g}, {t[-1]:g}]")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def orbit_gif(task: str, result: dict, path, frames: int = GIF["frames"], fps: int = GIF["fps"],

@@ -1,6 +1,6 @@
 """The pixel pendulum's figures: what the models see, what they learned, and what they predict.
 
-    pixel_figures(task, system, models, energy, fig_dir)   # reproduce.py's hook; all of the below
+Drawn by the figure registry (``hnn_analysis.registry``) under the names the task's ``task.py`` lists:
 
 - ``pixels-compare.gif``: the 200 test frames, truth | baseline | HNN, each decoded from its
   model's latent path (the paper's ``pixels-compare.gif``);
@@ -10,7 +10,8 @@
   contours of its learned H;
 - ``pixels-add-energy.gif`` / ``.png``: the paper's demo (flow, climb grad H, flow), decoded.
 
-``energy`` is ``{protocol: hnn.pixels.evaluate_pixel_energy(...)}``; ``models`` are PixelHNNs.
+``result`` is the paper protocol's output of the task's ``metric.evaluate_pixel_energy``;
+``models`` are PixelHNNs.
 """
 from __future__ import annotations
 
@@ -24,8 +25,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-import hnn.pixels  # noqa: E402
-from figures import COLORS, NAMES, _save  # noqa: E402
+from hnn_analysis.figures import COLORS, NAMES, save_figure  # noqa: E402
 
 SIDE = 28
 
@@ -55,7 +55,7 @@ def compare_static(result: dict, path, every: int = 6, upto: int = 100) -> Path:
     ax.set_xlabel("frame")
     ax.set_ylabel("q (rad), decoded then mapped linearly")
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def energy_plot(result: dict, path) -> Path:
@@ -69,7 +69,7 @@ def energy_plot(result: dict, path) -> Path:
     ax.set_ylabel("energy 1.9 (1 - cos q) + p^2")
     ax.set_title("Pixel pendulum: energy of the decoded paths")
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def phase_space(models: dict, dataset: dict, path, points: int = 3000) -> Path:
@@ -93,15 +93,23 @@ def phase_space(models: dict, dataset: dict, path, points: int = 3000) -> Path:
         ax.set_ylabel("latent z_p")
         ax.set_title(f"{NAMES[label]}: latents" + ("" if model.baseline else " and learned H")
                      + " (colour: true q)", fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def add_energy(model, z0, gif_path, png_path) -> dict:
-    """The paper's add-energy demo, decoded to frames (GIF) and plotted (latent path, learned H)."""
-    bump = hnn.energy_bump(model, z0, **hnn.pixels.ADD_ENERGY)
+def compare(result: dict, gif_path, png_path) -> None:
+    """The test frames, truth | baseline | HNN, as a GIF, and ``compare_static`` as a PNG."""
+    panels = {"truth": result["truth"]["pixels"], **{k: result[k]["decoded"] for k in ("baseline", "hnn") if k in result}}
+    hnn.write_gif(panels, gif_path)
+    compare_static(result, png_path)
+
+
+def add_energy(model, z0, gif_path, png_path, settings: dict) -> dict:
+    """The paper's add-energy demo (``hnn.energy_bump(model, z0, **settings)``), decoded to frames
+    (GIF) and plotted (latent path, learned H)."""
+    bump = hnn.energy_bump(model, z0, **settings)
     with torch.no_grad():
         frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
-    hnn.pixels.write_gif({"add energy": frames[::3]}, gif_path)
+    hnn.write_gif({"add energy": frames[::3]}, gif_path)
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(9, 3.5), constrained_layout=True)
     for stage, name in enumerate(("flow", "climb grad H", "flow again")):
         sel = bump["stage"] == stage
@@ -113,58 +121,5 @@ def add_energy(model, z0, gif_path, png_path) -> dict:
     ax1.set_xlabel("time (frames)")
     ax1.set_ylabel("learned H")
     ax1.set_title(f"H {bump['H_before']:.3g} -> {bump['H_after']:.3g}", fontsize=10)
-    _save(fig, png_path)
+    save_figure(fig, png_path)
     return {k: bump[k] for k in ("H_before", "H_after", "H_spread_before", "H_spread_after")}
-
-
-def pixel_figures(task: str, system, models: dict, energy: dict, fig_dir: Path) -> dict:
-    """Every pixel figure into ``fig_dir``; returns the add-energy numbers."""
-    fig_dir = Path(fig_dir)
-    result = energy["paper"]
-    panels = {"truth": result["truth"]["pixels"], **{k: result[k]["decoded"] for k in ("baseline", "hnn") if k in result}}
-    hnn.pixels.write_gif(panels, fig_dir / f"{task}-compare.gif")
-    compare_static(result, fig_dir / f"{task}-compare-static.png")
-    energy_plot(result, fig_dir / f"{task}-energy.png")
-    phase_space(models, _dataset_of(models), fig_dir / f"{task}-phase-space.png")
-    if "hnn" not in models:
-        return {}
-    numbers = add_energy(models["hnn"], result["hnn"]["latents"][0], fig_dir / f"{task}-add-energy.gif",
-                         fig_dir / f"{task}-add-energy.png")
-    return {"add_energy": numbers}
-
-
-# ---------------------------------------------------------------------------------------------
-# reproduce.py's hooks: runs carry their args, so evaluation finds the dataset they trained on
-
-def load_run(directory):
-    """``hnn.load_run`` that keeps the run's args on the model (``model.run_args``)."""
-    model, args, metrics = hnn.load_run(directory)
-    model.run_args = args
-    return model, args, metrics
-
-
-_DATASETS: dict = {}
-
-
-def _dataset_of(models: dict) -> dict:
-    args = next(iter(models.values())).run_args
-    key = (args["seed"], args["save_dir"], args["trials"], args["timesteps"], args["render_size"])
-    if key not in _DATASETS:
-        _DATASETS.clear()     # one dataset at a time: it holds ~300 MB
-        _DATASETS[key] = hnn.load_task("pixels").get_dataset(
-            seed=args["seed"], save_dir=args["save_dir"], trials=args["trials"], timesteps=args["timesteps"],
-            render_size=args["render_size"])
-    return _DATASETS[key]
-
-
-def pixel_energy(task: str, system, models: dict) -> dict:
-    """``{protocol: result}`` of ``hnn.pixels.evaluate_pixel_energy`` for both protocols."""
-    dataset = _dataset_of(models)
-    render_size = next(iter(models.values())).run_args["render_size"]
-    out = {}
-    for name, protocol in hnn.pixels.PIXEL_PROTOCOLS.items():
-        trajectory = hnn.pixels.test_trajectory(system, protocol, render_size)
-        result = hnn.pixels.evaluate_pixel_energy(system, models, protocol, dataset, trajectory)
-        result["description"] = protocol.describe()
-        out[name] = result
-    return out

@@ -14,7 +14,7 @@ import shutil
 from pathlib import Path
 
 import hnn
-from hnn.runs import atomic_write
+from hnn.io import atomic_write
 
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",

@@ -9,7 +9,8 @@ its figures, for every task in this checkout.
 Trains each model through its task's own ``train.py`` (reusing a saved run only when its args
 match exactly), in this process or in ``--jobs N`` worker processes (longest runs first), with
 one progress line for the whole job; then evaluates the energy MSE under the paper's protocol
-and a corrected one and draws the figures (per task, through ``task_hooks.HOOKS``). Writes
+and a corrected one and draws the figures (per task, as its ``experiment-<task>/task.py`` says,
+through ``hnn_analysis.registry``). Writes
 ``<out>/results.json`` (every number, with versions, commit, seed and the time of each stage),
 ``<out>/tables.md`` (built from that JSON: ours beside the paper's, marked, and the stage
 times) and ``<out>/figures/``.
@@ -34,12 +35,12 @@ import torch
 from tqdm.auto import tqdm
 
 import hnn
-from hnn.runs import atomic_write, write_json
-import figures
-import readme
-from readme import stage_table
-import task_hooks
 from hnn.paper import PAPER
+from hnn.io import atomic_write, write_json
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import figures, readme, registry  # noqa: E402
+from hnn_analysis.readme import stage_table  # noqa: E402
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))
@@ -210,7 +211,7 @@ def _train_in_process(jobs: list[dict], progress: _Progress) -> dict:
 
 def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Path) -> dict:
     """Train ``jobs`` in ``n`` worker processes with ``cores // n`` threads each, longest first
-    (``task_hooks`` cost x steps); ``{key: folder or exception}``. A worker's output goes to
+    (the task's ``TaskSpec.cost`` x steps); ``{key: folder or exception}``. A worker's output goes to
     ``<log_dir>/<task>-<label>-seed<seed>.log``; a failure other than missing data raises.
     """
     threads = max(1, _cores() // n)
@@ -218,7 +219,7 @@ def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Pa
     # the workers import the same hnn as this process, whatever the install points at
     package_root = str(Path(hnn.__file__).resolve().parent.parent)
     env["PYTHONPATH"] = os.pathsep.join([package_root] + [p for p in [os.environ.get("PYTHONPATH")] if p])
-    queue = sorted(jobs, key=lambda j: task_hooks.hooks_for(j["task"]).cost * j["total"], reverse=True)
+    queue = sorted(jobs, key=lambda j: hnn.task_spec(j["task"]).cost * j["total"], reverse=True)
     running, done, failed_tasks = {}, {}, {}
     log_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="hnn-progress-") as status_dir:
@@ -288,30 +289,36 @@ def _read_status(path: Path) -> dict:
 # evaluation
 
 
-def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
-    """Losses from the saved metrics, energy MSE under every protocol, and the figures (through
-    the task's ``task_hooks`` entry). ``runs`` is ``{label: run folder}``; the row's
-    ``"seconds"`` holds the time of the evaluation and of the figures.
-    """
-    hooks = task_hooks.hooks_for(task)
-    system = hnn.load_task(task)
-    tic = time.perf_counter()
-    models, row = {}, {label: {} for label in runs}
+def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
+    """``(the trained models with the first run's saved args, {label: its row of losses})`` of
+    ``runs`` (``{label: run folder}``), each read by the task's ``TaskSpec.load`` or ``hnn.load_run``."""
+    load = hnn.task_spec(task).load or hnn.load_run
+    models, row, first_args = {}, {}, None
     for label, directory in runs.items():
-        models[label], args, metrics = hooks.load(directory)
-        row[label]["train_loss"] = [metrics["train_loss"], metrics["train_loss_se"]]
-        row[label]["test_loss"] = [metrics["test_loss"], metrics["test_loss_se"]]
-        row[label]["train_seconds"] = metrics.get("train_seconds")
-        row[label]["data_seconds"] = metrics.get("data_seconds")
-        row[label]["total_steps"] = args["total_steps"]
-    energy = hooks.evaluate(task, system, models)
+        models[label], args, metrics = load(directory)
+        first_args = first_args or args
+        row[label] = {"train_loss": [metrics["train_loss"], metrics["train_loss_se"]],
+                      "test_loss": [metrics["test_loss"], metrics["test_loss_se"]],
+                      "train_seconds": metrics.get("train_seconds"), "data_seconds": metrics.get("data_seconds"),
+                      "total_steps": args["total_steps"]}
+    return registry.Trained(task, hnn.load_task(task), models, first_args), row
+
+
+def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
+    """Losses from the saved metrics, energy MSE under every protocol, and the figures (as the
+    task's ``task.py`` says, through ``hnn_analysis.registry``). ``runs`` is ``{label: run
+    folder}``; the row's ``"seconds"`` holds the time of the evaluation and of the figures.
+    """
+    tic = time.perf_counter()
+    trained, row = load_runs(task, runs)
+    energy = registry.evaluate(trained)
     for name, result in energy.items():
-        for label in models:
+        for label in trained.models:
             row[label][f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
         row.setdefault("protocols", {})[name] = result.get("description", name)
     t_eval = time.perf_counter() - tic
     if fig_dir is not None:
-        numbers = hooks.figures(task, system, models, energy, Path(fig_dir))
+        numbers = registry.draw_figures(trained, energy, fig_dir)
         if numbers:
             row["figure_numbers"] = numbers
     row["seconds"] = {"evaluate": t_eval, "figures": time.perf_counter() - tic - t_eval if fig_dir else 0.0}
@@ -404,7 +411,7 @@ def tables_markdown(results: dict) -> str:
     for task in skipped:
         lines += ["", f"Skipped {task}: {skipped[task]}"]
     present = meta.get("available", hnn.available_tasks())
-    missing = [t for t in hnn.tasks.TASKS if t not in present]
+    missing = [t for t in hnn.available_tasks() if t not in present]
     if missing:
         lines += ["", f"Not yet in this checkout: {', '.join(missing)}."]
     stages = stage_table(results)
@@ -482,16 +489,16 @@ def _metrics(directory: Path) -> dict:
 
 
 def table_rows(tasks: list[str], quick: bool) -> list[dict]:
-    """The rows of the tables: each task in the paper's setting, then its variants (``task_hooks``).
+    """The rows of the tables: each task in the paper's setting, then its variants (``TaskSpec.variants``).
 
     A row is ``{"row": name, "task": task, "extra_argv": train.py flags, "note": why or None}``.
     """
     rows = []
     for task in tasks:
-        hooks = task_hooks.hooks_for(task)
-        extra = list(hooks.train_argv) + (list(hooks.quick_argv) if quick else [])
+        spec = hnn.task_spec(task)
+        extra = list(spec.train_argv) + (list(spec.quick_argv) if quick else [])
         rows.append({"row": task, "task": task, "extra_argv": extra, "note": None})
-        for suffix, (argv, why) in hooks.variants.items():
+        for suffix, (argv, why) in spec.variants.items():
             name = f"{task}-{suffix}"
             rows.append({"row": name, "task": task, "extra_argv": extra + list(argv) + ["--name", name], "note": why})
     return rows

@@ -42,9 +42,10 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.runs import atomic_write, write_json
+from hnn.io import atomic_write, write_json
 
-import readme
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis import readme  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)
@@ -128,14 +129,14 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
             notes.append(f"{task} {label}: no saved run at {hnn.run_dir(args)} (train it with analysis/reproduce.py); skipped")
             print(f"  {task} {label}: not found at {hnn.run_dir(args)}, skipped", flush=True)
             continue
-        model = hnn.load_run(found)[0]
+        model, saved_args, _ = hnn.load_run(found)
         per_dtype = {name: copy.deepcopy(model).to(dtype).time_derivative for name, dtype in DTYPES.items()}
         model64 = copy.deepcopy(model).double()
         x0 = None
         if isinstance(model, hnn.PixelHNN):
             # a latent model: its start states are the encoded first frames of training trials, and a
             # baseline's latent has no energy to track
-            data = system.get_dataset(seed=0, save_dir=runs)
+            data = hnn.tasks.run_dataset(task, saved_args)       # the frames the run trained on
             rows = np.arange(TASKS[task]["batch"]) * (data["params"]["timesteps"] - 3)
             with torch.no_grad():
                 x0 = model64.encode(torch.as_tensor(data["pixels"][rows], dtype=torch.float64))

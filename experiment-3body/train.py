@@ -21,11 +21,16 @@ def parse_args(argv=None):
     return parser.parse_args(argv)
 
 
+def dataset(args) -> dict:
+    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
+    return hnn.load_task("3body").get_dataset(seed=args.seed, save_dir=args.save_dir,
+                                           min_separation=args.min_separation)
+
+
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, lambda: hnn.load_task("3body").get_dataset(seed=args.seed, save_dir=args.save_dir,
-                                                                      min_separation=args.min_separation))
+    return hnn.run_experiment(args, lambda: dataset(args))
 
 
 if __name__ == "__main__":

@@ -223,7 +223,8 @@ def get_dataset(seed: int = 0, save_dir=HERE, workers: int | None = None, **para
 
     Returns float32 ``pixels``/``next_pixels`` ``(16000, 1568)``, float64 ``coords``, ``dcoords``,
     ``pair_coords`` ``(16000, 2)``, the same with a ``test_`` prefix for the first 20% of the
-    trials (4000 rows), and the raw ``frames``/``states``. ``params`` override ``DEFAULTS``.
+    trials (4000 rows), the raw ``frames``/``states`` and the cache file's name ``cache_key``.
+    ``params`` override ``DEFAULTS``.
     """
     unknown = set(params) - set(DEFAULTS)
     if unknown:
@@ -238,5 +239,5 @@ def get_dataset(seed: int = 0, save_dir=HERE, workers: int | None = None, **para
     test, train = (pair_rows(raw["frames"][s], raw["states"][s])
                    for s in (slice(None, num_test), slice(num_test, None)))
     data = {**train, **{f"test_{k}": v for k, v in test.items()}}
-    data.update(frames=raw["frames"], states=raw["states"], dt=DT, params=p)
+    data.update(frames=raw["frames"], states=raw["states"], dt=DT, params=p, cache_key=raw["cache_key"])
     return data

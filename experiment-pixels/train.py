@@ -8,14 +8,15 @@ a small .npz in --save_dir. After training, the energy MSE is measured on a fres
 (both protocols, printed beside the paper's numbers) and GIFs are written into the run folder.
 Weight decay 1e-5 is the original's hard-coded value.
 """
-import time
+import functools
 from pathlib import Path
 
 import hnn
-import hnn.pixels
 from hnn.cli import int_at_least, nonnegative_float
 
 HERE = Path(__file__).resolve().parent
+# the autoencoder + latent HNN of hnn.PixelHNN, fit on pairs of frames one frame apart
+OBJECTIVE = hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels"))
 
 
 def parse_args(argv=None):
@@ -35,22 +36,28 @@ def parse_args(argv=None):
                         default=103, help="frames per trajectory (each gives timesteps - 3 rows)")
     parser.add_argument("--render_size", type=int_at_least(1), default=500,
                         help="side of gym's square render in pixels (the crop scales with it)")
-    parser.add_argument("--render_workers", type=int_at_least(1), default=None,
+    parser.add_argument("--render_workers", type=int_at_least(1), default=None, display_only=True,
                         help="processes that render frames (default: the cores); the frames do not depend on it")
-    parser.add_argument("--no_eval", action="store_true", help="skip the energy metric and the GIFs after training")
+    parser.add_argument("--no_eval", action="store_true", display_only=True,
+                        help="skip the energy metric and the GIFs after training")
     return parser.parse_args(argv)
+
+
+def dataset(args) -> dict:
+    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
+    return hnn.load_task("pixels").get_dataset(seed=args.seed, save_dir=args.save_dir, workers=args.render_workers,
+                                               render_size=args.render_size, trials=args.trials,
+                                               timesteps=args.timesteps)
 
 
 def main(argv=None):
     """Train one model, then measure its energy MSE; returns its run folder."""
     args = parse_args(argv)
-    system = hnn.load_task("pixels")
-    tic = time.perf_counter()
-    dataset = system.get_dataset(seed=args.seed, save_dir=args.save_dir, workers=args.render_workers,
-                                 render_size=args.render_size, trials=args.trials, timesteps=args.timesteps)
-    directory = hnn.pixels.run_pixel_experiment(args, dataset, data_seconds=time.perf_counter() - tic)
+    data = functools.cache(lambda: dataset(args))      # rendered or read once, for training and evaluation
+    directory = hnn.run_experiment(args, data, OBJECTIVE)
     if not args.no_eval:
-        hnn.pixels.evaluate_pixel_run(directory, system, dataset, args.render_size, verbose=True)
+        metric = hnn.load_task("pixels", "metric")
+        metric.evaluate_pixel_run(directory, hnn.load_task("pixels"), data(), args.render_size, verbose=True)
     return directory
 
 

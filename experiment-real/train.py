@@ -23,10 +23,15 @@ def parse_args(argv=None):
     return parser.parse_args(argv)
 
 
+def dataset(args) -> dict:
+    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
+    return hnn.load_task("real").get_dataset(data_dir=args.data_dir)
+
+
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, lambda: hnn.load_task("real").get_dataset(data_dir=args.data_dir))
+    return hnn.run_experiment(args, lambda: dataset(args))
 
 
 if __name__ == "__main__":

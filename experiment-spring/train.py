@@ -15,10 +15,15 @@ def parse_args(argv=None):
                                weight_decay=1e-4, save_dir=str(HERE)).parse_args(argv)
 
 
+def dataset(args) -> dict:
+    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
+    return hnn.load_task("spring").get_dataset(seed=args.seed)
+
+
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
     args = parse_args(argv)
-    return hnn.run_experiment(args, lambda: hnn.load_task("spring").get_dataset(seed=args.seed))
+    return hnn.run_experiment(args, lambda: dataset(args))
 
 
 if __name__ == "__main__":

@@ -3,7 +3,8 @@
     data = get_cached_dataset(save_dir, "3body", params, build)
 
 The file name holds a hash of the params (seed included) and the file stores the params as
-JSON beside the arrays, so a cache can never be silently reused for other params.
+JSON beside the arrays, so a cache can never be silently reused for other params. The data
+come back with ``cache_key``, the file's name, which a run records in its args.json.
 """
 from __future__ import annotations
 
@@ -76,7 +77,8 @@ def get_cached_dataset(path_dir, name: str, params: dict, build: Callable[[], di
     keys), or which cannot be read (a warning says why), is rebuilt and overwritten. With no
     file for these params, a message names the params in which the nearest other cache of
     ``name`` differs. ``build`` returns numeric arrays and scalars; the cache is written
-    atomically and scalars come back as Python numbers either way.
+    atomically and scalars come back as Python numbers either way, with ``cache_key``, the
+    file's name (``<name>-<hash>.npz``).
 
     Args:
         describe: ``data -> str`` for the one-line message printed after a build.
@@ -91,7 +93,7 @@ def get_cached_dataset(path_dir, name: str, params: dict, build: Callable[[], di
                           stacklevel=2)
         else:
             if stored == wanted:
-                return data
+                return {**data, "cache_key": path.name}
             warnings.warn(f"{name}: the cache {path} holds other params: {'; '.join(_differences(stored, wanted))}; "
                           "regenerating", stacklevel=2)
     else:
@@ -114,4 +116,4 @@ def get_cached_dataset(path_dir, name: str, params: dict, build: Callable[[], di
     data = {k: np.asarray(v).item() if np.ndim(v) == 0 else v for k, v in built.items()}
     what = describe(data) if describe else "the dataset"
     print(f"{name}: generated {what} in {seconds:.1f} s; cached at {path}")
-    return data
+    return {**data, "cache_key": path.name}

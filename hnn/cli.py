@@ -3,7 +3,9 @@
 Each task passes its own defaults (the original hard-coded some of them, such as the weight
 decay; here every knob is a flag with the original's value as its default). A bad flag or
 value stops the parse with the usage and one ``error: ...`` line naming the value and the fix
-(exit code 2, as argparse). ``run_main`` runs a ``train.py`` as a command: the package's input
+(exit code 2, as argparse). A flag declared ``display_only=True`` changes what is printed or how
+fast, never what is trained: ``hnn.find_run`` ignores it when it looks for a saved run with the
+same args (the parsed namespace lists them in ``args.display_only``). ``run_main`` runs a ``train.py`` as a command: the package's input
 errors raised while running (a missing data file, say) become such a line too, and it prints
 the run folder at the end.
 
@@ -28,6 +30,8 @@ USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while run
 # (the package raises ValueError naming the value and the fix), missing data files, and a
 # --save_dir that cannot be written. Anything else keeps its traceback.
 INPUT_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, PermissionError)
+# the shared display-only flags (a task declares its own with display_only=True)
+DISPLAY_ONLY = ("verbose", "debug")
 
 
 def _one_line(text) -> str:
@@ -35,10 +39,18 @@ def _one_line(text) -> str:
     return " ".join(str(text).split())
 
 
+class RunArgs(argparse.Namespace):
+    """Parsed flags; ``display_only`` (a slot, so not in ``vars(args)`` nor in args.json) names the
+    flags that change what is printed or how fast, never what is trained."""
+    __slots__ = ("display_only",)
+
+
 class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``."""
+    """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``, and
+    whose ``add_argument`` takes ``display_only=True`` (parsed into a ``RunArgs``)."""
 
     def __init__(self, *args, **kwargs):
+        self.display_only: set[str] = set()
         super().__init__(*args, **kwargs)
         # argparse (before 3.13) reads "--learn_rate -1e-3" as a flag missing its value; no
         # option here looks like a number, so let every negative number reach the type check
@@ -47,6 +59,18 @@ class Parser(argparse.ArgumentParser):
     def error(self, message):
         self.print_usage(sys.stderr)
         self.exit(USAGE_ERROR, f"error: {_one_line(message)}\n")
+
+    def add_argument(self, *args, display_only: bool = False, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        if display_only:
+            self.display_only.add(action.dest)
+        return action
+
+    def parse_known_args(self, args=None, namespace=None):
+        if namespace is None:
+            namespace = RunArgs()
+            namespace.display_only = tuple(sorted(self.display_only))
+        return super().parse_known_args(args, namespace)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -162,7 +186,7 @@ def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, w
     p.add_argument("--use_rk4", action="store_true", help=rk4_help or (
         "fit the RK4 average slope of the learned field over one data time step dt, (x(t+dt) - x(t))/dt "
         "of one RK4 step, to the true dx/dt (the original crashed on this flag); default: fit dx/dt itself"))
-    p.add_argument("--verbose", action="store_true", help="print the loss every print_every steps")
+    p.add_argument("--verbose", action="store_true", display_only=True, help="print the loss every print_every steps")
     p.add_argument("--field_type", type=str, default="solenoidal", choices=FIELD_TYPES,
                    help="solenoidal (Hamiltonian), conservative, or both")
     p.add_argument("--seed", type=int_at_least(0), default=0,
@@ -172,7 +196,7 @@ def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, w
     p.add_argument("--device", type=_device, default="cpu", help="torch device, e.g. cpu or cuda")
     p.add_argument("--dtype", type=str, default="float32", choices=("float32", "float64"),
                    help="dtype of the model and the data")
-    p.add_argument("--debug", action="store_true",
+    p.add_argument("--debug", action="store_true", display_only=True,
                    help="on an input error (a missing data file, say), show the full traceback "
                         "instead of one error: line")
     return p

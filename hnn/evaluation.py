@@ -1,5 +1,6 @@
 """Energy-MSE evaluation protocols, as data, and the one function that runs them.
 
+Each task declares its protocols in its ``task.py`` (``hnn.PROTOCOLS[task]`` collects them).
 Each task has the paper's protocol (what produced the published numbers, quirks included)
 and a corrected one. A protocol says how the start states are drawn, the time span and grid,
 the solver tolerance, which function is called "energy", and any time rescaling.
@@ -25,6 +26,7 @@ import torch
 from .integrate import rollout
 from .metrics import energy_mse
 from .solvers import get_solver
+from .tasks import PROTOCOLS
 
 
 @dataclass(frozen=True)
@@ -92,28 +94,8 @@ class EnergyProtocol:
                 + (f", {'; '.join(quirks)}" if quirks else ""))
 
 
-PROTOCOLS = {
-    "spring": {
-        # the notebook's t_span [0, 20] is scaled in place to [0, 21.8] before the metric cell
-        "paper": EnergyProtocol("paper", t_span=(0.0, 21.8), energy="q2+p2", time_rescale=1.09),
-        "corrected": EnergyProtocol("corrected"),
-    },
-    "pend": {
-        "paper": EnergyProtocol("paper", energy="q2+p2"),
-        "corrected": EnergyProtocol("corrected"),
-    },
-    "real": {
-        # the notebook passed no tolerance: solve_ivp's rtol 1e-3, loose enough to add error
-        "paper": EnergyProtocol("paper", x0="test_segment", rtol=1e-3),
-        "corrected": EnergyProtocol("corrected", x0="test_segment", rtol=1e-9, atol=1e-9),
-    },
-    # the paper's n-body protocols already use the physical energy; nothing to correct
-    "2body": {"paper": EnergyProtocol("paper", x0="seeds", t_span=(0.0, 25.0), num_points=500, rtol=1e-9)},
-    "3body": {"paper": EnergyProtocol("paper", x0="seeds", t_span=(0.0, 3.0), num_points=500, rtol=1e-9)},
-}
-
-
 def get_protocol(task: str, name: str = "paper") -> EnergyProtocol:
+    """Protocol ``name`` of ``task``, as its ``task.py`` declares it (``hnn.PROTOCOLS[task][name]``)."""
     try:
         return PROTOCOLS[task][name]
     except KeyError:
@@ -121,7 +103,7 @@ def get_protocol(task: str, name: str = "paper") -> EnergyProtocol:
                          f"{ {t: sorted(p) for t, p in PROTOCOLS.items()} }") from None
 
 
-def _start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:
+def start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:
     """``(num_trials, dim)`` start states of a ``'box'`` or ``'seeds'`` protocol."""
     if protocol.x0 == "seeds":
         return np.stack([np.asarray(system.initial_state(i), dtype=np.float64) for i in range(protocol.num_trials)])
@@ -190,7 +172,7 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     """
     if protocol.x0 == "test_segment":
         return _evaluate_segment(system, models, protocol, dataset)
-    x0 = torch.as_tensor(_start_states(protocol, system), dtype=torch.float64)
+    x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64)
     t0, t1 = protocol.t_span
     trials = np.arange(protocol.num_trials)
     rescale = protocol.time_rescale or 1.0

@@ -19,13 +19,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .integrate import rk4_step
+from . import cli
 from .io import atomic_write, write_json  # noqa: F401  (hnn.runs.atomic_write, as before)
-from .metrics import derivative_loss
-from .models import PixelHNN, build_model
+from .objectives import DerivativeObjective, Objective, model_from_args
 from .training import train
 
-_DTYPES = {"float32": torch.float32, "float64": torch.float64}
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
@@ -88,78 +86,79 @@ def _is_complete(directory: Path) -> bool:
     return all((directory / name).is_file() for name in files)
 
 
-# flags that change what is printed or how fast, never what is trained
-_DISPLAY_ONLY = ("verbose", "render_workers", "no_eval", "debug")
+# what a run adds to its flags in args.json: its model kind and its dataset's cache file (or None)
+RECORDED = ("model", "dataset_cache_key")
 
 
 def find_run(args) -> Path | None:
-    """The saved run for exactly these args (display-only flags aside), or None."""
+    """The saved run for exactly these args, or None.
+
+    Display-only flags (``args.display_only``, which ``hnn.cli`` parsers fill from the flags
+    declared ``display_only=True``; else ``hnn.cli.DISPLAY_ONLY``) and the ``RECORDED`` keys aside.
+    """
     directory = run_dir(args)
     try:
         saved = json.loads((directory / "args.json").read_text())
     except (OSError, ValueError):
         return None
-    wanted = {k: v for k, v in vars(args).items() if k not in _DISPLAY_ONLY}
-    saved = {k: v for k, v in saved.items() if k not in _DISPLAY_ONLY}
+    ignore = set(getattr(args, "display_only", cli.DISPLAY_ONLY)) | set(RECORDED)
+    wanted = {k: v for k, v in vars(args).items() if k not in ignore}
+    saved = {k: v for k, v in saved.items() if k not in ignore}
     if saved != wanted or not _is_complete(directory):
         return None
     return directory
 
 
-def model_from_args(args: dict) -> torch.nn.Module:
-    """The untrained model that a run with these args trains (a ``PixelHNN`` when they name a ``latent_dim``)."""
-    if "latent_dim" in args:
-        model = PixelHNN(args["input_dim"], args["latent_dim"], args["hidden_dim"], args["nonlinearity"],
-                         args["baseline"], args["field_type"], args.get("ae_nonlinearity", "relu"))
-        return model.to(dtype=_DTYPES[args.get("dtype", "float32")])
-    model = build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"], args["baseline"],
-                        args["field_type"])
-    return model.to(dtype=_DTYPES[args.get("dtype", "float32")])
+def _materialize(dataset) -> tuple[dict, float | None]:
+    """``(dataset, seconds it took)``: calls a dataset given as a function (None seconds otherwise)."""
+    if not callable(dataset):
+        return dataset, None
+    tic = time.perf_counter()
+    dataset = dataset()
+    return dataset, time.perf_counter() - tic
 
 
-def run_experiment(args, dataset) -> Path:
-    """Train the model that ``args`` describe on ``dataset`` and save the run; returns its folder.
+def run_experiment(args, dataset, objective: Objective | None = None) -> Path:
+    """Train the model that ``args`` and ``objective`` describe on ``dataset`` and save the run;
+    returns its folder. Every task and model kind trains here.
 
-    ``dataset`` holds ``x``, ``dxdt``, ``test_x``, ``test_dxdt`` (``(rows, input_dim)`` arrays)
-    and, for ``--use_rk4``, ``dt`` (the time step of its trajectories); or it is a function of
-    no arguments returning that dict, and then the time it takes is saved as ``data_seconds``
-    in ``metrics.json`` beside ``train_seconds`` (the training loop alone).
+    ``dataset`` holds the ``objective.arrays`` (default ``x``, ``dxdt``, ``test_x``, ``test_dxdt``,
+    ``(rows, input_dim)`` arrays) and, for ``--use_rk4``, ``dt`` (the time step of its
+    trajectories); or it is a function of no arguments returning that dict, and then the time it
+    takes is saved as ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training
+    loop alone). ``objective`` defaults to ``DerivativeObjective()`` (fit dx/dt). args.json
+    records the model kind (``"model"``) and the dataset's ``cache_key`` (``"dataset_cache_key"``).
     """
-    data_seconds = None
-    if callable(dataset):
-        tic = time.perf_counter()
-        dataset = dataset()
-        data_seconds = time.perf_counter() - tic
-    for key in ("x", "dxdt", "test_x", "test_dxdt"):
-        if key not in dataset:
-            raise KeyError(f"dataset lacks {key!r}; a task's get_dataset must return x, dxdt, test_x, test_dxdt")
+    objective = objective or DerivativeObjective()
+    dataset, data_seconds = _materialize(dataset)
+    missing = [key for key in objective.arrays if key not in dataset]
+    if missing:
+        raise KeyError(f"dataset lacks {missing}; this task's get_dataset must return {list(objective.arrays)}")
+    saved = {**vars(args), "model": objective.kind(vars(args)), "dataset_cache_key": dataset.get("cache_key")}
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
-    model = model_from_args(vars(args)).to(args.device)
-    predict = None
-    if args.use_rk4:
-        if "dt" not in dataset:
-            raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")
-        dt = float(dataset["dt"])
-        predict = lambda x: rk4_step(model.time_derivative, x, dt) / dt  # noqa: E731
-    stats = train(model, dataset["x"], dataset["dxdt"], dataset["test_x"], dataset["test_dxdt"],
-                  total_steps=args.total_steps, learn_rate=args.learn_rate, weight_decay=args.weight_decay,
-                  batch_size=args.batch_size, seed=args.seed, print_every=args.print_every,
-                  verbose=args.verbose, input_noise=getattr(args, "input_noise", 0.0), predict=predict)
-    return finish_run(args, model, stats, derivative_loss(model, dataset["x"], dataset["dxdt"]),
-                      derivative_loss(model, dataset["test_x"], dataset["test_dxdt"]), data_seconds)
+    model = objective.build(saved).to(args.device)
+    x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+    stats = train(model, x, y, test_x, test_y, total_steps=args.total_steps, learn_rate=args.learn_rate,
+                  weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
+                  print_every=args.print_every, verbose=args.verbose,
+                  **objective.train_options(model, saved, dataset))
+    return finish_run(args, model, stats, objective.final_loss(model, x, y), objective.final_loss(model, test_x, test_y),
+                      data_seconds, saved)
 
 
-def finish_run(args, model, stats: dict, train_loss, test_loss, data_seconds: float | None = None) -> Path:
+def finish_run(args, model, stats: dict, train_loss, test_loss, data_seconds: float | None = None,
+               saved_args: dict | None = None) -> Path:
     """Print (with ``--verbose``) and save a trained run: its final ``(mean, ±)`` train and test
-    losses, the seconds of its data and of its loop, and the loss history ``stats``."""
+    losses, the seconds of its data and of its loop, and the loss history ``stats``.
+    ``saved_args`` (default ``vars(args)``) is what args.json holds."""
     if args.verbose:
         print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
               f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
     metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
                "test_loss": test_loss[0], "test_loss_se": test_loss[1],
                "data_seconds": data_seconds, "train_seconds": stats["seconds"], "history": stats}
-    return save_run(run_dir(args), model, vars(args), metrics)
+    return save_run(run_dir(args), model, saved_args or vars(args), metrics)
 
 
 def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Path:

@@ -1,44 +1,177 @@
-"""Find a task's modules by name: the one place where the package knows the repo layout.
+"""The tasks of this checkout, found by folder: the one place where the package knows the repo layout.
 
-Task ``name`` lives in ``<repo>/experiment-<name>/`` (``data.py`` and ``train.py``). Folder
-names have hyphens, so the modules are loaded by path, each under a unique module name.
+Task ``name`` is the folder ``<repo>/experiment-<name>/`` holding a ``data.py`` (the system: H,
+true dynamics, sampler, ``get_dataset``), a ``train.py`` (flags, ``dataset(args)``, then
+``hnn.run_experiment``) and, optionally, a ``task.py`` that describes it with one object,
+``TASK = hnn.TaskSpec(...)``: its place in the paper's order, energy protocols, published
+numbers, figures, training cost and extra rows. A new task is one new folder; the package lists
+no task names. Folder names have hyphens, so the modules are loaded by path, each under a
+unique module name.
+
+    hnn.available_tasks()            # e.g. ['spring', 'pend', ...]: every folder, in TaskSpec.order
+    hnn.task_spec("spring").cost     # its task.py's TASK (a default TaskSpec without one)
+    hnn.PROTOCOLS["spring"]["paper"] # read-only views built from the specs when read
 """
 from __future__ import annotations
 
+import argparse
+import importlib
 import importlib.util
+import math
 import os
 import sys
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
-from types import ModuleType
+from types import MappingProxyType, ModuleType
 
-TASKS = ("spring", "pend", "real", "2body", "3body", "pixels")
+_PREFIX = "experiment-"
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """What a task says about itself in ``experiment-<name>/task.py`` (``TASK = hnn.TaskSpec(...)``).
+
+    Attributes:
+        order: its place in the paper's order; tasks are listed by ``(order, name)``.
+        protocols: ``{name: protocol}``, its energy protocols (``hnn.EnergyProtocol`` unless it
+            has its own ``evaluate``); the one named ``'paper'`` is compared with the paper's number.
+        paper: the published numbers, ``{metric: {model: (mean, ±)}}`` for ``train_loss``,
+            ``test_loss`` and ``energy_mse``.
+        figures: names in the analysis package's figure registry (``hnn_analysis.registry.FIGURES``),
+            drawn in this order by ``analysis/reproduce.py``.
+        figure_settings: what those figures need from the task, ``{figure name: {setting: value}}``
+            plus shared keys (``x0``, the start state of the phase-plane figures).
+        cost: relative wall time of one full training run (``--jobs N`` starts the longest first).
+        quick_argv: extra ``train.py`` flags for ``reproduce.py --quick`` (e.g. a smaller dataset).
+        train_argv: extra ``train.py`` flags for every run of ``reproduce.py``.
+        variants: extra table rows, ``{suffix: (train.py flags, why)}``: row ``<task>-<suffix>``
+            trains with those flags under ``--name <task>-<suffix>``, shown with its reason.
+        evaluate: ``evaluate(trained) -> {protocol name: result}`` replacing the default (every
+            protocol through ``hnn.evaluate_energy``); ``trained`` has ``task``, ``system``,
+            ``models`` (``{label: model}``), ``args`` (the runs' saved args) and ``dataset`` (the
+            dataset rebuilt from them); each result has ``result[label]["mse"]`` and ``["mse_se"]``
+            and a one-line ``"description"``.
+        load: ``load(directory) -> (model, args, metrics)`` replacing ``hnn.load_run``.
+    """
+    order: float = math.inf
+    protocols: Mapping = field(default_factory=dict)
+    paper: Mapping = field(default_factory=dict)
+    figures: tuple[str, ...] = ("energy",)
+    figure_settings: Mapping = field(default_factory=dict)
+    cost: float = 1.0
+    quick_argv: tuple[str, ...] = ()
+    train_argv: tuple[str, ...] = ()
+    variants: Mapping = field(default_factory=dict)
+    evaluate: Callable | None = None
+    load: Callable | None = None
 
 
 def repo_root() -> Path:
     """The checkout that holds the ``experiment-*`` folders (``HNN_REPO`` overrides)."""
     root = Path(os.environ.get("HNN_REPO", Path(__file__).resolve().parent.parent))
-    if not any(root.glob("experiment-*")):
+    if not any(root.glob(f"{_PREFIX}*")):
         raise FileNotFoundError(
             f"no experiment-* folders under {root}: the tasks live in the repository, not in the "
             "installed package; install it with `pip install -e .` from a checkout, or set HNN_REPO")
     return root
 
 
+def _has_task(name: str) -> bool:
+    return (repo_root() / f"{_PREFIX}{name}" / "data.py").is_file()
+
+
 def available_tasks() -> list[str]:
-    """Names of the tasks present in this checkout, in the paper's order."""
-    root = repo_root()
-    return [t for t in TASKS if (root / f"experiment-{t}" / "data.py").exists()]
+    """Names of the tasks in this checkout (every ``experiment-<name>/`` with a ``data.py``),
+    in the paper's order (``TaskSpec.order``, then the name)."""
+    names = [p.parent.name[len(_PREFIX):] for p in repo_root().glob(f"{_PREFIX}*/data.py")]
+    return sorted(names, key=lambda name: (task_spec(name).order, name))
 
 
-def load_task(name: str, module: str = "data") -> ModuleType:
-    """``experiment-<name>/<module>.py`` as a module (cached, so each is loaded once)."""
-    path = repo_root() / f"experiment-{name}" / f"{module}.py"
-    if not path.exists():
-        raise ValueError(f"unknown task {name!r} (no {path}); available: {available_tasks()}")
-    mod_name = f"hnn_task_{name}_{module}"
-    if mod_name in sys.modules:
-        return sys.modules[mod_name]
-    spec = importlib.util.spec_from_file_location(mod_name, path)
+def task_spec(name: str) -> TaskSpec:
+    """The ``TASK`` of ``experiment-<name>/task.py``; a default ``TaskSpec`` (no protocols, no
+    paper numbers, energy figures only) for a task folder without one."""
+    if not _has_task(name):
+        raise ValueError(f"unknown task {name!r} (no {repo_root() / (_PREFIX + name) / 'data.py'}); "
+                         f"available: {available_tasks()}")
+    if not (repo_root() / f"{_PREFIX}{name}" / "task.py").is_file():
+        return TaskSpec()
+    spec = getattr(load_task(name, "task"), "TASK", None)
+    if not isinstance(spec, TaskSpec):
+        raise TypeError(f"experiment-{name}/task.py must define TASK = hnn.TaskSpec(...), got {spec!r}")
+    return spec
+
+
+class _FromSpecs(Mapping):
+    """A read-only ``{task: spec.<attribute>}`` over the tasks whose attribute is not empty,
+    read from the task folders whenever it is used (so it follows ``HNN_REPO``)."""
+
+    def __init__(self, attribute: str):
+        self._attribute = attribute
+
+    def _value(self, task: str) -> Mapping:
+        return getattr(task_spec(task), self._attribute) if _has_task(task) else {}
+
+    def __getitem__(self, task: str) -> Mapping:
+        value = self._value(task) if isinstance(task, str) else {}
+        if not value:
+            raise KeyError(task)
+        return MappingProxyType(dict(value))
+
+    def __iter__(self):
+        return iter([task for task in available_tasks() if self._value(task)])
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+    def __repr__(self) -> str:
+        return f"{{{', '.join(f'{task!r}: {dict(self[task])!r}' for task in self)}}}"
+
+
+# task -> name -> protocol, and task -> metric -> model -> (mean, ±): the specs' protocols and paper
+PROTOCOLS = _FromSpecs("protocols")
+PAPER = _FromSpecs("paper")
+
+
+def run_dataset(task: str, args: dict) -> dict:
+    """The dataset a saved run of ``task`` trained on: its ``train.py``'s ``dataset(args)`` on the
+    run's saved ``args`` (so evaluation sees that run's seed, files and sizes, not the defaults).
+    Warns when the run recorded another cache file than the one the dataset now comes from."""
+    trainer = load_task(task, "train")
+    if not hasattr(trainer, "dataset"):
+        raise AttributeError(f"experiment-{task}/train.py has no dataset(args): add the function that "
+                             "builds the dataset a run with those flags trains on")
+    data = trainer.dataset(argparse.Namespace(**args))
+    recorded = args.get("dataset_cache_key")
+    if recorded and data.get("cache_key") != recorded:
+        warnings.warn(f"{task}: the run trained on the cached dataset {recorded}, but its args now give "
+                      f"{data.get('cache_key')} (was the dataset generator changed?)", stacklevel=2)
+    return data
+
+
+ANALYSIS = "hnn_analysis"   # the import name of the checkout's analysis/ folder (pyproject maps it)
+
+
+def import_analysis() -> ModuleType:
+    """The analysis package ``hnn_analysis``: the ``analysis/`` folder beside this ``hnn`` when there
+    is one (a checkout, installed or not), else the installed package.
+
+    ``pip install -e .`` maps the name to the folder; this also covers a checkout run without that
+    install, or installed before the mapping existed. The commands in ``analysis/`` call it before
+    importing each other, so ``python analysis/<command>.py`` works either way.
+    """
+    if ANALYSIS not in sys.modules:
+        folder = Path(__file__).resolve().parent.parent / "analysis"
+        if (folder / "__init__.py").is_file():
+            _load(ANALYSIS, folder / "__init__.py", package=folder)
+    return importlib.import_module(ANALYSIS)
+
+
+def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:
+    """The file ``path`` executed as module ``mod_name`` (a package searching ``package`` if given)."""
+    locations = None if package is None else [str(package)]
+    spec = importlib.util.spec_from_file_location(mod_name, path, submodule_search_locations=locations)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[mod_name] = mod
     try:
@@ -47,3 +180,14 @@ def load_task(name: str, module: str = "data") -> ModuleType:
         del sys.modules[mod_name]
         raise
     return mod
+
+
+def load_task(name: str, module: str = "data") -> ModuleType:
+    """``experiment-<name>/<module>.py`` as a module (cached, so each is loaded once)."""
+    path = repo_root() / f"{_PREFIX}{name}" / f"{module}.py"
+    if not path.exists():
+        raise ValueError(f"unknown task {name!r} (no {path}); available: {available_tasks()}")
+    mod_name = f"hnn_task_{name}_{module}"
+    if mod_name in sys.modules:
+        return sys.modules[mod_name]
+    return _load(mod_name, path)

@@ -8,7 +8,6 @@ import pytest
 import torch
 
 import hnn
-import hnn.pixels
 from hnn.models import MLPAutoencoder, PixelHNN
 
 pytest.importorskip("gymnasium", reason="the pixel task renders with gymnasium: pip install -e '.[pixels]'")
@@ -18,6 +17,11 @@ pytest.importorskip("pygame", reason="gymnasium renders the pendulum with pygame
 @pytest.fixture(scope="module")
 def system():
     return hnn.load_task("pixels")
+
+
+@pytest.fixture(scope="module")
+def metric():
+    return hnn.load_task("pixels", "metric")
 
 
 @pytest.fixture(scope="module")
@@ -166,14 +170,14 @@ def test_autoencoder_round_trip_on_a_tiny_dataset(tiny):
         ae.encode(frames[:, :100])
 
 
-def test_latent_map_recovers_an_affine_map():
+def test_latent_map_recovers_an_affine_map(metric):
     rng = np.random.RandomState(0)
     z = rng.randn(500, 2)
     A, b = np.array([[0.5, -1.0], [2.0, 0.3]]), np.array([0.1, -0.2])
     coords = z @ A + b
-    fit = hnn.pixels.fit_latent_map(z, coords, "lstsq")
+    fit = metric.fit_latent_map(z, coords, "lstsq")
     np.testing.assert_allclose(fit(torch.as_tensor(z)).numpy(), coords, atol=1e-10)
-    adam = hnn.pixels.fit_latent_map(z, coords, "adam")
+    adam = metric.fit_latent_map(z, coords, "adam")
     assert np.abs(adam(torch.as_tensor(z)).numpy() - coords).mean() < 0.05
 
 
@@ -194,12 +198,14 @@ def test_train_script_end_to_end(tmp_path, system):
         assert (run / f"truth-vs-{label}.gif").stat().st_size > 1000
         model, args, _ = hnn.load_run(run)
         assert isinstance(model, PixelHNN) and model.baseline == (label == "baseline")
+        assert args["model"] == f"pixel-{label}" and args["dataset_cache_key"].startswith("pixels-frames-")
+        assert (tmp_path / args["dataset_cache_key"]).is_file()          # the frames it trained on
     assert (hnn_run / "add-energy.gif").exists()
     assert (tmp_path / "pixels-compare-seed0.gif").exists()
     assert hnn.find_run(trainer.parse_args(argv + ["--verbose", "--render_workers", "2"])) == hnn_run
 
 
-def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, system):
+def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, system, metric):
     # the baseline first: the HNN run, evaluated second, must find the baseline's rollout by its args
     trainer = hnn.load_task("pixels", "train")
     argv = ["--save_dir", str(tmp_path), "--name", "myhnn", "--trials", "5", "--timesteps", "14",
@@ -212,8 +218,8 @@ def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, sys
     with np.load(hnn_run / "rollout.npz") as f:
         assert f["truth"].dtype == np.float32 and f["truth"].shape == f["decoded"].shape
     args = {"name": "myhnn", "save_dir": "x", "seed": 2, "baseline": False, "use_rk4": True}
-    assert hnn.pixels._sibling_run_name(args) == "myhnn-baseline-rk4-seed2"
-    assert hnn.pixels._sibling_run_name({**args, "baseline": True}) == "myhnn-hnn-rk4-seed2"
+    assert metric._sibling_run_name(args) == "myhnn-baseline-rk4-seed2"
+    assert metric._sibling_run_name({**args, "baseline": True}) == "myhnn-hnn-rk4-seed2"
 
 
 def test_add_energy_raises_the_learned_energy():

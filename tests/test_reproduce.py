@@ -1,18 +1,12 @@
 """analysis/reproduce.py: the table writer, the reuse rule, one task end to end, and --jobs."""
+import dataclasses
 import json
-import sys
-from pathlib import Path
 
 import pytest
 import torch
 
 import hnn
-
-ANALYSIS = Path(__file__).resolve().parent.parent / "analysis"
-sys.path.insert(0, str(ANALYSIS))
-
-import reproduce  # noqa: E402
-import task_hooks  # noqa: E402
+from hnn_analysis import figures, readme, registry, reproduce
 
 TINY = 20          # training steps of the end-to-end runs
 
@@ -25,7 +19,7 @@ def _row(train, test, energy):
 
 @pytest.fixture
 def results():
-    """A hand-made results dict against the paper's spring numbers (paper_numbers.PAPER)."""
+    """A hand-made results dict against the paper's spring numbers (hnn.paper.PAPER)."""
     # spring paper: train baseline 3.7134e-02 ± 1.9143e-03, hnn 3.6933e-02 ± 1.9128e-03
     #               test baseline 3.6656e-02 ± 1.8652e-03, energy hnn 3.8416e-04 ± 6.53e-05
     edge = 3.7134e-02 + 1.9143e-03          # exactly at the paper's ±: within
@@ -75,10 +69,11 @@ def test_tables_marks_missing_and_stages(results):
     assert "| spring | 0.5 | 1.0 | 2.0 | 3.0 | 4.0 |" in table and "total 10.5 s" in table
 
 
-def test_unknown_task_gets_the_default_hooks():
-    hooks = task_hooks.hooks_for("pixels-not-registered")
-    assert hooks is task_hooks.DEFAULT and hooks.evaluate is task_hooks.energy_protocols
-    assert task_hooks.hooks_for("3body").cost > task_hooks.hooks_for("spring").cost
+def test_every_task_names_known_figures_and_costs_more_when_it_trains_longer():
+    for task in hnn.available_tasks():
+        spec = hnn.task_spec(task)
+        assert spec.figures and set(spec.figures) <= set(registry.FIGURES), task
+    assert hnn.task_spec("3body").cost > hnn.task_spec("spring").cost
 
 
 def test_train_or_reuse(tmp_path):
@@ -142,7 +137,6 @@ def test_quick_end_to_end_and_jobs(tmp_path):
 
 
 def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monkeypatch):
-    import readme
     results["meta"]["cores"] = 2
     text = readme.timing_text(results)
     assert text.startswith("`python analysis/reproduce.py --quick` on 2026-01-01")
@@ -162,10 +156,9 @@ def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monke
 
 
 def test_variant_rows_train_under_their_own_name_and_keep_the_papers_numbers(tmp_path, monkeypatch, capsys):
-    hooks = task_hooks.HOOKS["spring"]
     variant = {"wide": (("--hidden_dim", "16"), "a narrower net, for the test")}
-    monkeypatch.setitem(task_hooks.HOOKS, "spring", task_hooks.TaskHooks(figures=hooks.figures, cost=hooks.cost,
-                                                                         variants=variant))
+    task = hnn.load_task("spring", "task")
+    monkeypatch.setattr(task, "TASK", dataclasses.replace(task.TASK, variants=variant))
     results = reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(tmp_path)])
     assert list(results["tasks"]) == ["spring", "spring-wide"]
     row = results["tasks"]["spring-wide"]
@@ -189,18 +182,17 @@ def test_a_task_that_cannot_run_is_reported_once(tmp_path, monkeypatch, capsys):
 
 
 def test_quick_figures_say_quick_in_their_titles(tmp_path):
-    import figures
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots()
     fig.suptitle("spring: fields")
     figures.set_stamp("QUICK smoke run")
     try:
-        figures._save(fig, tmp_path / "a.png")
+        figures.save_figure(fig, tmp_path / "a.png")
     finally:
         figures.set_stamp("")
     assert fig._suptitle.get_text() == "QUICK smoke run\nspring: fields" and (tmp_path / "a.png").stat().st_size > 0
     fig, ax = plt.subplots()
-    figures._save(fig, tmp_path / "b.png")
+    figures.save_figure(fig, tmp_path / "b.png")
     assert fig._suptitle is None                          # no stamp outside quick runs
 
 

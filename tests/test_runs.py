@@ -3,6 +3,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -173,3 +174,59 @@ def test_an_incomplete_folder_is_neither_reused_nor_loaded(damage, tmp_path):
     assert hnn.find_run(args) is None
     with pytest.raises(RuntimeError, match="interrupted.*delete the run folder and retrain"):
         hnn.load_run(run)
+
+
+# ----------------------------------------------------------------------------------------------
+# one runner for every model kind: args.json says which kind and which cached dataset
+
+
+@pytest.mark.parametrize("task, extra, kind, cached", [
+    ("spring", [], "hnn", False), ("spring", ["--baseline"], "baseline", False), ("2body", [], "hnn", True)])
+def test_args_json_records_the_model_kind_and_the_dataset_cache(task, extra, kind, cached, tmp_path):
+    run = hnn.load_task(task, "train").main(["--total_steps", "1", "--save_dir", str(tmp_path)] + extra)
+    saved = json.loads((run / "args.json").read_text())
+    assert saved["model"] == kind
+    if cached:       # the .npz the run trained on, beside the run, is what evaluation rebuilds from its args
+        assert saved["dataset_cache_key"].startswith(f"{task}-") and (tmp_path / saved["dataset_cache_key"]).is_file()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert hnn.tasks.run_dataset(task, saved)["cache_key"] == saved["dataset_cache_key"]
+        with pytest.warns(UserWarning, match="trained on the cached dataset 2body-old.npz"):
+            hnn.tasks.run_dataset(task, {**saved, "dataset_cache_key": "2body-old.npz"})
+    else:
+        assert saved["dataset_cache_key"] is None
+    assert hnn.load_run(run)[1] == saved
+
+
+def test_a_run_saved_before_the_kind_was_recorded_still_loads(tmp_path):
+    args = vars(_args(tmp_path, 2))
+    assert "model" not in args
+    assert isinstance(hnn.runs.model_from_args(args), hnn.HNN)                     # a plain run
+    pixel = {**args, "input_dim": 8, "latent_dim": 2, "hidden_dim": 4}
+    assert isinstance(hnn.runs.model_from_args(pixel), hnn.PixelHNN)              # named a latent_dim
+    # a recorded kind is never second-guessed: a plain HNN whose task happens to have a latent_dim flag
+    assert isinstance(hnn.runs.model_from_args({**pixel, "input_dim": 2, "model": "hnn"}), hnn.HNN)
+    with pytest.raises(ValueError, match="unknown model kind 'sideways'.*pixel-hnn"):
+        hnn.runs.model_from_args({**args, "model": "sideways"})
+
+
+def test_a_custom_objective_trains_through_the_one_runner(tmp_path):
+    class Halved(hnn.DerivativeObjective):
+        """Fits half of dx/dt, from arrays of other names (a toy, to show the runner asks the objective)."""
+        arrays = ("a", "b", "test_a", "test_b")
+
+    data = hnn.load_task("spring").get_dataset()
+    renamed = {"a": data["x"], "b": data["dxdt"] / 2, "test_a": data["test_x"], "test_b": data["test_dxdt"] / 2}
+    run = hnn.run_experiment(_args(tmp_path, 3), renamed, Halved())
+    assert json.loads((run / "args.json").read_text())["model"] == "hnn"
+    with pytest.raises(KeyError, match=r"lacks \['a', 'b', 'test_a', 'test_b'\]"):
+        hnn.run_experiment(_args(tmp_path, 3), data, Halved())
+
+
+def test_display_only_flags_are_declared_by_whoever_adds_them(tmp_path):
+    parser = hnn.cli.make_parser("a toy", name="toy", input_dim=2, save_dir=str(tmp_path), weight_decay=0.0)
+    parser.add_argument("--workers", type=int, default=1, display_only=True)
+    args = parser.parse_args(["--workers", "3"])
+    assert set(args.display_only) == {"verbose", "debug", "workers"} and "display_only" not in vars(args)
+    assert set(hnn.cli.DISPLAY_ONLY) <= set(args.display_only)
+    assert "render_workers" in hnn.load_task("pixels", "train").parse_args([]).display_only   # the task's own

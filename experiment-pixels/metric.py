@@ -1,7 +1,8 @@
-"""The pixel pendulum's machinery: train a ``PixelHNN`` from flags, and its energy metric.
+"""The pixel pendulum's energy metric, its evaluation of a saved run, and its GIFs.
 
-    run = run_pixel_experiment(args, dataset)          # trains, saves, returns the run folder
-    result = evaluate_pixel_energy(system, models, get_pixel_protocol("paper"), dataset)
+    result = evaluate_pixel_energy(system, models, hnn.get_protocol("pixels", "paper"), dataset)
+    evaluate_pixel_run(directory, system, dataset)      # train.py: metrics.json, rollout.npz, GIFs
+    evaluate(trained)                                    # reproduce.py: both protocols, both models
 
 The energy metric, reconstructed from the paper's notebooks (the final one is lost; docs/original.md): a fresh
 200-frame gym trajectory (seed 1, start angle in (pi/11, pi/10)); each model encodes its first
@@ -9,7 +10,8 @@ pixel pair, integrates its latent field, decodes every latent to pixels, encodes
 and maps the latents linearly to (q, p) (a map fitted per model on its training latents); the
 energy 1.9 (1 - cos q) + p^2 of that path against the truth's, squared, mean ± the batch-means
 standard error over 5 chunks of 40 frames. The original encoded the baseline's pixels with the
-HNN's encoder; here every model uses its own.
+HNN's encoder; here every model uses its own. The two protocols (the paper's and a corrected
+one) are ``PixelProtocol`` instances in this task's ``task.py``.
 """
 from __future__ import annotations
 
@@ -22,43 +24,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .evaluation import energy_bump, float64_copy
-from .integrate import rollout
-from .metrics import energy_mse, mean_and_se
-from .runs import atomic_write, finish_run, model_from_args, run_dir
-from .training import train
+import hnn
+from hnn.evaluation import energy_bump, float64_copy
+from hnn.integrate import rollout
+from hnn.metrics import energy_mse
+from hnn.runs import atomic_write, load_run, run_dir, write_json
 
-
-def pixel_loss(model, x, x_next, chunk: int = 4000) -> tuple[float, float]:
-    """The final train/test number: the per-sample combined loss over all rows, mean ± std/sqrt(rows)."""
-    param = next(model.parameters())
-    x = torch.as_tensor(x, dtype=param.dtype, device=param.device)
-    x_next = torch.as_tensor(x_next, dtype=param.dtype, device=param.device)
-    with torch.no_grad():
-        per_sample = torch.cat([model.loss(x[i:i + chunk], x_next[i:i + chunk]) for i in range(0, len(x), chunk)])
-    return mean_and_se(per_sample)
-
-
-def run_pixel_experiment(args, dataset: dict, data_seconds: float | None = None) -> Path:
-    """Train the ``PixelHNN`` (or its baseline) that ``args`` describe and save the run.
-
-    ``dataset`` holds ``pixels``, ``next_pixels`` and their ``test_`` twins, ``(rows, 2 side^2)``;
-    ``data_seconds`` (the time it took to load or render) is saved in ``metrics.json``.
-    """
-    torch.manual_seed(args.seed)
-    np.random.seed(args.seed)
-    model = model_from_args(vars(args)).to(args.device)
-    noise = torch.Generator().manual_seed(args.seed + 2)
-
-    def loss(x, x_next):
-        return model.loss(x, x_next, input_noise=args.input_noise, use_rk4=args.use_rk4, generator=noise)
-
-    stats = train(model, dataset["pixels"], dataset["next_pixels"], dataset["test_pixels"],
-                  dataset["test_next_pixels"], total_steps=args.total_steps, learn_rate=args.learn_rate,
-                  weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
-                  print_every=args.print_every, verbose=args.verbose, loss=loss)
-    return finish_run(args, model, stats, pixel_loss(model, dataset["pixels"], dataset["next_pixels"]),
-                      pixel_loss(model, dataset["test_pixels"], dataset["test_next_pixels"]), data_seconds)
+NAME = "pixels"
 
 
 @dataclass(frozen=True)
@@ -89,30 +61,20 @@ class PixelProtocol:
     min_angle: float = math.pi / 11
     max_angle: float = math.pi / 10
     splits: int = 5
+    # the latent integrator, as for hnn.EnergyProtocol: a name of hnn.SOLVERS and its options
+    method: str = "solve_ivp"
+    options: tuple = ()
 
     def describe(self) -> str:
         return (f"{self.name}: one gym trajectory (seed {self.seed}, |q0| in ({self.min_angle:.3f}, "
                 f"{self.max_angle:.3f})), {self.num_points} frames on t in [0, {self.t_end:g}] frames, "
-                f"RK45 rtol {self.rtol:g} atol {self.atol:g}, truth = {self.coords}, latent map {self.latent_map}, "
+                f"{hnn.get_solver(self.method).describe(dict(self.options))} rtol {self.rtol:g} atol {self.atol:g}, truth = {self.coords}, latent map {self.latent_map}, "
                 f"energy = {self.energy}" + (", first point = truth" if self.prepend_truth else ""))
-
-
-PIXEL_PROTOCOLS = {
-    "paper": PixelProtocol("paper"),
-    "corrected": PixelProtocol("corrected", t_end=199.0, rtol=1e-9, atol=1e-9, coords="pair_state",
-                               prepend_truth=False, latent_map="lstsq", energy="true"),
-}
 
 
 # the paper's add-energy demo in latent time (frames): flow 50, climb grad H for 1.8, flow 60;
 # 500 points in all, spread in proportion to time
 ADD_ENERGY = {"t_flow": 50.0, "t_bump": 1.8, "t_after": 60.0, "points": 450, "rtol": 1e-9, "atol": 1e-9}
-
-
-def get_pixel_protocol(name: str = "paper") -> PixelProtocol:
-    if name not in PIXEL_PROTOCOLS:
-        raise ValueError(f"unknown pixel protocol {name!r}; choose one of {sorted(PIXEL_PROTOCOLS)}")
-    return PIXEL_PROTOCOLS[name]
 
 
 def fit_latent_map(latents, coords, how: str = "adam", seed: int = 0):
@@ -155,12 +117,13 @@ def _render_trajectory(system, seed: int, num_points: int, min_angle: float, max
     return system.pair_rows(raw["frames"], raw["states"])
 
 
-def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6) -> torch.Tensor:
+def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6, method: str = "solve_ivp",
+                options: tuple = ()) -> torch.Tensor:
     """The latent path ``(len(t_eval), latent_dim)`` from the encoded first pixel pair ``pixels[:1]``."""
     param = next(model.parameters())
     with torch.no_grad():
         z0 = model.encode(torch.as_tensor(pixels[:1], dtype=param.dtype))
-    return rollout(model.time_derivative, z0, t_eval, method="solve_ivp", rtol=rtol, atol=atol)[0]
+    return rollout(model.time_derivative, z0, t_eval, method=method, rtol=rtol, atol=atol, **dict(options))[0]
 
 
 def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset: dict,
@@ -188,7 +151,8 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
             latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
                                  for i in range(0, len(dataset["pixels"]), 4000)])
         to_coords = fit_latent_map(latents, fit_coords, protocol.latent_map)
-        z = latent_path(model, trajectory["pixels"], t_eval, protocol.rtol, protocol.atol)
+        z = latent_path(model, trajectory["pixels"], t_eval, protocol.rtol, protocol.atol, protocol.method,
+                        protocol.options)
         with torch.no_grad():
             decoded = model.decode(z.to(param.dtype))
             coords = to_coords(model.encode(decoded))     # its own encoder (the original used the HNN's)
@@ -199,28 +163,6 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
         out[label] = {"mse": mse, "mse_se": se, "energy": e_pred.numpy(), "coords": coords.numpy(),
                       "latents": z.double().numpy(), "decoded": decoded.numpy()}
     return out
-
-
-def _to_uint8(pixels: np.ndarray, side: int, scale: int) -> np.ndarray:
-    """The first frame of each pair ``(T, 2 side^2)`` as ``(T, side*scale, side*scale)`` uint8 (0..0.5 -> 0..255)."""
-    frames = np.asarray(pixels)[:, :side * side].reshape(-1, side, side)
-    frames = np.clip(frames * 2.0, 0.0, 1.0) * 255
-    return np.kron(frames, np.ones((scale, scale))).astype(np.uint8)
-
-
-def write_gif(panels: dict, path, side: int = 28, scale: int = 4, ms_per_frame: int = 50) -> Path:
-    """An animated GIF of panels side by side: ``{title: pixels (T, 2 side^2)}``, all of the same T."""
-    import imageio.v3 as iio
-
-    lengths = {len(v) for v in panels.values()}
-    if len(lengths) != 1:
-        raise ValueError(f"all panels need the same number of frames, got {lengths}")
-    strips = [_to_uint8(v, side, scale) for v in panels.values()]
-    gap = np.full((strips[0].shape[0], side * scale, 4), 255, dtype=np.uint8)   # a white divider
-    movie = np.concatenate([x for s in strips for x in (s, gap)][:-1], axis=2)
-    path = Path(path)
-    atomic_write(path, lambda tmp: iio.imwrite(tmp, movie, extension=".gif", duration=ms_per_frame, loop=0))
-    return path
 
 
 def _save_rollout(path, truth: np.ndarray, decoded: np.ndarray) -> None:
@@ -234,46 +176,80 @@ def _sibling_run_name(args: dict) -> str:
     return run_dir(argparse.Namespace(**{**args, "baseline": not args["baseline"]})).name
 
 
+def _protocols() -> dict:
+    """``{name: PixelProtocol}`` of this task's ``task.py``."""
+    return dict(hnn.task_spec(NAME).protocols)
+
+
+def _measure(system, model, label: str, dataset: dict, render_size: int) -> tuple[dict, dict]:
+    """``({energy_mse_<protocol>: [mse, ±]}, the paper protocol's result)`` of one model."""
+    results = {name: evaluate_pixel_energy(system, {label: model}, protocol, dataset,
+                                           test_trajectory(system, protocol, render_size))
+               for name, protocol in _protocols().items()}
+    energy = {f"energy_mse_{name}": [r[label]["mse"], r[label]["mse_se"]] for name, r in results.items()}
+    return energy, results["paper"]
+
+
+def _compare_gif(directory: Path, args: dict, label: str, truth: np.ndarray, decoded: np.ndarray) -> None:
+    """truth | baseline | HNN beside the run folders, once both runs of this seed have a rollout."""
+    other = directory.parent / _sibling_run_name(args)
+    if not (other / "rollout.npz").exists():
+        return
+    with np.load(other / "rollout.npz") as f:
+        pair = {label: decoded, "other": f["decoded"]}
+    order = ("baseline", "hnn") if label == "baseline" else ("other", "hnn")
+    panels = {"truth": truth, **{k: (pair[k] if k in pair else pair["other"]) for k in order}}
+    hnn.write_gif(panels, directory.parent / f"{args['name']}-compare-seed{args['seed']}.gif")
+
+
+def _add_energy_gif(directory: Path, model, z0) -> None:
+    """The paper's add-energy demo from the latent ``z0``, decoded to ``add-energy.gif``."""
+    bump = energy_bump(model, z0, **ADD_ENERGY)
+    with torch.no_grad():
+        frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
+    hnn.write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
+
+
+def _print_beside_paper(metrics: dict, label: str, directory: Path) -> None:
+    paper = hnn.paper.PAPER[NAME]
+    print(f"{'metric':24s} {'paper':>24s} {'ours':>24s}")
+    for key, title in (("train_loss", "train loss"), ("test_loss", "test loss"), ("energy_mse_paper", "energy MSE")):
+        ours = metrics[key] if isinstance(metrics[key], list) else [metrics[key], metrics[key + "_se"]]
+        ref = paper[key.replace("_paper", "")][label]
+        print(f"{title + ' (' + label + ')':24s} {ref[0]:.4e} ± {ref[1]:.1e}  {ours[0]:.4e} ± {ours[1]:.1e}")
+    print(f"energy MSE, corrected protocol: {metrics['energy_mse_corrected'][0]:.4e} ± "
+          f"{metrics['energy_mse_corrected'][1]:.1e}; GIFs in {directory}")
+
+
 def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500, verbose: bool = True) -> dict:
     """After training: both energy protocols into the run's ``metrics.json``, the rollout's decoded
     frames into ``rollout.npz``, and GIFs (truth vs this model; truth vs baseline vs HNN once both
     runs of this seed exist in the same folder; the add-energy demo for an HNN). Returns the metrics."""
-    from .paper import PAPER
-    from .runs import load_run, write_json
-
     directory = Path(directory)
     model, args, metrics = load_run(directory)
     label = "baseline" if args["baseline"] else "hnn"
-    for name, protocol in PIXEL_PROTOCOLS.items():
-        result = evaluate_pixel_energy(system, {label: model}, protocol, dataset,
-                                       test_trajectory(system, protocol, render_size))
-        metrics[f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
-        if name == "paper":
-            paper_result = result
+    energy, result = _measure(system, model, label, dataset, render_size)
+    metrics.update(energy)
     write_json(directory / "metrics.json", metrics)
-    truth = paper_result["truth"]["pixels"]
-    decoded = paper_result[label]["decoded"]
+    truth, decoded = result["truth"]["pixels"], result[label]["decoded"]
     atomic_write(directory / "rollout.npz", lambda tmp: _save_rollout(tmp, truth, decoded))
-    write_gif({"truth": truth, label: decoded}, directory / f"truth-vs-{label}.gif")
-    other = directory.parent / _sibling_run_name(args)
-    if (other / "rollout.npz").exists():
-        with np.load(other / "rollout.npz") as f:
-            pair = {label: decoded, "other": f["decoded"]}
-        order = ("baseline", "hnn") if label == "baseline" else ("other", "hnn")
-        panels = {"truth": truth, **{k: (pair[k] if k in pair else pair["other"]) for k in order}}
-        write_gif(panels, directory.parent / f"{args['name']}-compare-seed{args['seed']}.gif")
+    hnn.write_gif({"truth": truth, label: decoded}, directory / f"truth-vs-{label}.gif")
+    _compare_gif(directory, args, label, truth, decoded)
     if label == "hnn":
-        bump = energy_bump(model, paper_result[label]["latents"][0], **ADD_ENERGY)
-        with torch.no_grad():
-            frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
-        write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
+        _add_energy_gif(directory, model, result[label]["latents"][0])
     if verbose:
-        paper = PAPER["pixels"]
-        print(f"{'metric':24s} {'paper':>24s} {'ours':>24s}")
-        for key, title in (("train_loss", "train loss"), ("test_loss", "test loss"), ("energy_mse_paper", "energy MSE")):
-            ours = metrics[key] if isinstance(metrics[key], list) else [metrics[key], metrics[key + "_se"]]
-            ref = paper[key.replace("_paper", "")][label]
-            print(f"{title + ' (' + label + ')':24s} {ref[0]:.4e} ± {ref[1]:.1e}  {ours[0]:.4e} ± {ours[1]:.1e}")
-        print(f"energy MSE, corrected protocol: {metrics['energy_mse_corrected'][0]:.4e} ± "
-              f"{metrics['energy_mse_corrected'][1]:.1e}; GIFs in {directory}")
+        _print_beside_paper(metrics, label, directory)
     return metrics
+
+
+def evaluate(trained) -> dict:
+    """``analysis/reproduce.py``'s evaluation (``TaskSpec.evaluate``): ``{protocol: result}`` of
+    ``evaluate_pixel_energy`` for every model and protocol, on the dataset and render size the
+    runs were trained with (``trained.dataset``, ``trained.args``)."""
+    out = {}
+    for name, protocol in _protocols().items():
+        trajectory = test_trajectory(trained.system, protocol, trained.args["render_size"])
+        result = evaluate_pixel_energy(trained.system, trained.models, protocol, trained.dataset, trajectory)
+        result["description"] = protocol.describe()
+        out[name] = result
+    return out

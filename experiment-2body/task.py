@@ -1,0 +1,16 @@
+"""Task 4, two bodies under gravity, as reproduce.py and the package see it (hnn.TaskSpec)."""
+import hnn
+
+TASK = hnn.TaskSpec(
+    order=4,
+    # the paper's n-body protocols already use the physical energy; nothing to correct
+    protocols={"paper": hnn.EnergyProtocol("paper", x0="seeds", t_span=(0.0, 25.0), num_points=500, rtol=1e-9)},
+    # the original README, one run at seed 0: (mean, ±)
+    paper={
+        "train_loss": {"baseline": (3.2682e-05, 1.2022e-06), "hnn": (2.9959e-06, 6.5500e-08)},
+        "test_loss": {"baseline": (2.9575e-05, 8.8900e-07), "hnn": (2.8218e-06, 4.2020e-08)},
+        "energy_mse": {"baseline": (6.3276e-02, 3.36e-02), "hnn": (3.8751e-05, 5.04e-06)},
+    },
+    figures=("energy", "orbits"),
+    cost=60,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+)

@@ -1,0 +1,22 @@
+"""Task 2, the ideal pendulum, as reproduce.py and the package see it (hnn.TaskSpec)."""
+import hnn
+
+TASK = hnn.TaskSpec(
+    order=2,
+    protocols={
+        "paper": hnn.EnergyProtocol("paper", energy="q2+p2"),
+        "corrected": hnn.EnergyProtocol("corrected"),
+    },
+    # the original README, one run at seed 0: (mean, ±)
+    paper={
+        "train_loss": {"baseline": (3.2606e-02, 1.7434e-03), "hnn": (3.2787e-02, 1.7567e-03)},
+        "test_loss": {"baseline": (3.5273e-02, 1.7970e-03), "hnn": (3.5586e-02, 1.8178e-03)},
+        "energy_mse": {"baseline": (4.1519e-02, 9.62e-03), "hnn": (2.4852e-02, 5.42e-03)},
+    },
+    figures=("energy", "fields", "integration", "energy_bump", "reversibility"),
+    # from the original notebooks (docs/original.md); every phase-plane figure starts from x0
+    figure_settings={"x0": (2.1, 0.0),
+                     "fields": {"lim": 2.6, "gridsize": 10, "t_span": (0.0, 28.0), "num_points": 1000},
+                     "integration": {"t_span": (0.0, 20.0), "num_points": 2000}},
+    cost=12,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+)

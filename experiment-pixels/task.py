@@ -1,0 +1,30 @@
+"""Task 5, the pixel pendulum, as reproduce.py and the package see it (hnn.TaskSpec).
+
+Its energy protocols are ``PixelProtocol``s (``metric.py``), measured by its own ``evaluate``:
+a model sees pixels, so its latent path is decoded and mapped to (q, p) before the energy is taken.
+"""
+import hnn
+
+metric = hnn.load_task("pixels", "metric")
+
+TASK = hnn.TaskSpec(
+    order=6,
+    protocols={
+        "paper": metric.PixelProtocol("paper"),
+        "corrected": metric.PixelProtocol("corrected", t_end=199.0, rtol=1e-9, atol=1e-9, coords="pair_state",
+                                          prepend_truth=False, latent_map="lstsq", energy="true"),
+    },
+    paper={
+        "train_loss": {"baseline": (1.7731e-04, 2.4202e-06), "hnn": (1.8683e-04, 2.4238e-06)},
+        "test_loss": {"baseline": (1.7306e-04, 3.2413e-06), "hnn": (1.8451e-04, 3.3422e-06)},
+        "energy_mse": {"baseline": (9.2748e-03, 1.14e-03), "hnn": (1.5315e-04, 8.42e-06)},
+    },
+    figures=("pixel_compare", "pixel_energy", "pixel_phase_space", "pixel_add_energy"),
+    figure_settings={"pixel_add_energy": metric.ADD_ENERGY},
+    cost=250,
+    # --quick renders 50 trajectories instead of 200
+    quick_argv=("--trials", "50"),
+    # train.py's own evaluation is skipped: reproduce evaluates both models together
+    train_argv=("--no_eval",),
+    evaluate=metric.evaluate,
+)

@@ -1,0 +1,170 @@
+"""A task is one folder: the package finds it, reads its task.py, and reproduce.py runs it; the
+package and the analysis name no task and import each other without cycles."""
+import ast
+import json
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import hnn
+from hnn_analysis import reproduce
+
+REPO = Path(hnn.__file__).resolve().parent.parent
+
+# a task that is not in the paper: the 1-D harmonic oscillator H = (q^2 + p^2) / 2, its period 2 pi
+TOY = {
+    "data.py": '''
+        """The toy system: H, its true dynamics and its dataset, nothing else."""
+        import torch
+
+        from hnn.datasets import ring_dataset
+
+
+        def hamiltonian(x):
+            return (x[..., 0] ** 2 + x[..., 1] ** 2) / 2
+
+
+        def dynamics(x):
+            return torch.stack([x[..., 1], -x[..., 0]], dim=-1)
+
+
+        def get_dataset(seed=0):
+            return ring_dataset(dynamics, seed, 20, (0.0, 3.0), 10, (0.1, 1.0), 0.1)
+        ''',
+    "train.py": '''
+        """Train the toy: the shared flags, its dataset, the shared runner."""
+        import hnn
+
+
+        def parse_args(argv=None):
+            return hnn.cli.make_parser("a toy oscillator", name="toy", input_dim=2, weight_decay=1e-4,
+                                       save_dir=".").parse_args(argv)
+
+
+        def dataset(args):
+            return hnn.load_task("toy").get_dataset(seed=args.seed)
+
+
+        def main(argv=None):
+            args = parse_args(argv)
+            return hnn.run_experiment(args, lambda: dataset(args))
+        ''',
+    "task.py": '''
+        """The toy as reproduce.py sees it."""
+        import hnn
+
+        TASK = hnn.TaskSpec(
+            order=1,
+            protocols={"paper": hnn.EnergyProtocol("paper", t_span=(0.0, 5.0), num_points=20, num_trials=5)},
+            figures=("energy", "fields"),
+            figure_settings={"x0": (1.0, 0.0),
+                             "fields": {"lim": 1.2, "gridsize": 5, "t_span": (0.0, 6.0), "num_points": 60}},
+        )
+        ''',
+}
+
+
+def _write_task(root: Path, name: str, files: dict) -> None:
+    folder = root / f"experiment-{name}"
+    folder.mkdir(parents=True)
+    for filename, text in files.items():
+        (folder / filename).write_text(textwrap.dedent(text).lstrip())
+
+
+def test_a_new_task_is_one_folder_that_reproduce_runs(tmp_path, monkeypatch):
+    _write_task(tmp_path / "repo", "toy", TOY)
+    monkeypatch.setenv("HNN_REPO", str(tmp_path / "repo"))
+    assert hnn.available_tasks() == ["toy"] and list(hnn.PROTOCOLS) == ["toy"] and "toy" not in hnn.paper.PAPER
+    out = tmp_path / "out"
+    results = reproduce.main(["--quick", "--steps", "5", "--tasks", "toy", "--out", str(out)])
+    row = results["tasks"]["toy"]
+    assert set(row["protocols"]) == {"paper"} and row["hnn"]["energy_mse_paper"][0] > 0
+    table = (out / "tables.md").read_text()
+    assert "| toy | hnn | n/a |" in table and "| toy | baseline | n/a |" in table      # no paper numbers
+    for name in ("toy-energy-paper.png", "toy-fields.png"):
+        assert (out / "figures" / name).stat().st_size > 10_000, name
+    saved = json.loads((out / "runs" / "toy-hnn-seed0" / "args.json").read_text())
+    assert saved["model"] == "hnn" and saved["dataset_cache_key"] is None and saved["total_steps"] == 5
+
+
+def test_tasks_are_found_by_folder_in_their_declared_order(tmp_path, monkeypatch):
+    for name, order in (("zeta", 1), ("alpha", None), ("beta", 1), ("gamma", 0.5)):
+        _write_task(tmp_path, name, {"data.py": "", **({"task.py": f"import hnn\nTASK = hnn.TaskSpec(order={order})\n"}
+                                                       if order is not None else {})})
+    (tmp_path / "experiment-notes").mkdir()                  # no data.py: not a task
+    monkeypatch.setenv("HNN_REPO", str(tmp_path))
+    assert hnn.available_tasks() == ["gamma", "beta", "zeta", "alpha"]
+    assert hnn.task_spec("alpha") == hnn.TaskSpec()          # no task.py: the default
+    assert hnn.task_spec("alpha").figures == ("energy",) and not hnn.task_spec("alpha").protocols
+    assert not dict(hnn.PROTOCOLS) and not dict(hnn.paper.PAPER)
+    with pytest.raises(ValueError, match="unknown task 'notes'"):
+        hnn.task_spec("notes")
+
+
+def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
+    spec = hnn.task_spec("spring")
+    assert hnn.PROTOCOLS["spring"]["paper"] is spec.protocols["paper"] is hnn.get_protocol("spring")
+    assert hnn.paper.PAPER["spring"]["test_loss"]["hnn"] == (3.5928e-02, 1.8328e-03)
+    assert list(hnn.paper.PAPER) == hnn.available_tasks()
+    assert set(hnn.PROTOCOLS) == set(hnn.available_tasks())
+    with pytest.raises(TypeError):
+        hnn.PROTOCOLS["spring"]["paper"] = None
+    with pytest.raises(ValueError, match="no energy protocol 'corrected' for task '2body'"):
+        hnn.get_protocol("2body", "corrected")
+    assert hnn.tasks.PROTOCOLS.get("nosuch") is None and "nosuch" not in hnn.paper.PAPER
+
+
+def _code_strings(path: Path) -> list[str]:
+    """Every string constant of a module that is not a docstring."""
+    tree = ast.parse(path.read_text())
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef)) and node.body
+                  and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    return [node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings]
+
+
+def test_the_package_names_no_task():
+    names = set(hnn.available_tasks())
+    for path in sorted((REPO / "hnn").glob("*.py")):
+        named = [s for s in _code_strings(path) if s in names or s.removeprefix("experiment-") in names]
+        assert not named, f"{path.name} names the tasks {named}: a task describes itself in its task.py"
+
+
+def _imports(path: Path, package: str) -> set[str]:
+    """The sibling modules ``path`` imports at module level (``from . import x``, ``from package.x import``...)."""
+    found = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ImportFrom):
+            base = "" if node.level else node.module or ""
+            if node.level or base == package:
+                found |= {node.module} if node.level and node.module else {a.name for a in node.names}
+            elif base.startswith(package + "."):
+                found.add(base.split(".")[1])
+        elif isinstance(node, ast.Import):
+            found |= {a.name.split(".")[1] for a in node.names if a.name.startswith(package + ".")}
+    return found
+
+
+@pytest.mark.parametrize("folder, package", [("hnn", "hnn"), ("analysis", "hnn_analysis")])
+def test_no_import_cycles(folder, package):
+    modules = {p.stem: p for p in (REPO / folder).glob("*.py") if p.stem != "__init__"}
+    graph = {name: _imports(path, package) & set(modules) for name, path in modules.items()}
+    done, stack = set(), []
+
+    def visit(name):
+        if name in stack:
+            cycle = stack[stack.index(name):] + [name]
+            raise AssertionError(f"import cycle: {' -> '.join(cycle)}")
+            return
+        if name in done:
+            return
+        stack.append(name)
+        for other in sorted(graph[name]):
+            visit(other)
+        stack.pop()
+        done.add(name)
+
+    for name in sorted(graph):
+        visit(name)
