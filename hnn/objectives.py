@@ -7,8 +7,9 @@ An objective builds the untrained model that a run's args describe (its init dra
 global generator, seeded by the run), gives ``hnn.train`` its options, and measures the final
 train and test numbers. Its model kind (``'hnn'``, ``'baseline'``, ``'pixel-hnn'``,
 ``'pixel-baseline'``) is saved in the run's ``args.json`` as ``"model"``, and ``model_from_args``
-rebuilds a saved run's model from it. A new model kind is a new ``Objective`` subclass listed in
-``FAMILIES``.
+rebuilds a saved run's model from it through ``MODEL_KINDS``. A new model kind is one entry there
+(``register_model_kind(name, objective class, build)``); a new kind of objective is an
+``Objective`` subclass.
 """
 from __future__ import annotations
 
@@ -31,12 +32,13 @@ class Objective:
     arrays: tuple[str, str, str, str] = ("x", "dxdt", "test_x", "test_dxdt")
 
     def kind(self, args: dict) -> str:
-        """The model kind of a run with these args, saved as ``"model"`` in its args.json."""
-        return self.prefix + ("baseline" if args["baseline"] else "hnn")
+        """The model kind of a run with these args, saved as ``"model"`` in its args.json: the
+        ``model`` flag when a task has one, else this objective's baseline or HNN."""
+        return args.get("model") or self.prefix + ("baseline" if args["baseline"] else "hnn")
 
     def build(self, args: dict) -> nn.Module:
-        """The untrained model (float32 unless ``args["dtype"]`` says otherwise)."""
-        raise NotImplementedError
+        """The untrained model of this run's kind (float32 unless ``args["dtype"]`` says otherwise)."""
+        return _typed(_registered(self.kind(args))[1](args), args)
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""
@@ -57,10 +59,6 @@ class DerivativeObjective(Objective):
     With ``use_rk4`` the prediction is the RK4 average slope over the dataset's ``dt``; with
     ``input_noise`` each training batch's inputs get Gaussian noise.
     """
-
-    def build(self, args: dict) -> nn.Module:
-        return _typed(build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"], args["baseline"],
-                                  args["field_type"]), args)
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None}
@@ -88,10 +86,6 @@ class PixelObjective(Objective):
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
-    def build(self, args: dict) -> nn.Module:
-        return _typed(PixelHNN(args["input_dim"], args["latent_dim"], args["hidden_dim"], args["nonlinearity"],
-                               args["baseline"], args["field_type"], args.get("ae_nonlinearity", "relu")), args)
-
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         noise = torch.Generator().manual_seed(args["seed"] + 2)
 
@@ -109,8 +103,40 @@ class PixelObjective(Objective):
         return mean_and_se(per_sample)
 
 
-# model-kind prefix -> objective class: how model_from_args rebuilds a saved run of each kind
-FAMILIES = {DerivativeObjective.prefix: DerivativeObjective, PixelObjective.prefix: PixelObjective}
+def _mlp_model(baseline: bool):
+    def build(args: dict) -> nn.Module:
+        return build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"], baseline, args["field_type"])
+    return build
+
+
+def _pixel_model(baseline: bool):
+    def build(args: dict) -> nn.Module:
+        return PixelHNN(args["input_dim"], args["latent_dim"], args["hidden_dim"], args["nonlinearity"], baseline,
+                        args["field_type"], args.get("ae_nonlinearity", "relu"))
+    return build
+
+
+# model kind -> (the objective that trains it, its builder from a run's args): the one place a kind is named
+MODEL_KINDS = {
+    "hnn": (DerivativeObjective, _mlp_model(False)),
+    "baseline": (DerivativeObjective, _mlp_model(True)),
+    "pixel-hnn": (PixelObjective, _pixel_model(False)),
+    "pixel-baseline": (PixelObjective, _pixel_model(True)),
+}
+
+
+def register_model_kind(name: str, objective: type, build) -> None:
+    """Add a model kind: runs whose args say ``"model": name`` train with ``objective`` and
+    ``build(args) -> nn.Module`` makes their untrained model (and rebuilds it on load)."""
+    if name in MODEL_KINDS:
+        raise ValueError(f"model kind {name!r} is registered already")
+    MODEL_KINDS[name] = (objective, build)
+
+
+def _registered(kind: str) -> tuple:
+    if kind not in MODEL_KINDS:
+        raise ValueError(f"unknown model kind {kind!r}; known: {sorted(MODEL_KINDS)}")
+    return MODEL_KINDS[kind]
 
 
 def _kind(args: dict) -> str:
@@ -121,14 +147,10 @@ def _kind(args: dict) -> str:
 
 
 def objective_for(kind: str) -> Objective:
-    """An objective that builds models of ``kind`` (its arrays are the defaults)."""
-    family = kind.rsplit("-", 1)[0] + "-" if "-" in kind else ""
-    if family not in FAMILIES or kind.rsplit("-", 1)[-1] not in ("hnn", "baseline"):
-        raise ValueError(f"unknown model kind {kind!r}; known: "
-                         f"{sorted(p + label for p in FAMILIES for label in ('hnn', 'baseline'))}")
-    return FAMILIES[family]()
+    """An objective that trains models of ``kind`` (its arrays are the defaults)."""
+    return _registered(kind)[0]()
 
 
 def model_from_args(args: dict) -> nn.Module:
     """The untrained model that a run with these (saved) args trains, of the kind it recorded."""
-    return objective_for(_kind(args)).build(args)
+    return objective_for(_kind(args)).build({**args, "model": _kind(args)})

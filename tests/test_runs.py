@@ -230,3 +230,30 @@ def test_display_only_flags_are_declared_by_whoever_adds_them(tmp_path):
     assert set(args.display_only) == {"verbose", "debug", "workers"} and "display_only" not in vars(args)
     assert set(hnn.cli.DISPLAY_ONLY) <= set(args.display_only)
     assert "render_workers" in hnn.load_task("pixels", "train").parse_args([]).display_only   # the task's own
+
+
+class _Scaled(torch.nn.Module):
+    """A toy model kind: the HNN's field times a learned scalar (stands in for a new rung)."""
+
+    def __init__(self, inner):
+        super().__init__()
+        self.inner, self.scale = inner, torch.nn.Parameter(torch.ones(()))
+
+    def time_derivative(self, x):
+        return self.scale * self.inner.time_derivative(x)
+
+
+def test_a_new_model_kind_is_one_registry_entry(tmp_path, monkeypatch):
+    monkeypatch.setattr(hnn.objectives, "MODEL_KINDS", dict(hnn.objectives.MODEL_KINDS))
+
+    def build(args):
+        return _Scaled(hnn.build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"]))
+
+    hnn.objectives.register_model_kind("scaled", hnn.DerivativeObjective, build)
+    with pytest.raises(ValueError, match="registered already"):
+        hnn.objectives.register_model_kind("scaled", hnn.DerivativeObjective, build)
+    args = _args(tmp_path, 3)
+    args.model = "scaled"                                   # what a task's --model flag would set
+    run = hnn.run_experiment(args, hnn.load_task("spring").get_dataset())
+    model, saved, metrics = hnn.load_run(run)
+    assert saved["model"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
