@@ -172,8 +172,9 @@ def _save_rollout(path, truth: np.ndarray, decoded: np.ndarray) -> None:
 
 
 def _sibling_run_name(args: dict) -> str:
-    """The folder name of the run whose args are ``args`` with ``baseline`` flipped."""
-    return run_dir(argparse.Namespace(**{**args, "baseline": not args["baseline"]})).name
+    """The folder name of the run whose args are ``args`` with the model flipped (hnn <-> baseline)."""
+    flipped = not args["baseline"]
+    return run_dir(argparse.Namespace(**{**args, "baseline": flipped, "model": "baseline" if flipped else "hnn"})).name
 
 
 def _protocols() -> dict:

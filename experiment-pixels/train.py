@@ -40,7 +40,10 @@ def parse_args(argv=None):
                         help="processes that render frames (default: the cores); the frames do not depend on it")
     parser.add_argument("--no_eval", action="store_true", display_only=True,
                         help="skip the energy metric and the GIFs after training")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.model not in ("hnn", "baseline"):      # the latent field's kinds registered for pixels
+        parser.error(f"--model {args.model}: the pixel task trains a latent hnn or baseline; pass one of those")
+    return args
 
 
 def dataset(args) -> dict:

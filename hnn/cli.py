@@ -24,6 +24,7 @@ from pathlib import Path
 import torch
 
 from .models import FIELD_TYPES, NONLINEARITIES
+from .objectives import MODEL_KINDS
 
 USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it
 # Exceptions that mean "the input is wrong", not "the code is": values the parser cannot check
@@ -70,7 +71,10 @@ class Parser(argparse.ArgumentParser):
         if namespace is None:
             namespace = RunArgs()
             namespace.display_only = tuple(sorted(self.display_only))
-        return super().parse_known_args(args, namespace)
+        parsed, rest = super().parse_known_args(args, namespace)
+        if hasattr(parsed, "model") and hasattr(parsed, "baseline"):
+            _resolve_model(self, parsed)
+        return parsed, rest
 
 
 # ----------------------------------------------------------------------------------------------
@@ -157,6 +161,20 @@ def _device(text: str) -> str:
 # the parser
 
 
+def _model_choices() -> list[str]:
+    """The model kinds a task's ``--model`` may name (the pixel kinds are the pixel task's own)."""
+    return [kind for kind in MODEL_KINDS if "-" not in kind]
+
+
+def _resolve_model(parser: argparse.ArgumentParser, args) -> None:
+    """``--baseline`` means ``--model baseline`` (the original's flag); both set ``args.model`` and
+    ``args.baseline`` consistently, and a contradiction is an error."""
+    if args.baseline and args.model not in (None, "baseline"):
+        parser.error(f"--baseline contradicts --model {args.model}; pass one of them")
+    args.model = "baseline" if args.baseline else (args.model or "hnn")
+    args.baseline = args.model == "baseline"
+
+
 def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, weight_decay: float,
                 total_steps: int = 2000, batch_size: int | None = None, learn_rate: float = 1e-3,
                 hidden_dim: int = 200, rk4_help: str | None = None,
@@ -182,7 +200,11 @@ def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, w
                    help="optimizer steps; the loop runs total_steps + 1, as the original")
     p.add_argument("--print_every", type=int_at_least(1), default=200, help="print (and test) every N steps")
     p.add_argument("--name", type=str, default=name, help="run name, the prefix of the run folder")
-    p.add_argument("--baseline", action="store_true", help="train the baseline (an MLP predicting dx/dt directly)")
+    p.add_argument("--baseline", action="store_true", help="train the baseline (an MLP predicting dx/dt directly); "
+                   "the same as --model baseline")
+    p.add_argument("--model", choices=_model_choices(), default=None,
+                   help="model kind: hnn (the paper's), baseline, separable (H = T(p) + V(q): explicit leapfrog is "
+                        "symplectic for it) or dissipative (J grad H + grad D: learns friction); default hnn")
     p.add_argument("--use_rk4", action="store_true", help=rk4_help or (
         "fit the RK4 average slope of the learned field over one data time step dt, (x(t+dt) - x(t))/dt "
         "of one RK4 step, to the true dx/dt (the original crashed on this flag); default: fit dx/dt itself"))

@@ -19,6 +19,7 @@ from torch import nn
 from .integrate import rk4_step
 from .metrics import derivative_loss, mean_and_se
 from .models import PixelHNN, build_model
+from .structured import DissipativeHNN, SeparableHNN
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -34,7 +35,8 @@ class Objective:
     def kind(self, args: dict) -> str:
         """The model kind of a run with these args, saved as ``"model"`` in its args.json: the
         ``model`` flag when a task has one, else this objective's baseline or HNN."""
-        return args.get("model") or self.prefix + ("baseline" if args["baseline"] else "hnn")
+        label = args.get("model") or ("baseline" if args["baseline"] else "hnn")
+        return label if label.startswith(self.prefix) else self.prefix + label
 
     def build(self, args: dict) -> nn.Module:
         """The untrained model of this run's kind (float32 unless ``args["dtype"]`` says otherwise)."""
@@ -116,10 +118,18 @@ def _pixel_model(baseline: bool):
     return build
 
 
+def _structured_model(cls):
+    def build(args: dict) -> nn.Module:
+        return cls(args["input_dim"], args["hidden_dim"], args["nonlinearity"])
+    return build
+
+
 # model kind -> (the objective that trains it, its builder from a run's args): the one place a kind is named
 MODEL_KINDS = {
     "hnn": (DerivativeObjective, _mlp_model(False)),
     "baseline": (DerivativeObjective, _mlp_model(True)),
+    "separable": (DerivativeObjective, _structured_model(SeparableHNN)),
+    "dissipative": (DerivativeObjective, _structured_model(DissipativeHNN)),
     "pixel-hnn": (PixelObjective, _pixel_model(False)),
     "pixel-baseline": (PixelObjective, _pixel_model(True)),
 }

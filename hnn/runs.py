@@ -29,7 +29,9 @@ os.umask(_UMASK)
 
 
 def run_label(args) -> str:
-    return ("baseline" if args.baseline else "hnn") + ("-rk4" if getattr(args, "use_rk4", False) else "")
+    # the kind as its task's --model names it: a recorded family prefix ("pixel-") is the task's own
+    kind = (getattr(args, "model", None) or ("baseline" if args.baseline else "hnn")).rsplit("-", 1)[-1]
+    return kind + ("-rk4" if getattr(args, "use_rk4", False) else "")
 
 
 def run_dir(args) -> Path:

@@ -1,0 +1,81 @@
+"""Model kinds with more structure than the paper's HNN: a separable H, and H plus dissipation.
+
+- ``SeparableHNN``: H(q, p) = T(p) + V(q), one MLP sees only p and one only q. Its field
+  ``(dT/dp, -dV/dq)`` reads p alone in dq/dt and q alone in dp/dt, so explicit ``leapfrog`` and
+  ``yoshida4`` are exactly symplectic for the *learned* model, at one field call per stage.
+- ``DissipativeHNN``: the Helmholtz split of Sosanya & Greydanus, "Dissipative Hamiltonian Neural
+  Networks" (2022): dx/dt = J grad H + grad D, a conservative H and a dissipative potential D
+  learned together from dx/dt. The split is unique only up to a harmonic pair (J grad phi =
+  grad psi), but the Laplacians are fixed by the field: lap H = -rot f and lap D = div f.
+
+State ``x = [q, p]`` of shape ``(batch, 2n)``; every scalar (H, T, V, D) has shape ``(batch,)``.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .models import HNN, MLP
+
+
+def _check_even(input_dim: int, kind: str) -> int:
+    if not isinstance(input_dim, int) or input_dim < 2 or input_dim % 2:
+        raise ValueError(f"{kind} needs x = [q, p] of even width input_dim >= 2, got {input_dim!r}")
+    return input_dim // 2
+
+
+def _scalar_gradient(net: nn.Module, x: torch.Tensor, create_graph: bool) -> torch.Tensor:
+    """d(net(x)[:, 0])/dx, ``(batch, width of x)``: the MLP's closed form where it applies, else autograd."""
+    if isinstance(net, MLP) and net._closed_form_applies():
+        return net.input_gradient(x, 0, create_graph)
+    with torch.enable_grad():
+        x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
+        return torch.autograd.grad(net(x_in)[:, 0].sum(), x_in, create_graph=create_graph)[0]
+
+
+class SeparableHNN(nn.Module):
+    """H(q, p) = T(p) + V(q), each an MLP of ``hidden_dim`` units on its half of ``x = [q, p]``."""
+
+    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+        super().__init__()
+        self.n = _check_even(input_dim, "SeparableHNN")
+        self.input_dim = input_dim
+        self.kinetic_net = MLP(self.n, hidden_dim, 1, nonlinearity)
+        self.potential_net = MLP(self.n, hidden_dim, 1, nonlinearity)
+
+    def _check_input(self, x: torch.Tensor) -> None:
+        if x.dim() != 2 or x.shape[1] != self.input_dim:
+            raise ValueError(f"expected x of shape (batch, {self.input_dim}), got {tuple(x.shape)}")
+
+    def kinetic(self, p: torch.Tensor) -> torch.Tensor:
+        """T(p), ``(batch, n)`` -> ``(batch,)``."""
+        return self.kinetic_net(p)[:, 0]
+
+    def potential(self, q: torch.Tensor) -> torch.Tensor:
+        """V(q), ``(batch, n)`` -> ``(batch,)``."""
+        return self.potential_net(q)[:, 0]
+
+    def hamiltonian(self, x: torch.Tensor) -> torch.Tensor:
+        """H = T(p) + V(q), ``(batch,)``."""
+        self._check_input(x)
+        return self.kinetic(x[:, self.n:]) + self.potential(x[:, :self.n])
+
+    def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        """``dx/dt = (dT/dp, -dV/dq)``, ``(batch, 2n)``; a graph for training only in grad mode."""
+        self._check_input(x)
+        create_graph = torch.is_grad_enabled()
+        dT = _scalar_gradient(self.kinetic_net, x[:, self.n:], create_graph)
+        dV = _scalar_gradient(self.potential_net, x[:, :self.n], create_graph)
+        return torch.cat([dT, -dV], dim=1)
+
+
+class DissipativeHNN(HNN):
+    """dx/dt = J grad H + grad D: the paper's HNN with both fields of one MLP (F2 = H, F1 = D)."""
+
+    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+        _check_even(input_dim, "DissipativeHNN")
+        super().__init__(input_dim, MLP(input_dim, hidden_dim, 2, nonlinearity), field_type="both")
+
+    def dissipation(self, x: torch.Tensor) -> torch.Tensor:
+        """The dissipative potential D = F1 at ``x``, ``(batch,)``: its gradient is the non-conservative part."""
+        return self.forward(x)[0].squeeze(1)
