@@ -1,7 +1,8 @@
-"""Atomic file writes: a reader sees the old file or the new one, never a partial one.
+"""Atomic writes: a reader sees the old file (or folder) or the new one, never a partial one.
 
     write_json(path, {"a": 1})
     atomic_write(path, lambda tmp: np.savez(tmp, x=x))
+    atomic_folder(path, lambda tmp: write_json(tmp / "a.json", {}))   # a whole folder at once
 
 Used by saved runs (``hnn.runs``) and the dataset cache (``hnn.cache``); it imports nothing of
 ``hnn``, so either can use it without loading the other.
@@ -10,11 +11,14 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
-_UMASK = os.umask(0)
-os.umask(_UMASK)
+# the process's umask (read once: os.umask can only be read by setting it); files and folders made
+# through temporary names get the permissions an ordinary open/mkdir would give them
+UMASK = os.umask(0)
+os.umask(UMASK)
 
 
 def atomic_write(path, write) -> None:
@@ -25,7 +29,7 @@ def atomic_write(path, write) -> None:
     os.close(fd)
     try:
         write(tmp)
-        os.chmod(tmp, 0o666 & ~_UMASK)     # mkstemp makes 0600; give the file the usual permissions
+        os.chmod(tmp, 0o666 & ~UMASK)     # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -35,3 +39,39 @@ def atomic_write(path, write) -> None:
 def write_json(path, obj) -> None:
     """``obj`` as indented JSON at ``path``, atomically."""
     atomic_write(path, lambda tmp: Path(tmp).write_text(json.dumps(obj, indent=2) + "\n"))
+
+
+def atomic_folder(path: Path, fill) -> None:
+    """Call ``fill(tmp)`` on a new hidden sibling folder ``.<name>.tmp-*``, then rename it to ``path``.
+
+    A folder already at ``path`` is renamed aside to ``.<name>.old-*`` first and deleted after,
+    so a crash at any moment leaves at ``path`` the old folder, the new one or nothing.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{path.name}.tmp-"
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=prefix))
+    aside = path.parent / f".{path.name}.old-{tmp.name[len(prefix):]}"   # unique while tmp exists
+    try:
+        os.chmod(tmp, 0o777 & ~UMASK)     # mkdtemp makes 0700; give the folder the usual permissions
+        fill(tmp)
+        _move_in(tmp, path, aside)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _move_in(tmp: Path, path: Path, aside: Path) -> None:
+    """Rename folder ``tmp`` to ``path``, replacing (via ``aside``) any folder there."""
+    try:
+        os.rename(path, aside)
+        replaced = True
+    except FileNotFoundError:
+        replaced = False
+    try:
+        os.rename(tmp, path)
+    except BaseException:
+        if replaced:
+            os.rename(aside, path)    # the old run back where it was
+        raise
+    if replaced:
+        shutil.rmtree(aside, ignore_errors=True)

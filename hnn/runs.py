@@ -10,9 +10,6 @@ one, or no folder, never a checkpoint of one run beside the args of another. Lat
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 import time
 from pathlib import Path
 
@@ -20,13 +17,9 @@ import numpy as np
 import torch
 
 from . import cli
-from .io import atomic_write, write_json  # noqa: F401  (hnn.runs.atomic_write, as before)
+from .io import atomic_folder, atomic_write, write_json  # noqa: F401  (hnn.runs.atomic_write, as before)
 from .objectives import DerivativeObjective, Objective, model_from_args
 from .training import train
-
-_UMASK = os.umask(0)
-os.umask(_UMASK)
-
 
 def run_label(args) -> str:
     # the kind as its task's --model names it: a recorded family prefix ("pixel-") is the task's own
@@ -41,42 +34,6 @@ def run_dir(args) -> Path:
 
 # written last into a run folder: one without it is an interrupted save (or predates this mark)
 COMPLETE = "complete.json"
-
-
-def _fill_then_move_in(path: Path, fill) -> None:
-    """Call ``fill(tmp)`` on a new hidden sibling folder ``.<name>.tmp-*``, then rename it to ``path``.
-
-    A folder already at ``path`` is renamed aside to ``.<name>.old-*`` first and deleted after,
-    so a crash at any moment leaves at ``path`` the old folder, the new one or nothing.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    prefix = f".{path.name}.tmp-"
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=prefix))
-    aside = path.parent / f".{path.name}.old-{tmp.name[len(prefix):]}"   # unique while tmp exists
-    try:
-        os.chmod(tmp, 0o777 & ~_UMASK)     # mkdtemp makes 0700; give the folder the usual permissions
-        fill(tmp)
-        _move_in(tmp, path, aside)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def _move_in(tmp: Path, path: Path, aside: Path) -> None:
-    """Rename folder ``tmp`` to ``path``, replacing (via ``aside``) any folder there."""
-    try:
-        os.rename(path, aside)
-        replaced = True
-    except FileNotFoundError:
-        replaced = False
-    try:
-        os.rename(tmp, path)
-    except BaseException:
-        if replaced:
-            os.rename(aside, path)    # the old run back where it was
-        raise
-    if replaced:
-        shutil.rmtree(aside, ignore_errors=True)
 
 
 def _is_complete(directory: Path) -> bool:
@@ -178,7 +135,7 @@ def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Pa
         write_json(tmp / "metrics.json", metrics)
         write_json(tmp / COMPLETE, {"files": ["model.tar", "args.json", "metrics.json"]})
 
-    _fill_then_move_in(directory, fill)
+    atomic_folder(directory, fill)
     return directory
 
 

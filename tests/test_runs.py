@@ -13,7 +13,7 @@ import hnn
 import hnn.runs
 
 REPO = Path(__file__).resolve().parent.parent
-_UMASK = hnn.runs._UMASK
+_UMASK = hnn.io.UMASK
 
 
 def _args(save_dir, steps: int):
@@ -77,7 +77,7 @@ def test_a_failed_move_puts_the_old_run_back(tmp_path, monkeypatch):
             raise OSError("rename refused")
         real(src, dst)
 
-    monkeypatch.setattr(hnn.runs.os, "rename", rename)
+    monkeypatch.setattr(hnn.io.os, "rename", rename)
     with pytest.raises(OSError, match="rename refused"):
         _save(new, 0.5)
     monkeypatch.undo()
