@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.evaluation import energy_bump, float64_copy
+from hnn.evaluation import check_integrator, describe_integrator, energy_bump, float64_copy, rollout_options
 from hnn.integrate import rollout
 from hnn.metrics import energy_mse
 from hnn.runs import atomic_write, load_run, run_dir, write_json
@@ -65,10 +65,13 @@ class PixelProtocol:
     method: str = "solve_ivp"
     options: tuple = ()
 
+    def __post_init__(self):
+        check_integrator(self)
+
     def describe(self) -> str:
         return (f"{self.name}: one gym trajectory (seed {self.seed}, |q0| in ({self.min_angle:.3f}, "
                 f"{self.max_angle:.3f})), {self.num_points} frames on t in [0, {self.t_end:g}] frames, "
-                f"{hnn.get_solver(self.method).describe(dict(self.options))} rtol {self.rtol:g} atol {self.atol:g}, truth = {self.coords}, latent map {self.latent_map}, "
+                f"{describe_integrator(self)}, truth = {self.coords}, latent map {self.latent_map}, "
                 f"energy = {self.energy}" + (", first point = truth" if self.prepend_truth else ""))
 
 
@@ -117,13 +120,13 @@ def _render_trajectory(system, seed: int, num_points: int, min_angle: float, max
     return system.pair_rows(raw["frames"], raw["states"])
 
 
-def latent_path(model, pixels, t_eval, rtol: float = 1e-3, atol: float = 1e-6, method: str = "solve_ivp",
-                options: tuple = ()) -> torch.Tensor:
-    """The latent path ``(len(t_eval), latent_dim)`` from the encoded first pixel pair ``pixels[:1]``."""
+def latent_path(model, pixels, t_eval, protocol: PixelProtocol) -> torch.Tensor:
+    """The latent path ``(len(t_eval), latent_dim)`` from the encoded first pixel pair ``pixels[:1]``,
+    integrated as ``protocol`` says."""
     param = next(model.parameters())
     with torch.no_grad():
         z0 = model.encode(torch.as_tensor(pixels[:1], dtype=param.dtype))
-    return rollout(model.time_derivative, z0, t_eval, method=method, rtol=rtol, atol=atol, **dict(options))[0]
+    return rollout(model.time_derivative, z0, t_eval, **rollout_options(protocol))[0]
 
 
 def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset: dict,
@@ -151,8 +154,7 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
             latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
                                  for i in range(0, len(dataset["pixels"]), 4000)])
         to_coords = fit_latent_map(latents, fit_coords, protocol.latent_map)
-        z = latent_path(model, trajectory["pixels"], t_eval, protocol.rtol, protocol.atol, protocol.method,
-                        protocol.options)
+        z = latent_path(model, trajectory["pixels"], t_eval, protocol)
         with torch.no_grad():
             decoded = model.decode(z.to(param.dtype))
             coords = to_coords(model.encode(decoded))     # its own encoder (the original used the HNN's)

@@ -29,6 +29,32 @@ from .solvers import get_solver
 from .tasks import PROTOCOLS
 
 
+# A protocol's integrator is data: fields ``method`` (a name in ``hnn.SOLVERS``), ``options`` (its
+# other rollout options) and ``rtol``/``atol``. These three serve every protocol type that has them.
+
+
+def check_integrator(protocol) -> None:
+    """Fail on an unknown ``method`` (naming the known ones); store a dict of ``options`` as sorted
+    pairs, so a frozen protocol stays hashable."""
+    get_solver(protocol.method)
+    if isinstance(protocol.options, dict):
+        object.__setattr__(protocol, "options", tuple(sorted(protocol.options.items())))
+
+
+def rollout_options(protocol) -> dict:
+    """The keywords ``hnn.rollout`` gets: ``method``, its ``options``, and the protocol's
+    ``rtol``/``atol`` if the method is adaptive (a fixed-step one has none)."""
+    tolerances = {"rtol": protocol.rtol, "atol": protocol.atol} if get_solver(protocol.method).adaptive else {}
+    return {"method": protocol.method, **tolerances, **dict(protocol.options)}
+
+
+def describe_integrator(protocol) -> str:
+    """E.g. ``'RK45 rtol 1e-12 atol 1e-06'`` (solve_ivp's default), ``'rk4 dt 0.01'``."""
+    solver = get_solver(protocol.method)
+    name = solver.describe(dict(protocol.options))
+    return f"{name} rtol {protocol.rtol:g} atol {protocol.atol:g}" if solver.adaptive else name
+
+
 @dataclass(frozen=True)
 class EnergyProtocol:
     """How one energy-MSE number is measured.
@@ -65,21 +91,10 @@ class EnergyProtocol:
     options: tuple[tuple[str, object], ...] = ()
 
     def __post_init__(self):
-        get_solver(self.method)             # an unknown method fails here, naming the known ones
-        if isinstance(self.options, dict):  # stored as sorted pairs: the protocol stays frozen and hashable
-            object.__setattr__(self, "options", tuple(sorted(self.options.items())))
+        check_integrator(self)
 
     def rollout_options(self) -> dict:
-        """The keywords ``hnn.rollout`` gets: ``method``, its ``options``, and the protocol's
-        ``rtol``/``atol`` if the method is adaptive (a fixed-step one has none)."""
-        tolerances = {"rtol": self.rtol, "atol": self.atol} if get_solver(self.method).adaptive else {}
-        return {"method": self.method, **tolerances, **dict(self.options)}
-
-    def _integrator(self) -> str:
-        """E.g. ``'RK45 rtol 1e-12 atol 1e-06'`` (solve_ivp's default), ``'rk4 dt 0.01'``."""
-        solver = get_solver(self.method)
-        name = solver.describe(dict(self.options))
-        return f"{name} rtol {self.rtol:g} atol {self.atol:g}" if solver.adaptive else name
+        return rollout_options(self)
 
     def describe(self) -> str:
         quirks = []
@@ -90,7 +105,7 @@ class EnergyProtocol:
         else:
             where = (f"{self.num_trials} trials ({'seeds 0..' + str(self.num_trials - 1) if self.x0 == 'seeds' else 'box'}),"
                      f" t in [{self.t_span[0]:g}, {self.t_span[1]:g}], {self.num_points} points")
-        return (f"{self.name}: {where}, {self._integrator()}, energy = {self.energy}"
+        return (f"{self.name}: {where}, {describe_integrator(self)}, energy = {self.energy}"
                 + (f", {'; '.join(quirks)}" if quirks else ""))
 
 
