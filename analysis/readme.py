@@ -6,6 +6,7 @@ Every generated section is written only this way, never by hand, by the command 
     python analysis/reproduce.py --update-docs        # docs/results.md, the README's headline, docs/figures/
     python analysis/benchmark.py --update-docs        # docs/speed.md
     python analysis/speed_accuracy.py --update-docs   # docs/integrators.md
+    python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
 """
 import argparse
@@ -19,7 +20,7 @@ from hnn.io import atomic_write
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
-         "speed-accuracy": "docs/integrators.md"}
+         "speed-accuracy": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md"}
 # the few figures the README shows (about 1.2 MB in all), copied from a full run's figures/
 CURATED = ("spring-fields.png", "real-fields.png", "2body-orbits.png", "3body-orbits.png",
            "pixels-compare-static.png")

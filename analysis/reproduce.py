@@ -72,7 +72,9 @@ def _cores() -> int:
 
 def _train_argv(task: str, label: str, runs_dir: Path, seed: int, steps: int | None, extra_argv=()) -> list[str]:
     """The ``train.py`` flags of one run."""
-    argv = ["--save_dir", str(runs_dir), "--seed", str(seed)] + (["--baseline"] if label == "baseline" else [])
+    # the paper's pair keeps the original's flags (--baseline, or nothing), so their runs stay reusable
+    kind = ["--baseline"] if label == "baseline" else ([] if label == "hnn" else ["--model", label])
+    argv = ["--save_dir", str(runs_dir), "--seed", str(seed)] + kind
     if steps is not None:
         argv += ["--total_steps", str(steps)]
     return argv + list(extra_argv)
@@ -312,13 +314,16 @@ def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
     tic = time.perf_counter()
     trained, row = load_runs(task, runs)
     energy = registry.evaluate(trained)
+    # the figures show the paper's pair; the extra kinds are numbers in their own table
+    pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
+                            trained.args)
     for name, result in energy.items():
         for label in trained.models:
             row[label][f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
         row.setdefault("protocols", {})[name] = result.get("description", name)
     t_eval = time.perf_counter() - tic
     if fig_dir is not None:
-        numbers = registry.draw_figures(trained, energy, fig_dir)
+        numbers = registry.draw_figures(pair, energy, fig_dir)
         if numbers:
             row["figure_numbers"] = numbers
     row["seconds"] = {"evaluate": t_eval, "figures": time.perf_counter() - tic - t_eval if fig_dir else 0.0}
@@ -398,6 +403,7 @@ def tables_markdown(results: dict) -> str:
             extra = f" {_across_seeds(row, label, 'energy_mse_paper')} |" if seeds else ""
             lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper)} | {_ratio(ours, paper)} | "
                          f"{_fmt(fixed) if fixed else 'same as paper'} |{extra}")
+    lines += _extra_kinds_table(results, seeds)
     notes = [f"- **{task}**: {row['note']}" for task, row in results["tasks"].items() if row.get("note")]
     if notes:
         lines += ["", "Rows beyond the paper's setting (compared with the paper's row of the same task):"] + notes
@@ -418,6 +424,29 @@ def tables_markdown(results: dict) -> str:
     if stages:
         lines += [""] + stages
     return "\n".join(lines) + "\n"
+
+
+def _extra_kinds_table(results: dict, seeds: str) -> list[str]:
+    """The rows of the model kinds beyond the paper's pair (``--models``), beside that task's HNN."""
+    rows = [(name, label) for name, row in results["tasks"].items() for label in row
+            if label not in MODELS and isinstance(row[label], dict) and "test_loss" in row[label]]
+    if not rows:
+        return []
+    meta = results["meta"]
+    lines = ["", f"**Other model kinds** (`--models`; not in the paper; seed {meta['seed']}; the HNN row repeated "
+             "for comparison)", "",
+             "| task | model | train loss | test loss | energy MSE, paper protocol | energy MSE, corrected |"
+             + (" test loss across " + seeds + " |" if seeds else ""),
+             "| --- | --- | --- | --- | --- | --- |" + (" --- |" if seeds else "")]
+    for name in dict.fromkeys(name for name, _ in rows):
+        row = results["tasks"][name]
+        for label in ["hnn"] + [lbl for n, lbl in rows if n == name]:
+            r = row[label]
+            extra = f" {_across_seeds(row, label, 'test_loss')} |" if seeds else ""
+            fixed = r.get("energy_mse_corrected")
+            lines.append(f"| {name} | {label} | {_fmt(r.get('train_loss'))} | {_fmt(r.get('test_loss'))} | "
+                         f"{_fmt(r.get('energy_mse_paper'))} | {_fmt(fixed) if fixed else 'same as paper'} |{extra}")
+    return lines
 
 
 def headline_markdown(results: dict) -> str:
@@ -459,6 +488,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=1,
                    help="training processes: 1 trains here, one run after another; N > 1 runs N worker "
                         "processes with cores // N threads each, longest runs first; evaluation stays here")
+    p.add_argument("--models", nargs="+", default=[], metavar="KIND",
+                   choices=[k for k in hnn.cli._model_choices() if k not in MODELS],
+                   help="extra model kinds trained and evaluated beside the paper's baseline and HNN, in a table "
+                        "of their own (the paper's tables stay as they are): separable, dissipative")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
                    help="write docs/results.md from tables.md, the README's headline table, and the curated "
@@ -504,12 +537,19 @@ def table_rows(tasks: list[str], quick: bool) -> list[dict]:
     return rows
 
 
-def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None) -> tuple[dict, list[dict]]:
-    """``(runs saved already with the same args {key: folder}, jobs to train)``."""
+def row_models(task: str, models=MODELS) -> list[str]:
+    """The kinds of ``models`` that ``task`` trains (``TaskSpec.models``), the paper's pair first."""
+    return [label for label in dict.fromkeys(MODELS + tuple(models)) if label in hnn.task_spec(task).models]
+
+
+def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
+         models=MODELS) -> tuple[dict, list[dict]]:
+    """``(runs saved already with the same args {key: folder}, jobs to train)``: every row and
+    seed, for the paper's two models and the extra ``models`` kinds the row's task has."""
     runs, jobs = {}, []
     for spec in rows:
         for seed in seeds:
-            for label in MODELS:
+            for label in row_models(spec["task"], models):
                 job = {**spec, "label": label, "seed": seed, "runs_dir": runs_dir, "steps": steps}
                 argv = _train_argv(spec["task"], label, runs_dir, seed, steps, spec["extra_argv"])
                 found = _find(spec["task"], argv)
@@ -558,14 +598,15 @@ def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
     return stage
 
 
-def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict, fig_dir: Path | None) -> None:
+def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict, fig_dir: Path | None,
+                  models=MODELS) -> None:
     """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
     each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
     for spec in rows:
         name, task = spec["row"], spec["task"]
         if task in results.get("skipped", {}):
             continue
-        keys = {seed: {label: f"{name}/{label}/seed{seed}" for label in MODELS} for seed in seeds}
+        keys = {seed: {label: f"{name}/{label}/seed{seed}" for label in row_models(task, models)} for seed in seeds}
         failed = [runs[k] for by_label in keys.values() for k in by_label.values() if isinstance(runs[k], Exception)]
         if failed:
             results.setdefault("skipped", {})[task] = str(failed[0])
@@ -602,7 +643,7 @@ def portable_command(argv: list[str]) -> str:
 def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:
     return {"command": portable_command(argv), "date": datetime.date.today().isoformat(),
             "commit": _commit(), "seed": args.seed, "seeds": seeds, "mode": mode, "quick": args.quick,
-            "steps": steps, "jobs": args.jobs, "torch": torch.__version__, "numpy": np.__version__,
+            "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models), "torch": torch.__version__, "numpy": np.__version__,
             "scipy": scipy.__version__, "python": platform.python_version(), "threads": torch.get_num_threads(),
             "cores": _cores(), "cpu": torch.backends.cpu.get_cpu_capability(), "available": hnn.available_tasks()}
 
@@ -641,14 +682,14 @@ def main(argv=None) -> dict:
     results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick)
-    runs, jobs = plan(rows, seeds, out / "runs", steps)
+    runs, jobs = plan(rows, seeds, out / "runs", steps, args.models)
     trained, seconds = train_jobs(jobs, args.jobs, out / "logs")
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()
     figures.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
     try:
-        evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures")
+        evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models)
     finally:
         figures.set_stamp("")
     results["seconds"]["evaluation"] = time.perf_counter() - tic

@@ -27,4 +27,6 @@ TASK = hnn.TaskSpec(
     # train.py's own evaluation is skipped: reproduce evaluates both models together
     train_argv=("--no_eval",),
     evaluate=metric.evaluate,
+    # a pixel model's latent HNN or MLP: the structured kinds are not wired into PixelHNN
+    models=("baseline", "hnn"),
 )

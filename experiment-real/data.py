@@ -204,7 +204,23 @@ def load_measurements(data_dir=None, verify: bool = True) -> tuple[np.ndarray, n
     return parsed
 
 
-def get_dataset(data_dir=None, test_split: float = 0.8, verify: bool = True) -> dict:
+SPLITS = ("original", "dhnn")
+
+
+def _dhnn_dataset(t: np.ndarray, x: np.ndarray, train_fraction: float) -> dict:
+    """The D-HNN paper's rows of the measurements ``t`` ``(N,)``, ``x`` ``(N, 2)`` (see ``get_dataset``)."""
+    forward = (x[1:] - x[:-1]) / (t[1:] - t[:-1])[:, None]
+    dxdt = forward.copy()
+    dxdt[:-1] = (forward[:-1] + forward[1:]) / 2     # centred on x[i + 1]: the mean of its two one-sided slopes
+    x, t = x[1:], t[1:]
+    a = int((len(x) + 1) * train_fraction)   # their split counts the file's rows, N = 556
+    data = {"dt": NOMINAL_DT}
+    for key, arr, dtype in (("x", x, np.float32), ("dxdt", dxdt, np.float32), ("t", t, np.float64)):
+        data[key], data["test_" + key] = arr[:a].astype(dtype), arr[a:].astype(dtype)
+    return data
+
+
+def get_dataset(data_dir=None, test_split: float = 0.8, verify: bool = True, split: str = "original") -> dict:
     """The original's dataset: inputs x = (theta, omega), targets their forward differences.
 
     dx[i] = (x[i+1] - x[i]) / (t[i+1] - t[i]) over the actual time steps (1/6 s, or 1/3 s and
@@ -216,10 +232,20 @@ def get_dataset(data_dir=None, test_split: float = 0.8, verify: bool = True) -> 
     Returns float32 ``x``, ``dxdt`` (445, 2) and ``test_x``, ``test_dxdt`` (110, 2); float64
     ``t`` (445,) and ``test_t`` (110,), the times of those rows; and ``dt`` = 1/6, the nominal
     step (used by ``--use_rk4``).
+
+    ``split='dhnn'`` is the D-HNN paper's preparation of the same file instead (Sosanya &
+    Greydanus 2022, as their code does it): targets are central differences, the mean of the
+    forward differences on either side of each row (the last row keeps its backward one), on
+    the rows after the first (555 rows), and the first int(556 * 0.8) = 444 of them train, the
+    other 111 test, in time order (no leftover row).
     """
     if not 0.0 < test_split < 1.0:
         raise ValueError(f"test_split is the train fraction and must lie in (0, 1), got {test_split}")
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; use one of {', '.join(SPLITS)}")
     t, x = load_measurements(data_dir, verify)
+    if split == "dhnn":
+        return _dhnn_dataset(t, x, test_split)
     dxdt = (x[1:] - x[:-1]) / (t[1:] - t[:-1])[:, None]
     x, t = x[:-1], t[:-1]
     n = len(x)

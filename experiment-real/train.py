@@ -20,12 +20,15 @@ def parse_args(argv=None):
     parser.add_argument("--data_dir", type=str, default=None,
                         help="folder holding real_pend_h_1.txt or invar_datasets.zip; "
                              "default: $HNN_DATA_DIR, else the copy shipped in experiment-real/")
+    parser.add_argument("--split", choices=("original", "dhnn"), default="original",
+                        help="original: the HNN paper's forward differences and split; dhnn: the D-HNN paper's "
+                             "central differences and split of the same file (Sosanya & Greydanus 2022)")
     return parser.parse_args(argv)
 
 
 def dataset(args) -> dict:
     """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
-    return hnn.load_task("real").get_dataset(data_dir=args.data_dir)
+    return hnn.load_task("real").get_dataset(data_dir=args.data_dir, split=getattr(args, "split", "original"))
 
 
 def main(argv=None):

@@ -118,6 +118,11 @@ def nonnegative_float(text: str) -> float:
     return _finite_float(text, ">= 0", lambda v: v >= 0)
 
 
+def fraction(text: str) -> float:
+    """An argparse ``type``: a finite number in (0, 1]."""
+    return _finite_float(text, "in (0, 1]", lambda v: 0 < v <= 1)
+
+
 def _optional_int(text: str) -> int | None:
     """``--batch_size``: a positive integer, or none/0/full for the full batch (None)."""
     if text.lower() in ("none", "0", "full"):
@@ -194,6 +199,9 @@ def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, w
                    help="Adam weight decay (hard-coded per task in the original)")
     p.add_argument("--batch_size", type=_optional_int, default=batch_size,
                    help="minibatch size; none/0/full = full batch")
+    p.add_argument("--train_fraction", type=fraction, default=1.0,
+                   help="train on this fraction of the training rows, drawn once from the seed (the test set "
+                        "stays whole); for studies of how much data a model needs")
     p.add_argument("--nonlinearity", type=str, default="tanh", choices=NONLINEARITIES,
                    help="activation of the MLP")
     p.add_argument("--total_steps", type=int_at_least(0), default=total_steps,

@@ -10,6 +10,7 @@ one, or no folder, never a checkpoint of one run beside the args of another. Lat
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -47,6 +48,8 @@ def _is_complete(directory: Path) -> bool:
 
 # what a run adds to its flags in args.json: its model kind and its dataset's cache file (or None)
 RECORDED = ("model", "dataset_cache_key")
+# flags added after runs were saved: a saved run without one of them was trained with its default
+ADDED_FLAGS = {"train_fraction": 1.0, "split": "original"}
 
 
 def find_run(args) -> Path | None:
@@ -62,7 +65,8 @@ def find_run(args) -> Path | None:
         return None
     ignore = set(getattr(args, "display_only", cli.DISPLAY_ONLY)) | set(RECORDED)
     wanted = {k: v for k, v in vars(args).items() if k not in ignore}
-    saved = {k: v for k, v in saved.items() if k not in ignore}
+    saved = {**ADDED_FLAGS, **{k: v for k, v in saved.items() if k not in ignore}}
+    wanted = {**ADDED_FLAGS, **wanted}
     if saved != wanted or not _is_complete(directory):
         return None
     return directory
@@ -98,12 +102,26 @@ def run_experiment(args, dataset, objective: Objective | None = None) -> Path:
     np.random.seed(args.seed)
     model = objective.build(saved).to(args.device)
     x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+    x, y = training_subset(x, y, getattr(args, "train_fraction", 1.0), args.seed)
     stats = train(model, x, y, test_x, test_y, total_steps=args.total_steps, learn_rate=args.learn_rate,
                   weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
                   print_every=args.print_every, verbose=args.verbose,
                   **objective.train_options(model, saved, dataset))
     return finish_run(args, model, stats, objective.final_loss(model, x, y), objective.final_loss(model, test_x, test_y),
                       data_seconds, saved)
+
+
+def training_subset(x, y, fraction: float, seed: int):
+    """The first ``ceil(fraction * rows)`` of a seeded permutation of the training rows (kept in
+    their original order), or ``(x, y)`` themselves for ``fraction`` 1. The draw has its own
+    generator, so the init and the minibatches see the same random streams at every fraction."""
+    if not 0 < fraction <= 1:
+        raise ValueError(f"train_fraction must be in (0, 1], got {fraction!r}")
+    if fraction == 1:
+        return x, y
+    rows = len(x)
+    keep = np.sort(np.random.default_rng(seed).permutation(rows)[:max(1, math.ceil(fraction * rows))])
+    return x[keep], y[keep]
 
 
 def finish_run(args, model, stats: dict, train_loss, test_loss, data_seconds: float | None = None,

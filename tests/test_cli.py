@@ -47,6 +47,8 @@ BAD_FLAGS = [
     ("spring", ["--learn_rate", "0"], ["--learn_rate", "'0'", "> 0"]),
     ("pend", ["--learn_rate", "-1e-3"], ["--learn_rate", "'-1e-3'"]),
     ("pend", ["--learn_rate", "nan"], ["--learn_rate", "'nan'"]),
+    ("spring", ["--train_fraction", "1.5"], ["--train_fraction", "'1.5'", "in (0, 1]"]),
+    ("real", ["--split", "theirs"], ["--split", "theirs", "dhnn"]),
     ("spring", ["--print_every", "0"], ["--print_every", "'0'", ">= 1"]),
     ("spring", ["--weight_decay", "-1e-4"], ["--weight_decay", "'-1e-4'", ">= 0"]),
     ("2body", ["--batch_size", "-3"], ["--batch_size", "'-3'", "none/0/full"]),

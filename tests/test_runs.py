@@ -256,3 +256,35 @@ def test_a_new_model_kind_is_one_registry_entry(tmp_path, monkeypatch):
     run = hnn.run_experiment(args, hnn.load_task("spring").get_dataset())
     model, saved, metrics = hnn.load_run(run)
     assert saved["model"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
+
+
+def test_train_fraction_draws_a_seeded_ordered_subset_of_the_training_rows():
+    x = torch.arange(40.0).reshape(20, 2)
+    y = -x
+    sub_x, sub_y = hnn.runs.training_subset(x, y, 0.25, seed=3)
+    assert len(sub_x) == 5 and torch.equal(sub_y, -sub_x)
+    rows = (sub_x[:, 0] / 2).long()
+    assert torch.all(rows[1:] > rows[:-1])                        # the rows keep their order
+    assert torch.equal(hnn.runs.training_subset(x, y, 0.25, seed=3)[0], sub_x)
+    assert not torch.equal(hnn.runs.training_subset(x, y, 0.25, seed=4)[0], sub_x)
+    assert hnn.runs.training_subset(x, y, 1.0, seed=3)[0] is x
+    assert len(hnn.runs.training_subset(x, y, 0.01, seed=0)[0]) == 1   # never empty
+    with pytest.raises(ValueError, match="train_fraction"):
+        hnn.runs.training_subset(x, y, 0.0, seed=0)
+
+
+def test_a_run_trains_on_its_fraction_and_a_run_saved_before_the_flag_counts_as_all_data(tmp_path, monkeypatch):
+    seen = []
+    real_train = hnn.runs.train
+    monkeypatch.setattr(hnn.runs, "train", lambda model, x, *a, **k: seen.append(len(x)) or real_train(model, x, *a, **k))
+    trainer = hnn.load_task("spring", "train")
+    argv = ["--save_dir", str(tmp_path), "--total_steps", "2", "--hidden_dim", "8"]
+    folder = trainer.main(argv + ["--train_fraction", "0.1", "--name", "small"])
+    assert seen == [75]                                            # 10% of spring's 750 training rows
+    assert json.loads((folder / "args.json").read_text())["train_fraction"] == 0.1
+    full = trainer.main(argv)
+    saved = json.loads((full / "args.json").read_text())
+    del saved["train_fraction"]                                    # as runs saved before the flag existed
+    (full / "args.json").write_text(json.dumps(saved))
+    assert hnn.find_run(trainer.parse_args(argv)) == full
+    assert hnn.find_run(trainer.parse_args(argv + ["--train_fraction", "0.5"])) is None

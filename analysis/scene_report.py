@@ -1,0 +1,271 @@
+"""The scene study's outputs, built from its results dict (``scene_study.json``), never typed:
+``scene_study.md`` (every table), ``figures/scenes-pareto.png`` and, with ``--update-docs``,
+docs/scenes.md (section ``scenes``), the README's model guide (section ``model-guide``) and
+docs/figures/scenes-pareto.png.
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+import hnn  # noqa: E402
+from hnn.io import atomic_write, write_json  # noqa: E402
+
+hnn.tasks.import_analysis()
+from hnn_analysis import readme, scene_metrics as sm  # noqa: E402
+
+COLORS = {"baseline": "tab:gray", "hnn": "tab:blue", "separable": "tab:green", "dissipative": "tab:red"}
+
+
+def _g(x, digits: int = 3) -> str:
+    return "n/a" if x is None else f"{x:.{digits}g}"
+
+
+def _pm(pair) -> str:
+    if not pair:
+        return "n/a"
+    return f"{pair[0]:.3g}" + (f" ± {pair[1]:.2g}" if pair[1] else "")
+
+
+def _main_metric(m: dict, key: str):
+    return (m.get(key) or [None])[0]
+
+
+def rung_table(results: dict) -> list[str]:
+    seeds = results["meta"]["seeds"]
+    many = len(seeds) > 1
+    lines = [f"**Per scene and rung** (width 200, all the data; seed {seeds[0]}"
+             + (f", and mean ± standard error over seeds {seeds}" if many else "") + "). Rollout error: the "
+             "geometric mean over time of |x̂ − x| / (|x̂| + |x|) against the true system, averaged over "
+             f"{results['meta'].get('starts', 8)} starts, over 10x the training trajectories' length (pixels: decoded frames against rendered "
+             "ones over the corrected protocol's 200 frames, 2x, no valid time: a decoded frame is never within 0.1; "
+             "real: the measured test segment, 18 s, from its first state; there is no truth beyond it). Valid time: median first time that error exceeds 0.1 (= horizon: never); the truth "
+             "column is when the true system itself, started 1e-4 away, leaves 0.1.", "",
+             "| scene | model | params | test loss | energy MSE (paper protocol) | energy MSE (corrected) | "
+             "rollout error | valid time / horizon | truth diverges after | train s |",
+             "| --- | --- | ---: | --- | --- | --- | --- | --- | --- | ---: |"]
+    for task, entry in results["scenes"].items():
+        div = entry.get("divergence")
+        for label, rung in entry["rungs"].items():
+            m = rung["per_seed"][str(seeds[0])] if str(seeds[0]) in rung["per_seed"] else \
+                rung["per_seed"][seeds[0]]
+            ro = m.get("rollout")
+            cells = []
+            for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
+                s = rung.get(key + "_seeds")
+                cells.append(_g(_main_metric(m, key)) + (f" ({_pm(s)})" if many and s else ""))
+            err = rung.get("error_seeds")
+            cells.append("n/a" if not ro else _g(ro["error"]) + (f" ({_pm(err)})" if many and err else ""))
+            cells.append("n/a" if not ro or ro["valid_time"] is None else f"{ro['valid_time']:.3g} / {ro['horizon']:.3g}")
+            cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
+            lines.append(f"| {task} | {label} | {m['params']} | " + " | ".join(cells)
+                         + f" | {_g(m.get('train_seconds'))} |")
+    return lines
+
+
+def speed_table(results: dict) -> list[str]:
+    lines = ["**Speed at equal accuracy** (seed 0, width 200): the fastest `hnn.rollout` setting whose max relative "
+             f"error over 4 starts and the training trajectories' length stays within {sm.TARGET:g} of DOP853 "
+             "rtol 1e-12 on the same field (float64), its median wall time, and the fastest symplectic one. "
+             "Drift: max |E(t) − E(0)| / |E(0)| of the learned H (HNN, separable) or the true H (baseline) over "
+             "the long run at that setting, on 2 starts; a run stops after "
+             "15 s and says how far it got.", "",
+             "| scene | model | fastest setting | s | drift (long run) | fastest symplectic | s | drift (long run) |",
+             "| --- | --- | --- | ---: | --- | --- | ---: | --- |"]
+    for task, entry in results["scenes"].items():
+        for label, sp in entry.get("speed", {}).items():
+            cells = []
+            for key in ("fastest", "fastest_symplectic"):
+                pick = sp.get(key)
+                if pick is None:
+                    cells += ["none reached it", "", ""]
+                    continue
+                d = pick.get("drift")
+                drift = "" if d is None else (f"{d['drift']:.2g} over {d['periods_done']} {_unit(task)}"
+                                              + (" (blew up)" if d["blew_up"] else ""))
+                cells += [pick["setting"], f"{pick['seconds']:.3g}", drift]
+            lines.append(f"| {task} | {label} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _unit(task: str) -> str:
+    from hnn_analysis.scene_study import SCENE
+    return SCENE[task].get("unit", "periods")
+
+
+def grid_tables(results: dict) -> list[str]:
+    lines = []
+    for task, entry in results["scenes"].items():
+        if not entry["grid"]:
+            continue
+        cells = dict(entry["grid"])
+        for label, rung in entry["rungs"].items():
+            first = next(iter(rung["per_seed"].values()))
+            cells[f"{label}@200x1"] = first
+        lines += ["", f"<details><summary>{task}: width x training fraction, every rung (seed 0)</summary>", "",
+                  "| model | width | fraction | params | test loss | energy MSE | rollout error | train s | "
+                  "rollout s |", "| --- | ---: | ---: | ---: | --- | --- | --- | ---: | ---: |"]
+        for key in sorted(cells, key=_cell_order):
+            m = cells[key]
+            label, cell = key.split("@")
+            width, fraction = cell.split("x")
+            energy = m.get("energy_mse_corrected") or m.get("energy_mse_paper")
+            ro = m.get("rollout") or {}
+            lines.append(f"| {label} | {width} | {fraction} | {m['params']} | {_g(m['test_loss'][0])} | "
+                         f"{_g(energy[0] if energy else None)} | {_g(ro.get('error'))} | "
+                         f"{_g(m.get('train_seconds'))} | {_g(ro.get('seconds'))} |")
+        lines += ["", "</details>"]
+    return lines
+
+
+def _cell_order(key: str):
+    label, cell = key.split("@")
+    width, fraction = cell.split("x")
+    order = list(COLORS).index(label) if label in COLORS else 9
+    return order, int(width), float(fraction)
+
+
+def card_table(results: dict) -> list[str]:
+    lines = ["**Scene cards**: the smallest model (fewest parameters, then the cheapest to train) whose energy "
+             "MSE (corrected protocol, else the paper's) and rollout error both come within 2x of the best of its "
+             "scene, over every rung and (spring, pend, 2body) every width and training fraction.", "",
+             "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds |",
+             "| --- | --- | ---: | --- | --- | ---: | --- |"]
+    for task, entry in results["scenes"].items():
+        card = entry.get("card")
+        if not card:
+            lines.append(f"| {task} | none within 2x of both bests | | | | | |")
+            continue
+        seeds = card.get("seeds", {})
+        over = ", ".join(f"{k.replace('_seeds', '')} {_pm(v)}" for k, v in seeds.items()
+                         if k in ("error_seeds", "energy_mse_corrected_seeds", "energy_mse_paper_seeds"))
+        lines.append(f"| {task} | {card['label']}, width {card['width']}, {card['fraction']:g} of the data | "
+                     f"{card['params']} | {_g(card['energy'])} ({_g(card['best_energy'])}) | "
+                     f"{_g(card['rollout'])} ({_g(card['best_rollout'])}) | {_g(card['train_seconds'])} | {over} |")
+    return lines
+
+
+def dhnn_table(results: dict) -> list[str]:
+    d = results.get("dhnn")
+    if not d:
+        return []
+    lines = ["**The real pendulum, the D-HNN paper's protocol** (Sosanya & Greydanus 2022): their split (first 444 "
+             "of 555 rows train, 111 test) and central-difference targets, their energy 2.4 (1 − cos q) + p², "
+             "the rollout from the first test state with solve_ivp's defaults (RK45, rtol 1e-3). Ours: our "
+             f"architectures (width 200) trained with `{' '.join(d['argv'][:-2])}` (their rate, steps, batch "
+             "and decay; their own MLP was a 256-unit residual net fed a zero time input, seed 42), seed 0, "
+             "± over rows / points. Theirs: as their notebook prints it (one seed; the test ± is the spread of "
+             "the last three logged test losses).", "",
+             "| model | test vector-field MSE, ours | theirs | energy MSE, ours | theirs | state MSE along the rollout, "
+             "ours |", "| --- | --- | --- | --- | --- | --- |"]
+    for label, ours in d["ours"].items():
+        theirs = d["paper"].get(label, {})
+        lines.append(f"| {label} | {_pm(ours['test_mse'])} | {_pm(theirs.get('test_mse'))} | "
+                     f"{_pm(ours['energy_mse'])} | {_pm(theirs.get('energy_mse'))} | {_pm(ours['state_mse'])} |")
+    return lines
+
+
+def markdown(results: dict) -> str:
+    meta, sec = results["meta"], results["seconds"]
+    lines = []
+    if meta["quick"]:
+        lines += ["**QUICK smoke run (300 steps per model, a 2x2 grid): not the study's settings.**", ""]
+    lines += [f"Generated by `{meta['command']}` on {meta['date']} (commit {meta['commit']}, torch {meta['torch']}, "
+              f"{meta['cores']} cores, {meta['cpu']}, --jobs {meta['jobs']}). Wall time: training "
+              f"{sec.get('training', 0):.0f} s, measuring {sec.get('measure', 0):.0f} s, the chosen cells' seeds "
+              f"{sec.get('cards', 0):.0f} s, total {sec.get('total', 0):.0f} s (runs that reproduce.py or an "
+              "earlier study saved with the same args are reused, not retrained).", ""]
+    for part in (card_table, rung_table, speed_table, dhnn_table):
+        block = part(results)
+        if block:
+            lines += block + [""]
+    lines += ["**Capacity and data** (each scene's grid; energy MSE of the corrected protocol, else the paper's; "
+              "rollout s: the dopri5 rtol 1e-9 rollout of the rollout-error metric)"] + grid_tables(results)
+    return "\n".join(lines) + "\n"
+
+
+def guide(results: dict) -> str:
+    """The README's model guide: each scene's card in one line, and where the rest is."""
+    lines = ["| scene | a model that is enough (within 2x of the best energy MSE and rollout error) | "
+             "its energy MSE / rollout error | train s |", "| --- | --- | --- | ---: |"]
+    for task, entry in results["scenes"].items():
+        card = entry.get("card")
+        if card:
+            lines.append(f"| {task} | {card['label']}, width {card['width']}, {card['fraction']:g} of the data | "
+                         f"{_g(card['energy'])} / {_g(card['rollout'])} | {_g(card['train_seconds'])} |")
+    meta = results["meta"]
+    lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every rung, the grids, "
+              "the speed at equal accuracy and the D-HNN comparison: [docs/scenes.md](docs/scenes.md)."]
+    return "\n".join(lines) + "\n"
+
+
+def pareto_figure(results: dict, path: Path) -> None:
+    """Rollout error against training seconds and against rollout seconds, one row per scene."""
+    scenes = [t for t, e in results["scenes"].items() if any("rollout" in m for m in _all_cells(e).values())]
+    if not scenes:
+        return
+    fig, axes = plt.subplots(len(scenes), 2, figsize=(9, 2.6 * len(scenes)), squeeze=False)
+    for ax_row, task in zip(axes, scenes):
+        cells = _all_cells(results["scenes"][task])
+        for ax, xkey, xlabel in ((ax_row[0], "train_seconds", "training s"), (ax_row[1], None, "rollout s")):
+            points = []
+            for key, m in cells.items():
+                label = key.split("@")[0]
+                ro = m.get("rollout")
+                x = m.get("train_seconds") if xkey else (ro or {}).get("seconds")
+                if ro and x:
+                    points.append((x, ro["error"]))
+                    ax.scatter(x, ro["error"], s=14, color=COLORS.get(label, "k"), label=label)
+            front, best = [], float("inf")
+            for x, y in sorted(points):
+                if y < best:
+                    front.append((x, y))
+                    best = y
+            if front:
+                ax.plot(*zip(*front), color="k", lw=0.8, alpha=0.6)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel(f"{task}: rollout error")
+            handles, labels = ax.get_legend_handles_labels()
+            unique = dict(zip(labels, handles))
+            ax.legend(unique.values(), unique.keys(), fontsize=7)
+    title = "Scene study: rollout error vs cost (black: Pareto front)"
+    if results["meta"]["quick"]:
+        title = "QUICK smoke run, not the study's settings. " + title
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format="png"))
+    plt.close(fig)
+
+
+def _all_cells(entry: dict) -> dict:
+    cells = dict(entry.get("grid", {}))
+    for label, rung in entry["rungs"].items():
+        cells[f"{label}@200x1"] = next(iter(rung["per_seed"].values()))
+    return cells
+
+
+def write(results: dict, out: Path, update_docs: bool) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "scene_study.json", results)
+    text = markdown(results)
+    atomic_write(out / "scene_study.md", lambda tmp: Path(tmp).write_text(text))
+    figure = out / "figures" / "scenes-pareto.png"
+    pareto_figure(results, figure)
+    print("\n" + text)
+    print(f"wrote {out / 'scene_study.json'}, {out / 'scene_study.md'}, {figure}")
+    if update_docs:
+        written = [readme.update_section("scenes", text), readme.update_section("model-guide", guide(results))]
+        if figure.exists():
+            target = hnn.tasks.repo_root() / "docs" / "figures" / figure.name
+            atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
+            written.append(target)
+        for path in written:
+            print(f"updated {path}")

@@ -1,0 +1,180 @@
+"""The scene study's metrics against analytic truths, its model choice, and one tiny run end to end."""
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import hnn
+from hnn_analysis import reproduce, scene_metrics as sm, scene_study
+
+
+def _spring_truth(x0, t, omega=2.0):
+    """The exact flow of H = q^2 + p^2 (dq/dt = 2p, dp/dt = -2q): a rotation by omega t."""
+    c, s = np.cos(omega * t), np.sin(omega * t)
+    q0, p0 = x0[:, :1].numpy(), x0[:, 1:].numpy()
+    return torch.tensor(np.stack([q0 * c + p0 * s, -q0 * s + p0 * c], axis=-1), dtype=torch.float64)
+
+
+def test_rollout_error_of_a_detuned_oscillator_is_analytic(spring):
+    # a model that turns (1 + eps) times as fast: |x' - x| / (|x'| + |x|) = |sin(eps omega t / 2)| exactly
+    eps, omega = 0.02, 2.0
+    x0 = torch.tensor([[1.0, 0.0], [0.3, -0.4]], dtype=torch.float64)
+    t = np.linspace(0.0, 30.0, 601)
+    truth = _spring_truth(x0, t)
+    out = sm.rollout_errors(lambda x: (1 + eps) * spring.dynamics(x), truth, t)
+    e = np.abs(np.sin(eps * omega * t[1:] / 2))
+    assert out["error"] == pytest.approx(float(np.exp(np.log(e).mean())), rel=1e-5)
+    first = 2 * math.asin(sm.VALID_ERROR) / (eps * omega)           # the first time e(t) = 0.1
+    assert first < out["valid_time"] <= first + (t[1] - t[0])
+    assert out["horizon"] == 30.0 and out["blew_up"] == 0
+
+
+def test_a_perfect_model_is_valid_for_the_whole_horizon_and_the_spring_never_diverges(spring):
+    x0 = torch.tensor([[1.0, 0.0], [0.0, 0.5]], dtype=torch.float64)
+    t = np.linspace(0.0, 10.0, 201)
+    out = sm.rollout_errors(spring.dynamics, _spring_truth(x0, t), t)
+    assert out["error"] < 1e-6 and out["valid_time"] == 10.0
+    # a linear isochronous oscillator keeps a 1e-4 perturbation at 1e-4: no divergence
+    assert sm.divergence_time(spring.dynamics, x0, t)["divergence_time"] == 10.0
+
+
+def test_divergence_time_of_an_unstable_saddle_is_analytic():
+    # dq/dt = q, dp/dt = -p (H = q p): from x0 = (0, 1) and x0 + d, the two exact paths are
+    # (0, e^-t) and (dq e^t, (1 + dp) e^-t), so the time their relative error passes 0.1 is known
+    x0 = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
+    t = np.linspace(0.0, 12.0, 1201)
+    got = sm.divergence_time(lambda x: torch.stack([x[:, 0], -x[:, 1]], 1), x0, t)["divergence_time"]
+    d = np.random.default_rng(0).standard_normal((1, 2))     # the direction divergence_time draws
+    dq, dp = sm.PERTURBATION * d[0] / np.linalg.norm(d)
+    ts = np.linspace(0.0, 12.0, 1_200_001)
+    e = np.hypot(dq * np.exp(ts), dp * np.exp(-ts)) / (np.hypot(dq * np.exp(ts), (1 + dp) * np.exp(-ts)) + np.exp(-ts))
+    exact = ts[np.argmax(e > sm.VALID_ERROR)]
+    assert exact < got <= exact + (t[1] - t[0]) + 1e-9
+
+
+def test_speed_ladder_takes_the_first_setting_of_each_method_that_reaches_the_target(spring):
+    x0 = torch.tensor([[1.0, 0.0], [0.2, 0.7]], dtype=torch.float64)
+    t = np.linspace(0.0, 3.0, 31)
+    ladder = sm.settings_ladder((0.5, 0.2, 0.1, 0.05, 0.02, 0.01), separable=True, quick=False)
+    assert {o["method"] for o in ladder} >= {"leapfrog", "midpoint", "rk4", "dopri5", "solve_ivp"}
+    assert not any(o["method"] == "leapfrog" for o in sm.settings_ladder((0.1,), separable=False, quick=False))
+    result = sm.speed_at_accuracy(spring.dynamics, x0, t, ladder)
+    ok = [r for r in result["rows"] if r["status"] == "ok"]
+    # within one method, the steps tried shrink until one reaches the target, then stop
+    for method in ("rk4", "leapfrog"):
+        rows = [r for r in ok if r["options"]["method"] == method]
+        assert all(r["error"] > sm.TARGET for r in rows[:-1]) and rows[-1]["error"] <= sm.TARGET
+        assert [r["options"]["dt"] for r in rows] == sorted([r["options"]["dt"] for r in rows], reverse=True)
+    assert result["fastest"]["error"] <= sm.TARGET
+    assert result["fastest_symplectic"]["symplectic"]
+    # leapfrog is second order, rk4 fourth: rk4 reaches 1e-4 at a coarser step
+    dt = {m: [r for r in ok if r["options"]["method"] == m][-1]["options"]["dt"] for m in ("rk4", "leapfrog")}
+    assert dt["rk4"] > dt["leapfrog"]
+
+
+def test_long_drift_of_rk4_on_the_oscillator_is_its_exact_amplification_factor(spring):
+    # RK4 multiplies the energy of a harmonic oscillator by |R(i h omega)|^2 every step, exactly
+    h, omega, periods = math.pi / 8, 2.0, 40            # 2 steps per output interval of pi / 4
+    x0 = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
+    out = sm.long_drift(spring.dynamics, spring.hamiltonian, x0, {"method": "rk4", "dt": h}, math.pi, periods,
+                        budget=60.0)
+    z = 1j * h * omega
+    factor = abs(1 + z + z ** 2 / 2 + z ** 3 / 6 + z ** 4 / 24) ** 2
+    assert out["periods_done"] == periods and not out["blew_up"]
+    assert out["drift"] == pytest.approx(1 - factor ** (8 * periods), rel=1e-8)
+    # leapfrog at the same step keeps the energy bounded: no secular drift from 10 to 40 periods
+    lf = [sm.long_drift(spring.dynamics, spring.hamiltonian, x0, {"method": "leapfrog", "dt": h}, math.pi, n,
+                        budget=60.0)["drift"] for n in (10, 40)]
+    assert lf[1] == pytest.approx(lf[0], rel=1e-6) and lf[1] < 0.2
+
+
+def test_long_drift_stops_at_its_budget_and_says_how_far_it_got(spring):
+    x0 = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
+    out = sm.long_drift(spring.dynamics, spring.hamiltonian, x0, {"method": "rk4", "dt": 1e-3}, math.pi, 1000,
+                        budget=0.0)
+    assert out["periods_done"] < 1000 and out["periods"] == 1000
+
+
+def _cell(params, energy, rollout, seconds=1.0):
+    return {"params": params, "train_seconds": seconds, "energy_mse_corrected": [energy, 0.0],
+            "rollout": {"error": rollout}}
+
+
+def test_scene_card_picks_the_smallest_model_within_2x_of_both_bests():
+    cells = {("hnn", 200, 1.0): _cell(41200, 1e-4, 0.10),
+             ("hnn", 16, 1.0): _cell(352, 1.5e-4, 0.5),         # small, but 5x the best rollout error
+             ("separable", 32, 0.5): _cell(2300, 1.9e-4, 0.17),  # within 2x of both: the card
+             ("baseline", 16, 1.0): _cell(352, 1e-1, 0.09)}      # best rollout, far worse energy
+    card = scene_study.scene_card(cells)
+    assert (card["label"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
+    assert card["best_energy"] == 1e-4 and card["best_rollout"] == 0.09
+    assert scene_study.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["label"] == "hnn"
+
+
+def test_dhnn_split_uses_central_differences_on_their_rows():
+    real = hnn.load_task("real")
+    t, x = real.load_measurements()
+    data = real.get_dataset(split="dhnn")
+    assert len(data["x"]) == int(len(t) * 0.8) and len(data["x"]) + len(data["test_x"]) == len(t) - 1
+    np.testing.assert_allclose(data["x"][:5], x[1:6].astype(np.float32))
+    # where the samples are evenly spaced the mean of the two one-sided slopes is the central difference
+    i = next(i for i in range(1, len(t) - 1) if abs((t[i + 1] - t[i]) - (t[i] - t[i - 1])) < 1e-9)
+    central = (x[i + 1] - x[i - 1]) / (t[i + 1] - t[i - 1])
+    np.testing.assert_allclose(data["dxdt"][i - 1], central, rtol=1e-5)
+    with pytest.raises(ValueError, match="unknown split"):
+        real.get_dataset(split="other")
+
+
+def test_dhnn_protocol_scores_the_true_field_of_a_frictionless_pendulum_as_it_should():
+    # a "model" whose field is the D-HNN paper's own H (k = 2.4), scored against scipy called directly
+    real = hnn.load_task("real")
+    data = real.get_dataset(split="dhnn")
+
+    class TrueH(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.w = torch.nn.Parameter(torch.zeros(1))
+
+        def time_derivative(self, x):
+            q, p = x[:, 0], x[:, 1]
+            return torch.stack([2 * p, -2.4 * torch.sin(q)], 1) + 0 * self.w
+
+    out = sm.dhnn_protocol(real, {"h": TrueH()}, data)["h"]
+    # the same rollout straight from scipy, with solve_ivp's defaults as their notebook called it
+    from scipy.integrate import solve_ivp
+    t = data["test_t"] - data["test_t"][0]
+    sol = solve_ivp(lambda _, y: [2 * y[1], -2.4 * np.sin(y[0])], (0, t[-1]), data["test_x"][0].astype(float), t_eval=t)
+    e_model = 2.4 * (1 - np.cos(sol.y[0])) + sol.y[1] ** 2
+    e_true = real.hamiltonian(data["test_x"].astype(float))
+    assert out["energy_mse"][0] == pytest.approx(float(np.mean((e_model - e_true) ** 2)), rel=1e-6)
+    expected = np.mean((np.stack([2 * data["test_x"][:, 1], -2.4 * np.sin(data["test_x"][:, 0])], 1)
+                        - data["test_dxdt"]) ** 2)
+    assert out["test_mse"][0] == pytest.approx(float(expected), rel=1e-5)
+
+
+def test_reproduce_models_flag_adds_kinds_only_where_a_task_has_them(tmp_path):
+    assert reproduce._train_argv("spring", "separable", tmp_path, 0, None)[-2:] == ["--model", "separable"]
+    assert "--model" not in reproduce._train_argv("spring", "hnn", tmp_path, 0, None)
+    assert reproduce.row_models("spring", ("dissipative",)) == ["baseline", "hnn", "dissipative"]
+    assert reproduce.row_models("pixels", ("separable", "dissipative")) == ["baseline", "hnn"]
+    with pytest.raises(SystemExit):
+        reproduce._parser().parse_args(["--models", "bogus"])
+
+
+@pytest.mark.slow
+def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
+    monkeypatch.setattr(scene_study, "QUICK_WIDTHS", (8, 200))
+    monkeypatch.setattr(scene_study, "QUICK_FRACTIONS", (0.5, 1.0))
+    monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
+    results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
+    entry = results["scenes"]["spring"]
+    assert set(entry["rungs"]) == set(scene_study.RUNGS)
+    assert len(entry["grid"]) == 4 * 3 and entry["card"] is not None
+    assert entry["speed"]["separable"]["fastest"] is not None
+    saved = json.loads((tmp_path / "scene_study.json").read_text())
+    assert saved["scenes"]["spring"]["card"] == json.loads(json.dumps(entry["card"]))
+    text = (tmp_path / "scene_study.md").read_text()
+    assert "QUICK smoke run" in text and "Scene cards" in text
+    assert (tmp_path / "figures" / "scenes-pareto.png").stat().st_size > 10_000
