@@ -185,7 +185,7 @@ def markdown(results: dict) -> str:
         if block:
             lines += block + [""]
     lines += ["**Capacity and data** (each scene's grid; energy MSE of the corrected protocol, else the paper's; "
-              "rollout s: the dopri5 rtol 1e-9 rollout of the rollout-error metric)"] + grid_tables(results)
+              f"rollout s: the dopri5 rtol {sm.EVAL_ROLLOUT['rtol']:g} rollout of the rollout-error metric)"] + grid_tables(results)
     return "\n".join(lines) + "\n"
 
 
@@ -269,3 +269,21 @@ def write(results: dict, out: Path, update_docs: bool) -> None:
             written.append(target)
         for path in written:
             print(f"updated {path}")
+
+
+def main(argv=None) -> None:
+    """Rebuild the outputs of a finished study from its ``scene_study.json`` (no measuring)."""
+    import argparse
+    import json
+    p = argparse.ArgumentParser(description=main.__doc__)
+    p.add_argument("results", type=Path, help="a scene_study.json")
+    p.add_argument("--update-docs", action="store_true", help="also docs/scenes.md and the README's model guide")
+    args = p.parse_args(argv)
+    results = json.loads(args.results.read_text())
+    if args.update_docs and results["meta"]["quick"]:
+        p.error("that study was a --quick smoke run: docs/ show full-settings studies only")
+    write(results, args.results.parent, args.update_docs)
+
+
+if __name__ == "__main__":
+    main()
