@@ -4,13 +4,15 @@ its figures, for every task in this checkout.
     python analysis/reproduce.py                      # full settings, results/
     python analysis/reproduce.py --quick              # smoke run (300 steps), results-quick/
     python analysis/reproduce.py --jobs 2             # two training processes, one thread each
+    python analysis/reproduce.py --jobs 2 --backend ray   # each run a Ray task (docs/sweeps.md: clusters)
     python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
 
 Trains each model through its task's own ``train.py`` (reusing a saved run only when its args
-match exactly), in this process or in ``--jobs N`` worker processes (longest runs first), with
-one progress line for the whole job; then evaluates the energy MSE under the paper's protocol
-and a corrected one and draws the figures (per task, as its ``experiment-<task>/task.py`` says,
-through ``hnn_analysis.registry``). Writes
+match exactly), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
+first; ``hnn_analysis.sweep``), with one progress line for the whole job; a run that fails is
+reported and the others go on (the command then exits with code 1, listing them). Then evaluates
+the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
+its ``experiment-<task>/task.py`` says, through ``hnn_analysis.registry``). Writes
 ``<out>/results.json`` (every number, with versions, commit, seed and the time of each stage),
 ``<out>/tables.md`` (built from that JSON: ours beside the paper's, marked, and the stage
 times) and ``<out>/figures/``.
@@ -36,7 +38,7 @@ from hnn.paper import PAPER
 from hnn.io import atomic_write, write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import figures, readme, registry  # noqa: E402
+from hnn_analysis import figures, readme, registry, sweep  # noqa: E402
 from hnn_analysis.readme import stage_table  # noqa: E402
 # training lives in sweep, shared with the other sweeps; train_or_reuse stays reachable as reproduce.train_or_reuse
 from hnn_analysis.sweep import (_cores, _find, _run_key, _total_steps, _train_argv, train_jobs,  # noqa: E402
@@ -232,7 +234,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="train and evaluate seeds seed .. seed+N-1; tables add mean ± standard error across them")
     p.add_argument("--jobs", type=int, default=1,
                    help="training processes: 1 trains here, one run after another; N > 1 runs N worker "
-                        "processes with cores // N threads each, longest runs first; evaluation stays here")
+                        "processes with cores // N threads each, longest runs first (with --backend ray: "
+                        "Ray tasks of cores // N threads); evaluation stays here")
+    sweep.add_backend_flags(p)
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
                    help="write docs/results.md from tables.md, the README's headline table, and the curated "
@@ -253,6 +257,7 @@ def _check(parser: argparse.ArgumentParser, args) -> None:
     for task in args.tasks or []:
         if task not in hnn.available_tasks():
             parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.available_tasks())}")
+    sweep.check_backend(parser, args)
 
 
 
@@ -382,13 +387,14 @@ def main(argv=None) -> dict:
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     tasks = args.tasks or hnn.available_tasks()
     mode, steps = _mode(args)
-    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}; output {out}", flush=True)
+    backend = "" if args.backend == "local" else f" --backend {args.backend}"
+    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)
     seeds = list(range(args.seed, args.seed + args.seeds))
     results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick)
     runs, jobs = plan(rows, seeds, out / "runs", steps)
-    trained, seconds = train_jobs(jobs, args.jobs, out / "logs")
+    trained, seconds = train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()
@@ -400,6 +406,7 @@ def main(argv=None) -> dict:
     results["seconds"]["evaluation"] = time.perf_counter() - tic
     results["seconds"]["total"] = time.perf_counter() - start
     write_outputs(results, out, args.update_docs, not args.no_figures)
+    sweep.exit_if_failed(trained)
     return results
 
 
