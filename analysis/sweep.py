@@ -358,7 +358,11 @@ class _RayPool:
         try:
             return self.ray.get(ref)
         except self.ray.exceptions.RayError as err:
-            # the task or its worker died (a node lost, the worker killed) before the run reported
+            # the task raised (its log could not be written, say; Ray wraps that exception as the
+            # cause) or its worker died (killed, a node lost) before the run reported
+            cause = getattr(err, "cause", None)
+            if isinstance(cause, BaseException):
+                return {"returncode": None, "status": {}, "tail": "", "error": f"{type(cause).__name__}: {cause}"}
             first = next((line for line in str(err).splitlines() if line.strip()), "")
             return {"returncode": None, "status": {}, "tail": "", "error": f"{type(err).__name__}: {first}"}
 
