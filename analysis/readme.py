@@ -70,8 +70,12 @@ def stage_table(results: dict) -> list[str]:
         train = [_s(s["train"].get(label)) if label in s["train"] else "reused" for label in ("baseline", "hnn")]
         lines.append(f"| {task} | {_s(s.get('data')) if s.get('data') is not None else 'reused'} | "
                      f"{train[0]} | {train[1]} | {_s(s.get('evaluate'))} | {_s(s.get('figures'))} |")
-    overlap = f"{jobs} worker processes of {seconds.get('threads_per_job')} threads, so runs overlap" if jobs > 1 \
-        else "in this process"
+    if seconds.get("backend") == "ray":
+        overlap = f"Ray tasks of {seconds.get('threads_per_job')} thread{'s' if seconds.get('threads_per_job') != 1 else ''} each, so runs overlap"
+    elif jobs > 1:
+        overlap = f"{jobs} worker processes of {seconds.get('threads_per_job')} threads, so runs overlap"
+    else:
+        overlap = "in this process"
     lines += ["", f"Wall time: training {_s(seconds.get('training'))} s ({overlap}), evaluation and figures "
                   f"{_s(seconds.get('evaluation'))} s, total {_s(seconds.get('total'))} s."]
     return lines

@@ -4,13 +4,15 @@ its figures, for every task in this checkout.
     python analysis/reproduce.py                      # full settings, results/
     python analysis/reproduce.py --quick              # smoke run (300 steps), results-quick/
     python analysis/reproduce.py --jobs 2             # two training processes, one thread each
+    python analysis/reproduce.py --jobs 2 --backend ray   # each run a Ray task (docs/sweeps.md: clusters)
     python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
 
 Trains each model through its task's own ``train.py`` (reusing a saved run only when its args
-match exactly), in this process or in ``--jobs N`` worker processes (longest runs first), with
-one progress line for the whole job; then evaluates the energy MSE under the paper's protocol
-and a corrected one and draws the figures (per task, as its ``experiment-<task>/task.py`` says,
-through ``hnn_analysis.registry``). Writes
+match exactly), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
+first; ``hnn_analysis.sweep``), with one progress line for the whole job; a run that fails is
+reported and the others go on (the command then exits with code 1, listing them). Then evaluates
+the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
+its ``experiment-<task>/task.py`` says, through ``hnn_analysis.registry``). Writes
 ``<out>/results.json`` (every number, with versions, commit, seed and the time of each stage),
 ``<out>/tables.md`` (built from that JSON: ours beside the paper's, marked, and the stage
 times) and ``<out>/figures/``.
@@ -19,28 +21,28 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import math
 import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import scipy
 import torch
-from tqdm.auto import tqdm
 
 import hnn
 from hnn.paper import PAPER
 from hnn.io import atomic_write, write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import figures, readme, registry  # noqa: E402
+from hnn_analysis import figures, readme, registry, sweep  # noqa: E402
 from hnn_analysis.readme import stage_table  # noqa: E402
+# training lives in sweep, shared with the other sweeps; train_or_reuse stays reachable as reproduce.train_or_reuse
+from hnn_analysis.sweep import (_cores, _find, _run_key, _total_steps, _train_argv, train_jobs,  # noqa: E402
+                                train_or_reuse)  # noqa: F401
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))
@@ -57,234 +59,6 @@ def _commit() -> str:
                               cwd=hnn.tasks.repo_root(), check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-
-
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
-
-
-# ----------------------------------------------------------------------------------------------
-# training
-
-
-def _train_argv(task: str, label: str, runs_dir: Path, seed: int, steps: int | None, extra_argv=()) -> list[str]:
-    """The ``train.py`` flags of one run."""
-    # the paper's pair keeps the original's flags (--baseline, or nothing), so their runs stay reusable
-    kind = ["--baseline"] if label == "baseline" else ([] if label == "hnn" else ["--model", label])
-    argv = ["--save_dir", str(runs_dir), "--seed", str(seed)] + kind
-    if steps is not None:
-        argv += ["--total_steps", str(steps)]
-    return argv + list(extra_argv)
-
-
-def _find(task: str, argv: list[str]) -> Path | None:
-    return hnn.find_run(hnn.load_task(task, "train").parse_args(argv))
-
-
-def _total_steps(task: str, argv: list[str]) -> int:
-    """Optimizer steps of a run (the loop runs total_steps + 1)."""
-    return hnn.load_task(task, "train").parse_args(argv).total_steps + 1
-
-
-def train_or_reuse(task: str, label: str, runs_dir: Path, seed: int, steps: int | None = None, extra_argv=(),
-                   progress=None) -> tuple[Path, bool]:
-    """The run folder of ``task``/``label``, trained now unless a run with identical args exists.
-
-    ``steps`` overrides the task's ``--total_steps``; ``extra_argv`` adds ``train.py`` flags;
-    ``progress(step, total)`` is called after every training step. Returns ``(folder, reused)``.
-    """
-    argv = _train_argv(task, label, runs_dir, seed, steps, extra_argv)
-    found = _find(task, argv)
-    if found:
-        return found, True
-    trainer = hnn.load_task(task, "train")
-    if progress is None:
-        return trainer.main(argv), False
-    with hnn.training.report_progress(progress):
-        return trainer.main(argv), False
-
-
-def _fmt_seconds(s: float) -> str:
-    s = int(round(s))
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
-
-
-class _Progress:
-    """One status line for the whole training phase: the runs in progress with their step/total,
-    elapsed and estimated remaining time (from the steps done so far, so a rough estimate when
-    tasks' steps cost differently). On a terminal a tqdm bar redrawn in place; otherwise a plain
-    line at most every ``every`` seconds, so CI logs stay readable.
-    """
-
-    def __init__(self, total: int, tty: bool | None = None, every: float = 10.0):
-        self.total, self.finished, self.active = max(total, 1), 0, {}
-        self.tty = sys.stderr.isatty() if tty is None else tty
-        self.every, self.start, self.last = every, time.perf_counter(), -math.inf
-        self.bar = (tqdm(total=self.total, unit="step", file=sys.stderr, dynamic_ncols=True, mininterval=0.2,
-                         bar_format="{percentage:3.0f}%|{bar:20}| {n_fmt}/{total_fmt} steps "
-                                    "[{elapsed}<{remaining}] {desc}") if self.tty else None)
-
-    def update(self, key: str, step: int, total: int) -> None:
-        self.active[key] = (step, total)
-        self._render()
-
-    def finish(self, key: str, total: int, line: str | None) -> None:
-        self.active.pop(key, None)
-        self.finished += total
-        if line:
-            self.write(line)
-        self._render(force=True)
-
-    def write(self, line: str) -> None:
-        if self.bar is not None:
-            self.bar.write(line, file=sys.stdout)
-        else:
-            print(line, flush=True)
-
-    def _render(self, force: bool = False) -> None:
-        now = time.perf_counter()
-        if not force and now - self.last < (0.2 if self.tty else self.every):
-            return
-        self.last = now
-        done = self.finished + sum(step for step, _ in self.active.values())
-        runs = ", ".join(f"{key} {step}/{total}" if step else f"{key} starting (data)"
-                         for key, (step, total) in self.active.items()) or "-"
-        if self.bar is not None:
-            self.bar.n = done
-            self.bar.set_description_str(runs, refresh=False)
-            self.bar.refresh()
-            return
-        elapsed = now - self.start
-        # too few steps for a rate: no estimate yet
-        remaining = _fmt_seconds(elapsed * (self.total - done) / done) if done >= 0.02 * self.total else "?"
-        print(f"  progress {100 * done / self.total:3.0f}% ({done}/{self.total} steps), elapsed "
-              f"{_fmt_seconds(elapsed)}, remaining ~{remaining}: {runs}", flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-
-
-def _run_key(job: dict) -> str:
-    return f"{job['row']}/{job['label']}/seed{job['seed']}"
-
-
-def _summary(job: dict, directory: Path, wall: float) -> str:
-    return f"  {job['row']:11s} {job['label']:8s} seed {job['seed']} trained {directory} ({wall:.1f} s)"
-
-
-# what a run raises when its task cannot run here: missing data or optional packages
-_CANNOT_RUN = (FileNotFoundError, ImportError)
-
-
-def _failed(job: dict, err: Exception, failed_tasks: dict, progress) -> Exception:
-    """Record a run that cannot run here; its task's reason is printed once per job, not per run."""
-    if job["task"] not in failed_tasks:
-        failed_tasks[job["task"]] = err
-        progress.write(f"  {job['task']:11s} cannot run here, skipping all its runs: {err}")
-    return failed_tasks[job["task"]]
-
-
-def _train_in_process(jobs: list[dict], progress: _Progress) -> dict:
-    """Train ``jobs`` one after another here; ``{key: folder or exception}``."""
-    done, failed_tasks = {}, {}
-    for job in jobs:
-        key, tic = _run_key(job), time.perf_counter()
-        if job["task"] in failed_tasks:
-            done[key] = failed_tasks[job["task"]]
-            progress.finish(key, job["total"], None)
-            continue
-        progress.update(key, 0, job["total"])
-        try:
-            directory, _ = train_or_reuse(job["task"], job["label"], job["runs_dir"], job["seed"], job["steps"],
-                                          job["extra_argv"], progress=lambda s, t, key=key: progress.update(key, s, t))
-        except _CANNOT_RUN as err:
-            done[key] = _failed(job, err, failed_tasks, progress)
-            progress.finish(key, job["total"], None)
-            continue
-        job["wall"] = time.perf_counter() - tic
-        progress.finish(key, job["total"], _summary(job, directory, job["wall"]))
-        done[key] = directory
-    return done
-
-
-def _train_in_workers(jobs: list[dict], n: int, progress: _Progress, log_dir: Path) -> dict:
-    """Train ``jobs`` in ``n`` worker processes with ``cores // n`` threads each, longest first
-    (the task's ``TaskSpec.cost`` x steps); ``{key: folder or exception}``. A worker's output goes to
-    ``<log_dir>/<task>-<label>-seed<seed>.log``; a failure other than missing data raises.
-    """
-    threads = max(1, _cores() // n)
-    env = dict(os.environ, OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads))
-    # the workers import the same hnn as this process, whatever the install points at
-    package_root = str(Path(hnn.__file__).resolve().parent.parent)
-    env["PYTHONPATH"] = os.pathsep.join([package_root] + [p for p in [os.environ.get("PYTHONPATH")] if p])
-    queue = sorted(jobs, key=lambda j: hnn.task_spec(j["task"]).cost * j["total"], reverse=True)
-    running, done, failed_tasks = {}, {}, {}
-    log_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="hnn-progress-") as status_dir:
-        try:
-            while queue or running:
-                for job in [j for j in queue if j["task"] in failed_tasks]:
-                    queue.remove(job)
-                    done[_run_key(job)] = failed_tasks[job["task"]]
-                    progress.finish(_run_key(job), job["total"], None)
-                while queue and len(running) < n:
-                    # a run whose sibling (same row and seed) is still making their shared dataset
-                    # waits, so that dataset is generated once and not twice at the same time
-                    ready = [j for j in queue if not any(
-                        r["row"] == j["row"] and r["seed"] == j["seed"] and "step" not in _read_status(s)
-                        for r, _, s, _, _ in running.values())]
-                    if not ready:
-                        break
-                    job = ready[0]
-                    queue.remove(job)
-                    key = _run_key(job)
-                    status = Path(status_dir) / f"{key.replace('/', '-')}.json"
-                    log = open(log_dir / f"{key.replace('/', '-')}.log", "w")
-                    argv = _train_argv(job["task"], job["label"], job["runs_dir"], job["seed"], job["steps"],
-                                       job["extra_argv"])
-                    cmd = [sys.executable, str(HERE / "train_worker.py"), "--threads", str(threads), "--status",
-                           str(status), "--task", job["task"], "--"] + argv
-                    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
-                    running[key] = (job, proc, status, log, time.perf_counter())
-                    progress.update(key, 0, job["total"])
-                time.sleep(0.3)
-                for key, (job, proc, status, log, tic) in list(running.items()):
-                    state = _read_status(status)
-                    if proc.poll() is None:
-                        if "step" in state:
-                            progress.update(key, state["step"], state["total"])
-                        continue
-                    log.close()
-                    del running[key]
-                    job["wall"] = time.perf_counter() - tic
-                    if proc.returncode == 0 and state.get("done"):
-                        done[key] = Path(state["run"])
-                        progress.finish(key, job["total"], _summary(job, done[key], job["wall"]))
-                    elif state.get("type") in ("FileNotFoundError", "ImportError", "ModuleNotFoundError"):
-                        err = (ImportError if "Import" in state["type"] or "Module" in state["type"]
-                               else FileNotFoundError)(state["error"])
-                        done[key] = _failed(job, err, failed_tasks, progress)
-                        progress.finish(key, job["total"], None)
-                    else:
-                        tail = "".join(Path(log.name).read_text().splitlines(keepends=True)[-15:])
-                        raise RuntimeError(f"training {key} failed (exit {proc.returncode}); the end of {log.name}:\n{tail}")
-        finally:
-            for _job, proc, _status, log, _tic in running.values():
-                proc.kill()
-                proc.wait()
-                log.close()
-    return done
-
-
-def _read_status(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -487,7 +261,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="train and evaluate seeds seed .. seed+N-1; tables add mean ± standard error across them")
     p.add_argument("--jobs", type=int, default=1,
                    help="training processes: 1 trains here, one run after another; N > 1 runs N worker "
-                        "processes with cores // N threads each, longest runs first; evaluation stays here")
+                        "processes with cores // N threads each, longest runs first (with --backend ray: "
+                        "Ray tasks of cores // N threads); evaluation stays here")
+    sweep.add_backend_flags(p)
     p.add_argument("--models", nargs="+", default=[], metavar="KIND",
                    choices=[k for k in hnn.cli._model_choices() if k not in MODELS],
                    help="extra model kinds trained and evaluated beside the paper's baseline and HNN, in a table "
@@ -512,13 +288,8 @@ def _check(parser: argparse.ArgumentParser, args) -> None:
     for task in args.tasks or []:
         if task not in hnn.available_tasks():
             parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.available_tasks())}")
+    sweep.check_backend(parser, args)
 
-
-def _metrics(directory: Path) -> dict:
-    try:
-        return json.loads((Path(directory) / "metrics.json").read_text())
-    except (OSError, ValueError):
-        return {}
 
 
 def table_rows(tasks: list[str], quick: bool) -> list[dict]:
@@ -560,28 +331,6 @@ def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
                     jobs.append(dict(job, total=_total_steps(spec["task"], argv)))
     return runs, jobs
 
-
-def train_jobs(jobs: list[dict], n_jobs: int, log_dir: Path) -> tuple[dict, dict]:
-    """Train ``jobs`` (here, or in ``n_jobs`` workers); ``({key: folder or exception}, seconds)``."""
-    tic, runs = time.perf_counter(), {}
-    if jobs:
-        progress = _Progress(sum(job["total"] for job in jobs))
-        try:
-            if n_jobs == 1:
-                runs = _train_in_process(jobs, progress)
-            else:
-                runs = _train_in_workers(jobs, n_jobs, progress, log_dir)
-        finally:
-            progress.close()
-    seconds = {"training": time.perf_counter() - tic, "jobs": n_jobs,
-               "threads_per_job": max(1, _cores() // n_jobs) if n_jobs > 1 else torch.get_num_threads(), "runs": {}}
-    for job in jobs:
-        key = _run_key(job)
-        if isinstance(runs.get(key), Path):
-            m = _metrics(runs[key])
-            seconds["runs"][key] = {"data": m.get("data_seconds"), "train": m.get("train_seconds"),
-                                    "wall": job.get("wall")}
-    return runs, seconds
 
 
 def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
@@ -677,13 +426,14 @@ def main(argv=None) -> dict:
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     tasks = args.tasks or hnn.available_tasks()
     mode, steps = _mode(args)
-    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}; output {out}", flush=True)
+    backend = "" if args.backend == "local" else f" --backend {args.backend}"
+    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)
     seeds = list(range(args.seed, args.seed + args.seeds))
     results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick)
     runs, jobs = plan(rows, seeds, out / "runs", steps, args.models)
-    trained, seconds = train_jobs(jobs, args.jobs, out / "logs")
+    trained, seconds = train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()
@@ -695,6 +445,7 @@ def main(argv=None) -> dict:
     results["seconds"]["evaluation"] = time.perf_counter() - tic
     results["seconds"]["total"] = time.perf_counter() - start
     write_outputs(results, out, args.update_docs, not args.no_figures)
+    sweep.exit_if_failed(trained)
     return results
 
 

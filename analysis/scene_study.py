@@ -43,7 +43,7 @@ import torch
 import hnn
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import reproduce, scene_metrics as sm, speed_accuracy  # noqa: E402
+from hnn_analysis import reproduce, scene_metrics as sm, speed_accuracy, sweep  # noqa: E402
 
 SCENES = ("spring", "pend", "real", "2body", "3body", "pixels")
 GRID_SCENES = ("spring", "pend", "2body")
@@ -119,11 +119,12 @@ def _jobs(rows, seeds, runs_dir: Path, steps, models=RUNGS):
     return runs, jobs
 
 
-def train(rows, seeds, out: Path, steps, n_jobs: int, models=RUNGS) -> tuple[dict, dict]:
-    """``({row/label/seed: run folder}, seconds)``: reuse what matches, train the rest."""
+def train(rows, seeds, out: Path, steps, args, models=RUNGS) -> tuple[dict, dict]:
+    """``({row/label/seed: run folder or the error of a failed run}, seconds)``: reuse what matches,
+    train the rest (``args.jobs`` processes, on ``args.backend``)."""
     runs, jobs = _jobs(rows, seeds, out / "runs", steps, models)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
-    trained, seconds = reproduce.train_jobs(jobs, n_jobs, out / "logs")
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
     runs.update(trained)
     return runs, seconds
 
@@ -262,6 +263,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
     p.add_argument("--seeds", type=int, default=3, help="seeds of the per-rung rows and the chosen cells (quick: 1)")
     p.add_argument("--jobs", type=int, default=1, help="training processes, as reproduce.py --jobs")
+    sweep.add_backend_flags(p)
     p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
                    help="write docs/scenes.md and the README's model guide (full settings only)")
     return p
@@ -281,6 +283,7 @@ def main(argv=None) -> dict:
         parser.error(f"--jobs {args.jobs} / --seeds {args.seeds}: both must be at least 1")
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
+    sweep.check_backend(parser, args)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     steps = reproduce.QUICK_STEPS if args.quick else None
     seeds = [0] if args.quick else list(range(args.seeds))
@@ -289,6 +292,7 @@ def main(argv=None) -> dict:
     results = {"meta": {"command": "python analysis/scene_study.py " + " ".join(
         "DIR" if Path(a).is_absolute() else a for a in argv), "date": datetime.date.today().isoformat(),
         "commit": reproduce._commit(), "quick": args.quick, "seeds": seeds, "jobs": args.jobs,
+        "backend": args.backend,
         "torch": torch.__version__, "python": platform.python_version(), "cores": reproduce._cores(),
         "cpu": torch.backends.cpu.get_cpu_capability(),
         "starts": STARTS // 2 if args.quick else STARTS}, "scenes": {}, "seconds": {}}
@@ -299,14 +303,14 @@ def main(argv=None) -> dict:
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
     dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_ARGV, name="real-dhnn")] if "real" in scenes else []
     tic = time.perf_counter()
-    runs, _ = train([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, out, steps, args.jobs)
-    more, _ = train([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], out, steps, args.jobs)
+    runs, _ = train([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, out, steps, args)
+    more, _ = train([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], out, steps, args)
     runs.update(more)
-    more, _ = train(grid_rows, [0], out, steps, args.jobs)
+    more, _ = train(grid_rows, [0], out, steps, args)
     runs.update(more)
     if dhnn_rows:
         # the D-HNN protocol's own 5000 steps (DHNN_ARGV) even in a quick run: 5000 small steps are seconds
-        more, _ = train(dhnn_rows, [0], out, None, args.jobs, DHNN_MODELS)
+        more, _ = train(dhnn_rows, [0], out, None, args, DHNN_MODELS)
         runs.update(more)
     results["seconds"]["training"] = time.perf_counter() - tic
 
@@ -353,7 +357,8 @@ def main(argv=None) -> dict:
         results["scenes"][task]["card"] = card
         if card and task in GRID_SCENES and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
             row = _row(task, (card["width"], card["fraction"]), args.quick)
-            more, _ = train([row], seeds, out, steps, args.jobs, (card["label"],))
+            more, _ = train([row], seeds, out, steps, args, (card["label"],))
+            runs.update(more)
             per_seed = {s: scene.measure(card["label"], more[f"{row['row']}/{card['label']}/seed{s}"])
                         for s in seeds if isinstance(more.get(f"{row['row']}/{card['label']}/seed{s}"), Path)}
             card["seeds"] = _across(per_seed)
@@ -363,6 +368,7 @@ def main(argv=None) -> dict:
     # 4. write
     from hnn_analysis import scene_report
     scene_report.write(results, out, args.update_docs)
+    sweep.exit_if_failed(runs)
     return results
 
 

@@ -1,0 +1,184 @@
+"""analysis/sweep.py: failed runs are reported and the others train (in this process, in worker
+processes, on Ray), Ray gives the numbers of the local workers, and Ray stays an optional extra."""
+import dataclasses
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+import hnn
+from hnn_analysis import readme, reproduce, sweep
+
+needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
+                               reason=f"Ray is not installed: {sweep.RAY_INSTALL}")
+LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
+
+
+def _job(task: str, label: str, runs_dir: Path, steps: int, extra=()) -> dict:
+    """A job as reproduce.plan makes it (the scene study builds the same shape)."""
+    argv = sweep._train_argv(task, label, runs_dir, 0, steps, extra)
+    return {"task": task, "row": task, "label": label, "seed": 0, "runs_dir": runs_dir, "steps": steps,
+            "extra_argv": list(extra), "total": sweep._total_steps(task, argv)}
+
+
+@pytest.mark.parametrize("backend, n_jobs", [
+    ("local", 1),
+    ("local", 2),
+    pytest.param("ray", 2, marks=needs_ray),
+])
+def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp_path, capsys):
+    """The failing run (its --save_dir is a file, so saving raises) goes first; with two slots
+    the third run starts only after a slot frees, so a failure that ended the sweep would lose it."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    runs_dir = tmp_path / "runs"
+    bad = _job("spring", "baseline", runs_dir, 20, ["--total_steps", "0", "--save_dir", str(blocker)])
+    bad["total"] = 10 ** 6          # longest first: it starts before the others
+    good = [_job("spring", "hnn", runs_dir, 20), _job("pend", "hnn", runs_dir, 20)]
+    runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend)
+    out = capsys.readouterr().out
+
+    failed = runs["spring/baseline/seed0"]
+    assert isinstance(failed, sweep.RunFailed) and "FileExistsError" in failed.message
+    assert "Traceback" in failed.log.read_text() and "FileExistsError" in failed.log.read_text()
+    line = next(line for line in out.splitlines() if "FAILED" in line)
+    assert line.split()[:3] == ["spring", "baseline", "seed"] and "FileExistsError" in line
+    for job in good:
+        run = runs[sweep._run_key(job)]
+        assert isinstance(run, Path) and (run / hnn.runs.COMPLETE).is_file(), run
+        assert json.loads((run / "args.json").read_text())["total_steps"] == 20
+    assert sweep.failures(runs) == [failed]
+    assert seconds["backend"] == backend and set(seconds["runs"]) == {"spring/hnn/seed0", "pend/hnn/seed0"}
+
+    with pytest.raises(SystemExit) as info:
+        sweep.exit_if_failed(runs)
+    err = capsys.readouterr().err
+    assert info.value.code == 1 and "1 run failed" in err and "spring/baseline/seed0: FileExistsError" in err
+    sweep.exit_if_failed({key: run for key, run in runs.items() if run is not failed})   # no failure: returns
+
+
+def test_reproduce_reports_a_failed_row_writes_the_rest_and_exits_1(tmp_path, monkeypatch, capsys):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    task = hnn.load_task("spring", "task")
+    variant = {"broken": (("--total_steps", "0", "--save_dir", str(blocker)), "cannot save, for the test")}
+    monkeypatch.setattr(task, "TASK", dataclasses.replace(task.TASK, variants=variant))
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as info:
+        reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert info.value.code == 1
+    assert "2 runs failed" in captured.err and "spring-broken/hnn/seed0: FileExistsError" in captured.err
+    saved = json.loads((out / "results.json").read_text())
+    assert set(saved["tasks"]["spring"]) >= {"baseline", "hnn"}          # the rows that trained are in the tables
+    assert (out / "tables.md").is_file()
+    # the rerun trains only what is missing: the spring runs are reused
+    with pytest.raises(SystemExit):
+        reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
+    reused = [line.split()[:2] for line in capsys.readouterr().out.splitlines() if "seed 0 reused" in line]
+    assert reused == [["spring", "baseline"], ["spring", "hnn"]]
+
+
+@pytest.mark.parametrize("outcome, message", [
+    ({"returncode": -9, "status": {"step": 3, "total": 10}, "tail": ""}, "killed by signal SIGKILL"),
+    ({"returncode": 1, "status": {"error": "boom", "type": "RuntimeError"}, "tail": "x"}, "RuntimeError: boom"),
+    ({"returncode": 2, "status": {}, "tail": "usage: ...\nerror: argument --learn_rate: bad\n"},
+     "exit 2: error: argument --learn_rate: bad"),
+    ({"returncode": None, "status": {}, "tail": "", "error": "WorkerCrashedError: the worker died"},
+     "WorkerCrashedError: the worker died"),
+])
+def test_a_worker_that_reports_no_run_is_described_by_its_error_signal_or_last_line(outcome, message):
+    assert sweep._error_message(outcome) == message
+
+
+def test_without_ray_the_ray_backend_says_what_to_install(monkeypatch, capsys, tmp_path):
+    monkeypatch.setitem(sys.modules, "ray", None)        # import ray now raises ImportError
+    with pytest.raises(SystemExit) as info:
+        reproduce.main(["--quick", "--tasks", "spring", "--backend", "ray", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2
+    assert err[-1] == 'error: --backend ray needs Ray, which is not installed here: pip install -e ".[ray]"'
+    assert not (tmp_path / "runs").exists()                           # it stopped before training anything
+    with pytest.raises(ImportError, match=r'pip install -e "\.\[ray\]"'):
+        sweep.train_jobs([_job("spring", "hnn", tmp_path, 1)], 1, tmp_path / "logs", backend="ray")
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--ray-address", "10.0.0.1:6379"], "--ray-address 10.0.0.1:6379: only used with --backend ray"),
+    (["--backend", "dask"], "invalid choice: 'dask'"),
+])
+def test_bad_backend_flags_exit_with_one_error_line(argv, match, capsys):
+    with pytest.raises(SystemExit) as info:
+        reproduce.main(["--quick", "--tasks", "spring"] + argv)
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and match in err.splitlines()[-1]
+
+
+@needs_ray
+def test_a_ray_address_where_nothing_answers_exits_at_once(capsys):
+    with pytest.raises(SystemExit) as info:
+        reproduce.main(["--quick", "--tasks", "spring", "--backend", "ray", "--ray-address", "127.0.0.1:1"])
+    last = capsys.readouterr().err.splitlines()[-1]
+    assert info.value.code == 2 and last.startswith("error: --ray-address 127.0.0.1:1: nothing answers there")
+    assert "ray start --head" in last
+
+
+def test_train_jobs_checks_its_arguments(tmp_path):
+    with pytest.raises(ValueError, match="backend 'dask': choose one of local, ray"):
+        sweep.train_jobs([], 1, tmp_path, backend="dask")
+    with pytest.raises(ValueError, match="only used with backend='ray'"):
+        sweep.train_jobs([], 1, tmp_path, ray_address="auto")
+    with pytest.raises(ValueError, match="n_jobs 0: must be at least 1"):
+        sweep.train_jobs([], 0, tmp_path)
+
+
+def test_only_the_sweep_imports_ray():
+    root = hnn.tasks.repo_root()
+    sources = [p for folder in ["hnn", "analysis", *[d.name for d in root.glob("experiment-*")]]
+               for p in (root / folder).rglob("*.py")]
+    importing = [p.relative_to(root).as_posix() for p in sources
+                 if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines())]
+    assert importing == ["analysis/sweep.py"]
+
+
+def test_the_stage_table_says_what_ran_the_runs():
+    results = {"seconds": {"tasks": {"spring": {"data": 0.1, "train": {"hnn": 1.0}, "evaluate": 1.0, "figures": 0.0}},
+                           "training": 2.0, "evaluation": 1.0, "total": 3.0, "jobs": 2, "threads_per_job": 1}}
+    assert "2 worker processes of 1 threads" in "\n".join(readme.stage_table(results))
+    results["seconds"]["backend"] = "ray"
+    assert "Ray tasks of 1 thread each" in "\n".join(readme.stage_table(results))
+
+
+@needs_ray
+def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
+    """A two-task quick sweep on a local Ray (this machine's cores; 2 here and in CI) against
+    --backend local, both at one thread per process (Ray: --jobs = the cores; local: this process
+    set to one thread, which test_reproduce shows the local workers match): the same
+    floating-point operations, so every loss and energy number agrees exactly."""
+    common = ["--quick", "--steps", "50", "--tasks", "spring", "pend", "--no-figures"]
+    on_ray = reproduce.main(common + ["--jobs", str(max(2, sweep._cores())), "--backend", "ray",
+                                      "--out", str(tmp_path / "ray")])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        local = reproduce.main(common + ["--out", str(tmp_path / "local")])
+    finally:
+        torch.set_num_threads(threads)
+    assert on_ray["seconds"]["backend"] == "ray" and on_ray["seconds"]["threads_per_job"] == 1
+    assert local["seconds"]["threads_per_job"] == 1
+    folders = sorted(p.name for p in (tmp_path / "ray" / "runs").iterdir() if p.is_dir())
+    assert folders == ["pend-baseline-seed0", "pend-hnn-seed0", "spring-baseline-seed0", "spring-hnn-seed0"]
+    for name in folders:
+        ray_metrics, local_metrics = (json.loads((tmp_path / side / "runs" / name / "metrics.json").read_text())
+                                      for side in ("ray", "local"))
+        assert {k: ray_metrics[k] for k in LOSSES} == {k: local_metrics[k] for k in LOSSES}, name
+    for task in ("spring", "pend"):
+        for label in ("baseline", "hnn"):
+            for key in ("train_loss", "test_loss", "energy_mse_paper", "energy_mse_corrected"):
+                assert on_ray["tasks"][task][label][key] == local["tasks"][task][label][key], (task, label, key)
+    # a local rerun on the Ray output reuses every run: the same args, whatever trained them
+    again = reproduce.main(common + ["--out", str(tmp_path / "ray")])
+    assert again["seconds"]["runs"] == {}
