@@ -314,7 +314,10 @@ def main(argv=None) -> dict:
         runs.update(more)
     results["seconds"]["training"] = time.perf_counter() - tic
 
-    # 2. measure
+    # 2. measure, on one thread: the rollouts here are batches of 4-15 states, which a second
+    # thread does not speed up, and two threads on a busy 2-core machine ran them many times slower
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     tic = time.perf_counter()
     cells_by_scene = {}
     for task in scenes:
@@ -363,6 +366,7 @@ def main(argv=None) -> dict:
                         for s in seeds if isinstance(more.get(f"{row['row']}/{card['label']}/seed{s}"), Path)}
             card["seeds"] = _across(per_seed)
     results["seconds"]["cards"] = time.perf_counter() - tic
+    torch.set_num_threads(threads)
     results["seconds"]["total"] = time.perf_counter() - start
 
     # 4. write
