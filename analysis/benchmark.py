@@ -32,6 +32,7 @@ check fails. Timings on a shared or busy machine are noisy: rerun on an idle one
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import datetime
 import platform
@@ -47,9 +48,11 @@ from scipy.integrate import solve_ivp
 import hnn
 from hnn.evaluation import start_states
 from hnn.io import write_json
+from hnn.models import PixelHNN
+from hnn.training import _adam, _batch, _l2_loss, _step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import readme  # noqa: E402
+from hnn_analysis import floor, readme  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -101,6 +104,26 @@ def _rel_diff(a: float, b: float) -> float:
 def _spring_dynamics_np(t, y):
     """The true spring field in numpy: (dq/dt, dp/dt) = (2p, -2q)."""
     return np.array([2 * y[1], -2 * y[0]])
+
+
+class _OriginalMLP(torch.nn.Module):
+    """The original's network (its nn_models.MLP): ``hnn.MLP``'s layers and weights, and ``torch.tanh``
+    (``hnn.MLP`` computes a large tanh as 2 sigmoid(2a) - 1, which the original did not)."""
+
+    def __init__(self, mlp: hnn.MLP):
+        super().__init__()
+        self.linear1, self.linear2, self.linear3 = (copy.deepcopy(layer) for layer in
+                                                    (mlp.linear1, mlp.linear2, mlp.linear3))
+
+    def forward(self, x):
+        h = torch.tanh(self.linear1(x))
+        h = torch.tanh(self.linear2(h))
+        return self.linear3(h)
+
+
+def _original_model(model: hnn.HNN) -> hnn.HNN:
+    """An HNN of the original's network with ``model``'s weights (its field is taken by autograd)."""
+    return hnn.HNN(model.input_dim, _OriginalMLP(model.differentiable_model))
 
 
 def _original_time_derivative(model: hnn.HNN, x: torch.Tensor) -> torch.Tensor:
@@ -171,7 +194,7 @@ def _ours_train(d: dict, steps: int):
 def _original_train(d: dict, steps: int):
     """The original loop: autograd double backprop, default Adam, full test loss with its graph every step."""
     torch.manual_seed(0)
-    model = hnn.build_model(2, HIDDEN)
+    model = _original_model(hnn.build_model(2, HIDDEN))
     optim = torch.optim.Adam(model.parameters(), LEARN_RATE, weight_decay=WEIGHT_DECAY)
     x = torch.tensor(d["x"], requires_grad=True, dtype=torch.float32)
     test_x = torch.tensor(d["test_x"], requires_grad=True, dtype=torch.float32)
@@ -211,6 +234,7 @@ def _ours_eval(task, model, protocol) -> float:
 def _original_eval(model, protocol) -> tuple[float, int]:
     """Per trial: truth by ``solve_ivp`` in numpy, model by ``solve_ivp`` one [1, 2] state per call."""
     calls = 0
+    model = _original_model(model)
 
     def fun(t, y):
         nonlocal calls
@@ -240,9 +264,78 @@ def job_eval(task, model, protocol, repeats: int) -> dict:
             "original_model_calls": calls, "checks": [check]}
 
 
+# --------------------------------------------------------------------------- job 4: the floor
+
+PIXEL_ROWS, PIXEL_BATCH, PIXEL_SIDE = 16000, 200, 28
+FLOOR_THREADS = (1, 2)
+FLOOR_TARGET = 1.5
+
+
+def _spring_step(d: dict):
+    """One step of ``hnn.train`` on the spring HNN: full batch, the closed-form field, fused Adam."""
+    torch.manual_seed(0)
+    model = hnn.build_model(2, HIDDEN)
+    x, y = (torch.tensor(d[k], dtype=torch.float32) for k in ("x", "dxdt"))
+    optim = _adam(model, LEARN_RATE, WEIGHT_DECAY)
+    loss = _l2_loss(model.time_derivative)
+    return lambda: _step(loss, x, y, optim)
+
+
+def _pixel_step():
+    """One step of ``hnn.train`` on the pixel HNN at the paper's settings (batch 200 of 16000 pairs,
+    weight decay 1e-5). The frames are uniform noise, not renders: dense products and elementwise
+    passes cost the same whatever the pixels hold, and rendering takes a minute."""
+    torch.manual_seed(0)
+    model = PixelHNN(2 * PIXEL_SIDE ** 2, 2, HIDDEN)
+    gen = torch.Generator().manual_seed(0)
+    frames = torch.rand(PIXEL_ROWS + 1, 2 * PIXEL_SIDE ** 2, generator=gen)
+    x, x_next = frames[:-1], frames[1:]
+    optim = _adam(model, LEARN_RATE, 1e-5)
+
+    def step():
+        xb, yb = _batch(x, x_next, PIXEL_BATCH, gen)
+        return _step(model.loss, xb, yb, optim)
+    return step
+
+
+def job_floor(d: dict, rounds: int) -> dict:
+    """Each step against its matrix-product floor, at 1 and then 2 threads in this process
+    (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
+    steps = {"spring": (_spring_step(d), rounds), "pixels": (_pixel_step(), max(10, rounds // 4))}
+    threads, flushing = torch.get_num_threads(), hnn.training._flushes_denormals()
+    torch.set_flush_denormal(True)
+    out = {}
+    try:
+        for name, (step, n) in steps.items():
+            shapes = floor.products(step)
+            out[name] = {"products": floor.describe_products(shapes), "by_threads": {}}
+            for t in FLOOR_THREADS:
+                torch.set_num_threads(t)
+                out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5))
+                r = out[name]["by_threads"][str(t)]
+                print(f"floor {name}, {t} thread(s): step {r['step_ms']:.2f} ms, floor {r['floor_ms']:.2f} ms, "
+                      f"ratio {r['ratio']:.2f}", flush=True)
+    finally:
+        torch.set_num_threads(threads)
+        torch.set_flush_denormal(flushing)
+    return out
+
+
+def _floor_table(result: dict) -> str:
+    lines = ["| training step | its matrix products | threads | products alone (ms) | step (ms) | step / floor |",
+             "| --- | --- | ---: | ---: | ---: | ---: |"]
+    labels = {"spring": f"spring HNN, 750 x 2, {HIDDEN} hidden",
+              "pixels": f"pixel HNN, batch {PIXEL_BATCH}, {2 * PIXEL_SIDE ** 2} pixels"}
+    for name, r in result.items():
+        for t, c in r["by_threads"].items():
+            lines.append(f"| {labels[name]} | {r['products']} ({c['gflop']:.2f} GFLOP) | {t} | {c['floor_ms']:.2f} | "
+                         f"{c['step_ms']:.2f} | {c['ratio']:.2f}x |")
+    return "\n".join(lines)
+
+
 # --------------------------------------------------------------------------- main
 
-JOBS = ("data", "train", "eval")
+JOBS = ("floor", "data", "train", "eval")
 LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spring HNN ({steps} Adam steps)",
           "eval": "eval: energy MSE, one HNN ({trials} trials)"}
 
@@ -250,9 +343,11 @@ LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spr
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=None, help="interleaved rounds per job (default 5; 1 with --quick)")
+    parser.add_argument("--floor-rounds", type=int, default=None,
+                        help="step/floor rounds of the spring step (default 200; 40 with --quick); the pixel step runs a quarter")
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
-    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of data,train,eval")
+    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of floor,data,train,eval")
     parser.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = parser.parse_args(argv)
@@ -262,8 +357,10 @@ def parse_args(argv=None):
         parser.error(f"--jobs must be a comma list of {','.join(JOBS)}; got {bad or 'nothing'}")
     if args.repeats is None:
         args.repeats = 1 if args.quick else 5
-    if args.repeats < 1:
-        parser.error("--repeats must be at least 1")
+    if args.floor_rounds is None:
+        args.floor_rounds = 40 if args.quick else 200
+    if args.repeats < 1 or args.floor_rounds < 1:
+        parser.error(f"--repeats and --floor-rounds must be at least 1; got {args.repeats} and {args.floor_rounds}")
     return args
 
 
@@ -290,7 +387,9 @@ def main(argv=None) -> int:
           f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
 
     task = hnn.load_task("spring")   # loading the task module is not part of the work compared
-    results, dataset, model = {}, None, None
+    results, dataset, model, floors = {}, None, None, None
+    if "floor" in args.jobs:
+        floors = job_floor(task.get_dataset(seed=0), args.floor_rounds)
     if "data" in args.jobs:
         results["data"], dataset = job_data(task, args.repeats)
         print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
@@ -308,9 +407,10 @@ def main(argv=None) -> int:
         print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
               f"original {results['eval']['median_original']:.3f} s", flush=True)
 
-    table = _table(results, steps, protocol.num_trials)
+    table = _table(results, steps, protocol.num_trials) if results else ""
+    floor_table = _floor_table(floors) if floors else ""
     print()
-    print(table)
+    print("\n\n".join(t for t in (floor_table, table) if t))
     failed = [f"{job}: {c['name']}" for job, r in results.items() for c in r["checks"] if not c["passed"]]
     for job, r in results.items():
         for c in r["checks"]:
@@ -318,7 +418,8 @@ def main(argv=None) -> int:
             print(f"check {job}: {c['name']} = {c['value']:.3e} (tolerance {c['tolerance']:g}) "
                   f"{'pass' if c['passed'] else 'FAIL'} {extra}")
     write_json(args.out, {"environment": env, "repeats": args.repeats, "quick": args.quick,
-                          "total_steps": steps, "jobs": results, "table": table,
+                          "total_steps": steps, "jobs": results, "table": table, "floor": floors,
+                          "floor_table": floor_table,
                           "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
