@@ -50,9 +50,38 @@ def test_four_dimensional_canonical_field():
     torch.testing.assert_close(model.time_derivative(x), torch.cat([x[:, 2:], -x[:, :2]], 1))
 
 
+@pytest.fixture(params=["torch.tanh", "2 sigmoid(2a) - 1"])
+def tanh_path(request, monkeypatch):
+    """Run a test with the MLPs' tanh taking each of its two ways, whatever the tensors' sizes."""
+    monkeypatch.setattr(hnn.models, "_FAST_TANH_MIN_ELEMENTS", 10 ** 9 if request.param == "torch.tanh" else 0)
+    return request.param
+
+
+@pytest.mark.parametrize("dtype, tolerance", [(torch.float32, 2e-7), (torch.float64, 1e-15)])
+def test_the_mlps_tanh_is_tanh(tanh_path, dtype, tolerance):
+    a = torch.linspace(-12, 12, 200_001, dtype=dtype)
+    for out in (hnn.models._tanh(a), hnn.models._tanh_(a.clone())):
+        assert (out.double() - torch.tanh(a.double())).abs().max() <= tolerance
+        if tanh_path == "torch.tanh":
+            assert torch.equal(out, torch.tanh(a))
+        elif dtype == torch.float32:        # the fast way really ran: it rounds differently
+            assert not torch.equal(out, torch.tanh(a))
+
+
+def test_the_mlps_tanh_differentiates_twice_as_torch_tanh(tanh_path):
+    a = torch.randn(6, 5, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(hnn.models._tanh, (a,))
+    assert torch.autograd.gradgradcheck(hnn.models._tanh, (a,))
+    g, = torch.autograd.grad(hnn.models._tanh(a).sum(), a, create_graph=True)
+    g_ref, = torch.autograd.grad(torch.tanh(a).sum(), a, create_graph=True)
+    torch.testing.assert_close(g, g_ref, rtol=1e-14, atol=1e-15)
+    torch.testing.assert_close(torch.autograd.grad(g.pow(2).sum(), a)[0],
+                               torch.autograd.grad(g_ref.pow(2).sum(), a)[0], rtol=1e-13, atol=1e-14)
+
+
 @pytest.mark.parametrize("field_type", ["solenoidal", "conservative", "both"])
 @pytest.mark.parametrize("dim", [2, 4])
-def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim):
+def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim, tanh_path):
     model = hnn.build_model(dim, 32, field_type=field_type).double()
     net = model.differentiable_model
     x = torch.randn(50, dim, dtype=torch.float64, requires_grad=True)
@@ -77,7 +106,7 @@ def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim):
         torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-12)
 
 
-def test_closed_form_is_used_and_gradcheck():
+def test_closed_form_is_used_and_gradcheck(tanh_path):
     # gradcheck compares the hand-written backward with finite differences, in float64
     net = hnn.MLP(2, 6, 2).double()
     x = torch.randn(5, 2, dtype=torch.float64, requires_grad=True)
