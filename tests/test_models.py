@@ -116,13 +116,16 @@ def test_closed_form_is_used_and_gradcheck(tanh_path):
 
 
 def _closed_form_calls(monkeypatch) -> list:
-    """Spy on the closed form: the returned list grows by one per call (either grad mode)."""
-    calls, real = [], hnn.models._tanh_mlp_input_gradient
+    """Spy on the closed form, both evaluation paths: the returned list grows by one per call (either grad mode)."""
+    calls = []
 
-    def spy(*args, **kwargs):
-        calls.append(1)
-        return real(*args, **kwargs)
-    monkeypatch.setattr(hnn.models, "_tanh_mlp_input_gradient", spy)
+    def spy_on(real):
+        def spy(*args, **kwargs):
+            calls.append(1)
+            return real(*args, **kwargs)
+        return spy
+    for name in ("_tanh_mlp_input_gradient", "_small_batch_input_gradient"):
+        monkeypatch.setattr(hnn.models, name, spy_on(getattr(hnn.models, name)))
     return calls
 
 
@@ -172,6 +175,31 @@ def test_subclasses_hooks_and_other_activations_fall_back_to_autograd(monkeypatc
     net = Named(2, 8, 2).double()
     torch.testing.assert_close(hnn.HNN(2, net).time_derivative(x), _autograd_field(net, x), rtol=1e-10, atol=1e-10)
     assert len(calls) == 1
+
+
+@pytest.mark.parametrize("dtype, rtol", [(torch.float32, 2e-6), (torch.float64, 1e-13)])
+def test_small_evaluation_batches_take_numpy_elementwise_and_agree_with_torch(monkeypatch, dtype, rtol):
+    torch.manual_seed(0)
+    model = hnn.build_model(4, 32, field_type="both").to(dtype)
+    calls = {"small": 0}
+    real = hnn.models._small_batch_input_gradient
+
+    def spy(*args):
+        calls["small"] += 1
+        return real(*args)
+    monkeypatch.setattr(hnn.models, "_small_batch_input_gradient", spy)
+    limit = hnn.models._SMALL_BATCH_MAX_ROWS
+    for rows in (1, 15, limit, limit + 1):
+        x = torch.randn(rows, 4, dtype=dtype)[:, [0, 2, 1, 3]]     # a strided view, as structured models pass
+        before = calls["small"]
+        with torch.no_grad():
+            fast = model.time_derivative(x)
+            monkeypatch.setattr(hnn.models, "_SMALL_BATCH_MAX_ROWS", -1)
+            reference = model.time_derivative(x)
+            monkeypatch.setattr(hnn.models, "_SMALL_BATCH_MAX_ROWS", limit)
+        assert calls["small"] - before == (2 if rows <= limit else 0)    # F1 and F2 of field_type both
+        assert fast.dtype == dtype and not fast.requires_grad
+        torch.testing.assert_close(fast, reference, rtol=rtol, atol=rtol)
 
 
 def test_time_derivative_modes():
