@@ -35,10 +35,12 @@ import argparse
 import copy
 import dataclasses
 import datetime
+import os
 import platform
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import scipy
@@ -63,6 +65,9 @@ WEIGHT_DECAY = 1e-4
 # by as much. The noise and the split are identical.
 DATA_TOL = 1e-5
 TRAIN_REL_TOL = 0.02     # relative difference of the final full-set train losses
+# the pixel loss and its gradients on one batch: our tanh (2 sigmoid(2a) - 1) differs from torch's by
+# up to 1.8e-7, and float32 sums in another order; measured 1e-6 or less
+PIXEL_REL_TOL = 1e-4
 EVAL_REL_TOL = 0.01      # relative difference of the energy MSEs
 
 
@@ -298,6 +303,34 @@ def _pixel_step():
     return step
 
 
+def _original_pixel_loss(model: PixelHNN, x: torch.Tensor, x_next: torch.Tensor) -> torch.Tensor:
+    """``PixelHNN.loss`` written the original's way on the same parameters: ``pow(2)`` for the
+    reconstruction, the latent field by autograd through ``torch.tanh``."""
+    z, z_next = model.encode(torch.cat([x, x_next])).split(len(x))
+    ae = (x - model.decode(z)).pow(2).mean(dim=1)
+    net = model.hnn.differentiable_model
+    F = net.linear3(torch.tanh(net.linear2(torch.tanh(net.linear1(z)))))
+    step = torch.autograd.grad(F[:, 1].sum(), z, create_graph=True)[0] @ model.hnn.M.T
+    hnn_term = (z_next - (z + step)).pow(2).mean(dim=1)
+    cc = (z[:, 1:] - (z_next[:, :1] - z[:, :1])).pow(2).mean(dim=1)
+    return ae + cc + 0.1 * hnn_term
+
+
+def _pixel_check() -> dict:
+    """The pixel loss and every parameter's gradient, ours against ``_original_pixel_loss``, on one batch."""
+    torch.manual_seed(0)
+    model = PixelHNN(2 * PIXEL_SIDE ** 2, 2, HIDDEN)
+    gen = torch.Generator().manual_seed(1)
+    x, x_next = (torch.rand(PIXEL_BATCH, 2 * PIXEL_SIDE ** 2, generator=gen) for _ in range(2))
+    params = list(model.parameters())
+    ours, theirs = model.loss(x, x_next).mean(), _original_pixel_loss(model, x, x_next).mean()
+    g_ours, g_theirs = torch.autograd.grad(ours, params), torch.autograd.grad(theirs, params)
+    worst = max(float((a - b).norm() / b.norm().clamp(min=1e-30)) for a, b in zip(g_ours, g_theirs))
+    return _check("pixel loss and gradients vs the original's formulation, worst relative difference",
+                  max(_rel_diff(float(ours), float(theirs)), worst), PIXEL_REL_TOL,
+                  {"loss_ours": float(ours), "loss_original": float(theirs), "worst_gradient": worst})
+
+
 def job_floor(d: dict, rounds: int) -> dict:
     """Each step against its matrix-product floor, at 1 and then 2 threads in this process
     (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
@@ -318,6 +351,7 @@ def job_floor(d: dict, rounds: int) -> dict:
     finally:
         torch.set_num_threads(threads)
         torch.set_flush_denormal(flushing)
+    out["checks"] = [_pixel_check()]
     return out
 
 
@@ -326,7 +360,7 @@ def _floor_table(result: dict) -> str:
              "| --- | --- | ---: | ---: | ---: | ---: |"]
     labels = {"spring": f"spring HNN, 750 x 2, {HIDDEN} hidden",
               "pixels": f"pixel HNN, batch {PIXEL_BATCH}, {2 * PIXEL_SIDE ** 2} pixels"}
-    for name, r in result.items():
+    for name, r in ((k, v) for k, v in result.items() if k in labels):
         for t, c in r["by_threads"].items():
             lines.append(f"| {labels[name]} | {r['products']} ({c['gflop']:.2f} GFLOP) | {t} | {c['floor_ms']:.2f} | "
                          f"{c['step_ms']:.2f} | {c['ratio']:.2f}x |")
@@ -375,6 +409,27 @@ def _table(results: dict, steps: int, trials: int) -> str:
     return "\n".join(lines)
 
 
+def _cpu_flags() -> str:
+    """The widest x86 vector extension this CPU reports (matrix products run on it), or ``''``."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split()
+    except OSError:
+        return ""
+    return "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else ""
+
+
+def _ceiling(results: dict, floors: dict | None, steps: int) -> str:
+    """What ``original / ours`` for training would be with our step exactly at its floor (same threads)."""
+    r = (floors or {}).get("spring", {}).get("by_threads", {}).get(str(torch.get_num_threads()))
+    if "train" not in results or r is None:
+        return ""
+    at_floor = (steps + 1) * r["floor_ms"] / 1e3
+    return (f"Training ratio ceiling: the original-style loop ({results['train']['median_original']:.2f} s) over "
+            f"{steps + 1} steps at the spring step's floor ({at_floor:.2f} s) is "
+            f"{results['train']['median_original'] / at_floor:.1f}x: no implementation of the same six products "
+            "per step can beat that.")
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     steps = 200 if args.quick else 2000
@@ -382,7 +437,8 @@ def main(argv=None) -> int:
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
     env = {"torch": torch.__version__, "torch_threads": torch.get_num_threads(), "numpy": np.__version__,
-           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine()}
+           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine(),
+           "cpu": _cpu_flags(), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
     print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
           f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
 
@@ -406,26 +462,37 @@ def main(argv=None) -> int:
         results["eval"] = job_eval(task, model, protocol, args.repeats)
         print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
               f"original {results['eval']['median_original']:.3f} s", flush=True)
+    env["load_average_after"] = os.getloadavg()[0]
 
-    table = _table(results, steps, protocol.num_trials) if results else ""
+    checked = {**({"floor": floors} if floors else {}), **results}
+    failed = [f"{job}: {c['name']}" for job, r in checked.items() for c in r["checks"] if not c["passed"]]
     floor_table = _floor_table(floors) if floors else ""
+    if floors:
+        floor_table += "\n\n" + "\n".join(
+            f"Check: {c['name']} = {c['value']:.3g} (tolerance {c['tolerance']:g}): {'pass' if c['passed'] else 'FAIL'}."
+            for c in floors["checks"])
+    table = "\n\n".join(t for t in (_table(results, steps, protocol.num_trials) if results else "",
+                                     _ceiling(results, floors, steps)) if t)
     print()
     print("\n\n".join(t for t in (floor_table, table) if t))
-    failed = [f"{job}: {c['name']}" for job, r in results.items() for c in r["checks"] if not c["passed"]]
-    for job, r in results.items():
+    for job, r in checked.items():
         for c in r["checks"]:
             extra = {k: v for k, v in c.items() if k not in ("name", "value", "tolerance", "passed")}
             print(f"check {job}: {c['name']} = {c['value']:.3e} (tolerance {c['tolerance']:g}) "
                   f"{'pass' if c['passed'] else 'FAIL'} {extra}")
     write_json(args.out, {"environment": env, "repeats": args.repeats, "quick": args.quick,
                           "total_steps": steps, "jobs": results, "table": table, "floor": floors,
-                          "floor_table": floor_table,
-                          "all_checks_passed": not failed})
+                          "floor_table": floor_table, "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
         command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
-        readme.update_section("benchmark", f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, "
-                              f"{env['torch_threads']} threads, {args.repeats} interleaved rounds:\n\n{table}")
+        busy = max(env["load_average_before"], env["load_average_after"])
+        shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
+                  "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")
+        head = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
+                f"{', ' + env['cpu'] if env['cpu'] else ''}, {env['torch_threads']} threads for the comparisons, "
+                f"{args.repeats} interleaved rounds.{shared}")
+        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table) if t))
         print("updated docs/speed.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)
