@@ -89,9 +89,10 @@ def preprocess(frame: np.ndarray, side: int = SIDE) -> np.ndarray:
     frame = np.asarray(frame)
     if frame.ndim != 3 or frame.shape[2] < 3 or frame.shape[0] != frame.shape[1] or frame.dtype != np.uint8:
         raise ValueError(f"expected a square uint8 RGB render (S, S, 3), got {frame.shape} {frame.dtype}")
-    rod = np.clip(frame[..., 0].astype(np.int16) - frame[..., 1], 0, 255).astype(np.uint8)
     top, bottom, left, right = crop_box(frame.shape[0])
-    return np.asarray(Image.fromarray(rod[top:bottom, left:right]).resize((side, side), Image.BILINEAR))
+    window = frame[top:bottom, left:right]      # crop first: the channel arithmetic on 12% of the pixels
+    rod = np.clip(window[..., 0].astype(np.int16) - window[..., 1], 0, 255).astype(np.uint8)
+    return np.asarray(Image.fromarray(rod).resize((side, side), Image.BILINEAR))
 
 
 def make_env(render_size: int = 500):

@@ -67,6 +67,20 @@ def test_any_render_size_gives_the_same_picture(system):
     assert np.corrcoef(other.astype(float).ravel(), b.ravel())[0, 1] < 0.9
 
 
+def test_preprocess_of_a_render_is_the_rod_channel_difference_cropped_and_resized(system):
+    from PIL import Image
+
+    env = system.make_env(500)
+    env.reset(seed=1)
+    frame = env.render()
+    env.close()
+    rod = np.clip(frame[..., 0].astype(np.int16) - frame[..., 1], 0, 255).astype(np.uint8)
+    top, bottom, left, right = system.crop_box(500)
+    expected = np.asarray(Image.fromarray(rod[top:bottom, left:right]).resize((28, 28), Image.BILINEAR))
+    assert expected.max() > 100                  # the rod is in the picture
+    np.testing.assert_array_equal(system.preprocess(frame), expected)
+
+
 def test_the_arrow_image_loaded_once_gives_the_same_frames(system, monkeypatch):
     import pygame
 
