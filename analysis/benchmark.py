@@ -3,6 +3,16 @@
     python analysis/benchmark.py                 # 5 interleaved rounds of every job
     python analysis/benchmark.py --quick         # 1 round, fewer training steps and trials
     python analysis/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
+    python analysis/benchmark.py --jobs floor    # only the training steps against their floor
+
+``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
+HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
+same) against their matrix-product floor, by ``analysis/floor.py``: every product the step
+performs (captured during one step, forward, backward and double backward), each timed alone in
+its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
+quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
+The step is ``hnn.training._step``, the very function ``hnn.train`` runs. It checks the pixel
+loss and its gradients against the original's formulation on one batch.
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
 
@@ -24,7 +34,8 @@ Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same i
 
 The "original" side is a small re-enactment written here (the ``_original_*`` functions),
 not the original code itself; it does the original's work in the original's way on today's
-libraries. Each job runs ours, original, ours, original, ... for ``--repeats`` rounds; the
+libraries, with the original's network (``torch.tanh``; ours computes large tanh arrays as
+2 sigmoid(2a) - 1). Each job runs ours, original, ours, original, ... for ``--repeats`` rounds; the
 table gives the median seconds of each and the ratio original / ours. Each job also checks
 that the two ways give the same numbers to a stated tolerance; the exit code is 1 if any
 check fails. Timings on a shared or busy machine are noisy: rerun on an idle one.
