@@ -355,7 +355,8 @@ def job_floor(d: dict, rounds: int) -> dict:
             out[name] = {"products": floor.describe_products(shapes), "by_threads": {}}
             for t in FLOOR_THREADS:
                 torch.set_num_threads(t)
-                out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5))
+                out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5),
+                                                                block=max(2, n // 20))
                 r = out[name]["by_threads"][str(t)]
                 print(f"floor {name}, {t} thread(s): step {r['step_ms']:.2f} ms, floor {r['floor_ms']:.2f} ms, "
                       f"ratio {r['ratio']:.2f} (fastest rounds {r['best_ratio']:.2f})", flush=True)

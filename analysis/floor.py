@@ -9,8 +9,9 @@ them, not as a count of the model's layers predicts. ``compare`` times each prod
 fresh operands of its shape, in whichever of its eight layouts (each operand and the result row-
 or column-major) the BLAS runs fastest at the current thread count: the floor is what the
 products cost at best, not in the layout the step happens to use (a 750x200 @ 200x2 product is
-5x slower in one layout than in another). It then runs step, floor, step, floor, ... and reports
-the medians and their ratio, so load from other processes hits both alike; it also reports the ratio of the fastest rounds.
+5x slower in one layout than in another). It then alternates blocks of steps and of floors and
+reports the medians and their ratio, so load from other processes hits both alike; it also reports
+the ratio of the fastest rounds.
 """
 from __future__ import annotations
 
@@ -92,9 +93,12 @@ def _fastest_layout(m: int, k: int, n: int, repeats: int = 15):
 
 
 def compare(step: Callable[[], object], shapes: list[tuple[int, int, int]], rounds: int = 200,
-            warmup: int = 30) -> dict:
-    """Step and floor timed alternately ``rounds`` times (after ``warmup`` steps), at the current
-    thread count; the floor runs each product of ``shapes`` in its fastest layout."""
+            warmup: int = 30, block: int = 10) -> dict:
+    """Step and floor timed ``rounds`` times each (after ``warmup`` steps), at the current thread
+    count, alternating in blocks of ``block`` of each; the floor runs each product of ``shapes`` in
+    its fastest layout. Blocks, not single calls, because the step runs back to back in training,
+    with the last step's arrays in cache: a floor run between two steps evicts them (measured: the
+    spring step 25% slower at 2 threads when alternated one by one)."""
     for _ in range(warmup):
         step()
     fastest = {shape: _fastest_layout(*shape) for shape in sorted(set(shapes))}
@@ -105,13 +109,13 @@ def compare(step: Callable[[], object], shapes: list[tuple[int, int, int]], roun
             run()
 
     t_step, t_floor = [], []
-    for _ in range(rounds):
-        tic = time.perf_counter()
-        step()
-        t_step.append(time.perf_counter() - tic)
-        tic = time.perf_counter()
-        floor()
-        t_floor.append(time.perf_counter() - tic)
+    while len(t_step) < rounds:
+        for fn, times in ((step, t_step), (floor, t_floor)):
+            fn()                                      # refills the cache with this side's arrays
+            for _ in range(min(block, rounds - len(times))):
+                tic = time.perf_counter()
+                fn()
+                times.append(time.perf_counter() - tic)
     step_s, floor_s = statistics.median(t_step), statistics.median(t_floor)
     # the fastest round of each is what the machine gives when nothing else runs: on a shared
     # machine their ratio is the steadier one
