@@ -390,6 +390,9 @@ LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spr
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=None, help="interleaved rounds per job (default 5; 1 with --quick)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads for the data, train and eval comparisons (default 1: one thread each, "
+                             "as the original's train.py is timed); the floor job always runs 1, then 2")
     parser.add_argument("--floor-rounds", type=int, default=None,
                         help="step/floor rounds of the spring step (default 200; 40 with --quick); the pixel step runs a quarter")
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
@@ -406,8 +409,9 @@ def parse_args(argv=None):
         args.repeats = 1 if args.quick else 5
     if args.floor_rounds is None:
         args.floor_rounds = 40 if args.quick else 200
-    if args.repeats < 1 or args.floor_rounds < 1:
-        parser.error(f"--repeats and --floor-rounds must be at least 1; got {args.repeats} and {args.floor_rounds}")
+    if args.repeats < 1 or args.floor_rounds < 1 or args.threads < 1:
+        parser.error(f"--repeats, --floor-rounds and --threads must be at least 1; got {args.repeats}, "
+                     f"{args.floor_rounds} and {args.threads}")
     return args
 
 
@@ -449,7 +453,7 @@ def main(argv=None) -> int:
     protocol = hnn.get_protocol("spring", "corrected")
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
-    env = {"torch": torch.__version__, "torch_threads": torch.get_num_threads(), "numpy": np.__version__,
+    env = {"torch": torch.__version__, "torch_threads": args.threads, "numpy": np.__version__,
            "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine(),
            "cpu": _cpu_flags(), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
     print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
@@ -459,6 +463,7 @@ def main(argv=None) -> int:
     results, dataset, model, floors = {}, None, None, None
     if "floor" in args.jobs:
         floors = job_floor(task.get_dataset(seed=0), args.floor_rounds)
+    torch.set_num_threads(args.threads)
     if "data" in args.jobs:
         results["data"], dataset = job_data(task, args.repeats)
         print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
