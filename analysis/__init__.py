@@ -4,6 +4,7 @@ Commands (run by path from a checkout, as the README does, or with ``python -m h
 once installed): ``reproduce`` (the paper's tables and figures), ``benchmark``,
 ``benchmark_orbits``, ``benchmark_pixels``, ``speed_accuracy``, ``regression_spread``, ``readme``
 (the generated pages) and ``train_worker`` (one run of ``reproduce --jobs N``). Modules:
-``figures``, ``mischief``, ``orbit_figures``, ``pixel_figures`` (plotting) and ``registry`` (the
-figures a task names in its ``task.py``, by name).
+``figures``, ``mischief``, ``orbit_figures``, ``pixel_figures`` (plotting), ``registry`` (the
+figures a task names in its ``task.py``, by name) and ``floor`` (a training step's matrix products,
+timed alone, for ``benchmark``).
 """
