@@ -338,8 +338,8 @@ def _pixel_check() -> dict:
     g_ours, g_theirs = torch.autograd.grad(ours, params), torch.autograd.grad(theirs, params)
     worst = max(float((a - b).norm() / b.norm().clamp(min=1e-30)) for a, b in zip(g_ours, g_theirs))
     return _check("pixel loss and gradients vs the original's formulation, worst relative difference",
-                  max(_rel_diff(float(ours), float(theirs)), worst), PIXEL_REL_TOL,
-                  {"loss_ours": float(ours), "loss_original": float(theirs), "worst_gradient": worst})
+                  max(_rel_diff(ours.item(), theirs.item()), worst), PIXEL_REL_TOL,
+                  {"loss_ours": ours.item(), "loss_original": theirs.item(), "worst_gradient": worst})
 
 
 def job_floor(d: dict, rounds: int) -> dict:
