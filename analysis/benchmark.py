@@ -3,6 +3,16 @@
     python analysis/benchmark.py                 # 5 interleaved rounds of every job
     python analysis/benchmark.py --quick         # 1 round, fewer training steps and trials
     python analysis/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
+    python analysis/benchmark.py --jobs floor    # only the training steps against their floor
+
+``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
+HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
+same) against their matrix-product floor, by ``analysis/floor.py``: every product the step
+performs (captured during one step, forward, backward and double backward), each timed alone in
+its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
+quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
+The step is ``hnn.training._step``, the very function ``hnn.train`` runs. It checks the pixel
+loss and its gradients against the original's formulation on one batch.
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
 
@@ -24,7 +34,8 @@ Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same i
 
 The "original" side is a small re-enactment written here (the ``_original_*`` functions),
 not the original code itself; it does the original's work in the original's way on today's
-libraries. Each job runs ours, original, ours, original, ... for ``--repeats`` rounds; the
+libraries, with the original's network (``torch.tanh``; ours computes large tanh arrays as
+2 sigmoid(2a) - 1). Each job runs ours, original, ours, original, ... for ``--repeats`` rounds; the
 table gives the median seconds of each and the ratio original / ours. Each job also checks
 that the two ways give the same numbers to a stated tolerance; the exit code is 1 if any
 check fails. Timings on a shared or busy machine are noisy: rerun on an idle one.
@@ -32,12 +43,15 @@ check fails. Timings on a shared or busy machine are noisy: rerun on an idle one
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import datetime
+import os
 import platform
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import scipy
@@ -47,9 +61,11 @@ from scipy.integrate import solve_ivp
 import hnn
 from hnn.evaluation import start_states
 from hnn.io import write_json
+from hnn.models import PixelHNN
+from hnn.training import _adam, _batch, _l2_loss, _step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import readme  # noqa: E402
+from hnn_analysis import floor, readme  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -60,6 +76,9 @@ WEIGHT_DECAY = 1e-4
 # by as much. The noise and the split are identical.
 DATA_TOL = 1e-5
 TRAIN_REL_TOL = 0.02     # relative difference of the final full-set train losses
+# the pixel loss and its gradients on one batch: our tanh (2 sigmoid(2a) - 1) differs from torch's by
+# up to 1.8e-7, and float32 sums in another order; measured 1e-6 or less
+PIXEL_REL_TOL = 1e-4
 EVAL_REL_TOL = 0.01      # relative difference of the energy MSEs
 
 
@@ -101,6 +120,26 @@ def _rel_diff(a: float, b: float) -> float:
 def _spring_dynamics_np(t, y):
     """The true spring field in numpy: (dq/dt, dp/dt) = (2p, -2q)."""
     return np.array([2 * y[1], -2 * y[0]])
+
+
+class _OriginalMLP(torch.nn.Module):
+    """The original's network (its nn_models.MLP): ``hnn.MLP``'s layers and weights, and ``torch.tanh``
+    (``hnn.MLP`` computes a large tanh as 2 sigmoid(2a) - 1, which the original did not)."""
+
+    def __init__(self, mlp: hnn.MLP):
+        super().__init__()
+        self.linear1, self.linear2, self.linear3 = (copy.deepcopy(layer) for layer in
+                                                    (mlp.linear1, mlp.linear2, mlp.linear3))
+
+    def forward(self, x):
+        h = torch.tanh(self.linear1(x))
+        h = torch.tanh(self.linear2(h))
+        return self.linear3(h)
+
+
+def _original_model(model: hnn.HNN) -> hnn.HNN:
+    """An HNN of the original's network with ``model``'s weights (its field is taken by autograd)."""
+    return hnn.HNN(model.input_dim, _OriginalMLP(model.differentiable_model))
 
 
 def _original_time_derivative(model: hnn.HNN, x: torch.Tensor) -> torch.Tensor:
@@ -171,7 +210,7 @@ def _ours_train(d: dict, steps: int):
 def _original_train(d: dict, steps: int):
     """The original loop: autograd double backprop, default Adam, full test loss with its graph every step."""
     torch.manual_seed(0)
-    model = hnn.build_model(2, HIDDEN)
+    model = _original_model(hnn.build_model(2, HIDDEN))
     optim = torch.optim.Adam(model.parameters(), LEARN_RATE, weight_decay=WEIGHT_DECAY)
     x = torch.tensor(d["x"], requires_grad=True, dtype=torch.float32)
     test_x = torch.tensor(d["test_x"], requires_grad=True, dtype=torch.float32)
@@ -211,6 +250,7 @@ def _ours_eval(task, model, protocol) -> float:
 def _original_eval(model, protocol) -> tuple[float, int]:
     """Per trial: truth by ``solve_ivp`` in numpy, model by ``solve_ivp`` one [1, 2] state per call."""
     calls = 0
+    model = _original_model(model)
 
     def fun(t, y):
         nonlocal calls
@@ -240,9 +280,109 @@ def job_eval(task, model, protocol, repeats: int) -> dict:
             "original_model_calls": calls, "checks": [check]}
 
 
+# --------------------------------------------------------------------------- job 4: the floor
+
+PIXEL_ROWS, PIXEL_BATCH, PIXEL_SIDE = 16000, 200, 28
+FLOOR_THREADS = (1, 2)
+FLOOR_TARGET = 1.5
+
+
+def _spring_step(d: dict):
+    """One step of ``hnn.train`` on the spring HNN: full batch, the closed-form field, fused Adam."""
+    torch.manual_seed(0)
+    model = hnn.build_model(2, HIDDEN)
+    x, y = (torch.tensor(d[k], dtype=torch.float32) for k in ("x", "dxdt"))
+    optim = _adam(model, LEARN_RATE, WEIGHT_DECAY)
+    loss = _l2_loss(model.time_derivative)
+    return lambda: _step(loss, x, y, optim)
+
+
+def _pixel_step():
+    """One step of ``hnn.train`` on the pixel HNN at the paper's settings (batch 200 of 16000 pairs,
+    weight decay 1e-5). The frames are uniform noise, not renders: dense products and elementwise
+    passes cost the same whatever the pixels hold, and rendering takes a minute."""
+    torch.manual_seed(0)
+    model = PixelHNN(2 * PIXEL_SIDE ** 2, 2, HIDDEN)
+    gen = torch.Generator().manual_seed(0)
+    frames = torch.rand(PIXEL_ROWS + 1, 2 * PIXEL_SIDE ** 2, generator=gen)
+    x, x_next = frames[:-1], frames[1:]
+    optim = _adam(model, LEARN_RATE, 1e-5)
+
+    def step():
+        xb, yb = _batch(x, x_next, PIXEL_BATCH, gen)
+        return _step(model.loss, xb, yb, optim)
+    return step
+
+
+def _original_pixel_loss(model: PixelHNN, x: torch.Tensor, x_next: torch.Tensor) -> torch.Tensor:
+    """``PixelHNN.loss`` written the original's way on the same parameters: ``pow(2)`` for the
+    reconstruction, the latent field by autograd through ``torch.tanh``."""
+    z, z_next = model.encode(torch.cat([x, x_next])).split(len(x))
+    ae = (x - model.decode(z)).pow(2).mean(dim=1)
+    net = model.hnn.differentiable_model
+    F = net.linear3(torch.tanh(net.linear2(torch.tanh(net.linear1(z)))))
+    step = torch.autograd.grad(F[:, 1].sum(), z, create_graph=True)[0] @ model.hnn.M.T
+    hnn_term = (z_next - (z + step)).pow(2).mean(dim=1)
+    cc = (z[:, 1:] - (z_next[:, :1] - z[:, :1])).pow(2).mean(dim=1)
+    return ae + cc + 0.1 * hnn_term
+
+
+def _pixel_check() -> dict:
+    """The pixel loss and every parameter's gradient, ours against ``_original_pixel_loss``, on one batch."""
+    torch.manual_seed(0)
+    model = PixelHNN(2 * PIXEL_SIDE ** 2, 2, HIDDEN)
+    gen = torch.Generator().manual_seed(1)
+    x, x_next = (torch.rand(PIXEL_BATCH, 2 * PIXEL_SIDE ** 2, generator=gen) for _ in range(2))
+    params = list(model.parameters())
+    ours, theirs = model.loss(x, x_next).mean(), _original_pixel_loss(model, x, x_next).mean()
+    g_ours, g_theirs = torch.autograd.grad(ours, params), torch.autograd.grad(theirs, params)
+    worst = max(float((a - b).norm() / b.norm().clamp(min=1e-30)) for a, b in zip(g_ours, g_theirs))
+    return _check("pixel loss and gradients vs the original's formulation, worst relative difference",
+                  max(_rel_diff(ours.item(), theirs.item()), worst), PIXEL_REL_TOL,
+                  {"loss_ours": ours.item(), "loss_original": theirs.item(), "worst_gradient": worst})
+
+
+def job_floor(d: dict, rounds: int) -> dict:
+    """Each step against its matrix-product floor, at 1 and then 2 threads in this process
+    (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
+    steps = {"spring": (_spring_step(d), rounds), "pixels": (_pixel_step(), max(10, rounds // 4))}
+    threads, flushing = torch.get_num_threads(), hnn.training._flushes_denormals()
+    torch.set_flush_denormal(True)
+    out = {}
+    try:
+        for name, (step, n) in steps.items():
+            shapes = floor.products(step)
+            out[name] = {"products": floor.describe_products(shapes), "by_threads": {}}
+            for t in FLOOR_THREADS:
+                torch.set_num_threads(t)
+                out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5),
+                                                                block=max(2, n // 20))
+                r = out[name]["by_threads"][str(t)]
+                print(f"floor {name}, {t} thread(s): step {r['step_ms']:.2f} ms, floor {r['floor_ms']:.2f} ms, "
+                      f"ratio {r['ratio']:.2f} (fastest rounds {r['best_ratio']:.2f})", flush=True)
+    finally:
+        torch.set_num_threads(threads)
+        torch.set_flush_denormal(flushing)
+    out["checks"] = [_pixel_check()]
+    return out
+
+
+def _floor_table(result: dict) -> str:
+    lines = ["| training step | its matrix products | threads | products alone (ms) | step (ms) | step / floor "
+             "| fastest rounds: step / floor |",
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+    labels = {"spring": f"spring HNN, 750 x 2, {HIDDEN} hidden",
+              "pixels": f"pixel HNN, batch {PIXEL_BATCH}, {2 * PIXEL_SIDE ** 2} pixels"}
+    for name, r in ((k, v) for k, v in result.items() if k in labels):
+        for t, c in r["by_threads"].items():
+            lines.append(f"| {labels[name]} | {r['products']} ({c['gflop']:.2f} GFLOP) | {t} | {c['floor_ms']:.2f} | "
+                         f"{c['step_ms']:.2f} | {c['ratio']:.2f}x | {c['best_ratio']:.2f}x |")
+    return "\n".join(lines)
+
+
 # --------------------------------------------------------------------------- main
 
-JOBS = ("data", "train", "eval")
+JOBS = ("floor", "data", "train", "eval")
 LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spring HNN ({steps} Adam steps)",
           "eval": "eval: energy MSE, one HNN ({trials} trials)"}
 
@@ -250,9 +390,14 @@ LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spr
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=None, help="interleaved rounds per job (default 5; 1 with --quick)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads for the data, train and eval comparisons (default 1: one thread each, "
+                             "as the original's train.py is timed); the floor job always runs 1, then 2")
+    parser.add_argument("--floor-rounds", type=int, default=None,
+                        help="step/floor rounds of the spring step (default 200; 40 with --quick); the pixel step runs a quarter")
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
-    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of data,train,eval")
+    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of floor,data,train,eval")
     parser.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = parser.parse_args(argv)
@@ -262,8 +407,11 @@ def parse_args(argv=None):
         parser.error(f"--jobs must be a comma list of {','.join(JOBS)}; got {bad or 'nothing'}")
     if args.repeats is None:
         args.repeats = 1 if args.quick else 5
-    if args.repeats < 1:
-        parser.error("--repeats must be at least 1")
+    if args.floor_rounds is None:
+        args.floor_rounds = 40 if args.quick else 200
+    if args.repeats < 1 or args.floor_rounds < 1 or args.threads < 1:
+        parser.error(f"--repeats, --floor-rounds and --threads must be at least 1; got {args.repeats}, "
+                     f"{args.floor_rounds} and {args.threads}")
     return args
 
 
@@ -278,19 +426,44 @@ def _table(results: dict, steps: int, trials: int) -> str:
     return "\n".join(lines)
 
 
+def _cpu_flags() -> str:
+    """The widest x86 vector extension this CPU reports (matrix products run on it), or ``''``."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split()
+    except OSError:
+        return ""
+    return "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else ""
+
+
+def _ceiling(results: dict, floors: dict | None, steps: int) -> str:
+    """What ``original / ours`` for training would be with our step exactly at its floor (same threads)."""
+    r = (floors or {}).get("spring", {}).get("by_threads", {}).get(str(torch.get_num_threads()))
+    if "train" not in results or r is None:
+        return ""
+    at_floor = (steps + 1) * r["floor_ms"] / 1e3
+    return (f"Training ratio ceiling: the original-style loop ({results['train']['median_original']:.2f} s) over "
+            f"{steps + 1} steps at the spring step's floor ({at_floor:.2f} s) is "
+            f"{results['train']['median_original'] / at_floor:.1f}x: no implementation of the same six products "
+            "per step can beat that.")
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     steps = 200 if args.quick else 2000
     protocol = hnn.get_protocol("spring", "corrected")
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
-    env = {"torch": torch.__version__, "torch_threads": torch.get_num_threads(), "numpy": np.__version__,
-           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine()}
+    env = {"torch": torch.__version__, "torch_threads": args.threads, "numpy": np.__version__,
+           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine(),
+           "cpu": _cpu_flags(), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
     print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
           f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
 
     task = hnn.load_task("spring")   # loading the task module is not part of the work compared
-    results, dataset, model = {}, None, None
+    results, dataset, model, floors = {}, None, None, None
+    if "floor" in args.jobs:
+        floors = job_floor(task.get_dataset(seed=0), args.floor_rounds)
+    torch.set_num_threads(args.threads)
     if "data" in args.jobs:
         results["data"], dataset = job_data(task, args.repeats)
         print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
@@ -307,24 +480,37 @@ def main(argv=None) -> int:
         results["eval"] = job_eval(task, model, protocol, args.repeats)
         print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
               f"original {results['eval']['median_original']:.3f} s", flush=True)
+    env["load_average_after"] = os.getloadavg()[0]
 
-    table = _table(results, steps, protocol.num_trials)
+    checked = {**({"floor": floors} if floors else {}), **results}
+    failed = [f"{job}: {c['name']}" for job, r in checked.items() for c in r["checks"] if not c["passed"]]
+    floor_table = _floor_table(floors) if floors else ""
+    if floors:
+        floor_table += "\n\n" + "\n".join(
+            f"Check: {c['name']} = {c['value']:.3g} (tolerance {c['tolerance']:g}): {'pass' if c['passed'] else 'FAIL'}."
+            for c in floors["checks"])
+    table = "\n\n".join(t for t in (_table(results, steps, protocol.num_trials) if results else "",
+                                     _ceiling(results, floors, steps)) if t)
     print()
-    print(table)
-    failed = [f"{job}: {c['name']}" for job, r in results.items() for c in r["checks"] if not c["passed"]]
-    for job, r in results.items():
+    print("\n\n".join(t for t in (floor_table, table) if t))
+    for job, r in checked.items():
         for c in r["checks"]:
             extra = {k: v for k, v in c.items() if k not in ("name", "value", "tolerance", "passed")}
             print(f"check {job}: {c['name']} = {c['value']:.3e} (tolerance {c['tolerance']:g}) "
                   f"{'pass' if c['passed'] else 'FAIL'} {extra}")
     write_json(args.out, {"environment": env, "repeats": args.repeats, "quick": args.quick,
-                          "total_steps": steps, "jobs": results, "table": table,
-                          "all_checks_passed": not failed})
+                          "total_steps": steps, "jobs": results, "table": table, "floor": floors,
+                          "floor_table": floor_table, "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
         command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
-        readme.update_section("benchmark", f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, "
-                              f"{env['torch_threads']} threads, {args.repeats} interleaved rounds:\n\n{table}")
+        busy = max(env["load_average_before"], env["load_average_after"])
+        shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
+                  "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")
+        head = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
+                f"{', ' + env['cpu'] if env['cpu'] else ''}, {env['torch_threads']} threads for the comparisons, "
+                f"{args.repeats} interleaved rounds.{shared}")
+        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table) if t))
         print("updated docs/speed.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)

@@ -6,6 +6,7 @@ import torch
 
 import hnn
 import hnn.models
+import hnn.tanh_mlp
 from hnn.models import _input_gradient
 
 
@@ -50,9 +51,38 @@ def test_four_dimensional_canonical_field():
     torch.testing.assert_close(model.time_derivative(x), torch.cat([x[:, 2:], -x[:, :2]], 1))
 
 
+@pytest.fixture(params=["torch.tanh", "2 sigmoid(2a) - 1"])
+def tanh_path(request, monkeypatch):
+    """Run a test with the MLPs' tanh taking each of its two ways, whatever the tensors' sizes."""
+    monkeypatch.setattr(hnn.tanh_mlp, "_FAST_TANH_MIN_ELEMENTS", 10 ** 9 if request.param == "torch.tanh" else 0)
+    return request.param
+
+
+@pytest.mark.parametrize("dtype, tolerance", [(torch.float32, 2e-7), (torch.float64, 1e-15)])
+def test_the_mlps_tanh_is_tanh(tanh_path, dtype, tolerance):
+    a = torch.linspace(-12, 12, 200_001, dtype=dtype)
+    for out in (hnn.tanh_mlp._tanh(a), hnn.tanh_mlp._tanh_(a.clone())):
+        assert (out.double() - torch.tanh(a.double())).abs().max() <= tolerance
+        if tanh_path == "torch.tanh":
+            assert torch.equal(out, torch.tanh(a))
+        elif dtype == torch.float32:        # the fast way really ran: it rounds differently
+            assert not torch.equal(out, torch.tanh(a))
+
+
+def test_the_mlps_tanh_differentiates_twice_as_torch_tanh(tanh_path):
+    a = torch.randn(6, 5, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(hnn.tanh_mlp._tanh, (a,))
+    assert torch.autograd.gradgradcheck(hnn.tanh_mlp._tanh, (a,))
+    g, = torch.autograd.grad(hnn.tanh_mlp._tanh(a).sum(), a, create_graph=True)
+    g_ref, = torch.autograd.grad(torch.tanh(a).sum(), a, create_graph=True)
+    torch.testing.assert_close(g, g_ref, rtol=1e-14, atol=1e-15)
+    torch.testing.assert_close(torch.autograd.grad(g.pow(2).sum(), a)[0],
+                               torch.autograd.grad(g_ref.pow(2).sum(), a)[0], rtol=1e-13, atol=1e-14)
+
+
 @pytest.mark.parametrize("field_type", ["solenoidal", "conservative", "both"])
 @pytest.mark.parametrize("dim", [2, 4])
-def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim):
+def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim, tanh_path):
     model = hnn.build_model(dim, 32, field_type=field_type).double()
     net = model.differentiable_model
     x = torch.randn(50, dim, dtype=torch.float64, requires_grad=True)
@@ -77,23 +107,26 @@ def test_closed_form_matches_autograd_values_and_all_gradients(field_type, dim):
         torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-12)
 
 
-def test_closed_form_is_used_and_gradcheck():
+def test_closed_form_is_used_and_gradcheck(tanh_path):
     # gradcheck compares the hand-written backward with finite differences, in float64
     net = hnn.MLP(2, 6, 2).double()
     x = torch.randn(5, 2, dtype=torch.float64, requires_grad=True)
     W1, b1, W2, b2, W3 = (p.detach().clone().requires_grad_(True) for p in net.parameters())
-    from hnn.models import _TanhMLPInputGradient
+    from hnn.tanh_mlp import _TanhMLPInputGradient
     assert torch.autograd.gradcheck(lambda *a: _TanhMLPInputGradient.apply(*a), (x, W1, b1, W2, b2, W3[1]))
 
 
 def _closed_form_calls(monkeypatch) -> list:
-    """Spy on the closed form: the returned list grows by one per call (either grad mode)."""
-    calls, real = [], hnn.models._tanh_mlp_input_gradient
+    """Spy on the closed form, both evaluation paths: the returned list grows by one per call (either grad mode)."""
+    calls = []
 
-    def spy(*args, **kwargs):
-        calls.append(1)
-        return real(*args, **kwargs)
-    monkeypatch.setattr(hnn.models, "_tanh_mlp_input_gradient", spy)
+    def spy_on(real):
+        def spy(*args, **kwargs):
+            calls.append(1)
+            return real(*args, **kwargs)
+        return spy
+    for name in ("_tanh_mlp_input_gradient", "_small_batch_input_gradient"):
+        monkeypatch.setattr(hnn.tanh_mlp, name, spy_on(getattr(hnn.tanh_mlp, name)))
     return calls
 
 
@@ -143,6 +176,31 @@ def test_subclasses_hooks_and_other_activations_fall_back_to_autograd(monkeypatc
     net = Named(2, 8, 2).double()
     torch.testing.assert_close(hnn.HNN(2, net).time_derivative(x), _autograd_field(net, x), rtol=1e-10, atol=1e-10)
     assert len(calls) == 1
+
+
+@pytest.mark.parametrize("dtype, rtol", [(torch.float32, 2e-6), (torch.float64, 1e-13)])
+def test_small_evaluation_batches_take_numpy_elementwise_and_agree_with_torch(monkeypatch, dtype, rtol):
+    torch.manual_seed(0)
+    model = hnn.build_model(4, 32, field_type="both").to(dtype)
+    calls = {"small": 0}
+    real = hnn.tanh_mlp._small_batch_input_gradient
+
+    def spy(*args):
+        calls["small"] += 1
+        return real(*args)
+    monkeypatch.setattr(hnn.tanh_mlp, "_small_batch_input_gradient", spy)
+    limit = hnn.tanh_mlp._SMALL_BATCH_MAX_ROWS
+    for rows in (1, 15, limit, limit + 1):
+        x = torch.randn(rows, 4, dtype=dtype)[:, [0, 2, 1, 3]]     # a strided view, as structured models pass
+        before = calls["small"]
+        with torch.no_grad():
+            fast = model.time_derivative(x)
+            monkeypatch.setattr(hnn.tanh_mlp, "_SMALL_BATCH_MAX_ROWS", -1)
+            reference = model.time_derivative(x)
+            monkeypatch.setattr(hnn.tanh_mlp, "_SMALL_BATCH_MAX_ROWS", limit)
+        assert calls["small"] - before == (2 if rows <= limit else 0)    # F1 and F2 of field_type both
+        assert fast.dtype == dtype and not fast.requires_grad
+        torch.testing.assert_close(fast, reference, rtol=rtol, atol=rtol)
 
 
 def test_time_derivative_modes():

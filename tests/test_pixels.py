@@ -1,4 +1,5 @@
 """The pixel pendulum: gym renders -> 28x28 rod pictures -> PixelHNN, checked against physics and the original's layout."""
+import contextlib
 import json
 import subprocess
 import sys
@@ -64,6 +65,40 @@ def test_any_render_size_gives_the_same_picture(system):
     # a render with the rod elsewhere is a different picture: the check above can fail
     other, _ = system.render_trials(system.sample_starts(4, 3), 6, render_size=250, workers=1)
     assert np.corrcoef(other.astype(float).ravel(), b.ravel())[0, 1] < 0.9
+
+
+def test_preprocess_of_a_render_is_the_rod_channel_difference_cropped_and_resized(system):
+    from PIL import Image
+
+    env = system.make_env(500)
+    env.reset(seed=1)
+    frame = env.render()
+    env.close()
+    rod = np.clip(frame[..., 0].astype(np.int16) - frame[..., 1], 0, 255).astype(np.uint8)
+    top, bottom, left, right = system.crop_box(500)
+    expected = np.asarray(Image.fromarray(rod[top:bottom, left:right]).resize((28, 28), Image.BILINEAR))
+    assert expected.max() > 100                  # the rod is in the picture
+    np.testing.assert_array_equal(system.preprocess(frame), expected)
+
+
+def test_the_arrow_image_loaded_once_gives_the_same_frames(system, monkeypatch):
+    import pygame
+
+    loads, real = [], pygame.image.load
+
+    def counted(*args):
+        loads.append(1)
+        return real(*args)
+    monkeypatch.setattr(pygame.image, "load", counted)
+    job = (system.sample_starts(5, 1)[0], 5, 28, 250)
+    frames, states = system._render_trial(job)
+    assert len(loads) == 1                       # one load for the trial's 5 frames
+    monkeypatch.setattr(system, "_images_loaded_once", contextlib.nullcontext)
+    every_frame, states_again = system._render_trial(job)
+    assert len(loads) == 1 + 5                   # gym's own way: a load per frame
+    np.testing.assert_array_equal(frames, every_frame)
+    np.testing.assert_array_equal(states, states_again)
+    assert pygame.image.load is counted          # the real function is back after each trial
 
 
 def test_starts_are_rejection_sampled_below_pi_over_6(system):

@@ -1,0 +1,52 @@
+"""analysis/floor.py: the matrix products a training step performs, as the benchmark's floor counts them."""
+import pytest
+import torch
+
+import hnn
+from hnn.training import _adam, _l2_loss, _step
+from hnn_analysis import benchmark, floor
+
+
+def _baseline_step(rows=10, hidden=8):
+    torch.manual_seed(0)
+    model = hnn.build_model(2, hidden, baseline=True)
+    x, y = torch.randn(rows, 2), torch.randn(rows, 2)
+    optim = _adam(model, 1e-3, 0.0)
+    loss = _l2_loss(model.time_derivative)
+    return lambda: _step(loss, x, y, optim)
+
+
+def test_a_plain_mlp_step_performs_one_product_per_layer_forward_and_two_back_but_none_into_x():
+    shapes = floor.products(_baseline_step())
+    # forward: 3 layers; backward: a weight gradient for each, an input gradient for the upper two
+    assert len(shapes) == 3 + 3 + 2
+    assert shapes[:3] == [(10, 2, 8), (10, 8, 8), (10, 8, 2)]
+    assert sorted(shapes[3:]) == sorted([(2, 10, 8), (10, 2, 8), (8, 10, 8), (10, 8, 8), (8, 10, 2)])
+
+
+def test_the_hnn_step_performs_six_large_products_and_the_pixel_step_the_layers_count():
+    d = hnn.load_task("spring").get_dataset(seed=0)
+    spring = floor.products(benchmark._spring_step(d))
+    assert floor.describe_products(spring) == "6 x 750x200x200 + 5 small"
+    # the pixel step, counted from its layers: the encoder's 4 (on 400 rows: both frames) and the
+    # decoder's 4 forward, each with a weight gradient and, but for the encoder's first, an input
+    # gradient (15); the latent HNN's closed form, 4 forward and 8 backward (12); 8 + 15 + 12 = 35
+    pixels = floor.products(benchmark._pixel_step())
+    assert len(pixels) == 35
+    assert pixels.count((400, 1568, 200)) == 1 and pixels.count((200, 200, 1568)) == 1
+
+
+def test_compare_reports_the_ratio_of_medians_and_the_fastest_layout():
+    step = _baseline_step(rows=64, hidden=32)
+    shapes = floor.products(step)
+    result = floor.compare(step, shapes, rounds=5, warmup=2)
+    assert result["products"] == len(shapes) and result["threads"] == torch.get_num_threads()
+    assert result["ratio"] == pytest.approx(result["step_ms"] / result["floor_ms"])
+    assert {tuple(s["shape"]) for s in result["per_shape"]} == set(shapes)
+    assert sum(s["count"] for s in result["per_shape"]) == len(shapes)
+
+
+def test_a_product_the_floor_cannot_time_is_refused():
+    a = torch.randn(3, 4, 5)
+    with pytest.raises(NotImplementedError, match="bmm"):
+        floor.products(lambda: torch.bmm(a, a.transpose(1, 2)))
