@@ -26,6 +26,8 @@ import torch
 
 import hnn
 
+from hnn_analysis import speed_accuracy
+
 VALID_ERROR = 0.1          # a prediction is "valid" while its relative error stays below this
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference
@@ -143,18 +145,6 @@ def describe(options: dict) -> str:
     return f"{name} dt={options['dt']:g}" if "dt" in options else f"{name} rtol={options['rtol']:g}"
 
 
-def _timed(f, x0, t, options: dict, repeats: int = 3) -> tuple[float, torch.Tensor, dict]:
-    seconds, traj, stats = [], None, {}
-    for _ in range(repeats):
-        stats = {}
-        tic = time.perf_counter()
-        traj = _quiet_rollout(f, x0, t, stats=stats, **options)
-        seconds.append(time.perf_counter() - tic)
-        if seconds[-1] > 0.5:       # long enough that one timing is not dominated by noise
-            break
-    return statistics.median(seconds), traj, stats
-
-
 def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict]) -> dict:
     """Every setting of ``ladder`` (each method's from coarse to fine, stopping at the first that
     reaches ``TARGET``) scored by its max relative error over the batch and times against
@@ -169,7 +159,7 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict]) ->
         row = {"setting": describe(options), "options": options,
                "symplectic": hnn.get_solver(options["method"]).symplectic}
         try:
-            seconds, traj, stats = _timed(f, x0, t, options)
+            seconds, traj, stats = speed_accuracy.timed_rollout(f, x0, t, options, 3, enough=0.5)
         except hnn.DivergenceError as err:
             row.update(status=type(err).__name__)
             rows.append(row)

@@ -269,12 +269,6 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _mean_se(values: list[float]) -> list[float]:
-    if len(values) < 2:
-        return [values[0], 0.0] if values else [math.nan, math.nan]
-    return [float(np.mean(values)), float(np.std(values, ddof=1) / math.sqrt(len(values)))]
-
-
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = _parser()
@@ -386,11 +380,11 @@ def _across(per_seed: dict) -> dict:
     for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
         values = [m[key][0] for m in per_seed.values() if m.get(key)]
         if values:
-            out[key + "_seeds"] = _mean_se(values)
+            out[key + "_seeds"] = list(hnn.mean_and_se(values))
     for key in ("error", "valid_time"):
         values = [m["rollout"][key] for m in per_seed.values() if m.get("rollout", {}).get(key) is not None]
         if values:
-            out[key + "_seeds"] = _mean_se(values)
+            out[key + "_seeds"] = list(hnn.mean_and_se(values))
     return out
 
 
