@@ -55,7 +55,13 @@ def _as_batch(x0) -> torch.Tensor:
     return x0
 
 
-def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch.Tensor:
+# Rollouts of at most this many states run on one torch thread: their products are too small to
+# split, and two processes each spinning two threads on two cores slow each other many times over.
+SMALL_BATCH_ROWS = 64
+
+
+def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: bool = False,
+            **options) -> torch.Tensor:
     """Integrate ``dx/dt = f(x)`` from every state of ``x0`` and sample at ``t_eval``.
 
     Args:
@@ -79,6 +85,15 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch
             for the midpoint ``iterations`` and ``max_step_iterations``), and ``max_norm`` (default
             1e6; None to disable): a state with a component beyond it counts as blown up.
             Fixed-step methods take ``t_eval`` in either direction (backwards for reversibility).
+        differentiable: False (default): no autograd graph, whatever the caller's grad mode (the
+            result does not require grad, memory does not grow with the horizon, and ``f`` runs its
+            evaluation path). True: every step is recorded by autograd, in grad mode whatever the
+            caller's, so the result can be differentiated with respect to ``x0`` and ``f``'s
+            parameters (trajectory training, one-step Jacobians); fixed-step methods only (the
+            adaptive ones choose their steps outside autograd).
+
+    Batches of at most ``SMALL_BATCH_ROWS`` (64) states run on one torch thread, and the caller's
+    thread count is restored afterwards: their products are too small to share between threads.
 
     Returns:
         ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
@@ -93,6 +108,19 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", **options) -> torch
     of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
     """
     solver = get_solver(method)
+    if differentiable and solver.adaptive:
+        raise ValueError(f"{method} chooses its steps outside autograd and cannot give a differentiable rollout; "
+                         "use a fixed-step method (rk4, leapfrog, midpoint, yoshida4) with differentiable=True")
     x0 = _as_batch(x0)
     _check_tolerance(solver, x0.dtype, options)
-    return solver.run(f, x0, _as_t_eval(t_eval), **options)
+    t = _as_t_eval(t_eval)
+    threads = torch.get_num_threads()
+    one_thread = threads != 1 and len(x0) <= SMALL_BATCH_ROWS
+    if one_thread:
+        torch.set_num_threads(1)
+    try:
+        with torch.set_grad_enabled(bool(differentiable)):
+            return solver.run(f, x0, t, **options)
+    finally:
+        if one_thread:
+            torch.set_num_threads(threads)

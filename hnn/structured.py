@@ -12,9 +12,11 @@ State ``x = [q, p]`` of shape ``(batch, 2n)``; every scalar (H, T, V, D) has sha
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
+from . import tanh_mlp
 from .models import HNN, MLP
 
 
@@ -60,13 +62,34 @@ class SeparableHNN(nn.Module):
         self._check_input(x)
         return self.kinetic(x[:, self.n:]) + self.potential(x[:, :self.n])
 
+    def _kernel(self, name: str, x: torch.Tensor):
+        """The evaluation kernel of ``kinetic_net`` or ``potential_net`` if it serves ``x``, else None."""
+        if torch.is_grad_enabled():
+            return None
+        net = getattr(self, name)
+        kernel = tanh_mlp.cached_kernel(self, name, net, (0,), lambda: torch.eye(self.n)[None]) \
+            if isinstance(net, MLP) else None
+        return kernel if kernel is not None and tanh_mlp.kernel_applies(x, kernel.dtype) else None
+
+    def kinetic_gradient(self, p: torch.Tensor) -> torch.Tensor:
+        """dT/dp = dq/dt, ``(batch, n)`` -> ``(batch, n)``: the half of the field that reads p alone."""
+        kernel = self._kernel("kinetic_net", p)
+        return kernel(p) if kernel is not None else _scalar_gradient(self.kinetic_net, p, torch.is_grad_enabled())
+
+    def potential_gradient(self, q: torch.Tensor) -> torch.Tensor:
+        """dV/dq = -dp/dt, ``(batch, n)`` -> ``(batch, n)``: the half of the field that reads q alone."""
+        kernel = self._kernel("potential_net", q)
+        return kernel(q) if kernel is not None else _scalar_gradient(self.potential_net, q, torch.is_grad_enabled())
+
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """``dx/dt = (dT/dp, -dV/dq)``, ``(batch, 2n)``; a graph for training only in grad mode."""
         self._check_input(x)
-        create_graph = torch.is_grad_enabled()
-        dT = _scalar_gradient(self.kinetic_net, x[:, self.n:], create_graph)
-        dV = _scalar_gradient(self.potential_net, x[:, :self.n], create_graph)
-        return torch.cat([dT, -dV], dim=1)
+        q, p = x[:, :self.n], x[:, self.n:]
+        kinetic, potential = self._kernel("kinetic_net", p), self._kernel("potential_net", q)
+        if kinetic is not None and potential is not None:
+            dV = potential.numpy(q.detach().numpy())
+            return torch.from_numpy(np.concatenate([kinetic.numpy(p.detach().numpy()), np.negative(dV, out=dV)], 1))
+        return torch.cat([self.kinetic_gradient(p), -self.potential_gradient(q)], dim=1)
 
 
 class DissipativeHNN(HNN):

@@ -67,34 +67,11 @@ def _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved: bool = True):
     return g_a1 @ W1.T.contiguous().T, ((h1, h2, s1, s2, g_h1, g_a1, W2w) if saved else ())
 
 
-# An integrator calls the field thousands of times on a few states (15 trials, or one). There
-# torch's tanh is slow (7 us for 15 x 200; numpy's 0.9 us) and each small torch op costs 1-2 us
-# of dispatch, so the elementwise work runs in numpy on the tensors' own memory, while the
-# products stay in torch (MKL, torch's thread count): 15 x 2 float32 states, 45 vs 64 us a call.
-# Large batches stay in torch, which parallelises its elementwise work.
-_SMALL_BATCH_MAX_ROWS = 64
 _SMALL_BATCH_DTYPES = (torch.float32, torch.float64)
 
 
-def _small_batch_input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
-    """``_tanh_mlp_input_gradient(..., saved=False)`` with its elementwise passes in numpy (no autograd)."""
-    h1 = nn.functional.linear(x, W1, b1)
-    n1 = np.tanh(h1.numpy(), out=h1.numpy())
-    h2 = nn.functional.linear(h1, W2, b2)
-    n2 = np.tanh(h2.numpy(), out=h2.numpy())
-    n2 = np.subtract(1, np.multiply(n2, n2, out=n2), out=n2)      # s2 = 1 - h2^2
-    n2 *= w.detach().numpy()
-    g_a1 = h2 @ W2
-    n3 = g_a1.numpy()
-    n3 *= np.subtract(1, np.multiply(n1, n1, out=n1), out=n1)     # times s1 = 1 - h1^2
-    return g_a1 @ W1
-
-
 def _evaluation_input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
-    """The closed form without autograd: numpy's elementwise passes for a few CPU states, else torch's."""
-    if len(x) <= _SMALL_BATCH_MAX_ROWS and x.device.type == "cpu" and x.dtype in _SMALL_BATCH_DTYPES \
-            and all(p.dtype == x.dtype and p.device == x.device for p in (W1, b1, W2, b2, w)):
-        return _small_batch_input_gradient(x, W1, b1, W2, b2, w)
+    """The closed form without autograd (a few states of a whole field go through ``EvaluationKernel``)."""
     return _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved=False)[0]
 
 
@@ -131,3 +108,97 @@ class _TanhMLPInputGradient(torch.autograd.Function):
         d_W1 = torch.addmm(d_gx.T @ g_a1, x.T, d_a1).T
         d_x = d_a1 @ W1.T.contiguous().T if ctx.needs_input_grad[0] else None
         return d_x, d_W1, d_a1.sum(0), d_W2, d_a2.sum(0), d_w
+
+
+# A rollout calls its field thousands of times on a few states, where the four products of the
+# closed form cost a few microseconds each and every further torch call costs one or two more.
+# ``EvaluationKernel`` is the evaluation path for those calls: the weights are taken once (as
+# numpy arrays and contiguous torch matrices in the layouts the products run fastest), the
+# elementwise passes and the thin products with the input run in numpy on the arrays' own memory,
+# the hidden x hidden products in torch (MKL, torch's thread count; numpy's OpenBLAS would spin
+# threads of its own), and the map from the output gradients to dx/dt (Hamilton's permutation, a
+# sign) is folded into the last product, so nothing is concatenated.
+KERNEL_MAX_ROWS = 64
+
+
+class EvaluationKernel:
+    """dx/dt = sum_k d(out_k)/dx @ fold[k] of a tanh ``MLP`` (or its output itself), without autograd.
+
+    Args:
+        mlp: an ``hnn.MLP`` whose closed form applies (tanh, plain layers).
+        rows: the output indices k whose input gradients the field reads; None for the MLP's own
+            output (a baseline's dx/dt).
+        fold: ``(len(rows), input_dim, out_dim)``: how each input gradient enters dx/dt.
+
+    ``kernel(x)`` maps ``(batch, input_dim)`` CPU states of the weights' dtype to ``(batch, out_dim)``
+    (a new tensor). ``kernel.current()`` is False once any weight has changed (an optimizer step,
+    ``load_state_dict``, ``.to()``): build a new kernel then.
+    """
+
+    def __init__(self, mlp: nn.Module, rows: tuple[int, ...] | None, fold: torch.Tensor | None = None):
+        l1, l2, l3 = mlp.linear1, mlp.linear2, mlp.linear3
+        self._params = (l1.weight, l1.bias, l2.weight, l2.bias, l3.weight)
+        self._stamp = self._signature()
+        with torch.no_grad():
+            W1, b1, W2, b2, W3 = (p.detach().clone() for p in self._params)
+            self.dtype = W1.dtype
+            self._W1T = W1.T.contiguous().numpy()
+            self._b1 = b1.numpy()
+            self._W2T = W2.T.contiguous()
+            self._b2 = b2
+            self._rows = rows
+            if rows is None:
+                self._W3T = W3.T.contiguous().numpy()
+                return
+            w = W3[list(rows)]                                                # (K, H)
+            # (s2 * w_k) @ W2 for every k as one product: s2 @ [diag(w_0) W2 | diag(w_1) W2 | ...]
+            self._W2w = torch.cat([w[i][:, None] * W2 for i in range(len(rows))], dim=1).contiguous()
+            fold = fold.to(W1.dtype)
+            self._out = torch.cat([W1 @ fold[i] for i in range(len(rows))]).numpy()   # (K H, out_dim)
+
+    def _signature(self) -> tuple:
+        return tuple((p.data_ptr(), p._version) for p in self._params)
+
+    def current(self) -> bool:
+        """Whether the weights are still the ones this kernel was built from."""
+        return self._signature() == self._stamp
+
+    def numpy(self, x: np.ndarray) -> np.ndarray:
+        """dx/dt of ``x`` ``(batch, input_dim)`` (numpy, the kernel's dtype) as a new numpy array."""
+        h1 = x @ self._W1T
+        h1 += self._b1
+        np.tanh(h1, out=h1)
+        h2 = torch.addmm(self._b2, torch.from_numpy(h1), self._W2T).numpy()
+        np.tanh(h2, out=h2)
+        if self._rows is None:
+            return h2 @ self._W3T
+        s2 = np.subtract(1, np.multiply(h2, h2, out=h2), out=h2)
+        s1 = np.subtract(1, np.multiply(h1, h1, out=h1), out=h1)
+        g = torch.mm(torch.from_numpy(s2), self._W2w).numpy()               # dF_k/dh1, (batch, K H)
+        if len(self._rows) == 1:
+            g *= s1                                                          # dF/da1
+        else:
+            g.reshape(len(x), len(self._rows), -1)[...] *= s1[:, None, :]
+        return g @ self._out
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.from_numpy(self.numpy(x.detach().numpy()))
+
+
+def kernel_applies(x: torch.Tensor, dtype: torch.dtype) -> bool:
+    """Whether ``EvaluationKernel`` serves ``x`` for weights of ``dtype``: no grad mode, a few CPU rows of that dtype."""
+    return (not torch.is_grad_enabled() and x.dim() == 2 and len(x) <= KERNEL_MAX_ROWS and x.dtype == dtype
+            and x.dtype in _SMALL_BATCH_DTYPES and x.device.type == "cpu")
+
+
+def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, ...] | None, fold=None):
+    """``owner``'s ``EvaluationKernel`` called ``key`` for ``mlp``, rebuilt when its weights changed;
+    None when ``mlp`` is not a tanh MLP the closed form applies to. ``fold``: a callable giving the
+    kernel's fold, called only when the kernel is (re)built."""
+    if not mlp._closed_form_applies():
+        return None
+    kernels = owner.__dict__.setdefault("_evaluation_kernels", {})
+    kernel = kernels.get(key)
+    if kernel is None or not kernel.current():
+        kernel = kernels[key] = EvaluationKernel(mlp, rows, None if fold is None else fold())
+    return kernel

@@ -125,8 +125,10 @@ def _closed_form_calls(monkeypatch) -> list:
             calls.append(1)
             return real(*args, **kwargs)
         return spy
-    for name in ("_tanh_mlp_input_gradient", "_small_batch_input_gradient"):
+    for name in ("_tanh_mlp_input_gradient",):
         monkeypatch.setattr(hnn.tanh_mlp, name, spy_on(getattr(hnn.tanh_mlp, name)))
+    # the evaluation path of a few states (the rollout kernel)
+    monkeypatch.setattr(hnn.tanh_mlp.EvaluationKernel, "numpy", spy_on(hnn.tanh_mlp.EvaluationKernel.numpy))
     return calls
 
 
@@ -178,29 +180,51 @@ def test_subclasses_hooks_and_other_activations_fall_back_to_autograd(monkeypatc
     assert len(calls) == 1
 
 
+_KINDS = {"hnn": lambda: hnn.build_model(4, 32), "both": lambda: hnn.build_model(4, 32, field_type="both"),
+          "baseline": lambda: hnn.build_model(4, 32, baseline=True), "separable": lambda: hnn.SeparableHNN(4, 32),
+          "dissipative": lambda: hnn.DissipativeHNN(4, 32)}
+
+
+@pytest.mark.parametrize("kind", sorted(_KINDS))
 @pytest.mark.parametrize("dtype, rtol", [(torch.float32, 2e-6), (torch.float64, 1e-13)])
-def test_small_evaluation_batches_take_numpy_elementwise_and_agree_with_torch(monkeypatch, dtype, rtol):
+def test_the_evaluation_kernel_serves_a_few_states_and_agrees_with_the_training_path(monkeypatch, kind, dtype, rtol):
     torch.manual_seed(0)
-    model = hnn.build_model(4, 32, field_type="both").to(dtype)
-    calls = {"small": 0}
-    real = hnn.tanh_mlp._small_batch_input_gradient
+    model = _KINDS[kind]().to(dtype)
+    calls = {"kernel": 0}
+    real = hnn.tanh_mlp.EvaluationKernel.numpy
 
     def spy(*args):
-        calls["small"] += 1
+        calls["kernel"] += 1
         return real(*args)
-    monkeypatch.setattr(hnn.tanh_mlp, "_small_batch_input_gradient", spy)
-    limit = hnn.tanh_mlp._SMALL_BATCH_MAX_ROWS
+    monkeypatch.setattr(hnn.tanh_mlp.EvaluationKernel, "numpy", spy)
+    limit = hnn.tanh_mlp.KERNEL_MAX_ROWS
     for rows in (1, 15, limit, limit + 1):
-        x = torch.randn(rows, 4, dtype=dtype)[:, [0, 2, 1, 3]]     # a strided view, as structured models pass
-        before = calls["small"]
+        x = torch.randn(rows, 4, dtype=dtype)[:, [0, 2, 1, 3]]     # a strided view
+        before = calls["kernel"]
         with torch.no_grad():
             fast = model.time_derivative(x)
-            monkeypatch.setattr(hnn.tanh_mlp, "_SMALL_BATCH_MAX_ROWS", -1)
-            reference = model.time_derivative(x)
-            monkeypatch.setattr(hnn.tanh_mlp, "_SMALL_BATCH_MAX_ROWS", limit)
-        assert calls["small"] - before == (2 if rows <= limit else 0)    # F1 and F2 of field_type both
+        reference = model.time_derivative(x.clone().requires_grad_(True)).detach()   # the training path
+        assert calls["kernel"] - before == ((2 if kind == "separable" else 1) if rows <= limit else 0)
         assert fast.dtype == dtype and not fast.requires_grad
         torch.testing.assert_close(fast, reference, rtol=rtol, atol=rtol)
+
+
+def test_the_evaluation_kernel_follows_the_weights():
+    """An optimizer step, a state dict and a dtype change all reach the kernel (it is rebuilt)."""
+    torch.manual_seed(0)
+    model = hnn.build_model(2, 16)
+    x = torch.randn(3, 2)
+    with torch.no_grad():
+        before = model.time_derivative(x)
+        model.differentiable_model.linear2.weight.add_(0.1)
+        after = model.time_derivative(x)
+    assert not torch.allclose(before, after)
+    torch.testing.assert_close(after, model.time_derivative(x.requires_grad_(True)).detach())
+    model.double()
+    with torch.no_grad():
+        out = model.time_derivative(x.detach().double())
+    assert out.dtype == torch.float64
+    torch.testing.assert_close(out, after.double(), rtol=1e-5, atol=1e-6)
 
 
 def test_time_derivative_modes():

@@ -27,7 +27,7 @@ def _laplacian(f, x):
 def _step_jacobian(f, x0, method, dt=0.1):
     """The (2, 2) Jacobian of one ``method`` step of ``dx/dt = f(x)`` at the state ``x0`` ``(2,)``."""
     def step(x):
-        return hnn.rollout(f, x[None], [0.0, dt], method=method, dt=dt, max_norm=None)[0, -1]
+        return hnn.rollout(f, x[None], [0.0, dt], method=method, dt=dt, max_norm=None, differentiable=True)[0, -1]
     return torch.autograd.functional.jacobian(step, x0)
 
 

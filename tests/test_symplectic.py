@@ -90,7 +90,7 @@ def _omega(dim: int) -> torch.Tensor:
 
 def symplectic_defect(f, x: torch.Tensor, method: str, dt: float, **options) -> float:
     """max |J^T Omega J - Omega| of the one-step map of ``method`` at ``x`` (dim,), float64."""
-    step = lambda y: hnn.rollout(f, y[None], [0.0, dt], method=method, **options)[0, -1]  # noqa: E731
+    step = lambda y: hnn.rollout(f, y[None], [0.0, dt], method=method, differentiable=True, **options)[0, -1]  # noqa: E731
     J = torch.autograd.functional.jacobian(step, x)
     omega = _omega(len(x))
     return float((J.T @ omega @ J - omega).abs().max())
