@@ -1,5 +1,5 @@
 """The adaptive integrators behind ``hnn.rollout``: scipy's ``solve_ivp`` on the flattened batch,
-and Dormand-Prince 5(4) in torch with one step size per trajectory (``'dopri5'``).
+and Dormand-Prince 5(4) with one step size per trajectory (``'dopri5'``, stepped in numpy).
 
 Both take a checked ``(batch, dim)`` ``x0`` and a float64 grid ``t`` from ``rollout`` and return
 ``(batch, len(t), dim)``; ``hnn.solvers`` registers them as ``'solve_ivp'`` and ``'dopri5'``.
@@ -80,10 +80,23 @@ _DP_P = (
 )
 
 
+def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
+    """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU."""
+    def field(y: np.ndarray) -> np.ndarray:
+        x = torch.from_numpy(y)
+        if device.type != "cpu":
+            x = x.to(device)
+        dxdt = f(x)
+        if dxdt.shape != x.shape:
+            raise ValueError(f"f must map (batch, dim) = {tuple(x.shape)} to the same shape, got {tuple(dxdt.shape)}")
+        return dxdt.detach().cpu().numpy()
+    return field
+
+
 def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
                    max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
                    stats: dict | None = None) -> torch.Tensor:
-    """RK45 (Dormand-Prince) in torch with one adaptive step size per trajectory.
+    """RK45 (Dormand-Prince) with one adaptive step size per trajectory.
 
     Each row is controlled by its own error norm, exactly the norm of one scipy ``solve_ivp``
     call on that row, so one hard trajectory no longer sets the step of the whole batch (as it
@@ -92,103 +105,123 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3
     iterations; once a quarter of them have finished, the finished ones are dropped, so ``f``
     sees only rows still running: it must treat rows independently (true of dynamics and of
     models), and a ``f`` that keeps per-trajectory state must carry each row's identity in the
-    state itself.
+    state itself. The stepping runs in numpy on the states' dtype (a few states cost a
+    microsecond an operation there, several in torch), ``f`` on tensors sharing the arrays' memory.
     """
+    with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
+        return _dopri5(_numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol, max_norm, max_iterations, stats)
+
+
+def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations, stats) -> torch.Tensor:
     batch, dim = x0.shape
     num_t = len(t)
     direction = 1.0 if t[-1] > t[0] else -1.0
-    times = torch.as_tensor(t, dtype=torch.float64)
-    y = x0.detach().clone()
-    k1 = f(y).detach()
+    y = x0.detach().cpu().numpy().copy()
+    dtype = y.dtype
+    k1 = field(y).astype(dtype, copy=True)
     nfev = 1
-    tc = torch.full((batch,), float(t[0]), dtype=torch.float64)
+    tc = np.full(batch, float(t[0]))
     # scipy's initial step guess (Hairer, Norsett & Wanner), per row
-    scale0 = atol + rtol * y.abs()
-    d0 = (y / scale0).pow(2).mean(1).sqrt()
-    d1 = (k1 / scale0).pow(2).mean(1).sqrt()
-    h0 = torch.where((d0 < 1e-5) | (d1 < 1e-5), torch.full_like(d0, 1e-6), 0.01 * d0 / d1).to(torch.float64)
-    y1 = y + direction * h0.to(y.dtype)[:, None] * k1
-    d2 = ((f(y1).detach() - k1) / scale0).pow(2).mean(1).sqrt().to(torch.float64) / h0
+    scale0 = atol + rtol * np.abs(y)
+    d0 = np.sqrt(((y / scale0) ** 2).mean(1))
+    d1 = np.sqrt(((k1 / scale0) ** 2).mean(1))
+    h0 = np.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / d1).astype(np.float64)
+    y1 = y + (direction * h0).astype(dtype)[:, None] * k1
+    d2 = np.sqrt((((field(y1) - k1) / scale0) ** 2).mean(1)).astype(np.float64) / h0
     nfev += 1
-    h1 = torch.where((d1 <= 1e-15) & (d2 <= 1e-15), torch.clamp(h0 * 1e-3, min=1e-6),
-                     (0.01 / torch.maximum(d1.to(torch.float64), d2)) ** (1 / 5))
-    prop = torch.minimum(100 * h0, h1)                   # proposed |step| per row
-    out = torch.empty((batch, num_t, dim), dtype=x0.dtype)
+    h1 = np.where((d1 <= 1e-15) & (d2 <= 1e-15), np.maximum(h0 * 1e-3, 1e-6),
+                  (0.01 / np.maximum(d1.astype(np.float64), d2)) ** (1 / 5))
+    prop = np.minimum(100 * h0, h1)                      # proposed |step| per row
+    out = np.empty((batch, num_t, dim), dtype=dtype)
     out[:, 0] = y
-    nxt = torch.ones(batch, dtype=torch.long)
-    done = torch.zeros(batch, dtype=torch.bool)
-    bad_time = torch.full((batch,), float("nan"), dtype=torch.float64)
-    rows = torch.arange(batch)
-    eps = float(torch.finfo(torch.float64).eps)
-    A = torch.zeros(7, 7, dtype=x0.dtype)
+    nxt = np.ones(batch, dtype=np.int64)
+    done = np.zeros(batch, dtype=bool)
+    bad_time = np.full(batch, np.nan)
+    rows = np.arange(batch)
+    eps = float(np.finfo(np.float64).eps)
+    A = torch.zeros((7, 7), dtype=x0.dtype)
     for i, a in enumerate(_DP_A):
         A[i, :len(a)] = torch.tensor(a, dtype=x0.dtype)
     E = torch.tensor(_DP_E, dtype=x0.dtype)
-    K = torch.empty((7, batch, dim), dtype=x0.dtype)       # the stage derivatives
-    P = torch.tensor(_DP_P, dtype=x0.dtype)
-    t_end = torch.tensor(float(t[-1]), dtype=torch.float64)
+    PT = torch.tensor(_DP_P, dtype=x0.dtype).T.contiguous()   # (4, 7)
+    K = np.empty((7, batch, dim), dtype=dtype)            # the stage derivatives
+    t_end = float(t[-1])
+    near = 1e-12 * max(abs(t_end), 1.0)
     for _ in range(max_iterations):
-        live = int((~done).sum())
+        live = int(np.count_nonzero(~done))
         if live == 0:
             break
         if live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
-            K = torch.empty((7, live, dim), dtype=x0.dtype)
-        gap = (t_end - tc).abs()
+            K = np.empty((7, live, dim), dtype=dtype)
+        rows_now = len(y)
+        gap = np.abs(t_end - tc)
         clipped = prop >= gap                         # this step ends on the last time
-        h = torch.where(done, torch.zeros_like(prop), torch.minimum(prop, gap)) * direction
-        hx = h.to(y.dtype)[:, None]
+        h = np.minimum(prop, gap)
+        h[done] = 0.0
+        h *= direction
+        hx = h.astype(dtype, copy=False)[:, None]
         K[0] = k1
+        # the tableau products in torch: its small products give each row the same bits whatever
+        # the other rows (numpy's BLAS does not), so a row's trajectory does not depend on the batch
+        flat = torch.from_numpy(K.reshape(7, -1))
         for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
-            stage = torch.addcmul(y, hx, (A[s, :s] @ K[:s].reshape(s, -1)).reshape(-1, dim))
-            K[s] = f(stage).detach()
+            stage = (A[s, :s] @ flat[:s]).numpy().reshape(rows_now, dim)
+            stage *= hx
+            stage += y
+            K[s] = field(stage)
         nfev += 6
         y_new = stage
-        err = hx * (E @ K.reshape(7, -1)).reshape(-1, dim)
-        scale = atol + rtol * torch.maximum(y.abs(), y_new.abs())
-        err_norm = (err / scale).pow(2).mean(1).sqrt().to(torch.float64)
-        finite = torch.isfinite(y_new).all(1) & torch.isfinite(K[6]).all(1) & torch.isfinite(err_norm)
+        err = (E @ flat).numpy().reshape(rows_now, dim)
+        err *= hx
+        scale = np.maximum(np.abs(y), np.abs(y_new))
+        scale *= rtol
+        scale += atol
+        err /= scale
+        err *= err
+        err_norm = np.sqrt(err.mean(1)).astype(np.float64, copy=False)
+        finite = np.isfinite(y_new).all(1) & np.isfinite(K[6]).all(1) & np.isfinite(err_norm)
         if max_norm is not None:
-            finite &= (y_new.abs() <= max_norm).all(1)
+            finite &= (np.abs(y_new) <= max_norm).all(1)
         blown = ~finite & ~done
-        too_small = ~done & finite & (err_norm > 1) & (h.abs() <= 10 * eps * tc.abs().clamp(min=1.0))
+        too_small = ~done & finite & (err_norm > 1) & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
         for mask in (blown, too_small):
             if mask.any():
                 bad_time[rows[mask]] = tc[mask]
                 done |= mask
         accept = ~done & (err_norm <= 1)
-        acc = accept[:, None]
-        t_new = torch.where(clipped, t_end, tc + h)
+        t_new = np.where(clipped, t_end, tc + h)
         if accept.any():
             # every output time inside (tc, t_new] of an accepted row, from the dense output
-            Q = torch.einsum("sbd,sm->bdm", K, P)            # (batch, dim, 4)
+            Q = (PT @ flat).numpy().reshape(4, rows_now, dim)
             while True:
-                tn = times[nxt.clamp(max=num_t - 1)]
-                due = accept & ~done & (direction * (tn - t_new) <= 1e-12 * t_end.abs().clamp(min=1.0))
+                tn = t[np.minimum(nxt, num_t - 1)]
+                due = accept & ~done & (direction * (tn - t_new) <= near)
                 if not due.any():
                     break
-                i = torch.nonzero(due).flatten()
-                sigma = ((tn[i] - tc[i]) / h[i]).to(y.dtype)
-                powers = torch.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4], dim=1)   # (n, 4)
-                out[rows[i], nxt[i]] = y[i] + hx[i] * (Q[i] @ powers[:, :, None])[..., 0]
+                i = np.flatnonzero(due)
+                sigma = ((tn[i] - tc[i]) / h[i]).astype(dtype)
+                powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
+                out[rows[i], nxt[i]] = y[i] + hx[i] * (powers[:, :, None] * Q[:, i]).sum(0)
                 nxt[i] += 1
                 done |= nxt >= num_t
-        y = torch.where(acc, y_new, y)
-        k1 = torch.where(acc, K[6], k1)
-        tc = torch.where(accept, t_new, tc)
+        y = np.where(accept[:, None], y_new, y)
+        k1 = np.where(accept[:, None], K[6], k1)
+        tc = np.where(accept, t_new, tc)
         # scipy's step-size rule: safety 0.9, factors in [0.2, 10], no growth right after a rejection
-        factor = torch.where(err_norm == 0, torch.full_like(err_norm, 10.0),
-                             (0.9 * err_norm.clamp(min=1e-300) ** -0.2).clamp(0.2, 10.0))
-        factor = torch.where(accept, factor, factor.clamp(max=1.0))
-        prop = h.abs() * factor
+        factor = np.maximum(err_norm, 1e-300) ** -0.2
+        factor *= 0.9
+        np.minimum(np.maximum(factor, 0.2, out=factor), 10.0, out=factor)   # err_norm = 0 gives 10 too
+        reject = ~accept
+        factor[reject] = np.minimum(factor[reject], 1.0)
+        prop = np.abs(h) * factor
     else:
         raise DivergenceError(f"dopri5 did not finish in {max_iterations} iterations")
     if stats is not None:
         stats["nfev"] = nfev
-    diverged = torch.nonzero(~torch.isnan(bad_time)).flatten().tolist()
+    diverged = np.flatnonzero(~np.isnan(bad_time)).tolist()
     if diverged:
         raise divergence_error(f"dopri5 (rtol={rtol}, atol={atol}, max_norm={max_norm})", diverged,
                                bad_time[diverged].tolist())
-    return out
-
+    return torch.from_numpy(out).to(x0.device)
