@@ -4,6 +4,7 @@
     python analysis/benchmark.py --quick         # 1 round, fewer training steps and trials
     python analysis/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
     python analysis/benchmark.py --jobs floor    # only the training steps against their floor
+    python analysis/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
 
 ``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
 HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
@@ -13,6 +14,9 @@ its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the 
 quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
 The step is ``hnn.training._step``, the very function ``hnn.train`` runs. It checks the pixel
 loss and its gradients against the original's formulation on one batch.
+
+``rollout``: a learned field on a few states, a fixed-step step and dopri5 against their floors
+and against torchdiffeq and scipy, by ``analysis/benchmark_rollouts.py`` (its docstring says how).
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
 
@@ -65,7 +69,7 @@ from hnn.models import PixelHNN
 from hnn.training import _adam, _batch, _l2_loss, _step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import floor, readme  # noqa: E402
+from hnn_analysis import benchmark_rollouts, floor, readme  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -382,7 +386,7 @@ def _floor_table(result: dict) -> str:
 
 # --------------------------------------------------------------------------- main
 
-JOBS = ("floor", "data", "train", "eval")
+JOBS = ("floor", "data", "train", "eval", "rollout")
 LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spring HNN ({steps} Adam steps)",
           "eval": "eval: energy MSE, one HNN ({trials} trials)"}
 
@@ -397,7 +401,7 @@ def parse_args(argv=None):
                         help="step/floor rounds of the spring step (default 200; 40 with --quick); the pixel step runs a quarter")
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
-    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of floor,data,train,eval")
+    parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of " + ",".join(JOBS))
     parser.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = parser.parse_args(argv)
@@ -468,18 +472,22 @@ def main(argv=None) -> int:
         results["data"], dataset = job_data(task, args.repeats)
         print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
               flush=True)
-    if dataset is None and ("train" in args.jobs or "eval" in args.jobs):
+    if dataset is None and ({"train", "eval", "rollout"} & set(args.jobs)):
         dataset = task.get_dataset(seed=0)
     if "train" in args.jobs:
         results["train"], model = job_train(dataset, steps, args.repeats)
         print(f"train done: ours {results['train']['median_ours']:.3f} s, "
               f"original {results['train']['median_original']:.3f} s", flush=True)
+    if model is None and ({"eval", "rollout"} & set(args.jobs)):   # trained once, outside the timed region
+        model, _ = _ours_train(dataset, steps)
     if "eval" in args.jobs:
-        if model is None:   # trained once, outside the timed region
-            model, _ = _ours_train(dataset, steps)
         results["eval"] = job_eval(task, model, protocol, args.repeats)
         print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
               f"original {results['eval']['median_original']:.3f} s", flush=True)
+    rollouts = None
+    if "rollout" in args.jobs:
+        rollouts = benchmark_rollouts.job_rollout(model, rounds=max(20, args.floor_rounds // 2),
+                                                  repeats=max(1, min(args.repeats, 3)))
     env["load_average_after"] = os.getloadavg()[0]
 
     checked = {**({"floor": floors} if floors else {}), **results}
@@ -492,7 +500,8 @@ def main(argv=None) -> int:
     table = "\n\n".join(t for t in (_table(results, steps, protocol.num_trials) if results else "",
                                      _ceiling(results, floors, steps)) if t)
     print()
-    print("\n\n".join(t for t in (floor_table, table) if t))
+    rollout_table = rollouts["table"] if rollouts else ""
+    print("\n\n".join(t for t in (floor_table, table, rollout_table) if t))
     for job, r in checked.items():
         for c in r["checks"]:
             extra = {k: v for k, v in c.items() if k not in ("name", "value", "tolerance", "passed")}
@@ -500,7 +509,7 @@ def main(argv=None) -> int:
                   f"{'pass' if c['passed'] else 'FAIL'} {extra}")
     write_json(args.out, {"environment": env, "repeats": args.repeats, "quick": args.quick,
                           "total_steps": steps, "jobs": results, "table": table, "floor": floors,
-                          "floor_table": floor_table, "all_checks_passed": not failed})
+                          "floor_table": floor_table, "rollouts": rollouts, "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
         command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
@@ -510,7 +519,7 @@ def main(argv=None) -> int:
         head = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
                 f"{', ' + env['cpu'] if env['cpu'] else ''}, {env['torch_threads']} threads for the comparisons, "
                 f"{args.repeats} interleaved rounds.{shared}")
-        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table) if t))
+        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table, rollout_table) if t))
         print("updated docs/speed.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)

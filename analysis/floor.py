@@ -19,6 +19,7 @@ import statistics
 import time
 from typing import Callable
 
+import numpy as np
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
@@ -65,25 +66,30 @@ def _median_seconds(fn: Callable[[], object], repeats: int) -> float:
     return statistics.median(times)
 
 
-def _layouts(m: int, k: int, n: int):
-    """The eight ways to compute one (M, K) @ (K, N) product: ``(label, fn)`` on fresh operands."""
+def _layouts(m: int, k: int, n: int, dtype: torch.dtype = torch.float32, with_numpy: bool = False):
+    """The eight ways to compute one (M, K) @ (K, N) product: ``(label, fn)`` on fresh operands; with
+    ``with_numpy`` also numpy's ``dot`` on the same operands (an evaluation path may use either)."""
     gen = torch.Generator().manual_seed(m * 1_000_003 + k * 1009 + n)
     for swapped in (False, True):               # C, or C^T = B^T A^T into a (N, M) result
         p, q = (n, m) if swapped else (m, n)
         for left_t in (False, True):
             for right_t in (False, True):
-                left = torch.randn((k, p) if left_t else (p, k), generator=gen)
-                right = torch.randn((q, k) if right_t else (k, q), generator=gen)
+                left = torch.randn((k, p) if left_t else (p, k), generator=gen, dtype=dtype)
+                right = torch.randn((q, k) if right_t else (k, q), generator=gen, dtype=dtype)
                 left, right = (left.T if left_t else left), (right.T if right_t else right)
-                out = torch.empty(p, q)
+                out = torch.empty(p, q, dtype=dtype)
                 label = f"{'C^T' if swapped else 'C'} {'col' if left_t else 'row'}/{'col' if right_t else 'row'}"
                 yield label, lambda left=left, right=right, out=out: torch.mm(left, right, out=out)
+                if with_numpy:
+                    a, b, c = left.numpy(), right.numpy(), out.numpy()
+                    yield "numpy " + label, lambda a=a, b=b, c=c: np.dot(a, b, out=c)
 
 
-def _fastest_layout(m: int, k: int, n: int, repeats: int = 15):
+def _fastest_layout(m: int, k: int, n: int, repeats: int = 15, dtype: torch.dtype = torch.float32,
+                    with_numpy: bool = False):
     """``(label, fn, seconds)`` of the layout of this product that runs fastest here and now."""
     best = None
-    for label, fn in _layouts(m, k, n):
+    for label, fn in _layouts(m, k, n, dtype, with_numpy):
         fn()
         fn()
         seconds = _median_seconds(fn, repeats)
@@ -93,15 +99,15 @@ def _fastest_layout(m: int, k: int, n: int, repeats: int = 15):
 
 
 def compare(step: Callable[[], object], shapes: list[tuple[int, int, int]], rounds: int = 200,
-            warmup: int = 30, block: int = 10) -> dict:
+            warmup: int = 30, block: int = 10, dtype: torch.dtype = torch.float32, with_numpy: bool = False) -> dict:
     """Step and floor timed ``rounds`` times each (after ``warmup`` steps), at the current thread
     count, alternating in blocks of ``block`` of each; the floor runs each product of ``shapes`` in
-    its fastest layout. Blocks, not single calls, because the step runs back to back in training,
+    its fastest layout (in ``dtype``; with ``with_numpy`` numpy's ``dot`` competes too). Blocks, not single calls, because the step runs back to back in training,
     with the last step's arrays in cache: a floor run between two steps evicts them (measured: the
     spring step 25% slower at 2 threads when alternated one by one)."""
     for _ in range(warmup):
         step()
-    fastest = {shape: _fastest_layout(*shape) for shape in sorted(set(shapes))}
+    fastest = {shape: _fastest_layout(*shape, dtype=dtype, with_numpy=with_numpy) for shape in sorted(set(shapes))}
     runners = [fastest[shape][1] for shape in shapes]
 
     def floor():

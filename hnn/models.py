@@ -28,6 +28,7 @@ NONLINEARITIES = tuple(_NONLINEARITIES)   # the names get_nonlinearity knows, fo
 # signal through d(dH/dx)/dtheta is poor.
 _PIECEWISE_LINEAR = {"relu"}
 FIELD_TYPES = ("solenoidal", "conservative", "both")
+_FIELD_ROWS = {"solenoidal": (1,), "conservative": (0,), "both": (0, 1)}   # the outputs (F1, F2) each field reads
 
 
 def get_nonlinearity(name: str):
@@ -199,7 +200,7 @@ class HNN(nn.Module):
         """
         if not separate_fields and not torch.is_grad_enabled():
             kernel = self._evaluation_kernel()
-            if kernel is not None and tanh_mlp.kernel_applies(x, kernel.dtype) and x.shape[1] == self.input_dim:
+            if kernel is not None and kernel.serves(x):
                 return kernel(x)
         self._check_input(x)
         if self.baseline:
@@ -232,12 +233,13 @@ class HNN(nn.Module):
             return None
         if self.baseline:
             return tanh_mlp.cached_kernel(self, "field", net, None)
-        rows = {"solenoidal": (1,), "conservative": (0,), "both": (0, 1)}[self.field_type]
+        rows = _FIELD_ROWS[self.field_type]
+        return tanh_mlp.cached_kernel(self, "field", net, rows, lambda: self._fold(rows))
 
-        def fold():
-            eye, hamilton = torch.eye(self.input_dim), self.M.detach().cpu().T
-            return torch.stack([{0: eye, 1: hamilton}[k] for k in rows])
-        return tanh_mlp.cached_kernel(self, "field", net, rows, fold)
+    def _fold(self, rows: tuple[int, ...]) -> torch.Tensor:
+        """How d(F_k)/dx enters dx/dt for each k of ``rows``: F1's gradient as it is, F2's through M^T."""
+        eye, hamilton = torch.eye(self.input_dim), self.M.detach().cpu().T
+        return torch.stack([{0: eye, 1: hamilton}[k] for k in rows])
 
 
 def build_model(input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", baseline: bool = False,

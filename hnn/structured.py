@@ -69,7 +69,7 @@ class SeparableHNN(nn.Module):
         net = getattr(self, name)
         kernel = tanh_mlp.cached_kernel(self, name, net, (0,), lambda: torch.eye(self.n)[None]) \
             if isinstance(net, MLP) else None
-        return kernel if kernel is not None and tanh_mlp.kernel_applies(x, kernel.dtype) else None
+        return kernel if kernel is not None and kernel.serves(x) else None
 
     def kinetic_gradient(self, p: torch.Tensor) -> torch.Tensor:
         """dT/dp = dq/dt, ``(batch, n)`` -> ``(batch, n)``: the half of the field that reads p alone."""
