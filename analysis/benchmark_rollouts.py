@@ -4,7 +4,8 @@ Three tables, each measured in one process at one torch thread (a rollout of a f
 one, ``hnn.rollout`` sees to that):
 
 - field: one ``time_derivative`` call of each model kind (HNN, separable, dissipative, baseline;
-  widths 200 and 32; 4 dims) on 1, 15 and 64 states in float32 and float64, without a graph,
+  widths 200 and 32; 4 dims) on 1, 15 and 64 states in float32 and float64, as a rollout makes it
+  (no graph, inside ``hnn.tanh_mlp.frozen_weights``),
   against the matrix products its arithmetic needs, each timed alone in its fastest layout
   (``analysis/floor.py``; numpy's ``dot`` competes with torch's), alternated in blocks;
 - step: one step of each fixed-step method (8 float64 states, width 200: leapfrog and yoshida4 on
@@ -76,8 +77,9 @@ def field_table(rounds: int) -> list[dict]:
                         with torch.no_grad():
                             return model.time_derivative(x)
                     shapes = field_products(kind, batch, width)
-                    r = floor.compare(call, shapes, rounds=rounds, warmup=max(10, rounds // 10), block=max(5, rounds // 20),
-                                      dtype=dtype, with_numpy=True)
+                    with hnn.tanh_mlp.frozen_weights():    # as inside hnn.rollout: the field runs as its kernel
+                        r = floor.compare(call, shapes, rounds=rounds, warmup=max(10, rounds // 10),
+                                          block=max(5, rounds // 20), dtype=dtype, with_numpy=True)
                     rows.append({"kind": kind, "width": width, "dtype": dname, "batch": batch,
                                  "call_us": r["step_ms"] * 1e3, "floor_us": r["floor_ms"] * 1e3, "ratio": r["ratio"],
                                  "best_ratio": r["best_ratio"]})
@@ -103,7 +105,7 @@ def step_table(repeats: int) -> list[dict]:
             calls = [functools.partial(model.time_derivative, x0)] * stats["nfev"]
 
         def field_calls(calls=calls):
-            with torch.no_grad():
+            with torch.no_grad(), hnn.tanh_mlp.frozen_weights():
                 for call in calls:
                     call()
         timed = {"step": [], "calls": []}

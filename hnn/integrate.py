@@ -15,6 +15,7 @@ import torch
 from .errors import DivergenceError  # noqa: F401  (hnn.integrate.DivergenceError, as before)
 from .fixed_step import Field, rk4_step  # noqa: F401  (hnn.integrate.rk4_step, as before)
 from .solvers import Solver, get_solver
+from .tanh_mlp import frozen_weights
 
 
 def _as_t_eval(t_eval) -> np.ndarray:
@@ -119,7 +120,10 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     if one_thread:
         torch.set_num_threads(1)
     try:
-        with torch.set_grad_enabled(bool(differentiable)):
+        if differentiable:
+            with torch.enable_grad():
+                return solver.run(f, x0, t, **options)
+        with torch.no_grad(), frozen_weights():     # the weights cannot change: fields may run as kernels
             return solver.run(f, x0, t, **options)
     finally:
         if one_thread:

@@ -4,6 +4,9 @@ the tanh as its ``'tanh'`` nonlinearity, the gradient in ``MLP.input_gradient``)
 """
 from __future__ import annotations
 
+import contextlib
+import threading
+
 import numpy as np
 import torch
 from torch import nn
@@ -135,16 +138,15 @@ class EvaluationKernel:
         fold: ``(len(rows), input_dim, out_dim)``: how each input gradient enters dx/dt.
 
     ``kernel(x)`` maps ``(batch, input_dim)`` CPU states of the weights' dtype to ``(batch, out_dim)``
-    (a new tensor). ``kernel.current()`` is False once any weight has changed (an optimizer step,
-    ``load_state_dict``, ``.to()``): build a new kernel then.
+    (a new tensor). The kernel holds a copy of the weights: it serves only inside ``frozen_weights``
+    (a rollout), where they cannot change; an optimizer step need not bump a parameter's version
+    counter (torch's fused Adam does not), so no cheap test could tell a stale kernel outside.
     """
 
     def __init__(self, mlp: nn.Module, rows: tuple[int, ...] | None, fold: torch.Tensor | None = None):
         l1, l2, l3 = mlp.linear1, mlp.linear2, mlp.linear3
-        self._params = (l1.weight, l1.bias, l2.weight, l2.bias, l3.weight)
-        self._stamp = self._signature()
         with torch.no_grad():
-            W1, b1, W2, b2, W3 = (p.detach().clone() for p in self._params)
+            W1, b1, W2, b2, W3 = (p.detach().clone() for p in (l1.weight, l1.bias, l2.weight, l2.bias, l3.weight))
             self.dtype, self.input_dim = W1.dtype, W1.shape[1]
             self._W1T = W1.T.contiguous().numpy()
             self._b1 = b1.numpy()
@@ -161,13 +163,6 @@ class EvaluationKernel:
             self._W2w_np = self._W2w.numpy()
             fold = fold.to(W1.dtype)
             self._out = torch.cat([W1 @ fold[i] for i in range(len(rows))]).numpy()   # (K H, out_dim)
-
-    def _signature(self) -> tuple:
-        return tuple((p.data_ptr(), p._version) for p in self._params)
-
-    def current(self) -> bool:
-        """Whether the weights are still the ones this kernel was built from."""
-        return self._signature() == self._stamp
 
     def numpy(self, x: np.ndarray) -> np.ndarray:
         """dx/dt of ``x`` ``(batch, input_dim)`` (numpy, the kernel's dtype) as a new numpy array."""
@@ -203,16 +198,32 @@ class EvaluationKernel:
                 and x.dtype is self.dtype and self.dtype in _SMALL_BATCH_DTYPES and x.is_cpu)
 
 
+_frozen = threading.local()     # .kernels: {(id(owner), key): (owner, kernel)} inside frozen_weights
+
+
+@contextlib.contextmanager
+def frozen_weights():
+    """Within this context the models' weights do not change, so their fields may run as
+    ``EvaluationKernel``s built once (``hnn.rollout`` runs a non-differentiable rollout in it).
+    Nested contexts share the outer one's kernels; leaving the outermost drops them."""
+    outer = getattr(_frozen, "kernels", None)
+    if outer is None:
+        _frozen.kernels = {}
+    try:
+        yield
+    finally:
+        if outer is None:
+            _frozen.kernels = None
+
+
 def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, ...] | None, fold=None):
-    """``owner``'s ``EvaluationKernel`` called ``key`` for ``mlp``, rebuilt when its weights changed;
-    None when ``mlp`` is not a tanh MLP the closed form applies to. ``fold``: a callable giving the
-    kernel's fold, called only when the kernel is (re)built."""
-    if not mlp._closed_form_applies():
+    """``owner``'s ``EvaluationKernel`` called ``key`` for ``mlp``, built once inside ``frozen_weights``;
+    None outside it, or when ``mlp`` is not a tanh MLP the closed form applies to. ``fold``: a
+    callable giving the kernel's fold, called when the kernel is built."""
+    kernels = getattr(_frozen, "kernels", None)
+    if kernels is None or not mlp._closed_form_applies():
         return None
-    kernels = owner.__dict__.get("_evaluation_kernels")
-    if kernels is None:
-        kernels = owner.__dict__["_evaluation_kernels"] = {}
-    kernel = kernels.get(key)
-    if kernel is None or not kernel.current():
-        kernel = kernels[key] = EvaluationKernel(mlp, rows, None if fold is None else fold())
-    return kernel
+    entry = kernels.get((id(owner), key))
+    if entry is None or entry[0] is not owner:      # the owner is held, so its id is not reused meanwhile
+        entry = kernels[(id(owner), key)] = (owner, EvaluationKernel(mlp, rows, None if fold is None else fold()))
+    return entry[1]

@@ -202,29 +202,34 @@ def test_the_evaluation_kernel_serves_a_few_states_and_agrees_with_the_training_
         x = torch.randn(rows, 4, dtype=dtype)[:, [0, 2, 1, 3]]     # a strided view
         before = calls["kernel"]
         with torch.no_grad():
-            fast = model.time_derivative(x)
+            assert model.time_derivative(x) is not None and calls["kernel"] == before   # outside a rollout: no kernel
+            with hnn.tanh_mlp.frozen_weights():                                      # as inside hnn.rollout
+                fast = model.time_derivative(x)
         reference = model.time_derivative(x.clone().requires_grad_(True)).detach()   # the training path
         assert calls["kernel"] - before == ((2 if kind == "separable" else 1) if rows <= limit else 0)
         assert fast.dtype == dtype and not fast.requires_grad
         torch.testing.assert_close(fast, reference, rtol=rtol, atol=rtol)
 
 
-def test_the_evaluation_kernel_follows_the_weights():
-    """An optimizer step, a state dict and a dtype change all reach the kernel (it is rebuilt)."""
+def test_a_rollout_after_training_rolls_out_the_trained_weights():
+    """The kernel is built per rollout: training between two rollouts (fused Adam, which does not
+    bump the parameters' version counters) reaches the second one."""
     torch.manual_seed(0)
     model = hnn.build_model(2, 16)
-    x = torch.randn(3, 2)
-    with torch.no_grad():
-        before = model.time_derivative(x)
-        model.differentiable_model.linear2.weight.add_(0.1)
-        after = model.time_derivative(x)
-    assert not torch.allclose(before, after)
-    torch.testing.assert_close(after, model.time_derivative(x.requires_grad_(True)).detach())
-    model.double()
-    with torch.no_grad():
-        out = model.time_derivative(x.detach().double())
-    assert out.dtype == torch.float64
-    torch.testing.assert_close(out, after.double(), rtol=1e-5, atol=1e-6)
+    x0 = torch.tensor([[0.3, 0.4], [-0.5, 0.2]])
+    t = [0.0, 0.5, 1.0]
+    before = hnn.rollout(model.time_derivative, x0, t, method="rk4", dt=0.1)
+    x = torch.randn(64, 2)
+    hnn.train(model, x, torch.cat([x[:, 1:], -x[:, :1]], 1), total_steps=20, progress=False)
+    after = hnn.rollout(model.time_derivative, x0, t, method="rk4", dt=0.1)
+    assert (after - before).abs().max() > 1e-3
+
+    def autograd(y):
+        with torch.enable_grad():
+            y = y.detach().requires_grad_(True)
+            g = torch.autograd.grad(model.differentiable_model(y)[:, 1].sum(), y)[0]
+        return torch.cat([g[:, 1:], -g[:, :1]], 1)
+    torch.testing.assert_close(after, hnn.rollout(autograd, x0, t, method="rk4", dt=0.1), rtol=1e-5, atol=1e-6)
 
 
 def test_time_derivative_modes():
