@@ -116,3 +116,15 @@ def test_a_few_states_roll_out_on_one_thread_and_the_callers_setting_returns():
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(threads)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_the_fused_rk4_increment_is_the_classic_formula(dtype):
+    """A float step takes the fused stage arithmetic, a (batch, 1) step the formula as written."""
+    model = _models(dtype)["hnn"]
+    x = torch.randn(64, 4, dtype=dtype)
+    with torch.no_grad():
+        fused = hnn.rk4_step(model.time_derivative, x, 0.1)
+        classic = hnn.rk4_step(model.time_derivative, x, torch.full((64, 1), 0.1, dtype=dtype))
+    eps = torch.finfo(dtype).eps
+    torch.testing.assert_close(fused, classic, rtol=16 * eps, atol=16 * eps)   # a few roundings apart
