@@ -211,11 +211,12 @@ class Midpoint(Stepper):
             x1 = x + (h / self.last[0]) * self.last[1]
         bound = x.detach().abs().clamp_(min=1.0).mul_(self.tol)
         for k in range(1, self.max_iter + 1):  # noqa: B007 (k counts the iterations after the loop)
-            x_next = torch.add(x, self.f(torch.add(x, x1).mul_(0.5)), alpha=h)
+            x_next = torch.add(x, self.f(torch.lerp(x, x1, 0.5)), alpha=h)
             self.nfev += 1
             # converged where the update is below tol (relative to max(|x|, 1)); non-finite rows are
             # not "unconverged": the divergence check reports them (NaN and inf updates count as 0)
-            delta = torch.sub(x_next.detach(), x1.detach()).abs_().nan_to_num_(0.0, 0.0, 0.0)
+            delta = (torch.sub(x_next.detach(), x1.detach()) if x_next.requires_grad else torch.sub(x_next, x1))
+            delta.abs_().nan_to_num_(0.0, 0.0, 0.0)
             x1 = x_next
             if not bool((delta > bound).any()):
                 break
