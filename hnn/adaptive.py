@@ -142,6 +142,7 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
     A = torch.zeros((7, 7), dtype=x0.dtype)
     for i, a in enumerate(_DP_A):
         A[i, :len(a)] = torch.tensor(a, dtype=x0.dtype)
+    A_rows = [A[s, :s] for s in range(7)]
     E = torch.tensor(_DP_E, dtype=x0.dtype)
     PT = torch.tensor(_DP_P, dtype=x0.dtype).T.contiguous()   # (4, 7)
     K = np.empty((7, batch, dim), dtype=dtype)            # the stage derivatives
@@ -167,7 +168,7 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
         # the other rows (numpy's BLAS does not), so a row's trajectory does not depend on the batch
         flat = torch.from_numpy(K.reshape(7, -1))
         for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
-            stage = (A[s, :s] @ flat[:s]).numpy().reshape(rows_now, dim)
+            stage = (A_rows[s] @ flat[:s]).numpy().reshape(rows_now, dim)
             stage *= hx
             stage += y
             K[s] = field(stage)
@@ -181,11 +182,12 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
         err /= scale
         err *= err
         err_norm = np.sqrt(err.mean(1)).astype(np.float64, copy=False)
-        finite = np.isfinite(y_new).all(1) & np.isfinite(K[6]).all(1) & np.isfinite(err_norm)
-        if max_norm is not None:
-            finite &= (np.abs(y_new) <= max_norm).all(1)
-        blown = ~finite & ~done
-        too_small = ~done & finite & (err_norm > 1) & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
+        # a NaN or inf in y_new makes its row's max NaN or inf, one in K[6] the error norm (E[6] != 0)
+        largest = np.abs(y_new).max(1)
+        finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
+        running = ~done
+        blown = ~finite & running
+        too_small = running & finite & (err_norm > 1) & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
         for mask in (blown, too_small):
             if mask.any():
                 bad_time[rows[mask]] = tc[mask]
@@ -206,9 +208,12 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
                 out[rows[i], nxt[i]] = y[i] + hx[i] * (powers[:, :, None] * Q[:, i]).sum(0)
                 nxt[i] += 1
                 done |= nxt >= num_t
-        y = np.where(accept[:, None], y_new, y)
-        k1 = np.where(accept[:, None], K[6], k1)
-        tc = np.where(accept, t_new, tc)
+        if accept.all():
+            y, k1, tc = y_new, K[6].copy(), t_new
+        else:
+            y = np.where(accept[:, None], y_new, y)
+            k1 = np.where(accept[:, None], K[6], k1)
+            tc = np.where(accept, t_new, tc)
         # scipy's step-size rule: safety 0.9, factors in [0.2, 10], no growth right after a rejection
         factor = np.maximum(err_norm, 1e-300) ** -0.2
         factor *= 0.9
