@@ -128,3 +128,14 @@ def test_the_fused_rk4_increment_is_the_classic_formula(dtype):
         classic = hnn.rk4_step(model.time_derivative, x, torch.full((64, 1), 0.1, dtype=dtype))
     eps = torch.finfo(dtype).eps
     torch.testing.assert_close(fused, classic, rtol=16 * eps, atol=16 * eps)   # a few roundings apart
+
+
+@pytest.mark.parametrize("max_norm", [1e6, None])
+def test_dopri5_names_the_rows_that_blow_up(max_norm):
+    """dx/dt = x^2 blows up at t = 1/x0: rows 1 and 2 before t = 1, row 0 not; with max_norm=None
+    the states run to inf/NaN and the finiteness test alone must catch them."""
+    x0 = torch.tensor([[0.1, 0.1], [2.0, 0.1], [0.2, 4.0]], dtype=torch.float64)
+    with pytest.raises(hnn.DivergenceError) as info:
+        hnn.rollout(lambda x: x ** 2, x0, np.linspace(0, 1, 11), method="dopri5", max_norm=max_norm)
+    assert info.value.trajectories == [1, 2]
+    assert 0.2 < info.value.times[0] <= 0.5 and 0.1 < info.value.times[1] <= 0.25   # 1/2 and 1/4
