@@ -17,7 +17,9 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from .models import HNN, MLP
+from .models import HNN, MLP, permutation_tensor
+
+_BLOCK_MAX_WIDTH = 128     # SeparableHNN: both networks as one block network up to this many units together
 
 
 def _check_even(input_dim: int, kind: str) -> int:
@@ -71,6 +73,29 @@ class SeparableHNN(nn.Module):
             if isinstance(net, MLP) else None
         return kernel if kernel is not None and kernel.serves(x) else None
 
+    def _block_kernel(self, x: torch.Tensor):
+        """Both networks as one of their summed width with block-diagonal weights, if it serves ``x``:
+        its scalar is H = T(p) + V(q) and the field Hamilton's equations of it, in one kernel call.
+        For narrow networks only (at most ``_BLOCK_MAX_WIDTH`` units together), where the call's
+        overhead outweighs the products; wider ones run as two kernels (the block's products would
+        cost twice the two networks' own)."""
+        if torch.is_grad_enabled():
+            return None
+        kinetic, potential = self._modules["kinetic_net"], self._modules["potential_net"]
+        if not (isinstance(kinetic, MLP) and isinstance(potential, MLP) and potential._closed_form_applies()
+                and kinetic.linear2.out_features + potential.linear2.out_features <= _BLOCK_MAX_WIDTH):
+            return None
+        kernel = tanh_mlp.cached_kernel(self, "block", kinetic, (0,), lambda: permutation_tensor(self.input_dim).T[None],
+                                        self._block_weights)
+        return kernel if kernel is not None and kernel.serves(x) else None
+
+    def _block_weights(self) -> tuple:
+        """``(W1, b1, W2, b2, W3)`` of the block network: hidden units of T read p, those of V read q."""
+        (k1, kb1, k2, kb2, k3), (v1, vb1, v2, vb2, v3) = (tanh_mlp.mlp_weights(net) for net in
+                                                          (self.kinetic_net, self.potential_net))
+        W1 = torch.cat([torch.cat([torch.zeros_like(k1), k1], 1), torch.cat([v1, torch.zeros_like(v1)], 1)])
+        return W1, torch.cat([kb1, vb1]), torch.block_diag(k2, v2), torch.cat([kb2, vb2]), torch.cat([k3, v3], 1)
+
     def kinetic_gradient(self, p: torch.Tensor) -> torch.Tensor:
         """dT/dp = dq/dt, ``(batch, n)`` -> ``(batch, n)``: the half of the field that reads p alone."""
         kernel = self._kernel("kinetic_net", p)
@@ -84,6 +109,9 @@ class SeparableHNN(nn.Module):
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """``dx/dt = (dT/dp, -dV/dq)``, ``(batch, 2n)``; a graph for training only in grad mode."""
         self._check_input(x)
+        block = self._block_kernel(x)
+        if block is not None:
+            return block(x)
         q, p = x[:, :self.n], x[:, self.n:]
         kinetic, potential = self._kernel("kinetic_net", p), self._kernel("potential_net", q)
         if kinetic is not None and potential is not None:

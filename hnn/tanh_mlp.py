@@ -132,7 +132,8 @@ class EvaluationKernel:
     """dx/dt = sum_k d(out_k)/dx @ fold[k] of a tanh ``MLP`` (or its output itself), without autograd.
 
     Args:
-        mlp: an ``hnn.MLP`` whose closed form applies (tanh, plain layers).
+        weights: ``(W1, b1, W2, b2, W3)`` of a tanh MLP ``W3 tanh(W2 tanh(W1 x + b1) + b2)``, e.g.
+            ``mlp_weights(mlp)`` of an ``hnn.MLP`` whose closed form applies (copied here).
         rows: the output indices k whose input gradients the field reads; None for the MLP's own
             output (a baseline's dx/dt).
         fold: ``(len(rows), input_dim, out_dim)``: how each input gradient enters dx/dt.
@@ -143,10 +144,9 @@ class EvaluationKernel:
     counter (torch's fused Adam does not), so no cheap test could tell a stale kernel outside.
     """
 
-    def __init__(self, mlp: nn.Module, rows: tuple[int, ...] | None, fold: torch.Tensor | None = None):
-        l1, l2, l3 = mlp.linear1, mlp.linear2, mlp.linear3
+    def __init__(self, weights: tuple, rows: tuple[int, ...] | None, fold: torch.Tensor | None = None):
         with torch.no_grad():
-            W1, b1, W2, b2, W3 = (p.detach().clone() for p in (l1.weight, l1.bias, l2.weight, l2.bias, l3.weight))
+            W1, b1, W2, b2, W3 = (p.detach().clone() for p in weights)
             self.dtype, self.input_dim = W1.dtype, W1.shape[1]
             self._W1T = W1.T.contiguous().numpy()
             self._b1 = b1.numpy()
@@ -216,14 +216,23 @@ def frozen_weights():
             _frozen.kernels = None
 
 
-def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, ...] | None, fold=None):
+def mlp_weights(mlp: nn.Module) -> tuple:
+    """``(W1, b1, W2, b2, W3)`` of an ``hnn.MLP``."""
+    l1, l2, l3 = mlp.linear1, mlp.linear2, mlp.linear3
+    return l1.weight, l1.bias, l2.weight, l2.bias, l3.weight
+
+
+def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, ...] | None, fold=None,
+                  weights=None):
     """``owner``'s ``EvaluationKernel`` called ``key`` for ``mlp``, built once inside ``frozen_weights``;
     None outside it, or when ``mlp`` is not a tanh MLP the closed form applies to. ``fold``: a
-    callable giving the kernel's fold, called when the kernel is built."""
+    callable giving the kernel's fold, ``weights`` one giving its weights (default ``mlp``'s),
+    called when the kernel is built."""
     kernels = getattr(_frozen, "kernels", None)
     if kernels is None or not mlp._closed_form_applies():
         return None
     entry = kernels.get((id(owner), key))
     if entry is None or entry[0] is not owner:      # the owner is held, so its id is not reused meanwhile
-        entry = kernels[(id(owner), key)] = (owner, EvaluationKernel(mlp, rows, None if fold is None else fold()))
+        built = EvaluationKernel(weights() if weights else mlp_weights(mlp), rows, None if fold is None else fold())
+        entry = kernels[(id(owner), key)] = (owner, built)
     return entry[1]
