@@ -7,8 +7,8 @@ its figures, for every task in this checkout.
     python analysis/reproduce.py --jobs 2 --backend ray   # each run a Ray task (docs/sweeps.md: clusters)
     python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
 
-Trains each model through its task's own ``train.py`` (reusing a saved run only when its args
-match exactly), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
+Trains each model from its task's config (``experiment-<task>/train.py``'s ``Config``; a saved
+run of the same config is reused), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
 first; ``hnn_analysis.sweep``), with one progress line for the whole job; a run that fails is
 reported and the others go on (the command then exits with code 1, listing them). Then evaluates
 the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
@@ -40,9 +40,6 @@ from hnn.io import atomic_write, write_json
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import figures, readme, registry, sweep  # noqa: E402
 from hnn_analysis.readme import stage_table  # noqa: E402
-# training lives in sweep, shared with the other sweeps; train_or_reuse stays reachable as reproduce.train_or_reuse
-from hnn_analysis.sweep import (_cores, _find, _run_key, _total_steps, _train_argv, train_jobs,  # noqa: E402
-                                train_or_reuse)  # noqa: F401
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))
@@ -265,11 +262,11 @@ def _parser() -> argparse.ArgumentParser:
                         "Ray tasks of cores // N threads); evaluation stays here")
     sweep.add_backend_flags(p)
     p.add_argument("--models", nargs="+", default=[], metavar="KIND",
-                   choices=[k for k in hnn.cli._model_choices() if k not in MODELS],
+                   choices=[k for k in hnn.cli.model_choices() if k not in MODELS],
                    help="extra model kinds trained and evaluated beside the paper's baseline and HNN, in a table "
                         "of their own (the paper's tables stay as they are): separable, dissipative")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
-    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
                    help="write docs/results.md from tables.md, the README's headline table, and the curated "
                         "figures in docs/figures/ (full settings only)")
     return p
@@ -295,16 +292,16 @@ def _check(parser: argparse.ArgumentParser, args) -> None:
 def table_rows(tasks: list[str], quick: bool) -> list[dict]:
     """The rows of the tables: each task in the paper's setting, then its variants (``TaskSpec.variants``).
 
-    A row is ``{"row": name, "task": task, "extra_argv": train.py flags, "note": why or None}``.
+    A row is ``{"row": name, "task": task, "fields": its runs' config fields, "note": why or None}``.
     """
     rows = []
     for task in tasks:
         spec = hnn.task_spec(task)
-        extra = list(spec.train_argv) + (list(spec.quick_argv) if quick else [])
-        rows.append({"row": task, "task": task, "extra_argv": extra, "note": None})
-        for suffix, (argv, why) in spec.variants.items():
+        fields = {**spec.settings, **(spec.quick if quick else {})}
+        rows.append({"row": task, "task": task, "fields": fields, "note": None})
+        for suffix, (changes, why) in spec.variants.items():
             name = f"{task}-{suffix}"
-            rows.append({"row": name, "task": task, "extra_argv": extra + list(argv) + ["--name", name], "note": why})
+            rows.append({"row": name, "task": task, "fields": {**fields, **changes, "name": name}, "note": why})
     return rows
 
 
@@ -314,22 +311,19 @@ def row_models(task: str, models=MODELS) -> list[str]:
 
 
 def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
-         models=MODELS) -> tuple[dict, list[dict]]:
-    """``(runs saved already with the same args {key: folder}, jobs to train)``: every row and
-    seed, for the paper's two models and the extra ``models`` kinds the row's task has."""
-    runs, jobs = {}, []
+         models=MODELS) -> list[sweep.Job]:
+    """The run of every row and seed, for the paper's two models and the extra ``models`` kinds
+    the row's task has; ``steps`` overrides the tasks' ``total_steps``."""
+    jobs = []
     for spec in rows:
         for seed in seeds:
             for label in row_models(spec["task"], models):
-                job = {**spec, "label": label, "seed": seed, "runs_dir": runs_dir, "steps": steps}
-                argv = _train_argv(spec["task"], label, runs_dir, seed, steps, spec["extra_argv"])
-                found = _find(spec["task"], argv)
-                if found:
-                    runs[_run_key(job)] = found
-                    print(f"  {spec['row']:11s} {label:8s} seed {seed} reused {found}", flush=True)
-                else:
-                    jobs.append(dict(job, total=_total_steps(spec["task"], argv)))
-    return runs, jobs
+                fields = {**spec["fields"], "model": label, "seed": seed, "save_dir": str(runs_dir)}
+                if steps is not None:
+                    fields["total_steps"] = steps
+                jobs.append(sweep.Job(f"{spec['row']}/{label}/seed{seed}", spec["task"],
+                                      hnn.tasks.task_config(spec["task"], fields)))
+    return jobs
 
 
 
@@ -394,7 +388,7 @@ def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None)
             "commit": _commit(), "seed": args.seed, "seeds": seeds, "mode": mode, "quick": args.quick,
             "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models), "torch": torch.__version__, "numpy": np.__version__,
             "scipy": scipy.__version__, "python": platform.python_version(), "threads": torch.get_num_threads(),
-            "cores": _cores(), "cpu": torch.backends.cpu.get_cpu_capability(), "available": hnn.available_tasks()}
+            "cores": sweep.cores(), "cpu": torch.backends.cpu.get_cpu_capability(), "available": hnn.available_tasks()}
 
 
 def _mode(args) -> tuple[str, int | None]:
@@ -432,8 +426,8 @@ def main(argv=None) -> dict:
     results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick)
-    runs, jobs = plan(rows, seeds, out / "runs", steps, args.models)
-    trained, seconds = train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
+    runs, jobs = sweep.reuse(plan(rows, seeds, out / "runs", steps, args.models))
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()

@@ -157,7 +157,7 @@ def dhnn_table(results: dict) -> list[str]:
     lines = ["**The real pendulum, the D-HNN paper's protocol** (Sosanya & Greydanus 2022): their split (first 444 "
              "of 555 rows train, 111 test) and central-difference targets, their energy 2.4 (1 − cos q) + p², "
              "the rollout from the first test state with solve_ivp's defaults (RK45, rtol 1e-3). Ours: our "
-             f"architectures (width 200) trained with `{' '.join(d['argv'][:-2])}` (their rate, steps, batch "
+             f"architectures (width 200) trained with `{' '.join(f'--{k} {v}' for k, v in d['config'].items() if k != 'name')}` (their rate, steps, batch "
              "and decay; their own MLP was a 256-unit residual net fed a zero time input, seed 42), seed 0, "
              "± over rows / points. Theirs: as their notebook prints it (one seed; the test ± is the spread of "
              "the last three logged test losses).", "",

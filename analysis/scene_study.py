@@ -70,8 +70,8 @@ SCENE = {
 DRIFT_SCENES = ("spring", "pend", "2body")
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
 RUNGS = ("baseline", "hnn", "separable", "dissipative")
-DHNN_ARGV = ("--split", "dhnn", "--learn_rate", "5e-3", "--total_steps", "5000", "--batch_size", "128",
-             "--weight_decay", "0", "--name", "real-dhnn")
+DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
+               "name": "real-dhnn"}
 DHNN_MODELS = ("baseline", "hnn", "dissipative")
 # scenes whose new kinds train at the first seed only (a 3-body run is ~10x a spring run); the
 # paper's pair keeps every seed that reproduce.py trained
@@ -82,21 +82,17 @@ ONE_SEED_SCENES = ("3body",)
 # what to train
 
 
-def _cell_argv(width: int, fraction: float) -> list[str]:
+def _cell_fields(width: int, fraction: float, task: str) -> dict:
     if (width, fraction) == DEFAULT_CELL:
-        return []       # the defaults: reproduce.py's own runs
-    return ["--hidden_dim", str(width), "--train_fraction", f"{fraction:g}", "--name", None]
+        return {}       # the defaults: reproduce.py's own runs
+    return {"hidden_dim": width, "train_fraction": fraction, "name": f"{task}-w{width}-f{fraction:g}"}
 
 
-def _row(task: str, cell: tuple, quick: bool, extra=(), name: str | None = None) -> dict:
+def _row(task: str, cell: tuple, quick: bool, extra=None, name: str | None = None) -> dict:
     width, fraction = cell
     spec = hnn.task_spec(task)
-    argv = list(spec.train_argv) + (list(spec.quick_argv) if quick else [])
-    cell_argv = _cell_argv(width, fraction)
-    if cell_argv:
-        cell_argv[-1] = f"{task}-w{width}-f{fraction:g}"
-    return {"row": name or f"{task}@{width}x{fraction:g}", "task": task,
-            "extra_argv": argv + cell_argv + list(extra), "note": None, "cell": cell}
+    fields = {**spec.settings, **(spec.quick if quick else {}), **_cell_fields(width, fraction, task), **(extra or {})}
+    return {"row": name or f"{task}@{width}x{fraction:g}", "task": task, "fields": fields, "note": None, "cell": cell}
 
 
 def plan_rows(scenes, quick: bool) -> list[dict]:
@@ -109,20 +105,12 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     return rows
 
 
-def _jobs(rows, seeds, runs_dir: Path, steps, models=RUNGS):
-    runs, jobs = {}, []
-    for row in rows:
-        found, todo = reproduce.plan([row], seeds, runs_dir, steps, models)
-        # plan() always takes the paper's pair: keep only the kinds asked for
-        runs.update({k: v for k, v in found.items() if k.split("/")[1] in models})
-        jobs += [j for j in todo if j["label"] in models]
-    return runs, jobs
-
-
 def train(rows, seeds, out: Path, steps, args, models=RUNGS) -> tuple[dict, dict]:
     """``({row/label/seed: run folder or the error of a failed run}, seconds)``: reuse what matches,
     train the rest (``args.jobs`` processes, on ``args.backend``)."""
-    runs, jobs = _jobs(rows, seeds, out / "runs", steps, models)
+    # plan() always takes the paper's pair: keep only the kinds asked for
+    jobs = [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models) if job.config.model in models]
+    runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
     runs.update(trained)
@@ -287,7 +275,7 @@ def main(argv=None) -> dict:
         "DIR" if Path(a).is_absolute() else a for a in argv), "date": datetime.date.today().isoformat(),
         "commit": reproduce._commit(), "quick": args.quick, "seeds": seeds, "jobs": args.jobs,
         "backend": args.backend,
-        "torch": torch.__version__, "python": platform.python_version(), "cores": reproduce._cores(),
+        "torch": torch.__version__, "python": platform.python_version(), "cores": sweep.cores(),
         "cpu": torch.backends.cpu.get_cpu_capability(),
         "starts": STARTS // 2 if args.quick else STARTS}, "scenes": {}, "seconds": {}}
 
@@ -295,7 +283,7 @@ def main(argv=None) -> dict:
     rows = plan_rows(scenes, args.quick)
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
-    dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_ARGV, name="real-dhnn")] if "real" in scenes else []
+    dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in scenes else []
     tic = time.perf_counter()
     runs, _ = train([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, out, steps, args)
     more, _ = train([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], out, steps, args)
@@ -303,7 +291,7 @@ def main(argv=None) -> dict:
     more, _ = train(grid_rows, [0], out, steps, args)
     runs.update(more)
     if dhnn_rows:
-        # the D-HNN protocol's own 5000 steps (DHNN_ARGV) even in a quick run: 5000 small steps are seconds
+        # the D-HNN protocol's own 5000 steps (DHNN_FIELDS) even in a quick run: 5000 small steps are seconds
         more, _ = train(dhnn_rows, [0], out, None, args, DHNN_MODELS)
         runs.update(more)
     results["seconds"]["training"] = time.perf_counter() - tic
@@ -399,7 +387,7 @@ def _dhnn(runs: dict, row: dict) -> dict:
     if not models:
         return {}
     return {"ours": sm.dhnn_protocol(hnn.load_task("real"), models, dataset), "paper": sm.DHNN_PAPER,
-            "argv": list(DHNN_ARGV)}
+            "config": DHNN_FIELDS}
 
 
 if __name__ == "__main__":

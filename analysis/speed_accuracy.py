@@ -122,9 +122,8 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
     fields = {"true": ({name: system.dynamics for name in DTYPES}, true_h, "true", None)}
     if runs is None:
         return fields
-    trainer = hnn.load_task(task, "train")
     for label in ("hnn", "baseline"):
-        args = trainer.parse_args(["--save_dir", str(runs), "--seed", "0"] + (["--baseline"] if label == "baseline" else []))
+        args = hnn.tasks.task_config(task, {"save_dir": str(runs), "seed": 0, "model": label})
         found = hnn.find_run(args)
         if found is None:
             notes.append(f"{task} {label}: no saved run at {hnn.run_dir(args)} (train it with analysis/reproduce.py); skipped")
@@ -235,9 +234,8 @@ def extremes(quick: bool, runs: Path | None, notes: list) -> list[dict]:
                 np.linspace(0, 1000 * dt, 101), method=method, dt=dt)
     # 4. learned models far outside their training radii (spring data: radius 0.1 .. 1)
     if runs is not None:
-        trainer = hnn.load_task("spring", "train")
         for label in ("hnn", "baseline"):
-            args = trainer.parse_args(["--save_dir", str(runs), "--seed", "0"] + (["--baseline"] if label == "baseline" else []))
+            args = hnn.tasks.task_config("spring", {"save_dir": str(runs), "seed": 0, "model": label})
             found = hnn.find_run(args)
             if found is None:
                 notes.append(f"extremes: spring {label} not found; its out-of-distribution rows are skipped")
