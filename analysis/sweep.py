@@ -169,7 +169,11 @@ def _on_ray(jobs: list[Job], threads: int, address: str | None):
             try:
                 folder = Path(ray.get(ref))
             except ray.exceptions.RayError as err:
+                # the run's own exception when it raised (its remote traceback as a note, for the
+                # log); Ray's when the worker or its node died
                 cause = getattr(err, "cause", None)
+                if isinstance(cause, Exception):
+                    cause.add_note(str(err))
                 yield job, cause if isinstance(cause, Exception) else err
                 continue
             if not (folder / hnn.runs.COMPLETE).is_file():

@@ -111,7 +111,7 @@ class RunConfig:
 
     def dataset_key(self) -> tuple:
         """Equal for runs that train on the same dataset."""
-        return (type(self).__qualname__,) + tuple(getattr(self, name) for name in self.DATASET_FIELDS)
+        return (type(self).__module__, type(self).__qualname__) + tuple(getattr(self, name) for name in self.DATASET_FIELDS)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

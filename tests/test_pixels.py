@@ -237,7 +237,7 @@ def test_train_script_end_to_end(tmp_path, system):
         assert (tmp_path / args["dataset_cache_key"]).is_file()          # the frames it trained on
     assert (hnn_run / "add-energy.gif").exists()
     assert (tmp_path / "pixels-compare-seed0.gif").exists()
-    assert hnn.find_run(trainer.parse_args(argv + ["--verbose", "--render_workers", "2"])) == hnn_run
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose", "--render_workers", "2"])) == hnn_run
 
 
 def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, system, metric):

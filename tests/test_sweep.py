@@ -17,11 +17,10 @@ needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
 LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
 
 
-def _job(task: str, label: str, runs_dir: Path, steps: int, extra=()) -> dict:
-    """A job as reproduce.plan makes it (the scene study builds the same shape)."""
-    argv = sweep._train_argv(task, label, runs_dir, 0, steps, extra)
-    return {"task": task, "row": task, "label": label, "seed": 0, "runs_dir": runs_dir, "steps": steps,
-            "extra_argv": list(extra), "total": sweep._total_steps(task, argv)}
+def _job(task: str, label: str, runs_dir: Path, steps: int, **fields) -> sweep.Job:
+    """A job as reproduce.plan makes it (the scene study too)."""
+    config = hnn.tasks.task_config(task, {"model": label, "save_dir": str(runs_dir), "total_steps": steps, **fields})
+    return sweep.Job(f"{task}/{label}/seed0", task, config)
 
 
 @pytest.mark.parametrize("backend, n_jobs", [
@@ -30,24 +29,19 @@ def _job(task: str, label: str, runs_dir: Path, steps: int, extra=()) -> dict:
     pytest.param("ray", 2, marks=needs_ray),
 ])
 def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp_path, capsys):
-    """The failing run (its --save_dir is a file, so saving raises) goes first; with two slots
-    the third run starts only after a slot frees, so a failure that ended the sweep would lose it."""
-    blocker = tmp_path / "a-file"
-    blocker.write_text("not a folder")
+    """The failing run (a nonlinearity that its check refuses) goes first (longest); the others
+    train regardless, and the failure is reported by name with its traceback in a log."""
     runs_dir = tmp_path / "runs"
-    bad = _job("spring", "baseline", runs_dir, 20, ["--total_steps", "0", "--save_dir", str(blocker)])
-    bad["total"] = 10 ** 6          # longest first: it starts before the others
+    bad = _job("spring", "baseline", runs_dir, 10 ** 4, nonlinearity="sideways")     # refused inside the run
     good = [_job("spring", "hnn", runs_dir, 20), _job("pend", "hnn", runs_dir, 20)]
     runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend)
-    out = capsys.readouterr().out
+    out = capsys.readouterr().out + capsys.readouterr().err
 
     failed = runs["spring/baseline/seed0"]
-    assert isinstance(failed, sweep.RunFailed) and "FileExistsError" in failed.message
-    assert "Traceback" in failed.log.read_text() and "FileExistsError" in failed.log.read_text()
-    line = next(line for line in out.splitlines() if "FAILED" in line)
-    assert line.split()[:3] == ["spring", "baseline", "seed"] and "FileExistsError" in line
+    assert isinstance(failed, sweep.RunFailed) and "sideways" in failed.message
+    assert "hnn/cli.py" in failed.log.read_text() and "sideways" in failed.log.read_text()   # where it raised
     for job in good:
-        run = runs[sweep._run_key(job)]
+        run = runs[job.key]
         assert isinstance(run, Path) and (run / hnn.runs.COMPLETE).is_file(), run
         assert json.loads((run / "args.json").read_text())["total_steps"] == 20
     assert sweep.failures(runs) == [failed]
@@ -56,42 +50,57 @@ def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp
     with pytest.raises(SystemExit) as info:
         sweep.exit_if_failed(runs)
     err = capsys.readouterr().err
-    assert info.value.code == 1 and "1 run failed" in err and "spring/baseline/seed0: FileExistsError" in err
+    assert info.value.code == 1 and "1 run failed" in err and "spring/baseline/seed0: ValueError" in err
     sweep.exit_if_failed({key: run for key, run in runs.items() if run is not failed})   # no failure: returns
 
 
+def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):
+    """Planning, reuse and training a sweep's runs go from config to folder: no parser is built."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("a sweep job parsed argv")
+
+    monkeypatch.setattr(hnn.cli, "make_parser", refuse)
+    rows = reproduce.table_rows(["spring"], quick=True)
+    jobs = reproduce.plan(rows, [0], tmp_path / "runs", 3)
+    runs, todo = sweep.reuse(jobs)
+    assert runs == {} and len(todo) == 2
+    trained, _ = sweep.train_jobs(todo, 1, tmp_path / "logs")
+    assert all(isinstance(run, Path) for run in trained.values())
+    again, todo = sweep.reuse(jobs)
+    assert again == trained and todo == []
+
+
+def test_a_run_that_does_not_load_is_named_and_trained_again(tmp_path, capsys):
+    jobs = [_job("spring", "hnn", tmp_path, 3)]
+    trained, _ = sweep.train_jobs(jobs, 1, tmp_path / "logs")
+    folder = trained["spring/hnn/seed0"]
+    (folder / "model.tar").write_bytes(b"corrupt")
+    runs, todo = sweep.reuse(jobs)
+    out = capsys.readouterr().out
+    assert runs == {} and todo == jobs
+    assert f"spring/hnn/seed0: {folder / 'model.tar'} does not load" in out and "training it again" in out
+    again, _ = sweep.train_jobs(todo, 1, tmp_path / "logs")
+    assert again["spring/hnn/seed0"] == folder and hnn.load_run(folder)[1]["total_steps"] == 3
+
+
 def test_reproduce_reports_a_failed_row_writes_the_rest_and_exits_1(tmp_path, monkeypatch, capsys):
-    blocker = tmp_path / "a-file"
-    blocker.write_text("not a folder")
     task = hnn.load_task("spring", "task")
-    variant = {"broken": (("--total_steps", "0", "--save_dir", str(blocker)), "cannot save, for the test")}
+    variant = {"broken": ({"nonlinearity": "sideways"}, "cannot build, for the test")}
     monkeypatch.setattr(task, "TASK", dataclasses.replace(task.TASK, variants=variant))
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as info:
         reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
     captured = capsys.readouterr()
     assert info.value.code == 1
-    assert "2 runs failed" in captured.err and "spring-broken/hnn/seed0: FileExistsError" in captured.err
+    assert "2 runs failed" in captured.err and "spring-broken/hnn/seed0: ValueError" in captured.err
     saved = json.loads((out / "results.json").read_text())
     assert set(saved["tasks"]["spring"]) >= {"baseline", "hnn"}          # the rows that trained are in the tables
     assert (out / "tables.md").is_file()
     # the rerun trains only what is missing: the spring runs are reused
     with pytest.raises(SystemExit):
         reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
-    reused = [line.split()[:2] for line in capsys.readouterr().out.splitlines() if "seed 0 reused" in line]
-    assert reused == [["spring", "baseline"], ["spring", "hnn"]]
-
-
-@pytest.mark.parametrize("outcome, message", [
-    ({"returncode": -9, "status": {"step": 3, "total": 10}, "tail": ""}, "killed by signal SIGKILL"),
-    ({"returncode": 1, "status": {"error": "boom", "type": "RuntimeError"}, "tail": "x"}, "RuntimeError: boom"),
-    ({"returncode": 2, "status": {}, "tail": "usage: ...\nerror: argument --learn_rate: bad\n"},
-     "exit 2: error: argument --learn_rate: bad"),
-    ({"returncode": None, "status": {}, "tail": "", "error": "WorkerCrashedError: the worker died"},
-     "WorkerCrashedError: the worker died"),
-])
-def test_a_worker_that_reports_no_run_is_described_by_its_error_signal_or_last_line(outcome, message):
-    assert sweep._error_message(outcome) == message
+    reused = [line.split()[0] for line in capsys.readouterr().out.splitlines() if "seed0 reused " in line]
+    assert reused == ["spring/baseline/seed0", "spring/hnn/seed0"]
 
 
 def test_without_ray_the_ray_backend_says_what_to_install(monkeypatch, capsys, tmp_path):
@@ -159,7 +168,7 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
     set to one thread, which test_reproduce shows the local workers match): the same
     floating-point operations, so every loss and energy number agrees exactly."""
     common = ["--quick", "--steps", "50", "--tasks", "spring", "pend", "--no-figures"]
-    on_ray = reproduce.main(common + ["--jobs", str(max(2, sweep._cores())), "--backend", "ray",
+    on_ray = reproduce.main(common + ["--jobs", str(max(2, sweep.cores())), "--backend", "ray",
                                       "--out", str(tmp_path / "ray")])
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -170,7 +179,8 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
     assert on_ray["seconds"]["backend"] == "ray" and on_ray["seconds"]["threads_per_job"] == 1
     assert local["seconds"]["threads_per_job"] == 1
     folders = sorted(p.name for p in (tmp_path / "ray" / "runs").iterdir() if p.is_dir())
-    assert folders == ["pend-baseline-seed0", "pend-hnn-seed0", "spring-baseline-seed0", "spring-hnn-seed0"]
+    assert [name.rsplit("-", 1)[0] for name in folders] == ["pend-baseline-seed0", "pend-hnn-seed0",
+                                                            "spring-baseline-seed0", "spring-hnn-seed0"]
     for name in folders:
         ray_metrics, local_metrics = (json.loads((tmp_path / side / "runs" / name / "metrics.json").read_text())
                                       for side in ("ray", "local"))
@@ -179,6 +189,6 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
         for label in ("baseline", "hnn"):
             for key in ("train_loss", "test_loss", "energy_mse_paper", "energy_mse_corrected"):
                 assert on_ray["tasks"][task][label][key] == local["tasks"][task][label][key], (task, label, key)
-    # a local rerun on the Ray output reuses every run: the same args, whatever trained them
+    # a local rerun on the Ray output reuses every run: the same configs, whatever trained them
     again = reproduce.main(common + ["--out", str(tmp_path / "ray")])
     assert again["seconds"]["runs"] == {}
