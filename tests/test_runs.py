@@ -141,7 +141,7 @@ def test_a_save_killed_between_files_leaves_the_old_run(kill_at, tmp_path):
 
 @pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
 def test_a_save_killed_between_the_renames_leaves_no_run(tmp_path):
-    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    old = _args(tmp_path, 2)
     before = _snapshot(_save(old, 0.25))
     _killed_save(tmp_path, "aside")
     # nothing at the run's path: it trains anew; the old run waits whole in .old-*

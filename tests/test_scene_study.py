@@ -155,8 +155,10 @@ def test_dhnn_protocol_scores_the_true_field_of_a_frictionless_pendulum_as_it_sh
 
 
 def test_reproduce_models_flag_adds_kinds_only_where_a_task_has_them(tmp_path):
-    assert reproduce._train_argv("spring", "separable", tmp_path, 0, None)[-2:] == ["--model", "separable"]
-    assert "--model" not in reproduce._train_argv("spring", "hnn", tmp_path, 0, None)
+    jobs = reproduce.plan(reproduce.table_rows(["spring", "pixels"], quick=True), [0], tmp_path, None, ("separable",))
+    assert [(job.key, job.config.kind) for job in jobs] == [
+        ("spring/baseline/seed0", "baseline"), ("spring/hnn/seed0", "hnn"), ("spring/separable/seed0", "separable"),
+        ("pixels/baseline/seed0", "pixel-baseline"), ("pixels/hnn/seed0", "pixel-hnn")]
     assert reproduce.row_models("spring", ("dissipative",)) == ["baseline", "hnn", "dissipative"]
     assert reproduce.row_models("pixels", ("separable", "dissipative")) == ["baseline", "hnn"]
     with pytest.raises(SystemExit):

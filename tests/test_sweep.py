@@ -35,8 +35,6 @@ def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp
     bad = _job("spring", "baseline", runs_dir, 10 ** 4, nonlinearity="sideways")     # refused inside the run
     good = [_job("spring", "hnn", runs_dir, 20), _job("pend", "hnn", runs_dir, 20)]
     runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend)
-    out = capsys.readouterr().out + capsys.readouterr().err
-
     failed = runs["spring/baseline/seed0"]
     assert isinstance(failed, sweep.RunFailed) and "sideways" in failed.message
     assert "hnn/cli.py" in failed.log.read_text() and "sideways" in failed.log.read_text()   # where it raised
