@@ -47,14 +47,12 @@ import copy
 import dataclasses
 import datetime
 import os
-import platform
 import statistics
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import scipy
 import torch
 from scipy.integrate import solve_ivp
 
@@ -66,6 +64,7 @@ from hnn.training import _adam, _batch, _l2_loss, _step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import floor, readme  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -453,9 +452,8 @@ def main(argv=None) -> int:
     protocol = hnn.get_protocol("spring", "corrected")
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
-    env = {"torch": torch.__version__, "torch_threads": args.threads, "numpy": np.__version__,
-           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine(),
-           "cpu": _cpu_flags(), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
+    env = {**provenance(), "torch_threads": args.threads, "cpu": _cpu_flags(),
+           "load_average_before": os.getloadavg()[0]}
     print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
           f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
 

@@ -16,8 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import datetime
-import platform
 import resource
 import statistics
 import tempfile
@@ -33,6 +31,7 @@ from hnn.io import write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 FULL_STEPS = 10001
 
@@ -86,8 +85,7 @@ def main(argv=None) -> dict:
     frames = data["frames"].shape[0] * data["frames"].shape[1]
     peak_after_data = _peak_mib()
     train = {label: time_training(data, label == "baseline", args.steps, args.seed) for label in ("hnn", "baseline")}
-    result = {"date": datetime.date.today().isoformat(), "torch": torch.__version__, "threads": torch.get_num_threads(),
-              "python": platform.python_version(), "frames": frames, "render_seconds": render_s,
+    result = {**provenance(), "frames": frames, "render_seconds": render_s,
               "render_ms_per_frame": render_s / frames * 1e3, "cache_mib": cache_mib, "arrays_mib": arrays_mib,
               "peak_rss_mib_after_data": peak_after_data, "peak_rss_mib": _peak_mib(), "train": train}
     rows = [f"| render {frames} frames (+ cache) | {render_s:.1f} s | {result['render_ms_per_frame']:.2f} ms/frame |",

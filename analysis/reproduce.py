@@ -20,18 +20,13 @@ times) and ``<out>/figures/``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
 import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import scipy
-import torch
 
 import hnn
 from hnn.paper import PAPER
@@ -39,6 +34,7 @@ from hnn.io import atomic_write, write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import figures, readme, registry, sweep  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 from hnn_analysis.readme import stage_table  # noqa: E402
 
 MODELS = ("baseline", "hnn")
@@ -48,14 +44,6 @@ MARKS = {"within": "✓", "better": "↓", "worse": "↑"}
 LEGEND = ("Marks: ✓ within the paper's ± (|ours − paper| ≤ the paper's ±); ↓ lower than the paper beyond "
           "its ± (better); ↑ higher than the paper beyond its ± (worse).")
 HERE = Path(__file__).resolve().parent
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=hnn.tasks.repo_root(), check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 # ----------------------------------------------------------------------------------------------
@@ -384,11 +372,9 @@ def portable_command(argv: list[str]) -> str:
 
 
 def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:
-    return {"command": portable_command(argv), "date": datetime.date.today().isoformat(),
-            "commit": _commit(), "seed": args.seed, "seeds": seeds, "mode": mode, "quick": args.quick,
-            "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models), "torch": torch.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "python": platform.python_version(), "threads": torch.get_num_threads(),
-            "cores": sweep.cores(), "cpu": torch.backends.cpu.get_cpu_capability(), "available": hnn.available_tasks()}
+    return {**provenance(), "command": portable_command(argv), "seed": args.seed, "seeds": seeds, "mode": mode,
+            "quick": args.quick, "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models),
+            "available": hnn.available_tasks()}
 
 
 def _mode(args) -> tuple[str, int | None]:

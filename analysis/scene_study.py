@@ -30,9 +30,7 @@ are reused when the args match). Writes ``<out>/scene_study.json`` (every number
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
-import platform
 import sys
 import time
 from pathlib import Path
@@ -44,6 +42,7 @@ import hnn
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import reproduce, scene_metrics as sm, speed_accuracy, sweep  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 SCENES = ("spring", "pend", "real", "2body", "3body", "pixels")
 GRID_SCENES = ("spring", "pend", "2body")
@@ -271,13 +270,10 @@ def main(argv=None) -> dict:
     seeds = [0] if args.quick else list(range(args.seeds))
     scenes = [s for s in (args.scenes or SCENES) if s in hnn.available_tasks()]
     start = time.perf_counter()
-    results = {"meta": {"command": "python analysis/scene_study.py " + " ".join(
-        "DIR" if Path(a).is_absolute() else a for a in argv), "date": datetime.date.today().isoformat(),
-        "commit": reproduce._commit(), "quick": args.quick, "seeds": seeds, "jobs": args.jobs,
-        "backend": args.backend,
-        "torch": torch.__version__, "python": platform.python_version(), "cores": sweep.cores(),
-        "cpu": torch.backends.cpu.get_cpu_capability(),
-        "starts": STARTS // 2 if args.quick else STARTS}, "scenes": {}, "seconds": {}}
+    results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
+        "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "seeds": seeds,
+        "jobs": args.jobs, "backend": args.backend, "starts": STARTS // 2 if args.quick else STARTS},
+        "scenes": {}, "seconds": {}}
 
     # 1. train: every scene's rungs at the default cell (all seeds), the grid (seed 0), the D-HNN split
     rows = plan_rows(scenes, args.quick)

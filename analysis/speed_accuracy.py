@@ -29,9 +29,7 @@ from __future__ import annotations
 
 import argparse
 import copy
-import datetime
 import math
-import platform
 import statistics
 import sys
 import time
@@ -46,6 +44,7 @@ from hnn.io import atomic_write, write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)
@@ -371,9 +370,7 @@ def main(argv=None) -> dict:
         print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)
         pareto_plot(task, results["tasks"][task], out / f"pareto-{task}.png")
     results["extremes"] = extremes(args.quick, runs, notes)
-    results["meta"] = {"command": " ".join(["python analysis/speed_accuracy.py"] + argv),
-                       "date": datetime.date.today().isoformat(), "torch": torch.__version__,
-                       "python": platform.python_version(), "threads": torch.get_num_threads(),
+    results["meta"] = {**provenance(), "command": " ".join(["python analysis/speed_accuracy.py"] + argv),
                        "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start}
     write_json(out / "speed_accuracy.json", results)
     text = markdown(results)

@@ -29,6 +29,7 @@ import torch
 from tqdm.auto import tqdm
 
 import hnn
+from hnn_analysis.provenance import cores
 
 BACKENDS = ("local", "ray")
 RAY_INSTALL = 'pip install -e ".[ray]"'
@@ -56,14 +57,6 @@ class RunFailed(Exception):
     def __init__(self, key: str, message: str, log: Path | None = None):
         self.key, self.message, self.log = key, message, log
         super().__init__(f"{key}: {message}" + (f" (log: {log})" if log else ""))
-
-
-def cores() -> int:
-    """The cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
 
 
 def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:

@@ -220,7 +220,7 @@ def check(config) -> None:
         choices = model_choices(cls) if f.name == "model" else meta.get("choices")
         if choices and value not in choices:
             raise ValueError(f"{f.name}={value!r}: choose one of {', '.join(map(str, choices))}")
-        if f.type in (bool, "bool") or isinstance(value, bool) or (value is None and f.name == "batch_size"):
+        if isinstance(value, bool) or (value is None and f.default is None):     # a switch, or an unset option
             continue
         if meta.get("parse") or f.name == "input_dim":
             try:
