@@ -17,7 +17,6 @@ not float32 rounding. States ``x = [q, p]`` of shape ``(batch, 2n)``; times in t
 from __future__ import annotations
 
 import math
-import statistics
 import time
 import warnings
 
@@ -25,10 +24,10 @@ import numpy as np
 import torch
 
 import hnn
+from hnn.metrics import energy_drift, relative_error, summarize_errors
 
 from hnn_analysis import speed_accuracy
 
-VALID_ERROR = 0.1          # a prediction is "valid" while its relative error stays below this
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference
 REFERENCE = {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
@@ -43,31 +42,6 @@ def _quiet_rollout(f, x0, t, **options) -> torch.Tensor:
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore")     # float64 states: the tolerances here are within reach
         return hnn.rollout(f, x0, t, **options)
-
-
-def relative_error(pred: torch.Tensor, true: torch.Tensor) -> np.ndarray:
-    """e(t) ``(batch, times)`` of two ``(batch, times, dim)`` trajectories; 0 where both are 0."""
-    pred, true = pred.double(), true.double()
-    den = pred.norm(dim=-1) + true.norm(dim=-1)
-    err = (pred - true).norm(dim=-1) / torch.where(den > 0, den, torch.ones_like(den))
-    return err.numpy()
-
-
-def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
-    """Geometric mean over t > 0 and valid prediction time of each row of ``err`` ``(batch, times)``.
-
-    Returns ``{"error": mean over trajectories of the geometric means, "error_per_trajectory",
-    "valid_time": median over trajectories, "valid_times", "horizon"}``; a trajectory that never
-    leaves ``VALID_ERROR`` counts the whole horizon (``valid_time == horizon`` means "at least").
-    """
-    after = np.clip(err[:, 1:], 1e-16, None)        # e(0) = 0 exactly: the log would be -inf
-    geo = np.exp(np.log(after).mean(axis=1))
-    valid = []
-    for row in err:
-        bad = np.nonzero(row > VALID_ERROR)[0]
-        valid.append(float(t[bad[0]] - t[0]) if len(bad) else float(t[-1] - t[0]))
-    return {"error": float(geo.mean()), "error_per_trajectory": geo.tolist(),
-            "valid_time": float(statistics.median(valid)), "valid_times": valid, "horizon": float(t[-1] - t[0])}
 
 
 def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int]:
@@ -194,7 +168,7 @@ def long_drift(f, energy, x0: torch.Tensor, options: dict, period: float, period
         spent += time.perf_counter() - tic
         with torch.no_grad():
             e = energy(traj.reshape(-1, traj.shape[-1])).reshape(traj.shape[:2]).double()
-        drift = max(drift, float(((e - e0[:, None]).abs() / e0.abs().clamp_min(1e-12)[:, None]).max()))
+        drift = max(drift, energy_drift(e, e0, relative=True))
         x, done = traj[:, -1], done + chunk
     return {"drift": drift, "periods_done": done, "periods": periods, "seconds": spent, "blew_up": False,
             "seconds_per_period": spent / max(done, 1)}

@@ -163,7 +163,7 @@ class Scene:
             truth = torch.as_tensor(result["truth"]["pixels"], dtype=torch.float64)[None]
             decoded = torch.as_tensor(result[label]["decoded"], dtype=torch.float64)[None]
             frames = np.arange(truth.shape[1], dtype=np.float64)
-            out["rollout"] = sm.summarize_errors(sm.relative_error(decoded, truth), frames)
+            out["rollout"] = hnn.metrics.summarize_errors(hnn.metrics.relative_error(decoded, truth), frames)
             # the decoder's own reconstruction error of a frame is ~0.3 in this measure: no frame is
             # ever within 0.1, so a valid time in pixel space says nothing
             out["rollout"]["valid_time"] = None

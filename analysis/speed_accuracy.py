@@ -152,7 +152,7 @@ def _energy_drift(energy, traj: torch.Tensor) -> float | None:
     batch, steps, dim = traj.shape
     with torch.no_grad():
         H = energy(traj.double().reshape(-1, dim)).reshape(batch, steps)
-    return float((H - H[:, :1]).abs().max())
+    return hnn.metrics.energy_drift(H)
 
 
 def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes: list) -> list[dict]:

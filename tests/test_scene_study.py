@@ -26,7 +26,7 @@ def test_rollout_error_of_a_detuned_oscillator_is_analytic(spring):
     out = sm.rollout_errors(lambda x: (1 + eps) * spring.dynamics(x), truth, t)
     e = np.abs(np.sin(eps * omega * t[1:] / 2))
     assert out["error"] == pytest.approx(float(np.exp(np.log(e).mean())), rel=1e-5)
-    first = 2 * math.asin(sm.VALID_ERROR) / (eps * omega)           # the first time e(t) = 0.1
+    first = 2 * math.asin(hnn.metrics.VALID_ERROR) / (eps * omega)           # the first time e(t) = 0.1
     assert first < out["valid_time"] <= first + (t[1] - t[0])
     assert out["horizon"] == 30.0 and out["blew_up"] == 0
 
@@ -50,7 +50,7 @@ def test_divergence_time_of_an_unstable_saddle_is_analytic():
     dq, dp = sm.PERTURBATION * d[0] / np.linalg.norm(d)
     ts = np.linspace(0.0, 12.0, 1_200_001)
     e = np.hypot(dq * np.exp(ts), dp * np.exp(-ts)) / (np.hypot(dq * np.exp(ts), (1 + dp) * np.exp(-ts)) + np.exp(-ts))
-    exact = ts[np.argmax(e > sm.VALID_ERROR)]
+    exact = ts[np.argmax(e > hnn.metrics.VALID_ERROR)]
     assert exact < got <= exact + (t[1] - t[0]) + 1e-9
 
 
