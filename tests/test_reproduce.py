@@ -6,7 +6,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import figures, readme, registry, reproduce, sweep
+from hnn_analysis.paper import figures, registry, reproduce
+from hnn_analysis import readme, sweep
 
 TINY = 20          # training steps of the end-to-end runs
 

@@ -7,7 +7,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import reproduce, scene_metrics as sm, scene_study
+from hnn_analysis.paper import reproduce
+from hnn_analysis.scenes import scene_metrics as sm, scene_study
 
 
 def _spring_truth(x0, t, omega=2.0):

@@ -10,7 +10,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import readme, reproduce, sweep
+from hnn_analysis import readme, sweep
+from hnn_analysis.paper import reproduce
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
                                reason=f"Ray is not installed: {sweep.RAY_INSTALL}")

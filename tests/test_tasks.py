@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import hnn
-from hnn_analysis import reproduce
+from hnn_analysis.paper import reproduce
 
 REPO = Path(hnn.__file__).resolve().parent.parent
 

@@ -39,7 +39,7 @@ def test_train_restores_the_callers_denormal_flushing(before):
     try:
         hnn.train(model, x, x, total_steps=2)
         assert (torch.full((1,), tiny) / 2 == 0).item() == before    # half of it is denormal unless flushed
-        assert hnn.training._flushes_denormals() == before
+        assert hnn.training.flushes_denormals() == before
     finally:
         torch.set_flush_denormal(False)
 

@@ -33,7 +33,8 @@ from hnn.paper import PAPER
 from hnn.io import atomic_write, write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import figures, readme, registry, sweep  # noqa: E402
+from hnn_analysis.paper import figures, registry  # noqa: E402
+from hnn_analysis import readme, sweep  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
 from hnn_analysis.readme import stage_table  # noqa: E402
 

@@ -26,7 +26,7 @@ import torch
 import hnn
 from hnn.metrics import energy_drift, relative_error, summarize_errors
 
-from hnn_analysis import speed_accuracy
+from hnn_analysis.speed import speed_accuracy
 
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference
@@ -38,7 +38,7 @@ REFERENCE = {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": 1e-12, "at
 EVAL_ROLLOUT = {"method": "dopri5", "rtol": 1e-6, "atol": 1e-8, "max_iterations": 20_000}
 
 
-def _quiet_rollout(f, x0, t, **options) -> torch.Tensor:
+def quiet_rollout(f, x0, t, **options) -> torch.Tensor:
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore")     # float64 states: the tolerances here are within reach
         return hnn.rollout(f, x0, t, **options)
@@ -49,13 +49,13 @@ def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int
     when the batch fails; a trajectory that blows up or does not finish within its step budget
     counts as unrelated to the truth (error ~1) over the whole horizon."""
     try:
-        return _quiet_rollout(f, x0, t, **EVAL_ROLLOUT), 0
+        return quiet_rollout(f, x0, t, **EVAL_ROLLOUT), 0
     except hnn.DivergenceError:
         pass
     rows, failed = [], 0
     for i in range(len(x0)):
         try:
-            rows.append(_quiet_rollout(f, x0[i:i + 1], t, **EVAL_ROLLOUT)[0])
+            rows.append(quiet_rollout(f, x0[i:i + 1], t, **EVAL_ROLLOUT)[0])
         except hnn.DivergenceError:
             failed += 1
             # a finite stand-in far from any true state: e(t) ~ 1 for the whole trajectory
@@ -80,8 +80,8 @@ def divergence_time(dynamics, x0: torch.Tensor, t: np.ndarray, seed: int = 0) ->
     rng = np.random.default_rng(seed)
     direction = rng.standard_normal(tuple(x0.shape))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    a = _quiet_rollout(dynamics, x0, t, **REFERENCE)
-    b = _quiet_rollout(dynamics, x0 + PERTURBATION * torch.as_tensor(direction, dtype=x0.dtype), t, **REFERENCE)
+    a = quiet_rollout(dynamics, x0, t, **REFERENCE)
+    b = quiet_rollout(dynamics, x0 + PERTURBATION * torch.as_tensor(direction, dtype=x0.dtype), t, **REFERENCE)
     s = summarize_errors(relative_error(b, a), t)
     return {"divergence_time": s["valid_time"], "divergence_times": s["valid_times"], "horizon": s["horizon"]}
 
@@ -124,7 +124,7 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict]) ->
     reaches ``TARGET``) scored by its max relative error over the batch and times against
     ``REFERENCE`` of the same field ``f``; ``{"rows", "fastest", "fastest_symplectic"}``, the last two
     the quickest settings reaching ``TARGET`` (None when none does)."""
-    reference = _quiet_rollout(f, x0, t, **REFERENCE)
+    reference = quiet_rollout(f, x0, t, **REFERENCE)
     rows, reached = [], set()
     for options in ladder:
         family = (options["method"], options.get("scipy_method"), options.get("base"))
@@ -161,7 +161,7 @@ def long_drift(f, energy, x0: torch.Tensor, options: dict, period: float, period
     while done < periods and spent < budget:
         tic = time.perf_counter()
         try:
-            traj = _quiet_rollout(f, x, t_chunk, **options)
+            traj = quiet_rollout(f, x, t_chunk, **options)
         except hnn.DivergenceError:
             return {"drift": math.inf, "periods_done": done, "seconds": spent, "blew_up": True,
                     "seconds_per_period": spent / max(done, 1)}
@@ -197,7 +197,7 @@ def dhnn_protocol(system, models: dict, dataset: dict) -> dict:
         model64 = hnn.evaluation.float64_copy(model)
         with torch.enable_grad():
             sq = (model64.time_derivative(test_x).detach() - test_dxdt).pow(2).numpy()
-        traj = _quiet_rollout(model64.time_derivative, test_x[:1], t, method="solve_ivp", rtol=1e-3, atol=1e-6)[0]
+        traj = quiet_rollout(model64.time_derivative, test_x[:1], t, method="solve_ivp", rtol=1e-3, atol=1e-6)[0]
         e_err = (system.hamiltonian(traj).numpy() - e_true) ** 2
         x_err = (traj - test_x).pow(2).mean(-1).numpy()
         out[label] = {"test_mse": [float(sq.mean()), float(sq.std() / math.sqrt(sq.size))],

@@ -17,7 +17,8 @@ import hnn  # noqa: E402
 from hnn.io import atomic_write, write_json  # noqa: E402
 
 hnn.tasks.import_analysis()
-from hnn_analysis import readme, scene_metrics as sm  # noqa: E402
+from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
 
 COLORS = {"baseline": "tab:gray", "hnn": "tab:blue", "separable": "tab:green", "dissipative": "tab:red"}
 
@@ -94,7 +95,7 @@ def speed_table(results: dict) -> list[str]:
 
 
 def _unit(task: str) -> str:
-    from hnn_analysis.scene_study import SCENE
+    from hnn_analysis.scenes.scene_study import SCENE
     return SCENE[task].get("unit", "periods")
 
 

@@ -41,7 +41,10 @@ import torch
 import hnn
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import reproduce, scene_metrics as sm, speed_accuracy, sweep  # noqa: E402
+from hnn_analysis.paper import registry, reproduce  # noqa: E402
+from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.speed import speed_accuracy  # noqa: E402
+from hnn_analysis import sweep  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
 
 SCENES = ("spring", "pend", "real", "2body", "3body", "pixels")
@@ -134,9 +137,9 @@ class Scene:
         if "T" in self.cfg:
             horizon = HORIZON * self.cfg["T"]
             self.t = np.linspace(0.0, horizon, (50 if quick else 100) * HORIZON + 1)
-            self.x0 = speed_accuracy._start_states(task, self.system, STARTS // 2 if quick else STARTS)
+            self.x0 = speed_accuracy.start_states(task, self.system, STARTS // 2 if quick else STARTS)
             with torch.no_grad():
-                self.truth = sm._quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
+                self.truth = sm.quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
             self.divergence = sm.divergence_time(self.system.dynamics, self.x0, self.t)
         elif task == "real":
             # no truth past the measurements: the measured test segment, from its first state
@@ -152,7 +155,7 @@ class Scene:
                "train_seconds": row[label]["train_seconds"], "params": _params(model),
                "run": directory.name}
         tic = time.perf_counter()
-        energy = reproduce.registry.evaluate(trained) if protocols else {}
+        energy = registry.evaluate(trained) if protocols else {}
         for name, result in energy.items():
             out[f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
         if self.truth is not None:
@@ -348,7 +351,7 @@ def main(argv=None) -> dict:
     results["seconds"]["total"] = time.perf_counter() - start
 
     # 4. write
-    from hnn_analysis import scene_report
+    from hnn_analysis.scenes import scene_report
     scene_report.write(results, out, args.update_docs)
     sweep.exit_if_failed(runs)
     return results

@@ -1,17 +1,17 @@
 """Time our implementation against the same work done the way the original code did it.
 
-    python analysis/benchmark.py                 # 5 interleaved rounds of every job
-    python analysis/benchmark.py --quick         # 1 round, fewer training steps and trials
-    python analysis/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
-    python analysis/benchmark.py --jobs floor    # only the training steps against their floor
+    python analysis/speed/benchmark.py                 # 5 interleaved rounds of every job
+    python analysis/speed/benchmark.py --quick         # 1 round, fewer training steps and trials
+    python analysis/speed/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
+    python analysis/speed/benchmark.py --jobs floor    # only the training steps against their floor
 
 ``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
 HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
-same) against their matrix-product floor, by ``analysis/floor.py``: every product the step
+same) against their matrix-product floor, by ``analysis/speed/floor.py``: every product the step
 performs (captured during one step, forward, backward and double backward), each timed alone in
 its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
 quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
-The step is ``hnn.training._step``, the very function ``hnn.train`` runs. It checks the pixel
+The step is ``hnn.training.optimizer_step``, the very function ``hnn.train`` runs. It checks the pixel
 loss and its gradients against the original's formulation on one batch.
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
@@ -60,10 +60,11 @@ import hnn
 from hnn.evaluation import start_states
 from hnn.io import write_json
 from hnn.models import PixelHNN
-from hnn.training import _adam, _batch, _l2_loss, _step
+from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import floor, readme  # noqa: E402
+from hnn_analysis.speed import floor  # noqa: E402
+from hnn_analysis import readme  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
 
 HIDDEN = 200
@@ -291,9 +292,9 @@ def _spring_step(d: dict):
     torch.manual_seed(0)
     model = hnn.build_model(2, HIDDEN)
     x, y = (torch.tensor(d[k], dtype=torch.float32) for k in ("x", "dxdt"))
-    optim = _adam(model, LEARN_RATE, WEIGHT_DECAY)
-    loss = _l2_loss(model.time_derivative)
-    return lambda: _step(loss, x, y, optim)
+    optim = adam_optimizer(model, LEARN_RATE, WEIGHT_DECAY)
+    loss = l2_loss(model.time_derivative)
+    return lambda: optimizer_step(loss, x, y, optim)
 
 
 def _pixel_step():
@@ -305,11 +306,11 @@ def _pixel_step():
     gen = torch.Generator().manual_seed(0)
     frames = torch.rand(PIXEL_ROWS + 1, 2 * PIXEL_SIDE ** 2, generator=gen)
     x, x_next = frames[:-1], frames[1:]
-    optim = _adam(model, LEARN_RATE, 1e-5)
+    optim = adam_optimizer(model, LEARN_RATE, 1e-5)
 
     def step():
-        xb, yb = _batch(x, x_next, PIXEL_BATCH, gen)
-        return _step(model.loss, xb, yb, optim)
+        xb, yb = minibatch(x, x_next, PIXEL_BATCH, gen)
+        return optimizer_step(model.loss, xb, yb, optim)
     return step
 
 
@@ -345,7 +346,7 @@ def job_floor(d: dict, rounds: int) -> dict:
     """Each step against its matrix-product floor, at 1 and then 2 threads in this process
     (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
     steps = {"spring": (_spring_step(d), rounds), "pixels": (_pixel_step(), max(10, rounds // 4))}
-    threads, flushing = torch.get_num_threads(), hnn.training._flushes_denormals()
+    threads, flushing = torch.get_num_threads(), hnn.training.flushes_denormals()
     torch.set_flush_denormal(True)
     out = {}
     try:
@@ -501,7 +502,7 @@ def main(argv=None) -> int:
                           "floor_table": floor_table, "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
-        command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
+        command = " ".join(["python analysis/speed/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
         busy = max(env["load_average_before"], env["load_average_after"])
         shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
                   "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")

@@ -1,8 +1,8 @@
 """The speed / accuracy trade of every integrator, on the true systems and on the trained models.
 
-    python analysis/speed_accuracy.py                       # every task, full grid (a few minutes)
-    python analysis/speed_accuracy.py --quick               # fewer settings (well under a minute)
-    python analysis/speed_accuracy.py --runs results/runs --update-docs
+    python analysis/speed/speed_accuracy.py                       # every task, full grid (a few minutes)
+    python analysis/speed/speed_accuracy.py --quick               # fewer settings (well under a minute)
+    python analysis/speed/speed_accuracy.py --runs results/runs --update-docs
 
 For each task with a true dynamics function (spring, pend, 2body, 3body) and each saved model
 (the HNN and the baseline that ``analysis/reproduce.py`` trains into ``<runs>/<task>-<label>-seed0``;
@@ -66,7 +66,7 @@ MODEL_DTS = 3
 QUICK_DT_PICK = (0, 2, 4)          # first, middle and last step size
 
 
-def _start_states(task: str, system, batch: int) -> torch.Tensor:
+def start_states(task: str, system, batch: int) -> torch.Tensor:
     """``(batch, dim)`` float64 start states inside each task's training distribution."""
     if hasattr(system, "initial_state"):            # the orbits: the energy-MSE trials' states
         return torch.tensor(np.stack([system.initial_state(s) for s in range(batch)]), dtype=torch.float64)
@@ -158,7 +158,7 @@ def _energy_drift(energy, traj: torch.Tensor) -> float | None:
 def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes: list) -> list[dict]:
     system = hnn.load_task(task)
     cfg = TASKS[task]
-    true_x0 = _start_states(task, system, cfg["batch"])
+    true_x0 = start_states(task, system, cfg["batch"])
     rows = []
     for label, (per_dtype, energy, kind, x0) in _fields(task, system, runs, notes).items():
         scale = cfg.get("model_time", 1.0) if kind == "model" else 1.0
@@ -370,7 +370,7 @@ def main(argv=None) -> dict:
         print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)
         pareto_plot(task, results["tasks"][task], out / f"pareto-{task}.png")
     results["extremes"] = extremes(args.quick, runs, notes)
-    results["meta"] = {**provenance(), "command": " ".join(["python analysis/speed_accuracy.py"] + argv),
+    results["meta"] = {**provenance(), "command": " ".join(["python analysis/speed/speed_accuracy.py"] + argv),
                        "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start}
     write_json(out / "speed_accuracy.json", results)
     text = markdown(results)
