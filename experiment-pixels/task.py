@@ -27,6 +27,4 @@ TASK = hnn.TaskSpec(
     # train.py's own evaluation is skipped: reproduce evaluates both models together
     settings={"no_eval": True},
     evaluate=metric.evaluate,
-    # a pixel model's latent HNN or MLP: the structured kinds are not wired into PixelHNN
-    models=("baseline", "hnn"),
 )

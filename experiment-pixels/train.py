@@ -44,7 +44,8 @@ class Config(hnn.RunConfig):
     no_eval: bool = setting(False, "skip the energy metric and the GIFs after training", display_only=True)
 
     STATE: ClassVar[str] = "input (two 28x28 frames side by side)"
-    # the latent field's kinds registered for pixels (hnn.MODEL_KINDS "pixel-hnn", "pixel-baseline")
+    # the latent field's kinds registered for pixels (hnn.MODEL_KINDS "pixel-hnn", "pixel-baseline"): the
+    # structured kinds are not wired into PixelHNN
     MODELS: ClassVar[tuple[str, ...]] = ("hnn", "baseline")
     KIND_PREFIX: ClassVar[str] = "pixel-"
     HELP: ClassVar[dict[str, str]] = {"use_rk4": "step the latent by one RK4 step per frame instead of the "

@@ -121,33 +121,38 @@ def _structured_model(cls):
 @dataclass(frozen=True)
 class ModelKind:
     """A registered model kind: the objective that trains it, ``build(args) -> nn.Module`` (its
-    untrained model from a run's args; also rebuilds it on load), whether its H is separable
-    (``H = T(p) + V(q)``: explicit symplectic solvers apply), and its colour in the studies' plots."""
+    untrained model from a run's args; also rebuilds it on load), and what the studies read:
+    ``conservative`` (it learns an H that its flow conserves, ``model.hamiltonian``),
+    ``separable`` (that H is ``T(p) + V(q)``: explicit symplectic solvers apply), ``dissipative``
+    (its flow loses energy on purpose, so no energy drift is measured) and its plot ``color``."""
     objective: type
     build: Callable[[dict], nn.Module]
+    conservative: bool = False
     separable: bool = False
+    dissipative: bool = False
     color: str = "tab:gray"
 
 
 # the one place a kind is named; a run's config says which (RunConfig.kind), its args.json too
 MODEL_KINDS = {
-    "hnn": ModelKind(DerivativeObjective, _mlp_model(False), color="tab:blue"),
+    "hnn": ModelKind(DerivativeObjective, _mlp_model(False), conservative=True, color="tab:blue"),
     "baseline": ModelKind(DerivativeObjective, _mlp_model(True), color="tab:red"),
-    "separable": ModelKind(DerivativeObjective, _structured_model(SeparableHNN), separable=True, color="tab:green"),
-    "dissipative": ModelKind(DerivativeObjective, _structured_model(DissipativeHNN), color="tab:purple"),
-    "pixel-hnn": ModelKind(PixelObjective, _pixel_model(False), color="tab:blue"),
+    "separable": ModelKind(DerivativeObjective, _structured_model(SeparableHNN), conservative=True, separable=True,
+                           color="tab:green"),
+    "dissipative": ModelKind(DerivativeObjective, _structured_model(DissipativeHNN), dissipative=True,
+                             color="tab:purple"),
+    "pixel-hnn": ModelKind(PixelObjective, _pixel_model(False), conservative=True, color="tab:blue"),
     "pixel-baseline": ModelKind(PixelObjective, _pixel_model(True), color="tab:red"),
 }
 
 
-def register_model_kind(name: str, objective: type, build, *, separable: bool = False,
-                        color: str = "tab:gray") -> None:
+def register_model_kind(name: str, objective: type, build, **properties) -> None:
     """Add a model kind: runs whose config says ``model=name`` train with ``objective``, and
     ``build(args) -> nn.Module`` makes their untrained model (and rebuilds it on load);
-    ``separable`` and ``color`` as in ``ModelKind``."""
+    ``properties`` are ``ModelKind``'s (``conservative``, ``separable``, ``dissipative``, ``color``)."""
     if name in MODEL_KINDS:
         raise ValueError(f"model kind {name!r} is registered already")
-    MODEL_KINDS[name] = ModelKind(objective, build, separable, color)
+    MODEL_KINDS[name] = ModelKind(objective, build, **properties)
 
 
 def _registered(kind: str) -> ModelKind:

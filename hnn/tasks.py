@@ -57,8 +57,6 @@ class TaskSpec:
             dataset rebuilt from them); each result has ``result[label]["mse"]`` and ``["mse_se"]``
             and a one-line ``"description"``.
         load: ``load(directory) -> (model, args, metrics)`` replacing ``hnn.load_run``.
-        models: the model kinds its ``train.py --model`` trains (``reproduce.py --models`` and
-            ``analysis/scene_study.py`` skip the others); the pixel task has its latent pair only.
     """
     order: float = math.inf
     protocols: Mapping = field(default_factory=dict)
@@ -71,7 +69,6 @@ class TaskSpec:
     variants: Mapping = field(default_factory=dict)
     evaluate: Callable | None = None
     load: Callable | None = None
-    models: tuple[str, ...] = ("baseline", "hnn", "separable", "dissipative")
 
 
 def repo_root() -> Path:

@@ -295,8 +295,9 @@ def table_rows(tasks: list[str], quick: bool) -> list[dict]:
 
 
 def row_models(task: str, models=MODELS) -> list[str]:
-    """The kinds of ``models`` that ``task`` trains (``TaskSpec.models``), the paper's pair first."""
-    return [label for label in dict.fromkeys(MODELS + tuple(models)) if label in hnn.task_spec(task).models]
+    """The kinds of ``models`` that ``task``'s ``--model`` takes (its config's), the paper's pair first."""
+    takes = hnn.cli.model_choices(hnn.load_task(task, "train").Config)
+    return [label for label in dict.fromkeys(MODELS + tuple(models)) if label in takes]
 
 
 def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,

@@ -35,6 +35,8 @@ REFERENCE = {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": 1e-12, "at
 # changes them in the third digit at most (checked against rtol 1e-9)
 # at half the cost; a healthy field needs under 5000 steps over the horizon (3-body baseline: 4800),
 # while a learned orbit that collapses shrinks the step without end: 20000 steps bound it
+# the adaptive solvers' setting in the ladder: solve_ivp with DOP853, its high-order method
+ADAPTIVE = {"solve_ivp": ({"scipy_method": "DOP853"},)}
 EVAL_ROLLOUT = {"method": "dopri5", "rtol": 1e-6, "atol": 1e-8, "max_iterations": 20_000}
 
 
@@ -100,15 +102,13 @@ def settings_ladder(dts, separable: bool, quick: bool) -> list[dict]:
     within this study's time.
     """
     rtols = (1e-4, 1e-7) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
-    out = [{"method": "dopri5", "rtol": r, "atol": r} for r in rtols]
-    out += [{"method": "solve_ivp", "scipy_method": "DOP853", "rtol": r, "atol": r} for r in rtols]
     dts = dts[::2] if quick else dts
-    methods = [("rk4", {}, dts), ("midpoint", {}, dts), ("yoshida4", {"base": "midpoint"}, dts[:4])]
-    if separable:
-        methods += [("leapfrog", {}, dts), ("yoshida4", {"base": "leapfrog"}, dts)]
-    for method, extra, steps in methods:
-        out += [{"method": method, "dt": dt, **extra} for dt in steps]
-    return out
+    # every registered solver that applies (speed_accuracy.solver_settings reads hnn.SOLVERS)
+    out = [options for _, options in speed_accuracy.solver_settings(separable, rtols, dts, ADAPTIVE)]
+    if separable:       # the any-H settings too (yoshida4 on the midpoint), as for a learned H
+        out += [options for _, options in speed_accuracy.solver_settings(False, (), dts)
+                if options not in out and "base" in options]
+    return [o for o in out if o.get("base") != "midpoint" or o["dt"] in dts[:4]]
 
 
 def describe(options: dict) -> str:

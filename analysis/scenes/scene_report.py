@@ -20,7 +20,12 @@ hnn.tasks.import_analysis()
 from hnn_analysis import readme  # noqa: E402
 from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
 
-COLORS = {"baseline": "tab:gray", "hnn": "tab:blue", "separable": "tab:green", "dissipative": "tab:red"}
+
+
+def color(label: str) -> str:
+    """A model kind's plot colour, as its registration declares it (``hnn.ModelKind.color``)."""
+    kind = hnn.MODEL_KINDS.get(label)
+    return kind.color if kind else "k"
 
 
 def _g(x, digits: int = 3) -> str:
@@ -127,7 +132,8 @@ def grid_tables(results: dict) -> list[str]:
 def _cell_order(key: str):
     label, cell = key.split("@")
     width, fraction = cell.split("x")
-    order = list(COLORS).index(label) if label in COLORS else 9
+    kinds = list(hnn.MODEL_KINDS)
+    order = kinds.index(label) if label in kinds else len(kinds)
     return order, int(width), float(fraction)
 
 
@@ -221,7 +227,7 @@ def pareto_figure(results: dict, path: Path) -> None:
                 x = m.get("train_seconds") if xkey else (ro or {}).get("seconds")
                 if ro and x:
                     points.append((x, ro["error"]))
-                    ax.scatter(x, ro["error"], s=14, color=COLORS.get(label, "k"), label=label)
+                    ax.scatter(x, ro["error"], s=14, color=color(label), label=label)
             front, best = [], float("inf")
             for x, y in sorted(points):
                 if y < best:

@@ -71,7 +71,9 @@ SCENE = {
 }
 DRIFT_SCENES = ("spring", "pend", "2body")
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
-RUNGS = ("baseline", "hnn", "separable", "dissipative")
+def rungs() -> tuple[str, ...]:
+    """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)."""
+    return tuple(hnn.cli.model_choices())
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
                "name": "real-dhnn"}
 DHNN_MODELS = ("baseline", "hnn", "dissipative")
@@ -107,9 +109,10 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     return rows
 
 
-def train(rows, seeds, out: Path, steps, args, models=RUNGS) -> tuple[dict, dict]:
+def train(rows, seeds, out: Path, steps, args, models=None) -> tuple[dict, dict]:
     """``({row/label/seed: run folder or the error of a failed run}, seconds)``: reuse what matches,
     train the rest (``args.jobs`` processes, on ``args.backend``)."""
+    models = rungs() if models is None else models
     # plan() always takes the paper's pair: keep only the kinds asked for
     jobs = [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models) if job.config.model in models]
     runs, jobs = sweep.reuse(jobs)
@@ -176,7 +179,7 @@ class Scene:
 
 def _energy_fn(system, model, label: str):
     """The learned H of an H-model, else the system's own H (the drift a baseline shows)."""
-    if label in ("hnn", "separable"):
+    if hnn.MODEL_KINDS[label].conservative:
         return hnn.evaluation.float64_copy(model).hamiltonian
     return system.hamiltonian
 
@@ -199,9 +202,9 @@ def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
     f = model64.time_derivative
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
-    ladder = sm.settings_ladder(scene.cfg["dts"], label == "separable", quick)
+    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick)
     result = sm.speed_at_accuracy(f, x0, t, ladder)
-    if scene.task in DRIFT_SCENES and label != "dissipative":
+    if scene.task in DRIFT_SCENES and not hnn.MODEL_KINDS[label].dissipative:
         period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
         budget = 2.0 if quick else DRIFT_BUDGET
         energy = _energy_fn(scene.system, model, label)
@@ -305,7 +308,7 @@ def main(argv=None) -> dict:
         scene = Scene(task, args.quick)
         entry = {"divergence": getattr(scene, "divergence", None), "rungs": {}, "grid": {}, "speed": {}}
         cells = {}
-        for label in reproduce.row_models(task, RUNGS):
+        for label in reproduce.row_models(task, rungs()):
             per_seed = {}
             for seed in seeds:
                 run = runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}")
@@ -320,7 +323,7 @@ def main(argv=None) -> dict:
                 entry["speed"][label] = speed_study(scene, label, model, args.quick)
             print(f"  {task:7s} {label:11s} measured", flush=True)
         for row in (r for r in grid_rows if r["task"] == task):
-            for label in reproduce.row_models(task, RUNGS):
+            for label in reproduce.row_models(task, rungs()):
                 run = runs.get(f"{row['row']}/{label}/seed0")
                 if isinstance(run, Path):
                     m = scene.measure(label, run, protocols=True)

@@ -79,23 +79,36 @@ def start_states(task: str, system, batch: int) -> torch.Tensor:
     return torch.tensor(np.stack([r * np.cos(angle), r * np.sin(angle)], 1), dtype=torch.float64)
 
 
-def _settings(kind: str, quick: bool, dts) -> list[tuple[str, dict]]:
-    """(method label, rollout options) of the grid; ``kind`` is 'true' (separable H) or 'model'."""
+# the settings a study runs beyond a solver's defaults: solve_ivp also with DOP853; yoshida4 (a
+# composition of a base method) also on the midpoint, which makes it symplectic for any H
+ADAPTIVE_VARIANTS = {"solve_ivp": ({}, {"scipy_method": "DOP853"})}
+ANY_H_VARIANTS = {"yoshida4": {"base": "midpoint"}}
+
+
+def solver_settings(separable: bool, rtols, dts, adaptive_variants=ADAPTIVE_VARIANTS) -> list[tuple[str, dict]]:
+    """``(method label, rollout options)`` of every solver in ``hnn.SOLVERS`` that applies to a field:
+    the adaptive ones at each of ``rtols`` (and their ``adaptive_variants``), the fixed-step ones at
+    each of ``dts``; one that ``needs_separable`` only for a ``separable`` H, or else in its
+    ``ANY_H_VARIANTS`` setting."""
+    solvers = list(hnn.SOLVERS.values())
     out = []
-    for rtol in (QUICK_RTOLS if quick else RTOLS):
-        out.append(("RK45", {"method": "solve_ivp", "rtol": rtol, "atol": rtol}))
-        out.append(("DOP853", {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": rtol, "atol": rtol}))
-        out.append(("dopri5", {"method": "dopri5", "rtol": rtol, "atol": rtol}))
+    for rtol in rtols:
+        for solver in (s for s in solvers if s.adaptive):
+            for extra in adaptive_variants.get(solver.name, ({},)):
+                out.append((solver.describe(extra), {"method": solver.name, **extra, "rtol": rtol, "atol": rtol}))
+    for solver in (s for s in solvers if not s.adaptive):
+        extra = {} if separable or not solver.needs_separable else ANY_H_VARIANTS.get(solver.name)
+        if extra is not None:
+            out += [(solver.name, {"method": solver.name, "dt": dt, **extra}) for dt in dts]
+    return out
+
+
+def _settings(kind: str, quick: bool, dts, separable: bool = False) -> list[tuple[str, dict]]:
+    """(method label, rollout options) of the grid; ``kind`` is 'true' (separable H) or 'model'
+    (a learned field, ``separable`` for a model kind with a separable H)."""
     dts = list(dts) if kind == "true" else list(dts[:MODEL_DTS])
     picked = [dts[i] for i in QUICK_DT_PICK if i < len(dts)] if quick else dts
-    fixed = ["rk4", "midpoint", "yoshida4"] + (["leapfrog"] if kind == "true" else [])
-    for method in fixed:
-        for dt in picked:
-            options = {"method": method, "dt": dt}
-            if method == "yoshida4" and kind == "model":
-                options["base"] = "midpoint"        # a learned H is not separable
-            out.append((method, options))
-    return out
+    return solver_settings(kind == "true" or separable, QUICK_RTOLS if quick else RTOLS, picked)
 
 
 def timed_rollout(f, x0, t, options, repeats: int, enough: float = 1.0):
@@ -121,9 +134,12 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
     fields = {"true": ({name: system.dynamics for name in DTYPES}, true_h, "true", None)}
     if runs is None:
         return fields
-    for label in ("hnn", "baseline"):
+    # every model kind the task trains (hnn.MODEL_KINDS): those reproduce.py --models trained are measured
+    for label in hnn.cli.model_choices(hnn.load_task(task, "train").Config):
         args = hnn.tasks.task_config(task, {"save_dir": str(runs), "seed": 0, "model": label})
         found = hnn.find_run(args)
+        if found is None and label not in ("hnn", "baseline"):
+            continue
         if found is None:
             notes.append(f"{task} {label}: no saved run at {hnn.run_dir(args)} (train it with analysis/reproduce.py); skipped")
             print(f"  {task} {label}: not found at {hnn.run_dir(args)}, skipped", flush=True)
@@ -166,7 +182,8 @@ def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes:
         t = np.linspace(0, cfg["T"] * scale, 51)
         with torch.no_grad():
             ref = hnn.rollout(per_dtype["float64"], x0, t, scipy_method="DOP853", rtol=1e-12, atol=1e-12)
-        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"])):
+        separable = kind == "model" and hnn.MODEL_KINDS[label].separable
+        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable):
             for dname, dtype in DTYPES.items():
                 rtol = options.get("rtol")
                 if rtol is not None and rtol < 100 * torch.finfo(dtype).eps:
@@ -301,8 +318,8 @@ def summary_markdown(results: dict) -> str:
              "| task | model | method | fastest setting | seconds | nfev | error | energy drift | floor float32 | floor float64 |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for task, rows in results["tasks"].items():
-        for model in ("true", "hnn", "baseline"):
-            for method in ("RK45", "DOP853", "dopri5", "rk4", "leapfrog", "midpoint", "yoshida4"):
+        for model in dict.fromkeys(r["model"] for r in rows):
+            for method in dict.fromkeys(r["method"] for r in rows):
                 mine = [r for r in rows if r["model"] == model and r["method"] == method and r["status"] == "ok"]
                 if not mine:
                     continue
@@ -321,7 +338,7 @@ def pareto_plot(task: str, rows: list[dict], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    models = sorted({r["model"] for r in rows}, key=["true", "hnn", "baseline"].index)
+    models = list(dict.fromkeys(r["model"] for r in rows))
     fig, axes = plt.subplots(1, len(models), figsize=(5 * len(models), 4), squeeze=False)
     for ax, model in zip(axes[0], models):
         for (method, dtype) in sorted({(r["method"], r["dtype"]) for r in rows if r["model"] == model}):
