@@ -257,7 +257,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=3, help="seeds of the per-rung rows and the chosen cells (quick: 1)")
     p.add_argument("--jobs", type=int, default=1, help="training processes, as reproduce.py --jobs")
     sweep.add_backend_flags(p)
-    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
                    help="write docs/scenes.md and the README's model guide (full settings only)")
     return p
 

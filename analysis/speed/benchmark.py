@@ -398,7 +398,7 @@ def parse_args(argv=None):
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
     parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of floor,data,train,eval")
-    parser.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    parser.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = parser.parse_args(argv)
     args.jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]

@@ -70,7 +70,7 @@ def main(argv=None) -> dict:
     p.add_argument("--workers", type=int, default=None, help="rendering processes (default: the cores)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="JSON path (default results/benchmark_pixels.json)")
-    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = p.parse_args(argv)
     system = hnn.load_task("pixels")

@@ -362,7 +362,7 @@ def main(argv=None) -> dict:
     p.add_argument("--out", type=Path, default=None, help="output folder (default <repo>/results/speed_accuracy)")
     p.add_argument("--quick", action="store_true", help="fewer settings, one repeat, shorter extremes")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats per setting (median)")
-    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the generated section of docs/integrators.md")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(argv)
