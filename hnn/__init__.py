@@ -7,8 +7,8 @@ the training loop, the paper's metrics, and saved runs.
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
 """
 from .errors import ConvergenceError, DivergenceError
-from .integrate import rk4_step, rollout
-from .fixed_step import YOSHIDA_WEIGHTS
+from .integrate import rollout
+from .fixed_step import YOSHIDA_WEIGHTS, rk4_step
 from .solvers import SOLVERS, SYMPLECTIC_METHODS, Solver, get_solver, register_solver
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor

@@ -26,7 +26,8 @@ import numpy as np
 import torch
 
 from .config import RunConfig, setting
-from .integrate import DivergenceError, rollout
+from .errors import DivergenceError
+from .integrate import rollout
 from .cache import get_cached_dataset
 from .tasks import load_task
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from .integrate import rk4_step
+from .fixed_step import rk4_step
 from .metrics import derivative_loss, mean_and_se
 from .models import PixelHNN, build_model
 from .structured import DissipativeHNN, SeparableHNN
