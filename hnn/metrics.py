@@ -20,6 +20,9 @@ import numpy as np
 import torch
 
 VALID_ERROR = 0.1          # a prediction is "valid" while its relative error stays below this
+# more numbers of a rollout's relative error: name -> metric(err (batch, times), t (times,)) -> a
+# JSON value; every study that summarizes rollouts (summarize_errors) reports each one
+ROLLOUT_METRICS: dict = {}
 
 
 def _to_numpy(a) -> np.ndarray:
@@ -85,6 +88,7 @@ def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
     Returns ``{"error": mean over trajectories of the geometric means, "error_per_trajectory",
     "valid_time": median over trajectories, "valid_times", "horizon"}``; a trajectory that never
     leaves ``VALID_ERROR`` counts the whole horizon (``valid_time == horizon`` means "at least").
+    Each metric of ``ROLLOUT_METRICS`` adds its entry.
     """
     after = np.clip(err[:, 1:], 1e-16, None)        # e(0) = 0 exactly: the log would be -inf
     geo = np.exp(np.log(after).mean(axis=1))
@@ -92,8 +96,9 @@ def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
     for row in err:
         bad = np.nonzero(row > VALID_ERROR)[0]
         valid.append(float(t[bad[0]] - t[0]) if len(bad) else float(t[-1] - t[0]))
-    return {"error": float(geo.mean()), "error_per_trajectory": geo.tolist(),
-            "valid_time": float(statistics.median(valid)), "valid_times": valid, "horizon": float(t[-1] - t[0])}
+    out = {"error": float(geo.mean()), "error_per_trajectory": geo.tolist(),
+           "valid_time": float(statistics.median(valid)), "valid_times": valid, "horizon": float(t[-1] - t[0])}
+    return {**out, **{name: metric(err, t) for name, metric in ROLLOUT_METRICS.items()}}
 
 
 def energy_drift(H: torch.Tensor, H0: torch.Tensor | None = None, relative: bool = False) -> float:
