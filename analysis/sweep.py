@@ -49,6 +49,11 @@ class Job:
         """Optimizer steps (the loop runs total_steps + 1)."""
         return self.config.total_steps + 1
 
+    def fields(self) -> dict:
+        """The config as a worker elsewhere receives it: ``save_dir`` absolute (a Ray worker runs
+        in a folder of its own; save_dir is not part of a run's identity, so its folder is the same)."""
+        return {**self.config.to_dict(), "save_dir": str(Path(self.config.save_dir).resolve())}
+
 
 class RunFailed(Exception):
     """A run that raised or whose worker died: its ``key``, the error ``message`` and the ``log``
@@ -128,7 +133,7 @@ def _in_pool(jobs: list[Job], n_jobs: int, threads: int):
     """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads finish them."""
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
     with concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context) as pool:
-        futures = {pool.submit(hnn.tasks.run_task, job.task, job.config.to_dict(), threads): job for job in jobs}
+        futures = {pool.submit(hnn.tasks.run_task, job.task, job.fields(), threads): job for job in jobs}
         for future in concurrent.futures.as_completed(futures):
             error = future.exception()
             yield futures[future], error if error is not None else Path(future.result())
@@ -155,7 +160,7 @@ def _on_ray(jobs: list[Job], threads: int, address: str | None):
                "HNN_REPO": str(hnn.tasks.repo_root()), "OMP_NUM_THREADS": str(threads)}
         remote = ray.remote(hnn.tasks.run_task).options(num_cpus=threads, max_retries=1,
                                                         runtime_env={"env_vars": env})
-        refs = {remote.remote(job.task, job.config.to_dict(), threads): job for job in jobs}
+        refs = {remote.remote(job.task, job.fields(), threads): job for job in jobs}
         while refs:
             [ref], _ = ray.wait(list(refs), num_returns=1)
             job = refs.pop(ref)

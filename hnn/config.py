@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .cli import field_meta
 from .models import FIELD_TYPES, NONLINEARITIES
 from .objectives import Objective, objective_for
 
@@ -97,7 +96,7 @@ class RunConfig:
     @classmethod
     def display_only(cls) -> tuple[str, ...]:
         """The fields that change what is printed or how fast, never what is trained."""
-        return tuple(f.name for f in dataclasses.fields(cls) if field_meta(cls, f.name).get("display_only"))
+        return tuple(f.name for f in dataclasses.fields(cls) if cli.field_meta(cls, f.name).get("display_only"))
 
     def identity(self) -> dict:
         """The fields that decide what is trained: all but the display-only ones and ``save_dir``."""
