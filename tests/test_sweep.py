@@ -3,7 +3,15 @@ processes, on Ray), Ray gives the numbers of the local workers, and Ray stays an
 import dataclasses
 import importlib.util
 import json
+import os
+import secrets
+import shutil
+import socket
+import subprocess
 import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -191,3 +199,102 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
     # a local rerun on the Ray output reuses every run: the same configs, whatever trained them
     again = reproduce.main(common + ["--out", str(tmp_path / "ray")])
     assert again["seconds"]["runs"] == {}
+
+
+def _free_ports(n: int) -> list[int]:
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def _ray_start(args: list[str], env: dict, log: Path) -> subprocess.Popen:
+    """``ray start ... --block``: a node that stops (its raylet and workers) when this process gets SIGTERM."""
+    return subprocess.Popen(["ray", "start", "--num-cpus=1", "--disable-usage-stats", "--block", *args], env=env,
+                            stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def _wait_for_nodes(address: str, expect: int, procs: list, timeout: float = 180.0) -> None:
+    import ray
+    host, port = address.rsplit(":", 1)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert all(p.poll() is None for p in procs), "a ray start process ended (its log is in tmp_path)"
+        try:
+            socket.create_connection((host, int(port)), timeout=2).close()
+        except OSError:
+            time.sleep(1)
+            continue
+        ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+        try:
+            if sum(node["Alive"] for node in ray.nodes()) >= expect:
+                return
+        finally:
+            ray.shutdown()
+        time.sleep(2)
+    raise TimeoutError(f"the Ray cluster at {address} did not reach {expect} nodes in {timeout} s")
+
+
+@pytest.mark.slow
+@needs_ray
+def test_a_two_node_cluster_with_token_auth_loses_a_node_mid_sweep_and_a_rerun_completes(tmp_path, monkeypatch, capsys):
+    """docs/sweeps.md's cluster recipe on this machine: a head and a second node (two raylets,
+    token authentication on), a sweep with --ray-address, the second node stopped once the
+    first run finishes. Its runs are retried on the head or reported by name; the others
+    finish; a rerun trains only what is missing."""
+    port, *node_ports = _free_ports(8)
+    token, address = secrets.token_hex(16), f"127.0.0.1:{port}"
+    monkeypatch.setenv("RAY_AUTH_MODE", "token")
+    monkeypatch.setenv("RAY_AUTH_TOKEN", token)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(hnn.tasks.repo_root()),
+                                                                     os.environ.get("PYTHONPATH")]))}
+    # Ray's unix sockets live under --temp-dir, whose path must stay short (107 characters at most)
+    temp = tempfile.mkdtemp(prefix="ray-", dir="/tmp")
+    head = _ray_start(["--head", f"--port={port}", "--include-dashboard=false", f"--temp-dir={temp}"],
+                      env, tmp_path / "head.log")
+    node = None
+    try:
+        _wait_for_nodes(address, 1, [head])
+        a, b, c, d, e, f, g = node_ports
+        node = _ray_start([f"--address={address}", f"--node-manager-port={a}", f"--object-manager-port={b}",
+                           f"--dashboard-agent-listen-port={c}", f"--dashboard-agent-grpc-port={d}",
+                           f"--metrics-export-port={e}", f"--runtime-env-agent-port={f}",
+                           f"--min-worker-port={g}", f"--max-worker-port={g + 50}"], env, tmp_path / "node.log")
+        _wait_for_nodes(address, 2, [head, node])
+        out = tmp_path / "out"
+
+        def stop_the_second_node_after_the_first_run():
+            deadline = time.monotonic() + 600
+            while time.monotonic() < deadline and not list((out / "runs").glob("*/complete.json")):
+                time.sleep(0.2)
+            node.terminate()
+
+        killer = threading.Thread(target=stop_the_second_node_after_the_first_run, daemon=True)
+        killer.start()
+        argv = ["--quick", "--steps", "1500", "--tasks", "spring", "pend", "--no-figures", "--out", str(out),
+                "--backend", "ray", "--ray-address", address, "--jobs", str(sweep.cores())]
+        failed = []
+        try:
+            reproduce.main(argv)
+        except SystemExit as exit:
+            assert exit.code == 1
+            failed = [line.split(":")[0].strip() for line in capsys.readouterr().err.splitlines()
+                      if line.startswith("  ") and "seed0:" in line]
+            assert failed, "exit 1 without naming the failed runs"
+        killer.join(timeout=60)
+        assert node.wait(timeout=60) is not None                # the second node is gone
+        trained = {p.parent.name for p in (out / "runs").glob("*/complete.json")}
+        assert len(trained) + len(failed) == 4, (trained, failed)
+        again = reproduce.main(argv)                             # on the head alone: only what is missing
+        assert len(again["seconds"]["runs"]) == len(failed) and set(again["tasks"]) == {"spring", "pend"}
+        assert len({p.parent.name for p in (out / "runs").glob("*/complete.json")}) == 4
+    finally:
+        for proc in (node, head):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                proc.wait(timeout=60)
+        shutil.rmtree(temp, ignore_errors=True)
