@@ -1,11 +1,15 @@
 """The analysis of this repository, importable as ``hnn_analysis`` (pyproject maps the name to ``analysis/``).
 
-Commands (run by path from a checkout, as the README does, or with ``python -m hnn_analysis.<name>``
-once installed): ``reproduce`` (the paper's tables and figures), ``benchmark``,
-``benchmark_orbits``, ``benchmark_pixels``, ``speed_accuracy``, ``regression_spread``, ``readme``
-(the generated pages) and ``train_worker`` (one run of ``reproduce --jobs N``). Modules:
-``figures``, ``mischief``, ``orbit_figures``, ``pixel_figures`` (plotting), ``registry`` (the
-figures a task names in its ``task.py``, by name), ``sweep`` (training a list of runs here, in
-worker processes or on Ray, for ``reproduce`` and the other sweeps) and ``floor`` (a training
-step's matrix products, timed alone, for ``benchmark``).
+Rooms by purpose, each importing only the others' public names:
+
+- ``paper``: the paper's reproduction (``reproduce``: tables, figures, docs pages; the figure registry).
+- ``scenes``: the scene study (``scene_study``, ``scene_metrics``, ``scene_report``).
+- ``speed``: benchmarks and the integrator study (``benchmark``, ``floor``, ``benchmark_orbits``,
+  ``benchmark_pixels``, ``speed_accuracy``).
+- ``sweep`` (mapping run configs to trained runs, here, in worker processes or on Ray),
+  ``provenance`` (commit, versions, machine for every JSON written) and ``readme`` (the generated
+  blocks of README.md and docs/).
+
+``reproduce.py`` and ``scene_study.py`` at this level are the README's entry points
+(``python analysis/reproduce.py --quick``); every command also runs by its own path.
 """

@@ -4,8 +4,8 @@ README.md or a page of docs/, and the curated figures in docs/figures/.
 Every generated section is written only this way, never by hand, by the command that measures it:
 
     python analysis/reproduce.py --update-docs        # docs/results.md, the README's headline, docs/figures/
-    python analysis/benchmark.py --update-docs        # docs/speed.md
-    python analysis/speed_accuracy.py --update-docs   # docs/integrators.md
+    python analysis/speed/benchmark.py --update-docs        # docs/speed.md
+    python analysis/speed/speed_accuracy.py --update-docs   # docs/integrators.md
     python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
 """

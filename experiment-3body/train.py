@@ -6,31 +6,29 @@
 The dataset (5000 orbits, 100000 rows) is generated once per seed and cached as an .npz in
 --save_dir. Weight decay 1e-4 is the original's hard-coded value.
 """
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import hnn
 
 HERE = Path(__file__).resolve().parent
 
 
-def parse_args(argv=None):
-    parser = hnn.cli.make_parser("Task 4b: three bodies under Newtonian gravity (G = 1, unit masses)",
-                                 name="3body", input_dim=12, weight_decay=1e-4, total_steps=10000,
-                                 batch_size=600, save_dir=str(HERE))
-    hnn.nbody.add_dataset_flags(parser)
-    return parser.parse_args(argv)
-
-
-def dataset(args) -> dict:
-    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
-    return hnn.load_task("3body").get_dataset(seed=args.seed, save_dir=args.save_dir,
-                                           min_separation=args.min_separation)
+@dataclass
+class Config(hnn.nbody.OrbitConfig):
+    """Task 4b: three bodies under Newtonian gravity (G = 1, unit masses)."""
+    name: str = "3body"
+    input_dim: int = 12
+    total_steps: int = 10000
+    batch_size: int | None = 600
+    save_dir: str = str(HERE)
+    TASK: ClassVar[str] = "3body"
 
 
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
-    args = parse_args(argv)
-    return hnn.run_experiment(args, lambda: dataset(args))
+    return hnn.run_experiment(hnn.cli.parse(Config, argv))
 
 
 if __name__ == "__main__":

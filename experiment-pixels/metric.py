@@ -15,7 +15,6 @@ one) are ``PixelProtocol`` instances in this task's ``task.py``.
 """
 from __future__ import annotations
 
-import argparse
 import functools
 import math
 from dataclasses import asdict, dataclass
@@ -28,7 +27,8 @@ import hnn
 from hnn.evaluation import check_integrator, describe_integrator, energy_bump, float64_copy, rollout_options
 from hnn.integrate import rollout
 from hnn.metrics import energy_mse
-from hnn.runs import atomic_write, load_run, run_dir, write_json
+from hnn.io import atomic_write, write_json
+from hnn.runs import load_run, run_dir
 
 NAME = "pixels"
 
@@ -175,8 +175,8 @@ def _save_rollout(path, truth: np.ndarray, decoded: np.ndarray) -> None:
 
 def _sibling_run_name(args: dict) -> str:
     """The folder name of the run whose args are ``args`` with the model flipped (hnn <-> baseline)."""
-    flipped = not args["baseline"]
-    return run_dir(argparse.Namespace(**{**args, "baseline": flipped, "model": "baseline" if flipped else "hnn"})).name
+    flipped = "hnn" if args["model"] == "baseline" else "baseline"
+    return run_dir(hnn.tasks.task_config(NAME, {**args, "model": flipped})).name
 
 
 def _protocols() -> dict:
@@ -230,7 +230,7 @@ def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500,
     runs of this seed exist in the same folder; the add-energy demo for an HNN). Returns the metrics."""
     directory = Path(directory)
     model, args, metrics = load_run(directory)
-    label = "baseline" if args["baseline"] else "hnn"
+    label = args["model"]
     energy, result = _measure(system, model, label, dataset, render_size)
     metrics.update(energy)
     write_json(directory / "metrics.json", metrics)

@@ -23,10 +23,8 @@ TASK = hnn.TaskSpec(
     figure_settings={"pixel_add_energy": metric.ADD_ENERGY},
     cost=250,
     # --quick renders 50 trajectories instead of 200
-    quick_argv=("--trials", "50"),
+    quick={"trials": 50},
     # train.py's own evaluation is skipped: reproduce evaluates both models together
-    train_argv=("--no_eval",),
+    settings={"no_eval": True},
     evaluate=metric.evaluate,
-    # a pixel model's latent HNN or MLP: the structured kinds are not wired into PixelHNN
-    models=("baseline", "hnn"),
 )

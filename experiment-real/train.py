@@ -7,34 +7,36 @@ Trains on the Schmidt & Lipson (2009) measurements that ship beside this file (D
 another copy (real_pend_h_1.txt or invar_datasets.zip) in --data_dir DIR or $HNN_DATA_DIR. Weight decay 1e-5 is the original
 code's hard-coded value (the paper says 1e-4); training is full batch (445 rows).
 """
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import hnn
+from hnn.config import setting
 
 HERE = Path(__file__).resolve().parent
 
 
-def parse_args(argv=None):
-    parser = hnn.cli.make_parser("Task 3: the real pendulum (Schmidt & Lipson 2009 measurements)", name="real",
-                                 input_dim=2, weight_decay=1e-5, save_dir=str(HERE))
-    parser.add_argument("--data_dir", type=str, default=None,
-                        help="folder holding real_pend_h_1.txt or invar_datasets.zip; "
-                             "default: $HNN_DATA_DIR, else the copy shipped in experiment-real/")
-    parser.add_argument("--split", choices=("original", "dhnn"), default="original",
-                        help="original: the HNN paper's forward differences and split; dhnn: the D-HNN paper's "
-                             "central differences and split of the same file (Sosanya & Greydanus 2022)")
-    return parser.parse_args(argv)
+@dataclass
+class Config(hnn.RunConfig):
+    """Task 3: the real pendulum (Schmidt & Lipson 2009 measurements)."""
+    name: str = "real"
+    weight_decay: float = 1e-5
+    save_dir: str = str(HERE)
+    data_dir: str | None = setting(None, "folder holding real_pend_h_1.txt or invar_datasets.zip; default: "
+                                         "$HNN_DATA_DIR, else the copy shipped in experiment-real/", parse=str)
+    split: str = setting("original", "original: the HNN paper's forward differences and split; dhnn: the D-HNN "
+                                     "paper's central differences and split of the same file (Sosanya & Greydanus "
+                                     "2022)", choices=("original", "dhnn"))
+    DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("data_dir", "split")
 
-
-def dataset(args) -> dict:
-    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
-    return hnn.load_task("real").get_dataset(data_dir=args.data_dir, split=getattr(args, "split", "original"))
+    def dataset(self) -> dict:
+        return hnn.load_task("real").get_dataset(data_dir=self.data_dir, split=self.split)
 
 
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
-    args = parse_args(argv)
-    return hnn.run_experiment(args, lambda: dataset(args))
+    return hnn.run_experiment(hnn.cli.parse(Config, argv))
 
 
 if __name__ == "__main__":

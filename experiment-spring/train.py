@@ -3,6 +3,7 @@
     python experiment-spring/train.py --verbose              # HNN
     python experiment-spring/train.py --verbose --baseline   # baseline
 """
+from dataclasses import dataclass
 from pathlib import Path
 
 import hnn
@@ -10,20 +11,19 @@ import hnn
 HERE = Path(__file__).resolve().parent
 
 
-def parse_args(argv=None):
-    return hnn.cli.make_parser("Task 1: the ideal mass-spring, H = q^2 + p^2", name="spring", input_dim=2,
-                               weight_decay=1e-4, save_dir=str(HERE)).parse_args(argv)
+@dataclass
+class Config(hnn.RunConfig):
+    """Task 1: the ideal mass-spring, H = q^2 + p^2."""
+    name: str = "spring"
+    save_dir: str = str(HERE)
 
-
-def dataset(args) -> dict:
-    """The dataset a run with these flags trains on (evaluation rebuilds it from a run's saved args)."""
-    return hnn.load_task("spring").get_dataset(seed=args.seed)
+    def dataset(self) -> dict:
+        return hnn.load_task("spring").get_dataset(seed=self.seed)
 
 
 def main(argv=None):
     """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
-    args = parse_args(argv)
-    return hnn.run_experiment(args, lambda: dataset(args))
+    return hnn.run_experiment(hnn.cli.parse(Config, argv))
 
 
 if __name__ == "__main__":

@@ -7,14 +7,14 @@ the training loop, the paper's metrics, and saved runs.
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
 """
 from .errors import ConvergenceError, DivergenceError
-from .integrate import rk4_step, rollout
-from .fixed_step import YOSHIDA_WEIGHTS
+from .integrate import rollout
+from .fixed_step import YOSHIDA_WEIGHTS, rk4_step
 from .solvers import SOLVERS, SYMPLECTIC_METHODS, Solver, get_solver, register_solver
-from . import symplectic  # noqa: F401  (the old name of hnn.fixed_step, still importable as hnn.symplectic)
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
 from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
 from .structured import DissipativeHNN, SeparableHNN
-from .objectives import MODEL_KINDS, DerivativeObjective, Objective, PixelObjective, register_model_kind
+from .objectives import MODEL_KINDS, DerivativeObjective, ModelKind, Objective, PixelObjective, register_model_kind
+from .config import RunConfig
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import TaskSpec, available_tasks, load_task, task_spec
 from .training import train
@@ -28,9 +28,9 @@ __all__ = [
     "SOLVERS", "Solver", "get_solver", "register_solver",
     "train",
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
-    "run_experiment", "run_dir", "save_run", "load_run", "find_run",
+    "RunConfig", "run_experiment", "run_dir", "save_run", "load_run", "find_run",
     "SeparableHNN", "DissipativeHNN",
-    "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "register_model_kind",
+    "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind", "register_model_kind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
     "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "objectives", "paper",
 ]

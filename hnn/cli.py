@@ -1,13 +1,12 @@
-"""One argument parser for every ``train.py``: the original's flags, declared and checked once.
+"""The command line of every ``train.py``, built from its ``hnn.RunConfig`` subclass.
 
-Each task passes its own defaults (the original hard-coded some of them, such as the weight
-decay; here every knob is a flag with the original's value as its default). A bad flag or
-value stops the parse with the usage and one ``error: ...`` line naming the value and the fix
-(exit code 2, as argparse). A flag declared ``display_only=True`` changes what is printed or how
-fast, never what is trained: ``hnn.find_run`` ignores it when it looks for a saved run with the
-same args (the parsed namespace lists them in ``args.display_only``). ``run_main`` runs a ``train.py`` as a command: the package's input
-errors raised while running (a missing data file, say) become such a line too, and it prints
-the run folder at the end.
+Every field of the config is a flag with the field's name and default (``--input_dim``,
+``--total_steps``, ``--verbose``, ...); ``--baseline``, the original's flag, means ``--model
+baseline``. A bad flag or value stops the parse with the usage and one ``error: ...`` line
+naming the value and the fix (exit code 2, as argparse); so does a ``--save_dir`` that is a file
+or cannot be written, before anything trains. ``run_main`` runs a ``train.py`` as a command: the
+package's input errors raised while running (a missing data file, say) become such a line too,
+and it prints the run folder at the end.
 
     if __name__ == "__main__":
         hnn.cli.run_main(main)
@@ -15,6 +14,8 @@ the run folder at the end.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import inspect
 import math
 import re
 import sys
@@ -23,16 +24,14 @@ from pathlib import Path
 
 import torch
 
-from .models import FIELD_TYPES, NONLINEARITIES
-from .objectives import MODEL_KINDS
+from . import objectives
+from .io import check_save_dir
 
 USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it
 # Exceptions that mean "the input is wrong", not "the code is": values the parser cannot check
 # (the package raises ValueError naming the value and the fix), missing data files, and a
 # --save_dir that cannot be written. Anything else keeps its traceback.
 INPUT_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, PermissionError)
-# the shared display-only flags (a task declares its own with display_only=True)
-DISPLAY_ONLY = ("verbose", "debug")
 
 
 def _one_line(text) -> str:
@@ -40,18 +39,10 @@ def _one_line(text) -> str:
     return " ".join(str(text).split())
 
 
-class RunArgs(argparse.Namespace):
-    """Parsed flags; ``display_only`` (a slot, so not in ``vars(args)`` nor in args.json) names the
-    flags that change what is printed or how fast, never what is trained."""
-    __slots__ = ("display_only",)
-
-
 class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``, and
-    whose ``add_argument`` takes ``display_only=True`` (parsed into a ``RunArgs``)."""
+    """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``."""
 
     def __init__(self, *args, **kwargs):
-        self.display_only: set[str] = set()
         super().__init__(*args, **kwargs)
         # argparse (before 3.13) reads "--learn_rate -1e-3" as a flag missing its value; no
         # option here looks like a number, so let every negative number reach the type check
@@ -60,21 +51,6 @@ class Parser(argparse.ArgumentParser):
     def error(self, message):
         self.print_usage(sys.stderr)
         self.exit(USAGE_ERROR, f"error: {_one_line(message)}\n")
-
-    def add_argument(self, *args, display_only: bool = False, **kwargs):
-        action = super().add_argument(*args, **kwargs)
-        if display_only:
-            self.display_only.add(action.dest)
-        return action
-
-    def parse_known_args(self, args=None, namespace=None):
-        if namespace is None:
-            namespace = RunArgs()
-            namespace.display_only = tuple(sorted(self.display_only))
-        parsed, rest = super().parse_known_args(args, namespace)
-        if hasattr(parsed, "model") and hasattr(parsed, "baseline"):
-            _resolve_model(self, parsed)
-        return parsed, rest
 
 
 # ----------------------------------------------------------------------------------------------
@@ -123,7 +99,7 @@ def fraction(text: str) -> float:
     return _finite_float(text, "in (0, 1]", lambda v: 0 < v <= 1)
 
 
-def _optional_int(text: str) -> int | None:
+def optional_int(text: str) -> int | None:
     """``--batch_size``: a positive integer, or none/0/full for the full batch (None)."""
     if text.lower() in ("none", "0", "full"):
         return None
@@ -146,90 +122,111 @@ def _fixed_width(width: int, task: str, state: str) -> Callable[[str], int]:
     return parse
 
 
-def _device(text: str) -> str:
+def device(text: str) -> str:
     """``--device``: a torch device string this machine has (kept as text: it is saved in args.json)."""
     try:
-        device = torch.device(text)
+        found = torch.device(text)
     except RuntimeError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a torch device; use e.g. cpu, cuda or cuda:1") from None
-    backend = getattr(torch, device.type, None)     # torch.cuda, torch.mps, ...: None for exotic types
-    if device.type != "cpu" and backend is not None and not backend.is_available():
-        raise argparse.ArgumentTypeError(f"{text!r}: this torch build sees no {device.type} device; use --device cpu")
-    if device.type != "cpu" and device.index is not None and backend is not None \
-            and device.index >= backend.device_count():
-        raise argparse.ArgumentTypeError(f"{text!r}: only {backend.device_count()} {device.type} device(s) here, "
+    backend = getattr(torch, found.type, None)     # torch.cuda, torch.mps, ...: None for exotic types
+    if found.type != "cpu" and backend is not None and not backend.is_available():
+        raise argparse.ArgumentTypeError(f"{text!r}: this torch build sees no {found.type} device; use --device cpu")
+    if found.type != "cpu" and found.index is not None and backend is not None \
+            and found.index >= backend.device_count():
+        raise argparse.ArgumentTypeError(f"{text!r}: only {backend.device_count()} {found.type} device(s) here, "
                                          "numbered from 0")
     return text
 
 
 # ----------------------------------------------------------------------------------------------
-# the parser
+# the parser of a config class
 
 
-def _model_choices() -> list[str]:
-    """The model kinds a task's ``--model`` may name (the pixel kinds are the pixel task's own)."""
-    return [kind for kind in MODEL_KINDS if "-" not in kind]
+def field_meta(cls: type, name: str) -> dict:
+    """The ``hnn.config.setting`` metadata of field ``name`` of dataclass ``cls``: a subclass that
+    only changes a default inherits the help text and parsing of the class that declared the field."""
+    for klass in cls.__mro__:
+        found = getattr(klass, "__dataclass_fields__", {}).get(name)
+        if found is not None and found.metadata:
+            return dict(found.metadata)
+    return {}
 
 
-def _resolve_model(parser: argparse.ArgumentParser, args) -> None:
-    """``--baseline`` means ``--model baseline`` (the original's flag); both set ``args.model`` and
-    ``args.baseline`` consistently, and a contradiction is an error."""
-    if args.baseline and args.model not in (None, "baseline"):
-        parser.error(f"--baseline contradicts --model {args.model}; pass one of them")
-    args.model = "baseline" if args.baseline else (args.model or "hnn")
-    args.baseline = args.model == "baseline"
+def model_choices(cls=None) -> list[str]:
+    """The model kinds ``--model`` of config class ``cls`` takes: its ``MODELS``, else every
+    registered kind without a family prefix (the pixel kinds are the pixel task's own)."""
+    declared = getattr(cls, "MODELS", None)
+    return list(declared) if declared else [kind for kind in objectives.MODEL_KINDS if "-" not in kind]
 
 
-def make_parser(description: str, *, name: str, input_dim: int, save_dir: str, weight_decay: float,
-                total_steps: int = 2000, batch_size: int | None = None, learn_rate: float = 1e-3,
-                hidden_dim: int = 200, rk4_help: str | None = None,
-                state: str = "state x = [q, p]") -> argparse.ArgumentParser:
-    """The shared flags with one task's defaults; a task may add flags of its own.
+def _flag_type(cls, f: dataclasses.Field, meta: dict):
+    """How the text of field ``f``'s flag becomes its value."""
+    if f.name == "input_dim":
+        # the original's flag, but the task fixes the state width: only that value parses
+        return _fixed_width(f.default, getattr(cls, "name", "this"), getattr(cls, "STATE", "state"))
+    if meta.get("parse"):
+        return meta["parse"]
+    return type(f.default) if f.default is not None else str
 
-    ``name`` is the task's name (the default run name); ``input_dim`` its fixed state width,
-    the only value ``--input_dim`` accepts; ``state`` says what that width measures, for the
-    error message.
-    """
-    p = Parser(description=description, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--input_dim", type=_fixed_width(input_dim, name, state), default=input_dim,
-                   help=f"width of the {state} (fixed by the task)")
-    p.add_argument("--hidden_dim", type=int_at_least(1), default=hidden_dim, help="hidden units per layer of the MLP")
-    p.add_argument("--learn_rate", type=positive_float, default=learn_rate, help="Adam learning rate")
-    p.add_argument("--weight_decay", type=nonnegative_float, default=weight_decay,
-                   help="Adam weight decay (hard-coded per task in the original)")
-    p.add_argument("--batch_size", type=_optional_int, default=batch_size,
-                   help="minibatch size; none/0/full = full batch")
-    p.add_argument("--train_fraction", type=fraction, default=1.0,
-                   help="train on this fraction of the training rows, drawn once from the seed (the test set "
-                        "stays whole); for studies of how much data a model needs")
-    p.add_argument("--nonlinearity", type=str, default="tanh", choices=NONLINEARITIES,
-                   help="activation of the MLP")
-    p.add_argument("--total_steps", type=int_at_least(0), default=total_steps,
-                   help="optimizer steps; the loop runs total_steps + 1, as the original")
-    p.add_argument("--print_every", type=int_at_least(1), default=200, help="print (and test) every N steps")
-    p.add_argument("--name", type=str, default=name, help="run name, the prefix of the run folder")
-    p.add_argument("--baseline", action="store_true", help="train the baseline (an MLP predicting dx/dt directly); "
-                   "the same as --model baseline")
-    p.add_argument("--model", choices=_model_choices(), default=None,
-                   help="model kind: hnn (the paper's), baseline, separable (H = T(p) + V(q): explicit leapfrog is "
-                        "symplectic for it) or dissipative (J grad H + grad D: learns friction); default hnn")
-    p.add_argument("--use_rk4", action="store_true", help=rk4_help or (
-        "fit the RK4 average slope of the learned field over one data time step dt, (x(t+dt) - x(t))/dt "
-        "of one RK4 step, to the true dx/dt (the original crashed on this flag); default: fit dx/dt itself"))
-    p.add_argument("--verbose", action="store_true", display_only=True, help="print the loss every print_every steps")
-    p.add_argument("--field_type", type=str, default="solenoidal", choices=FIELD_TYPES,
-                   help="solenoidal (Hamiltonian), conservative, or both")
-    p.add_argument("--seed", type=int_at_least(0), default=0,
-                   help="seeds the dataset, the init and the minibatches")
-    p.add_argument("--save_dir", type=str, default=save_dir,
-                   help="folder that receives the run folder <name>-<hnn|baseline>-seed<seed>/")
-    p.add_argument("--device", type=_device, default="cpu", help="torch device, e.g. cpu or cuda")
-    p.add_argument("--dtype", type=str, default="float32", choices=("float32", "float64"),
-                   help="dtype of the model and the data")
-    p.add_argument("--debug", action="store_true", display_only=True,
-                   help="on an input error (a missing data file, say), show the full traceback "
-                        "instead of one error: line")
+
+def make_parser(cls, description: str | None = None) -> Parser:
+    """An argparse parser with one flag per field of the config dataclass ``cls``, its
+    ``setting`` help and parsing, the class's defaults, and ``--baseline`` beside ``--model``."""
+    help_of = getattr(cls, "HELP", {})
+    p = Parser(description=description or inspect.getdoc(cls), formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    for f in dataclasses.fields(cls):
+        meta = field_meta(cls, f.name)
+        text = help_of.get(f.name, meta.get("help", ""))
+        if f.type in (bool, "bool"):
+            p.add_argument(f"--{f.name}", action="store_true", help=text)
+        elif f.name == "model":
+            # no argparse default, so that --baseline can tell an explicit --model from none
+            p.add_argument("--model", choices=model_choices(cls), default=argparse.SUPPRESS,
+                           help=f"{text} (default: {f.default})")
+            p.add_argument("--baseline", action="store_true",
+                           help="train the baseline (an MLP predicting dx/dt directly): the original's flag, the "
+                                "same as --model baseline")
+        else:
+            p.add_argument(f"--{f.name}", type=_flag_type(cls, f, meta), choices=meta.get("choices"),
+                           default=f.default, help=text)
     return p
+
+
+def parse(cls, argv: Sequence[str] | None = None):
+    """The config of class ``cls`` that the command line ``argv`` (default ``sys.argv[1:]``) asks
+    for; a bad flag or value exits with one ``error:`` line (code 2)."""
+    parser = make_parser(cls)
+    values = vars(parser.parse_args(argv))
+    # the original's --baseline is --model baseline: this is the one place it is mapped
+    model = values.get("model", cls.model)
+    if values.pop("baseline", False):
+        if values.get("model", "baseline") != "baseline":
+            parser.error(f"--baseline contradicts --model {model}; pass one of them")
+        model = "baseline"
+    values["model"] = model
+    try:
+        check_save_dir(values["save_dir"])
+    except ValueError as err:
+        parser.error(f"--{err}")
+    return cls(**values)
+
+
+def check(config) -> None:
+    """Raise ValueError naming the field, the value and the rule, for a config built in Python
+    with a value its flag would refuse."""
+    cls = type(config)
+    for f in dataclasses.fields(cls):
+        value, meta = getattr(config, f.name), field_meta(cls, f.name)
+        choices = model_choices(cls) if f.name == "model" else meta.get("choices")
+        if choices and value not in choices:
+            raise ValueError(f"{f.name}={value!r}: choose one of {', '.join(map(str, choices))}")
+        if isinstance(value, bool) or (value is None and f.default is None):     # a switch, or an unset option
+            continue
+        if meta.get("parse") or f.name == "input_dim":
+            try:
+                _flag_type(cls, f, meta)(str(value))
+            except argparse.ArgumentTypeError as err:
+                raise ValueError(f"{f.name}={value!r}: {err}") from None
 
 
 # ----------------------------------------------------------------------------------------------

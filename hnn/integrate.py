@@ -12,8 +12,7 @@ import warnings
 import numpy as np
 import torch
 
-from .errors import DivergenceError  # noqa: F401  (hnn.integrate.DivergenceError, as before)
-from .fixed_step import Field, rk4_step  # noqa: F401  (hnn.integrate.rk4_step, as before)
+from .fixed_step import Field
 from .solvers import Solver, get_solver
 from .tanh_mlp import frozen_weights
 

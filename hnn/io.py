@@ -75,3 +75,18 @@ def _move_in(tmp: Path, path: Path, aside: Path) -> None:
         raise
     if replaced:
         shutil.rmtree(aside, ignore_errors=True)
+
+
+def check_save_dir(save_dir) -> None:
+    """Raise ValueError naming ``save_dir`` and the fix when run folders cannot be written there
+    (it is a file, or it cannot be created or written); creates it otherwise."""
+    path = Path(save_dir)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"save_dir {save_dir}: is a file, not a folder; pass a folder (it is created if missing)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ValueError(f"save_dir {save_dir}: cannot create it ({err.strerror or err}); pass a folder you can "
+                         "write") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ValueError(f"save_dir {save_dir}: not writable; pass a folder you can write")

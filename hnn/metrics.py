@@ -4,11 +4,25 @@
   standard deviation (unbiased) divided by sqrt(number of rows), as the original prints it.
 - ``energy_mse``: squared energy error, mean ± ``batch_means_se`` over 5 contiguous groups
   (the original's ``bootstrap_conf``: a batch-means standard error, not a bootstrap).
+
+Per trajectory (the scene study, the integrator study):
+
+- ``relative_error``: e(t) = |pred - true| / (|pred| + |true|) along rollouts.
+- ``summarize_errors``: the geometric mean of e(t) and the valid prediction time (until e(t)
+  first exceeds ``VALID_ERROR``).
+- ``energy_drift``: max |H(t) - H(0)|, or relative to |H(0)|.
 """
 from __future__ import annotations
 
+import statistics
+
 import numpy as np
 import torch
+
+VALID_ERROR = 0.1          # a prediction is "valid" while its relative error stays below this
+# more numbers of a rollout's relative error: name -> metric(err (batch, times), t (times,)) -> a
+# JSON value; every study that summarizes rollouts (summarize_errors) reports each one
+ROLLOUT_METRICS: dict = {}
 
 
 def _to_numpy(a) -> np.ndarray:
@@ -58,3 +72,40 @@ def energy_mse(energy_true, energy_pred, splits: int = 5) -> tuple[float, float]
         raise ValueError(f"energy arrays differ in shape: {e_true.shape} vs {e_pred.shape}")
     dist = (e_true.astype(np.float64) - e_pred.astype(np.float64)) ** 2
     return float(dist.mean()), batch_means_se(dist, splits)
+
+
+def relative_error(pred: torch.Tensor, true: torch.Tensor) -> np.ndarray:
+    """e(t) ``(batch, times)`` of two ``(batch, times, dim)`` trajectories; 0 where both are 0."""
+    pred, true = pred.double(), true.double()
+    den = pred.norm(dim=-1) + true.norm(dim=-1)
+    err = (pred - true).norm(dim=-1) / torch.where(den > 0, den, torch.ones_like(den))
+    return err.numpy()
+
+
+def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
+    """Geometric mean over t > 0 and valid prediction time of each row of ``err`` ``(batch, times)``.
+
+    Returns ``{"error": mean over trajectories of the geometric means, "error_per_trajectory",
+    "valid_time": median over trajectories, "valid_times", "horizon"}``; a trajectory that never
+    leaves ``VALID_ERROR`` counts the whole horizon (``valid_time == horizon`` means "at least").
+    Each metric of ``ROLLOUT_METRICS`` adds its entry.
+    """
+    after = np.clip(err[:, 1:], 1e-16, None)        # e(0) = 0 exactly: the log would be -inf
+    geo = np.exp(np.log(after).mean(axis=1))
+    valid = []
+    for row in err:
+        bad = np.nonzero(row > VALID_ERROR)[0]
+        valid.append(float(t[bad[0]] - t[0]) if len(bad) else float(t[-1] - t[0]))
+    out = {"error": float(geo.mean()), "error_per_trajectory": geo.tolist(),
+           "valid_time": float(statistics.median(valid)), "valid_times": valid, "horizon": float(t[-1] - t[0])}
+    return {**out, **{name: metric(err, t) for name, metric in ROLLOUT_METRICS.items()}}
+
+
+def energy_drift(H: torch.Tensor, H0: torch.Tensor | None = None, relative: bool = False) -> float:
+    """max over trajectories and times of |H(t) - H0|, ``H`` of shape ``(batch, times)``; ``H0``
+    ``(batch,)`` defaults to ``H[:, 0]``; ``relative`` divides by |H0| (at least 1e-12)."""
+    if H0 is None:
+        H0 = H[:, 0]
+    if relative:
+        return float(((H - H0[:, None]).abs() / H0.abs().clamp_min(1e-12)[:, None]).max())
+    return float((H - H0[:, None]).abs().max())

@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from .integrate import rk4_step
+from .fixed_step import rk4_step
 
 _NONLINEARITIES = {
     "tanh": tanh_mlp._tanh,

@@ -20,13 +20,16 @@ import functools
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 import torch
 
-from .integrate import DivergenceError, rollout
+from .config import RunConfig, setting
+from .errors import DivergenceError
+from .integrate import rollout
 from .cache import get_cached_dataset
+from .tasks import load_task
 
 # A trajectory is redrawn when two bodies come closer than this at any state the integrator
 # evaluated. For these unit-mass systems the typical separation is 1-2 and the forces 0.3-1.
@@ -143,11 +146,19 @@ def angular_momentum(x: torch.Tensor) -> torch.Tensor:
     return (q[..., 0] * p[..., 1] - q[..., 1] * p[..., 0]).sum(-1)
 
 
-def add_dataset_flags(parser) -> None:
-    """The orbit tasks' dataset flag(s) for a ``train.py`` parser."""
-    parser.add_argument("--min_separation", type=float, default=TASK_MIN_SEPARATION,
-                        help="redraw orbits whose bodies come closer than this (close encounters); "
-                             f"0 keeps them all, as the original did; {MIN_SEPARATION} gives the cleaned dataset")
+@dataclass
+class OrbitConfig(RunConfig):
+    """The orbit tasks' config: ``min_separation`` beside the shared fields; a subclass names its
+    task (``TASK``, the folder whose ``get_dataset`` it calls) and its defaults."""
+    min_separation: float = setting(TASK_MIN_SEPARATION, "redraw orbits whose bodies come closer than this (close "
+                                    f"encounters); 0 keeps them all, as the original did; {MIN_SEPARATION} gives "
+                                    "the cleaned dataset", parse=float)
+    TASK: ClassVar[str] = ""
+    DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "save_dir", "min_separation")
+
+    def dataset(self) -> dict:
+        return load_task(self.TASK).get_dataset(seed=self.seed, save_dir=self.save_dir,
+                                                min_separation=self.min_separation)
 
 
 def min_separation(x: torch.Tensor) -> torch.Tensor:

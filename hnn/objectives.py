@@ -1,22 +1,25 @@
 """What a run fits: the model kind, the dataset arrays it trains on, its loss and its final numbers.
 
-    hnn.run_experiment(args, dataset)                          # DerivativeObjective: x -> dx/dt
-    hnn.run_experiment(args, dataset, hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
+    hnn.run_experiment(config)                                   # config.objective(): the kind's
+    hnn.run_experiment(config, dataset, hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
 An objective builds the untrained model that a run's args describe (its init draws from torch's
 global generator, seeded by the run), gives ``hnn.train`` its options, and measures the final
-train and test numbers. Its model kind (``'hnn'``, ``'baseline'``, ``'pixel-hnn'``,
-``'pixel-baseline'``) is saved in the run's ``args.json`` as ``"model"``, and ``model_from_args``
-rebuilds a saved run's model from it through ``MODEL_KINDS``. A new model kind is one entry there
+train and test numbers. The run's model kind (``'hnn'``, ``'baseline'``, ``'pixel-hnn'``, ...;
+``RunConfig.kind``) is saved in its ``args.json`` as ``"kind"``, and ``model_from_args`` rebuilds
+a saved run's model from it through ``MODEL_KINDS``. A new model kind is one entry there
 (``register_model_kind(name, objective class, build)``); a new kind of objective is an
 ``Objective`` subclass.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import torch
 from torch import nn
 
-from .integrate import rk4_step
+from .fixed_step import rk4_step
 from .metrics import derivative_loss, mean_and_se
 from .models import PixelHNN, build_model
 from .structured import DissipativeHNN, SeparableHNN
@@ -25,22 +28,15 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
 
 class Objective:
-    """The interface: subclasses set ``prefix`` and implement ``build`` and ``final_loss``.
+    """The interface: subclasses implement ``final_loss`` (and ``train_options`` if they need any).
 
     ``arrays`` names the dataset's ``(inputs, targets, test inputs, test targets)``, each ``(rows, width)``.
     """
-    prefix = ""
     arrays: tuple[str, str, str, str] = ("x", "dxdt", "test_x", "test_dxdt")
 
-    def kind(self, args: dict) -> str:
-        """The model kind of a run with these args, saved as ``"model"`` in its args.json: the
-        ``model`` flag when a task has one, else this objective's baseline or HNN."""
-        label = args.get("model") or ("baseline" if args["baseline"] else "hnn")
-        return label if label.startswith(self.prefix) else self.prefix + label
-
     def build(self, args: dict) -> nn.Module:
-        """The untrained model of this run's kind (float32 unless ``args["dtype"]`` says otherwise)."""
-        return _typed(_registered(self.kind(args))[1](args), args)
+        """The untrained model of the run's ``args["kind"]`` (float32 unless ``args["dtype"]`` says otherwise)."""
+        return _typed(_registered(args["kind"]).build(args), args)
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""
@@ -83,8 +79,6 @@ class PixelObjective(Objective):
     The latent noise (``input_noise``) draws from its own generator seeded ``seed + 2``;
     ``use_rk4`` steps the latent by RK4 instead of Euler.
     """
-    prefix = "pixel-"
-
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
@@ -124,43 +118,54 @@ def _structured_model(cls):
     return build
 
 
-# model kind -> (the objective that trains it, its builder from a run's args): the one place a kind is named
+@dataclass(frozen=True)
+class ModelKind:
+    """A registered model kind: the objective that trains it, ``build(args) -> nn.Module`` (its
+    untrained model from a run's args; also rebuilds it on load), and what the studies read:
+    ``conservative`` (it learns an H that its flow conserves, ``model.hamiltonian``),
+    ``separable`` (that H is ``T(p) + V(q)``: explicit symplectic solvers apply), ``dissipative``
+    (its flow loses energy on purpose, so no energy drift is measured) and its plot ``color``."""
+    objective: type
+    build: Callable[[dict], nn.Module]
+    conservative: bool = False
+    separable: bool = False
+    dissipative: bool = False
+    color: str = "tab:gray"
+
+
+# the one place a kind is named; a run's config says which (RunConfig.kind), its args.json too
 MODEL_KINDS = {
-    "hnn": (DerivativeObjective, _mlp_model(False)),
-    "baseline": (DerivativeObjective, _mlp_model(True)),
-    "separable": (DerivativeObjective, _structured_model(SeparableHNN)),
-    "dissipative": (DerivativeObjective, _structured_model(DissipativeHNN)),
-    "pixel-hnn": (PixelObjective, _pixel_model(False)),
-    "pixel-baseline": (PixelObjective, _pixel_model(True)),
+    "hnn": ModelKind(DerivativeObjective, _mlp_model(False), conservative=True, color="tab:blue"),
+    "baseline": ModelKind(DerivativeObjective, _mlp_model(True), color="tab:red"),
+    "separable": ModelKind(DerivativeObjective, _structured_model(SeparableHNN), conservative=True, separable=True,
+                           color="tab:green"),
+    "dissipative": ModelKind(DerivativeObjective, _structured_model(DissipativeHNN), dissipative=True,
+                             color="tab:purple"),
+    "pixel-hnn": ModelKind(PixelObjective, _pixel_model(False), conservative=True, color="tab:blue"),
+    "pixel-baseline": ModelKind(PixelObjective, _pixel_model(True), color="tab:red"),
 }
 
 
-def register_model_kind(name: str, objective: type, build) -> None:
-    """Add a model kind: runs whose args say ``"model": name`` train with ``objective`` and
-    ``build(args) -> nn.Module`` makes their untrained model (and rebuilds it on load)."""
+def register_model_kind(name: str, objective: type, build, **properties) -> None:
+    """Add a model kind: runs whose config says ``model=name`` train with ``objective``, and
+    ``build(args) -> nn.Module`` makes their untrained model (and rebuilds it on load);
+    ``properties`` are ``ModelKind``'s (``conservative``, ``separable``, ``dissipative``, ``color``)."""
     if name in MODEL_KINDS:
         raise ValueError(f"model kind {name!r} is registered already")
-    MODEL_KINDS[name] = (objective, build)
+    MODEL_KINDS[name] = ModelKind(objective, build, **properties)
 
 
-def _registered(kind: str) -> tuple:
+def _registered(kind: str) -> ModelKind:
     if kind not in MODEL_KINDS:
         raise ValueError(f"unknown model kind {kind!r}; known: {sorted(MODEL_KINDS)}")
     return MODEL_KINDS[kind]
 
 
-def _kind(args: dict) -> str:
-    """The saved ``"model"``; for runs saved before it was recorded, read off the args they hold."""
-    if args.get("model"):
-        return args["model"]
-    return ("pixel-" if "latent_dim" in args else "") + ("baseline" if args["baseline"] else "hnn")
-
-
 def objective_for(kind: str) -> Objective:
     """An objective that trains models of ``kind`` (its arrays are the defaults)."""
-    return _registered(kind)[0]()
+    return _registered(kind).objective()
 
 
 def model_from_args(args: dict) -> nn.Module:
-    """The untrained model that a run with these (saved) args trains, of the kind it recorded."""
-    return objective_for(_kind(args)).build({**args, "model": _kind(args)})
+    """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded."""
+    return objective_for(args["kind"]).build(args)

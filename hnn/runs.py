@@ -1,11 +1,13 @@
-"""A run: train one model from parsed flags, and save / load it.
+"""A run: train one model from its config (``hnn.RunConfig``), and save / load it.
 
-A run folder ``<save_dir>/<name>-<label>-seed<seed>/`` holds ``model.tar`` (state dict and
-args; loads with ``weights_only=True``), ``args.json``, ``metrics.json`` and, written last,
-``complete.json``. The folder is written as a whole: filled under a hidden temporary name
-beside it, then renamed into place, so a crash leaves the complete old run, the complete new
-one, or no folder, never a checkpoint of one run beside the args of another. Later files
-(a pixel run's ``rollout.npz`` and GIFs) are added to the finished folder one by one.
+A run folder ``<save_dir>/<name>-<model>-seed<seed>-<key>/`` (``key``: the short hash of the
+config's identity, ``RunConfig.key``) holds ``model.tar`` (state dict and args; loads with
+``weights_only=True``), ``args.json`` (the config, its model ``kind`` and its dataset's
+``dataset_cache_key``), ``metrics.json`` and, written last, ``complete.json``. The folder is
+written as a whole: filled under a hidden temporary name beside it, then renamed into place, so
+a crash leaves the complete old run, the complete new one, or no folder, never a checkpoint of
+one run beside the args of another. Later files (a pixel run's ``rollout.npz`` and GIFs) are
+added to the finished folder one by one.
 """
 from __future__ import annotations
 
@@ -18,22 +20,22 @@ import numpy as np
 import torch
 
 from . import cli
-from .io import atomic_folder, atomic_write, write_json  # noqa: F401  (hnn.runs.atomic_write, as before)
-from .objectives import DerivativeObjective, Objective, model_from_args
+from .io import atomic_folder, check_save_dir, write_json
+from .objectives import Objective, model_from_args
 from .training import train
 
-def run_label(args) -> str:
-    # the kind as its task's --model names it: a recorded family prefix ("pixel-") is the task's own
-    kind = (getattr(args, "model", None) or ("baseline" if args.baseline else "hnn")).rsplit("-", 1)[-1]
-    return kind + ("-rk4" if getattr(args, "use_rk4", False) else "")
+
+def run_label(config) -> str:
+    """The middle of a run folder's name: its ``model``, and ``-rk4`` for ``use_rk4``."""
+    return config.model + ("-rk4" if config.use_rk4 else "")
 
 
-def run_dir(args) -> Path:
-    """Where the run for these args lives: ``<save_dir>/<name>-<label>-seed<seed>``."""
-    return Path(args.save_dir) / f"{args.name}-{run_label(args)}-seed{args.seed}"
+def run_dir(config) -> Path:
+    """Where the run of this config lives: ``<save_dir>/<name>-<label>-seed<seed>-<key>``."""
+    return Path(config.save_dir) / f"{config.name}-{run_label(config)}-seed{config.seed}-{config.key()}"
 
 
-# written last into a run folder: one without it is an interrupted save (or predates this mark)
+# written last into a run folder: one without it is an interrupted save
 COMPLETE = "complete.json"
 
 
@@ -46,30 +48,10 @@ def _is_complete(directory: Path) -> bool:
     return all((directory / name).is_file() for name in files)
 
 
-# what a run adds to its flags in args.json: its model kind and its dataset's cache file (or None)
-RECORDED = ("model", "dataset_cache_key")
-# flags added after runs were saved: a saved run without one of them was trained with its default
-ADDED_FLAGS = {"train_fraction": 1.0, "split": "original"}
-
-
-def find_run(args) -> Path | None:
-    """The saved run for exactly these args, or None.
-
-    Display-only flags (``args.display_only``, which ``hnn.cli`` parsers fill from the flags
-    declared ``display_only=True``; else ``hnn.cli.DISPLAY_ONLY``) and the ``RECORDED`` keys aside.
-    """
-    directory = run_dir(args)
-    try:
-        saved = json.loads((directory / "args.json").read_text())
-    except (OSError, ValueError):
-        return None
-    ignore = set(getattr(args, "display_only", cli.DISPLAY_ONLY)) | set(RECORDED)
-    wanted = {k: v for k, v in vars(args).items() if k not in ignore}
-    saved = {**ADDED_FLAGS, **{k: v for k, v in saved.items() if k not in ignore}}
-    wanted = {**ADDED_FLAGS, **wanted}
-    if saved != wanted or not _is_complete(directory):
-        return None
-    return directory
+def find_run(config) -> Path | None:
+    """The complete saved run of this config, or None: a lookup of its folder."""
+    directory = run_dir(config)
+    return directory if _is_complete(directory) else None
 
 
 def _materialize(dataset) -> tuple[dict, float | None]:
@@ -81,34 +63,38 @@ def _materialize(dataset) -> tuple[dict, float | None]:
     return dataset, time.perf_counter() - tic
 
 
-def run_experiment(args, dataset, objective: Objective | None = None) -> Path:
-    """Train the model that ``args`` and ``objective`` describe on ``dataset`` and save the run;
-    returns its folder. Every task and model kind trains here.
+def run_experiment(config, dataset=None, objective: Objective | None = None) -> Path:
+    """Train the model that ``config`` (an ``hnn.RunConfig``) describes and save the run; returns
+    its folder. Every task and model kind trains here.
 
-    ``dataset`` holds the ``objective.arrays`` (default ``x``, ``dxdt``, ``test_x``, ``test_dxdt``,
-    ``(rows, input_dim)`` arrays) and, for ``--use_rk4``, ``dt`` (the time step of its
-    trajectories); or it is a function of no arguments returning that dict, and then the time it
-    takes is saved as ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training
-    loop alone). ``objective`` defaults to ``DerivativeObjective()`` (fit dx/dt). args.json
-    records the model kind (``"model"``) and the dataset's ``cache_key`` (``"dataset_cache_key"``).
+    ``dataset`` defaults to ``config.dataset``; it holds the ``objective.arrays`` (default ``x``,
+    ``dxdt``, ``test_x``, ``test_dxdt``, ``(rows, input_dim)`` arrays) and, for ``use_rk4``,
+    ``dt`` (the time step of its trajectories); or it is a function of no arguments returning that
+    dict, and then the time it takes is saved as ``data_seconds`` in ``metrics.json`` beside
+    ``train_seconds`` (the training loop alone). ``objective`` defaults to ``config.objective()``.
+    A value the config's flag would refuse raises ValueError before anything is built.
     """
-    objective = objective or DerivativeObjective()
-    dataset, data_seconds = _materialize(dataset)
+    cli.check(config)
+    check_save_dir(config.save_dir)
+    objective = objective or config.objective()
+    dataset, data_seconds = _materialize(config.dataset if dataset is None else dataset)
     missing = [key for key in objective.arrays if key not in dataset]
     if missing:
-        raise KeyError(f"dataset lacks {missing}; this task's get_dataset must return {list(objective.arrays)}")
-    saved = {**vars(args), "model": objective.kind(vars(args)), "dataset_cache_key": dataset.get("cache_key")}
-    torch.manual_seed(args.seed)
-    np.random.seed(args.seed)
-    model = objective.build(saved).to(args.device)
+        raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
+    saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
+    torch.manual_seed(config.seed)
+    np.random.seed(config.seed)
+    model = objective.build(saved).to(config.device)
     x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
-    x, y = training_subset(x, y, getattr(args, "train_fraction", 1.0), args.seed)
-    stats = train(model, x, y, test_x, test_y, total_steps=args.total_steps, learn_rate=args.learn_rate,
-                  weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
-                  print_every=args.print_every, verbose=args.verbose,
+    x, y = training_subset(x, y, config.train_fraction, config.seed)
+    stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
+                  weight_decay=config.weight_decay, batch_size=config.batch_size, seed=config.seed,
+                  print_every=config.print_every, verbose=config.verbose,
                   **objective.train_options(model, saved, dataset))
-    return finish_run(args, model, stats, objective.final_loss(model, x, y), objective.final_loss(model, test_x, test_y),
-                      data_seconds, saved)
+    directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
+                           objective.final_loss(model, test_x, test_y), data_seconds, saved)
+    config.finish(directory, dataset)
+    return directory
 
 
 def training_subset(x, y, fraction: float, seed: int):
@@ -124,18 +110,18 @@ def training_subset(x, y, fraction: float, seed: int):
     return x[keep], y[keep]
 
 
-def finish_run(args, model, stats: dict, train_loss, test_loss, data_seconds: float | None = None,
-               saved_args: dict | None = None) -> Path:
-    """Print (with ``--verbose``) and save a trained run: its final ``(mean, ±)`` train and test
+def finish_run(config, model, stats: dict, train_loss, test_loss, data_seconds: float | None,
+               saved_args: dict) -> Path:
+    """Print (with ``verbose``) and save a trained run: its final ``(mean, ±)`` train and test
     losses, the seconds of its data and of its loop, and the loss history ``stats``.
-    ``saved_args`` (default ``vars(args)``) is what args.json holds."""
-    if args.verbose:
+    ``saved_args`` is what args.json holds."""
+    if config.verbose:
         print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
               f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
     metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
                "test_loss": test_loss[0], "test_loss_se": test_loss[1],
                "data_seconds": data_seconds, "train_seconds": stats["seconds"], "history": stats}
-    return save_run(run_dir(args), model, saved_args or vars(args), metrics)
+    return save_run(run_dir(config), model, saved_args, metrics)
 
 
 def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Path:
@@ -165,13 +151,15 @@ def load_run(directory) -> tuple[torch.nn.Module, dict, dict]:
         raise FileNotFoundError(f"no checkpoint at {ckpt}; train it first (see the task's train.py)")
     if not _is_complete(directory):
         raise RuntimeError(f"run folder {directory} lacks {COMPLETE} or a file it lists: its save was interrupted "
-                           "(or it predates whole-folder saves); delete the run folder and retrain")
+                           "; delete the folder and retrain")
     try:
         blob = torch.load(ckpt, map_location="cpu", weights_only=True)
+        model = model_from_args(blob["args"])
+        model.load_state_dict(blob["state_dict"])
     except Exception as err:
-        raise RuntimeError(f"checkpoint {ckpt} is unreadable ({err}); delete the run folder and retrain") from err
-    model = model_from_args(blob["args"])
-    model.load_state_dict(blob["state_dict"])
+        # torch's own message advises weights_only=False, which would run code from the file
+        raise RuntimeError(f"{ckpt} does not load ({type(err).__name__}); delete the folder {directory} and "
+                           "retrain") from err
     metrics_path = directory / "metrics.json"
     metrics = json.loads(metrics_path.read_text()) if metrics_path.exists() else {}
     return model.eval(), blob["args"], metrics

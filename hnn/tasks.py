@@ -1,8 +1,8 @@
 """The tasks of this checkout, found by folder: the one place where the package knows the repo layout.
 
 Task ``name`` is the folder ``<repo>/experiment-<name>/`` holding a ``data.py`` (the system: H,
-true dynamics, sampler, ``get_dataset``), a ``train.py`` (flags, ``dataset(args)``, then
-``hnn.run_experiment``) and, optionally, a ``task.py`` that describes it with one object,
+true dynamics, sampler, ``get_dataset``), a ``train.py`` (``Config``, its ``hnn.RunConfig``
+subclass: fields, defaults and ``dataset()``; ``main`` parses the flags into one and runs it) and, optionally, a ``task.py`` that describes it with one object,
 ``TASK = hnn.TaskSpec(...)``: its place in the paper's order, energy protocols, published
 numbers, figures, training cost and extra rows. A new task is one new folder; the package lists
 no task names. Folder names have hyphens, so the modules are loaded by path, each under a
@@ -14,7 +14,6 @@ unique module name.
 """
 from __future__ import annotations
 
-import argparse
 import importlib
 import importlib.util
 import math
@@ -25,6 +24,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, ModuleType
+
+import torch
+
+from .runs import run_experiment
 
 _PREFIX = "experiment-"
 
@@ -44,18 +47,16 @@ class TaskSpec:
         figure_settings: what those figures need from the task, ``{figure name: {setting: value}}``
             plus shared keys (``x0``, the start state of the phase-plane figures).
         cost: relative wall time of one full training run (``--jobs N`` starts the longest first).
-        quick_argv: extra ``train.py`` flags for ``reproduce.py --quick`` (e.g. a smaller dataset).
-        train_argv: extra ``train.py`` flags for every run of ``reproduce.py``.
-        variants: extra table rows, ``{suffix: (train.py flags, why)}``: row ``<task>-<suffix>``
-            trains with those flags under ``--name <task>-<suffix>``, shown with its reason.
+        quick: config fields for ``reproduce.py --quick``, ``{field: value}`` (e.g. a smaller dataset).
+        settings: config fields for every run of ``reproduce.py`` and the sweeps.
+        variants: extra table rows, ``{suffix: ({field: value}, why)}``: row ``<task>-<suffix>``
+            trains with those fields under the name ``<task>-<suffix>``, shown with its reason.
         evaluate: ``evaluate(trained) -> {protocol name: result}`` replacing the default (every
             protocol through ``hnn.evaluate_energy``); ``trained`` has ``task``, ``system``,
             ``models`` (``{label: model}``), ``args`` (the runs' saved args) and ``dataset`` (the
             dataset rebuilt from them); each result has ``result[label]["mse"]`` and ``["mse_se"]``
             and a one-line ``"description"``.
         load: ``load(directory) -> (model, args, metrics)`` replacing ``hnn.load_run``.
-        models: the model kinds its ``train.py --model`` trains (``reproduce.py --models`` and
-            ``analysis/scene_study.py`` skip the others); the pixel task has its latent pair only.
     """
     order: float = math.inf
     protocols: Mapping = field(default_factory=dict)
@@ -63,12 +64,11 @@ class TaskSpec:
     figures: tuple[str, ...] = ("energy",)
     figure_settings: Mapping = field(default_factory=dict)
     cost: float = 1.0
-    quick_argv: tuple[str, ...] = ()
-    train_argv: tuple[str, ...] = ()
+    quick: Mapping = field(default_factory=dict)
+    settings: Mapping = field(default_factory=dict)
     variants: Mapping = field(default_factory=dict)
     evaluate: Callable | None = None
     load: Callable | None = None
-    models: tuple[str, ...] = ("baseline", "hnn", "separable", "dissipative")
 
 
 def repo_root() -> Path:
@@ -137,20 +137,33 @@ PROTOCOLS = _FromSpecs("protocols")
 PAPER = _FromSpecs("paper")
 
 
-def run_dataset(task: str, args: dict) -> dict:
-    """The dataset a saved run of ``task`` trained on: its ``train.py``'s ``dataset(args)`` on the
-    run's saved ``args`` (so evaluation sees that run's seed, files and sizes, not the defaults).
-    Warns when the run recorded another cache file than the one the dataset now comes from."""
+def task_config(task: str, values: Mapping | None = None):
+    """The config of a run of ``task`` (its ``train.py``'s ``Config``) with ``values`` over the
+    defaults; a saved run's args.json gives that run's config (its recorded keys aside)."""
     trainer = load_task(task, "train")
-    if not hasattr(trainer, "dataset"):
-        raise AttributeError(f"experiment-{task}/train.py has no dataset(args): add the function that "
-                             "builds the dataset a run with those flags trains on")
-    data = trainer.dataset(argparse.Namespace(**args))
+    if not hasattr(trainer, "Config"):
+        raise AttributeError(f"experiment-{task}/train.py has no Config: add its hnn.RunConfig subclass")
+    return trainer.Config.from_dict(dict(values or {}))
+
+
+def run_dataset(task: str, args: Mapping) -> dict:
+    """The dataset a saved run of ``task`` trained on: its config's ``dataset()`` from the run's
+    saved ``args`` (so evaluation sees that run's seed, files and sizes, not the defaults).
+    Warns when the run recorded another cache file than the one the dataset now comes from."""
+    data = task_config(task, args).dataset()
     recorded = args.get("dataset_cache_key")
     if recorded and data.get("cache_key") != recorded:
         warnings.warn(f"{task}: the run trained on the cached dataset {recorded}, but its args now give "
                       f"{data.get('cache_key')} (was the dataset generator changed?)", stacklevel=2)
     return data
+
+
+def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
+    """Train the run of ``task`` with config ``values`` (a sweep's job, in a worker process or a Ray
+    task; ``threads`` sets torch's thread count first); returns its folder as text."""
+    if threads is not None:
+        torch.set_num_threads(threads)
+    return str(run_experiment(task_config(task, values)))
 
 
 ANALYSIS = "hnn_analysis"   # the import name of the checkout's analysis/ folder (pyproject maps it)

@@ -45,26 +45,26 @@ def report_progress(callback: Callable[[int, int], None]) -> Iterator[None]:
         _PROGRESS_CALLBACKS.remove(callback)
 
 
-def _flushes_denormals() -> bool:
+def flushes_denormals() -> bool:
     """Whether this thread's float arithmetic flushes denormals to zero now (torch has no getter)."""
     tiny = torch.full((1,), torch.finfo(torch.float32).tiny)    # the smallest normal float32
     return bool((tiny / 2 == 0).item())                          # half of it is denormal, or 0 when flushed
 
 
-def _adam(model, learn_rate: float, weight_decay: float) -> torch.optim.Adam:
-    """The optimizer ``train`` uses (analysis/benchmark.py times steps with it too)."""
+def adam_optimizer(model, learn_rate: float, weight_decay: float) -> torch.optim.Adam:
+    """The optimizer ``train`` uses (analysis/speed/benchmark.py times steps with it too)."""
     device = next(model.parameters()).device
     # the fused kernel updates all parameters in one pass: the foreach one cost ~1 ms a step here
     return torch.optim.Adam(model.parameters(), lr=learn_rate, weight_decay=weight_decay,
                             fused=device.type in ("cpu", "cuda"))
 
 
-def _l2_loss(predict: Callable) -> Callable:
+def l2_loss(predict: Callable) -> Callable:
     """``train``'s default loss: per-element squared error of ``predict(x)`` against the targets."""
     return lambda xb, yb: (yb - predict(xb)).pow(2)
 
 
-def _batch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: torch.Generator):
+def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: torch.Generator):
     """The whole set when ``batch_size`` is None or covers it, else a random minibatch without replacement."""
     if batch_size is None or batch_size >= len(x):
         return x, y
@@ -73,8 +73,8 @@ def _batch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: torch.
     return x.index_select(0, ix), y.index_select(0, ix)
 
 
-def _step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: torch.optim.Optimizer) -> float:
-    """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/benchmark.py
+def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: torch.optim.Optimizer) -> float:
+    """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/speed/benchmark.py
     times this very function against the step's matrix-product floor."""
     batch_loss = loss(xb, yb).mean()
     batch_loss.backward()
@@ -130,12 +130,12 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         if len(test_x) != len(test_dxdt):
             raise ValueError(f"test_x has {len(test_x)} rows but test_dxdt has {len(test_dxdt)}")
     if loss is None:
-        loss = _l2_loss(predict or model.time_derivative)
+        loss = l2_loss(predict or model.time_derivative)
     if test_every is None:
         test_every = print_every
     if test_every < 1 or print_every < 1:
         raise ValueError(f"print_every and test_every must be positive, got {print_every}, {test_every}")
-    optim = _adam(model, learn_rate, weight_decay)
+    optim = adam_optimizer(model, learn_rate, weight_decay)
     gen = torch.Generator().manual_seed(seed)
     test_gen = torch.Generator().manual_seed(seed + 1)
     stats = {"train_loss": [], "test_loss": [], "test_steps": []}
@@ -146,19 +146,19 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     # Weights that only weight decay moves (e.g. those of pixels that are always dark) shrink
     # into denormal floats, and CPU arithmetic on denormals is many times slower: the pixel task
     # slowed from 28 to over 100 ms a step by step 3000. Flush them to zero while training.
-    was_flushing = _flushes_denormals()
+    was_flushing = flushes_denormals()
     torch.set_flush_denormal(True)
     try:
         start = time.perf_counter()
         for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
-            xb, yb = _batch(x, dxdt, batch_size, gen)
+            xb, yb = minibatch(x, dxdt, batch_size, gen)
             if input_noise:
                 xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
-            stats["train_loss"].append(_step(loss, xb, yb, optim))
+            stats["train_loss"].append(optimizer_step(loss, xb, yb, optim))
             for callback in callbacks:
                 callback(step + 1, total_steps + 1)
             if has_test and (step % test_every == 0 or step == total_steps):
-                tx, ty = _batch(test_x, test_dxdt, batch_size, test_gen)
+                tx, ty = minibatch(test_x, test_dxdt, batch_size, test_gen)
                 with torch.no_grad():
                     stats["test_loss"].append(loss(tx, ty).mean().item())
                 stats["test_steps"].append(step)

@@ -4,6 +4,10 @@ never a traceback; ``--debug`` shows it; a good run prints where it was saved.
 Most parse errors are checked in-process (argparse raises SystemExit); a handful run the
 script as a subprocess, the way a user does.
 """
+import dataclasses
+import functools
+import shutil
+from pathlib import Path
 import os
 import subprocess
 import sys
@@ -71,7 +75,7 @@ BAD_FLAGS = [
 @pytest.mark.parametrize("task, argv, names", BAD_FLAGS, ids=lambda v: " ".join(v) if isinstance(v, list) else v)
 def test_bad_flag_is_one_error_line(task, argv, names, capsys):
     with pytest.raises(SystemExit) as info:
-        hnn.load_task(task, "train").parse_args(argv)
+        hnn.cli.parse(hnn.load_task(task, "train").Config, argv)
     assert info.value.code == 2
     _assert_one_error(capsys.readouterr().err, *names)
 
@@ -79,14 +83,14 @@ def test_bad_flag_is_one_error_line(task, argv, names, capsys):
 @pytest.mark.parametrize("task, width", [("spring", 2), ("pend", 2), ("real", 2), ("2body", 8), ("3body", 12),
                                          ("pixels", 1568)])
 def test_defaults_and_the_task_width_parse(task, width):
-    parse = hnn.load_task(task, "train").parse_args
+    parse = functools.partial(hnn.cli.parse, hnn.load_task(task, "train").Config)
     assert parse([]).input_dim == width
     assert parse(["--input_dim", str(width)]).input_dim == width
     assert parse([]).debug is False
 
 
 def test_good_values_keep_their_meaning():
-    parse = hnn.load_task("spring", "train").parse_args
+    parse = functools.partial(hnn.cli.parse, hnn.load_task("spring", "train").Config)
     for text in ("none", "0", "full", "FULL"):
         assert parse(["--batch_size", text]).batch_size is None
     assert parse(["--batch_size", "32"]).batch_size == 32
@@ -95,7 +99,7 @@ def test_good_values_keep_their_meaning():
     args = parse(["--total_steps", "0", "--weight_decay", "0", "--learn_rate", "1e-2", "--field_type", "both",
                   "--device", "cpu"])
     assert (args.total_steps, args.weight_decay, args.learn_rate, args.field_type) == (0, 0.0, 1e-2, "both")
-    assert hnn.load_task("pixels", "train").parse_args(["--latent_dim", "4", "--trials", "5"]).latent_dim == 4
+    assert hnn.cli.parse(hnn.load_task("pixels", "train").Config, ["--latent_dim", "4", "--trials", "5"]).latent_dim == 4
 
 
 # ----------------------------------------------------------------------------------------------
@@ -137,7 +141,7 @@ def test_main_raises_for_programs_and_debug_does_not_change_the_run(tmp_path):
     trainer = hnn.load_task("spring", "train")
     argv = ["--total_steps", "0", "--save_dir", str(tmp_path)]
     run = trainer.main(argv)
-    assert find_run(trainer.parse_args(argv + ["--debug"])) == run
+    assert find_run(hnn.cli.parse(trainer.Config, argv + ["--debug"])) == run
 
 
 # ----------------------------------------------------------------------------------------------
@@ -178,6 +182,53 @@ def test_script_missing_real_data_debug_shows_the_traceback(tmp_path):
 def test_script_prints_the_saved_run(tmp_path):
     out = _run("spring", "--total_steps", "2", "--save_dir", str(tmp_path))
     assert out.returncode == 0, out.stderr
-    folder = tmp_path / "spring-hnn-seed0"
+    folder = hnn.run_dir(hnn.cli.parse(hnn.load_task("spring", "train").Config, ["--total_steps", "2", "--save_dir",
+                                                                                 str(tmp_path)]))
+    assert folder.name.startswith("spring-hnn-seed0-") and folder.is_dir()
     assert out.stdout.splitlines()[-1] == f"saved the run to {folder}"
     assert (folder / "model.tar").exists()
+
+
+@pytest.mark.parametrize("where, names", [
+    ("file", ["--save_dir", "is a file", "pass a folder"]),
+    ("unwritable", ["--save_dir", "/proc/x", "pass a folder you can write"]),
+])
+def test_script_checks_save_dir_before_training(where, names, tmp_path):
+    target = tmp_path / "a-file" if where == "file" else Path("/proc/x")
+    if where == "file":
+        target.write_text("not a folder")
+    out = _run("spring", "--total_steps", "100000", "--save_dir", str(target))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    _assert_one_error(out.stderr, *names)
+
+
+def test_a_run_with_other_flags_keeps_the_first_and_a_copied_folder_is_reused(tmp_path):
+    trainer = hnn.load_task("spring", "train")
+    first = trainer.main(["--total_steps", "3", "--save_dir", str(tmp_path / "a")])
+    second = trainer.main(["--total_steps", "2", "--hidden_dim", "16", "--save_dir", str(tmp_path / "a")])
+    assert first != second and hnn.load_run(first)[1]["total_steps"] == 3 and hnn.load_run(second)[1]["hidden_dim"] == 16
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    copied = find_run(hnn.cli.parse(trainer.Config, ["--total_steps", "3", "--save_dir", str(tmp_path / "b")]))
+    assert copied == tmp_path / "b" / first.name        # save_dir is where a run lies, not what it is
+
+
+def test_a_config_runs_from_python_with_no_argv(tmp_path):
+    Config = hnn.load_task("spring", "train").Config
+    config = Config(total_steps=2, hidden_dim=8, model="baseline", save_dir=str(tmp_path))
+    run = hnn.run_experiment(config)
+    assert run == hnn.run_dir(config) == hnn.run_dir(hnn.cli.parse(Config, [
+        "--total_steps", "2", "--hidden_dim", "8", "--baseline", "--save_dir", str(tmp_path)]))
+    assert hnn.load_run(run)[1]["kind"] == "baseline"
+    with pytest.raises(ValueError, match="hidden_dim=0: must be an integer >= 1"):
+        hnn.run_experiment(Config(hidden_dim=0, save_dir=str(tmp_path)))
+    with pytest.raises(ValueError, match="model='sideways': choose one of hnn, baseline"):
+        hnn.run_experiment(Config(model="sideways", save_dir=str(tmp_path)))
+
+
+def test_every_config_field_is_a_documented_flag():
+    for task in hnn.available_tasks():
+        Config = hnn.load_task(task, "train").Config
+        text = hnn.cli.make_parser(Config).format_help()
+        for field in dataclasses.fields(Config):
+            assert f"--{field.name}" in text, (task, field.name)
+            assert hnn.cli.field_meta(Config, field.name).get("help"), (task, field.name)

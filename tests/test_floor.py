@@ -1,19 +1,19 @@
-"""analysis/floor.py: the matrix products a training step performs, as the benchmark's floor counts them."""
+"""analysis/speed/floor.py: the matrix products a training step performs, as the benchmark's floor counts them."""
 import pytest
 import torch
 
 import hnn
-from hnn.training import _adam, _l2_loss, _step
-from hnn_analysis import benchmark, floor
+from hnn.training import adam_optimizer, l2_loss, optimizer_step
+from hnn_analysis.speed import benchmark, floor
 
 
 def _baseline_step(rows=10, hidden=8):
     torch.manual_seed(0)
     model = hnn.build_model(2, hidden, baseline=True)
     x, y = torch.randn(rows, 2), torch.randn(rows, 2)
-    optim = _adam(model, 1e-3, 0.0)
-    loss = _l2_loss(model.time_derivative)
-    return lambda: _step(loss, x, y, optim)
+    optim = adam_optimizer(model, 1e-3, 0.0)
+    loss = l2_loss(model.time_derivative)
+    return lambda: optimizer_step(loss, x, y, optim)
 
 
 def test_a_plain_mlp_step_performs_one_product_per_layer_forward_and_two_back_but_none_into_x():

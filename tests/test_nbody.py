@@ -376,8 +376,8 @@ def test_full_datasets(task, rows, test_rows, tmp_path):
 # --------------------------------------------------------------------------- train.py
 
 def test_train_flags_have_the_original_defaults():
-    two = hnn.load_task("2body", "train").parse_args([])
-    three = hnn.load_task("3body", "train").parse_args([])
+    two = hnn.cli.parse(hnn.load_task("2body", "train").Config, [])
+    three = hnn.cli.parse(hnn.load_task("3body", "train").Config, [])
     assert (two.input_dim, two.batch_size, two.total_steps, two.weight_decay, two.name) == (8, 200, 10000, 0.0, "2body")
     assert (three.input_dim, three.batch_size, three.total_steps, three.weight_decay, three.name) == (
         12, 600, 10000, 1e-4, "3body")
@@ -385,4 +385,4 @@ def test_train_flags_have_the_original_defaults():
     # the original kept close encounters; the cleaned dataset is opt-in
     assert two.min_separation == three.min_separation == 0.0
     assert hnn.load_task("2body").DEFAULTS["min_separation"] == hnn.load_task("3body").DEFAULTS["min_separation"] == 0.0
-    assert hnn.load_task("2body", "train").parse_args(["--input_noise", "0.05"]).input_noise == 0.05
+    assert hnn.cli.parse(hnn.load_task("2body", "train").Config, ["--input_noise", "0.05"]).input_noise == 0.05

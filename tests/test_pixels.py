@@ -233,11 +233,11 @@ def test_train_script_end_to_end(tmp_path, system):
         assert (run / f"truth-vs-{label}.gif").stat().st_size > 1000
         model, args, _ = hnn.load_run(run)
         assert isinstance(model, PixelHNN) and model.baseline == (label == "baseline")
-        assert args["model"] == f"pixel-{label}" and args["dataset_cache_key"].startswith("pixels-frames-")
+        assert args["kind"] == f"pixel-{label}" and args["dataset_cache_key"].startswith("pixels-frames-")
         assert (tmp_path / args["dataset_cache_key"]).is_file()          # the frames it trained on
     assert (hnn_run / "add-energy.gif").exists()
     assert (tmp_path / "pixels-compare-seed0.gif").exists()
-    assert hnn.find_run(trainer.parse_args(argv + ["--verbose", "--render_workers", "2"])) == hnn_run
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose", "--render_workers", "2"])) == hnn_run
 
 
 def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, system, metric):
@@ -248,13 +248,15 @@ def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, sys
     base_run = trainer.main(argv + ["--baseline"])
     assert not (tmp_path / "myhnn-compare-seed0.gif").exists()
     hnn_run = trainer.main(argv)
-    assert (base_run.name, hnn_run.name) == ("myhnn-baseline-seed0", "myhnn-hnn-seed0")
+    assert base_run.name.startswith("myhnn-baseline-seed0-") and hnn_run.name.startswith("myhnn-hnn-seed0-")
     assert (tmp_path / "myhnn-compare-seed0.gif").stat().st_size > 1000
     with np.load(hnn_run / "rollout.npz") as f:
         assert f["truth"].dtype == np.float32 and f["truth"].shape == f["decoded"].shape
-    args = {"name": "myhnn", "save_dir": "x", "seed": 2, "baseline": False, "use_rk4": True}
-    assert metric._sibling_run_name(args) == "myhnn-baseline-rk4-seed2"
-    assert metric._sibling_run_name({**args, "baseline": True}) == "myhnn-hnn-rk4-seed2"
+    args = {"name": "myhnn", "save_dir": "x", "seed": 2, "model": "hnn", "use_rk4": True}
+    Config = hnn.load_task("pixels", "train").Config
+    assert metric._sibling_run_name(args) == hnn.run_dir(Config(**{**args, "model": "baseline"})).name
+    assert metric._sibling_run_name({**args, "model": "baseline"}) == hnn.run_dir(Config(**args)).name
+    assert metric._sibling_run_name(args).startswith("myhnn-baseline-rk4-seed2-")
 
 
 def test_add_energy_raises_the_learned_energy():

@@ -232,7 +232,7 @@ def test_train_script_end_to_end(extra, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "step 4, train_loss" in out and "Final train loss" in out and "Final test loss" in out
     label = "baseline" if "--baseline" in extra else "hnn-rk4" if "--use_rk4" in extra else "hnn"
-    assert run == tmp_path / f"real-{label}-seed0"
+    assert run.parent == tmp_path and run.name.startswith(f"real-{label}-seed0-")
     args = json.loads((run / "args.json").read_text())
     metrics = json.loads((run / "metrics.json").read_text())
     assert args["weight_decay"] == 1e-5 and args["batch_size"] is None and args["data_dir"] is None

@@ -2,7 +2,7 @@
 
 Training amplifies the last bits of every float sum, and those depend on the thread count and on
 the CPU kernels torch picks (AVX-512 or AVX2), so the test pins one thread and every threshold is
-set from the spread measured by ``python analysis/regression_spread.py --kernels default avx2``
+set from the spread measured by ``python analysis/paper/regression_spread.py --kernels default avx2``
 (seeds 0-4 x threads 1, 2 x torch's AVX-512 and AVX2 kernels on an AVX-512 CPU: 20 trainings of
 each model), with its margin. Seeds stand in for the last-bit changes of other machines: the
 thread count moved seed 0's HNN energy MSE by 1.9x, while ATEN_CPU_CAPABILITY=avx2 changed

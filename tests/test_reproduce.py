@@ -6,7 +6,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import figures, readme, registry, reproduce
+from hnn_analysis.paper import figures, registry, reproduce
+from hnn_analysis import readme, sweep
 
 TINY = 20          # training steps of the end-to-end runs
 
@@ -76,20 +77,24 @@ def test_every_task_names_known_figures_and_costs_more_when_it_trains_longer():
     assert hnn.task_spec("3body").cost > hnn.task_spec("spring").cost
 
 
-def test_train_or_reuse(tmp_path):
-    first, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=3)
-    assert not reused and (first / "model.tar").exists()
+def test_a_sweep_reuses_a_run_of_the_same_config_and_keeps_it_beside_others(tmp_path):
+    def job(**fields):
+        return sweep.Job("spring/hnn/seed0", "spring",
+                         hnn.tasks.task_config("spring", {"save_dir": str(tmp_path), "total_steps": 3, **fields}))
+
+    trained, _ = sweep.train_jobs([job()], 1, tmp_path / "logs")
+    first = trained["spring/hnn/seed0"]
     metrics = json.loads((first / "metrics.json").read_text())
-    assert metrics["data_seconds"] > 0 and metrics["train_seconds"] > 0
+    assert metrics["train_seconds"] > 0
     stamp = (first / "model.tar").stat().st_mtime_ns
-    again, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=3)
-    assert reused and again == first and (first / "model.tar").stat().st_mtime_ns == stamp
-    seen = []
-    _, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=4, progress=lambda s, t: seen.append((s, t)))
-    assert not reused and seen[-1] == (5, 5) and len(seen) == 5       # retrained: other --total_steps
-    _, reused = reproduce.train_or_reuse("spring", "hnn", tmp_path, 0, steps=4, extra_argv=["--learn_rate", "0.002"])
-    assert not reused                                                   # other --learn_rate
-    assert json.loads((first / "args.json").read_text())["learn_rate"] == 0.002
+    found, todo = sweep.reuse([job()])
+    assert found == {"spring/hnn/seed0": first} and todo == []
+    for other in (dict(total_steps=4), dict(learn_rate=0.002)):
+        found, todo = sweep.reuse([job(**other)])
+        assert found == {} and len(todo) == 1, other
+        second = sweep.train_jobs(todo, 1, tmp_path / "logs")[0]["spring/hnn/seed0"]
+        assert second != first and (first / "model.tar").stat().st_mtime_ns == stamp      # the first is kept
+    assert json.loads((second / "args.json").read_text())["learn_rate"] == 0.002
 
 
 def _losses(results: dict) -> dict:
@@ -127,10 +132,10 @@ def test_quick_end_to_end_and_jobs(tmp_path):
         path = out / "figures" / f"spring-{name}.png"
         assert path.stat().st_size > 10_000, path
 
-    jobs = max(2, reproduce._cores())
+    jobs = max(2, sweep.cores())
     two = reproduce.main(["--quick", "--steps", str(TINY), "--tasks", "spring", "--out", str(tmp_path / "b"),
                           "--jobs", str(jobs), "--no-figures"])
-    assert two["seconds"]["jobs"] == jobs and two["seconds"]["threads_per_job"] == 1 and (tmp_path / "b" / "logs").is_dir()
+    assert two["seconds"]["jobs"] == jobs and two["seconds"]["threads_per_job"] == 1
     assert _losses(two) == _losses(one)
     for label in ("baseline", "hnn"):
         assert two["tasks"]["spring"][label]["energy_mse_paper"] == one["tasks"]["spring"][label]["energy_mse_paper"]
@@ -156,15 +161,15 @@ def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monke
 
 
 def test_variant_rows_train_under_their_own_name_and_keep_the_papers_numbers(tmp_path, monkeypatch, capsys):
-    variant = {"wide": (("--hidden_dim", "16"), "a narrower net, for the test")}
+    variant = {"wide": ({"hidden_dim": 16}, "a narrower net, for the test")}
     task = hnn.load_task("spring", "task")
     monkeypatch.setattr(task, "TASK", dataclasses.replace(task.TASK, variants=variant))
     results = reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(tmp_path)])
     assert list(results["tasks"]) == ["spring", "spring-wide"]
     row = results["tasks"]["spring-wide"]
     assert row["task"] == "spring" and row["note"] == "a narrower net, for the test"
-    assert (tmp_path / "runs" / "spring-wide-hnn-seed0").is_dir()
-    assert json.loads((tmp_path / "runs" / "spring-wide-hnn-seed0" / "args.json").read_text())["hidden_dim"] == 16
+    [run] = (tmp_path / "runs").glob("spring-wide-hnn-seed0-*")
+    assert json.loads((run / "args.json").read_text())["hidden_dim"] == 16
     table = (tmp_path / "tables.md").read_text()
     assert "| spring-wide | hnn | 3.5928e-02 ± 1.83e-03 |" in table          # the paper's spring number beside it
     assert "- **spring-wide**: a narrower net, for the test" in table

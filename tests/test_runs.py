@@ -1,4 +1,5 @@
 """Run folders are written as a whole: an interrupted save never mixes two runs."""
+import dataclasses
 import json
 import os
 import subprocess
@@ -17,18 +18,22 @@ _UMASK = hnn.io.UMASK
 
 
 def _args(save_dir, steps: int):
-    """The spring task's flags of a run with ``--total_steps steps``; every ``steps`` shares one folder."""
-    return hnn.load_task("spring", "train").parse_args(["--save_dir", str(save_dir), "--total_steps", str(steps),
-                                                         "--hidden_dim", "8"])
+    """The spring task's config of a run with ``total_steps=steps`` (other steps, another folder)."""
+    return hnn.load_task("spring", "train").Config(save_dir=str(save_dir), total_steps=steps, hidden_dim=8)
 
 
-def _save(args, fill: float):
-    """A small model with every parameter ``fill``, saved as the run of ``args``; returns its folder."""
-    model = hnn.runs.model_from_args(vars(args))
+def _saved(config) -> dict:
+    return {**config.to_dict(), "kind": config.kind}
+
+
+def _save(args, fill: float, directory=None):
+    """A small model with every parameter ``fill``, saved as the run of ``args`` (or in
+    ``directory``); returns its folder."""
+    model = hnn.runs.model_from_args(_saved(args))
     with torch.no_grad():
         for p in model.parameters():
             p.fill_(fill)
-    return hnn.save_run(hnn.run_dir(args), model, vars(args), {"train_loss": fill})
+    return hnn.save_run(directory or hnn.run_dir(args), model, _saved(args), {"train_loss": fill})
 
 
 def _snapshot(directory: Path) -> dict:
@@ -62,7 +67,7 @@ def test_a_save_failing_between_files_leaves_the_old_run(failing, tmp_path, monk
 
     monkeypatch.setattr(hnn.runs, "write_json", write_json)
     with pytest.raises(OSError, match="disk full"):
-        _save(new, 0.5)
+        _save(new, 0.5, hnn.run_dir(old))
     _assert_old_run_intact(old, new, before)
     assert _hidden(tmp_path) == []                     # the half-filled folder is removed
 
@@ -79,13 +84,13 @@ def test_a_failed_move_puts_the_old_run_back(tmp_path, monkeypatch):
 
     monkeypatch.setattr(hnn.io.os, "rename", rename)
     with pytest.raises(OSError, match="rename refused"):
-        _save(new, 0.5)
+        _save(new, 0.5, hnn.run_dir(old))
     monkeypatch.undo()
     _assert_old_run_intact(old, new, before)
     assert _hidden(tmp_path) == []
 
 
-# a child process that saves the run of --total_steps 3 over the one of 2, and is SIGKILLed when
+# a child process that saves a run of total_steps 3 into the folder of the one of 2, and is SIGKILLed when
 # `kill_at` happens: before the last file is written, or between moving the old folder aside and
 # moving the new one in
 _KILLED_SAVE = """
@@ -106,9 +111,9 @@ def rename(src, dst):
         os.kill(os.getpid(), signal.SIGKILL)
 
 hnn.runs.write_json, os.rename = write_json, rename
-args = hnn.load_task("spring", "train").parse_args(["--save_dir", save_dir, "--total_steps", "3",
-                                                         "--hidden_dim", "8"])
-hnn.save_run(hnn.run_dir(args), hnn.build_model(2, 8), vars(args), {"train_loss": 0.5})
+Config = hnn.load_task("spring", "train").Config
+old, new = Config(save_dir=save_dir, total_steps=2, hidden_dim=8), Config(save_dir=save_dir, total_steps=3, hidden_dim=8)
+hnn.save_run(hnn.run_dir(old), hnn.build_model(2, 8), {**new.to_dict(), "kind": "hnn"}, {"train_loss": 0.5})
 """
 
 
@@ -127,25 +132,25 @@ def test_a_save_killed_between_files_leaves_the_old_run(kill_at, tmp_path):
     _killed_save(tmp_path, kill_at)
     _assert_old_run_intact(old, new, before)
     leftover = _hidden(tmp_path)
-    assert len(leftover) == 1 and leftover[0].startswith(".spring-hnn-seed0.tmp-")   # never looked at
-    # a later save of the new args replaces the old run, whatever was left over
-    run = _save(new, 0.5)
-    assert hnn.find_run(new) == run and hnn.find_run(old) is None
+    assert len(leftover) == 1 and leftover[0].startswith(".spring-hnn-seed0-")   # never looked at
+    assert ".tmp-" in leftover[0]
+    # a later save into that folder replaces the old run, whatever was left over
+    run = _save(new, 0.5, hnn.run_dir(old))
     assert hnn.load_run(run)[1]["total_steps"] == 3 and _hidden(tmp_path) == leftover
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="needs SIGKILL")
 def test_a_save_killed_between_the_renames_leaves_no_run(tmp_path):
-    old, new = _args(tmp_path, 2), _args(tmp_path, 3)
+    old = _args(tmp_path, 2)
     before = _snapshot(_save(old, 0.25))
     _killed_save(tmp_path, "aside")
-    # nothing at the run's path: both args train anew; the old run waits whole in .old-*
+    # nothing at the run's path: it trains anew; the old run waits whole in .old-*
     assert not hnn.run_dir(old).exists()
-    assert hnn.find_run(old) is None and hnn.find_run(new) is None
+    assert hnn.find_run(old) is None
     [aside] = [p for p in tmp_path.iterdir() if ".old-" in p.name]
     assert _snapshot(aside) == before
-    run = _save(new, 0.5)
-    assert hnn.find_run(new) == run and hnn.find_run(old) is None
+    run = _save(old, 0.5)
+    assert hnn.find_run(old) == run
 
 
 def test_a_save_replaces_the_old_run_whole_with_ordinary_permissions(tmp_path):
@@ -153,17 +158,17 @@ def test_a_save_replaces_the_old_run_whole_with_ordinary_permissions(tmp_path):
     run = _save(old, 0.25)
     (run / "rollout.npz").write_bytes(b"of the old model")     # written after a save, as pixel runs do
     assert hnn.find_run(old) == run
-    assert _save(new, 0.5) == run
+    assert _save(new, 0.5, run) == run
     assert sorted(p.name for p in run.iterdir()) == ["args.json", hnn.runs.COMPLETE, "metrics.json", "model.tar"]
-    assert hnn.find_run(new) == run and hnn.find_run(old) is None and _hidden(tmp_path) == []
+    assert _hidden(tmp_path) == []
     model, args, metrics = hnn.load_run(run)
-    assert args == json.loads(json.dumps(vars(new))) and metrics["train_loss"] == 0.5
+    assert args == json.loads(json.dumps(_saved(new))) and metrics["train_loss"] == 0.5
     assert all((p == 0.5).all() for p in model.parameters())
     assert run.stat().st_mode & 0o777 == 0o777 & ~_UMASK
     assert all(p.stat().st_mode & 0o777 == 0o666 & ~_UMASK for p in run.iterdir())
     # files added after the save keep the run complete
     hnn.runs.write_json(run / "metrics.json", {**metrics, "energy_mse": 1.0})
-    assert hnn.find_run(new) == run
+    assert hnn.find_run(old) == run
 
 
 @pytest.mark.parametrize("damage", ["no mark", "file missing"])
@@ -172,7 +177,7 @@ def test_an_incomplete_folder_is_neither_reused_nor_loaded(damage, tmp_path):
     run = _save(args, 0.25)
     (run / (hnn.runs.COMPLETE if damage == "no mark" else "metrics.json")).unlink()
     assert hnn.find_run(args) is None
-    with pytest.raises(RuntimeError, match="interrupted.*delete the run folder and retrain"):
+    with pytest.raises(RuntimeError, match="interrupted.*delete the folder and retrain"):
         hnn.load_run(run)
 
 
@@ -195,18 +200,16 @@ def test_args_json_records_the_model_kind_and_the_dataset_cache(task, extra, kin
             hnn.tasks.run_dataset(task, {**saved, "dataset_cache_key": "2body-old.npz"})
     else:
         assert saved["dataset_cache_key"] is None
-    assert hnn.load_run(run)[1] == saved
+    assert hnn.load_run(run)[1] == saved and saved["kind"] == kind
 
 
-def test_a_run_saved_before_the_kind_was_recorded_still_loads(tmp_path):
-    args = {k: v for k, v in vars(_args(tmp_path, 2)).items() if k != "model"}   # args.json before "model"
-    assert isinstance(hnn.runs.model_from_args(args), hnn.HNN)                     # a plain run
-    pixel = {**args, "input_dim": 8, "latent_dim": 2, "hidden_dim": 4}
-    assert isinstance(hnn.runs.model_from_args(pixel), hnn.PixelHNN)              # named a latent_dim
-    # a recorded kind is never second-guessed: a plain HNN whose task happens to have a latent_dim flag
-    assert isinstance(hnn.runs.model_from_args({**pixel, "input_dim": 2, "model": "hnn"}), hnn.HNN)
+def test_a_saved_kind_decides_the_model_and_an_unknown_one_is_named():
+    saved = _saved(_args(".", 2))
+    assert isinstance(hnn.runs.model_from_args(saved), hnn.HNN)
+    pixel = {**saved, "input_dim": 8, "latent_dim": 2, "hidden_dim": 4, "kind": "pixel-hnn"}
+    assert isinstance(hnn.runs.model_from_args(pixel), hnn.PixelHNN)
     with pytest.raises(ValueError, match="unknown model kind 'sideways'.*pixel-hnn"):
-        hnn.runs.model_from_args({**args, "model": "sideways"})
+        hnn.runs.model_from_args({**saved, "kind": "sideways"})
 
 
 def test_a_custom_objective_trains_through_the_one_runner(tmp_path):
@@ -217,18 +220,19 @@ def test_a_custom_objective_trains_through_the_one_runner(tmp_path):
     data = hnn.load_task("spring").get_dataset()
     renamed = {"a": data["x"], "b": data["dxdt"] / 2, "test_a": data["test_x"], "test_b": data["test_dxdt"] / 2}
     run = hnn.run_experiment(_args(tmp_path, 3), renamed, Halved())
-    assert json.loads((run / "args.json").read_text())["model"] == "hnn"
+    assert json.loads((run / "args.json").read_text())["kind"] == "hnn"
     with pytest.raises(KeyError, match=r"lacks \['a', 'b', 'test_a', 'test_b'\]"):
         hnn.run_experiment(_args(tmp_path, 3), data, Halved())
 
 
-def test_display_only_flags_are_declared_by_whoever_adds_them(tmp_path):
-    parser = hnn.cli.make_parser("a toy", name="toy", input_dim=2, save_dir=str(tmp_path), weight_decay=0.0)
-    parser.add_argument("--workers", type=int, default=1, display_only=True)
-    args = parser.parse_args(["--workers", "3"])
-    assert set(args.display_only) == {"verbose", "debug", "workers"} and "display_only" not in vars(args)
-    assert set(hnn.cli.DISPLAY_ONLY) <= set(args.display_only)
-    assert "render_workers" in hnn.load_task("pixels", "train").parse_args([]).display_only   # the task's own
+def test_display_only_fields_and_save_dir_are_not_the_identity(tmp_path):
+    Pixels = hnn.load_task("pixels", "train").Config
+    assert set(Pixels.display_only()) == {"verbose", "debug", "render_workers", "no_eval"}
+    base = Pixels(save_dir=str(tmp_path))
+    for same in (dict(verbose=True), dict(render_workers=3, no_eval=True), dict(save_dir=str(tmp_path / "b"))):
+        assert dataclasses.replace(base, **same).key() == base.key(), same
+    for other in (dict(trials=50), dict(model="baseline"), dict(learn_rate=2e-3), dict(seed=1)):
+        assert dataclasses.replace(base, **other).key() != base.key(), other
 
 
 class _Scaled(torch.nn.Module):
@@ -251,11 +255,11 @@ def test_a_new_model_kind_is_one_registry_entry(tmp_path, monkeypatch):
     hnn.objectives.register_model_kind("scaled", hnn.DerivativeObjective, build)
     with pytest.raises(ValueError, match="registered already"):
         hnn.objectives.register_model_kind("scaled", hnn.DerivativeObjective, build)
-    args = _args(tmp_path, 3)
-    args.model = "scaled"                                   # what a task's --model flag would set
-    run = hnn.run_experiment(args, hnn.load_task("spring").get_dataset())
+    assert "scaled" in hnn.cli.make_parser(hnn.load_task("spring", "train").Config).format_help()   # a --model choice
+    args = dataclasses.replace(_args(tmp_path, 3), model="scaled")
+    run = hnn.run_experiment(args)
     model, saved, metrics = hnn.load_run(run)
-    assert saved["model"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
+    assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
 
 
 def test_train_fraction_draws_a_seeded_ordered_subset_of_the_training_rows():
@@ -273,7 +277,7 @@ def test_train_fraction_draws_a_seeded_ordered_subset_of_the_training_rows():
         hnn.runs.training_subset(x, y, 0.0, seed=0)
 
 
-def test_a_run_trains_on_its_fraction_and_a_run_saved_before_the_flag_counts_as_all_data(tmp_path, monkeypatch):
+def test_a_run_trains_on_its_fraction(tmp_path, monkeypatch):
     seen = []
     real_train = hnn.runs.train
     monkeypatch.setattr(hnn.runs, "train", lambda model, x, *a, **k: seen.append(len(x)) or real_train(model, x, *a, **k))
@@ -283,8 +287,5 @@ def test_a_run_trains_on_its_fraction_and_a_run_saved_before_the_flag_counts_as_
     assert seen == [75]                                            # 10% of spring's 750 training rows
     assert json.loads((folder / "args.json").read_text())["train_fraction"] == 0.1
     full = trainer.main(argv)
-    saved = json.loads((full / "args.json").read_text())
-    del saved["train_fraction"]                                    # as runs saved before the flag existed
-    (full / "args.json").write_text(json.dumps(saved))
-    assert hnn.find_run(trainer.parse_args(argv)) == full
-    assert hnn.find_run(trainer.parse_args(argv + ["--train_fraction", "0.5"])) is None
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv)) == full
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--train_fraction", "0.5"])) is None

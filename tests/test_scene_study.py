@@ -7,7 +7,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import reproduce, scene_metrics as sm, scene_study
+from hnn_analysis.paper import reproduce
+from hnn_analysis.scenes import scene_metrics as sm, scene_study
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -26,7 +27,7 @@ def test_rollout_error_of_a_detuned_oscillator_is_analytic(spring):
     out = sm.rollout_errors(lambda x: (1 + eps) * spring.dynamics(x), truth, t)
     e = np.abs(np.sin(eps * omega * t[1:] / 2))
     assert out["error"] == pytest.approx(float(np.exp(np.log(e).mean())), rel=1e-5)
-    first = 2 * math.asin(sm.VALID_ERROR) / (eps * omega)           # the first time e(t) = 0.1
+    first = 2 * math.asin(hnn.metrics.VALID_ERROR) / (eps * omega)           # the first time e(t) = 0.1
     assert first < out["valid_time"] <= first + (t[1] - t[0])
     assert out["horizon"] == 30.0 and out["blew_up"] == 0
 
@@ -50,7 +51,7 @@ def test_divergence_time_of_an_unstable_saddle_is_analytic():
     dq, dp = sm.PERTURBATION * d[0] / np.linalg.norm(d)
     ts = np.linspace(0.0, 12.0, 1_200_001)
     e = np.hypot(dq * np.exp(ts), dp * np.exp(-ts)) / (np.hypot(dq * np.exp(ts), (1 + dp) * np.exp(-ts)) + np.exp(-ts))
-    exact = ts[np.argmax(e > sm.VALID_ERROR)]
+    exact = ts[np.argmax(e > hnn.metrics.VALID_ERROR)]
     assert exact < got <= exact + (t[1] - t[0]) + 1e-9
 
 
@@ -155,8 +156,10 @@ def test_dhnn_protocol_scores_the_true_field_of_a_frictionless_pendulum_as_it_sh
 
 
 def test_reproduce_models_flag_adds_kinds_only_where_a_task_has_them(tmp_path):
-    assert reproduce._train_argv("spring", "separable", tmp_path, 0, None)[-2:] == ["--model", "separable"]
-    assert "--model" not in reproduce._train_argv("spring", "hnn", tmp_path, 0, None)
+    jobs = reproduce.plan(reproduce.table_rows(["spring", "pixels"], quick=True), [0], tmp_path, None, ("separable",))
+    assert [(job.key, job.config.kind) for job in jobs] == [
+        ("spring/baseline/seed0", "baseline"), ("spring/hnn/seed0", "hnn"), ("spring/separable/seed0", "separable"),
+        ("pixels/baseline/seed0", "pixel-baseline"), ("pixels/hnn/seed0", "pixel-hnn")]
     assert reproduce.row_models("spring", ("dissipative",)) == ["baseline", "hnn", "dissipative"]
     assert reproduce.row_models("pixels", ("separable", "dissipative")) == ["baseline", "hnn"]
     with pytest.raises(SystemExit):
@@ -170,7 +173,7 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
-    assert set(entry["rungs"]) == set(scene_study.RUNGS)
+    assert set(entry["rungs"]) == set(scene_study.rungs())
     assert len(entry["grid"]) == 4 * 3 and entry["card"] is not None
     assert entry["speed"]["separable"]["fastest"] is not None
     saved = json.loads((tmp_path / "scene_study.json").read_text())

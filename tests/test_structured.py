@@ -123,7 +123,7 @@ def test_dissipative_split_of_a_damped_oscillator():
 def test_model_flag_trains_saves_and_reloads_each_kind(kind, cls, tmp_path):
     run = hnn.load_task("spring", "train").main(["--model", kind, "--total_steps", "3", "--hidden_dim", "8",
                                                   "--save_dir", str(tmp_path)])
-    assert run.name == f"spring-{kind}-seed0"
+    assert run.name.startswith(f"spring-{kind}-seed0-")
     assert json.loads((run / "args.json").read_text())["model"] == kind
     model, args, metrics = hnn.load_run(run)
     assert type(model) is cls and args["model"] == kind and np.isfinite(metrics["test_loss"])
@@ -143,4 +143,4 @@ def test_bad_input():
     assert done.returncode == 2 and done.stderr.splitlines()[-1].startswith("error: argument --model")
     assert "Traceback" not in done.stderr
     with pytest.raises(SystemExit):
-        hnn.load_task("spring", "train").parse_args(["--model", "separable", "--baseline"])
+        hnn.cli.parse(hnn.load_task("spring", "train").Config, ["--model", "separable", "--baseline"])

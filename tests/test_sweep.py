@@ -3,25 +3,33 @@ processes, on Ray), Ray gives the numbers of the local workers, and Ray stays an
 import dataclasses
 import importlib.util
 import json
+import os
+import secrets
+import shutil
+import socket
+import subprocess
 import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
 
 import pytest
 import torch
 
 import hnn
-from hnn_analysis import readme, reproduce, sweep
+from hnn_analysis import readme, sweep
+from hnn_analysis.paper import reproduce
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
                                reason=f"Ray is not installed: {sweep.RAY_INSTALL}")
 LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
 
 
-def _job(task: str, label: str, runs_dir: Path, steps: int, extra=()) -> dict:
-    """A job as reproduce.plan makes it (the scene study builds the same shape)."""
-    argv = sweep._train_argv(task, label, runs_dir, 0, steps, extra)
-    return {"task": task, "row": task, "label": label, "seed": 0, "runs_dir": runs_dir, "steps": steps,
-            "extra_argv": list(extra), "total": sweep._total_steps(task, argv)}
+def _job(task: str, label: str, runs_dir: Path, steps: int, **fields) -> sweep.Job:
+    """A job as reproduce.plan makes it (the scene study too)."""
+    config = hnn.tasks.task_config(task, {"model": label, "save_dir": str(runs_dir), "total_steps": steps, **fields})
+    return sweep.Job(f"{task}/{label}/seed0", task, config)
 
 
 @pytest.mark.parametrize("backend, n_jobs", [
@@ -30,24 +38,17 @@ def _job(task: str, label: str, runs_dir: Path, steps: int, extra=()) -> dict:
     pytest.param("ray", 2, marks=needs_ray),
 ])
 def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp_path, capsys):
-    """The failing run (its --save_dir is a file, so saving raises) goes first; with two slots
-    the third run starts only after a slot frees, so a failure that ended the sweep would lose it."""
-    blocker = tmp_path / "a-file"
-    blocker.write_text("not a folder")
+    """The failing run (a nonlinearity that its check refuses) goes first (longest); the others
+    train regardless, and the failure is reported by name with its traceback in a log."""
     runs_dir = tmp_path / "runs"
-    bad = _job("spring", "baseline", runs_dir, 20, ["--total_steps", "0", "--save_dir", str(blocker)])
-    bad["total"] = 10 ** 6          # longest first: it starts before the others
+    bad = _job("spring", "baseline", runs_dir, 10 ** 4, nonlinearity="sideways")     # refused inside the run
     good = [_job("spring", "hnn", runs_dir, 20), _job("pend", "hnn", runs_dir, 20)]
     runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend)
-    out = capsys.readouterr().out
-
     failed = runs["spring/baseline/seed0"]
-    assert isinstance(failed, sweep.RunFailed) and "FileExistsError" in failed.message
-    assert "Traceback" in failed.log.read_text() and "FileExistsError" in failed.log.read_text()
-    line = next(line for line in out.splitlines() if "FAILED" in line)
-    assert line.split()[:3] == ["spring", "baseline", "seed"] and "FileExistsError" in line
+    assert isinstance(failed, sweep.RunFailed) and "sideways" in failed.message
+    assert "hnn/cli.py" in failed.log.read_text() and "sideways" in failed.log.read_text()   # where it raised
     for job in good:
-        run = runs[sweep._run_key(job)]
+        run = runs[job.key]
         assert isinstance(run, Path) and (run / hnn.runs.COMPLETE).is_file(), run
         assert json.loads((run / "args.json").read_text())["total_steps"] == 20
     assert sweep.failures(runs) == [failed]
@@ -56,42 +57,57 @@ def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp
     with pytest.raises(SystemExit) as info:
         sweep.exit_if_failed(runs)
     err = capsys.readouterr().err
-    assert info.value.code == 1 and "1 run failed" in err and "spring/baseline/seed0: FileExistsError" in err
+    assert info.value.code == 1 and "1 run failed" in err and "spring/baseline/seed0: ValueError" in err
     sweep.exit_if_failed({key: run for key, run in runs.items() if run is not failed})   # no failure: returns
 
 
+def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):
+    """Planning, reuse and training a sweep's runs go from config to folder: no parser is built."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("a sweep job parsed argv")
+
+    monkeypatch.setattr(hnn.cli, "make_parser", refuse)
+    rows = reproduce.table_rows(["spring"], quick=True)
+    jobs = reproduce.plan(rows, [0], tmp_path / "runs", 3)
+    runs, todo = sweep.reuse(jobs)
+    assert runs == {} and len(todo) == 2
+    trained, _ = sweep.train_jobs(todo, 1, tmp_path / "logs")
+    assert all(isinstance(run, Path) for run in trained.values())
+    again, todo = sweep.reuse(jobs)
+    assert again == trained and todo == []
+
+
+def test_a_run_that_does_not_load_is_named_and_trained_again(tmp_path, capsys):
+    jobs = [_job("spring", "hnn", tmp_path, 3)]
+    trained, _ = sweep.train_jobs(jobs, 1, tmp_path / "logs")
+    folder = trained["spring/hnn/seed0"]
+    (folder / "model.tar").write_bytes(b"corrupt")
+    runs, todo = sweep.reuse(jobs)
+    out = capsys.readouterr().out
+    assert runs == {} and todo == jobs
+    assert f"spring/hnn/seed0: {folder / 'model.tar'} does not load" in out and "training it again" in out
+    again, _ = sweep.train_jobs(todo, 1, tmp_path / "logs")
+    assert again["spring/hnn/seed0"] == folder and hnn.load_run(folder)[1]["total_steps"] == 3
+
+
 def test_reproduce_reports_a_failed_row_writes_the_rest_and_exits_1(tmp_path, monkeypatch, capsys):
-    blocker = tmp_path / "a-file"
-    blocker.write_text("not a folder")
     task = hnn.load_task("spring", "task")
-    variant = {"broken": (("--total_steps", "0", "--save_dir", str(blocker)), "cannot save, for the test")}
+    variant = {"broken": ({"nonlinearity": "sideways"}, "cannot build, for the test")}
     monkeypatch.setattr(task, "TASK", dataclasses.replace(task.TASK, variants=variant))
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as info:
         reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
     captured = capsys.readouterr()
     assert info.value.code == 1
-    assert "2 runs failed" in captured.err and "spring-broken/hnn/seed0: FileExistsError" in captured.err
+    assert "2 runs failed" in captured.err and "spring-broken/hnn/seed0: ValueError" in captured.err
     saved = json.loads((out / "results.json").read_text())
     assert set(saved["tasks"]["spring"]) >= {"baseline", "hnn"}          # the rows that trained are in the tables
     assert (out / "tables.md").is_file()
     # the rerun trains only what is missing: the spring runs are reused
     with pytest.raises(SystemExit):
         reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
-    reused = [line.split()[:2] for line in capsys.readouterr().out.splitlines() if "seed 0 reused" in line]
-    assert reused == [["spring", "baseline"], ["spring", "hnn"]]
-
-
-@pytest.mark.parametrize("outcome, message", [
-    ({"returncode": -9, "status": {"step": 3, "total": 10}, "tail": ""}, "killed by signal SIGKILL"),
-    ({"returncode": 1, "status": {"error": "boom", "type": "RuntimeError"}, "tail": "x"}, "RuntimeError: boom"),
-    ({"returncode": 2, "status": {}, "tail": "usage: ...\nerror: argument --learn_rate: bad\n"},
-     "exit 2: error: argument --learn_rate: bad"),
-    ({"returncode": None, "status": {}, "tail": "", "error": "WorkerCrashedError: the worker died"},
-     "WorkerCrashedError: the worker died"),
-])
-def test_a_worker_that_reports_no_run_is_described_by_its_error_signal_or_last_line(outcome, message):
-    assert sweep._error_message(outcome) == message
+    reused = [line.split()[0] for line in capsys.readouterr().out.splitlines() if "seed0 reused " in line]
+    assert reused == ["spring/baseline/seed0", "spring/hnn/seed0"]
 
 
 def test_without_ray_the_ray_backend_says_what_to_install(monkeypatch, capsys, tmp_path):
@@ -159,7 +175,7 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
     set to one thread, which test_reproduce shows the local workers match): the same
     floating-point operations, so every loss and energy number agrees exactly."""
     common = ["--quick", "--steps", "50", "--tasks", "spring", "pend", "--no-figures"]
-    on_ray = reproduce.main(common + ["--jobs", str(max(2, sweep._cores())), "--backend", "ray",
+    on_ray = reproduce.main(common + ["--jobs", str(max(2, sweep.cores())), "--backend", "ray",
                                       "--out", str(tmp_path / "ray")])
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -170,7 +186,8 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
     assert on_ray["seconds"]["backend"] == "ray" and on_ray["seconds"]["threads_per_job"] == 1
     assert local["seconds"]["threads_per_job"] == 1
     folders = sorted(p.name for p in (tmp_path / "ray" / "runs").iterdir() if p.is_dir())
-    assert folders == ["pend-baseline-seed0", "pend-hnn-seed0", "spring-baseline-seed0", "spring-hnn-seed0"]
+    assert [name.rsplit("-", 1)[0] for name in folders] == ["pend-baseline-seed0", "pend-hnn-seed0",
+                                                            "spring-baseline-seed0", "spring-hnn-seed0"]
     for name in folders:
         ray_metrics, local_metrics = (json.loads((tmp_path / side / "runs" / name / "metrics.json").read_text())
                                       for side in ("ray", "local"))
@@ -179,6 +196,105 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
         for label in ("baseline", "hnn"):
             for key in ("train_loss", "test_loss", "energy_mse_paper", "energy_mse_corrected"):
                 assert on_ray["tasks"][task][label][key] == local["tasks"][task][label][key], (task, label, key)
-    # a local rerun on the Ray output reuses every run: the same args, whatever trained them
+    # a local rerun on the Ray output reuses every run: the same configs, whatever trained them
     again = reproduce.main(common + ["--out", str(tmp_path / "ray")])
     assert again["seconds"]["runs"] == {}
+
+
+def _free_ports(n: int) -> list[int]:
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def _ray_start(args: list[str], env: dict, log: Path) -> subprocess.Popen:
+    """``ray start ... --block``: a node that stops (its raylet and workers) when this process gets SIGTERM."""
+    return subprocess.Popen(["ray", "start", "--num-cpus=1", "--disable-usage-stats", "--block", *args], env=env,
+                            stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def _wait_for_nodes(address: str, expect: int, procs: list, timeout: float = 180.0) -> None:
+    import ray
+    host, port = address.rsplit(":", 1)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert all(p.poll() is None for p in procs), "a ray start process ended (its log is in tmp_path)"
+        try:
+            socket.create_connection((host, int(port)), timeout=2).close()
+        except OSError:
+            time.sleep(1)
+            continue
+        ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+        try:
+            if sum(node["Alive"] for node in ray.nodes()) >= expect:
+                return
+        finally:
+            ray.shutdown()
+        time.sleep(2)
+    raise TimeoutError(f"the Ray cluster at {address} did not reach {expect} nodes in {timeout} s")
+
+
+@pytest.mark.slow
+@needs_ray
+def test_a_two_node_cluster_with_token_auth_loses_a_node_mid_sweep_and_a_rerun_completes(tmp_path, monkeypatch, capsys):
+    """docs/sweeps.md's cluster recipe on this machine: a head and a second node (two raylets,
+    token authentication on), a sweep with --ray-address, the second node stopped once the
+    first run finishes. Its runs are retried on the head or reported by name; the others
+    finish; a rerun trains only what is missing."""
+    port, *node_ports = _free_ports(8)
+    token, address = secrets.token_hex(16), f"127.0.0.1:{port}"
+    monkeypatch.setenv("RAY_AUTH_MODE", "token")
+    monkeypatch.setenv("RAY_AUTH_TOKEN", token)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(hnn.tasks.repo_root()),
+                                                                     os.environ.get("PYTHONPATH")]))}
+    # Ray's unix sockets live under --temp-dir, whose path must stay short (107 characters at most)
+    temp = tempfile.mkdtemp(prefix="ray-", dir="/tmp")
+    head = _ray_start(["--head", f"--port={port}", "--include-dashboard=false", f"--temp-dir={temp}"],
+                      env, tmp_path / "head.log")
+    node = None
+    try:
+        _wait_for_nodes(address, 1, [head])
+        a, b, c, d, e, f, g = node_ports
+        node = _ray_start([f"--address={address}", f"--node-manager-port={a}", f"--object-manager-port={b}",
+                           f"--dashboard-agent-listen-port={c}", f"--dashboard-agent-grpc-port={d}",
+                           f"--metrics-export-port={e}", f"--runtime-env-agent-port={f}",
+                           f"--min-worker-port={g}", f"--max-worker-port={g + 50}"], env, tmp_path / "node.log")
+        _wait_for_nodes(address, 2, [head, node])
+        out = tmp_path / "out"
+
+        def stop_the_second_node_after_the_first_run():
+            deadline = time.monotonic() + 600
+            while time.monotonic() < deadline and not list((out / "runs").glob("*/complete.json")):
+                time.sleep(0.2)
+            node.terminate()
+
+        killer = threading.Thread(target=stop_the_second_node_after_the_first_run, daemon=True)
+        killer.start()
+        argv = ["--quick", "--steps", "1500", "--tasks", "spring", "pend", "--no-figures", "--out", str(out),
+                "--backend", "ray", "--ray-address", address, "--jobs", str(sweep.cores())]
+        failed = []
+        try:
+            reproduce.main(argv)
+        except SystemExit as exit:
+            assert exit.code == 1
+            failed = [line.split(":")[0].strip() for line in capsys.readouterr().err.splitlines()
+                      if line.startswith("  ") and "seed0:" in line]
+            assert failed, "exit 1 without naming the failed runs"
+        killer.join(timeout=60)
+        assert node.wait(timeout=60) is not None                # the second node is gone
+        trained = {p.parent.name for p in (out / "runs").glob("*/complete.json")}
+        assert len(trained) + len(failed) == 4, (trained, failed)
+        again = reproduce.main(argv)                             # on the head alone: only what is missing
+        assert len(again["seconds"]["runs"]) == len(failed) and set(again["tasks"]) == {"spring", "pend"}
+        assert len({p.parent.name for p in (out / "runs").glob("*/complete.json")}) == 4
+    finally:
+        for proc in (node, head):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                proc.wait(timeout=60)
+        shutil.rmtree(temp, ignore_errors=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import hnn
-from hnn_analysis import reproduce
+from hnn_analysis.paper import reproduce
 
 REPO = Path(hnn.__file__).resolve().parent.parent
 
@@ -29,26 +29,32 @@ TOY = {
             return torch.stack([x[..., 1], -x[..., 0]], dim=-1)
 
 
-        def get_dataset(seed=0):
-            return ring_dataset(dynamics, seed, 20, (0.0, 3.0), 10, (0.1, 1.0), 0.1)
+        def get_dataset(seed=0, samples=20):
+            return ring_dataset(dynamics, seed, samples, (0.0, 3.0), 10, (0.1, 1.0), 0.1)
         ''',
     "train.py": '''
-        """Train the toy: the shared flags, its dataset, the shared runner."""
+        """Train the toy: its config (defaults, one field of its own, its dataset), the shared runner."""
+        from dataclasses import dataclass
+        from typing import ClassVar
+
         import hnn
+        from hnn.config import setting
 
 
-        def parse_args(argv=None):
-            return hnn.cli.make_parser("a toy oscillator", name="toy", input_dim=2, weight_decay=1e-4,
-                                       save_dir=".").parse_args(argv)
+        @dataclass
+        class Config(hnn.RunConfig):
+            """A toy oscillator."""
+            name: str = "toy"
+            save_dir: str = "."
+            samples: int = setting(20, "trajectories in the dataset", parse=hnn.cli.int_at_least(2))
+            DATASET_FIELDS: ClassVar[tuple] = ("seed", "samples")
 
-
-        def dataset(args):
-            return hnn.load_task("toy").get_dataset(seed=args.seed)
+            def dataset(self):
+                return hnn.load_task("toy").get_dataset(seed=self.seed, samples=self.samples)
 
 
         def main(argv=None):
-            args = parse_args(argv)
-            return hnn.run_experiment(args, lambda: dataset(args))
+            return hnn.run_experiment(hnn.cli.parse(Config, argv))
         ''',
     "task.py": '''
         """The toy as reproduce.py sees it."""
@@ -84,8 +90,14 @@ def test_a_new_task_is_one_folder_that_reproduce_runs(tmp_path, monkeypatch):
     assert "| toy | hnn | n/a |" in table and "| toy | baseline | n/a |" in table      # no paper numbers
     for name in ("toy-energy-paper.png", "toy-fields.png"):
         assert (out / "figures" / name).stat().st_size > 10_000, name
-    saved = json.loads((out / "runs" / "toy-hnn-seed0" / "args.json").read_text())
+    [run] = (out / "runs").glob("toy-hnn-seed0-*")
+    saved = json.loads((run / "args.json").read_text())
     assert saved["model"] == "hnn" and saved["dataset_cache_key"] is None and saved["total_steps"] == 5
+    # its own field is a flag and a config field: --samples 10 trains on 10 trajectories in another folder
+    config = hnn.cli.parse(hnn.load_task("toy", "train").Config, ["--samples", "10", "--total_steps", "1",
+                                                                 "--save_dir", str(out / "runs")])
+    assert config.samples == 10 and hnn.run_dir(config) != run
+    assert len(config.dataset()["x"]) == len(hnn.tasks.run_dataset("toy", saved)["x"]) // 2
 
 
 def test_tasks_are_found_by_folder_in_their_declared_order(tmp_path, monkeypatch):

@@ -39,7 +39,7 @@ def test_train_restores_the_callers_denormal_flushing(before):
     try:
         hnn.train(model, x, x, total_steps=2)
         assert (torch.full((1,), tiny) / 2 == 0).item() == before    # half of it is denormal unless flushed
-        assert hnn.training._flushes_denormals() == before
+        assert hnn.training.flushes_denormals() == before
     finally:
         torch.set_flush_denormal(False)
 
@@ -67,31 +67,33 @@ def test_train_script_end_to_end(task, extra, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "step 4, train_loss" in out and "Final train loss" in out and "Final test loss" in out
     label = "baseline" if "--baseline" in extra else "hnn-rk4" if "--use_rk4" in extra else "hnn"
-    assert run == tmp_path / f"{task}-{label}-seed0"
+    assert run.parent == tmp_path and run.name.startswith(f"{task}-{label}-seed0-")
     args = json.loads((run / "args.json").read_text())
     metrics = json.loads((run / "metrics.json").read_text())
     assert args["total_steps"] == 5 and args["weight_decay"] == 1e-4
     assert len(metrics["history"]["train_loss"]) == 6 and metrics["test_loss"] > 0
     model, saved_args, _ = hnn.load_run(run)                    # weights_only=True inside
     assert saved_args == args and model.baseline == ("--baseline" in extra)
+    assert args["model"] == ("baseline" if "--baseline" in extra else "hnn") and "baseline" not in args
     assert not list(tmp_path.rglob("*.tmp"))                     # atomic writes leave nothing behind
 
 
 def test_runs_are_reused_only_for_identical_args(tmp_path):
     trainer = hnn.load_task("spring", "train")
     argv = ["--total_steps", "2", "--save_dir", str(tmp_path)]
-    assert hnn.find_run(trainer.parse_args(argv)) is None
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv)) is None
     run = trainer.main(argv)
-    assert hnn.find_run(trainer.parse_args(argv)) == run
-    assert hnn.find_run(trainer.parse_args(argv + ["--verbose"])) == run        # display only
-    assert hnn.find_run(trainer.parse_args(argv[:1] + ["3"] + argv[2:])) is None
-    assert hnn.find_run(trainer.parse_args(argv + ["--learn_rate", "0.01"])) is None
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv)) == run
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose"])) == run        # display only
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv[:1] + ["3"] + argv[2:])) is None
+    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--learn_rate", "0.01"])) is None
 
 
 def test_unreadable_checkpoint_says_what_to_do(tmp_path):
     (tmp_path / "model.tar").write_bytes(b"not a checkpoint")
     (tmp_path / "complete.json").write_text('{"files": ["model.tar"]}')
-    with pytest.raises(RuntimeError, match="delete the run folder and retrain"):
+    with pytest.raises(RuntimeError, match="model.tar does not load.*delete the folder .* and retrain") as info:
         hnn.load_run(tmp_path)
+    assert "weights_only" not in str(info.value)
     with pytest.raises(FileNotFoundError, match="train it first"):
         hnn.load_run(tmp_path / "missing")

@@ -1,22 +1,22 @@
 """Time our implementation against the same work done the way the original code did it.
 
-    python analysis/benchmark.py                 # 5 interleaved rounds of every job
-    python analysis/benchmark.py --quick         # 1 round, fewer training steps and trials
-    python analysis/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
-    python analysis/benchmark.py --jobs floor    # only the training steps against their floor
-    python analysis/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
+    python analysis/speed/benchmark.py                 # 5 interleaved rounds of every job
+    python analysis/speed/benchmark.py --quick         # 1 round, fewer training steps and trials
+    python analysis/speed/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
+    python analysis/speed/benchmark.py --jobs floor    # only the training steps against their floor
+    python analysis/speed/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
 
 ``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
 HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
-same) against their matrix-product floor, by ``analysis/floor.py``: every product the step
+same) against their matrix-product floor, by ``analysis/speed/floor.py``: every product the step
 performs (captured during one step, forward, backward and double backward), each timed alone in
 its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
 quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
-The step is ``hnn.training._step``, the very function ``hnn.train`` runs. It checks the pixel
+The step is ``hnn.training.optimizer_step``, the very function ``hnn.train`` runs. It checks the pixel
 loss and its gradients against the original's formulation on one batch.
 
 ``rollout``: a learned field on a few states, a fixed-step step and dopri5 against their floors
-and against torchdiffeq and scipy, by ``analysis/benchmark_rollouts.py`` (its docstring says how).
+and against torchdiffeq and scipy, by ``analysis/speed/benchmark_rollouts.py`` (its docstring says how).
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
 
@@ -51,14 +51,12 @@ import copy
 import dataclasses
 import datetime
 import os
-import platform
 import statistics
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import scipy
 import torch
 from scipy.integrate import solve_ivp
 
@@ -66,10 +64,12 @@ import hnn
 from hnn.evaluation import start_states
 from hnn.io import write_json
 from hnn.models import PixelHNN
-from hnn.training import _adam, _batch, _l2_loss, _step
+from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import benchmark_rollouts, floor, readme  # noqa: E402
+from hnn_analysis.speed import benchmark_rollouts, floor  # noqa: E402
+from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -296,9 +296,9 @@ def _spring_step(d: dict):
     torch.manual_seed(0)
     model = hnn.build_model(2, HIDDEN)
     x, y = (torch.tensor(d[k], dtype=torch.float32) for k in ("x", "dxdt"))
-    optim = _adam(model, LEARN_RATE, WEIGHT_DECAY)
-    loss = _l2_loss(model.time_derivative)
-    return lambda: _step(loss, x, y, optim)
+    optim = adam_optimizer(model, LEARN_RATE, WEIGHT_DECAY)
+    loss = l2_loss(model.time_derivative)
+    return lambda: optimizer_step(loss, x, y, optim)
 
 
 def _pixel_step():
@@ -310,11 +310,11 @@ def _pixel_step():
     gen = torch.Generator().manual_seed(0)
     frames = torch.rand(PIXEL_ROWS + 1, 2 * PIXEL_SIDE ** 2, generator=gen)
     x, x_next = frames[:-1], frames[1:]
-    optim = _adam(model, LEARN_RATE, 1e-5)
+    optim = adam_optimizer(model, LEARN_RATE, 1e-5)
 
     def step():
-        xb, yb = _batch(x, x_next, PIXEL_BATCH, gen)
-        return _step(model.loss, xb, yb, optim)
+        xb, yb = minibatch(x, x_next, PIXEL_BATCH, gen)
+        return optimizer_step(model.loss, xb, yb, optim)
     return step
 
 
@@ -350,7 +350,7 @@ def job_floor(d: dict, rounds: int) -> dict:
     """Each step against its matrix-product floor, at 1 and then 2 threads in this process
     (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
     steps = {"spring": (_spring_step(d), rounds), "pixels": (_pixel_step(), max(10, rounds // 4))}
-    threads, flushing = torch.get_num_threads(), hnn.training._flushes_denormals()
+    threads, flushing = torch.get_num_threads(), hnn.training.flushes_denormals()
     torch.set_flush_denormal(True)
     out = {}
     try:
@@ -402,7 +402,7 @@ def parse_args(argv=None):
     parser.add_argument("--quick", action="store_true", help="1 round, 200 training steps, 5 evaluation trials")
     parser.add_argument("--out", default="results/benchmark.json", help="where to write the JSON results")
     parser.add_argument("--jobs", default=",".join(JOBS), help="comma list of " + ",".join(JOBS))
-    parser.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    parser.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = parser.parse_args(argv)
     args.jobs = [j.strip() for j in args.jobs.split(",") if j.strip()]
@@ -457,9 +457,8 @@ def main(argv=None) -> int:
     protocol = hnn.get_protocol("spring", "corrected")
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
-    env = {"torch": torch.__version__, "torch_threads": args.threads, "numpy": np.__version__,
-           "scipy": scipy.__version__, "python": platform.python_version(), "machine": platform.machine(),
-           "cpu": _cpu_flags(), "cores": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
+    env = {**provenance(), "torch_threads": args.threads, "cpu": _cpu_flags(),
+           "load_average_before": os.getloadavg()[0]}
     print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
           f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
 
@@ -512,7 +511,7 @@ def main(argv=None) -> int:
                           "floor_table": floor_table, "rollouts": rollouts, "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
-        command = " ".join(["python analysis/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
+        command = " ".join(["python analysis/speed/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
         busy = max(env["load_average_before"], env["load_average_after"])
         shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
                   "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")

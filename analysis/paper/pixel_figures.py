@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn_analysis.figures import COLORS, NAMES, save_figure  # noqa: E402
+from hnn_analysis.paper.figures import COLORS, NAMES, save_figure  # noqa: E402
 
 SIDE = 28
 

@@ -1,8 +1,8 @@
 """How far training's last bits move the spring regression numbers: the spread behind the
 thresholds of ``tests/test_regression.py``.
 
-    python analysis/regression_spread.py                         # seeds 0-4, threads 1 and 2, this CPU's kernels
-    python analysis/regression_spread.py --kernels default avx2  # also torch's AVX2 kernels on an AVX-512 CPU
+    python analysis/paper/regression_spread.py                         # seeds 0-4, threads 1 and 2, this CPU's kernels
+    python analysis/paper/regression_spread.py --kernels default avx2  # also torch's AVX2 kernels on an AVX-512 CPU
 
 Each configuration (threads x kernels) runs in its own process, because the thread count and
 ``ATEN_CPU_CAPABILITY`` must be set before torch is imported; configurations run one at a time

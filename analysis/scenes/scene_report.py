@@ -17,9 +17,15 @@ import hnn  # noqa: E402
 from hnn.io import atomic_write, write_json  # noqa: E402
 
 hnn.tasks.import_analysis()
-from hnn_analysis import readme, scene_metrics as sm  # noqa: E402
+from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
 
-COLORS = {"baseline": "tab:gray", "hnn": "tab:blue", "separable": "tab:green", "dissipative": "tab:red"}
+
+
+def color(label: str) -> str:
+    """A model kind's plot colour, as its registration declares it (``hnn.ModelKind.color``)."""
+    kind = hnn.MODEL_KINDS.get(label)
+    return kind.color if kind else "k"
 
 
 def _g(x, digits: int = 3) -> str:
@@ -94,7 +100,7 @@ def speed_table(results: dict) -> list[str]:
 
 
 def _unit(task: str) -> str:
-    from hnn_analysis.scene_study import SCENE
+    from hnn_analysis.scenes.scene_study import SCENE
     return SCENE[task].get("unit", "periods")
 
 
@@ -126,7 +132,8 @@ def grid_tables(results: dict) -> list[str]:
 def _cell_order(key: str):
     label, cell = key.split("@")
     width, fraction = cell.split("x")
-    order = list(COLORS).index(label) if label in COLORS else 9
+    kinds = list(hnn.MODEL_KINDS)
+    order = kinds.index(label) if label in kinds else len(kinds)
     return order, int(width), float(fraction)
 
 
@@ -157,7 +164,7 @@ def dhnn_table(results: dict) -> list[str]:
     lines = ["**The real pendulum, the D-HNN paper's protocol** (Sosanya & Greydanus 2022): their split (first 444 "
              "of 555 rows train, 111 test) and central-difference targets, their energy 2.4 (1 − cos q) + p², "
              "the rollout from the first test state with solve_ivp's defaults (RK45, rtol 1e-3). Ours: our "
-             f"architectures (width 200) trained with `{' '.join(d['argv'][:-2])}` (their rate, steps, batch "
+             f"architectures (width 200) trained with `{' '.join(f'--{k} {v}' for k, v in d['config'].items() if k != 'name')}` (their rate, steps, batch "
              "and decay; their own MLP was a 256-unit residual net fed a zero time input, seed 42), seed 0, "
              "± over rows / points. Theirs: as their notebook prints it (one seed; the test ± is the spread of "
              "the last three logged test losses).", "",
@@ -220,7 +227,7 @@ def pareto_figure(results: dict, path: Path) -> None:
                 x = m.get("train_seconds") if xkey else (ro or {}).get("seconds")
                 if ro and x:
                     points.append((x, ro["error"]))
-                    ax.scatter(x, ro["error"], s=14, color=COLORS.get(label, "k"), label=label)
+                    ax.scatter(x, ro["error"], s=14, color=color(label), label=label)
             front, best = [], float("inf")
             for x, y in sorted(points):
                 if y < best:

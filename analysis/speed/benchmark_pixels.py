@@ -1,8 +1,8 @@
 """Time and size the pixel task: rendering its dataset, one training step, and peak memory.
 
-    python analysis/benchmark_pixels.py                  # render the full dataset, 300 steps per model
-    python analysis/benchmark_pixels.py --steps 10000    # the full training of both models
-    python analysis/benchmark_pixels.py --update-docs  # write the table into docs/speed.md
+    python analysis/speed/benchmark_pixels.py                  # render the full dataset, 300 steps per model
+    python analysis/speed/benchmark_pixels.py --steps 10000    # the full training of both models
+    python analysis/speed/benchmark_pixels.py --update-docs  # write the table into docs/speed.md
 
 Renders the 200 x 103 frames afresh into a temporary folder (gymnasium, ``--workers``
 processes), builds the training arrays, then trains the HNN and the baseline for ``--steps``
@@ -16,8 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import datetime
-import platform
 import resource
 import statistics
 import tempfile
@@ -33,6 +31,7 @@ from hnn.io import write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 FULL_STEPS = 10001
 
@@ -71,7 +70,7 @@ def main(argv=None) -> dict:
     p.add_argument("--workers", type=int, default=None, help="rendering processes (default: the cores)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="JSON path (default results/benchmark_pixels.json)")
-    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the generated section of docs/speed.md")
     args = p.parse_args(argv)
     system = hnn.load_task("pixels")
@@ -86,8 +85,7 @@ def main(argv=None) -> dict:
     frames = data["frames"].shape[0] * data["frames"].shape[1]
     peak_after_data = _peak_mib()
     train = {label: time_training(data, label == "baseline", args.steps, args.seed) for label in ("hnn", "baseline")}
-    result = {"date": datetime.date.today().isoformat(), "torch": torch.__version__, "threads": torch.get_num_threads(),
-              "python": platform.python_version(), "frames": frames, "render_seconds": render_s,
+    result = {**provenance(), "frames": frames, "render_seconds": render_s,
               "render_ms_per_frame": render_s / frames * 1e3, "cache_mib": cache_mib, "arrays_mib": arrays_mib,
               "peak_rss_mib_after_data": peak_after_data, "peak_rss_mib": _peak_mib(), "train": train}
     rows = [f"| render {frames} frames (+ cache) | {render_s:.1f} s | {result['render_ms_per_frame']:.2f} ms/frame |",
@@ -95,7 +93,7 @@ def main(argv=None) -> dict:
               f"full {FULL_STEPS} steps ~ {t['full_training_s_estimate']:.0f} s |" for label, t in train.items()),
             f"| dataset in memory | {arrays_mib:.0f} MiB | cache file {cache_mib:.1f} MiB |",
             f"| peak resident memory | {result['peak_rss_mib']:.0f} MiB | after the data: {peak_after_data:.0f} MiB |"]
-    command = " ".join(["python analysis/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
+    command = " ".join(["python analysis/speed/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
     text = (f"`{command}` on {result['date']}, {result['threads']} torch threads, torch {torch.__version__}, "
             f"rendering in {data_workers} processes:\n\n| stage | time / size | note |\n| --- | --- | --- |\n"
             + "\n".join(rows))

@@ -53,7 +53,7 @@ def products(step: Callable[[], object]) -> list[tuple[int, int, int]]:
         step()
     if recorder.unhandled:
         raise NotImplementedError(f"the step calls {sorted(set(recorder.unhandled))}, which the floor does not "
-                                  "time; add them to analysis/floor.py's _PRODUCT_OPS")
+                                  "time; add them to analysis/speed/floor.py's _PRODUCT_OPS")
     return recorder.shapes
 
 

@@ -1,8 +1,8 @@
 """The speed / accuracy trade of every integrator, on the true systems and on the trained models.
 
-    python analysis/speed_accuracy.py                       # every task, full grid (a few minutes)
-    python analysis/speed_accuracy.py --quick               # fewer settings (well under a minute)
-    python analysis/speed_accuracy.py --runs results/runs --update-docs
+    python analysis/speed/speed_accuracy.py                       # every task, full grid (a few minutes)
+    python analysis/speed/speed_accuracy.py --quick               # fewer settings (well under a minute)
+    python analysis/speed/speed_accuracy.py --runs results/runs --update-docs
 
 For each task with a true dynamics function (spring, pend, 2body, 3body) and each saved model
 (the HNN and the baseline that ``analysis/reproduce.py`` trains into ``<runs>/<task>-<label>-seed0``;
@@ -29,9 +29,7 @@ from __future__ import annotations
 
 import argparse
 import copy
-import datetime
 import math
-import platform
 import statistics
 import sys
 import time
@@ -46,6 +44,7 @@ from hnn.io import atomic_write, write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)
@@ -67,7 +66,7 @@ MODEL_DTS = 3
 QUICK_DT_PICK = (0, 2, 4)          # first, middle and last step size
 
 
-def _start_states(task: str, system, batch: int) -> torch.Tensor:
+def start_states(task: str, system, batch: int) -> torch.Tensor:
     """``(batch, dim)`` float64 start states inside each task's training distribution."""
     if hasattr(system, "initial_state"):            # the orbits: the energy-MSE trials' states
         return torch.tensor(np.stack([system.initial_state(s) for s in range(batch)]), dtype=torch.float64)
@@ -80,23 +79,36 @@ def _start_states(task: str, system, batch: int) -> torch.Tensor:
     return torch.tensor(np.stack([r * np.cos(angle), r * np.sin(angle)], 1), dtype=torch.float64)
 
 
-def _settings(kind: str, quick: bool, dts) -> list[tuple[str, dict]]:
-    """(method label, rollout options) of the grid; ``kind`` is 'true' (separable H) or 'model'."""
+# the settings a study runs beyond a solver's defaults: solve_ivp also with DOP853; yoshida4 (a
+# composition of a base method) also on the midpoint, which makes it symplectic for any H
+ADAPTIVE_VARIANTS = {"solve_ivp": ({}, {"scipy_method": "DOP853"})}
+ANY_H_VARIANTS = {"yoshida4": {"base": "midpoint"}}
+
+
+def solver_settings(separable: bool, rtols, dts, adaptive_variants=ADAPTIVE_VARIANTS) -> list[tuple[str, dict]]:
+    """``(method label, rollout options)`` of every solver in ``hnn.SOLVERS`` that applies to a field:
+    the adaptive ones at each of ``rtols`` (and their ``adaptive_variants``), the fixed-step ones at
+    each of ``dts``; one that ``needs_separable`` only for a ``separable`` H, or else in its
+    ``ANY_H_VARIANTS`` setting."""
+    solvers = list(hnn.SOLVERS.values())
     out = []
-    for rtol in (QUICK_RTOLS if quick else RTOLS):
-        out.append(("RK45", {"method": "solve_ivp", "rtol": rtol, "atol": rtol}))
-        out.append(("DOP853", {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": rtol, "atol": rtol}))
-        out.append(("dopri5", {"method": "dopri5", "rtol": rtol, "atol": rtol}))
+    for rtol in rtols:
+        for solver in (s for s in solvers if s.adaptive):
+            for extra in adaptive_variants.get(solver.name, ({},)):
+                out.append((solver.describe(extra), {"method": solver.name, **extra, "rtol": rtol, "atol": rtol}))
+    for solver in (s for s in solvers if not s.adaptive):
+        extra = {} if separable or not solver.needs_separable else ANY_H_VARIANTS.get(solver.name)
+        if extra is not None:
+            out += [(solver.name, {"method": solver.name, "dt": dt, **extra}) for dt in dts]
+    return out
+
+
+def _settings(kind: str, quick: bool, dts, separable: bool = False) -> list[tuple[str, dict]]:
+    """(method label, rollout options) of the grid; ``kind`` is 'true' (separable H) or 'model'
+    (a learned field, ``separable`` for a model kind with a separable H)."""
     dts = list(dts) if kind == "true" else list(dts[:MODEL_DTS])
     picked = [dts[i] for i in QUICK_DT_PICK if i < len(dts)] if quick else dts
-    fixed = ["rk4", "midpoint", "yoshida4"] + (["leapfrog"] if kind == "true" else [])
-    for method in fixed:
-        for dt in picked:
-            options = {"method": method, "dt": dt}
-            if method == "yoshida4" and kind == "model":
-                options["base"] = "midpoint"        # a learned H is not separable
-            out.append((method, options))
-    return out
+    return solver_settings(kind == "true" or separable, QUICK_RTOLS if quick else RTOLS, picked)
 
 
 def timed_rollout(f, x0, t, options, repeats: int, enough: float = 1.0):
@@ -122,10 +134,12 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
     fields = {"true": ({name: system.dynamics for name in DTYPES}, true_h, "true", None)}
     if runs is None:
         return fields
-    trainer = hnn.load_task(task, "train")
-    for label in ("hnn", "baseline"):
-        args = trainer.parse_args(["--save_dir", str(runs), "--seed", "0"] + (["--baseline"] if label == "baseline" else []))
+    # every model kind the task trains (hnn.MODEL_KINDS): those reproduce.py --models trained are measured
+    for label in hnn.cli.model_choices(hnn.load_task(task, "train").Config):
+        args = hnn.tasks.task_config(task, {"save_dir": str(runs), "seed": 0, "model": label})
         found = hnn.find_run(args)
+        if found is None and label not in ("hnn", "baseline"):
+            continue
         if found is None:
             notes.append(f"{task} {label}: no saved run at {hnn.run_dir(args)} (train it with analysis/reproduce.py); skipped")
             print(f"  {task} {label}: not found at {hnn.run_dir(args)}, skipped", flush=True)
@@ -154,13 +168,13 @@ def _energy_drift(energy, traj: torch.Tensor) -> float | None:
     batch, steps, dim = traj.shape
     with torch.no_grad():
         H = energy(traj.double().reshape(-1, dim)).reshape(batch, steps)
-    return float((H - H[:, :1]).abs().max())
+    return hnn.metrics.energy_drift(H)
 
 
 def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes: list) -> list[dict]:
     system = hnn.load_task(task)
     cfg = TASKS[task]
-    true_x0 = _start_states(task, system, cfg["batch"])
+    true_x0 = start_states(task, system, cfg["batch"])
     rows = []
     for label, (per_dtype, energy, kind, x0) in _fields(task, system, runs, notes).items():
         scale = cfg.get("model_time", 1.0) if kind == "model" else 1.0
@@ -168,7 +182,8 @@ def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes:
         t = np.linspace(0, cfg["T"] * scale, 51)
         with torch.no_grad():
             ref = hnn.rollout(per_dtype["float64"], x0, t, scipy_method="DOP853", rtol=1e-12, atol=1e-12)
-        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"])):
+        separable = kind == "model" and hnn.MODEL_KINDS[label].separable
+        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable):
             for dname, dtype in DTYPES.items():
                 rtol = options.get("rtol")
                 if rtol is not None and rtol < 100 * torch.finfo(dtype).eps:
@@ -235,9 +250,8 @@ def extremes(quick: bool, runs: Path | None, notes: list) -> list[dict]:
                 np.linspace(0, 1000 * dt, 101), method=method, dt=dt)
     # 4. learned models far outside their training radii (spring data: radius 0.1 .. 1)
     if runs is not None:
-        trainer = hnn.load_task("spring", "train")
         for label in ("hnn", "baseline"):
-            args = trainer.parse_args(["--save_dir", str(runs), "--seed", "0"] + (["--baseline"] if label == "baseline" else []))
+            args = hnn.tasks.task_config("spring", {"save_dir": str(runs), "seed": 0, "model": label})
             found = hnn.find_run(args)
             if found is None:
                 notes.append(f"extremes: spring {label} not found; its out-of-distribution rows are skipped")
@@ -304,8 +318,8 @@ def summary_markdown(results: dict) -> str:
              "| task | model | method | fastest setting | seconds | nfev | error | energy drift | floor float32 | floor float64 |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for task, rows in results["tasks"].items():
-        for model in ("true", "hnn", "baseline"):
-            for method in ("RK45", "DOP853", "dopri5", "rk4", "leapfrog", "midpoint", "yoshida4"):
+        for model in dict.fromkeys(r["model"] for r in rows):
+            for method in dict.fromkeys(r["method"] for r in rows):
                 mine = [r for r in rows if r["model"] == model and r["method"] == method and r["status"] == "ok"]
                 if not mine:
                     continue
@@ -324,7 +338,7 @@ def pareto_plot(task: str, rows: list[dict], path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    models = sorted({r["model"] for r in rows}, key=["true", "hnn", "baseline"].index)
+    models = list(dict.fromkeys(r["model"] for r in rows))
     fig, axes = plt.subplots(1, len(models), figsize=(5 * len(models), 4), squeeze=False)
     for ax, model in zip(axes[0], models):
         for (method, dtype) in sorted({(r["method"], r["dtype"]) for r in rows if r["model"] == model}):
@@ -348,7 +362,7 @@ def main(argv=None) -> dict:
     p.add_argument("--out", type=Path, default=None, help="output folder (default <repo>/results/speed_accuracy)")
     p.add_argument("--quick", action="store_true", help="fewer settings, one repeat, shorter extremes")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats per setting (median)")
-    p.add_argument("--update-docs", "--update-readme", dest="update_docs", action="store_true",
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the generated section of docs/integrators.md")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(argv)
@@ -373,9 +387,7 @@ def main(argv=None) -> dict:
         print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)
         pareto_plot(task, results["tasks"][task], out / f"pareto-{task}.png")
     results["extremes"] = extremes(args.quick, runs, notes)
-    results["meta"] = {"command": " ".join(["python analysis/speed_accuracy.py"] + argv),
-                       "date": datetime.date.today().isoformat(), "torch": torch.__version__,
-                       "python": platform.python_version(), "threads": torch.get_num_threads(),
+    results["meta"] = {**provenance(), "command": " ".join(["python analysis/speed/speed_accuracy.py"] + argv),
                        "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start}
     write_json(out / "speed_accuracy.json", results)
     text = markdown(results)

@@ -1,7 +1,7 @@
 """Time the batched orbit generator against one solve_ivp call per orbit.
 
-    python analysis/benchmark_orbits.py                       # 2body, 200 orbits x 50 points, 3 rounds
-    python analysis/benchmark_orbits.py --task 3body --trials 500 --repeats 5
+    python analysis/speed/benchmark_orbits.py                       # 2body, 200 orbits x 50 points, 3 rounds
+    python analysis/speed/benchmark_orbits.py --task 3body --trials 500 --repeats 5
 
 Both sides integrate the same start states (the task's sampler on RandomState(--seed)) with
 scipy's RK45 at rtol 1e-9 and solve_ivp's default atol 1e-6, as the original generator did:
@@ -21,20 +21,19 @@ are noisy: rerun on an idle one.
 from __future__ import annotations
 
 import argparse
-import datetime
-import platform
 import statistics
 import sys
 import time
 
 import numpy as np
-import scipy
-import torch
 from scipy.integrate import solve_ivp
 
 import hnn
 from hnn import nbody
 from hnn.io import write_json
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis.provenance import provenance  # noqa: E402
 
 # Max abs difference of the two sides' states. atol 1e-6 bounds the local error of each of some
 # hundred steps, so each side is up to a few 1e-4 off the exact orbit (measured against DOP853 at
@@ -137,10 +136,7 @@ def main(argv=None) -> int:
         "max_abs_diff": diff, "agree_tol": agree_tol, "agree": agree,
         "max_error_vs_dop853_batched": float(err_ours.max()), "max_error_vs_dop853_per_orbit": float(err_loop.max()),
         "batched_no_less_accurate": accurate, "accuracy_slack": ACCURACY_SLACK,
-        "machine": {"platform": platform.platform(), "python": platform.python_version(),
-                    "torch": torch.__version__, "numpy": np.__version__, "scipy": scipy.__version__,
-                    "torch_threads": torch.get_num_threads()},
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "machine": provenance(),
     })
     print(f"wrote {args.out}")
     return 0 if agree and accurate else 1

@@ -22,7 +22,7 @@ from types import ModuleType
 import numpy as np
 
 import hnn
-from hnn_analysis import figures, mischief, orbit_figures, pixel_figures
+from hnn_analysis.paper import figures, mischief, orbit_figures, pixel_figures
 
 
 @dataclass

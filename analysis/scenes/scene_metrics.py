@@ -17,7 +17,6 @@ not float32 rounding. States ``x = [q, p]`` of shape ``(batch, 2n)``; times in t
 from __future__ import annotations
 
 import math
-import statistics
 import time
 import warnings
 
@@ -25,10 +24,10 @@ import numpy as np
 import torch
 
 import hnn
+from hnn.metrics import energy_drift, relative_error, summarize_errors
 
-from hnn_analysis import speed_accuracy
+from hnn_analysis.speed import speed_accuracy
 
-VALID_ERROR = 0.1          # a prediction is "valid" while its relative error stays below this
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference
 REFERENCE = {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
@@ -36,38 +35,15 @@ REFERENCE = {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": 1e-12, "at
 # changes them in the third digit at most (checked against rtol 1e-9)
 # at half the cost; a healthy field needs under 5000 steps over the horizon (3-body baseline: 4800),
 # while a learned orbit that collapses shrinks the step without end: 20000 steps bound it
+# the adaptive solvers' setting in the ladder: solve_ivp with DOP853, its high-order method
+ADAPTIVE = {"solve_ivp": ({"scipy_method": "DOP853"},)}
 EVAL_ROLLOUT = {"method": "dopri5", "rtol": 1e-6, "atol": 1e-8, "max_iterations": 20_000}
 
 
-def _quiet_rollout(f, x0, t, **options) -> torch.Tensor:
+def quiet_rollout(f, x0, t, **options) -> torch.Tensor:
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore")     # float64 states: the tolerances here are within reach
         return hnn.rollout(f, x0, t, **options)
-
-
-def relative_error(pred: torch.Tensor, true: torch.Tensor) -> np.ndarray:
-    """e(t) ``(batch, times)`` of two ``(batch, times, dim)`` trajectories; 0 where both are 0."""
-    pred, true = pred.double(), true.double()
-    den = pred.norm(dim=-1) + true.norm(dim=-1)
-    err = (pred - true).norm(dim=-1) / torch.where(den > 0, den, torch.ones_like(den))
-    return err.numpy()
-
-
-def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
-    """Geometric mean over t > 0 and valid prediction time of each row of ``err`` ``(batch, times)``.
-
-    Returns ``{"error": mean over trajectories of the geometric means, "error_per_trajectory",
-    "valid_time": median over trajectories, "valid_times", "horizon"}``; a trajectory that never
-    leaves ``VALID_ERROR`` counts the whole horizon (``valid_time == horizon`` means "at least").
-    """
-    after = np.clip(err[:, 1:], 1e-16, None)        # e(0) = 0 exactly: the log would be -inf
-    geo = np.exp(np.log(after).mean(axis=1))
-    valid = []
-    for row in err:
-        bad = np.nonzero(row > VALID_ERROR)[0]
-        valid.append(float(t[bad[0]] - t[0]) if len(bad) else float(t[-1] - t[0]))
-    return {"error": float(geo.mean()), "error_per_trajectory": geo.tolist(),
-            "valid_time": float(statistics.median(valid)), "valid_times": valid, "horizon": float(t[-1] - t[0])}
 
 
 def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int]:
@@ -75,13 +51,13 @@ def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int
     when the batch fails; a trajectory that blows up or does not finish within its step budget
     counts as unrelated to the truth (error ~1) over the whole horizon."""
     try:
-        return _quiet_rollout(f, x0, t, **EVAL_ROLLOUT), 0
+        return quiet_rollout(f, x0, t, **EVAL_ROLLOUT), 0
     except hnn.DivergenceError:
         pass
     rows, failed = [], 0
     for i in range(len(x0)):
         try:
-            rows.append(_quiet_rollout(f, x0[i:i + 1], t, **EVAL_ROLLOUT)[0])
+            rows.append(quiet_rollout(f, x0[i:i + 1], t, **EVAL_ROLLOUT)[0])
         except hnn.DivergenceError:
             failed += 1
             # a finite stand-in far from any true state: e(t) ~ 1 for the whole trajectory
@@ -106,8 +82,8 @@ def divergence_time(dynamics, x0: torch.Tensor, t: np.ndarray, seed: int = 0) ->
     rng = np.random.default_rng(seed)
     direction = rng.standard_normal(tuple(x0.shape))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    a = _quiet_rollout(dynamics, x0, t, **REFERENCE)
-    b = _quiet_rollout(dynamics, x0 + PERTURBATION * torch.as_tensor(direction, dtype=x0.dtype), t, **REFERENCE)
+    a = quiet_rollout(dynamics, x0, t, **REFERENCE)
+    b = quiet_rollout(dynamics, x0 + PERTURBATION * torch.as_tensor(direction, dtype=x0.dtype), t, **REFERENCE)
     s = summarize_errors(relative_error(b, a), t)
     return {"divergence_time": s["valid_time"], "divergence_times": s["valid_times"], "horizon": s["horizon"]}
 
@@ -126,15 +102,13 @@ def settings_ladder(dts, separable: bool, quick: bool) -> list[dict]:
     within this study's time.
     """
     rtols = (1e-4, 1e-7) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
-    out = [{"method": "dopri5", "rtol": r, "atol": r} for r in rtols]
-    out += [{"method": "solve_ivp", "scipy_method": "DOP853", "rtol": r, "atol": r} for r in rtols]
     dts = dts[::2] if quick else dts
-    methods = [("rk4", {}, dts), ("midpoint", {}, dts), ("yoshida4", {"base": "midpoint"}, dts[:4])]
-    if separable:
-        methods += [("leapfrog", {}, dts), ("yoshida4", {"base": "leapfrog"}, dts)]
-    for method, extra, steps in methods:
-        out += [{"method": method, "dt": dt, **extra} for dt in steps]
-    return out
+    # every registered solver that applies (speed_accuracy.solver_settings reads hnn.SOLVERS)
+    out = [options for _, options in speed_accuracy.solver_settings(separable, rtols, dts, ADAPTIVE)]
+    if separable:       # the any-H settings too (yoshida4 on the midpoint), as for a learned H
+        out += [options for _, options in speed_accuracy.solver_settings(False, (), dts)
+                if options not in out and "base" in options]
+    return [o for o in out if o.get("base") != "midpoint" or o["dt"] in dts[:4]]
 
 
 def describe(options: dict) -> str:
@@ -150,7 +124,7 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict]) ->
     reaches ``TARGET``) scored by its max relative error over the batch and times against
     ``REFERENCE`` of the same field ``f``; ``{"rows", "fastest", "fastest_symplectic"}``, the last two
     the quickest settings reaching ``TARGET`` (None when none does)."""
-    reference = _quiet_rollout(f, x0, t, **REFERENCE)
+    reference = quiet_rollout(f, x0, t, **REFERENCE)
     rows, reached = [], set()
     for options in ladder:
         family = (options["method"], options.get("scipy_method"), options.get("base"))
@@ -187,14 +161,14 @@ def long_drift(f, energy, x0: torch.Tensor, options: dict, period: float, period
     while done < periods and spent < budget:
         tic = time.perf_counter()
         try:
-            traj = _quiet_rollout(f, x, t_chunk, **options)
+            traj = quiet_rollout(f, x, t_chunk, **options)
         except hnn.DivergenceError:
             return {"drift": math.inf, "periods_done": done, "seconds": spent, "blew_up": True,
                     "seconds_per_period": spent / max(done, 1)}
         spent += time.perf_counter() - tic
         with torch.no_grad():
             e = energy(traj.reshape(-1, traj.shape[-1])).reshape(traj.shape[:2]).double()
-        drift = max(drift, float(((e - e0[:, None]).abs() / e0.abs().clamp_min(1e-12)[:, None]).max()))
+        drift = max(drift, energy_drift(e, e0, relative=True))
         x, done = traj[:, -1], done + chunk
     return {"drift": drift, "periods_done": done, "periods": periods, "seconds": spent, "blew_up": False,
             "seconds_per_period": spent / max(done, 1)}
@@ -223,7 +197,7 @@ def dhnn_protocol(system, models: dict, dataset: dict) -> dict:
         model64 = hnn.evaluation.float64_copy(model)
         with torch.enable_grad():
             sq = (model64.time_derivative(test_x).detach() - test_dxdt).pow(2).numpy()
-        traj = _quiet_rollout(model64.time_derivative, test_x[:1], t, method="solve_ivp", rtol=1e-3, atol=1e-6)[0]
+        traj = quiet_rollout(model64.time_derivative, test_x[:1], t, method="solve_ivp", rtol=1e-3, atol=1e-6)[0]
         e_err = (system.hamiltonian(traj).numpy() - e_true) ** 2
         x_err = (traj - test_x).pow(2).mean(-1).numpy()
         out[label] = {"test_mse": [float(sq.mean()), float(sq.std() / math.sqrt(sq.size))],

@@ -1,0 +1,435 @@
+"""Reproduce the paper's three tables (train loss, test loss, energy MSE; baseline vs HNN) and
+its figures, for every task in this checkout.
+
+    python analysis/reproduce.py                      # full settings, results/
+    python analysis/reproduce.py --quick              # smoke run (300 steps), results-quick/
+    python analysis/reproduce.py --jobs 2             # two training processes, one thread each
+    python analysis/reproduce.py --jobs 2 --backend ray   # each run a Ray task (docs/sweeps.md: clusters)
+    python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
+
+Trains each model from its task's config (``experiment-<task>/train.py``'s ``Config``; a saved
+run of the same config is reused), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
+first; ``hnn_analysis.sweep``), with one progress line for the whole job; a run that fails is
+reported and the others go on (the command then exits with code 1, listing them). Then evaluates
+the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
+its ``experiment-<task>/task.py`` says, through ``hnn_analysis.registry``). Writes
+``<out>/results.json`` (every number, with versions, commit, seed and the time of each stage),
+``<out>/tables.md`` (built from that JSON: ours beside the paper's, marked, and the stage
+times) and ``<out>/figures/``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import hnn
+from hnn.paper import PAPER
+from hnn.io import atomic_write, write_json
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis.paper import figures, registry  # noqa: E402
+from hnn_analysis import readme, sweep  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
+from hnn_analysis.readme import stage_table  # noqa: E402
+
+MODELS = ("baseline", "hnn")
+METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))
+QUICK_STEPS = 300
+MARKS = {"within": "✓", "better": "↓", "worse": "↑"}
+LEGEND = ("Marks: ✓ within the paper's ± (|ours − paper| ≤ the paper's ±); ↓ lower than the paper beyond "
+          "its ± (better); ↑ higher than the paper beyond its ± (worse).")
+HERE = Path(__file__).resolve().parent
+
+
+# ----------------------------------------------------------------------------------------------
+# evaluation
+
+
+def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
+    """``(the trained models with the first run's saved args, {label: its row of losses})`` of
+    ``runs`` (``{label: run folder}``), each read by the task's ``TaskSpec.load`` or ``hnn.load_run``."""
+    load = hnn.task_spec(task).load or hnn.load_run
+    models, row, first_args = {}, {}, None
+    for label, directory in runs.items():
+        models[label], args, metrics = load(directory)
+        first_args = first_args or args
+        row[label] = {"train_loss": [metrics["train_loss"], metrics["train_loss_se"]],
+                      "test_loss": [metrics["test_loss"], metrics["test_loss_se"]],
+                      "train_seconds": metrics.get("train_seconds"), "data_seconds": metrics.get("data_seconds"),
+                      "total_steps": args["total_steps"]}
+    return registry.Trained(task, hnn.load_task(task), models, first_args), row
+
+
+def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
+    """Losses from the saved metrics, energy MSE under every protocol, and the figures (as the
+    task's ``task.py`` says, through ``hnn_analysis.registry``). ``runs`` is ``{label: run
+    folder}``; the row's ``"seconds"`` holds the time of the evaluation and of the figures.
+    """
+    tic = time.perf_counter()
+    trained, row = load_runs(task, runs)
+    energy = registry.evaluate(trained)
+    # the figures show the paper's pair; the extra kinds are numbers in their own table
+    pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
+                            trained.args)
+    for name, result in energy.items():
+        for label in trained.models:
+            row[label][f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
+        row.setdefault("protocols", {})[name] = result.get("description", name)
+    t_eval = time.perf_counter() - tic
+    if fig_dir is not None:
+        numbers = registry.draw_figures(pair, energy, fig_dir)
+        if numbers:
+            row["figure_numbers"] = numbers
+    row["seconds"] = {"evaluate": t_eval, "figures": time.perf_counter() - tic - t_eval if fig_dir else 0.0}
+    return row
+
+
+# ----------------------------------------------------------------------------------------------
+# tables
+
+
+def _fmt(pair) -> str:
+    return "n/a" if pair is None else f"{pair[0]:.4e} ± {pair[1]:.2e}"
+
+
+def _ratio(ours, paper) -> str:
+    if ours is None or paper is None:
+        return ""
+    ratio = ours[0] / paper[0]
+    return f"{ratio:.2f}x" if ratio >= 0.01 else f"{ratio:.1e}x"
+
+
+def compare(ours, paper) -> str | None:
+    """``'within'`` when |ours - paper| <= the paper's ± (equality up to rounding counts as
+    within), else ``'better'`` (lower) or ``'worse'`` (higher); None when either is missing.
+    ``ours`` and ``paper`` are ``(mean, ±)`` pairs.
+    """
+    if ours is None or paper is None:
+        return None
+    gap, band = abs(ours[0] - paper[0]), abs(paper[1])
+    if gap <= band or math.isclose(gap, band, rel_tol=1e-9):
+        return "within"
+    return "better" if ours[0] < paper[0] else "worse"
+
+
+def _marked(ours, paper) -> str:
+    verdict = compare(ours, paper)
+    return _fmt(ours) + (f" {MARKS[verdict]}" if verdict else "")
+
+
+def _across_seeds(row: dict, label: str, key: str) -> str:
+    """Mean ± standard error over seeds of one metric, or '' for a single seed."""
+    values = [r[label][key][0] for r in row.get("per_seed", {}).values() if r[label].get(key)]
+    if len(values) < 2:
+        return ""
+    return f"{np.mean(values):.4e} ± {np.std(values, ddof=1) / np.sqrt(len(values)):.2e} (n={len(values)})"
+
+
+def tables_markdown(results: dict) -> str:
+    """The three tables, ours beside the paper's, and the stage times, from a results dict (``results.json``)."""
+    meta = results["meta"]
+    lines = []
+    if meta.get("quick"):
+        lines += [f"**QUICK smoke run ({meta.get('steps')} steps per model): not the paper's settings, so the "
+                  "numbers are not comparable with the paper's.**", ""]
+    lines += [f"Generated by `{meta['command']}` on {meta['date']} (commit {meta['commit']}, seed {meta['seed']}, "
+              f"torch {meta['torch']}, {meta['mode']}). Ratio = ours / paper. {LEGEND}", ""]
+    seeds = f"seeds {meta['seeds']}: mean ± standard error of the seeds' means" if len(meta["seeds"]) > 1 else ""
+    for key, title in METRICS:
+        lines += [f"**{title}** (mean ± std/sqrt(rows), seed {meta['seed']})", "",
+                  f"| task | model | paper | ours | ratio |{' across ' + seeds + ' |' if seeds else ''}",
+                  f"| --- | --- | --- | --- | --- |{' --- |' if seeds else ''}"]
+        for task, row in results["tasks"].items():
+            for label in MODELS:
+                paper, ours = PAPER.get(row.get("task", task), {}).get(key, {}).get(label), row[label].get(key)
+                extra = f" {_across_seeds(row, label, key)} |" if seeds else ""
+                lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper)} | "
+                             f"{_ratio(ours, paper)} |{extra}")
+        lines.append("")
+    lines += [f"**Energy MSE** (mean ± batch-means standard error over 5 groups, seed {meta['seed']})", "",
+              "| task | model | paper | ours, paper protocol | ratio | ours, corrected protocol |"
+              + (f" paper protocol across {seeds} |" if seeds else ""),
+              "| --- | --- | --- | --- | --- | --- |" + (" --- |" if seeds else "")]
+    for task, row in results["tasks"].items():
+        for label in MODELS:
+            paper = PAPER.get(row.get("task", task), {}).get("energy_mse", {}).get(label)
+            ours, fixed = row[label].get("energy_mse_paper"), row[label].get("energy_mse_corrected")
+            extra = f" {_across_seeds(row, label, 'energy_mse_paper')} |" if seeds else ""
+            lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper)} | {_ratio(ours, paper)} | "
+                         f"{_fmt(fixed) if fixed else 'same as paper'} |{extra}")
+    lines += _extra_kinds_table(results, seeds)
+    notes = [f"- **{task}**: {row['note']}" for task, row in results["tasks"].items() if row.get("note")]
+    if notes:
+        lines += ["", "Rows beyond the paper's setting (compared with the paper's row of the same task):"] + notes
+    lines += ["", "Protocols:"]
+    for task, row in results["tasks"].items():
+        if row.get("note"):
+            continue
+        for text in row.get("protocols", {}).values():
+            lines.append(f"- {task}, {text}")
+    skipped = results.get("skipped", {})
+    for task in skipped:
+        lines += ["", f"Skipped {task}: {skipped[task]}"]
+    present = meta.get("available", hnn.available_tasks())
+    missing = [t for t in hnn.available_tasks() if t not in present]
+    if missing:
+        lines += ["", f"Not yet in this checkout: {', '.join(missing)}."]
+    stages = stage_table(results)
+    if stages:
+        lines += [""] + stages
+    return "\n".join(lines) + "\n"
+
+
+def _extra_kinds_table(results: dict, seeds: str) -> list[str]:
+    """The rows of the model kinds beyond the paper's pair (``--models``), beside that task's HNN."""
+    rows = [(name, label) for name, row in results["tasks"].items() for label in row
+            if label not in MODELS and isinstance(row[label], dict) and "test_loss" in row[label]]
+    if not rows:
+        return []
+    meta = results["meta"]
+    lines = ["", f"**Other model kinds** (`--models`; not in the paper; seed {meta['seed']}; the HNN row repeated "
+             "for comparison)", "",
+             "| task | model | train loss | test loss | energy MSE, paper protocol | energy MSE, corrected |"
+             + (" test loss across " + seeds + " |" if seeds else ""),
+             "| --- | --- | --- | --- | --- | --- |" + (" --- |" if seeds else "")]
+    for name in dict.fromkeys(name for name, _ in rows):
+        row = results["tasks"][name]
+        for label in ["hnn"] + [lbl for n, lbl in rows if n == name]:
+            r = row[label]
+            extra = f" {_across_seeds(row, label, 'test_loss')} |" if seeds else ""
+            fixed = r.get("energy_mse_corrected")
+            lines.append(f"| {name} | {label} | {_fmt(r.get('train_loss'))} | {_fmt(r.get('test_loss'))} | "
+                         f"{_fmt(r.get('energy_mse_paper'))} | {_fmt(fixed) if fixed else 'same as paper'} |{extra}")
+    return lines
+
+
+def headline_markdown(results: dict) -> str:
+    """The README's short table: test loss and energy MSE (paper's protocol) at the first seed, beside the paper's."""
+    meta = results["meta"]
+    lines = [f"Seed {meta['seed']}, full settings, `{meta['command']}` (commit {meta['commit']}, {meta['date']}); "
+             f"{LEGEND} All numbers, seeds and protocols: [docs/results.md](docs/results.md).", "",
+             "| task | model | test loss, paper | test loss, ours | energy MSE, paper | energy MSE, ours |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for name, row in results["tasks"].items():
+        paper = PAPER.get(row.get("task", name), {})
+        for label in MODELS:
+            cells = []
+            for key, ours_key in (("test_loss", "test_loss"), ("energy_mse", "energy_mse_paper")):
+                ref, ours = paper.get(key, {}).get(label), row[label].get(ours_key)
+                verdict = compare(ours, ref)
+                cells += ["n/a" if ref is None else f"{ref[0]:.3g}",
+                          "n/a" if ours is None else f"{ours[0]:.3g}" + (f" {MARKS[verdict]}" if verdict else "")]
+            lines.append(f"| {name} | {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------------------------
+# the command
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = hnn.cli.Parser(prog="reproduce.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task present)")
+    p.add_argument("--quick", action="store_true",
+                   help=f"smoke run: {QUICK_STEPS} training steps per model (or --steps), output in results-quick/")
+    p.add_argument("--steps", type=int, default=None,
+                   help="training steps per model, overriding every task's default (with --quick: default "
+                        f"{QUICK_STEPS}); a run trained with other steps is retrained")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the datasets, inits and minibatches")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="train and evaluate seeds seed .. seed+N-1; tables add mean ± standard error across them")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="training processes: 1 trains here, one run after another; N > 1 runs N worker "
+                        "processes with cores // N threads each, longest runs first (with --backend ray: "
+                        "Ray tasks of cores // N threads); evaluation stays here")
+    sweep.add_backend_flags(p)
+    p.add_argument("--models", nargs="+", default=[], metavar="KIND",
+                   choices=[k for k in hnn.cli.model_choices() if k not in MODELS],
+                   help="extra model kinds trained and evaluated beside the paper's baseline and HNN, in a table "
+                        "of their own (the paper's tables stay as they are): separable, dissipative")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
+                   help="write docs/results.md from tables.md, the README's headline table, and the curated "
+                        "figures in docs/figures/ (full settings only)")
+    return p
+
+
+def _check(parser: argparse.ArgumentParser, args) -> None:
+    """Bad values exit with one ``error:`` line (code 2) that names the value and the fix."""
+    if args.jobs < 1:
+        parser.error(f"--jobs {args.jobs}: must be at least 1 (1 = train in this process)")
+    if args.seeds < 1:
+        parser.error(f"--seeds {args.seeds}: must be at least 1")
+    if args.steps is not None and args.steps < 0:
+        parser.error(f"--steps {args.steps}: must be a non-negative number of training steps")
+    if args.update_docs and (args.quick or args.steps is not None):
+        parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick / --steps")
+    for task in args.tasks or []:
+        if task not in hnn.available_tasks():
+            parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.available_tasks())}")
+    sweep.check_backend(parser, args)
+
+
+
+def table_rows(tasks: list[str], quick: bool) -> list[dict]:
+    """The rows of the tables: each task in the paper's setting, then its variants (``TaskSpec.variants``).
+
+    A row is ``{"row": name, "task": task, "fields": its runs' config fields, "note": why or None}``.
+    """
+    rows = []
+    for task in tasks:
+        spec = hnn.task_spec(task)
+        fields = {**spec.settings, **(spec.quick if quick else {})}
+        rows.append({"row": task, "task": task, "fields": fields, "note": None})
+        for suffix, (changes, why) in spec.variants.items():
+            name = f"{task}-{suffix}"
+            rows.append({"row": name, "task": task, "fields": {**fields, **changes, "name": name}, "note": why})
+    return rows
+
+
+def row_models(task: str, models=MODELS) -> list[str]:
+    """The kinds of ``models`` that ``task``'s ``--model`` takes (its config's), the paper's pair first."""
+    takes = hnn.cli.model_choices(hnn.load_task(task, "train").Config)
+    return [label for label in dict.fromkeys(MODELS + tuple(models)) if label in takes]
+
+
+def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
+         models=MODELS) -> list[sweep.Job]:
+    """The run of every row and seed, for the paper's two models and the extra ``models`` kinds
+    the row's task has; ``steps`` overrides the tasks' ``total_steps``."""
+    jobs = []
+    for spec in rows:
+        for seed in seeds:
+            for label in row_models(spec["task"], models):
+                fields = {**spec["fields"], "model": label, "seed": seed, "save_dir": str(runs_dir)}
+                if steps is not None:
+                    fields["total_steps"] = steps
+                jobs.append(sweep.Job(f"{spec['row']}/{label}/seed{seed}", spec["task"],
+                                      hnn.tasks.task_config(spec["task"], fields)))
+    return jobs
+
+
+
+def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
+    """One row's seconds: dataset, training per model (summed over seeds), evaluation, figures."""
+    stage = {"data": None, "train": {}, "evaluate": 0.0, "figures": 0.0}
+    for seed, by_label in keys.items():
+        for label, key in by_label.items():
+            timing = run_seconds.get(key)
+            if timing:
+                stage["data"] = (stage["data"] or 0.0) + (timing["data"] or 0.0)
+                stage["train"][label] = stage["train"].get(label, 0.0) + (timing["train"] or 0.0)
+        for part in ("evaluate", "figures"):
+            stage[part] += per_seed[str(seed)]["seconds"][part]
+    return stage
+
+
+def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict, fig_dir: Path | None,
+                  models=MODELS) -> None:
+    """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
+    each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
+    for spec in rows:
+        name, task = spec["row"], spec["task"]
+        if task in results.get("skipped", {}):
+            continue
+        keys = {seed: {label: f"{name}/{label}/seed{seed}" for label in row_models(task, models)} for seed in seeds}
+        failed = [runs[k] for by_label in keys.values() for k in by_label.values() if isinstance(runs[k], Exception)]
+        if failed:
+            results.setdefault("skipped", {})[task] = str(failed[0])
+            print(f"  {task:11s} SKIPPED (the reason is above)", flush=True)
+            continue
+        per_seed = {}
+        for seed in seeds:
+            figs = fig_dir if fig_dir is not None and seed == seeds[0] and spec["note"] is None else None
+            per_seed[str(seed)] = evaluate_task(task, {label: runs[k] for label, k in keys[seed].items()}, figs)
+        row = dict(per_seed[str(seeds[0])], task=task, note=spec["note"])
+        if len(per_seed) > 1:
+            row["per_seed"] = per_seed
+        stage = _stage_seconds(keys, per_seed, results["seconds"]["runs"])
+        row.pop("seconds", None)
+        results["tasks"][name] = row
+        results["seconds"]["tasks"][name] = stage
+        print(f"  {name:11s} evaluated ({stage['evaluate']:.1f} s)"
+              + (f", figures ({stage['figures']:.1f} s)" if fig_dir is not None and spec["note"] is None else ""),
+              flush=True)
+
+
+def portable_command(argv: list[str]) -> str:
+    """The command as a reader can rerun it: paths inside the checkout made relative to it, and
+    other absolute paths (one machine's folders) shown as ``DIR``."""
+    root, words = hnn.tasks.repo_root().resolve(), []
+    for word in argv:
+        path = Path(word)
+        if path.is_absolute():
+            word = os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
+        words.append(word)
+    return " ".join(["python analysis/reproduce.py"] + words)
+
+
+def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:
+    return {**provenance(), "command": portable_command(argv), "seed": args.seed, "seeds": seeds, "mode": mode,
+            "quick": args.quick, "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models),
+            "available": hnn.available_tasks()}
+
+
+def _mode(args) -> tuple[str, int | None]:
+    steps = args.steps if args.steps is not None else (QUICK_STEPS if args.quick else None)
+    if args.quick:
+        return f"QUICK smoke run, {steps} steps per model: not the paper's settings", steps
+    return ("full settings" if steps is None else f"{steps} steps per model: not the paper's settings"), steps
+
+
+def write_outputs(results: dict, out: Path, update_docs: bool, figures_drawn: bool) -> None:
+    """``results.json`` and ``tables.md`` in ``out``; with ``update_docs`` also the docs pages, the
+    README's headline table and the curated figures."""
+    write_json(out / "results.json", results)
+    tables = tables_markdown(results)
+    atomic_write(out / "tables.md", lambda tmp: Path(tmp).write_text(tables))
+    print("\n" + tables)
+    print(f"{'QUICK smoke run: ' if results['meta']['quick'] else ''}total {results['seconds']['total']:.1f} s; "
+          f"wrote {out / 'results.json'}, {out / 'tables.md'}" + (f", {out / 'figures'}/" if figures_drawn else ""))
+    if update_docs:
+        for path in readme.update_results(tables, headline_markdown(results), out / "figures" if figures_drawn else None):
+            print(f"updated {path}")
+
+
+def main(argv=None) -> dict:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    _check(parser, args)
+    out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
+    tasks = args.tasks or hnn.available_tasks()
+    mode, steps = _mode(args)
+    backend = "" if args.backend == "local" else f" --backend {args.backend}"
+    print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
+    start = time.perf_counter()
+    rows = table_rows(tasks, args.quick)
+    runs, jobs = sweep.reuse(plan(rows, seeds, out / "runs", steps, args.models))
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
+    runs.update(trained)
+    results["seconds"].update(seconds)
+    tic = time.perf_counter()
+    figures.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
+    try:
+        evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models)
+    finally:
+        figures.set_stamp("")
+    results["seconds"]["evaluation"] = time.perf_counter() - tic
+    results["seconds"]["total"] = time.perf_counter() - start
+    write_outputs(results, out, args.update_docs, not args.no_figures)
+    sweep.exit_if_failed(trained)
+    return results
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,396 @@
+"""Which model does each scene need? Every rung of the model ladder on every scene, measured.
+
+    python analysis/scene_study.py --jobs 2                  # full study (reuses reproduce.py's runs)
+    python analysis/scene_study.py --quick                   # smoke run (300 steps, a small grid)
+    python analysis/scene_study.py --jobs 2 --update-docs    # docs/scenes.md, the README's model guide
+
+The rungs are the model kinds each task trains (``--model``): the baseline MLP, the paper's HNN,
+the separable HNN (H = T(p) + V(q)) and the dissipative HNN (J grad H + grad D); the pixel task
+has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3body, pixels):
+
+1. *Per rung* (width 200, all the data, ``--seeds`` seeds): test loss, energy MSE under each of
+   the task's protocols, the rollout relative error (geometric mean over a horizon 10x the
+   training trajectories') and the valid prediction time, beside the time over which the true
+   system itself diverges from starts 1e-4 apart.
+2. *Speed at equal accuracy* (seed 0; not pixels): the fastest ``hnn.rollout`` setting that
+   reaches error 1e-4 against DOP853 rtol 1e-12 of the same field, and the learned H's drift over
+   1000 periods (spring, pend) or 100 orbits (2body) at it and at the fastest symplectic one.
+3. *Capacity and data* (spring, pend, 2body): hidden width x training fraction for every rung at
+   seed 0, then ``--seeds`` seeds at the cell each scene card picks.
+4. *Scene cards*: the smallest model (fewest parameters, then cheapest to train) within 2x of
+   the best energy MSE and the best rollout error of its scene; Pareto plots of error against
+   training and rollout seconds.
+5. *The real pendulum, the D-HNN paper's way*: their split and central differences, their energy
+   2.4 (1 - cos q) + p^2, beside their published numbers.
+
+Training goes through each task's ``train.py`` (as ``reproduce.py``, whose runs in ``<out>/runs``
+are reused when the args match). Writes ``<out>/scene_study.json`` (every number), 
+``<out>/scene_study.md`` and ``<out>/figures/scenes-pareto.png``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import hnn
+
+hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
+from hnn_analysis.paper import registry, reproduce  # noqa: E402
+from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.speed import speed_accuracy  # noqa: E402
+from hnn_analysis import sweep  # noqa: E402
+from hnn_analysis.provenance import provenance  # noqa: E402
+
+SCENES = ("spring", "pend", "real", "2body", "3body", "pixels")
+GRID_SCENES = ("spring", "pend", "2body")
+WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
+QUICK_WIDTHS, QUICK_FRACTIONS = (16, 200), (0.25, 1.0)
+DEFAULT_CELL = (200, 1.0)
+HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
+STARTS = 8                 # start states of the rollout metrics
+CARD_FACTOR = 2.0          # a scene card's model is within this factor of the best on both errors
+# per scene: the training trajectories' length (scene time units), the fixed steps of the speed
+# ladder, and the long run of the drift: the period (None: measured per start) and how many
+SCENE = {
+    "spring": {"T": 3.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002), "period": math.pi, "periods": 1000,
+               "unit": "periods"},
+    # the small-angle period 2 pi / sqrt(6) of H = 3 (1 - cos q) + p^2 (the data swing wider: longer)
+    "pend": {"T": 3.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002), "period": 2 * math.pi / math.sqrt(6),
+             "periods": 1000, "unit": "small-angle periods"},
+    "2body": {"T": 20.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01), "period": None, "periods": 100,
+              "unit": "orbits"},
+    "3body": {"T": 5.0, "dts": (0.05, 0.02, 0.01, 0.005, 0.002)},
+    "real": {},
+    "pixels": {},
+}
+DRIFT_SCENES = ("spring", "pend", "2body")
+DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
+def rungs() -> tuple[str, ...]:
+    """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)."""
+    return tuple(hnn.cli.model_choices())
+DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
+               "name": "real-dhnn"}
+DHNN_MODELS = ("baseline", "hnn", "dissipative")
+# scenes whose new kinds train at the first seed only (a 3-body run is ~10x a spring run); the
+# paper's pair keeps every seed that reproduce.py trained
+ONE_SEED_SCENES = ("3body",)
+
+
+# ----------------------------------------------------------------------------------------------
+# what to train
+
+
+def _cell_fields(width: int, fraction: float, task: str) -> dict:
+    if (width, fraction) == DEFAULT_CELL:
+        return {}       # the defaults: reproduce.py's own runs
+    return {"hidden_dim": width, "train_fraction": fraction, "name": f"{task}-w{width}-f{fraction:g}"}
+
+
+def _row(task: str, cell: tuple, quick: bool, extra=None, name: str | None = None) -> dict:
+    width, fraction = cell
+    spec = hnn.task_spec(task)
+    fields = {**spec.settings, **(spec.quick if quick else {}), **_cell_fields(width, fraction, task), **(extra or {})}
+    return {"row": name or f"{task}@{width}x{fraction:g}", "task": task, "fields": fields, "note": None, "cell": cell}
+
+
+def plan_rows(scenes, quick: bool) -> list[dict]:
+    """Every (task, cell) row of the study: the default cell of every scene, the grid of the grid scenes."""
+    widths, fractions = (QUICK_WIDTHS, QUICK_FRACTIONS) if quick else (WIDTHS, FRACTIONS)
+    rows = [_row(task, DEFAULT_CELL, quick) for task in scenes]
+    for task in scenes:
+        if task in GRID_SCENES:
+            rows += [_row(task, (w, f), quick) for w in widths for f in fractions if (w, f) != DEFAULT_CELL]
+    return rows
+
+
+def train(rows, seeds, out: Path, steps, args, models=None) -> tuple[dict, dict]:
+    """``({row/label/seed: run folder or the error of a failed run}, seconds)``: reuse what matches,
+    train the rest (``args.jobs`` processes, on ``args.backend``)."""
+    models = rungs() if models is None else models
+    # plan() always takes the paper's pair: keep only the kinds asked for
+    jobs = [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models) if job.config.model in models]
+    runs, jobs = sweep.reuse(jobs)
+    print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
+    runs.update(trained)
+    return runs, seconds
+
+
+# ----------------------------------------------------------------------------------------------
+# measuring one scene
+
+
+def _params(model) -> int:
+    return sum(p.numel() for p in model.parameters())
+
+
+class Scene:
+    """A scene's truth: start states, the true trajectories over ``HORIZON`` training lengths, and
+    the time over which the truth itself diverges from starts ``PERTURBATION`` apart."""
+
+    def __init__(self, task: str, quick: bool):
+        self.task, self.system, self.cfg = task, hnn.load_task(task), SCENE[task]
+        self.truth = None
+        if "T" in self.cfg:
+            horizon = HORIZON * self.cfg["T"]
+            self.t = np.linspace(0.0, horizon, (50 if quick else 100) * HORIZON + 1)
+            self.x0 = speed_accuracy.start_states(task, self.system, STARTS // 2 if quick else STARTS)
+            with torch.no_grad():
+                self.truth = sm.quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
+            self.divergence = sm.divergence_time(self.system.dynamics, self.x0, self.t)
+        elif task == "real":
+            # no truth past the measurements: the measured test segment, from its first state
+            data = hnn.load_task("real").get_dataset()
+            self.truth = torch.as_tensor(data["test_x"], dtype=torch.float64)[None]
+            self.t = np.asarray(data["test_t"], dtype=np.float64) - float(data["test_t"][0])
+
+    def measure(self, label: str, directory: Path, protocols: bool = True) -> dict:
+        """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one run."""
+        trained, row = reproduce.load_runs(self.task, {label: directory})
+        model = trained.models[label]
+        out = {"test_loss": row[label]["test_loss"], "train_loss": row[label]["train_loss"],
+               "train_seconds": row[label]["train_seconds"], "params": _params(model),
+               "run": directory.name}
+        tic = time.perf_counter()
+        energy = registry.evaluate(trained) if protocols else {}
+        for name, result in energy.items():
+            out[f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
+        if self.truth is not None:
+            out["rollout"] = sm.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, self.truth, self.t)
+        elif self.task == "pixels" and "corrected" in energy:
+            # the decoded frames of the corrected protocol's trajectory against the rendered ones
+            result = energy["corrected"]
+            truth = torch.as_tensor(result["truth"]["pixels"], dtype=torch.float64)[None]
+            decoded = torch.as_tensor(result[label]["decoded"], dtype=torch.float64)[None]
+            frames = np.arange(truth.shape[1], dtype=np.float64)
+            out["rollout"] = hnn.metrics.summarize_errors(hnn.metrics.relative_error(decoded, truth), frames)
+            # the decoder's own reconstruction error of a frame is ~0.3 in this measure: no frame is
+            # ever within 0.1, so a valid time in pixel space says nothing
+            out["rollout"]["valid_time"] = None
+        out["evaluate_seconds"] = time.perf_counter() - tic
+        return out
+
+
+def _energy_fn(system, model, label: str):
+    """The learned H of an H-model, else the system's own H (the drift a baseline shows)."""
+    if hnn.MODEL_KINDS[label].conservative:
+        return hnn.evaluation.float64_copy(model).hamiltonian
+    return system.hamiltonian
+
+
+def _periods(scene: Scene) -> float:
+    """The period of the long drift run: the scene's, or for the orbits the median circular-orbit
+    period 2 pi r / v of body 0 about the centre of mass."""
+    if scene.cfg["period"] is not None:
+        return scene.cfg["period"]
+    x = scene.x0.numpy()
+    n = x.shape[1] // 4     # bodies; x = [qx_i, qy_i, px_i, py_i] blocks of n
+    r = np.hypot(x[:, 0], x[:, n])
+    v = np.hypot(x[:, 2 * n], x[:, 3 * n])
+    return float(np.median(2 * np.pi * r / v))
+
+
+def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
+    """Speed at equal accuracy of one model, and the drift of its energy over the long run."""
+    model64 = hnn.evaluation.float64_copy(model)
+    f = model64.time_derivative
+    x0 = scene.x0[:4]
+    t = np.linspace(0.0, scene.cfg["T"], 31)
+    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick)
+    result = sm.speed_at_accuracy(f, x0, t, ladder)
+    if scene.task in DRIFT_SCENES and not hnn.MODEL_KINDS[label].dissipative:
+        period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
+        budget = 2.0 if quick else DRIFT_BUDGET
+        energy = _energy_fn(scene.system, model, label)
+        for key in ("fastest", "fastest_symplectic"):
+            pick = result[key]
+            if pick is not None:
+                pick["drift"] = sm.long_drift(f, energy, x0[:2], pick["options"], period, periods, budget)
+        result["period"] = period
+    return result
+
+
+# ----------------------------------------------------------------------------------------------
+# scene cards
+
+
+def _key_metric(m: dict) -> tuple[float | None, float | None]:
+    """(energy MSE of the scene's main protocol, rollout error) of one measured model."""
+    energy = m.get("energy_mse_corrected") or m.get("energy_mse_paper")
+    return (energy[0] if energy else None), (m["rollout"]["error"] if "rollout" in m else None)
+
+
+def scene_card(cells: dict) -> dict | None:
+    """The smallest model (parameters, then training seconds) within ``CARD_FACTOR`` of the scene's
+    best energy MSE and best rollout error. ``cells`` is ``{(label, width, fraction): measured}``."""
+    scored = {k: _key_metric(m) for k, m in cells.items()}
+    best_e = min((e for e, _ in scored.values() if e is not None), default=None)
+    best_r = min((r for _, r in scored.values() if r is not None), default=None)
+    ok = [k for k, (e, r) in scored.items()
+          if (best_e is None or (e is not None and e <= CARD_FACTOR * best_e))
+          and (best_r is None or (r is not None and r <= CARD_FACTOR * best_r))]
+    if not ok:
+        return None
+    pick = min(ok, key=lambda k: (cells[k]["params"], cells[k]["train_seconds"] or 0.0))
+    return {"label": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
+            **{k: cells[pick][k] for k in ("params", "train_seconds")},
+            "energy": scored[pick][0], "rollout": scored[pick][1]}
+
+
+# ----------------------------------------------------------------------------------------------
+# the command
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = hnn.cli.Parser(prog="scene_study.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenes", nargs="+", default=None, choices=SCENES, help="scenes to study (default: all present)")
+    p.add_argument("--quick", action="store_true",
+                   help=f"smoke run: {reproduce.QUICK_STEPS} steps per model, widths {QUICK_WIDTHS} x fractions "
+                        f"{QUICK_FRACTIONS}, one seed, short drift runs; output in results-quick/")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
+    p.add_argument("--seeds", type=int, default=3, help="seeds of the per-rung rows and the chosen cells (quick: 1)")
+    p.add_argument("--jobs", type=int, default=1, help="training processes, as reproduce.py --jobs")
+    sweep.add_backend_flags(p)
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
+                   help="write docs/scenes.md and the README's model guide (full settings only)")
+    return p
+
+
+def main(argv=None) -> dict:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.jobs < 1 or args.seeds < 1:
+        parser.error(f"--jobs {args.jobs} / --seeds {args.seeds}: both must be at least 1")
+    if args.update_docs and args.quick:
+        parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
+    sweep.check_backend(parser, args)
+    out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
+    steps = reproduce.QUICK_STEPS if args.quick else None
+    seeds = [0] if args.quick else list(range(args.seeds))
+    scenes = [s for s in (args.scenes or SCENES) if s in hnn.available_tasks()]
+    start = time.perf_counter()
+    results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
+        "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "seeds": seeds,
+        "jobs": args.jobs, "backend": args.backend, "starts": STARTS // 2 if args.quick else STARTS},
+        "scenes": {}, "seconds": {}}
+
+    # 1. train: every scene's rungs at the default cell (all seeds), the grid (seed 0), the D-HNN split
+    rows = plan_rows(scenes, args.quick)
+    default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
+    grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
+    dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in scenes else []
+    tic = time.perf_counter()
+    runs, _ = train([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, out, steps, args)
+    more, _ = train([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], out, steps, args)
+    runs.update(more)
+    more, _ = train(grid_rows, [0], out, steps, args)
+    runs.update(more)
+    if dhnn_rows:
+        # the D-HNN protocol's own 5000 steps (DHNN_FIELDS) even in a quick run: 5000 small steps are seconds
+        more, _ = train(dhnn_rows, [0], out, None, args, DHNN_MODELS)
+        runs.update(more)
+    results["seconds"]["training"] = time.perf_counter() - tic
+
+    # 2. measure, on one thread: the rollouts here are batches of 4-15 states, which a second
+    # thread does not speed up, and two threads on a busy 2-core machine ran them many times slower
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    tic = time.perf_counter()
+    cells_by_scene = {}
+    for task in scenes:
+        scene = Scene(task, args.quick)
+        entry = {"divergence": getattr(scene, "divergence", None), "rungs": {}, "grid": {}, "speed": {}}
+        cells = {}
+        for label in reproduce.row_models(task, rungs()):
+            per_seed = {}
+            for seed in seeds:
+                run = runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}")
+                if isinstance(run, Path):
+                    per_seed[seed] = scene.measure(label, run)
+            if not per_seed:
+                continue
+            entry["rungs"][label] = {"per_seed": per_seed, **_across(per_seed)}
+            cells[(label, *DEFAULT_CELL)] = per_seed[seeds[0]]
+            if seeds[0] in per_seed and "dts" in scene.cfg:     # a scene with a truth to roll out
+                model = hnn.load_run(run_of(runs, task, DEFAULT_CELL, label, seeds[0]))[0]
+                entry["speed"][label] = speed_study(scene, label, model, args.quick)
+            print(f"  {task:7s} {label:11s} measured", flush=True)
+        for row in (r for r in grid_rows if r["task"] == task):
+            for label in reproduce.row_models(task, rungs()):
+                run = runs.get(f"{row['row']}/{label}/seed0")
+                if isinstance(run, Path):
+                    m = scene.measure(label, run, protocols=True)
+                    entry["grid"][f"{label}@{row['cell'][0]}x{row['cell'][1]:g}"] = m
+                    cells[(label, *row["cell"])] = m
+        if entry["grid"]:
+            print(f"  {task:7s} grid of {len(entry['grid'])} models measured", flush=True)
+        cells_by_scene[task] = (scene, cells)
+        results["scenes"][task] = entry
+    if dhnn_rows:
+        results["dhnn"] = _dhnn(runs, dhnn_rows[0])
+    results["seconds"]["measure"] = time.perf_counter() - tic
+
+    # 3. the cards; more seeds at a chosen grid cell
+    tic = time.perf_counter()
+    for task, (scene, cells) in cells_by_scene.items():
+        card = scene_card(cells)
+        results["scenes"][task]["card"] = card
+        if card and task in GRID_SCENES and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
+            row = _row(task, (card["width"], card["fraction"]), args.quick)
+            more, _ = train([row], seeds, out, steps, args, (card["label"],))
+            runs.update(more)
+            per_seed = {s: scene.measure(card["label"], more[f"{row['row']}/{card['label']}/seed{s}"])
+                        for s in seeds if isinstance(more.get(f"{row['row']}/{card['label']}/seed{s}"), Path)}
+            card["seeds"] = _across(per_seed)
+    results["seconds"]["cards"] = time.perf_counter() - tic
+    torch.set_num_threads(threads)
+    results["seconds"]["total"] = time.perf_counter() - start
+
+    # 4. write
+    from hnn_analysis.scenes import scene_report
+    scene_report.write(results, out, args.update_docs)
+    sweep.exit_if_failed(runs)
+    return results
+
+
+def run_of(runs: dict, task: str, cell: tuple, label: str, seed: int) -> Path:
+    return runs[f"{task}@{cell[0]}x{cell[1]:g}/{label}/seed{seed}"]
+
+
+def _across(per_seed: dict) -> dict:
+    """Mean ± standard error across seeds of the main numbers of one rung."""
+    out = {}
+    for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
+        values = [m[key][0] for m in per_seed.values() if m.get(key)]
+        if values:
+            out[key + "_seeds"] = list(hnn.mean_and_se(values))
+    for key in ("error", "valid_time"):
+        values = [m["rollout"][key] for m in per_seed.values() if m.get("rollout", {}).get(key) is not None]
+        if values:
+            out[key + "_seeds"] = list(hnn.mean_and_se(values))
+    return out
+
+
+def _dhnn(runs: dict, row: dict) -> dict:
+    """The D-HNN protocol's numbers of our models trained on their split (seed 0)."""
+    models, dataset = {}, None
+    for label in DHNN_MODELS:
+        run = runs.get(f"{row['row']}/{label}/seed0")
+        if isinstance(run, Path):
+            models[label], saved, metrics = hnn.load_run(run)
+            dataset = dataset or hnn.tasks.run_dataset("real", saved)
+    if not models:
+        return {}
+    return {"ours": sm.dhnn_protocol(hnn.load_task("real"), models, dataset), "paper": sm.DHNN_PAPER,
+            "config": DHNN_FIELDS}
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+"""A run is a config: ``RunConfig`` holds every field of a training run, with the original's names.
+
+    config = SpringConfig(total_steps=10, hidden_dim=16)     # a task's subclass (experiment-spring/train.py)
+    folder = hnn.run_experiment(config)                     # trains, saves, returns the run folder
+
+A task subclasses ``RunConfig``: it sets its defaults (``name``, ``input_dim``, ``weight_decay``,
+...), adds its own fields (declared with ``setting``, which gives each its ``--help`` text and
+how its flag parses), and implements ``dataset()``. ``hnn.cli.parse(SpringConfig, argv)`` builds
+the command line from the fields, so every field is a flag with the field's spelling and default.
+
+A config's identity is every field but the display-only ones (``display_only=True``: what is
+printed or how fast, never what is trained) and ``save_dir`` (where it is saved): its short hash
+names the run folder ``<name>-<model>-seed<seed>-<hash>``, so two configs never share a folder
+and a copied output folder is found again where it lies.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from . import cli
+from .models import FIELD_TYPES, NONLINEARITIES
+from .objectives import Objective, objective_for
+
+
+def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False) -> Any:
+    """A config field with its flag's ``help`` text; ``parse(text) -> value`` (an argparse
+    ``type``, default: the type of ``default``), ``choices`` and ``display_only`` as in argparse."""
+    return dataclasses.field(default=default, metadata={"help": help, "parse": parse, "choices": choices,
+                                                        "display_only": display_only})
+
+
+@dataclass
+class RunConfig:
+    """One training run: the original's flags with its defaults, plus the knobs it hard-coded."""
+    input_dim: int = setting(2, "width of the state x = [q, p] (fixed by the task)")
+    hidden_dim: int = setting(200, "hidden units per layer of the MLP", parse=cli.int_at_least(1))
+    learn_rate: float = setting(1e-3, "Adam learning rate", parse=cli.positive_float)
+    weight_decay: float = setting(1e-4, "Adam weight decay (hard-coded per task in the original)",
+                                  parse=cli.nonnegative_float)
+    batch_size: int | None = setting(None, "minibatch size; none/0/full = full batch", parse=cli.optional_int)
+    train_fraction: float = setting(1.0, "train on this fraction of the training rows, drawn once from the seed "
+                                         "(the test set stays whole); for studies of how much data a model needs",
+                                    parse=cli.fraction)
+    nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
+    total_steps: int = setting(2000, "optimizer steps; the loop runs total_steps + 1, as the original",
+                               parse=cli.int_at_least(0))
+    print_every: int = setting(200, "print (and test) every N steps", parse=cli.int_at_least(1))
+    name: str = setting("run", "run name, the prefix of the run folder")
+    model: str = setting("hnn", "model kind: hnn (the paper's), baseline (an MLP predicting dx/dt directly; also "
+                                "--baseline), separable (H = T(p) + V(q): explicit leapfrog is symplectic for it) "
+                                "or dissipative (J grad H + grad D: learns friction)")
+    use_rk4: bool = setting(False, "fit the RK4 average slope of the learned field over one data time step dt, "
+                                   "(x(t+dt) - x(t))/dt of one RK4 step, to the true dx/dt (the original crashed on "
+                                   "this flag); default: fit dx/dt itself")
+    verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
+    field_type: str = setting("solenoidal", "solenoidal (Hamiltonian), conservative, or both", choices=FIELD_TYPES)
+    seed: int = setting(0, "seeds the dataset, the init and the minibatches", parse=cli.int_at_least(0))
+    save_dir: str = setting(".", "folder that receives the run folder <name>-<model>-seed<seed>-<hash>/")
+    device: str = setting("cpu", "torch device, e.g. cpu or cuda", parse=cli.device)
+    dtype: str = setting("float32", "dtype of the model and the data", choices=("float32", "float64"))
+    debug: bool = setting(False, "on an input error (a missing data file, say), show the full traceback instead "
+                                 "of one error: line", display_only=True)
+
+    # what the state's width measures, for --input_dim's error; the model kinds --model takes
+    # (None: every registered kind without a family prefix); the prefix of this task's kinds
+    # ("pixel-" for the pixel task's latent models); help texts that differ from the base's
+    STATE: ClassVar[str] = "state x = [q, p]"
+    MODELS: ClassVar[tuple[str, ...] | None] = None
+    KIND_PREFIX: ClassVar[str] = ""
+    HELP: ClassVar[dict[str, str]] = {}
+    # the fields that dataset() reads: runs that agree on them share one dataset, built once per sweep
+    DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed",)
+
+    @property
+    def kind(self) -> str:
+        """The registered model kind (``hnn.MODEL_KINDS``) this run trains: the one place it is worked out."""
+        return self.KIND_PREFIX + self.model
+
+    def dataset(self) -> dict:
+        """The arrays this run trains on (``self.objective().arrays`` and, for ``use_rk4``, ``dt``)."""
+        raise NotImplementedError(f"{type(self).__name__} must implement dataset()")
+
+    def objective(self) -> Objective:
+        """What this run fits; by default the objective its model kind is registered with."""
+        return objective_for(self.kind)
+
+    def finish(self, directory, dataset: dict) -> None:
+        """Called after the run is saved in ``directory`` (the pixel task measures its energy here)."""
+
+    # -- identity ------------------------------------------------------------------------------
+
+    @classmethod
+    def display_only(cls) -> tuple[str, ...]:
+        """The fields that change what is printed or how fast, never what is trained."""
+        return tuple(f.name for f in dataclasses.fields(cls) if cli.field_meta(cls, f.name).get("display_only"))
+
+    def identity(self) -> dict:
+        """The fields that decide what is trained: all but the display-only ones and ``save_dir``."""
+        skip = set(self.display_only()) | {"save_dir"}
+        return {k: v for k, v in dataclasses.asdict(self).items() if k not in skip}
+
+    def key(self) -> str:
+        """8 hex digits of the SHA-256 of ``identity()`` as JSON: the last part of the run folder's name."""
+        text = json.dumps(self.identity(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:8]
+
+    def dataset_key(self) -> tuple:
+        """Equal for runs that train on the same dataset."""
+        return (type(self).__module__, type(self).__qualname__) + tuple(getattr(self, name) for name in self.DATASET_FIELDS)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> RunConfig:
+        """The config of a saved run's args (keys that are not fields, such as ``kind``, aside)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in values.items() if k in names})
