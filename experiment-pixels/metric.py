@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -44,7 +45,10 @@ class PixelProtocol:
             second frame (the original's off-by-one); ``'pair_state'``: the state that frame shows.
         prepend_truth: replace the model's first point by the true one (the paper's notebook).
         latent_map: ``'adam'``: a linear layer fitted by Adam (lr 1e-3, 4000 steps, batches of
-            400, as the notebook); ``'lstsq'``: the exact least-squares affine map.
+            400, as the notebook); ``'lstsq'``: the exact least-squares affine map. The Adam
+            map moves a weight by at most about 4, so it does not converge on a run whose
+            latent p is small (std ~0.05: docs/original.md, "The pixel gap"); ``evaluate_pixel_energy``
+            then warns and reports ``map_excess``.
         energy: ``'paper'``: 1.9 (1 - cos q) + p^2; ``'true'``: 1.875 (1 - cos q) + p^2, the
             conserved quantity of the pendulum gym simulates.
     """
@@ -105,6 +109,22 @@ def fit_latent_map(latents, coords, how: str = "adam", seed: int = 0):
     return lambda u: layer(u.to(torch.float64))
 
 
+# the Adam map's residual beyond which evaluate_pixel_energy warns, as a multiple of least squares
+MAP_EXCESS_WARNING = 2.0
+
+
+def map_excess(latents, coords, to_coords) -> float:
+    """How much worse the map ``to_coords`` fits ``coords`` ``(rows, 2)`` from ``latents`` than the
+    exact least-squares affine map: the largest ratio of the two mean squared residuals over the
+    coordinates (1 for the least-squares map itself)."""
+    z = torch.as_tensor(latents, dtype=torch.float64)
+    c = torch.as_tensor(coords, dtype=torch.float64)
+    best = fit_latent_map(z, c, "lstsq")
+    with torch.no_grad():
+        ratio = (to_coords(z) - c).pow(2).mean(0) / (best(z) - c).pow(2).mean(0).clamp_min(1e-300)
+    return float(ratio.max())
+
+
 def test_trajectory(system, protocol: PixelProtocol, render_size: int = 500) -> dict:
     """The evaluation trajectory as ``system.pair_rows`` gives it: ``pixels`` ``(num_points, 2 side^2)``,
     ``coords`` and ``pair_coords``. Rendered once per setting: both protocols share the frames."""
@@ -135,7 +155,9 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
 
     ``dataset`` is the task's training set (for the latent maps); ``trajectory`` the output of
     ``test_trajectory`` (rendered when None). Returns ``{label: {mse, mse_se, energy, coords,
-    decoded}, 'truth': {energy, coords}, 'protocol': ...}``.
+    decoded, map_excess}, 'truth': {energy, coords}, 'protocol': ...}``; ``map_excess`` is
+    ``map_excess`` of the model's latent map (a warning names models above ``MAP_EXCESS_WARNING``:
+    their energy MSE then measures the latent scale more than the dynamics).
     """
     trajectory = trajectory or test_trajectory(system, protocol)
     energy_fn = system.hamiltonian if protocol.energy == "paper" else system.true_hamiltonian
@@ -154,6 +176,12 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
             latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
                                  for i in range(0, len(dataset["pixels"]), 4000)])
         to_coords = fit_latent_map(latents, fit_coords, protocol.latent_map)
+        excess = map_excess(latents, fit_coords, to_coords)
+        if excess > MAP_EXCESS_WARNING:
+            warnings.warn(f"{protocol.name} protocol, {label}: the latent map fits the training coordinates "
+                          f"{excess:.1f}x worse than least squares (latent std {[round(v, 3) for v in latents.std(0).tolist()]}); this "
+                          f"energy MSE measures the latent scale as much as the dynamics; compare "
+                          f"latent_map='lstsq' (docs/original.md, 'The pixel gap')", stacklevel=2)
         z = latent_path(model, trajectory["pixels"], t_eval, protocol)
         with torch.no_grad():
             decoded = model.decode(z.to(param.dtype))
@@ -163,7 +191,7 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
         e_pred = energy_fn(coords)
         mse, se = energy_mse(e_true, e_pred, protocol.splits)
         out[label] = {"mse": mse, "mse_se": se, "energy": e_pred.numpy(), "coords": coords.numpy(),
-                      "latents": z.double().numpy(), "decoded": decoded.numpy()}
+                      "latents": z.double().numpy(), "decoded": decoded.numpy(), "map_excess": excess}
     return out
 
 

@@ -216,6 +216,19 @@ def test_latent_map_recovers_an_affine_map(metric):
     assert np.abs(adam(torch.as_tensor(z)).numpy() - coords).mean() < 0.05
 
 
+def test_latent_map_excess_flags_an_adam_map_that_cannot_reach_small_latents(metric):
+    # the paper protocol's Adam map moves a weight by at most ~4 (lr 1e-3, 4000 steps): latents
+    # 50x smaller than the coordinates need weights of ~50, which it cannot reach
+    rng = np.random.RandomState(0)
+    z = rng.randn(2000, 2)
+    coords = z @ np.array([[0.5, -1.0], [2.0, 0.3]]) + 0.1 * rng.randn(2000, 2)
+    lstsq = metric.fit_latent_map(z, coords, "lstsq")
+    assert metric.map_excess(z, coords, lstsq) == pytest.approx(1.0)
+    assert metric.map_excess(z, coords, metric.fit_latent_map(z, coords, "adam")) < 1.5
+    small = z / 50
+    assert metric.map_excess(small, coords, metric.fit_latent_map(small, coords, "adam")) > 10
+
+
 def test_train_script_end_to_end(tmp_path, system):
     trainer = hnn.load_task("pixels", "train")
     argv = ["--save_dir", str(tmp_path), "--trials", "5", "--timesteps", "14", "--total_steps", "40",
