@@ -140,4 +140,6 @@ def test_per_row_methods_name_the_rows_that_blow_up(max_norm, method):
     with pytest.raises(hnn.DivergenceError) as info:
         hnn.rollout(lambda x: x ** 2, x0, np.linspace(0, 1, 11), method=method, max_norm=max_norm)
     assert info.value.trajectories == [1, 2]
-    assert 0.2 < info.value.times[0] <= 0.5 and 0.1 < info.value.times[1] <= 0.25   # 1/2 and 1/4
+    # the poles are at 1/2 and 1/4; without max_norm, dop853's last accepted step may land just
+    # past one (its error estimate catches the inf a step later)
+    assert 0.2 < info.value.times[0] <= 0.5 + 1e-4 and 0.1 < info.value.times[1] <= 0.25 + 1e-4
