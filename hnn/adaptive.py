@@ -84,12 +84,13 @@ _DP_P = (
 
 class _Dopri5:
     """The Dormand-Prince 5(4) scheme of ``per_row_rollout`` (scipy's RK45 step-size rule:
-    error exponent 1/5, a step grows at most 10x and shrinks at most 5x)."""
+    error exponent 1/5, a step grows at most 10x and shrinks at most 5x, no PI term: ``beta`` =
+    0.04 cost about as much more as it gained in error here)."""
 
     order = 5
     stages = 7
     fsal = 6
-    safety, min_factor, max_factor = 0.9, 0.2, 10.0
+    safety, min_factor, max_factor, beta = 0.9, 0.2, 10.0, 0.0
 
     def __init__(self, dtype: torch.dtype):
         A = torch.zeros((7, 7), dtype=dtype)
@@ -183,6 +184,8 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     dtype = y.dtype
     k1 = field(y).astype(dtype, copy=True)
     nfev = 1
+    rejected = 0                        # row-steps rejected by the error test
+    err_old = np.full(batch, 1e-4)
     tc = np.full(batch, float(t[0]))
     exponent = 1.0 / scheme.order       # the error estimate is one order lower: err ~ h^order
     # scipy's initial step guess (Hairer, Norsett & Wanner), per row
@@ -220,6 +223,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         if live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
+            err_old = err_old[keep]
             K = np.empty((scheme.stages, live, dim), dtype=dtype)
         gap = np.abs(t_end - tc)
         clipped = prop >= gap                         # this step ends on the last time
@@ -268,17 +272,23 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             y = np.where(accept[:, None], y_new, y)
             k1 = np.where(accept[:, None], K[scheme.fsal], k1)
             tc = np.where(accept, t_new, tc)
-        # the step-size rule: a safety factor, bounded growth and shrinking, no growth right after a rejection
-        factor = np.maximum(err_norm, 1e-300) ** -exponent
+        # the step-size rule: a safety factor, the scheme's PI term (beta), bounded growth and
+        # shrinking, no growth right after a rejection
+        factor = np.maximum(err_norm, 1e-300) ** -(exponent - 0.75 * scheme.beta)
         factor *= scheme.safety
+        if scheme.beta:
+            factor *= err_old ** scheme.beta
+            err_old = np.where(accept, np.maximum(err_norm, 1e-4), err_old)
         np.minimum(np.maximum(factor, scheme.min_factor, out=factor), scheme.max_factor, out=factor)
         reject = ~accept
-        factor[reject] = np.minimum(factor[reject], 1.0)
+        if reject.any():
+            rejected += int(np.count_nonzero(reject & ~done))
+            factor[reject] = np.minimum(factor[reject], 1.0)
         prop = np.abs(h) * factor
     else:
         raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")
     if stats is not None:
-        stats["nfev"] = nfev
+        stats.update(nfev=nfev, rejected=rejected)
     diverged = np.flatnonzero(~np.isnan(bad_time)).tolist()
     if diverged:
         raise divergence_error(f"{name} (rtol={rtol}, atol={atol}, max_norm={max_norm})", diverged,
