@@ -315,6 +315,29 @@ def test_midpoint_non_convergence_is_reported(spring):
     assert stats["max_step_iterations"] < 100 and stats["nfev"] == stats["iterations"] + 1   # one Euler guess, then the last increments
 
 
+@pytest.mark.parametrize("field", ["pendulum", "hnn"])
+def test_midpoint_extrapolated_guess_converges_to_the_old_guesss_result_in_fewer_iterations(pend, field,
+                                                                                          monkeypatch):
+    """The first iterate extrapolated from the last MIDPOINT_HISTORY increments reaches the same
+    fixed point as the last increment alone (history 1, the guess before) to the iteration's
+    tolerance a step, with at most half the iterations at a small step."""
+    torch.manual_seed(0)
+    model = hnn.build_model(2, 32).double()
+    f = pend.dynamics if field == "pendulum" else model.time_derivative
+    x0 = 1.5 * (2 * torch.rand(8, 2, generator=torch.Generator().manual_seed(0), dtype=torch.float64) - 1)
+    t = np.linspace(0, 10, 11)
+    runs = {}
+    for history in (1, hnn.fixed_step.MIDPOINT_HISTORY):
+        monkeypatch.setattr(hnn.fixed_step, "MIDPOINT_HISTORY", history)
+        stats = {}
+        runs[history] = hnn.rollout(f, x0, t, method="midpoint", dt=0.01, stats=stats), stats["iterations"]
+    (old, old_iterations), (new, new_iterations) = runs[1], runs[hnn.fixed_step.MIDPOINT_HISTORY]
+    # each step's two results lie within about tol (1e-12, relative to max(|x|, 1)) of the fixed
+    # point; 1000 steps carry the differences along
+    torch.testing.assert_close(new, old, rtol=0, atol=1000 * 1e-12 * 1.5)
+    assert new_iterations <= 0.5 * old_iterations, (new_iterations, old_iterations)
+
+
 @pytest.mark.parametrize("method", hnn.SYMPLECTIC_METHODS)
 def test_symplectic_methods_report_blow_ups_with_trajectory_and_time(method):
     # H = 10 (p^2 - q^2), separable as leapfrog needs: q' = 20 p, p' = 20 q. q + p grows like
