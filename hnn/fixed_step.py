@@ -213,12 +213,14 @@ class Midpoint(Stepper):
         """The first iterate. The increment x(t + h) - x(t) is smooth in t, so the last m increments
         of the same step size extrapolate it by a polynomial of degree m - 1, off by O(h^(m+1)):
         sum_j (-1)^(j+1) binomial(m, j) d_j, newest d_1. After a change of step size, the last
-        one rescaled (O(h^2)); at the start, explicit Euler (O(h^2))."""
+        one rescaled (O(h^2)), as in a differentiable rollout; at the start, explicit Euler (O(h^2))."""
         if self.last is None:
             self.nfev += 1
             return torch.add(x, self.f(x), alpha=h)
         h_last, increments = self.last
-        if h_last != h:
+        # a differentiable rollout differentiates the unrolled iteration, whose gradient nears the
+        # fixed point's only with the iterations a good guess saves: it keeps the rescaled last increment
+        if h_last != h or torch.is_grad_enabled():
             return torch.add(x, increments[0], alpha=h / h_last)
         x1 = x.clone()
         for d, weight in zip(increments, _EXTRAPOLATION[len(increments)]):
