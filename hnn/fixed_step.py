@@ -207,17 +207,23 @@ class Midpoint(Stepper):
         self.max_iter = max_iter
         self.iterations = self.max_step_iterations = 0
         self.failed = None          # (batch,) rows whose iteration did not converge in the current interval
-        self.last = None            # (h, [x1 - x of the last steps of size h, newest first]): the next guess
+        # slot -> (h, [x1 - x of its last steps of size h, newest first]): the next guess. A
+        # composition sets ``slot`` to the substep's position, so each position extrapolates its own
+        # sequence (equally spaced in time, one a step) instead of its neighbours'
+        self.last, self.slot = {}, 0
 
     def _guess(self, x: torch.Tensor, h: float) -> torch.Tensor:
         """The first iterate. The increment x(t + h) - x(t) is smooth in t, so the last m increments
         of the same step size extrapolate it by a polynomial of degree m - 1, off by O(h^(m+1)):
         sum_j (-1)^(j+1) binomial(m, j) d_j, newest d_1. After a change of step size, the last
         one rescaled (O(h^2)), as in a differentiable rollout; at the start, explicit Euler (O(h^2))."""
-        if self.last is None:
+        if self.slot not in self.last:
+            if self.last:           # a composition's later substep: the previous substep's increment
+                h_last, increments = next(reversed(self.last.values()))
+                return torch.add(x, increments[0], alpha=h / h_last)
             self.nfev += 1
             return torch.add(x, self.f(x), alpha=h)
-        h_last, increments = self.last
+        h_last, increments = self.last[self.slot]
         # a differentiable rollout differentiates the unrolled iteration, whose gradient nears the
         # fixed point's only with the iterations a good guess saves: it keeps the rescaled last increment
         if h_last != h or torch.is_grad_enabled():
@@ -249,12 +255,12 @@ class Midpoint(Stepper):
         self.max_step_iterations = max(self.max_step_iterations, k)
         # detached: the converged x1 does not depend on the guess
         increment = torch.sub(x1, x).detach() if graph else torch.sub(x1, x)
-        same = self.last is not None and self.last[0] == h
-        self.last = (h, [increment, *self.last[1][:MIDPOINT_HISTORY - 1]] if same else [increment])
+        h_last, increments = self.last.get(self.slot, (None, []))
+        self.last[self.slot] = (h, [increment, *increments[:MIDPOINT_HISTORY - 1]] if h_last == h else [increment])
         return x1
 
     def reset(self, x: torch.Tensor) -> None:
-        self.last = None
+        self.last = {}
 
     def take_failed(self) -> torch.Tensor | None:
         failed, self.failed = self.failed, None
@@ -293,7 +299,8 @@ class Yoshida4(Stepper):
         return self.base.nfev
 
     def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
-        for w in YOSHIDA_WEIGHTS:
+        for i, w in enumerate(YOSHIDA_WEIGHTS):
+            self.base.slot = i      # the midpoint base extrapolates each substep from its own history
             x = self.base.step(x, w * h)
         return x
 
