@@ -1,8 +1,9 @@
 """The adaptive integrators behind ``hnn.rollout``: scipy's ``solve_ivp`` on the flattened batch,
-and Dormand-Prince 5(4) with one step size per trajectory (``'dopri5'``, stepped in numpy).
+and Dormand-Prince 5(4) and 8(5,3) with one step size per trajectory (``'dopri5'``, ``'dop853'``,
+stepped in numpy).
 
-Both take a checked ``(batch, dim)`` ``x0`` and a float64 grid ``t`` from ``rollout`` and return
-``(batch, len(t), dim)``; ``hnn.solvers`` registers them as ``'solve_ivp'`` and ``'dopri5'``.
+All take a checked ``(batch, dim)`` ``x0`` and a float64 grid ``t`` from ``rollout`` and return
+``(batch, len(t), dim)``; ``hnn.solvers`` registers them as ``'solve_ivp'``, ``'dopri5'`` and ``'dop853'``.
 """
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 import torch
 from scipy.integrate import solve_ivp
 
+from .dop853 import DOP853
 from .errors import DivergenceError, divergence_error
 from .fixed_step import Field
 
@@ -80,6 +82,46 @@ _DP_P = (
 )
 
 
+class _Dopri5:
+    """The Dormand-Prince 5(4) scheme of ``per_row_rollout`` (scipy's RK45 step-size rule:
+    error exponent 1/5, a step grows at most 10x and shrinks at most 5x, no PI term: ``beta`` =
+    0.04 cost about as much more as it gained in error here)."""
+
+    order = 5
+    stages = 7
+    fsal = 6
+    safety, min_factor, max_factor, beta = 0.9, 0.2, 10.0, 0.0
+
+    def __init__(self, dtype: torch.dtype):
+        A = torch.zeros((7, 7), dtype=dtype)
+        for i, a in enumerate(_DP_A):
+            A[i, :len(a)] = torch.tensor(a, dtype=dtype)
+        self.A_rows = [A[s, :s] for s in range(7)]
+        self.E = torch.tensor(_DP_E, dtype=dtype)
+        self.PT = torch.tensor(_DP_P, dtype=dtype).T.contiguous()   # (4, 7)
+
+    def attempt(self, field, y, hx, K, flat, scale_tol):
+        rows, dim = y.shape
+        for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
+            stage = (self.A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
+            stage *= hx
+            stage += y
+            K[s] = field(stage)
+        err = (self.E @ flat).numpy().reshape(rows, dim)
+        err *= hx
+        err /= scale_tol(y, stage)
+        err *= err
+        return stage, np.sqrt(err.mean(1)).astype(np.float64, copy=False), 6
+
+    def dense(self, field, y, y_new, hx, K):
+        Q = (self.PT @ torch.from_numpy(K.reshape(7, -1))).numpy().reshape(4, *y.shape)
+
+        def evaluate(sigma, j):
+            powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
+            return y[j] + hx[j] * (powers[:, :, None] * Q[:, j]).sum(0)
+        return evaluate, 0
+
+
 def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
     """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU."""
     def field(y: np.ndarray) -> np.ndarray:
@@ -108,11 +150,33 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3
     state itself. The stepping runs in numpy on the states' dtype (a few states cost a
     microsecond an operation there, several in torch), ``f`` on tensors sharing the arrays' memory.
     """
+    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
+
+
+def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
+                   max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
+                   stats: dict | None = None) -> torch.Tensor:
+    """Dormand-Prince 8(5,3) (Hairer's DOP853, ``hnn.dop853``) with one step size per trajectory.
+
+    As ``dopri5_rollout`` in all else (rows controlled alone, finished rows dropped, ``f`` must
+    treat rows independently), with the method's 7th-order dense output at ``t_eval``: 12 field
+    calls a step, 3 more on the rows that have an output time inside it. Order 8: at tight
+    tolerances it takes several times fewer steps than dopri5 for the same error.
+    """
+    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
+
+
+def per_row_rollout(scheme, name: str, f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float, atol: float,
+                    max_norm: float | None, max_iterations: int, stats: dict | None) -> torch.Tensor:
+    """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.dop853.DOP853``, built for the dtype)
+    with one step size per row: the driver of ``dopri5_rollout`` and ``dop853_rollout``."""
     with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
-        return _dopri5(_numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol, max_norm, max_iterations, stats)
+        return _per_row(scheme(x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,
+                        max_norm, max_iterations, stats)
 
 
-def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations, stats) -> torch.Tensor:
+def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations,
+             stats) -> torch.Tensor:
     batch, dim = x0.shape
     num_t = len(t)
     direction = 1.0 if t[-1] > t[0] else -1.0
@@ -120,7 +184,10 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
     dtype = y.dtype
     k1 = field(y).astype(dtype, copy=True)
     nfev = 1
+    rejected = 0                        # row-steps rejected by the error test
+    err_old = np.full(batch, 1e-4)
     tc = np.full(batch, float(t[0]))
+    exponent = 1.0 / scheme.order       # the error estimate is one order lower: err ~ h^order
     # scipy's initial step guess (Hairer, Norsett & Wanner), per row
     scale0 = atol + rtol * np.abs(y)
     d0 = np.sqrt(((y / scale0) ** 2).mean(1))
@@ -130,7 +197,7 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
     d2 = np.sqrt((((field(y1) - k1) / scale0) ** 2).mean(1)).astype(np.float64) / h0
     nfev += 1
     h1 = np.where((d1 <= 1e-15) & (d2 <= 1e-15), np.maximum(h0 * 1e-3, 1e-6),
-                  (0.01 / np.maximum(d1.astype(np.float64), d2)) ** (1 / 5))
+                  (0.01 / np.maximum(d1.astype(np.float64), d2)) ** exponent)
     prop = np.minimum(100 * h0, h1)                      # proposed |step| per row
     out = np.empty((batch, num_t, dim), dtype=dtype)
     out[:, 0] = y
@@ -139,15 +206,16 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
     bad_time = np.full(batch, np.nan)
     rows = np.arange(batch)
     eps = float(np.finfo(np.float64).eps)
-    A = torch.zeros((7, 7), dtype=x0.dtype)
-    for i, a in enumerate(_DP_A):
-        A[i, :len(a)] = torch.tensor(a, dtype=x0.dtype)
-    A_rows = [A[s, :s] for s in range(7)]
-    E = torch.tensor(_DP_E, dtype=x0.dtype)
-    PT = torch.tensor(_DP_P, dtype=x0.dtype).T.contiguous()   # (4, 7)
-    K = np.empty((7, batch, dim), dtype=dtype)            # the stage derivatives
+    K = np.empty((scheme.stages, batch, dim), dtype=dtype)            # the stage derivatives
     t_end = float(t[-1])
     near = 1e-12 * max(abs(t_end), 1.0)
+
+    def scale_tol(y, y_new):
+        scale = np.maximum(np.abs(y), np.abs(y_new))
+        scale *= rtol
+        scale += atol
+        return scale
+
     for _ in range(max_iterations):
         live = int(np.count_nonzero(~done))
         if live == 0:
@@ -155,8 +223,8 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
         if live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
-            K = np.empty((7, live, dim), dtype=dtype)
-        rows_now = len(y)
+            err_old = err_old[keep]
+            K = np.empty((scheme.stages, live, dim), dtype=dtype)
         gap = np.abs(t_end - tc)
         clipped = prop >= gap                         # this step ends on the last time
         h = np.minimum(prop, gap)
@@ -166,23 +234,10 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
         K[0] = k1
         # the tableau products in torch: its small products give each row the same bits whatever
         # the other rows (numpy's BLAS does not), so a row's trajectory does not depend on the batch
-        flat = torch.from_numpy(K.reshape(7, -1))
-        for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
-            stage = (A_rows[s] @ flat[:s]).numpy().reshape(rows_now, dim)
-            stage *= hx
-            stage += y
-            K[s] = field(stage)
-        nfev += 6
-        y_new = stage
-        err = (E @ flat).numpy().reshape(rows_now, dim)
-        err *= hx
-        scale = np.maximum(np.abs(y), np.abs(y_new))
-        scale *= rtol
-        scale += atol
-        err /= scale
-        err *= err
-        err_norm = np.sqrt(err.mean(1)).astype(np.float64, copy=False)
-        # a NaN or inf in y_new makes its row's max NaN or inf, one in K[6] the error norm (E[6] != 0)
+        flat = torch.from_numpy(K.reshape(scheme.stages, -1))
+        y_new, err_norm, calls = scheme.attempt(field, y, hx, K, flat, scale_tol)
+        nfev += calls
+        # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm
         largest = np.abs(y_new).max(1)
         finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
         running = ~done
@@ -194,39 +249,48 @@ def _dopri5(field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_it
                 done |= mask
         accept = ~done & (err_norm <= 1)
         t_new = np.where(clipped, t_end, tc + h)
-        if accept.any():
+        due = accept & (direction * (t[np.minimum(nxt, num_t - 1)] - t_new) <= near)
+        if due.any():
             # every output time inside (tc, t_new] of an accepted row, from the dense output
-            Q = (PT @ flat).numpy().reshape(4, rows_now, dim)
-            while True:
-                tn = t[np.minimum(nxt, num_t - 1)]
-                due = accept & ~done & (direction * (tn - t_new) <= near)
-                if not due.any():
-                    break
-                i = np.flatnonzero(due)
-                sigma = ((tn[i] - tc[i]) / h[i]).astype(dtype)
-                powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
-                out[rows[i], nxt[i]] = y[i] + hx[i] * (powers[:, :, None] * Q[:, i]).sum(0)
-                nxt[i] += 1
-                done |= nxt >= num_t
+            i = np.flatnonzero(due)
+            evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], np.ascontiguousarray(K[:, i]))
+            nfev += calls
+            j = np.arange(len(i))
+            while len(j):
+                ij = i[j]
+                tn = t[nxt[ij]]
+                sigma = ((tn - tc[ij]) / h[ij]).astype(dtype)
+                out[rows[ij], nxt[ij]] = evaluate(sigma, j)
+                nxt[ij] += 1
+                more = nxt[ij] < num_t
+                more[more] = direction * (t[nxt[ij[more]]] - t_new[ij[more]]) <= near
+                j = j[more]
+            done |= nxt >= num_t
         if accept.all():
-            y, k1, tc = y_new, K[6].copy(), t_new
+            y, k1, tc = y_new, K[scheme.fsal].copy(), t_new
         else:
             y = np.where(accept[:, None], y_new, y)
-            k1 = np.where(accept[:, None], K[6], k1)
+            k1 = np.where(accept[:, None], K[scheme.fsal], k1)
             tc = np.where(accept, t_new, tc)
-        # scipy's step-size rule: safety 0.9, factors in [0.2, 10], no growth right after a rejection
-        factor = np.maximum(err_norm, 1e-300) ** -0.2
-        factor *= 0.9
-        np.minimum(np.maximum(factor, 0.2, out=factor), 10.0, out=factor)   # err_norm = 0 gives 10 too
+        # the step-size rule: a safety factor, the scheme's PI term (beta), bounded growth and
+        # shrinking, no growth right after a rejection
+        factor = np.maximum(err_norm, 1e-300) ** -(exponent - 0.75 * scheme.beta)
+        factor *= scheme.safety
+        if scheme.beta:
+            factor *= err_old ** scheme.beta
+            err_old = np.where(accept, np.maximum(err_norm, 1e-4), err_old)
+        np.minimum(np.maximum(factor, scheme.min_factor, out=factor), scheme.max_factor, out=factor)
         reject = ~accept
-        factor[reject] = np.minimum(factor[reject], 1.0)
+        if reject.any():
+            rejected += int(np.count_nonzero(reject & ~done))
+            factor[reject] = np.minimum(factor[reject], 1.0)
         prop = np.abs(h) * factor
     else:
-        raise DivergenceError(f"dopri5 did not finish in {max_iterations} iterations")
+        raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")
     if stats is not None:
-        stats["nfev"] = nfev
+        stats.update(nfev=nfev, rejected=rejected)
     diverged = np.flatnonzero(~np.isnan(bad_time)).tolist()
     if diverged:
-        raise divergence_error(f"dopri5 (rtol={rtol}, atol={atol}, max_norm={max_norm})", diverged,
+        raise divergence_error(f"{name} (rtol={rtol}, atol={atol}, max_norm={max_norm})", diverged,
                                bad_time[diverged].tolist())
     return torch.from_numpy(out).to(x0.device)

@@ -17,7 +17,7 @@ from typing import Callable
 
 import torch
 
-from .adaptive import DEFAULT_SCIPY_METHOD, dopri5_rollout, scipy_rollout
+from .adaptive import DEFAULT_SCIPY_METHOD, dop853_rollout, dopri5_rollout, scipy_rollout
 from .fixed_step import RK4, Leapfrog, Midpoint, Stepper, Yoshida4, fixed_step_rollout
 
 
@@ -74,6 +74,7 @@ SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
     Solver("solve_ivp", 5, symplectic=False, needs_separable=False, adaptive=True, run=scipy_rollout,
            label=_scipy_label),
     Solver("dopri5", 5, symplectic=False, needs_separable=False, adaptive=True, run=dopri5_rollout),
+    Solver("dop853", 8, symplectic=False, needs_separable=False, adaptive=True, run=dop853_rollout),
     fixed_step_solver("rk4", RK4, order=4),
     fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True),
     fixed_step_solver("midpoint", Midpoint, order=2, symplectic=True),
