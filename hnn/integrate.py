@@ -74,7 +74,8 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             ``'solve_ivp'`` (scipy, adaptive; options ``rtol``, ``atol``,
             ``scipy_method='RK45'|'DOP853'|...``), ``'dopri5'`` (the same RK45 in torch with one
             step size per trajectory, each controlled as in its own scipy call; options ``rtol``,
-            ``atol``), ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
+            ``atol``), ``'dop853'`` (order 8 with the same per-trajectory control; cheaper than
+            dopri5 at tight tolerances), ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
             ``t_eval`` interval), or the symplectic fixed-step methods of ``hnn.fixed_step``
             (option ``dt`` as for rk4): ``'leapfrog'`` (Stormer-Verlet; exact only for
             separable H = T(p) + V(q), e.g. true dynamics), ``'midpoint'`` (implicit midpoint,
