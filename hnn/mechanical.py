@@ -53,8 +53,8 @@ class MechanicalHNN(_StateCheck):
 
     Args:
         input_dim: 2n, the width of x.
-        hidden_dim: units per hidden layer of the two MLPs (``hnn.MLP``: V(q), and the n(n+1)/2
-            entries of L(q)).
+        hidden_dim: units per hidden layer of the MLP of q (``hnn.MLP``) whose outputs are V(q)
+            and the n(n+1)/2 entries of L(q).
         nonlinearity: their activation (smooth ones only: the field differentiates them).
         periodic: q are angles (the networks see cos q, sin q).
         eps: the floor of M^-1's eigenvalues, in 1 / (mass length^2) of q's units.
@@ -73,38 +73,38 @@ class MechanicalHNN(_StateCheck):
         if not eps >= 0:
             raise ValueError(f"eps must be >= 0 (M^-1's eigenvalue floor), got {eps!r}")
         self.input_dim, self.periodic, self.eps = input_dim, bool(periodic), float(eps)
-        width = 2 * self.n if periodic else self.n
-        self.potential_net = MLP(width, hidden_dim, 1, nonlinearity)
-        self.factor_net = MLP(width, hidden_dim, self.n * (self.n + 1) // 2, nonlinearity)
+        # one MLP of q for V and the n(n+1)/2 entries of L: half the matrix products of two nets
+        self.net = MLP(2 * self.n if periodic else self.n, hidden_dim, 1 + self.n * (self.n + 1) // 2, nonlinearity)
         rows, cols = torch.tril_indices(self.n, self.n)
         self.register_buffer("_rows", rows, persistent=False)
         self.register_buffer("_cols", cols, persistent=False)
 
-    def potential(self, q: torch.Tensor) -> torch.Tensor:
-        """V(q), ``(batch, n)`` -> ``(batch,)``."""
-        return self.potential_net(_embed(q, self.periodic))[:, 0]
-
-    def inverse_mass_factor(self, q: torch.Tensor) -> torch.Tensor:
-        """L(q), ``(batch, n)`` -> ``(batch, n, n)``, lower triangular with a positive diagonal."""
-        entries = self.factor_net(_embed(q, self.periodic))
-        diagonal = self._rows == self._cols
-        entries = torch.where(diagonal, nn.functional.softplus(entries), entries)
+    def potential_and_factor(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(V(q), L(q))`` from one pass of the MLP, ``(batch, n)`` -> ``(batch,)`` and ``(batch, n, n)``,
+        L lower triangular with a positive diagonal. Override it to plug in a known V and L."""
+        out = self.net(_embed(q, self.periodic))
+        entries = out[:, 1:]
+        entries = torch.where(self._rows == self._cols, nn.functional.softplus(entries), entries)
         L = entries.new_zeros(len(q), self.n, self.n)
         L[:, self._rows, self._cols] = entries
-        return L
+        return out[:, 0], L
+
+    def potential(self, q: torch.Tensor) -> torch.Tensor:
+        """V(q), ``(batch, n)`` -> ``(batch,)``."""
+        return self.potential_and_factor(q)[0]
 
     def inverse_mass(self, q: torch.Tensor) -> torch.Tensor:
         """M^-1(q) = L L^T + eps I, ``(batch, n, n)``: symmetric positive definite."""
-        L = self.inverse_mass_factor(q)
-        eye = torch.eye(self.n, dtype=q.dtype, device=q.device)
-        return L @ L.transpose(1, 2) + self.eps * eye
+        L = self.potential_and_factor(q)[1]
+        return L @ L.transpose(1, 2) + self.eps * torch.eye(self.n, dtype=q.dtype, device=q.device)
 
     def hamiltonian(self, x: torch.Tensor) -> torch.Tensor:
-        """H = 1/2 p^T M^-1(q) p + V(q), ``(batch,)``."""
+        """H = 1/2 |L(q)^T p|^2 + eps/2 |p|^2 + V(q) = 1/2 p^T M^-1(q) p + V(q), ``(batch,)``."""
         self._check_input(x)
         q, p = x[:, :self.n], x[:, self.n:]
-        kinetic = 0.5 * (p[:, None, :] @ self.inverse_mass(q) @ p[:, :, None])[:, 0, 0]
-        return kinetic + self.potential(q)
+        V, L = self.potential_and_factor(q)
+        u = (L.transpose(1, 2) @ p[:, :, None])[..., 0]
+        return 0.5 * (u.pow(2).sum(1) + self.eps * p.pow(2).sum(1)) + V
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """``dx/dt = (dH/dp, -dH/dq)`` by autograd, ``(batch, 2n)``; a graph for training only in grad mode."""

@@ -94,11 +94,8 @@ class _TrueMechanical(hnn.MechanicalHNN):
         super().__init__(2 * chain.n, 8, eps=0.0)
         self.chain = chain
 
-    def inverse_mass_factor(self, q):
-        return torch.linalg.cholesky(torch.linalg.inv(self.chain.mass_matrix(q)))
-
-    def potential(self, q):
-        return self.chain.potential(q)
+    def potential_and_factor(self, q):
+        return self.chain.potential(q), torch.linalg.cholesky(torch.linalg.inv(self.chain.mass_matrix(q)))
 
 
 def test_mechanical_hnn_with_the_true_m_and_v_is_the_true_field():
