@@ -7,7 +7,7 @@ import torch
 
 import hnn
 
-data = hnn.load_task("chain")
+data = hnn.load_task("chain", "chain")
 protocols = hnn.load_task("chain", "protocols")
 
 

@@ -1,4 +1,8 @@
-"""Task: a chain of N point masses on massless rods hanging from a fixed pivot, in a plane.
+"""A chain of N point masses on massless rods hanging from a fixed pivot, in a plane.
+
+The system of the chain task. The folder is not a task yet (``hnn.available_tasks`` lists
+folders with a ``data.py``, and ``analysis/reproduce.py`` trains every listed task through its
+``train.py``): this module becomes its ``data.py`` together with a ``train.py`` and ``task.py``.
 
 Generalized coordinates: q_k is the angle of rod k from the downward vertical (absolute, not
 relative to rod k-1), k = 0 the rod at the pivot; bob k hangs at the end of rod k. With
