@@ -29,6 +29,7 @@ from torch import nn
 from .models import MLP
 from .objectives import DerivativeObjective, register_model_kind
 
+
 def _check_width(input_dim, kind: str) -> int:
     if not isinstance(input_dim, int) or isinstance(input_dim, bool) or input_dim < 2 or input_dim % 2:
         raise ValueError(f"{kind} needs a state [q, p] or [q, qdot] of even width input_dim >= 2, "
@@ -57,7 +58,7 @@ class MechanicalHNN(_StateCheck):
             and the n(n+1)/2 entries of L(q).
         nonlinearity: their activation (smooth ones only: the field differentiates them).
         periodic: q are angles (the networks see cos q, sin q).
-        eps: the floor of M^-1's eigenvalues, in 1 / (mass length^2) of q's units.
+        eps: the floor of M^-1's eigenvalues (units of M^-1, e.g. 1 / (kg m^2) for angles).
 
     Valid where T is quadratic in p with a configuration-dependent mass (any holonomic
     mechanical system in generalized coordinates). Not separable: roll out with ``midpoint``

@@ -26,6 +26,7 @@ import torch
 from torch import nn
 
 from .fixed_step import Stepper
+from .integrate import rollout
 from .metrics import mean_and_se
 from .objectives import DerivativeObjective, Objective
 from .solvers import SOLVERS, get_solver
@@ -68,6 +69,15 @@ def observed_from_state(model: nn.Module, x: torch.Tensor) -> torch.Tensor:
     """Observed states for the model's states ``x`` ``(batch, width)`` (x itself for most models)."""
     convert = getattr(model, "observed_from_state", None)
     return convert(x) if convert is not None else x
+
+
+def rollout_observed(model: nn.Module, z0: torch.Tensor, t_eval, method: str = "dopri5", **options) -> torch.Tensor:
+    """Observed states ``(batch, len(t_eval), width)`` of ``model`` rolled out by ``hnn.rollout``
+    from observed starts ``z0`` ``(batch, width)``, for evaluation (no autograd graph is kept)."""
+    with torch.no_grad():
+        x0 = state_from_observed(model, z0)
+        xs = rollout(model.time_derivative, x0, t_eval, method=method, **options)
+        return observed_from_state(model, xs.reshape(-1, xs.shape[-1])).reshape(xs.shape)
 
 
 def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, method: str | None = None,

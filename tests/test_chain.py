@@ -106,6 +106,9 @@ def test_mechanical_hnn_with_the_true_m_and_v_is_the_true_field():
     torch.testing.assert_close(model.time_derivative(x), chain.dynamics(x), rtol=1e-10, atol=1e-10)
     torch.testing.assert_close(model.state_from_observed(z), x)
     torch.testing.assert_close(model.observed_from_state(x), z)
+    t = 0.03 * np.arange(11)
+    torch.testing.assert_close(hnn.trajectory.rollout_observed(model, z, t, rtol=1e-10, atol=1e-10),
+                               data.trajectories(chain, z, t), rtol=1e-7, atol=1e-7)
 
 
 def test_learned_mechanical_hnn_is_positive_definite_and_conserves_its_h():
