@@ -130,6 +130,12 @@ class Chain:
         dp = -lengths * v * (coupling @ v[..., None])[..., 0] - self.g * below * lengths * torch.sin(q)
         return torch.cat([v, dp], dim=1)
 
+    def observed_dynamics(self, z: torch.Tensor) -> torch.Tensor:
+        """d/dt of observed states ``z = [q, qdot]``, ``(batch, 2N) -> (batch, 2N)``: (qdot, qddot),
+        the derivative of qdot = M^-1 p along Hamilton's equations (what the LNN trains on)."""
+        x = self.momenta(z)
+        return torch.func.jvp(self.velocities, (x,), (self.dynamics(x),))[1]
+
     def cartesian(self, z: torch.Tensor) -> torch.Tensor:
         """Positions and velocities of every bob of observed states ``z = [q, qdot]``.
 
