@@ -162,5 +162,5 @@ def _builder(cls):
     return build
 
 
-register_model_kind("mechanical", DerivativeObjective, _builder(MechanicalHNN))
-register_model_kind("second_order", DerivativeObjective, _builder(SecondOrderNODE))
+register_model_kind("mechanical", DerivativeObjective, _builder(MechanicalHNN), conservative=True, color="tab:olive")
+register_model_kind("second_order", DerivativeObjective, _builder(SecondOrderNODE), color="tab:orange")

@@ -1,6 +1,6 @@
 """What a run fits: the model kind, the dataset arrays it trains on, its loss and its final numbers.
 
-    hnn.run_experiment(config)                                   # config.objective(): the kind's
+    hnn.run_experiment(config)                                   # config.make_objective(): the kind's
     hnn.run_experiment(config, dataset, hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
 An objective builds the untrained model that a run's args describe (its init draws from torch's
@@ -37,6 +37,10 @@ class Objective:
     def build(self, args: dict) -> nn.Module:
         """The untrained model of the run's ``args["kind"]`` (float32 unless ``args["dtype"]`` says otherwise)."""
         return _typed(_registered(args["kind"]).build(args), args)
+
+    def prepare(self, dataset: dict) -> dict:
+        """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
+        return dataset
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""

@@ -19,13 +19,10 @@ A method that ``hnn.SOLVERS`` declares ``needs_separable`` is refused for other 
 """
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import torch
 from torch import nn
 
-from .fixed_step import Stepper
 from .integrate import rollout
 from .metrics import mean_and_se
 from .objectives import DerivativeObjective, Objective
@@ -45,18 +42,16 @@ def default_method(model: nn.Module) -> str:
     return "leapfrog" if is_separable(model) else "rk4"
 
 
-def _stepper(method: str, model: nn.Module) -> type[Stepper]:
+def check_method(method: str, model: nn.Module) -> None:
+    """Raise ValueError unless ``method`` is a fixed-step solver valid for ``model``'s field."""
     solver = get_solver(method)
-    run = solver.run
-    stepper = run.keywords.get("stepper") if isinstance(run, functools.partial) else None
-    if solver.adaptive or stepper is None:
+    if solver.adaptive:
         fixed = sorted(name for name, s in SOLVERS.items() if not s.adaptive)
         raise ValueError(f"trajectory training steps through a fixed-step method; {method!r} is not one "
                          f"(choose one of {fixed})")
     if solver.needs_separable and not is_separable(model):
         raise ValueError(f"{method!r} is exact only for a separable H = T(p) + V(q), and "
                          f"{type(model).__name__} is not separable; use method='rk4' or 'midpoint'")
-    return stepper
 
 
 def state_from_observed(model: nn.Module, z: torch.Tensor) -> torch.Tensor:
@@ -84,9 +79,8 @@ def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, 
                     substeps: int = 1) -> torch.Tensor:
     """Predicted observed states ``(batch, points, width)`` from ``z0`` ``(batch, width)``, ``dt`` apart.
 
-    Differentiable in the model's parameters when grad mode is on: a plain loop of the method's
-    ``Stepper`` (``hnn.rollout`` is for evaluation; its ``differentiable=True`` option, once
-    it has one, can replace this loop). No blow-up checks: a non-finite loss stops training.
+    Differentiable in the model's parameters: ``hnn.rollout(..., differentiable=True)`` with the
+    method's fixed step ``dt / substeps``; a blow-up raises ``hnn.DivergenceError`` naming the rows.
     """
     if not (isinstance(points, int) and points >= 2):
         raise ValueError(f"a snippet needs points >= 2 (the start and at least one more), got {points!r}")
@@ -95,15 +89,10 @@ def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, 
     if not (dt > 0 and np.isfinite(dt)):
         raise ValueError(f"dt must be a positive finite time step, got {dt!r}")
     method = method or default_method(model)
+    check_method(method, model)
     x = state_from_observed(model, z0)
-    stepper = _stepper(method, model)(model.time_derivative, x.shape[1], x.dtype)
-    h = dt / substeps
-    states = [x]
-    for _ in range(points - 1):
-        for _ in range(substeps):
-            x = stepper.step(x, h)
-        states.append(x)
-    xs = torch.stack(states, dim=1)
+    xs = rollout(model.time_derivative, x, dt * np.arange(points), method=method, differentiable=True,
+                 dt=dt / substeps)
     return observed_from_state(model, xs.reshape(-1, xs.shape[-1])).reshape(xs.shape)
 
 
@@ -141,17 +130,46 @@ def sample_snippets(paths, points: int, generator: torch.Generator) -> torch.Ten
     return paths[torch.arange(len(paths))[:, None], index]
 
 
+def snippets_from_paths(rows, path_points: int, steps: int) -> np.ndarray:
+    """Non-overlapping snippets of ``steps + 1`` consecutive states, flattened: ``rows``
+    ``(paths * path_points, width)`` are paths of ``path_points`` states one after another (the
+    tasks' trajectory-major layout); returns ``(paths * (path_points // (steps + 1)), (steps + 1) * width)``."""
+    rows = np.asarray(rows)
+    points = steps + 1
+    if not (isinstance(steps, int) and 1 <= steps and points <= path_points):
+        raise ValueError(f"snippet_steps must be an integer in [1, {path_points - 1}] (the paths have "
+                         f"{path_points} states), got {steps!r}")
+    if rows.ndim != 2 or len(rows) % path_points:
+        raise ValueError(f"{len(rows)} rows are not whole paths of {path_points} states; the dataset must "
+                         "list its trajectories one after another")
+    paths = rows.reshape(-1, path_points, rows.shape[1])[:, :path_points // points * points]
+    return np.ascontiguousarray(paths.reshape(len(paths), -1, points * rows.shape[1]).reshape(-1, points * rows.shape[1]))
+
+
 class TrajectoryObjective(Objective):
-    """Fit by rolling out over snippets: the dataset's ``snippets`` and ``test_snippets`` are
-    ``(rows, points * width)`` (snippets of ``points`` observed states, flattened) and ``dt``
-    their spacing. Run options, read from the run's args: ``snippet_loss`` (``'mae'``),
-    ``snippet_method`` (``default_method``), ``snippet_substeps`` (1). ``input_noise`` perturbs
-    the start states only.
+    """Fit by rolling out over snippets of ``steps + 1`` observed states ``dt`` apart.
+
+    The dataset's ``snippets`` and ``test_snippets`` are ``(rows, (steps + 1) * width)``
+    (flattened snippets) and ``dt`` their spacing; a dataset without them gets them from its
+    ``x`` and ``test_x`` paths (``prepare``: ``t_eval`` gives the states per path). Run options,
+    read from the run's args: ``snippet_steps`` (the config field), ``snippet_loss`` (``'mae'``),
+    ``snippet_method`` (``default_method``), ``snippet_substeps`` (1).
     """
     arrays = ("snippets", "snippets", "test_snippets", "test_snippets")
 
-    def __init__(self, dt: float | None = None, loss: str = "mae", method: str | None = None, substeps: int = 1):
-        self.dt, self.loss, self.method, self.substeps = dt, loss, method, substeps
+    def __init__(self, dt: float | None = None, loss: str = "mae", method: str | None = None, substeps: int = 1,
+                 steps: int = 4):
+        self.dt, self.loss, self.method, self.substeps, self.steps = dt, loss, method, substeps, steps
+
+    def prepare(self, dataset: dict) -> dict:
+        if all(key in dataset for key in self.arrays):
+            return dataset
+        if "dt" not in dataset or "t_eval" not in dataset:
+            raise ValueError("trajectory training needs paths: this task's dataset gives no 'snippets' and no "
+                             "'dt' and 't_eval' to cut its x into them; use --objective derivative")
+        points = len(dataset["t_eval"])
+        return {**dataset, "snippets": snippets_from_paths(dataset["x"], points, self.steps),
+                "test_snippets": snippets_from_paths(dataset["test_x"], points, self.steps)}
 
     def loss_for(self, model: nn.Module, dt: float | None = None):
         """``(x, y) -> (batch,)`` for ``hnn.train``: x, y flattened snippets (x's first state starts the rollout)."""
@@ -181,11 +199,11 @@ class TrajectoryObjective(Objective):
         y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
         loss = self.loss_for(model)
         with torch.no_grad():
-            per_snippet = torch.cat([loss(y[i:i + chunk], y[i:i + chunk]) for i in range(0, len(y), chunk)])
+            per_snippet = torch.cat([loss(y[i:i + chunk], y[i:i + chunk]).detach() for i in range(0, len(y), chunk)])
         return mean_and_se(per_snippet)
 
 
-# objective name -> class, for a task's --objective flag (moves beside MODEL_KINDS once runs are configs)
+# objective name -> class: RunConfig.objective's choices
 OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective}
 
 

@@ -128,8 +128,8 @@ def test_second_order_node_moves_q_by_v():
     dz = model.time_derivative(z)
     assert torch.equal(dz[:, :2], z[:, 2:])
     torch.testing.assert_close(dz[:, 2:], model.acceleration(z))
-    assert hnn.MODEL_KINDS["mechanical"][1]({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh"}).n == 2
-    assert isinstance(hnn.MODEL_KINDS["second_order"][1]({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh",
+    assert hnn.MODEL_KINDS["mechanical"].build({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh"}).n == 2
+    assert isinstance(hnn.MODEL_KINDS["second_order"].build({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh",
                                                           "periodic": True}), hnn.SecondOrderNODE)
 
 
