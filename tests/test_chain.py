@@ -160,37 +160,6 @@ def test_bad_input_is_refused_with_the_fix():
 
 # ----------------------------------------------------------------------- trajectory training
 
-class _Linear(torch.nn.Module):
-    """dx/dt = A x, A learned."""
-
-    def __init__(self):
-        super().__init__()
-        self.input_dim = 2
-        self.A = torch.nn.Parameter(torch.zeros(2, 2, dtype=torch.float64))
-
-    def time_derivative(self, x, t=None):
-        return x @ self.A.T
-
-
-def test_trajectory_training_recovers_a_linear_oscillator():
-    """Snippets of q'' = -omega^2 q (exact solutions) determine A = [[0, 1], [-omega^2, 0]]."""
-    omega, dt, points = 2.0, 0.1, 5
-    gen = torch.Generator().manual_seed(0)
-    amplitude, phase = 0.5 + torch.rand(64, generator=gen, dtype=torch.float64), 2 * np.pi * torch.rand(64, generator=gen, dtype=torch.float64)
-    t = dt * torch.arange(points, dtype=torch.float64)
-    angle = omega * t[None] + phase[:, None]
-    snippets = torch.stack([amplitude[:, None] * torch.cos(angle), -omega * amplitude[:, None] * torch.sin(angle)], -1)
-    flat = snippets.reshape(64, -1)
-    model = _Linear()
-    loss = hnn.TrajectoryObjective(dt=dt, loss="l2").loss_for(model)
-    stats = hnn.train(model, flat, flat, total_steps=1500, learn_rate=3e-2, weight_decay=0.0, loss=loss, progress=False)
-    # RK4's one-step error at omega dt = 0.2 biases A by about (omega dt)^4 / 120 relative: 1e-5
-    torch.testing.assert_close(model.A.detach(), torch.tensor([[0.0, 1.0], [-omega ** 2, 0.0]], dtype=torch.float64),
-                               rtol=0, atol=1e-3)
-    assert stats["train_loss"][-1] < 1e-8
-    assert float(loss(flat, flat).max()) < 1e-8
-
-
 def test_separable_model_rolls_out_by_leapfrog_exactly_as_hnn_rollout():
     model = hnn.SeparableHNN(2, 8).double()
     z0 = torch.randn(4, 2, dtype=torch.float64)
