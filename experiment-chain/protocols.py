@@ -17,7 +17,7 @@ from scipy.integrate import trapezoid
 
 import hnn
 
-data = hnn.load_task("chain", "chain")
+data = hnn.load_task("chain")
 
 # CHNN's pl_trainer.py defaults and ChainPendulum's class attributes
 CHNN = {

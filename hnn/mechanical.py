@@ -135,9 +135,11 @@ class SecondOrderNODE(_StateCheck):
 
     Valid on states of positions and *velocities* (v = dq/dt), e.g. trajectories observed as
     [q, qdot]; on canonical [q, p] it is wrong unless p = qdot (unit mass). No energy, not
-    symplectic, not separable: roll out with ``rk4`` or ``dopri5``.
+    symplectic, not separable: roll out with ``rk4`` or ``dopri5``. The objectives refuse it
+    on a task whose states are canonical (``needs_velocities``).
     """
     separable = False
+    needs_velocities = True
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
         super().__init__()

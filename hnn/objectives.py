@@ -55,6 +55,21 @@ def _typed(model: nn.Module, args: dict) -> nn.Module:
     return model.to(dtype=DTYPES[args.get("dtype", "float32")])
 
 
+def check_coordinates(model: nn.Module, dataset: dict, maps_velocities: bool) -> None:
+    """Raise ValueError when ``model`` cannot be fit to ``dataset``'s states: a model that reads the
+    state's second half as velocities (``model.needs_velocities``) on canonical ``[q, p]``, or a
+    model of canonical states (one with ``state_from_observed``) on observed ``[q, qdot]``
+    (``dataset["state"] == "velocity"``) by an objective that does not map them (``maps_velocities``)."""
+    velocity = dataset.get("state", "canonical") == "velocity"
+    name = type(model).__name__
+    if getattr(model, "needs_velocities", False) and not velocity:
+        raise ValueError(f"{name} moves q by the second half of the state, a velocity, and this task's states are "
+                         "canonical [q, p]; choose another --model (e.g. hnn or mechanical)")
+    if velocity and hasattr(model, "state_from_observed") and not maps_velocities:
+        raise ValueError(f"{name}'s field is on canonical [q, p] and this task observes [q, qdot]; use --objective "
+                         "trajectory, which converts the observed states through the model's own mass matrix")
+
+
 class DerivativeObjective(Objective):
     """The paper's objective: fit ``time_derivative(x)`` to ``dxdt`` (an HNN, or an MLP as the baseline).
 
@@ -63,6 +78,7 @@ class DerivativeObjective(Objective):
     """
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
+        check_coordinates(model, dataset, maps_velocities=False)
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None}
         if args.get("use_rk4"):
             if "dt" not in dataset:

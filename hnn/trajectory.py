@@ -25,7 +25,7 @@ from torch import nn
 
 from .integrate import rollout
 from .metrics import mean_and_se
-from .objectives import DerivativeObjective, Objective
+from .objectives import DerivativeObjective, Objective, check_coordinates
 from .solvers import SOLVERS, get_solver
 from .structured import SeparableHNN
 
@@ -76,7 +76,7 @@ def rollout_observed(model: nn.Module, z0: torch.Tensor, t_eval, method: str = "
 
 
 def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, method: str | None = None,
-                    substeps: int = 1) -> torch.Tensor:
+                    substeps: int = 1, velocities: bool = True) -> torch.Tensor:
     """Predicted observed states ``(batch, points, width)`` from ``z0`` ``(batch, width)``, ``dt`` apart.
 
     Differentiable in the model's parameters: ``hnn.rollout(..., differentiable=True)`` with the
@@ -90,18 +90,23 @@ def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, 
         raise ValueError(f"dt must be a positive finite time step, got {dt!r}")
     method = method or default_method(model)
     check_method(method, model)
-    x = state_from_observed(model, z0)
+    x = state_from_observed(model, z0) if velocities else z0
     xs = rollout(model.time_derivative, x, dt * np.arange(points), method=method, differentiable=True,
                  dt=dt / substeps)
+    if not velocities:
+        return xs
     return observed_from_state(model, xs.reshape(-1, xs.shape[-1])).reshape(xs.shape)
 
 
 def snippet_loss(model: nn.Module, snippets: torch.Tensor, dt: float, method: str | None = None,
-                 loss: str = "mae", substeps: int = 1, start: torch.Tensor | None = None) -> torch.Tensor:
+                 loss: str = "mae", substeps: int = 1, start: torch.Tensor | None = None,
+                 velocities: bool = True) -> torch.Tensor:
     """Per-snippet error ``(batch,)`` of the model rolled out from each snippet's first state.
 
     ``snippets`` ``(batch, points, width)`` are observed states ``dt`` apart; ``start`` (default
-    ``snippets[:, 0]``) is where the rollout begins (e.g. a noisy copy). The error is the mean
+    ``snippets[:, 0]``) is where the rollout begins (e.g. a noisy copy). ``velocities``: the
+    snippets are ``[q, qdot]``, mapped through the model's ``state_from_observed`` if it has one
+    (False: they are the model's own states). The error is the mean
     over points 1.. and components of |z^ - z| (``'mae'``) or (z^ - z)^2 (``'l2'``); CHNN's MAE
     also averages in point 0, where the error is zero, so theirs is (points-1)/points of ours.
     """
@@ -110,7 +115,7 @@ def snippet_loss(model: nn.Module, snippets: torch.Tensor, dt: float, method: st
     if snippets.dim() != 3:
         raise ValueError(f"snippets must have shape (batch, points, width), got {tuple(snippets.shape)}")
     z0 = snippets[:, 0] if start is None else start
-    pred = rollout_snippet(model, z0, snippets.shape[1], dt, method, substeps)
+    pred = rollout_snippet(model, z0, snippets.shape[1], dt, method, substeps, velocities)
     error = pred[:, 1:] - snippets[:, 1:]
     return (error.abs() if loss == "mae" else error.pow(2)).mean(dim=(1, 2))
 
@@ -158,8 +163,9 @@ class TrajectoryObjective(Objective):
     arrays = ("snippets", "snippets", "test_snippets", "test_snippets")
 
     def __init__(self, dt: float | None = None, loss: str = "mae", method: str | None = None, substeps: int = 1,
-                 steps: int = 4):
+                 steps: int = 4, velocities: bool = True):
         self.dt, self.loss, self.method, self.substeps, self.steps = dt, loss, method, substeps, steps
+        self.velocities = velocities
 
     def prepare(self, dataset: dict) -> dict:
         if all(key in dataset for key in self.arrays):
@@ -183,10 +189,14 @@ class TrajectoryObjective(Objective):
             if y.shape[1] % width:
                 raise ValueError(f"snippets of {y.shape[1]} columns are not whole states of width {width}")
             snippets = y.reshape(len(y), -1, width)
-            return snippet_loss(model, snippets, dt, self.method, self.loss, self.substeps, start=x[:, :width])
+            return snippet_loss(model, snippets, dt, self.method, self.loss, self.substeps, start=x[:, :width],
+                                velocities=self.velocities)
         return loss
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
+        check_coordinates(model, dataset, maps_velocities=True)
+        # observed [q, qdot] go through a mechanical model's mass matrix; canonical states do not
+        self.velocities = dataset.get("state", "canonical") == "velocity"
         self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
         self.loss = args.get("snippet_loss", self.loss)
         self.method = args.get("snippet_method", self.method)

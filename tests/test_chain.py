@@ -7,7 +7,7 @@ import torch
 
 import hnn
 
-data = hnn.load_task("chain", "chain")
+data = hnn.load_task("chain")
 protocols = hnn.load_task("chain", "protocols")
 
 
@@ -229,3 +229,28 @@ def test_lnn_energy_error():
     raised = torch.tensor([[np.pi / 2, 0.0, 0.0, 0.0]], dtype=torch.float64)     # rod 1 horizontal
     assert protocols.energy_error(chain, raised, hanging)[0] == pytest.approx(2 * 9.8 / 29.4)
     assert len(protocols.lnn_times()) == 1000 and protocols.lnn_times()[-1] == 100.0
+
+
+# ------------------------------------------------------------------------------ the task folder
+
+def test_chain_task_trains_every_rung_and_reloads(tmp_path):
+    """experiment-chain/train.py: CHNN's paths (their d/dt is the paths' slope), every rung by
+    --model, the angle embedding saved with the run; the chain is not one of the paper's tasks."""
+    main = hnn.load_task("chain", "train").main
+    common = ["--bobs", "2", "--n_train", "6", "--n_test", "3", "--total_steps", "3", "--hidden_dim", "16",
+              "--save_dir", str(tmp_path)]
+    dataset = data.get_dataset(bobs=2, n_train=6, n_test=3, dt=0.003, save_dir=tmp_path)
+    paths, slopes = dataset["x"].reshape(6, 100, 4), dataset["dxdt"].reshape(6, 100, 4)
+    # the five-point central difference, O(dt^4): at dt = 0.03 it is off by 0.07 (fast swings), at 0.003 by 1e-5
+    central = (-paths[:, 4:] + 8 * paths[:, 3:-1] - 8 * paths[:, 1:-3] + paths[:, :-4]) / (12 * dataset["dt"])
+    np.testing.assert_allclose(central, slopes[:, 2:-2], atol=1e-5 * np.abs(slopes).max())
+    for model in ("mechanical", "second_order", "hnn", "baseline"):
+        run = main(common + ["--model", model])
+        loaded, args, metrics = hnn.load_run(run)
+        assert args["objective"] == "trajectory" and args["input_dim"] == 4 and np.isfinite(metrics["test_loss"])
+        assert getattr(loaded, "periodic", True)
+    assert "chain" not in hnn.tasks.paper_tasks() and not hnn.task_spec("chain").in_paper
+    with pytest.raises(ValueError, match="use --objective trajectory"):
+        main(common + ["--model", "mechanical", "--objective", "derivative"])
+    with pytest.raises(ValueError, match="the LNN protocol is the double pendulum"):
+        data.get_dataset(bobs=3, protocol="lnn", save_dir=tmp_path)

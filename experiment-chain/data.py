@@ -1,8 +1,7 @@
 """A chain of N point masses on massless rods hanging from a fixed pivot, in a plane.
 
-The system of the chain task. The folder is not a task yet (``hnn.available_tasks`` lists
-folders with a ``data.py``, and ``analysis/reproduce.py`` trains every listed task through its
-``train.py``): this module becomes its ``data.py`` together with a ``train.py`` and ``task.py``.
+The system of the chain task (not one of the paper's six: its ``task.py`` keeps it out of
+``analysis/reproduce.py``; ``analysis/peers.py`` trains it on the peers' protocols).
 
 Generalized coordinates: q_k is the angle of rod k from the downward vertical (absolute, not
 relative to rod k-1), k = 0 the rod at the pivot; bob k hangs at the end of rod k. With
@@ -32,10 +31,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pathlib import Path
+
 import numpy as np
 import torch
 
 import hnn
+from hnn.cache import get_cached_dataset
+
+HERE = Path(__file__).resolve().parent
 
 NAME = "chain"
 CHNN_G = 9.81
@@ -237,3 +241,53 @@ def trajectories(chain: Chain, z0: torch.Tensor, t_eval, rtol: float = 1e-10, at
         xs = hnn.rollout(chain.dynamics, x0, t_eval, method="dopri5", rtol=rtol, atol=atol)
     return chain.velocities(xs.reshape(-1, 2 * chain.n)).reshape(xs.shape)
 
+
+
+def _paths_dataset(chain: Chain, seed: int, n_train: int, n_test: int, points: int, dt: float) -> dict:
+    t_eval = dt * np.arange(points)
+    arrays = {}
+    for split, count, offset in (("", n_train, 0), ("test_", n_test, 2)):
+        # CHNN's seeds: training trajectories under seed 0, test under seed 2 (validation 1)
+        z0 = sample_chnn_starts(chain, count, torch.Generator().manual_seed(seed + offset))
+        z = trajectories(chain, z0, t_eval).reshape(-1, 2 * chain.n)
+        arrays[split + "x"] = z.numpy()
+        arrays[split + "dxdt"] = chain.observed_dynamics(z).numpy()
+    return {**arrays, "dt": float(dt), "t_eval": t_eval}
+
+
+def _states_dataset(chain: Chain, seed: int, n_train: int, n_test: int) -> dict:
+    arrays = {}
+    for split, count, offset in (("", n_train, 0), ("test_", n_test, 1)):
+        z = sample_lnn_starts(count, torch.Generator().manual_seed(seed + offset), train=True)
+        arrays[split + "x"] = z.numpy()
+        arrays[split + "dxdt"] = chain.observed_dynamics(z).numpy()
+    return arrays
+
+
+def get_dataset(bobs: int = 2, unit: bool = False, protocol: str = "chnn", seed: int = 0, n_train: int = 800,
+                n_test: int = 100, points: int = 100, dt: float = 0.03, save_dir=HERE) -> dict:
+    """The observed states ``z = [q, qdot]`` (float64, ``(rows, 2 * bobs)``) and their ``d/dt``.
+
+    ``protocol='chnn'``: ``n_train`` and ``n_test`` true paths of ``points`` states ``dt`` apart
+    from CHNN's start law (rows path after path; ``t_eval`` and ``dt`` let ``--objective
+    trajectory`` cut them into snippets), on ``chnn_chain(bobs, unit)``. ``protocol='lnn'``:
+    the LNN double pendulum's derivative data, states q ~ U[0, 2 pi], qdot ~ U[-10, 10] (no
+    paths; ``bobs`` must be 2). ``"state": "velocity"`` tells the objectives the second half of
+    a state is qdot, not p. Cached as an .npz in ``save_dir``.
+    """
+    if protocol not in ("chnn", "lnn"):
+        raise ValueError(f"unknown protocol {protocol!r}; choose 'chnn' (Finzi et al. 2020) or 'lnn' (Cranmer et al. 2020)")
+    if protocol == "lnn" and (bobs != 2 or unit):
+        raise ValueError(f"the LNN protocol is the double pendulum with m = l = 1: pass --bobs 2 without --unit, "
+                         f"got bobs={bobs}, unit={unit}")
+    chain = lnn_double_pendulum() if protocol == "lnn" else chnn_chain(bobs, unit)
+    params = {"bobs": bobs, "unit": unit, "protocol": protocol, "seed": seed, "n_train": n_train, "n_test": n_test,
+              "points": points, "dt": dt, "version": 1}
+
+    def build():
+        if protocol == "lnn":
+            return _states_dataset(chain, seed, n_train, n_test)
+        return _paths_dataset(chain, seed, n_train, n_test, points, dt)
+    data = get_cached_dataset(save_dir, f"{NAME}{bobs}-{protocol}", params, build,
+                                        describe=lambda d: f"{len(d['x'])} training states of a {bobs}-bob chain")
+    return {**data, "state": "velocity"}
