@@ -24,6 +24,7 @@ def test_tiny_peers_table(tmp_path):
     text = (tmp_path / "peers.md").read_text()
     assert text.startswith("**QUICK smoke run**") and "| 1 | 1.80e-04 (1.12e-04) | 7.46e-05" in text
     assert json.loads((tmp_path / "peers.json").read_text())["meta"]["quick"] is True
+    assert "From `python analysis/peers.py --out DIR` at commit" in text
     # a rerun trains nothing: every run is found by its config
     again = peers.main(["--out", str(tmp_path)], settings=TINY)
     assert again["rows"]["chain1"]["floor"] == row["floor"]

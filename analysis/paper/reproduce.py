@@ -361,16 +361,16 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
               flush=True)
 
 
-def portable_command(argv: list[str]) -> str:
-    """The command as a reader can rerun it: paths inside the checkout made relative to it, and
-    other absolute paths (one machine's folders) shown as ``DIR``."""
+def portable_command(argv: list[str], script: str = "analysis/reproduce.py") -> str:
+    """The command ``python <script> <argv>`` as a reader can rerun it: paths inside the checkout
+    made relative to it, and other absolute paths (one machine's folders) shown as ``DIR``."""
     root, words = hnn.tasks.repo_root().resolve(), []
     for word in argv:
         path = Path(word)
         if path.is_absolute():
             word = os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
         words.append(word)
-    return " ".join(["python analysis/reproduce.py"] + words)
+    return " ".join([f"python {script}"] + words)
 
 
 def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:

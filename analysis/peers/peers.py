@@ -163,7 +163,7 @@ def markdown(results: dict) -> str:
                   "mean (median) over the starts (ours: dopri5 at rtol 1e-8)", "",
                   "| rung | energy error | training s |", "| --- | --- | --- |"]
         lines += [f"| published {k} | {v:.2g} | |" for k, v in lnn_published.items()]
-        lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | {lnn['seconds'].get(rung) or 0:.0f} |" for rung in LNN_RUNGS]
+        lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | {lnn['seconds'].get(rung) or 0:.1f} |" for rung in LNN_RUNGS]
     return "\n".join(lines) + "\n"
 
 
@@ -197,7 +197,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     runs.update(trained)
     tic = time.perf_counter()
     rows = measure(runs, settings, args.seed)
-    results = {"meta": {**provenance(), "command": "python analysis/peers.py " + portable_command(argv),
+    results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
                         "quick": settings is not FULL,     # --quick or a test's settings: not the table
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
                "rows": rows}
