@@ -6,12 +6,16 @@ integrator, one step (or ``substeps``) per observation interval ``dt``, and the 
 states are compared with the observed ones (mean absolute error, as Finzi et al. 2020, or
 squared error):
 
+    python experiment-spring/train.py --objective trajectory --snippet_steps 4   # any task with paths
     loss = hnn.trajectory.snippet_loss(model, snippets, dt)      # snippets (batch, points, 2n)
     hnn.train(model, flat, flat, loss=hnn.TrajectoryObjective().loss_for(model, dt))
 
-Snippets are observed states. A model with ``state_from_observed`` / ``observed_from_state``
-(``hnn.MechanicalHNN``: [q, qdot] <-> [q, p]) is rolled out in its own state and compared
-after mapping back; every other model rolls out the observed state itself.
+A run with ``objective='trajectory'`` (``hnn.RunConfig``) cuts its task's paths (``x`` and
+``test_x``, path after path, ``t_eval`` long) into non-overlapping snippets of
+``snippet_steps + 1`` states. Where a task observes [q, qdot] (its dataset's ``"state":
+"velocity"``), a model with ``state_from_observed`` / ``observed_from_state``
+(``hnn.MechanicalHNN``: [q, qdot] <-> [q, p]) is rolled out in its own state and compared after
+mapping back; otherwise the model rolls out the observed state itself.
 
 The integrator defaults to ``rk4``, and to ``leapfrog`` for a separable model
 (``hnn.SeparableHNN``, or ``model.separable``): symplectic for it at two field calls a step.
