@@ -1,7 +1,7 @@
 """Train a model of an N-bob pendulum chain on the peers' protocols (not one of the paper's tasks).
 
     python experiment-chain/train.py --bobs 2 --model mechanical --verbose       # CHNN's protocol
-    python experiment-chain/train.py --protocol lnn --objective derivative --model second_order
+    python experiment-chain/train.py --protocol lnn --objective derivative --model mechanical
 
 States are observed [q, qdot] (absolute angles from the downward vertical and their rates).
 The defaults are CHNN's training setting (Finzi et al. 2020, docs/peers.md): 800 paths of 100

@@ -123,6 +123,19 @@ class MechanicalHNN(_StateCheck):
         p = torch.linalg.solve(self.inverse_mass(q), v[..., None])[..., 0]
         return torch.cat([q, p], dim=1)
 
+    def observed_time_derivative(self, z: torch.Tensor) -> torch.Tensor:
+        """d/dt of observed ``z = [q, qdot]`` along the model's flow, ``(batch, 2n)``: (qdot, qddot),
+        qddot = d/dt [M^-1(q) p] = (D_q M^-1 . qdot) p + M^-1 dp/dt (the derivative objective's
+        prediction where a task observes velocities); a graph for training only in grad mode."""
+        self._check_input(z)
+        x = self.state_from_observed(z)
+        dx = self.time_derivative(x)
+        q, p, qdot = x[:, :self.n], x[:, self.n:], dx[:, :self.n]
+        with torch.enable_grad() if torch.is_grad_enabled() else torch.no_grad():
+            mobility, along = torch.func.jvp(lambda q: self.inverse_mass(q), (q,), (qdot,))
+        qddot = (along @ p[..., None] + mobility @ dx[:, self.n:, None])[..., 0]
+        return torch.cat([qdot, qddot], dim=1)
+
     def observed_from_state(self, x: torch.Tensor) -> torch.Tensor:
         """``z = [q, qdot]`` with qdot = M^-1(q) p = dH/dp, from ``x = [q, p]``, both ``(batch, 2n)``."""
         self._check_input(x)

@@ -66,8 +66,8 @@ def check_coordinates(model: nn.Module, dataset: dict, maps_velocities: bool) ->
         raise ValueError(f"{name} moves q by the second half of the state, a velocity, and this task's states are "
                          "canonical [q, p]; choose another --model (e.g. hnn or mechanical)")
     if velocity and hasattr(model, "state_from_observed") and not maps_velocities:
-        raise ValueError(f"{name}'s field is on canonical [q, p] and this task observes [q, qdot]; use --objective "
-                         "trajectory, which converts the observed states through the model's own mass matrix")
+        raise ValueError(f"{name}'s field is on canonical [q, p] and this task observes [q, qdot], and it gives no "
+                         "observed_time_derivative; use --objective trajectory, which maps the observed states")
 
 
 class DerivativeObjective(Objective):
@@ -77,9 +77,18 @@ class DerivativeObjective(Objective):
     ``input_noise`` each training batch's inputs get Gaussian noise.
     """
 
+    field = None    # what final_loss measures: model.time_derivative unless train_options maps states
+
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
-        check_coordinates(model, dataset, maps_velocities=False)
+        observed = getattr(model, "observed_time_derivative", None)
+        check_coordinates(model, dataset, maps_velocities=observed is not None)
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None}
+        if dataset.get("state") == "velocity" and observed is not None:
+            # a model of canonical [q, p] fit to d/dt of observed [q, qdot] through its own mass matrix
+            if args.get("use_rk4"):
+                raise ValueError("--use_rk4 steps the model's own state; on observed [q, qdot] drop it")
+            self.field = options["predict"] = observed
+            return options
         if args.get("use_rk4"):
             if "dt" not in dataset:
                 raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")
@@ -88,7 +97,7 @@ class DerivativeObjective(Objective):
         return options
 
     def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        return derivative_loss(model, inputs, targets)
+        return derivative_loss(model, inputs, targets, field=self.field)
 
 
 class PixelObjective(Objective):

@@ -250,7 +250,25 @@ def test_chain_task_trains_every_rung_and_reloads(tmp_path):
         assert args["objective"] == "trajectory" and args["input_dim"] == 4 and np.isfinite(metrics["test_loss"])
         assert getattr(loaded, "periodic", True)
     assert "chain" not in hnn.tasks.paper_tasks() and not hnn.task_spec("chain").in_paper
-    with pytest.raises(ValueError, match="use --objective trajectory"):
-        main(common + ["--model", "mechanical", "--objective", "derivative"])
+    run = main(common + ["--model", "mechanical", "--objective", "derivative"])     # through its mass matrix
+    assert np.isfinite(hnn.load_run(run)[2]["test_loss"])
+    with pytest.raises(ValueError, match="canonical \\[q, p\\]; choose another --model"):
+        hnn.load_task("spring", "train").main(["--model", "second_order", "--total_steps", "1", "--save_dir", str(tmp_path)])
     with pytest.raises(ValueError, match="the LNN protocol is the double pendulum"):
         data.get_dataset(bobs=3, protocol="lnn", save_dir=tmp_path)
+
+
+def test_mechanical_hnn_with_the_true_m_and_v_gives_the_observed_accelerations():
+    """d/dt [q, qdot] through the model's own mass matrix is the chain's (qdot, qddot), and the
+    derivative objective trains a learned mechanical HNN on it (its loss falls)."""
+    chain = data.chnn_chain(3)
+    z = _starts(chain, 7)
+    torch.testing.assert_close(_TrueMechanical(chain).double().observed_time_derivative(z),
+                               chain.observed_dynamics(z), rtol=1e-10, atol=1e-10)
+    with torch.no_grad():
+        assert not _TrueMechanical(chain).double().observed_time_derivative(z).requires_grad
+    z = _starts(chain, 64)
+    model = hnn.MechanicalHNN(6, 32, periodic=True).double()
+    options = hnn.DerivativeObjective().train_options(model, {}, {"state": "velocity"})
+    stats = hnn.train(model, z, chain.observed_dynamics(z), total_steps=60, learn_rate=1e-2, progress=False, **options)
+    assert stats["train_loss"][-1] < 0.5 * stats["train_loss"][0]
