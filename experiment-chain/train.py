@@ -5,9 +5,10 @@
 
 States are observed [q, qdot] (absolute angles from the downward vertical and their rates).
 The defaults are CHNN's training setting (Finzi et al. 2020, docs/peers.md): 800 paths of 100
-states 0.03 s apart, fit by rolling out 4-step snippets (RK4, MAE), AdamW-like weight decay
-1e-4, learning rate 3e-3, batch 200, 256 hidden units; their 2000 epochs of 4 batches are
-8000 steps. ``analysis/peers.py`` trains and measures every rung on it.
+states 0.03 s apart, fit by rolling out 4-step snippets (RK4, MAE), weight decay 1e-4,
+learning rate 3e-3, batch 200, 256 hidden units; their 2000 epochs of 4 batches are 8000 steps.
+Not theirs: our optimizer is Adam with L2 weight decay at a constant rate (theirs AdamW with a
+cosine schedule), and each step draws from all 20 snippets of every path (theirs one a path). ``analysis/peers.py`` trains and measures every rung on it.
 """
 from dataclasses import dataclass
 from pathlib import Path

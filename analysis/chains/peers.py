@@ -140,7 +140,9 @@ def markdown(results: dict) -> str:
                   "pipeline and say nothing about the rungs; the full table comes from `python analysis/peers.py "
                   "--jobs 2 --update-docs`.", ""]
     lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')}; {meta.get('cores', '?')} cores; "
-              f"training {meta['seconds']['training']:.0f} s, measuring {meta['seconds']['measuring']:.0f} s.", "",
+              f"training {meta['seconds']['training']:.0f} s, measuring {meta['seconds']['measuring']:.0f} s. "
+              f"Each CHNN-protocol rung trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
+              "epochs of 800 snippets (theirs: 2000), by Adam at a constant rate (theirs: AdamW, cosine schedule).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published NeuralODE | published floor | "
@@ -199,6 +201,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     rows = measure(runs, settings, args.seed)
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
                         "quick": settings is not FULL,     # --quick or a test's settings: not the table
+                        "steps": jobs[0].config.total_steps if jobs else None,
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
                "rows": rows}
     out.mkdir(parents=True, exist_ok=True)
