@@ -20,7 +20,8 @@ from hnn.io import atomic_write
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
-         "speed-accuracy": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md"}
+         "speed-accuracy": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
+         "peers": "docs/peers.md"}
 # the few figures the README shows (about 1.2 MB in all), copied from a full run's figures/
 CURATED = ("spring-fields.png", "real-fields.png", "2body-orbits.png", "3body-orbits.png",
            "pixels-compare-static.png")

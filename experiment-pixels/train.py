@@ -57,8 +57,11 @@ class Config(hnn.RunConfig):
                                                    render_size=self.render_size, trials=self.trials,
                                                    timesteps=self.timesteps)
 
-    def objective(self) -> hnn.Objective:
+    def make_objective(self) -> hnn.Objective:
         # the autoencoder + latent HNN of hnn.PixelHNN, fit on pairs of frames one frame apart
+        if self.objective != "derivative":
+            raise ValueError(f"objective={self.objective!r}: the pixel task fits its autoencoder and latent field "
+                             "on pairs of frames; use objective='derivative'")
         return hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels"))
 
     def finish(self, directory, dataset: dict) -> None:

@@ -15,11 +15,13 @@ from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonline
 from .structured import DissipativeHNN, SeparableHNN
 from .objectives import MODEL_KINDS, DerivativeObjective, ModelKind, Objective, PixelObjective, register_model_kind
 from .config import RunConfig
+from .mechanical import MechanicalHNN, SecondOrderNODE
+from .trajectory import OBJECTIVES, TrajectoryObjective, get_objective, snippet_loss
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import TaskSpec, available_tasks, load_task, task_spec
 from .training import train
 from .gifs import write_gif
-from . import cli, nbody, objectives, paper
+from . import cli, nbody, objectives, paper, trajectory
 from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
 
 __all__ = [
@@ -29,7 +31,8 @@ __all__ = [
     "train",
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "RunConfig", "run_experiment", "run_dir", "save_run", "load_run", "find_run",
-    "SeparableHNN", "DissipativeHNN",
+    "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "SecondOrderNODE",
+    "TrajectoryObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
     "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind", "register_model_kind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
     "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "objectives", "paper",

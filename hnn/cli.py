@@ -161,7 +161,7 @@ def model_choices(cls=None) -> list[str]:
 
 def _flag_type(cls, f: dataclasses.Field, meta: dict):
     """How the text of field ``f``'s flag becomes its value."""
-    if f.name == "input_dim":
+    if f.name == "input_dim" and not meta.get("parse"):
         # the original's flag, but the task fixes the state width: only that value parses
         return _fixed_width(f.default, getattr(cls, "name", "this"), getattr(cls, "STATE", "state"))
     if meta.get("parse"):
@@ -177,7 +177,10 @@ def make_parser(cls, description: str | None = None) -> Parser:
     for f in dataclasses.fields(cls):
         meta = field_meta(cls, f.name)
         text = help_of.get(f.name, meta.get("help", ""))
-        if f.type in (bool, "bool"):
+        if f.type in (bool, "bool") and f.default:
+            # a switch that is on by default: --name / --no-name
+            p.add_argument(f"--{f.name}", action=argparse.BooleanOptionalAction, default=True, help=text)
+        elif f.type in (bool, "bool"):
             p.add_argument(f"--{f.name}", action="store_true", help=text)
         elif f.name == "model":
             # no argparse default, so that --baseline can tell an explicit --model from none

@@ -23,7 +23,8 @@ from typing import Any, ClassVar
 
 from . import cli
 from .models import FIELD_TYPES, NONLINEARITIES
-from .objectives import Objective, objective_for
+from .objectives import DerivativeObjective, Objective, objective_for
+from .trajectory import OBJECTIVES, get_objective
 
 
 def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False) -> Any:
@@ -56,6 +57,12 @@ class RunConfig:
     use_rk4: bool = setting(False, "fit the RK4 average slope of the learned field over one data time step dt, "
                                    "(x(t+dt) - x(t))/dt of one RK4 step, to the true dx/dt (the original crashed on "
                                    "this flag); default: fit dx/dt itself")
+    objective: str = setting("derivative", "what the model is fit to: derivative (dx/dt at every state, the paper's) "
+                                           "or trajectory (its rollout over snippets of snippet_steps + 1 observed "
+                                           "states, through RK4, or leapfrog for a separable model; what measured "
+                                           "paths without derivatives allow)", choices=tuple(OBJECTIVES))
+    snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
+                                 parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
     field_type: str = setting("solenoidal", "solenoidal (Hamiltonian), conservative, or both", choices=FIELD_TYPES)
     seed: int = setting(0, "seeds the dataset, the init and the minibatches", parse=cli.int_at_least(0))
@@ -81,12 +88,21 @@ class RunConfig:
         return self.KIND_PREFIX + self.model
 
     def dataset(self) -> dict:
-        """The arrays this run trains on (``self.objective().arrays`` and, for ``use_rk4``, ``dt``)."""
+        """The arrays this run trains on (``self.make_objective().arrays`` and, for ``use_rk4``, ``dt``)."""
         raise NotImplementedError(f"{type(self).__name__} must implement dataset()")
 
-    def objective(self) -> Objective:
-        """What this run fits; by default the objective its model kind is registered with."""
-        return objective_for(self.kind)
+    def make_objective(self) -> Objective:
+        """What this run fits: the objective its model kind is registered with, or with ``objective=
+        'trajectory'`` a ``TrajectoryObjective`` of ``snippet_steps`` (for kinds fit on dx/dt only)."""
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective={self.objective!r}: choose one of {', '.join(OBJECTIVES)}")
+        registered = objective_for(self.kind)
+        if self.objective == "derivative":
+            return registered
+        if not isinstance(registered, DerivativeObjective):
+            raise ValueError(f"objective={self.objective!r} fits a field of the state, and the {self.kind} model "
+                             f"trains with {type(registered).__name__}; use objective='derivative'")
+        return get_objective(self.objective, steps=self.snippet_steps)
 
     def finish(self, directory, dataset: dict) -> None:
         """Called after the run is saved in ``directory`` (the pixel task measures its energy here)."""

@@ -42,13 +42,14 @@ def mean_and_se(values) -> tuple[float, float]:
     return float(v.mean()), float(std / np.sqrt(rows))
 
 
-def derivative_loss(model, x, dxdt, chunk: int = 65536) -> tuple[float, float]:
-    """The paper's train/test loss of ``model.time_derivative`` on ``(x, dxdt)``, both ``(rows, dim)``."""
+def derivative_loss(model, x, dxdt, chunk: int = 65536, field=None) -> tuple[float, float]:
+    """The paper's train/test loss of ``model.time_derivative`` (or ``field``) on ``(x, dxdt)``, both ``(rows, dim)``."""
     param = next(model.parameters())
     x = torch.as_tensor(x, dtype=param.dtype, device=param.device)
     dxdt = torch.as_tensor(dxdt, dtype=param.dtype, device=param.device)
     with torch.no_grad():
-        pred = torch.cat([model.time_derivative(x[i:i + chunk]) for i in range(0, len(x), chunk)])
+        field = field or model.time_derivative
+        pred = torch.cat([field(x[i:i + chunk]) for i in range(0, len(x), chunk)])
     return mean_and_se((dxdt - pred) ** 2)
 
 

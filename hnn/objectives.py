@@ -1,6 +1,6 @@
 """What a run fits: the model kind, the dataset arrays it trains on, its loss and its final numbers.
 
-    hnn.run_experiment(config)                                   # config.objective(): the kind's
+    hnn.run_experiment(config)                                   # config.make_objective(): the kind's
     hnn.run_experiment(config, dataset, hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
 An objective builds the untrained model that a run's args describe (its init draws from torch's
@@ -38,6 +38,10 @@ class Objective:
         """The untrained model of the run's ``args["kind"]`` (float32 unless ``args["dtype"]`` says otherwise)."""
         return _typed(_registered(args["kind"]).build(args), args)
 
+    def prepare(self, dataset: dict) -> dict:
+        """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
+        return dataset
+
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""
         return {}
@@ -51,6 +55,21 @@ def _typed(model: nn.Module, args: dict) -> nn.Module:
     return model.to(dtype=DTYPES[args.get("dtype", "float32")])
 
 
+def check_coordinates(model: nn.Module, dataset: dict, maps_velocities: bool) -> None:
+    """Raise ValueError when ``model`` cannot be fit to ``dataset``'s states: a model that reads the
+    state's second half as velocities (``model.needs_velocities``) on canonical ``[q, p]``, or a
+    model of canonical states (one with ``state_from_observed``) on observed ``[q, qdot]``
+    (``dataset["state"] == "velocity"``) by an objective that does not map them (``maps_velocities``)."""
+    velocity = dataset.get("state", "canonical") == "velocity"
+    name = type(model).__name__
+    if getattr(model, "needs_velocities", False) and not velocity:
+        raise ValueError(f"{name} moves q by the second half of the state, a velocity, and this task's states are "
+                         "canonical [q, p]; choose another --model (e.g. hnn or mechanical)")
+    if velocity and hasattr(model, "state_from_observed") and not maps_velocities:
+        raise ValueError(f"{name}'s field is on canonical [q, p] and this task observes [q, qdot], and it gives no "
+                         "observed_time_derivative; use --objective trajectory, which maps the observed states")
+
+
 class DerivativeObjective(Objective):
     """The paper's objective: fit ``time_derivative(x)`` to ``dxdt`` (an HNN, or an MLP as the baseline).
 
@@ -58,8 +77,18 @@ class DerivativeObjective(Objective):
     ``input_noise`` each training batch's inputs get Gaussian noise.
     """
 
+    field = None    # what final_loss measures: model.time_derivative unless train_options maps states
+
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
+        observed = getattr(model, "observed_time_derivative", None)
+        check_coordinates(model, dataset, maps_velocities=observed is not None)
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None}
+        if dataset.get("state") == "velocity" and observed is not None:
+            # a model of canonical [q, p] fit to d/dt of observed [q, qdot] through its own mass matrix
+            if args.get("use_rk4"):
+                raise ValueError("--use_rk4 steps the model's own state; on observed [q, qdot] drop it")
+            self.field = options["predict"] = observed
+            return options
         if args.get("use_rk4"):
             if "dt" not in dataset:
                 raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")
@@ -68,7 +97,7 @@ class DerivativeObjective(Objective):
         return options
 
     def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        return derivative_loss(model, inputs, targets)
+        return derivative_loss(model, inputs, targets, field=self.field)
 
 
 class PixelObjective(Objective):

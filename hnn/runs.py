@@ -71,13 +71,14 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     ``dxdt``, ``test_x``, ``test_dxdt``, ``(rows, input_dim)`` arrays) and, for ``use_rk4``,
     ``dt`` (the time step of its trajectories); or it is a function of no arguments returning that
     dict, and then the time it takes is saved as ``data_seconds`` in ``metrics.json`` beside
-    ``train_seconds`` (the training loop alone). ``objective`` defaults to ``config.objective()``.
+    ``train_seconds`` (the training loop alone). ``objective`` defaults to ``config.make_objective()``.
     A value the config's flag would refuse raises ValueError before anything is built.
     """
     cli.check(config)
     check_save_dir(config.save_dir)
-    objective = objective or config.objective()
+    objective = objective or config.make_objective()
     dataset, data_seconds = _materialize(config.dataset if dataset is None else dataset)
+    dataset = objective.prepare(dataset)
     missing = [key for key in objective.arrays if key not in dataset]
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")

@@ -57,6 +57,8 @@ class TaskSpec:
             dataset rebuilt from them); each result has ``result[label]["mse"]`` and ``["mse_se"]``
             and a one-line ``"description"``.
         load: ``load(directory) -> (model, args, metrics)`` replacing ``hnn.load_run``.
+        in_paper: one of the paper's tasks (``paper_tasks``); False keeps a task out of
+            ``analysis/reproduce.py``'s default tasks and tables (it still trains and loads).
     """
     order: float = math.inf
     protocols: Mapping = field(default_factory=dict)
@@ -69,6 +71,7 @@ class TaskSpec:
     variants: Mapping = field(default_factory=dict)
     evaluate: Callable | None = None
     load: Callable | None = None
+    in_paper: bool = True
 
 
 def repo_root() -> Path:
@@ -90,6 +93,11 @@ def available_tasks() -> list[str]:
     in the paper's order (``TaskSpec.order``, then the name)."""
     names = [p.parent.name[len(_PREFIX):] for p in repo_root().glob(f"{_PREFIX}*/data.py")]
     return sorted(names, key=lambda name: (task_spec(name).order, name))
+
+
+def paper_tasks() -> list[str]:
+    """The ``available_tasks`` that are the paper's (``TaskSpec.in_paper``), in its order."""
+    return [name for name in available_tasks() if task_spec(name).in_paper]
 
 
 def task_spec(name: str) -> TaskSpec:

@@ -104,7 +104,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             step (0: none). The original 2-body script added it to the prediction instead.
         predict: ``x -> prediction`` compared with ``dxdt``; default ``model.time_derivative``.
         loss: ``(x, y) -> per-sample or scalar loss`` replacing the L2 loss of ``predict``, for
-            models with an objective of their own (the pixel task passes ``x``, ``x_next``).
+            models with an objective of their own (the pixel task passes ``x``, ``x_next``; the
+            trajectory objective flattened snippets). Its arrays' widths are then not checked
+            against the model's ``input_dim``: the loss reads them.
         progress: show a progress bar; default when stderr is a terminal, not ``verbose``, and no
             ``report_progress`` callback is active (its caller shows progress its own way).
 
@@ -119,7 +121,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     if batch_size is not None and batch_size < 1:
         raise ValueError(f"batch_size must be positive or None (full batch), got {batch_size!r}")
     param = next(model.parameters())
-    width = getattr(model, "input_dim", None)
+    # a custom loss owns its arrays' layout (e.g. flattened trajectory snippets): rows, not widths, are checked
+    width = getattr(model, "input_dim", None) if loss is None else None
     kw = dict(width=width, dtype=param.dtype, device=param.device)
     x, dxdt = check_data("x", x, **kw), check_data("dxdt", dxdt, **kw)
     if len(x) != len(dxdt):

@@ -176,8 +176,8 @@ def tables_markdown(results: dict) -> str:
     skipped = results.get("skipped", {})
     for task in skipped:
         lines += ["", f"Skipped {task}: {skipped[task]}"]
-    present = meta.get("available", hnn.available_tasks())
-    missing = [t for t in hnn.available_tasks() if t not in present]
+    present = meta.get("available", hnn.tasks.paper_tasks())
+    missing = [t for t in hnn.tasks.paper_tasks() if t not in present]
     if missing:
         lines += ["", f"Not yet in this checkout: {', '.join(missing)}."]
     stages = stage_table(results)
@@ -235,7 +235,7 @@ def headline_markdown(results: dict) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="reproduce.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task present)")
+    p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task of the paper present)")
     p.add_argument("--quick", action="store_true",
                    help=f"smoke run: {QUICK_STEPS} training steps per model (or --steps), output in results-quick/")
     p.add_argument("--steps", type=int, default=None,
@@ -361,22 +361,22 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
               flush=True)
 
 
-def portable_command(argv: list[str]) -> str:
-    """The command as a reader can rerun it: paths inside the checkout made relative to it, and
-    other absolute paths (one machine's folders) shown as ``DIR``."""
+def portable_command(argv: list[str], script: str = "analysis/reproduce.py") -> str:
+    """The command ``python <script> <argv>`` as a reader can rerun it: paths inside the checkout
+    made relative to it, and other absolute paths (one machine's folders) shown as ``DIR``."""
     root, words = hnn.tasks.repo_root().resolve(), []
     for word in argv:
         path = Path(word)
         if path.is_absolute():
             word = os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
         words.append(word)
-    return " ".join(["python analysis/reproduce.py"] + words)
+    return " ".join([f"python {script}"] + words)
 
 
 def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:
     return {**provenance(), "command": portable_command(argv), "seed": args.seed, "seeds": seeds, "mode": mode,
             "quick": args.quick, "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models),
-            "available": hnn.available_tasks()}
+            "available": hnn.tasks.paper_tasks()}
 
 
 def _mode(args) -> tuple[str, int | None]:
@@ -406,7 +406,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     _check(parser, args)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    tasks = args.tasks or hnn.available_tasks()
+    tasks = args.tasks or hnn.tasks.paper_tasks()
     mode, steps = _mode(args)
     backend = "" if args.backend == "local" else f" --backend {args.backend}"
     print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)

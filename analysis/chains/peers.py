@@ -1,0 +1,215 @@
+"""The peers' published numbers on pendulum chains beside ours, on their own protocols (docs/peers.md).
+
+    python analysis/peers.py --jobs 2 --update-docs      # the whole table (about an hour on 2 cores)
+    python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
+
+Trains our rungs (``RUNGS``: the paper's HNN, the mechanical HNN, the second-order NODE and the
+baseline) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
+N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), through
+``analysis/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
+protocol (``experiment-chain/protocols.py``): CHNN's geometric-mean relative error of the
+Cartesian rollout (dopri5 at rtol 1e-7, in float64), mean and median over the test starts, with
+the chaos floor; LNN's energy error at T = 100 s. A rollout that blows up is reported by name
+with its time, never as a NaN. Writes ``peers.json`` and ``peers.md`` under ``--out``;
+``--update-docs`` puts the table into docs/peers.md (full settings only).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import hnn
+from hnn.io import atomic_write, write_json
+from hnn_analysis import readme, sweep
+from hnn_analysis.paper.reproduce import portable_command
+from hnn_analysis.provenance import provenance
+
+RUNGS = ("hnn", "mechanical", "second_order", "baseline")
+# the LNN protocol trains on derivatives of [q, qdot] (the mechanical HNN's through its mass matrix)
+LNN_RUNGS = RUNGS
+BOBS = (1, 2, 3, 5)
+# --quick: a smoke run of every stage, minutes not an hour
+QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 64, "total_steps": 100},
+         "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
+                                                           "total_steps": 100}}
+# 2500 steps of batch 200 (625 of CHNN's 4-batch epochs, against their 2000): about 5 minutes of
+# one core for a 256-unit rung through 4-step RK4 snippets (0.12 s a step measured on a shared machine)
+FULL = {"bobs": BOBS, "fields": {"total_steps": 2500}, "test_starts": 100, "lnn_starts": 40,
+        "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
+
+
+def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
+    """One ``sweep.Job`` per (protocol row, rung): ``chain<N>/<rung>/seed<seed>`` and ``lnn/<rung>/seed<seed>``."""
+    jobs = []
+    for n in settings["bobs"]:
+        for rung in RUNGS:
+            fields = {"bobs": n, "model": rung, "seed": seed, "save_dir": str(out / "runs"), **settings["fields"]}
+            jobs.append(sweep.Job(f"chain{n}/{rung}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
+    for rung in LNN_RUNGS if settings["lnn_starts"] else ():
+        fields = {"bobs": 2, "protocol": "lnn", "objective": "derivative", "model": rung, "seed": seed,
+                  "save_dir": str(out / "runs"), **settings["lnn_fields"]}
+        jobs.append(sweep.Job(f"lnn/{rung}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
+    return jobs
+
+
+def _rollout(model, z0: torch.Tensor, t_eval, rtol: float) -> tuple[torch.Tensor | None, str | None]:
+    """The model's observed path from ``z0`` by dopri5 in float64, or ``(None, why)`` if it blows up."""
+    try:
+        return hnn.trajectory.rollout_observed(model.double(), z0, t_eval, method="dopri5", rtol=rtol, atol=rtol), None
+    except hnn.DivergenceError as err:
+        return None, str(err).split(";")[0]
+
+
+def measure_chnn(chain, models: dict, starts: int) -> dict:
+    """CHNN's number ``{rung: {mean, median, n, seconds}}`` and the chaos floor, over ``starts`` test starts."""
+    protocols = hnn.load_task("chain", "protocols")
+    spec = protocols.CHNN
+    z0 = protocols.chnn_test_starts(chain, starts)
+    t = spec["dt"] * np.arange(spec["points"])
+    truth = hnn.load_task("chain").trajectories(chain, z0, t)
+    result = {"floor": protocols.summary(protocols.chaos_floor(chain, z0))}
+    for rung, model in models.items():
+        pred, blew_up = _rollout(model, z0, t, spec["model_rtol"])
+        result[rung] = ({"blew_up": blew_up} if pred is None
+                        else protocols.summary(protocols.rollout_error(chain, pred, truth)))
+    return result
+
+
+def measure_lnn(models: dict, starts: int) -> dict:
+    """LNN's |E(z^_T) - E(z_T)| / 29.4 at T = 100 s ``{rung: {mean, median, n}}``, dopri5 at rtol 1e-8 (theirs)."""
+    data, protocols = hnn.load_task("chain"), hnn.load_task("chain", "protocols")
+    chain = data.lnn_double_pendulum()
+    z0 = data.sample_lnn_starts(starts, torch.Generator().manual_seed(0), train=False)
+    t = protocols.lnn_times()
+    true_end = data.trajectories(chain, z0, t, rtol=protocols.LNN["truth_rtol"], atol=protocols.LNN["truth_rtol"])[:, -1]
+    result = {}
+    for rung, model in models.items():
+        pred, blew_up = _rollout(model, z0, t, 1e-8)
+        result[rung] = ({"blew_up": blew_up} if pred is None
+                        else protocols.summary(protocols.energy_error(chain, pred[:, -1], true_end)))
+    return result
+
+
+def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
+    """Every protocol row: ``{"chain<N>": {...}, "lnn": {...}}`` from the trained ``runs``."""
+    data = hnn.load_task("chain")
+    rows = {}
+    for n in settings["bobs"]:
+        models = _loaded(runs, f"chain{n}", RUNGS, seed)
+        rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"]),
+                             "seconds": _seconds(runs, f"chain{n}", RUNGS, seed)}
+    if not settings["lnn_starts"]:
+        return rows
+    models = _loaded(runs, "lnn", LNN_RUNGS, seed)
+    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"]), "seconds": _seconds(runs, "lnn", LNN_RUNGS, seed)}
+    return rows
+
+
+def _loaded(runs: dict, row: str, rungs, seed: int) -> dict:
+    found = {rung: runs.get(f"{row}/{rung}/seed{seed}") for rung in rungs}
+    return {rung: hnn.load_run(folder)[0] for rung, folder in found.items() if isinstance(folder, Path)}
+
+
+def _seconds(runs: dict, row: str, rungs, seed: int) -> dict:
+    found = {rung: runs.get(f"{row}/{rung}/seed{seed}") for rung in rungs}
+    return {rung: json.loads((folder / "metrics.json").read_text()).get("train_seconds")
+            for rung, folder in found.items() if isinstance(folder, Path)}
+
+
+def _cell(entry: dict | None) -> str:
+    if entry is None:
+        return "not trained"
+    if "blew_up" in entry:
+        return f"blew up: {entry['blew_up']}"
+    return f"{entry['mean']:.2e} ({entry['median']:.2e})"
+
+
+def markdown(results: dict) -> str:
+    """The generated section of docs/peers.md: the peers' numbers beside ours, same metric."""
+    published = hnn.load_task("chain", "protocols").CHNN_PUBLISHED
+    meta = results["meta"]
+    lines = []
+    if meta["quick"]:
+        lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
+                  "pipeline and say nothing about the rungs; the full table comes from `python analysis/peers.py "
+                  "--jobs 2 --update-docs`.", ""]
+    lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')}; {meta.get('cores', '?')} cores; "
+              f"training {meta['seconds']['training']:.0f} s, measuring {meta['seconds']['measuring']:.0f} s. "
+              f"Each CHNN-protocol rung trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
+              "epochs of 800 snippets (theirs: 2000), by Adam at a constant rate (theirs: AdamW, cosine schedule).", "",
+              "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
+              "mean (median) over the test starts", "",
+              "| N | published HNN (mechanical) | published CHNN | published NeuralODE | published floor | "
+              + " | ".join(f"ours: {rung}" for rung in RUNGS) + " | our floor | our training s |",
+              "| --- " * (6 + len(RUNGS)) + "| --- |"]
+    for name, row in results["rows"].items():
+        if not name.startswith("chain"):
+            continue
+        n = int(name[len("chain"):])
+        peer = published.get(n, {})
+        seconds = ", ".join(f"{rung} {s:.0f}" for rung, s in row["seconds"].items() if s is not None)
+        lines.append(f"| {n} | " + " | ".join(
+            f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "NeuralODE", "floor"))
+            + " | " + " | ".join(_cell(row.get(rung)) for rung in RUNGS)
+            + f" | {_cell(row['floor'])} | {seconds} |")
+    lnn = results["rows"].get("lnn")
+    if lnn is not None:
+        lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
+        lines += ["", "### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = 100 s, "
+                  "mean (median) over the starts (ours: dopri5 at rtol 1e-8)", "",
+                  "| rung | energy error | training s |", "| --- | --- | --- |"]
+        lines += [f"| published {k} | {v:.2g} | |" for k, v in lnn_published.items()]
+        lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | {lnn['seconds'].get(rung) or 0:.1f} |" for rung in LNN_RUNGS]
+    return "\n".join(lines) + "\n"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = hnn.cli.Parser(prog="peers.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="a smoke run: small data, 100 steps, N = 1, 2 (minutes)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: results/peers, or results-quick/peers with --quick)")
+    p.add_argument("--jobs", type=hnn.cli.int_at_least(1), default=1, help="worker processes (1: in this process)")
+    p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of every run")
+    sweep.add_backend_flags(p)
+    p.add_argument("--update-docs", dest="update_docs", action="store_true",
+                   help="write the table into docs/peers.md (full settings only)")
+    return p
+
+
+def main(argv=None, settings: dict | None = None) -> dict:
+    """Train, measure, write; ``settings`` replaces ``FULL`` / ``QUICK`` (the tests' tiny config)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.update_docs and (args.quick or settings is not None):
+        parser.error("--update-docs writes full-settings results into docs/peers.md; drop --quick")
+    sweep.check_backend(parser, args)
+    settings = settings or (QUICK if args.quick else FULL)
+    out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"
+    jobs = plan(settings, out, args.seed)
+    runs, todo = sweep.reuse(jobs)
+    print(f"peers: {len(runs)} runs reused, {len(todo)} to train", flush=True)
+    trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address)
+    runs.update(trained)
+    tic = time.perf_counter()
+    rows = measure(runs, settings, args.seed)
+    results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
+                        "quick": settings is not FULL,     # --quick or a test's settings: not the table
+                        "steps": jobs[0].config.total_steps if jobs else None,
+                        "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
+               "rows": rows}
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "peers.json", results)
+    text = markdown(results)
+    atomic_write(out / "peers.md", lambda tmp: Path(tmp).write_text(text))
+    print("\n" + text)
+    if args.update_docs:
+        print(f"updated {readme.update_section('peers', text)}")
+    sweep.exit_if_failed(runs)
+    return results

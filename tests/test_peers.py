@@ -1,0 +1,36 @@
+"""analysis/peers.py on a tiny config: every stage runs, the table holds the peers' numbers beside ours."""
+import json
+
+import pytest
+
+import hnn
+
+hnn.tasks.import_analysis()
+from hnn_analysis.chains import peers  # noqa: E402
+
+TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
+        "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}}
+
+
+def test_tiny_peers_table(tmp_path):
+    results = peers.main(["--out", str(tmp_path)], settings=TINY)
+    row = results["rows"]["chain1"]
+    for rung in peers.RUNGS:
+        entry = row[rung]
+        assert "blew_up" in entry or (entry["n"] == 3 and 0 < entry["median"] <= 1), (rung, entry)
+        assert row["seconds"][rung] > 0
+    # the chaos floor of one bob from 3 starts: the published one is 4.9e-5 (100 starts)
+    assert 1e-5 < row["floor"]["mean"] < 2e-4
+    text = (tmp_path / "peers.md").read_text()
+    assert text.startswith("**QUICK smoke run**") and "| 1 | 1.80e-04 (1.12e-04) | 7.46e-05" in text
+    assert json.loads((tmp_path / "peers.json").read_text())["meta"]["quick"] is True
+    assert "From `python analysis/peers.py --out DIR` at commit" in text
+    # a rerun trains nothing: every run is found by its config
+    again = peers.main(["--out", str(tmp_path)], settings=TINY)
+    assert again["rows"]["chain1"]["floor"] == row["floor"]
+
+
+def test_update_docs_refuses_a_smoke_run(capsys):
+    with pytest.raises(SystemExit):
+        peers.main(["--quick", "--update-docs"])
+    assert "drop --quick" in capsys.readouterr().err
