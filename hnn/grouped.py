@@ -223,11 +223,11 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
                                      for g, (gen, c) in enumerate(zip(gens, _drawn(train_rows)))])
                 xb = xb + input_noise * noise.to(xb)
             losses = train_rows.loss(_field(weights, xb, baseline, rows), yb)
+            # a dropped model's loss is replaced, not multiplied by 0 (NaN * 0 is NaN)
+            torch.where(alive, losses, losses.new_zeros(())).sum().backward()
             finite = torch.isfinite(losses)
             if not bool(finite[alive].all()):
                 _drop(weights, optim, alive, finite, failures, names, step)
-            # a dropped model's loss is replaced, not multiplied by 0 (NaN * 0 is NaN)
-            torch.where(alive, losses, losses.new_zeros(())).sum().backward()
             optim.step()
             optim.zero_grad(set_to_none=True)
             train_loss.append(losses.detach())
@@ -275,14 +275,16 @@ class _Params:
 
 
 def _drop(weights, optim, alive, finite, failures, names, step) -> None:
-    """Report the newly failed models by name and zero their slices (weights and Adam state)."""
+    """Report the newly failed models by name and zero their slices, after the backward of the step
+    that found them."""
     for g in torch.nonzero(alive & ~finite).flatten().tolist():
         alive[g] = False
         failures[g] = GroupedRunFailed(names[g], step, "loss is not finite")
         print(f"  {failures[g]}", flush=True)
         with torch.no_grad():
-            for w in weights:
+            for w in weights:       # weights, gradient and Adam state: this slice moves no more
                 w[g] = 0
+                w.grad[g] = 0
                 for value in optim.state.get(w, {}).values():
                     if torch.is_tensor(value) and value.dim() > 0:
                         value[g] = 0
