@@ -22,6 +22,7 @@ Groupable: the ``hnn`` and ``baseline`` kinds on the paper's tanh MLP, fitting d
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 
 import numpy as np
 import torch
@@ -334,4 +335,15 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     return out
 
 
-__all__ = ["GROUPABLE_KINDS", "GroupedRunFailed", "fit_group", "group_key", "train_group"]
+def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:
+    """A sweep's group in a worker process or a Ray task: the configs of ``task`` with ``values``
+    trained as one group (``threads`` sets torch's thread count first). Per config
+    ``{"folder": text}`` or ``{"error": message}`` (plain data: it crosses process boundaries)."""
+    from .tasks import task_config
+    if threads is not None:
+        torch.set_num_threads(threads)
+    outcomes = train_group([task_config(task, v) for v in values])
+    return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
+
+
+__all__ = ["GROUPABLE_KINDS", "GroupedRunFailed", "fit_group", "group_key", "run_group_task", "train_group"]
