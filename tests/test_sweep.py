@@ -300,8 +300,8 @@ def test_a_two_node_cluster_with_token_auth_loses_a_node_mid_sweep_and_a_rerun_c
         shutil.rmtree(temp, ignore_errors=True)
 
 
-@pytest.mark.parametrize("n_jobs", [1, 2])
-def test_grouped_sweeps_save_the_runs_of_lone_ones(n_jobs, tmp_path):
+@pytest.mark.parametrize("backend, n_jobs", [("local", 1), ("local", 2), pytest.param("ray", 2, marks=needs_ray)])
+def test_grouped_sweeps_save_the_runs_of_lone_ones(backend, n_jobs, tmp_path):
     """--group auto trains the narrow runs of one task and kind as one group (in this process or
     as one worker's unit) and a wide one alone; every run's numbers are its lone run's to the
     grouped training's tolerance (tests/test_grouped.py: measured 1e-6, 1e-4 allowed)."""
@@ -314,7 +314,7 @@ def test_grouped_sweeps_save_the_runs_of_lone_ones(n_jobs, tmp_path):
     units = sweep.plan_units(jobs(tmp_path), "auto")
     assert sorted(len(unit) for unit in units) == [1, 4]
     assert [len(unit) for unit in sweep.plan_units(jobs(tmp_path), "off")] == [1] * 5
-    grouped, seconds = sweep.train_jobs(jobs(tmp_path / "grouped"), n_jobs, tmp_path / "logs", group="auto")
+    grouped, seconds = sweep.train_jobs(jobs(tmp_path / "grouped"), n_jobs, tmp_path / "logs", backend, group="auto")
     alone, _ = sweep.train_jobs(jobs(tmp_path / "alone"), 1, tmp_path / "logs", group="off")
     assert seconds["group"] == "auto" and set(grouped) == set(alone)
     for key, folder in grouped.items():
