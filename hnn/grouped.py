@@ -16,8 +16,11 @@ models apart. A run trained in a group gives its lone run's numbers up to float 
 A model whose loss turns NaN or infinite is reported by name, its slice zeroed and left out of
 the remaining updates; the others go on unaffected.
 
-Groupable: the ``hnn`` and ``baseline`` kinds on the paper's tanh MLP, fitting dx/dt itself
-(``DerivativeObjective`` without ``use_rk4``); ``group_key`` says which configs train together.
+Groupable: the ``hnn``, ``baseline``, ``dissipative`` and ``separable`` kinds on the paper's tanh
+MLP, fitting dx/dt itself (``DerivativeObjective`` without ``use_rk4``); ``group_key`` says which
+configs train together. Widths group apart, not padded to the widest: a padded unit is not
+exactly inert under weight decay and Adam, and from width 64 on a step is near its arithmetic
+floor, so padding 16 to 64 would cost the wide step's products (benchmark ``group`` job).
 """
 from __future__ import annotations
 
@@ -29,12 +32,13 @@ import torch
 from tqdm.auto import tqdm
 
 from .models import HNN, MLP, _FIELD_ROWS
+from .structured import SeparableHNN
 from .objectives import DerivativeObjective
 from .runs import finish_run, run_dir, training_subset
 from .tanh_mlp import _tanh, _tanh_
 from .training import adam_optimizer, check_data, flushes_denormals
 
-GROUPABLE_KINDS = ("hnn", "baseline")
+GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
 # the fields that must agree for configs to train as one program (seed, train_fraction and the
 # dataset may differ; so may the width when groups are formed by width, see ``group_key``)
 _SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
@@ -59,13 +63,23 @@ def group_key(config) -> tuple | None:
             + tuple(getattr(config, name) for name in _SHARED_FIELDS))
 
 
-def _stacked_weights(models: list[HNN]) -> list[torch.Tensor]:
-    """``[W1, b1, W2, b2, W3]``, each the models' own stacked along a new leading axis, as leaves."""
-    nets = [model.differentiable_model for model in models]
+def _nets(model) -> list[MLP]:
+    """The tanh MLPs of a model, in the order their slices stack: net j of model g at ``j * G + g``."""
+    nets = [model.kinetic_net, model.potential_net] if isinstance(model, SeparableHNN) else [model.differentiable_model]
     for net in nets:
         if not (isinstance(net, MLP) and net._closed_form_applies()):
-            raise ValueError("a group trains HNNs and baselines on the paper's tanh MLP only; train this model alone")
-    layers = [(n.linear1.weight, n.linear1.bias, n.linear2.weight, n.linear2.bias, n.linear3.weight) for n in nets]
+            raise ValueError("a group trains models on the paper's tanh MLP only; train this model alone")
+    return nets
+
+
+def _layers(net: MLP) -> tuple:
+    return net.linear1.weight, net.linear1.bias, net.linear2.weight, net.linear2.bias, net.linear3.weight
+
+
+def _stacked_weights(models: list) -> list[torch.Tensor]:
+    """``[W1, b1, W2, b2, W3]``, the models' nets stacked along a new leading axis (``_nets``), as leaves."""
+    nets = [list(column) for column in zip(*(_nets(model) for model in models))]
+    layers = [_layers(net) for column in nets for net in column]
     return [torch.stack([ws[i].detach() for ws in layers]).clone().requires_grad_(True) for i in range(5)]
 
 
@@ -108,9 +122,23 @@ def _grouped_input_gradient(x, W1, b1, W2, b2, w):
     return torch.bmm(g_a1, W1), (h1, h2, s1, s2, g_h1, g_a1, W2w)
 
 
-def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...]) -> torch.Tensor:
-    """dx/dt of every model at its own states ``x`` ``(G, batch, n)``: ``(G, batch, n)``."""
+def _input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
+    """dF/dx of every stacked net; a graph for the parameters' gradients only in grad mode."""
+    if torch.is_grad_enabled():
+        return _GroupedInputGradient.apply(x, W1, b1, W2, b2, w)
+    return _grouped_input_gradient(x, W1, b1, W2, b2, w)[0]
+
+
+def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | None) -> torch.Tensor:
+    """dx/dt of every model at its own states ``x`` ``(G, batch, n)``: ``(G, batch, n)``; ``rows``
+    None for separable models (kinetic nets, then potential nets: ``(dT/dp, -dV/dq)``)."""
     W1, b1, W2, b2, W3 = weights
+    if rows is None:
+        half = x.shape[-1] // 2
+        q, p = x[..., :half], x[..., half:]
+        grad = _input_gradient(torch.cat([p, q]), W1, b1, W2, b2, W3[:, 0])
+        kinetic, potential = grad.split(len(x))
+        return torch.cat([kinetic, -potential], dim=-1)
     if baseline:
         h1 = _tanh(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
         h2 = _tanh(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
@@ -118,10 +146,7 @@ def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...]) -> t
     n = x.shape[-1] // 2
     out = None
     for k in rows:                                   # 0: F1 (conservative), 1: F2 (Hamilton's equations)
-        if torch.is_grad_enabled():
-            grad = _GroupedInputGradient.apply(x, W1, b1, W2, b2, W3[:, k])
-        else:
-            grad = _grouped_input_gradient(x, W1, b1, W2, b2, W3[:, k])[0]
+        grad = _input_gradient(x, W1, b1, W2, b2, W3[:, k])
         part = grad if k == 0 else torch.cat([grad[..., n:], -grad[..., :n]], dim=-1)
         out = part if out is None else out + part
     return out
@@ -171,8 +196,8 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
               batch_size: int | None = None, print_every: int = 200, test_every: int | None = None,
               input_noise: float = 0.0, names: list[str] | None = None, after_step=None,
               progress: bool = False) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
-    """Train ``models`` (HNNs or baselines of one width on the tanh MLP) together, as ``hnn.train``
-    trains each alone; their weights are updated in place.
+    """Train ``models`` (of one kind and width on the tanh MLP: HNNs, baselines, dissipative or
+    separable HNNs) together, as ``hnn.train`` trains each alone; their weights are updated in place.
 
     Args:
         data: each model's ``(x, dxdt)``, ``(rows, n)`` arrays or tensors (rows may differ).
@@ -195,11 +220,16 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     if total_steps < 0 or int(total_steps) != total_steps:
         raise ValueError(f"total_steps must be a non-negative integer, got {total_steps!r}")
     first = models[0]
-    baseline, n = first.baseline, first.input_dim
-    if any(m.baseline != baseline or m.input_dim != n or m.field_type != first.field_type
-           or not m.assume_canonical_coords for m in models):
+    n = first.input_dim
+    if isinstance(first, SeparableHNN):
+        baseline, rows = False, None
+        same = all(type(m) is type(first) and m.input_dim == n for m in models)
+    else:
+        baseline, rows = first.baseline, _FIELD_ROWS[first.field_type]
+        same = all(isinstance(m, HNN) and m.baseline == baseline and m.input_dim == n
+                   and m.field_type == first.field_type and m.assume_canonical_coords for m in models)
+    if not same:
         raise ValueError("a group's models must be of one kind, width and field type, in canonical coordinates")
-    rows = _FIELD_ROWS[first.field_type]
     weights = _stacked_weights(models)
     kw = dict(width=n, dtype=weights[0].dtype, device=weights[0].device)
     train_rows = _Rows([check_data("x", x, **kw) for x, _ in data], [check_data("dxdt", y, **kw) for _, y in data],
@@ -249,11 +279,10 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
         if g in failures:
             stats.append(None)
             continue
-        net = model.differentiable_model
         with torch.no_grad():
-            for param, stacked in zip((net.linear1.weight, net.linear1.bias, net.linear2.weight, net.linear2.bias,
-                                       net.linear3.weight), weights):
-                param.copy_(stacked[g])
+            for j, net in enumerate(_nets(model)):
+                for param, stacked in zip(_layers(net), weights):
+                    param.copy_(stacked[j * len(models) + g])
         model.eval()
         stats.append({"train_loss": train_loss[g], "test_loss": test_loss[g], "test_steps": list(test_steps),
                       "seconds": seconds / len(models), "group_seconds": seconds, "group_size": len(models)})
@@ -283,12 +312,13 @@ def _drop(weights, optim, alive, finite, failures, names, step) -> None:
         failures[g] = GroupedRunFailed(names[g], step, "loss is not finite")
         print(f"  {failures[g]}", flush=True)
         with torch.no_grad():
-            for w in weights:       # weights, gradient and Adam state: this slice moves no more
-                w[g] = 0
-                w.grad[g] = 0
+            for w in weights:       # weights, gradient and Adam state: its slices move no more
+                mine = slice(g, None, len(alive))          # net j of model g is slice j * G + g
+                w[mine] = 0
+                w.grad[mine] = 0
                 for value in optim.state.get(w, {}).values():
                     if torch.is_tensor(value) and value.dim() > 0:
-                        value[g] = 0
+                        value[mine] = 0
 
 
 def train_group(configs: list, datasets: list[dict] | None = None) -> list:

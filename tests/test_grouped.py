@@ -26,9 +26,10 @@ def _spring_cells(widths, seeds, fractions):
     return [(w, s, f) for w in widths for s in seeds for f in fractions], data
 
 
-def _model(width: int, seed: int, baseline: bool = False):
+def _model(width: int, seed: int, kind: str = "hnn"):
     torch.manual_seed(seed)
-    return hnn.build_model(2, width, baseline=baseline)
+    return hnn.objectives.model_from_args({"kind": kind, "input_dim": 2, "hidden_dim": width, "nonlinearity": "tanh",
+                                          "field_type": "solenoidal"})
 
 
 def _close(a, b) -> float:
@@ -41,12 +42,13 @@ def _lone(model, pair, test, seed, batch_size):
     return hnn.train(model, *pair, *test, total_steps=STEPS, seed=seed, batch_size=batch_size)
 
 
-@pytest.mark.parametrize("baseline, batch_size", [(False, None), (False, 100), (True, None)])
-def test_grouped_training_agrees_with_lone_runs(baseline, batch_size):
+@pytest.mark.parametrize("kind, batch_size", [("hnn", None), ("hnn", 100), ("baseline", None),
+                                              ("dissipative", None), ("separable", None)])
+def test_grouped_training_agrees_with_lone_runs(kind, batch_size):
     cells, data = _spring_cells((16, 32), (0, 1), (0.25, 1.0))
     for width in (16, 32):              # a group is one width
         mine = [c for c in cells if c[0] == width]
-        models = [_model(w, s, baseline) for w, s, _ in mine]
+        models = [_model(w, s, kind) for w, s, _ in mine]
         alone = [copy.deepcopy(m) for m in models]
         pairs = [training_subset(data[s]["x"], data[s]["dxdt"], f, s) for _, s, f in mine]
         tests = [(data[s]["test_x"], data[s]["test_dxdt"]) for _, s, _ in mine]
