@@ -39,10 +39,12 @@ from hnn_analysis.provenance import cores
 BACKENDS = ("local", "ray")
 GROUP_MODES = ("auto", "off")
 # Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
-# 1 thread): 2.6-3.1x at width 16 (G 4-16), 1.3-1.4x at 64, slower at 200 (near its arithmetic
-# floor already, and one batched product is slower than G plain ones there)
+# 1 thread, two runs): 2.3-2.6x at width 16 with G 4 and 3.1-3.4x with G 16; 1.3x at width 64
+# with G 4 but 0.9-1.4x with G 16; 0.6-0.7x at width 200 with G 4 and 16. A group's activations
+# (G x rows x width) outgrow the cache that a lone run's stay in: groups stop at this many hidden
+# units in all (16 models of width 16, 4 of width 64) and at this width
+GROUP_HIDDEN_UNITS = 256
 GROUP_MAX_WIDTH = 64
-GROUP_MAX_SIZE = 64
 RAY_INSTALL = 'pip install -e ".[ray]"'
 # what a dataset raises when its task cannot run here: missing data or optional packages
 _CANNOT_RUN = (FileNotFoundError, ImportError)
@@ -95,7 +97,7 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
 
 def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
     """``jobs`` as units of work: with ``group="auto"`` the jobs of one ``hnn.grouped.group_key`` at
-    most ``GROUP_MAX_WIDTH`` wide, up to ``GROUP_MAX_SIZE`` together, each other job alone."""
+    most ``GROUP_MAX_WIDTH`` wide, up to ``GROUP_HIDDEN_UNITS`` hidden units together, each other job alone."""
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
     units, groups = [], {}
@@ -106,7 +108,8 @@ def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
         else:
             groups.setdefault(key, []).append(job)
     for members in groups.values():
-        units += [members[i:i + GROUP_MAX_SIZE] for i in range(0, len(members), GROUP_MAX_SIZE)]
+        size = max(1, GROUP_HIDDEN_UNITS // members[0].config.hidden_dim)
+        units += [members[i:i + size] for i in range(0, len(members), size)]
     return units
 
 
