@@ -4,7 +4,8 @@ model axis, every product of a step one batched product over the models.
     folders = hnn.grouped.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
 
 A width-16 HNN step is a few microseconds of arithmetic inside a millisecond of dispatch; G of
-them as one batched step cost about one dispatch. Each model keeps what its lone run has: its
+them as one batched step share one dispatch (measured 2-3x the model-steps per second of separate
+runs at width 16: ``python analysis/speed/benchmark.py --jobs group``). Each model keeps what its lone run has: its
 init (built as ``hnn.run_experiment`` builds it, from its seed), its data subset
 (``train_fraction``), its minibatch stream (its own generator, drawing the lone run's indices),
 its own Adam state (Adam is elementwise, so one optimizer over the stacked tensors is G
@@ -32,15 +33,15 @@ import torch
 from tqdm.auto import tqdm
 
 from .models import HNN, MLP, _FIELD_ROWS
-from .structured import SeparableHNN
 from .objectives import DerivativeObjective
 from .runs import finish_run, run_dir, training_subset
+from .structured import SeparableHNN
 from .tanh_mlp import _tanh, _tanh_
 from .training import adam_optimizer, check_data, flushes_denormals
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
-# the fields that must agree for configs to train as one program (seed, train_fraction and the
-# dataset may differ; so may the width when groups are formed by width, see ``group_key``)
+# the fields that must agree for configs to train as one program (seed, train_fraction and with
+# them the dataset may differ)
 _SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
                   "print_every", "field_type", "dtype", "device")
 
@@ -169,7 +170,6 @@ class _Rows:
         for g, m in enumerate(sizes):
             weight[g, :m] = 1.0 / (m * self.x.shape[2])
         self.weight = weight
-        self.padded = any(m != self.size for m in sizes)
         self.full = all(m == c for m, c in zip(sizes, self.counts))
         self._models = torch.arange(len(xs))[:, None]
 

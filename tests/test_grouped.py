@@ -38,13 +38,14 @@ def _close(a, b) -> float:
     return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
 
 
-def _lone(model, pair, test, seed, batch_size):
-    return hnn.train(model, *pair, *test, total_steps=STEPS, seed=seed, batch_size=batch_size)
+def _lone(model, pair, test, seed, batch_size, input_noise=0.0):
+    return hnn.train(model, *pair, *test, total_steps=STEPS, seed=seed, batch_size=batch_size, input_noise=input_noise)
 
 
-@pytest.mark.parametrize("kind, batch_size", [("hnn", None), ("hnn", 100), ("baseline", None),
-                                              ("dissipative", None), ("separable", None)])
-def test_grouped_training_agrees_with_lone_runs(kind, batch_size):
+@pytest.mark.parametrize("kind, batch_size, noise", [("hnn", None, 0.0), ("hnn", 100, 0.0), ("hnn", 100, 0.05),
+                                                     ("baseline", None, 0.0), ("dissipative", None, 0.0),
+                                                     ("separable", None, 0.0)])
+def test_grouped_training_agrees_with_lone_runs(kind, batch_size, noise):
     cells, data = _spring_cells((16, 32), (0, 1), (0.25, 1.0))
     for width in (16, 32):              # a group is one width
         mine = [c for c in cells if c[0] == width]
@@ -53,10 +54,10 @@ def test_grouped_training_agrees_with_lone_runs(kind, batch_size):
         pairs = [training_subset(data[s]["x"], data[s]["dxdt"], f, s) for _, s, f in mine]
         tests = [(data[s]["test_x"], data[s]["test_dxdt"]) for _, s, _ in mine]
         stats, failures = grouped.fit_group(models, pairs, tests, seeds=[s for _, s, _ in mine], total_steps=STEPS,
-                                            batch_size=batch_size)
+                                            batch_size=batch_size, input_noise=noise)
         assert failures == {}
         for g, (_, seed, _) in enumerate(mine):
-            lone = _lone(alone[g], pairs[g], tests[g], seed, batch_size)
+            lone = _lone(alone[g], pairs[g], tests[g], seed, batch_size, noise)
             assert _close(stats[g]["train_loss"], lone["train_loss"]) < RTOL, mine[g]
             assert _close(stats[g]["test_loss"], lone["test_loss"]) < RTOL, mine[g]
             assert stats[g]["test_steps"] == lone["test_steps"]
