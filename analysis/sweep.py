@@ -11,6 +11,11 @@ here, before the map (the cached ones are then read by every worker). A run that
 reported by name with its error and the others go on; ``exit_if_failed`` ends the command with
 code 1 and the list. A task that cannot run here at all (missing data or optional packages) is
 skipped with its reason once. Ray is optional and imported only for ``backend="ray"``.
+
+With ``group="auto"`` the runs that can train as one program (``hnn.grouped.group_key``: one
+task, kind and width, seeds and fractions apart) and are narrow enough for grouping to pay
+(``GROUP_MAX_WIDTH``, measured by ``analysis/speed/benchmark.py --jobs group``) train as groups,
+each one unit of work for the pool or Ray, each model still saved as its own run folder.
 """
 from __future__ import annotations
 
@@ -32,6 +37,14 @@ import hnn
 from hnn_analysis.provenance import cores
 
 BACKENDS = ("local", "ray")
+GROUP_MODES = ("auto", "off")
+# Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
+# 1 thread, two runs): 2.3-2.6x at width 16 with G 4 and 3.1-3.4x with G 16; 1.3x at width 64
+# with G 4 but 0.9-1.4x with G 16; 0.6-0.7x at width 200 with G 4 and 16. A group's activations
+# (G x rows x width) outgrow the cache that a lone run's stay in: groups stop at this many hidden
+# units in all (16 models of width 16, 4 of width 64) and at this width
+GROUP_HIDDEN_UNITS = 256
+GROUP_MAX_WIDTH = 64
 RAY_INSTALL = 'pip install -e ".[ray]"'
 # what a dataset raises when its task cannot run here: missing data or optional packages
 _CANNOT_RUN = (FileNotFoundError, ImportError)
@@ -82,6 +95,35 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
     return found, todo
 
 
+def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
+    """``jobs`` as units of work: with ``group="auto"`` the jobs of one ``hnn.grouped.group_key`` at
+    most ``GROUP_MAX_WIDTH`` wide, up to ``GROUP_HIDDEN_UNITS`` hidden units together, each other job alone."""
+    if group not in GROUP_MODES:
+        raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
+    units, groups = [], {}
+    for job in jobs:
+        key = hnn.grouped.group_key(job.config) if group == "auto" else None
+        if key is None or job.config.hidden_dim > GROUP_MAX_WIDTH:
+            units.append([job])
+        else:
+            groups.setdefault(key, []).append(job)
+    for members in groups.values():
+        size = max(1, GROUP_HIDDEN_UNITS // members[0].config.hidden_dim)
+        units += [members[i:i + size] for i in range(0, len(members), size)]
+    return units
+
+
+def _unit_cost(unit: list[Job]) -> float:
+    """Longest first: a group costs about its longest member's time (the models step together)."""
+    return hnn.task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
+
+
+def _group_outcomes(unit: list[Job], outcomes: list[dict]):
+    """``(job, folder or exception)`` of each job of a group from ``hnn.grouped.run_group_task``'s outcomes."""
+    for job, outcome in zip(unit, outcomes):
+        yield job, Path(outcome["folder"]) if "folder" in outcome else RuntimeError(outcome["error"])
+
+
 def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
     """Each distinct dataset of ``jobs`` built once: ``({dataset key: data}, {dataset key: seconds},
     {task: the error of a task that cannot run here})``."""
@@ -111,11 +153,21 @@ def _failure(job: Job, err: BaseException, log_dir: Path, bar) -> RunFailed:
     return failed
 
 
-def _in_process(jobs: list[Job], data: dict, bar):
-    """Yield ``(job, folder or exception)`` for each run trained here, one after another, on the
-    datasets built; the bar moves with every step."""
-    for job in jobs:
-        done = [0]
+def _in_process(units: list[list[Job]], data: dict, bar):
+    """Yield ``(job, folder or exception)`` for each run trained here, one unit after another, on
+    the datasets built; the bar moves with every step of a lone run, after a group."""
+    for unit in units:
+        if len(unit) > 1:
+            try:
+                outcomes = hnn.grouped.train_group([job.config for job in unit],
+                                                   [data[job.config.dataset_key()] for job in unit])
+            except Exception as err:        # the whole group failed: each of its runs is reported
+                outcomes = [err] * len(unit)
+            for job, outcome in zip(unit, outcomes):
+                bar.update(job.steps)
+                yield job, outcome
+            continue
+        job, done = unit[0], [0]
 
         def advance(step: int, total: int, done=done) -> None:
             bar.update(step - done[0])
@@ -129,17 +181,35 @@ def _in_process(jobs: list[Job], data: dict, bar):
         yield job, outcome
 
 
-def _in_pool(jobs: list[Job], n_jobs: int, threads: int):
+def _submit(unit: list[Job]) -> tuple:
+    """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
+    if len(unit) == 1:
+        return hnn.tasks.run_task, unit[0].task, unit[0].fields()
+    return hnn.grouped.run_group_task, unit[0].task, [job.fields() for job in unit]
+
+
+def _unit_results(unit: list[Job], result):
+    """``(job, folder or exception)`` of each job of a finished unit (``result``: its worker's return)."""
+    if isinstance(result, BaseException):
+        for job in unit:
+            yield job, result
+    elif len(unit) == 1:
+        yield unit[0], Path(result)
+    else:
+        yield from _group_outcomes(unit, result)
+
+
+def _in_pool(units: list[list[Job]], n_jobs: int, threads: int):
     """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads finish them."""
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
     with concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context) as pool:
-        futures = {pool.submit(hnn.tasks.run_task, job.task, job.fields(), threads): job for job in jobs}
+        futures = {pool.submit(*_submit(unit), threads): unit for unit in units}
         for future in concurrent.futures.as_completed(futures):
             error = future.exception()
-            yield futures[future], error if error is not None else Path(future.result())
+            yield from _unit_results(futures[future], error if error is not None else future.result())
 
 
-def _on_ray(jobs: list[Job], threads: int, address: str | None):
+def _on_ray(units: list[list[Job]], threads: int, address: str | None):
     """Yield ``(job, folder or exception)`` as Ray tasks of ``threads`` CPUs each finish them; a run
     whose node dies is retried once elsewhere, then reported."""
     ray = _import_ray()
@@ -158,26 +228,30 @@ def _on_ray(jobs: list[Job], threads: int, address: str | None):
         root = str(Path(hnn.__file__).resolve().parent.parent)
         env = {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
                "HNN_REPO": str(hnn.tasks.repo_root()), "OMP_NUM_THREADS": str(threads)}
-        remote = ray.remote(hnn.tasks.run_task).options(num_cpus=threads, max_retries=1,
-                                                        runtime_env={"env_vars": env})
-        refs = {remote.remote(job.task, job.fields(), threads): job for job in jobs}
+        options = dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
+        remotes = {}
+        refs = {}
+        for unit in units:
+            function, *arguments = _submit(unit)
+            remote = remotes.setdefault(function, ray.remote(function).options(**options))
+            refs[remote.remote(*arguments, threads)] = unit
         while refs:
             [ref], _ = ray.wait(list(refs), num_returns=1)
-            job = refs.pop(ref)
+            unit = refs.pop(ref)
             try:
-                folder = Path(ray.get(ref))
+                result = ray.get(ref)
             except ray.exceptions.RayError as err:
                 # the run's own exception when it raised (its remote traceback as a note, for the
                 # log); Ray's when the worker or its node died
                 cause = getattr(err, "cause", None)
                 if isinstance(cause, Exception):
                     cause.add_note(str(err))
-                yield job, cause if isinstance(cause, Exception) else err
-                continue
-            if not (folder / hnn.runs.COMPLETE).is_file():
-                folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete here: "
-                                      "put --out on storage that every node sees at the same path")
-            yield job, folder
+                result = cause if isinstance(cause, Exception) else err
+            for job, folder in _unit_results(unit, result):
+                if isinstance(folder, Path) and not (folder / hnn.runs.COMPLETE).is_file():
+                    folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
+                                          "here: put --out on storage that every node sees at the same path")
+                yield job, folder
     finally:
         if started:
             ray.shutdown()
@@ -226,6 +300,12 @@ def add_backend_flags(parser) -> None:
                              "storage every node sees at the same path")
 
 
+    parser.add_argument("--group", choices=GROUP_MODES, default="auto",
+                        help="auto: train the runs that can share one program (one task, kind and width up to "
+                             f"{GROUP_MAX_WIDTH}, seeds and data fractions apart) as batched groups, each run "
+                             "still saved as its own folder; off: every run alone")
+
+
 def check_backend(parser, args) -> None:
     """Bad backend flags exit with one ``error:`` line (``parser.error``, code 2) naming the fix,
     among them ``--backend ray`` without Ray installed."""
@@ -241,7 +321,7 @@ def check_backend(parser, args) -> None:
 
 
 def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "local",
-               ray_address: str | None = None) -> tuple[dict, dict]:
+               ray_address: str | None = None, group: str = "off") -> tuple[dict, dict]:
     """Train ``jobs``; ``({key: run folder or exception}, seconds)``.
 
     ``backend="local"``: here (``n_jobs`` 1) or in ``n_jobs`` worker processes with ``cores //
@@ -250,6 +330,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     that fails maps to a ``RunFailed``, one whose task cannot run here to that task's error.
     ``seconds`` holds the wall time, the backend, jobs, threads per job and each run's data /
     train / wall seconds (a dataset's build here counts for the first run that uses it).
+    ``group``: ``"auto"`` trains the runs that can share one program as groups (``plan_units``).
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend {backend!r}: choose one of {', '.join(BACKENDS)}")
@@ -260,16 +341,18 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     in_process = backend == "local" and n_jobs == 1
     threads = torch.get_num_threads() if in_process else max(1, cores() // n_jobs)
     tic, runs, per_run = time.perf_counter(), {}, {}
-    jobs = sorted(jobs, key=lambda job: hnn.task_spec(job.task).cost * job.steps, reverse=True)
+    if group not in GROUP_MODES:
+        raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
     with tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr, disable=None,
               dynamic_ncols=True) as bar:
         data, data_seconds, skipped = _build_datasets(jobs, bar)
         runs.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
         todo = [job for job in jobs if job.task not in skipped]
+        units = sorted(plan_units(todo, group), key=_unit_cost, reverse=True)
         if not in_process:
             data.clear()        # the workers read the cached datasets themselves
-        results = (_in_process(todo, data, bar) if in_process else _in_pool(todo, n_jobs, threads)
-                   if backend == "local" else _on_ray(todo, threads, ray_address))
+        results = (_in_process(units, data, bar) if in_process else _in_pool(units, n_jobs, threads)
+                   if backend == "local" else _on_ray(units, threads, ray_address))
         for job, outcome in results:
             if isinstance(outcome, BaseException):
                 runs[job.key] = _failure(job, outcome, log_dir, bar)
@@ -283,7 +366,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
             if not in_process:
                 bar.update(job.steps)
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,
-               "threads_per_job": threads, "runs": per_run}
+               "threads_per_job": threads, "group": group, "runs": per_run}
     return runs, seconds
 
 

@@ -21,7 +21,7 @@ from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import TaskSpec, available_tasks, load_task, task_spec
 from .training import train
 from .gifs import write_gif
-from . import cli, nbody, objectives, paper, trajectory
+from . import cli, grouped, nbody, objectives, paper, trajectory
 from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
 
 __all__ = [
@@ -35,5 +35,6 @@ __all__ = [
     "TrajectoryObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
     "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind", "register_model_kind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "nbody", "objectives", "paper",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "grouped", "nbody", "objectives",
+    "paper",
 ]

@@ -298,3 +298,28 @@ def test_a_two_node_cluster_with_token_auth_loses_a_node_mid_sweep_and_a_rerun_c
                 proc.terminate()
                 proc.wait(timeout=60)
         shutil.rmtree(temp, ignore_errors=True)
+
+
+@pytest.mark.parametrize("backend, n_jobs", [("local", 1), ("local", 2), pytest.param("ray", 2, marks=needs_ray)])
+def test_grouped_sweeps_save_the_runs_of_lone_ones(backend, n_jobs, tmp_path):
+    """--group auto trains the narrow runs of one task and kind as one group (in this process or
+    as one worker's unit) and a wide one alone; every run's numbers are its lone run's to the
+    grouped training's tolerance (tests/test_grouped.py: measured 1e-6, 1e-4 allowed)."""
+    def jobs(folder):
+        cells = [(16, seed, fraction) for seed in (0, 1) for fraction in (0.5, 1.0)] + [(200, 0, 1.0)]
+        return [sweep.Job(f"spring/hnn/w{w}f{f}/seed{s}", "spring",
+                          hnn.tasks.task_config("spring", {"hidden_dim": w, "seed": s, "train_fraction": f,
+                                                           "total_steps": 50, "save_dir": str(folder)}))
+                for w, s, f in cells]
+    units = sweep.plan_units(jobs(tmp_path), "auto")
+    assert sorted(len(unit) for unit in units) == [1, 4]
+    assert [len(unit) for unit in sweep.plan_units(jobs(tmp_path), "off")] == [1] * 5
+    grouped, seconds = sweep.train_jobs(jobs(tmp_path / "grouped"), n_jobs, tmp_path / "logs", backend, group="auto")
+    alone, _ = sweep.train_jobs(jobs(tmp_path / "alone"), 1, tmp_path / "logs", group="off")
+    assert seconds["group"] == "auto" and set(grouped) == set(alone)
+    for key, folder in grouped.items():
+        assert isinstance(folder, Path) and folder.name == alone[key].name, key
+        mine, theirs = (json.loads((f / "metrics.json").read_text()) for f in (folder, alone[key]))
+        assert mine["history"].get("group_size", 1) == (1 if "w200" in key else 4)
+        for name in LOSSES:
+            assert mine[name] == pytest.approx(theirs[name], rel=1e-4), (key, name)

@@ -415,7 +415,7 @@ def main(argv=None) -> dict:
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick)
     runs, jobs = sweep.reuse(plan(rows, seeds, out / "runs", steps, args.models))
-    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()

@@ -117,7 +117,7 @@ def train(rows, seeds, out: Path, steps, args, models=None) -> tuple[dict, dict]
     jobs = [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models) if job.config.model in models]
     runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
-    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address)
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
     runs.update(trained)
     return runs, seconds
 

@@ -5,6 +5,7 @@
     python analysis/speed/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
     python analysis/speed/benchmark.py --jobs floor    # only the training steps against their floor
     python analysis/speed/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
+    python analysis/speed/benchmark.py --jobs group    # only grouped training against separate runs
 
 ``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
 HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
@@ -17,6 +18,9 @@ loss and its gradients against the original's formulation on one batch.
 
 ``rollout``: a learned field on a few states, a fixed-step step and dopri5 against their floors
 and against torchdiffeq and scipy, by ``analysis/speed/benchmark_rollouts.py`` (its docstring says how).
+
+``group``: G spring HNNs trained as one program (``hnn.grouped``) against G separate runs, per width
+and G, in model-steps per second, by ``analysis/speed/benchmark_group.py`` (its docstring says how).
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
 
@@ -67,7 +71,7 @@ from hnn.models import PixelHNN
 from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis.speed import benchmark_rollouts, floor  # noqa: E402
+from hnn_analysis.speed import benchmark_group, benchmark_rollouts, floor  # noqa: E402
 from hnn_analysis import readme  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
 
@@ -386,7 +390,7 @@ def _floor_table(result: dict) -> str:
 
 # --------------------------------------------------------------------------- main
 
-JOBS = ("floor", "data", "train", "eval", "rollout")
+JOBS = ("floor", "data", "train", "eval", "rollout", "group")
 LABELS = {"data": "data: spring dataset (50 trajectories)", "train": "train: spring HNN ({steps} Adam steps)",
           "eval": "eval: energy MSE, one HNN ({trials} trials)"}
 
@@ -487,6 +491,7 @@ def main(argv=None) -> int:
     if "rollout" in args.jobs:
         rollouts = benchmark_rollouts.job_rollout(model, rounds=max(20, args.floor_rounds // 2),
                                                   repeats=max(1, min(args.repeats, 3)))
+    group = benchmark_group.job_group(args.quick, repeats=max(1, min(args.repeats, 3))) if "group" in args.jobs else None
     env["load_average_after"] = os.getloadavg()[0]
 
     checked = {**({"floor": floors} if floors else {}), **results}
@@ -500,7 +505,8 @@ def main(argv=None) -> int:
                                      _ceiling(results, floors, steps)) if t)
     print()
     rollout_table = rollouts["table"] if rollouts else ""
-    print("\n\n".join(t for t in (floor_table, table, rollout_table) if t))
+    group_table = group["table"] if group else ""
+    print("\n\n".join(t for t in (floor_table, table, rollout_table, group_table) if t))
     for job, r in checked.items():
         for c in r["checks"]:
             extra = {k: v for k, v in c.items() if k not in ("name", "value", "tolerance", "passed")}
@@ -508,7 +514,8 @@ def main(argv=None) -> int:
                   f"{'pass' if c['passed'] else 'FAIL'} {extra}")
     write_json(args.out, {"environment": env, "repeats": args.repeats, "quick": args.quick,
                           "total_steps": steps, "jobs": results, "table": table, "floor": floors,
-                          "floor_table": floor_table, "rollouts": rollouts, "all_checks_passed": not failed})
+                          "floor_table": floor_table, "rollouts": rollouts, "group": group,
+                          "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
         command = " ".join(["python analysis/speed/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
@@ -518,7 +525,8 @@ def main(argv=None) -> int:
         head = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
                 f"{', ' + env['cpu'] if env['cpu'] else ''}, {env['torch_threads']} threads for the comparisons, "
                 f"{args.repeats} interleaved rounds.{shared}")
-        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table, rollout_table) if t))
+        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table, rollout_table, group_table)
+                                                          if t))
         print("updated docs/speed.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)

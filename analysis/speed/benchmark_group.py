@@ -1,0 +1,90 @@
+"""Grouped training against separate runs: the ``group`` job of ``analysis/speed/benchmark.py``.
+
+    python analysis/speed/benchmark.py --jobs group            # widths 16, 32, 64, 200; G = 1, 4, 16, 64
+    python analysis/speed/benchmark.py --jobs group --quick    # widths 16, 64, 200; G = 1, 4, 16
+
+For each hidden width and group size G: G spring HNNs (seeds 0..G-1 for the init and the
+minibatches, the seed-0 dataset, 750 x 2 full batch, as the scene study's grid) trained for the
+same steps by ``hnn.grouped.fit_group`` as one program, against the same G models trained one
+after another by ``hnn.train`` (the separate runs' time is that of ``min(G, 4)`` of them scaled
+to G: separate runs are independent, each costs the same). Both in this process, at the
+benchmark's thread count, alternated for ``repeats`` rounds; the table gives model-steps per
+second (G x steps / seconds) of each and their ratio, the speedup of grouping.
+"""
+from __future__ import annotations
+
+import copy
+import statistics
+import time
+
+import torch
+
+import hnn
+from hnn import grouped
+
+WIDTHS, SIZES = (16, 32, 64, 200), (1, 4, 16, 64)
+QUICK_WIDTHS, QUICK_SIZES = (16, 64, 200), (1, 4, 16)
+_SEPARATE_SAMPLE = 4      # separate runs timed per cell; the rest scaled from them
+
+
+def _models(width: int, size: int) -> list:
+    out = []
+    for seed in range(size):
+        torch.manual_seed(seed)
+        out.append(hnn.build_model(2, width))
+    return out
+
+
+def _grouped_seconds(models, data, steps: int) -> float:
+    models = copy.deepcopy(models)
+    pairs, tests = [(data["x"], data["dxdt"])] * len(models), [(data["test_x"], data["test_dxdt"])] * len(models)
+    tic = time.perf_counter()
+    grouped.fit_group(models, pairs, tests, seeds=list(range(len(models))), total_steps=steps)
+    return time.perf_counter() - tic
+
+
+def _separate_seconds(models, data, steps: int) -> float:
+    sample = copy.deepcopy(models[:_SEPARATE_SAMPLE])
+    tic = time.perf_counter()
+    for seed, model in enumerate(sample):
+        hnn.train(model, data["x"], data["dxdt"], data["test_x"], data["test_dxdt"], total_steps=steps, seed=seed,
+                  progress=False)
+    return (time.perf_counter() - tic) * len(models) / len(sample)
+
+
+def job_group(quick: bool, steps: int | None = None, repeats: int = 1) -> dict:
+    """``{"rows": [{width, models, steps, grouped_steps_per_s, separate_steps_per_s, speedup}], "table": str}``."""
+    widths, sizes = (QUICK_WIDTHS, QUICK_SIZES) if quick else (WIDTHS, SIZES)
+    steps = steps if steps is not None else (100 if quick else 300)
+    data = hnn.load_task("spring").get_dataset(seed=0)
+    warm = _models(widths[0], 2)           # first calls pay one-time setup: not part of either side
+    _grouped_seconds(warm, data, 5), _separate_seconds(warm, data, 5)
+    rows = []
+    for width in widths:
+        for size in sizes:
+            models = _models(width, size)
+            together, apart = [], []
+            for _ in range(repeats):
+                together.append(_grouped_seconds(models, data, steps))
+                apart.append(_separate_seconds(models, data, steps))
+            work = size * (steps + 1)
+            row = {"width": width, "models": size, "steps": steps + 1,
+                   "grouped_steps_per_s": work / statistics.median(together),
+                   "separate_steps_per_s": work / statistics.median(apart)}
+            row["speedup"] = row["grouped_steps_per_s"] / row["separate_steps_per_s"]
+            rows.append(row)
+            print(f"group: width {width:3d}, G {size:2d}: grouped {row['grouped_steps_per_s']:8.0f} model-steps/s, "
+                  f"separate {row['separate_steps_per_s']:8.0f}, {row['speedup']:.2f}x", flush=True)
+    return {"rows": rows, "table": markdown(rows), "threads": torch.get_num_threads()}
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = [f"Grouped training (`hnn.grouped.fit_group`) of G spring HNNs (750 x 2 full batch, "
+             f"{rows[0]['steps'] if rows else 0} steps, {torch.get_num_threads()} thread(s)) against G separate "
+             "`hnn.train` runs, in model-steps per second:", "",
+             "| width | G | grouped (model-steps/s) | separate (model-steps/s) | grouped / separate |",
+             "| ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        lines.append(f"| {r['width']} | {r['models']} | {r['grouped_steps_per_s']:.0f} | "
+                     f"{r['separate_steps_per_s']:.0f} | {r['speedup']:.2f}x |")
+    return "\n".join(lines)

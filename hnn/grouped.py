@@ -1,0 +1,379 @@
+"""Many small models of one kind trained as one program: their parameters stacked along a leading
+model axis, every product of a step one batched product over the models.
+
+    folders = hnn.grouped.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
+
+A width-16 HNN step is a few microseconds of arithmetic inside a millisecond of dispatch; G of
+them as one batched step share one dispatch (measured 2-3x the model-steps per second of separate
+runs at width 16: ``python analysis/speed/benchmark.py --jobs group``). Each model keeps what its lone run has: its
+init (built as ``hnn.run_experiment`` builds it, from its seed), its data subset
+(``train_fraction``), its minibatch stream (its own generator, drawing the lone run's indices),
+its own Adam state (Adam is elementwise, so one optimizer over the stacked tensors is G
+independent ones) and its own dataset (a group may mix seeds). The loss summed over the models
+has, for each model's parameters, that model's own gradient: the batched products keep the
+models apart. A run trained in a group gives its lone run's numbers up to float rounding
+(tests/test_grouped.py measures how close), and is saved as its own ordinary run folder.
+
+A model whose loss turns NaN or infinite is reported by name, its slice zeroed and left out of
+the remaining updates; the others go on unaffected.
+
+Groupable: the ``hnn``, ``baseline``, ``dissipative`` and ``separable`` kinds on the paper's tanh
+MLP, fitting dx/dt itself (``DerivativeObjective`` without ``use_rk4``); ``group_key`` says which
+configs train together. Widths group apart, not padded to the widest: a padded unit is not
+exactly inert under weight decay and Adam, and from width 64 on a step is near its arithmetic
+floor, so padding 16 to 64 would cost the wide step's products (benchmark ``group`` job).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from .models import HNN, MLP, _FIELD_ROWS
+from .objectives import DerivativeObjective
+from .runs import finish_run, run_dir, training_subset
+from .structured import SeparableHNN
+from .tanh_mlp import _tanh, _tanh_
+from .training import adam_optimizer, check_data, flushes_denormals
+
+GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
+# the fields that must agree for configs to train as one program (seed, train_fraction and with
+# them the dataset may differ)
+_SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
+                  "print_every", "field_type", "dtype", "device")
+
+
+class GroupedRunFailed(Exception):
+    """A model of a group that failed (its loss turned NaN or infinite): its run ``name`` and ``step``."""
+
+    def __init__(self, name: str, step: int, message: str):
+        self.name, self.step = name, step
+        super().__init__(f"{name}: {message} at step {step}; left out of its group, the others trained on")
+
+
+def group_key(config) -> tuple | None:
+    """Configs with equal keys can train as one group; None for a config that trains alone
+    (another kind, ``use_rk4``, another nonlinearity than tanh, or an objective of its own)."""
+    if (config.kind not in GROUPABLE_KINDS or config.use_rk4 or config.nonlinearity != "tanh"
+            or type(config.make_objective()) is not DerivativeObjective):
+        return None
+    return ((type(config).__module__, type(config).__qualname__, config.kind, getattr(config, "input_noise", 0.0))
+            + tuple(getattr(config, name) for name in _SHARED_FIELDS))
+
+
+def _nets(model) -> list[MLP]:
+    """The tanh MLPs of a model, in the order their slices stack: net j of model g at ``j * G + g``."""
+    nets = [model.kinetic_net, model.potential_net] if isinstance(model, SeparableHNN) else [model.differentiable_model]
+    for net in nets:
+        if not (isinstance(net, MLP) and net._closed_form_applies()):
+            raise ValueError("a group trains models on the paper's tanh MLP only; train this model alone")
+    return nets
+
+
+def _layers(net: MLP) -> tuple:
+    return net.linear1.weight, net.linear1.bias, net.linear2.weight, net.linear2.bias, net.linear3.weight
+
+
+def _stacked_weights(models: list) -> list[torch.Tensor]:
+    """``[W1, b1, W2, b2, W3]``, the models' nets stacked along a new leading axis (``_nets``), as leaves."""
+    nets = [list(column) for column in zip(*(_nets(model) for model in models))]
+    layers = [_layers(net) for column in nets for net in column]
+    return [torch.stack([ws[i].detach() for ws in layers]).clone().requires_grad_(True) for i in range(5)]
+
+
+class _GroupedInputGradient(torch.autograd.Function):
+    """dF/dx of every model of a group, F = w . tanh(W2 tanh(W1 x + b1) + b2), ``(G, batch, n)``:
+    ``hnn.tanh_mlp._TanhMLPInputGradient`` with a leading model axis (the same closed form and
+    hand-written backward, every product a batched one)."""
+
+    @staticmethod
+    def forward(ctx, x, W1, b1, W2, b2, w):
+        g_x, saved = _grouped_input_gradient(x, W1, b1, W2, b2, w)
+        ctx.save_for_backward(x, W1, W2, w, *saved)
+        return g_x
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, d_gx):
+        x, W1, W2, w, h1, h2, s1, s2, g_h1, g_a1, W2w = ctx.saved_tensors
+        d_ga1 = torch.bmm(d_gx, W1.transpose(1, 2))
+        d_gh1 = d_ga1 * s1
+        d_W2w = torch.bmm(s2.transpose(1, 2), d_gh1)
+        d_a2 = torch.bmm(d_gh1, (-2 * W2w).transpose(1, 2)).mul_(h2).mul_(s2)
+        d_W2 = torch.baddbmm(d_W2w * w.unsqueeze(2), d_a2.transpose(1, 2), h1)
+        d_w = (d_W2w * W2).sum(2)
+        d_h1 = torch.baddbmm(d_ga1.mul_(g_h1).mul_(h1), d_a2, W2, beta=-2)
+        d_a1 = d_h1.mul_(s1)
+        d_W1 = torch.baddbmm(torch.bmm(g_a1.transpose(1, 2), d_gx), d_a1.transpose(1, 2), x)
+        return None, d_W1, d_a1.sum(1), d_W2, d_a2.sum(1), d_w
+
+
+def _grouped_input_gradient(x, W1, b1, W2, b2, w):
+    """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.tanh_mlp``'s closed form, batched."""
+    h1 = _tanh_(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
+    h2 = _tanh_(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
+    one = h1.new_ones(())
+    s1, s2 = torch.addcmul(one, h1, h1, value=-1), torch.addcmul(one, h2, h2, value=-1)
+    W2w = w.unsqueeze(2) * W2
+    g_h1 = torch.bmm(s2, W2w)
+    g_a1 = g_h1 * s1
+    return torch.bmm(g_a1, W1), (h1, h2, s1, s2, g_h1, g_a1, W2w)
+
+
+def _input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
+    """dF/dx of every stacked net; a graph for the parameters' gradients only in grad mode."""
+    if torch.is_grad_enabled():
+        return _GroupedInputGradient.apply(x, W1, b1, W2, b2, w)
+    return _grouped_input_gradient(x, W1, b1, W2, b2, w)[0]
+
+
+def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | None) -> torch.Tensor:
+    """dx/dt of every model at its own states ``x`` ``(G, batch, n)``: ``(G, batch, n)``; ``rows``
+    None for separable models (kinetic nets, then potential nets: ``(dT/dp, -dV/dq)``)."""
+    W1, b1, W2, b2, W3 = weights
+    if rows is None:
+        half = x.shape[-1] // 2
+        q, p = x[..., :half], x[..., half:]
+        grad = _input_gradient(torch.cat([p, q]), W1, b1, W2, b2, W3[:, 0])
+        kinetic, potential = grad.split(len(x))
+        return torch.cat([kinetic, -potential], dim=-1)
+    if baseline:
+        h1 = _tanh(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
+        h2 = _tanh(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
+        return torch.bmm(h2, W3.transpose(1, 2))
+    n = x.shape[-1] // 2
+    out = None
+    for k in rows:                                   # 0: F1 (conservative), 1: F2 (Hamilton's equations)
+        grad = _input_gradient(x, W1, b1, W2, b2, W3[:, k])
+        part = grad if k == 0 else torch.cat([grad[..., n:], -grad[..., :n]], dim=-1)
+        out = part if out is None else out + part
+    return out
+
+
+class _Rows:
+    """The rows each model trains on, padded to one ``(G, rows, n)`` stack, and how it draws minibatches."""
+
+    def __init__(self, xs, ys, batch_size, seeds, seed_offset: int):
+        self.counts = [len(x) for x in xs]
+        most = max(self.counts)
+        self.x = torch.stack([torch.cat([x, x.new_zeros(most - len(x), x.shape[1])]) for x in xs])
+        self.y = torch.stack([torch.cat([y, y.new_zeros(most - len(y), y.shape[1])]) for y in ys])
+        self.batch_size = batch_size
+        self.gens = [torch.Generator().manual_seed(seed + seed_offset) for seed in seeds]
+        sizes = [c if batch_size is None or batch_size >= c else batch_size for c in self.counts]
+        self.size = max(sizes)
+        # weight of each row in its model's mean: 1/(rows * width) for a drawn row, 0 for padding
+        weight = torch.zeros(len(xs), self.size, dtype=self.x.dtype)
+        for g, m in enumerate(sizes):
+            weight[g, :m] = 1.0 / (m * self.x.shape[2])
+        self.weight = weight
+        self.full = all(m == c for m, c in zip(sizes, self.counts))
+        self._models = torch.arange(len(xs))[:, None]
+
+    def draw(self):
+        """``(x, y)`` of this step, ``(G, size, n)`` each: the lone run's ``hnn.training.minibatch``
+        of every model (its generator advances only when it draws)."""
+        if self.full:
+            return self.x[:, :self.size], self.y[:, :self.size], self.gens
+        index = torch.zeros(len(self.gens), self.size, dtype=torch.long)
+        for g, (gen, count) in enumerate(zip(self.gens, self.counts)):
+            if self.batch_size >= count:
+                index[g, :count] = torch.arange(count)
+            else:
+                index[g] = torch.randperm(count, generator=gen)[:self.batch_size]
+        return self.x[self._models, index], self.y[self._models, index], self.gens
+
+    def loss(self, prediction: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Each model's mean squared error over its own rows, ``(G,)``."""
+        return ((y - prediction).pow(2).sum(-1) * self.weight).sum(-1)
+
+
+def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = None, *, seeds: list[int],
+              total_steps: int = 2000, learn_rate: float = 1e-3, weight_decay: float = 1e-4,
+              batch_size: int | None = None, print_every: int = 200, test_every: int | None = None,
+              input_noise: float = 0.0, names: list[str] | None = None, after_step=None,
+              progress: bool = False) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
+    """Train ``models`` (of one kind and width on the tanh MLP: HNNs, baselines, dissipative or
+    separable HNNs) together, as ``hnn.train`` trains each alone; their weights are updated in place.
+
+    Args:
+        data: each model's ``(x, dxdt)``, ``(rows, n)`` arrays or tensors (rows may differ).
+        tests: each model's ``(test_x, test_dxdt)``, or None.
+        seeds: each model's ``hnn.train`` seed (its minibatches and input noise).
+        names: each model's name in a failure's report (default ``model <index>``).
+        after_step: ``after_step(step, weights)`` after each optimizer step, with the stacked
+            ``[W1, b1, W2, b2, W3]`` (a test poisons one model's slice with it).
+
+    Returns:
+        ``(stats, failures)``: per model ``hnn.train``'s stats (``train_loss``, ``test_loss``,
+        ``test_steps``, ``seconds``: the group's seconds over its size), None for a model that
+        failed; ``{index: GroupedRunFailed}``.
+    """
+    if not models:
+        raise ValueError("fit_group needs at least one model")
+    if len(data) != len(models) or len(seeds) != len(models) or (tests is not None and len(tests) != len(models)):
+        raise ValueError(f"{len(models)} models need as many data pairs, seeds and test pairs; got {len(data)}, "
+                         f"{len(seeds)} and {None if tests is None else len(tests)}")
+    if total_steps < 0 or int(total_steps) != total_steps:
+        raise ValueError(f"total_steps must be a non-negative integer, got {total_steps!r}")
+    first = models[0]
+    n = first.input_dim
+    if isinstance(first, SeparableHNN):
+        baseline, rows = False, None
+        same = all(type(m) is type(first) and m.input_dim == n for m in models)
+    else:
+        baseline, rows = first.baseline, _FIELD_ROWS[first.field_type]
+        same = all(isinstance(m, HNN) and m.baseline == baseline and m.input_dim == n
+                   and m.field_type == first.field_type and m.assume_canonical_coords for m in models)
+    if not same:
+        raise ValueError("a group's models must be of one kind, width and field type, in canonical coordinates")
+    weights = _stacked_weights(models)
+    kw = dict(width=n, dtype=weights[0].dtype, device=weights[0].device)
+    train_rows = _Rows([check_data("x", x, **kw) for x, _ in data], [check_data("dxdt", y, **kw) for _, y in data],
+                       batch_size, seeds, 0)
+    test_rows = None if tests is None else _Rows([check_data("test_x", x, **kw) for x, _ in tests],
+                                                  [check_data("test_dxdt", y, **kw) for _, y in tests],
+                                                  batch_size, seeds, 1)
+    test_every = print_every if test_every is None else test_every
+    names = names or [f"model {g}" for g in range(len(models))]
+    optim = adam_optimizer(_Params(weights), learn_rate, weight_decay)
+    alive = torch.ones(len(models), dtype=torch.bool)
+    failures: dict[int, GroupedRunFailed] = {}
+    train_loss, test_loss, test_steps = [], [], []
+    was_flushing = flushes_denormals()
+    torch.set_flush_denormal(True)     # as hnn.train: weight decay's denormals slow CPU arithmetic
+    try:
+        start = time.perf_counter()
+        for step in tqdm(range(total_steps + 1), disable=not progress, desc="group", leave=False):
+            xb, yb, gens = train_rows.draw()
+            if input_noise:
+                noise = torch.stack([torch.cat([torch.randn((c, n), generator=gen), torch.zeros(len(xb[g]) - c, n)])
+                                     for g, (gen, c) in enumerate(zip(gens, _drawn(train_rows)))])
+                xb = xb + input_noise * noise.to(xb)
+            losses = train_rows.loss(_field(weights, xb, baseline, rows), yb)
+            # a dropped model's loss is replaced, not multiplied by 0 (NaN * 0 is NaN)
+            torch.where(alive, losses, losses.new_zeros(())).sum().backward()
+            finite = torch.isfinite(losses)
+            if not bool(finite[alive].all()):
+                _drop(weights, optim, alive, finite, failures, names, step)
+            optim.step()
+            optim.zero_grad(set_to_none=True)
+            train_loss.append(losses.detach())
+            if after_step is not None:
+                after_step(step, weights)
+            if test_rows is not None and (step % test_every == 0 or step == total_steps):
+                tx, ty, _ = test_rows.draw()
+                with torch.no_grad():
+                    test_loss.append(test_rows.loss(_field(weights, tx, baseline, rows), ty))
+                test_steps.append(step)
+    finally:
+        torch.set_flush_denormal(was_flushing)
+    seconds = time.perf_counter() - start
+    train_loss = torch.stack(train_loss).T.tolist()
+    test_loss = torch.stack(test_loss).T.tolist() if test_loss else [[] for _ in models]
+    stats = []
+    for g, model in enumerate(models):
+        if g in failures:
+            stats.append(None)
+            continue
+        with torch.no_grad():
+            for j, net in enumerate(_nets(model)):
+                for param, stacked in zip(_layers(net), weights):
+                    param.copy_(stacked[j * len(models) + g])
+        model.eval()
+        stats.append({"train_loss": train_loss[g], "test_loss": test_loss[g], "test_steps": list(test_steps),
+                      "seconds": seconds / len(models), "group_seconds": seconds, "group_size": len(models)})
+    return stats, failures
+
+
+def _drawn(rows: _Rows) -> list[int]:
+    """How many real rows each model drew this step."""
+    return [c if rows.batch_size is None or rows.batch_size >= c else rows.batch_size for c in rows.counts]
+
+
+class _Params:
+    """The stacked weights as ``adam_optimizer`` asks for a model's: ``parameters()``."""
+
+    def __init__(self, weights):
+        self._weights = weights
+
+    def parameters(self):
+        return iter(self._weights)
+
+
+def _drop(weights, optim, alive, finite, failures, names, step) -> None:
+    """Report the newly failed models by name and zero their slices, after the backward of the step
+    that found them."""
+    for g in torch.nonzero(alive & ~finite).flatten().tolist():
+        alive[g] = False
+        failures[g] = GroupedRunFailed(names[g], step, "loss is not finite")
+        print(f"  {failures[g]}", flush=True)
+        with torch.no_grad():
+            for w in weights:       # weights, gradient and Adam state: its slices move no more
+                mine = slice(g, None, len(alive))          # net j of model g is slice j * G + g
+                w[mine] = 0
+                w.grad[mine] = 0
+                for value in optim.state.get(w, {}).values():
+                    if torch.is_tensor(value) and value.dim() > 0:
+                        value[mine] = 0
+
+
+def train_group(configs: list, datasets: list[dict] | None = None) -> list:
+    """Train ``configs`` (equal ``group_key``s) as one group and save each as its own run folder
+    (as ``hnn.run_experiment`` would); per config its folder, or the ``GroupedRunFailed`` of a
+    model that failed. ``datasets``: each config's dataset (default ``config.dataset()``)."""
+    keys = {group_key(config) for config in configs}
+    if None in keys or len(keys) != 1:
+        raise ValueError("train_group needs configs of one group (equal hnn.grouped.group_key, none None); "
+                         "train the others alone with hnn.run_experiment")
+    from . import cli
+    from .io import check_save_dir
+    for config in configs:
+        cli.check(config)
+        check_save_dir(config.save_dir)
+    datasets = datasets or [config.dataset() for config in configs]
+    objective = configs[0].objective()
+    models, data, tests, saved = [], [], [], []
+    for config, dataset in zip(configs, datasets):
+        args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
+        torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
+        np.random.seed(config.seed)
+        models.append(objective.build(args).to(config.device))
+        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+        data.append(training_subset(x, y, config.train_fraction, config.seed))
+        tests.append((test_x, test_y))
+        saved.append(args)
+    first = configs[0]
+    stats, failures = fit_group(models, data, tests, seeds=[c.seed for c in configs], total_steps=first.total_steps,
+                                learn_rate=first.learn_rate, weight_decay=first.weight_decay,
+                                batch_size=first.batch_size, print_every=first.print_every,
+                                input_noise=getattr(first, "input_noise", 0.0),
+                                names=[run_dir(c).name for c in configs])
+    out = []
+    for g, config in enumerate(configs):
+        if g in failures:
+            out.append(failures[g])
+            continue
+        (x, y), (test_x, test_y) = data[g], tests[g]
+        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y),
+                               objective.final_loss(models[g], test_x, test_y), None, saved[g])
+        config.finish(directory, datasets[g])
+        out.append(directory)
+    return out
+
+
+def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:
+    """A sweep's group in a worker process or a Ray task: the configs of ``task`` with ``values``
+    trained as one group (``threads`` sets torch's thread count first). Per config
+    ``{"folder": text}`` or ``{"error": message}`` (plain data: it crosses process boundaries)."""
+    from .tasks import task_config
+    if threads is not None:
+        torch.set_num_threads(threads)
+    outcomes = train_group([task_config(task, v) for v in values])
+    return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
+
+
+__all__ = ["GROUPABLE_KINDS", "GroupedRunFailed", "fit_group", "group_key", "run_group_task", "train_group"]
