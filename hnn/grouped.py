@@ -335,7 +335,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         cli.check(config)
         check_save_dir(config.save_dir)
     datasets = datasets or [config.dataset() for config in configs]
-    objective = configs[0].objective()
+    objective = configs[0].make_objective()
     models, data, tests, saved = [], [], [], []
     for config, dataset in zip(configs, datasets):
         args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
