@@ -32,11 +32,11 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .models import HNN, MLP, _FIELD_ROWS
+from .models import HNN, MLP, FIELD_ROWS
 from .objectives import DerivativeObjective
 from .runs import finish_run, run_dir, training_subset
 from .structured import SeparableHNN
-from .tanh_mlp import _tanh, _tanh_
+from .tanh_mlp import fast_tanh, fast_tanh_
 from .training import adam_optimizer, check_data, flushes_denormals
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
@@ -113,8 +113,8 @@ class _GroupedInputGradient(torch.autograd.Function):
 
 def _grouped_input_gradient(x, W1, b1, W2, b2, w):
     """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.tanh_mlp``'s closed form, batched."""
-    h1 = _tanh_(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
-    h2 = _tanh_(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
+    h1 = fast_tanh_(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
+    h2 = fast_tanh_(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
     one = h1.new_ones(())
     s1, s2 = torch.addcmul(one, h1, h1, value=-1), torch.addcmul(one, h2, h2, value=-1)
     W2w = w.unsqueeze(2) * W2
@@ -141,8 +141,8 @@ def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | Non
         kinetic, potential = grad.split(len(x))
         return torch.cat([kinetic, -potential], dim=-1)
     if baseline:
-        h1 = _tanh(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
-        h2 = _tanh(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
+        h1 = fast_tanh(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
+        h2 = fast_tanh(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
         return torch.bmm(h2, W3.transpose(1, 2))
     n = x.shape[-1] // 2
     out = None
@@ -225,7 +225,7 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
         baseline, rows = False, None
         same = all(type(m) is type(first) and m.input_dim == n for m in models)
     else:
-        baseline, rows = first.baseline, _FIELD_ROWS[first.field_type]
+        baseline, rows = first.baseline, FIELD_ROWS[first.field_type]
         same = all(isinstance(m, HNN) and m.baseline == baseline and m.input_dim == n
                    and m.field_type == first.field_type and m.assume_canonical_coords for m in models)
     if not same:

@@ -14,7 +14,7 @@ from . import tanh_mlp
 from .fixed_step import rk4_step
 
 _NONLINEARITIES = {
-    "tanh": tanh_mlp._tanh,
+    "tanh": tanh_mlp.fast_tanh,
     "relu": torch.relu,
     "sigmoid": torch.sigmoid,
     "softplus": nn.functional.softplus,
@@ -28,7 +28,7 @@ NONLINEARITIES = tuple(_NONLINEARITIES)   # the names get_nonlinearity knows, fo
 # signal through d(dH/dx)/dtheta is poor.
 _PIECEWISE_LINEAR = {"relu"}
 FIELD_TYPES = ("solenoidal", "conservative", "both")
-_FIELD_ROWS = {"solenoidal": (1,), "conservative": (0,), "both": (0, 1)}   # the outputs (F1, F2) each field reads
+FIELD_ROWS = {"solenoidal": (1,), "conservative": (0,), "both": (0, 1)}   # the outputs (F1, F2) each field reads
 
 
 def get_nonlinearity(name: str):
@@ -86,7 +86,7 @@ class MLP(nn.Module):
         # read from the module's dicts directly: an integrator asks at every field call
         own, layers = self.__dict__, self._modules
         return (type(self).forward is _CLOSED_FORM_FORWARD and "forward" not in own
-                and own["_act"] is tanh_mlp._tanh and not (own["_forward_hooks"] or own["_forward_pre_hooks"])
+                and own["_act"] is tanh_mlp.fast_tanh and not (own["_forward_hooks"] or own["_forward_pre_hooks"])
                 and type(layers["linear1"]) is nn.Linear and type(layers["linear2"]) is nn.Linear
                 and type(layers["linear3"]) is nn.Linear)
 
@@ -233,7 +233,7 @@ class HNN(nn.Module):
             return None
         if self.baseline:
             return tanh_mlp.cached_kernel(self, "field", net, None)
-        rows = _FIELD_ROWS[self.field_type]
+        rows = FIELD_ROWS[self.field_type]
         return tanh_mlp.cached_kernel(self, "field", net, rows, lambda: self._fold(rows))
 
     def _fold(self, rows: tuple[int, ...]) -> torch.Tensor:

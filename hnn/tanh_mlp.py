@@ -20,7 +20,7 @@ from torch import nn
 _FAST_TANH_MIN_ELEMENTS = 4096
 
 
-def _tanh_(a: torch.Tensor) -> torch.Tensor:
+def fast_tanh_(a: torch.Tensor) -> torch.Tensor:
     """tanh of ``a``, in place (no autograd)."""
     if a.numel() < _FAST_TANH_MIN_ELEMENTS:
         return a.tanh_()
@@ -28,11 +28,11 @@ def _tanh_(a: torch.Tensor) -> torch.Tensor:
 
 
 class _Tanh(torch.autograd.Function):
-    """tanh by ``_tanh_``, with torch's own tanh backward (differentiable again, for double backprop)."""
+    """tanh by ``fast_tanh_``, with torch's own tanh backward (differentiable again, for double backprop)."""
 
     @staticmethod
     def forward(ctx, a):
-        h = _tanh_(a.clone())
+        h = fast_tanh_(a.clone())
         ctx.save_for_backward(h)
         return h
 
@@ -42,20 +42,20 @@ class _Tanh(torch.autograd.Function):
         return torch.ops.aten.tanh_backward(grad, h)
 
 
-def _tanh(a: torch.Tensor) -> torch.Tensor:
+def fast_tanh(a: torch.Tensor) -> torch.Tensor:
     """The MLPs' ``'tanh'``: ``torch.tanh`` for small inputs, ``2 sigmoid(2a) - 1`` for large ones."""
     if a.numel() < _FAST_TANH_MIN_ELEMENTS:
         return torch.tanh(a)
     if torch.is_grad_enabled() and a.requires_grad:
         return _Tanh.apply(a)
-    return _tanh_(a.clone())
+    return fast_tanh_(a.clone())
 
 
 
 def _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved: bool = True):
     """dF/dx for F = w . tanh(W2 tanh(W1 x + b1) + b2), and (if ``saved``) what its backward needs."""
-    h1 = _tanh_(nn.functional.linear(x, W1, b1))
-    h2 = _tanh_(nn.functional.linear(h1, W2, b2))
+    h1 = fast_tanh_(nn.functional.linear(x, W1, b1))
+    h2 = fast_tanh_(nn.functional.linear(h1, W2, b2))
     one = h1.new_ones(())
     s1 = torch.addcmul(one, h1, h1, value=-1)    # tanh' = 1 - tanh^2, in one pass
     s2 = torch.addcmul(one, h2, h2, value=-1)
