@@ -8,10 +8,16 @@ Every generated section is written only this way, never by hand, by the command 
     python analysis/speed/speed_accuracy.py --update-docs   # docs/integrators.md
     python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
+    python analysis/readme.py check                          # which pages are older than the code
+
+A page's stamp names the commit that made it; ``check`` (and ``reproduce.py`` before it writes)
+warns about every section stamped before the last change to ``hnn/`` or ``experiment-*/``.
 """
 import argparse
 import json
+import re
 import shutil
+import subprocess
 from pathlib import Path
 
 import hnn
@@ -22,6 +28,18 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
          "speed-accuracy": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "peers": "docs/peers.md"}
+# section name -> the command that regenerates it (the staleness check's fix)
+REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
+           "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
+           "full-run": "python analysis/readme.py timing results/results.json (after a full reproduce.py)",
+           "benchmark": "python analysis/speed/benchmark.py --update-docs --repeats 3",
+           "benchmark-pixels": "python analysis/speed/benchmark_pixels.py --update-docs",
+           "speed-accuracy": "python analysis/speed/speed_accuracy.py --update-docs",
+           "scenes": "python analysis/scene_study.py --jobs 2 --update-docs",
+           "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
+           "peers": "python analysis/peers.py --jobs 2 --update-docs"}
+# the code whose changes can move a generated number (git pathspecs)
+CODE = ("hnn", "experiment-*")
 # the few figures the README shows (about 1.2 MB in all), copied from a full run's figures/
 CURATED = ("spring-fields.png", "real-fields.png", "2body-orbits.png", "3body-orbits.png",
            "pixels-compare-static.png")
@@ -38,6 +56,51 @@ def update_section(name: str, text: str) -> Path:
     tail = rest.split(end, 1)[1]
     atomic_write(page, lambda tmp: Path(tmp).write_text(f"{head}{begin}\n{text.rstrip()}\n{end}{tail}"))
     return page
+
+
+def section_text(name: str, root: Path | None = None) -> str | None:
+    """The text of section ``name`` on its page, or None when the page or its markers are missing."""
+    page = (root or hnn.tasks.repo_root()) / PAGES.get(name, "README.md")
+    content = page.read_text() if page.exists() else ""
+    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
+    if begin not in content or end not in content:
+        return None
+    return content.split(begin, 1)[1].split(end, 1)[0]
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+
+
+def stale(names=None, root: Path | None = None) -> list[str]:
+    """One line per generated section whose numbers may be older than the code: its stamp (the first
+    ``commit <hash>`` in it) names a commit that lacks the last change to ``hnn/`` or ``experiment-*/``,
+    or it has no stamp at all; each line says how to refresh it. Empty outside a git checkout."""
+    root = root or hnn.tasks.repo_root()
+    last = _git(root, "log", "-1", "--format=%h %cs", "--", *CODE)
+    if last.returncode != 0 or not last.stdout.strip():
+        return []
+    change, day = last.stdout.split()
+    lines = []
+    for name in names or PAGES:
+        text = section_text(name, root)
+        if text is None or "Not measured yet" in text:
+            continue
+        found = re.search(r"commit[: ]+`?([0-9a-f]{7,40})\b", text)
+        where = f"{PAGES[name]} ({name})"
+        if found is None:
+            lines.append(f"{where} names no commit; refresh it: {REFRESH[name]}")
+        elif _git(root, "merge-base", "--is-ancestor", change, found.group(1)).returncode != 0:
+            lines.append(f"{where} is stamped {found.group(1)}, older than the last change to hnn/ or "
+                         f"experiment-*/ ({change}, {day}): its numbers may not be what the code makes today; "
+                         f"refresh it: {REFRESH[name]}")
+    return lines
+
+
+def warn_stale(names=None) -> None:
+    """Print ``stale(names)``'s lines as warnings (a command calls it before it writes those pages)."""
+    for line in stale(names):
+        print(f"warning: {line}", flush=True)
 
 
 def update_results(tables: str, headline: str, fig_dir: Path | None) -> list[Path]:
@@ -96,9 +159,17 @@ def timing_text(results: dict) -> str:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("what", choices=["timing"], help="timing: the full-run section from a results.json")
-    p.add_argument("results", type=Path, help="a results.json written by analysis/reproduce.py")
+    p.add_argument("what", choices=["timing", "check"],
+                   help="timing: the full-run section from a results.json; check: list the stale pages "
+                        "(exit code 1 if any)")
+    p.add_argument("results", type=Path, nargs="?", help="a results.json written by analysis/reproduce.py")
     args = p.parse_args(argv)
+    if args.what == "check":
+        lines = stale()
+        print("\n".join(lines) if lines else "every generated page is stamped at or after the last code change")
+        raise SystemExit(1 if lines else 0)
+    if args.results is None:
+        p.error("timing needs the results.json of a full reproduce.py run, e.g. results/results.json")
     page = update_section("full-run", timing_text(json.loads(args.results.read_text())))
     print(f"updated the full-run section of {page} from {args.results}")
 

@@ -27,4 +27,7 @@ TASK = hnn.TaskSpec(
     # train.py's own evaluation is skipped: reproduce evaluates both models together
     settings={"no_eval": True},
     evaluate=metric.evaluate,
+    # one run in ten lands on a small latent scale that the paper protocol's Adam map cannot fit
+    # (docs/original.md, "The pixel gap"): its spread needs more seeds than the other tasks'
+    min_seeds=5,
 )

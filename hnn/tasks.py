@@ -59,6 +59,8 @@ class TaskSpec:
         load: ``load(directory) -> (model, args, metrics)`` replacing ``hnn.load_run``.
         in_paper: one of the paper's tasks (``paper_tasks``); False keeps a task out of
             ``analysis/reproduce.py``'s default tasks and tables (it still trains and loads).
+        min_seeds: a reproduction across seeds (``--seeds`` of 2 or more) trains at least this many
+            seeds of the task, for a task whose numbers vary widely from seed to seed.
     """
     order: float = math.inf
     protocols: Mapping = field(default_factory=dict)
@@ -72,6 +74,7 @@ class TaskSpec:
     evaluate: Callable | None = None
     load: Callable | None = None
     in_paper: bool = True
+    min_seeds: int = 1
 
 
 def repo_root() -> Path:

@@ -1,6 +1,7 @@
 """analysis/reproduce.py: the table writer, the reuse rule, one task end to end, and --jobs."""
 import dataclasses
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -219,3 +220,76 @@ def test_bad_values_exit_with_one_error_line(argv, match, capsys):
     assert info.value.code == 2 and match in err
     assert [line for line in err.splitlines() if line.startswith("error:")] == [err.splitlines()[-1]]
     assert "Traceback" not in err
+
+
+def _git(root, *args):
+    import subprocess
+    subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=root, check=True,
+                   capture_output=True)
+
+
+def _head(root) -> str:
+    import subprocess
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                          check=True).stdout.strip()
+
+
+def test_staleness_check_flags_a_page_stamped_before_a_code_change(tmp_path, monkeypatch, capsys):
+    for code in ("hnn/x.py", "experiment-x/data.py"):
+        (tmp_path / code).parent.mkdir()
+        (tmp_path / code).write_text("a = 1\n")
+    (tmp_path / "README.md").write_text("<!-- headline:begin -->\nnot stamped yet\n<!-- headline:end -->\n")
+    _git(tmp_path, "init", "-q")
+    _git(tmp_path, "add", ".")
+    _git(tmp_path, "commit", "-qm", "code")
+    made = _head(tmp_path)
+    readme_text = f"<!-- headline:begin -->\nfrom `cmd` (commit {made}, today)\n<!-- headline:end -->\n"
+    (tmp_path / "README.md").write_text(readme_text)
+    _git(tmp_path, "commit", "-qam", "the page, stamped with the code that made it")
+    monkeypatch.setenv("HNN_REPO", str(tmp_path))
+    assert readme.stale(["headline"]) == []                      # a docs-only commit after the stamp is fine
+    (tmp_path / "hnn" / "x.py").write_text("a = 2\n")
+    _git(tmp_path, "commit", "-qam", "a code change")
+    [line] = readme.stale(["headline"])
+    assert f"stamped {made}, older than the last change" in line and readme.REFRESH["headline"] in line
+    with pytest.raises(SystemExit) as exit_code:
+        readme.main(["check"])
+    assert exit_code.value.code == 1 and made in capsys.readouterr().out
+    (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
+    assert readme.stale(["headline"]) == []
+    (tmp_path / "experiment-x" / "data.py").write_text("a = 2\n")     # a task's code counts too
+    _git(tmp_path, "commit", "-qam", "a task change")
+    assert len(readme.stale(["headline"])) == 1
+
+
+def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results):
+    results["meta"].update(seeds=[0, 1, 2], quick=False)
+    row = results["tasks"]["spring"]
+    per_seed = {seed: {label: dict(row[label]) for label in ("baseline", "hnn")} for seed in "012"}
+    row["per_seed"] = per_seed
+
+    def hnn_energy_cell(values):
+        for seed, value in zip("012", values):
+            per_seed[seed]["hnn"]["energy_mse_paper"] = [value, 1e-5]
+        text = reproduce.headline_markdown(results)
+        return text, next(line for line in text.splitlines() if line.startswith("| spring | hnn |")).split("|")
+
+    # paper 3.8416e-04 ± 6.53e-05; ours mean 5e-4, std 1e-4, standard error 5.8e-5: the gap 1.16e-4 is
+    # wider than either band, so worse; the spread (std) is 1.5x the paper's ±, so it is named under the table
+    text, cells = hnn_energy_cell((4e-4, 5e-4, 6e-4))
+    assert cells[3].strip() == "3"
+    assert cells[7].strip() == f"0.0005 ± 5.8e-05 {reproduce.MARKS['worse']}"
+    assert "spring hnn energy MSE (0.0004 to 0.0006) 1.5x" in text
+    # the same mean, std 3e-4: the standard error 1.7e-4 is now the band and covers the gap
+    text, cells = hnn_energy_cell((2e-4, 5e-4, 8e-4))
+    assert cells[7].strip() == f"0.0005 ± 0.00017 {reproduce.MARKS['within']}"
+
+
+def test_a_task_with_min_seeds_trains_more_seeds_only_across_seeds():
+    rows = {r["row"]: r for r in reproduce.table_rows(["spring", "pixels"], quick=True, seeds=[0, 1, 2])}
+    assert rows["spring"]["seeds"] == [0, 1, 2]
+    assert rows["pixels"]["seeds"] == list(range(hnn.task_spec("pixels").min_seeds)) == [0, 1, 2, 3, 4]
+    one = {r["row"]: r for r in reproduce.table_rows(["pixels"], quick=True, seeds=[7])}
+    assert one["pixels"]["seeds"] == [7]                         # one seed stays one seed
+    jobs = reproduce.plan(list(rows.values()), [0, 1, 2], Path("runs"), 3)
+    assert sorted({j.config.seed for j in jobs if j.task == "pixels"}) == [0, 1, 2, 3, 4]
