@@ -40,3 +40,8 @@ def provenance() -> dict:
             "numpy": np.__version__, "scipy": scipy.__version__, "python": platform.python_version(),
             "platform": platform.platform(), "machine": platform.machine(),
             "cpu": torch.backends.cpu.get_cpu_capability(), "cores": cores(), "threads": torch.get_num_threads()}
+
+
+def machine(meta: dict) -> str:
+    """The box a timing was taken on, as a stamp names it: ``'2 cores, AVX512'``."""
+    return f"{meta.get('cores', '?')} cores, {meta.get('cpu', 'unknown CPU')}"

@@ -31,7 +31,7 @@ from hnn.io import write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import provenance  # noqa: E402
+from hnn_analysis.provenance import machine, provenance  # noqa: E402
 
 FULL_STEPS = 10001
 
@@ -94,7 +94,8 @@ def main(argv=None) -> dict:
             f"| dataset in memory | {arrays_mib:.0f} MiB | cache file {cache_mib:.1f} MiB |",
             f"| peak resident memory | {result['peak_rss_mib']:.0f} MiB | after the data: {peak_after_data:.0f} MiB |"]
     command = " ".join(["python analysis/speed/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
-    text = (f"`{command}` on {result['date']}, {result['threads']} torch threads, torch {torch.__version__}, "
+    text = (f"`{command}` on {result['date']} (commit {result['commit']}, {machine(result)}), {result['threads']} "
+            f"torch threads, torch {torch.__version__}, "
             f"rendering in {data_workers} processes:\n\n| stage | time / size | note |\n| --- | --- | --- |\n"
             + "\n".join(rows))
     print(text)
