@@ -39,9 +39,11 @@ BOBS = (1, 2, 3, 5)
 QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 64, "total_steps": 100},
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
                                                            "total_steps": 100}}
-# 2500 steps of batch 200 (625 of CHNN's 4-batch epochs, against their 2000): about 5 minutes of
-# one core for a 256-unit rung through 4-step RK4 snippets (0.12 s a step measured on a shared machine)
-FULL = {"bobs": BOBS, "fields": {"total_steps": 2500}, "test_starts": 100, "lnn_starts": 40,
+# 4000 steps of batch 200 (1000 of CHNN's 4-batch epochs, against their 2000): under 5 minutes of one
+# core for the costliest rung (the mechanical HNN through 4-step RK4 snippets: 70 ms a step, measured on
+# a shared 2-core machine; the others 20-37 ms). At N = 2 the mechanical rung's mean error went from
+# 2.8e-2 at 1500 steps to 7.2e-3 at 4000 (docs/peers.md, "What we tried")
+FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_starts": 40,
         "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
 
 
