@@ -42,6 +42,12 @@ class RunConfig:
     learn_rate: float = setting(1e-3, "Adam learning rate", parse=cli.positive_float)
     weight_decay: float = setting(1e-4, "Adam weight decay (hard-coded per task in the original)",
                                   parse=cli.nonnegative_float)
+    optimizer: str = setting("adam", "adam (weight decay added to the gradient, the paper's) or adamw (decoupled "
+                                     "weight decay, CHNN's)", choices=("adam", "adamw"))
+    schedule: str = setting("constant", "learning rate over the run: constant (the paper's) or cosine (annealed "
+                                        "to 0 at the last step, CHNN's)", choices=("constant", "cosine"))
+    clip_grad: float = setting(0.0, "clip each step's gradient to this global norm (0: never); for runs whose "
+                                    "loss spikes, such as rollouts through long snippets", parse=cli.nonnegative_float)
     batch_size: int | None = setting(None, "minibatch size; none/0/full = full batch", parse=cli.optional_int)
     train_fraction: float = setting(1.0, "train on this fraction of the training rows, drawn once from the seed "
                                          "(the test set stays whole); for studies of how much data a model needs",

@@ -90,8 +90,8 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     x, y = training_subset(x, y, config.train_fraction, config.seed)
     stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
                   weight_decay=config.weight_decay, batch_size=config.batch_size, seed=config.seed,
-                  print_every=config.print_every, verbose=config.verbose,
-                  **objective.train_options(model, saved, dataset))
+                  print_every=config.print_every, verbose=config.verbose, optimizer=config.optimizer,
+                  schedule=config.schedule, clip_grad=config.clip_grad, **objective.train_options(model, saved, dataset))
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
     config.finish(directory, dataset)

@@ -46,8 +46,10 @@ def fast_tanh(a: torch.Tensor) -> torch.Tensor:
     """The MLPs' ``'tanh'``: ``torch.tanh`` for small inputs, ``2 sigmoid(2a) - 1`` for large ones."""
     if a.numel() < _FAST_TANH_MIN_ELEMENTS:
         return torch.tanh(a)
-    if torch.is_grad_enabled() and a.requires_grad:
-        return _Tanh.apply(a)
+    if torch.is_grad_enabled():
+        # inside torch.func transforms (jvp, vmap) ``a`` can report requires_grad=False while an outer
+        # graph records it: there the in-place formula would clobber a value sigmoid's backward keeps
+        return _Tanh.apply(a) if a.requires_grad else torch.tanh(a)
     return fast_tanh_(a.clone())
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 import time
 from typing import Callable, Iterator
@@ -51,12 +52,30 @@ def flushes_denormals() -> bool:
     return bool((tiny / 2 == 0).item())                          # half of it is denormal, or 0 when flushed
 
 
-def adam_optimizer(model, learn_rate: float, weight_decay: float) -> torch.optim.Adam:
-    """The optimizer ``train`` uses (analysis/speed/benchmark.py times steps with it too)."""
+OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
+SCHEDULES = ("constant", "cosine")
+
+
+def adam_optimizer(model, learn_rate: float, weight_decay: float, kind: str = "adam") -> torch.optim.Optimizer:
+    """The optimizer ``train`` uses (analysis/speed/benchmark.py times steps with it too): ``kind``
+    ``'adam'`` adds ``weight_decay * w`` to the gradient (the paper's), ``'adamw'`` decays the
+    weights apart from the gradient's moments (decoupled, Loshchilov & Hutter; CHNN's)."""
+    if kind not in OPTIMIZERS:
+        raise ValueError(f"optimizer={kind!r}: choose one of {', '.join(OPTIMIZERS)}")
     device = next(model.parameters()).device
     # the fused kernel updates all parameters in one pass: the foreach one cost ~1 ms a step here
-    return torch.optim.Adam(model.parameters(), lr=learn_rate, weight_decay=weight_decay,
+    return OPTIMIZERS[kind](model.parameters(), lr=learn_rate, weight_decay=weight_decay,
                             fused=device.type in ("cpu", "cuda"))
+
+
+def learning_rate(learn_rate: float, step: int, total_steps: int, schedule: str = "constant") -> float:
+    """The rate of optimizer step ``step`` (0 .. total_steps): ``'constant'``, or ``'cosine'``
+    annealing from ``learn_rate`` at step 0 to 0 at step ``total_steps``."""
+    if schedule == "constant":
+        return learn_rate
+    if schedule == "cosine":
+        return 0.5 * learn_rate * (1.0 + math.cos(math.pi * step / max(total_steps, 1)))
+    raise ValueError(f"schedule={schedule!r}: choose one of {', '.join(SCHEDULES)}")
 
 
 def l2_loss(predict: Callable) -> Callable:
@@ -73,11 +92,15 @@ def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: tor
     return x.index_select(0, ix), y.index_select(0, ix)
 
 
-def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: torch.optim.Optimizer) -> float:
+def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: torch.optim.Optimizer,
+                   clip_grad: float = 0.0) -> float:
     """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/speed/benchmark.py
-    times this very function against the step's matrix-product floor."""
+    times this very function against the step's matrix-product floor. ``clip_grad`` > 0 scales the
+    gradient down to that global norm first."""
     batch_loss = loss(xb, yb).mean()
     batch_loss.backward()
+    if clip_grad > 0:
+        torch.nn.utils.clip_grad_norm_([p for group in optim.param_groups for p in group["params"]], clip_grad)
     optim.step()
     optim.zero_grad(set_to_none=True)
     return batch_loss.item()
@@ -86,7 +109,8 @@ def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: to
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
-          predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None) -> dict:
+          predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
+          optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` with Adam; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -109,6 +133,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             against the model's ``input_dim``: the loss reads them.
         progress: show a progress bar; default when stderr is a terminal, not ``verbose``, and no
             ``report_progress`` callback is active (its caller shows progress its own way).
+        optimizer, schedule: ``adam_optimizer``'s kind and ``learning_rate``'s schedule.
+        clip_grad: clip each step's gradient to this global norm (0: never).
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -138,7 +164,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         test_every = print_every
     if test_every < 1 or print_every < 1:
         raise ValueError(f"print_every and test_every must be positive, got {print_every}, {test_every}")
-    optim = adam_optimizer(model, learn_rate, weight_decay)
+    if not clip_grad >= 0:
+        raise ValueError(f"clip_grad must be a non-negative norm (0: no clipping), got {clip_grad!r}")
+    learning_rate(learn_rate, 0, total_steps, schedule)         # an unknown schedule fails before training
+    optim = adam_optimizer(model, learn_rate, weight_decay, optimizer)
     gen = torch.Generator().manual_seed(seed)
     test_gen = torch.Generator().manual_seed(seed + 1)
     stats = {"train_loss": [], "test_loss": [], "test_steps": []}
@@ -157,7 +186,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             xb, yb = minibatch(x, dxdt, batch_size, gen)
             if input_noise:
                 xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
-            stats["train_loss"].append(optimizer_step(loss, xb, yb, optim))
+            if schedule != "constant":
+                for group in optim.param_groups:
+                    group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)
+            stats["train_loss"].append(optimizer_step(loss, xb, yb, optim, clip_grad))
             for callback in callbacks:
                 callback(step + 1, total_steps + 1)
             if has_test and (step % test_every == 0 or step == total_steps):

@@ -304,3 +304,22 @@ def test_autograd_path_for_other_nonlinearities_agrees_with_finite_differences()
         e[j] = eps
         fd = (net(x + e)[:, 1] - net(x - e)[:, 1]) / (2 * eps)
         torch.testing.assert_close(g[:, j], fd, rtol=1e-6, atol=1e-8)
+
+
+def test_large_tanh_layers_differentiate_through_forward_mode_inside_a_recorded_graph(monkeypatch):
+    """MechanicalHNN.observed_time_derivative takes a jvp of M^-1(q) while training records the graph:
+    there tanh's input reports requires_grad=False, and the in-place fast tanh once clobbered a value
+    the backward needed. Gradients must equal those of torch's own tanh (big batch: the fast path)."""
+    import hnn.tanh_mlp as tanh_mlp
+
+    def grads():
+        torch.manual_seed(0)
+        model = hnn.MechanicalHNN(4, hidden_dim=64, periodic=True)
+        z = torch.randn(100, 4)                         # 100 x 64 = 6400 elements: past the fast tanh's threshold
+        model.observed_time_derivative(z).pow(2).mean().backward()
+        return [p.grad.clone() for p in model.parameters()]
+
+    fast = grads()
+    monkeypatch.setattr(tanh_mlp, "_FAST_TANH_MIN_ELEMENTS", 10 ** 9)   # torch.tanh everywhere
+    for a, b in zip(fast, grads()):
+        assert torch.allclose(a, b, rtol=1e-4, atol=1e-6)  # the two tanh formulas differ in the last bits

@@ -97,3 +97,51 @@ def test_unreadable_checkpoint_says_what_to_do(tmp_path):
     assert "weights_only" not in str(info.value)
     with pytest.raises(FileNotFoundError, match="train it first"):
         hnn.load_run(tmp_path / "missing")
+
+
+def test_cosine_schedule_anneals_from_the_rate_to_zero():
+    from hnn.training import learning_rate
+    assert learning_rate(3e-3, 0, 100, "cosine") == 3e-3
+    assert learning_rate(3e-3, 50, 100, "cosine") == pytest.approx(1.5e-3, rel=1e-12)
+    assert learning_rate(3e-3, 100, 100, "cosine") == pytest.approx(0.0, abs=1e-18)
+    assert learning_rate(3e-3, 70, 100, "constant") == 3e-3
+    with pytest.raises(ValueError, match="schedule='linear'"):
+        learning_rate(1e-3, 0, 10, "linear")
+
+
+@pytest.mark.parametrize("kind", ["adam", "adamw"])
+def test_adam_and_adamw_decay_weights_as_their_definitions_say(kind):
+    """A weight whose loss has no gradient, one step: Adam's decay enters the gradient, so the step is
+    lr * g / |g| = lr; AdamW's is decoupled, w <- w (1 - lr wd), and the zero gradient moves nothing."""
+    from hnn.training import adam_optimizer
+    w = torch.nn.Parameter(torch.tensor([2.0], dtype=torch.float64))
+    optim = adam_optimizer(torch.nn.ParameterList([w]), learn_rate=0.1, weight_decay=0.5, kind=kind)
+    (0.0 * w).sum().backward()
+    optim.step()
+    expected = 2.0 - 0.1 if kind == "adam" else 2.0 * (1 - 0.1 * 0.5)
+    assert w.item() == pytest.approx(expected, rel=1e-6)       # rel: Adam's eps 1e-8 against |g| = 1
+
+
+def test_schedule_and_clipping_change_training_and_bad_values_are_named(spring):
+    d = spring.get_dataset(seed=0, noise_std=0.0)
+
+    def fit(**options):
+        torch.manual_seed(0)
+        model = hnn.build_model(2, 16)
+        return hnn.train(model, d["x"], d["dxdt"], total_steps=40, learn_rate=1e-2, **options)["train_loss"]
+
+    plain = fit()
+    assert fit(optimizer="adam", schedule="constant", clip_grad=0.0) == plain     # the defaults are the paper's
+    assert fit(schedule="cosine")[1:] != plain[1:] and fit(schedule="cosine")[0] == plain[0]
+    assert fit(clip_grad=1e-3)[1:] != plain[1:]
+    with pytest.raises(ValueError, match="clip_grad"):
+        fit(clip_grad=-1.0)
+    with pytest.raises(ValueError, match="optimizer='sgd'"):
+        fit(optimizer="sgd")
+
+
+def test_configs_off_the_papers_optimizer_train_alone_not_in_a_group():
+    config = hnn.tasks.task_config("spring", {"hidden_dim": 16})
+    assert hnn.grouped.group_key(config) is not None
+    for change in ({"optimizer": "adamw"}, {"schedule": "cosine"}, {"clip_grad": 1.0}):
+        assert hnn.grouped.group_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None

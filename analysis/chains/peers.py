@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -38,9 +39,11 @@ BOBS = (1, 2, 3, 5)
 QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 64, "total_steps": 100},
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
                                                            "total_steps": 100}}
-# 2500 steps of batch 200 (625 of CHNN's 4-batch epochs, against their 2000): about 5 minutes of
-# one core for a 256-unit rung through 4-step RK4 snippets (0.12 s a step measured on a shared machine)
-FULL = {"bobs": BOBS, "fields": {"total_steps": 2500}, "test_starts": 100, "lnn_starts": 40,
+# 4000 steps of batch 200 (1000 of CHNN's 4-batch epochs, against their 2000): under 5 minutes of one
+# core for the costliest rung (the mechanical HNN through 4-step RK4 snippets: 70 ms a step, measured on
+# a shared 2-core machine; the others 20-37 ms). At N = 2 the mechanical rung's mean error went from
+# 2.8e-2 at 1500 steps to 7.2e-3 at 4000 (docs/peers.md, "What we tried")
+FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_starts": 40,
         "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
 
 
@@ -122,6 +125,42 @@ def _seconds(runs: dict, row: str, rungs, seed: int) -> dict:
             for rung, folder in found.items() if isinstance(folder, Path)}
 
 
+def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
+    """Each run's held-out loss against training: ``{row: {rung: {"epochs": [...], "test_loss": [...]}}}``,
+    from the saved histories (a test batch every ``print_every`` steps); x in CHNN's epochs of 800
+    snippets (4 steps of batch 200) for the chain rows, in steps for the LNN row."""
+    rows = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
+    out = {}
+    for row in rows:
+        for rung in RUNGS:
+            folder = runs.get(f"{row}/{rung}/seed{seed}")
+            if not isinstance(folder, Path):
+                continue
+            history = json.loads((folder / "metrics.json").read_text())["history"]
+            per_epoch = 1.0 if row == "lnn" else 800 / 200
+            out.setdefault(row, {})[rung] = {"epochs": [step / per_epoch for step in history["test_steps"]],
+                                             "test_loss": history["test_loss"]}
+    return out
+
+
+def curves_figure(found: dict, path: Path) -> Path:
+    """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each rung (log axis)."""
+    from hnn_analysis.paper.figures import plt, save_figure
+    fig, axes = plt.subplots(1, len(found), figsize=(3.3 * len(found), 3.0), squeeze=False)
+    for ax, (row, by_rung) in zip(axes[0], found.items()):
+        for rung, curve in by_rung.items():
+            ax.plot(curve["epochs"], curve["test_loss"], label=rung, lw=1.2)
+        ax.set_yscale("log")
+        ax.set_title(f"N = {row[len('chain'):]}, CHNN protocol" if row.startswith("chain") else "LNN double pendulum",
+                     fontsize=9)
+        ax.set_xlabel("epochs (800 snippets)" if row.startswith("chain") else "steps (batch of states)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0][0].set_ylabel("held-out loss (snippet MAE; LNN: dx/dt MSE)", fontsize=8)
+    axes[0][-1].legend(fontsize=7)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
 def _cell(entry: dict | None) -> str:
     if entry is None:
         return "not trained"
@@ -142,7 +181,9 @@ def markdown(results: dict) -> str:
     lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')}; {meta.get('cores', '?')} cores; "
               f"training {meta['seconds']['training']:.0f} s, measuring {meta['seconds']['measuring']:.0f} s. "
               f"Each CHNN-protocol rung trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
-              "epochs of 800 snippets (theirs: 2000), by Adam at a constant rate (theirs: AdamW, cosine schedule).", "",
+              "epochs of 800 snippets (theirs: 2000), by "
+              f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
+              "cosine). Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published NeuralODE | published floor | "
@@ -199,11 +240,19 @@ def main(argv=None, settings: dict | None = None) -> dict:
     runs.update(trained)
     tic = time.perf_counter()
     rows = measure(runs, settings, args.seed)
+    found = curves(runs, settings, args.seed)
+    if found:
+        figure = curves_figure(found, out / "figures" / "peers-curves.png")
+        if args.update_docs:
+            target = hnn.tasks.repo_root() / "docs" / "figures" / "peers-curves.png"
+            atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
                         "quick": settings is not FULL,     # --quick or a test's settings: not the table
                         "steps": jobs[0].config.total_steps if jobs else None,
+                        "optimizer": jobs[0].config.optimizer if jobs else None,
+                        "schedule": jobs[0].config.schedule if jobs else None,
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
-               "rows": rows}
+               "rows": rows, "curves": found}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "peers.json", results)
     text = markdown(results)
