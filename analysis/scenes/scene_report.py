@@ -18,7 +18,7 @@ from hnn.io import atomic_write, write_json  # noqa: E402
 
 hnn.tasks.import_analysis()
 from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm  # noqa: E402
 
 
 
@@ -70,7 +70,7 @@ def rung_table(results: dict) -> list[str]:
             cells.append("n/a" if not ro or ro["valid_time"] is None else f"{ro['valid_time']:.3g} / {ro['horizon']:.3g}")
             cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
             lines.append(f"| {task} | {label} | {m['params']} | " + " | ".join(cells)
-                         + f" | {_g(m.get('train_seconds'))} |")
+                         + f" | {_g(scene_measure.cost_seconds(m))} |")
     return lines
 
 
@@ -124,7 +124,7 @@ def grid_tables(results: dict) -> list[str]:
             ro = m.get("rollout") or {}
             lines.append(f"| {label} | {width} | {fraction} | {m['params']} | {_g(m['test_loss'][0])} | "
                          f"{_g(energy[0] if energy else None)} | {_g(ro.get('error'))} | "
-                         f"{_g(m.get('train_seconds'))} | {_g(ro.get('seconds'))} |")
+                         f"{_g(scene_measure.cost_seconds(m))} | {_g(ro.get('seconds'))} |")
         lines += ["", "</details>"]
     return lines
 
@@ -140,7 +140,9 @@ def _cell_order(key: str):
 def card_table(results: dict) -> list[str]:
     lines = ["**Scene cards**: the smallest model (fewest parameters, then the cheapest to train) whose energy "
              "MSE (corrected protocol, else the paper's) and rollout error both come within 2x of the best of its "
-             "scene, over every rung and (spring, pend, 2body) every width and training fraction.", "",
+             "scene, over every rung and (spring, pend, 2body) every width and training fraction. Train s, here and "
+             "below: the run's steps at the steps per second of that model alone on one thread, timed by this study "
+             "over a short burst (not the run's recorded wall time, which depends on what else the machine did).", "",
              "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds |",
              "| --- | --- | ---: | --- | --- | ---: | --- |"]
     for task, entry in results["scenes"].items():
@@ -219,12 +221,12 @@ def pareto_figure(results: dict, path: Path) -> None:
     fig, axes = plt.subplots(len(scenes), 2, figsize=(9, 2.6 * len(scenes)), squeeze=False)
     for ax_row, task in zip(axes, scenes):
         cells = _all_cells(results["scenes"][task])
-        for ax, xkey, xlabel in ((ax_row[0], "train_seconds", "training s"), (ax_row[1], None, "rollout s")):
+        for ax, xkey, xlabel in ((ax_row[0], "train", "training s (one thread)"), (ax_row[1], None, "rollout s")):
             points = []
             for key, m in cells.items():
                 label = key.split("@")[0]
                 ro = m.get("rollout")
-                x = m.get("train_seconds") if xkey else (ro or {}).get("seconds")
+                x = scene_measure.cost_seconds(m) if xkey else (ro or {}).get("seconds")
                 if ro and x:
                     points.append((x, ro["error"]))
                     ax.scatter(x, ro["error"], s=14, color=color(label), label=label)
