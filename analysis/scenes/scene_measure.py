@@ -82,6 +82,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
     """``{key: measured}`` of ``runs`` (``{key: (label, run folder)}``, models of ``scene``): each as
     ``Scene.measure`` gives it, plus ``train_cost`` (``training_cost``). The energy protocols run
     once for all of them (one truth); a task with its own ``evaluate`` (pixels) goes model by model."""
+    from hnn_analysis.scenes.scene_study import saved_numbers
     if not runs:
         return {}
     if hnn.task_spec(scene.task).evaluate is not None:
@@ -94,9 +95,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
     out = {}
     for key, (_, directory) in runs.items():
         model = trained.models[key]
-        m = {"test_loss": rows[key]["test_loss"], "train_loss": rows[key]["train_loss"],
-             "train_seconds": rows[key]["train_seconds"], "params": sum(p.numel() for p in model.parameters()),
-             "run": Path(directory).name}
+        m = saved_numbers(rows[key], model, directory)
         for name, result in energy.items():
             m[f"energy_mse_{name}"] = [result[key]["mse"], result[key]["mse_se"]]
         tic = time.perf_counter()

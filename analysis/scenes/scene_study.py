@@ -130,8 +130,10 @@ def train(batches, out: Path, args) -> tuple[dict, dict]:
 # measuring one scene
 
 
-def _params(model) -> int:
-    return sum(p.numel() for p in model.parameters())
+def saved_numbers(row: dict, model, directory: Path) -> dict:
+    """What a measured model's entry takes from its saved run: ``row`` is its ``reproduce.load_runs`` row."""
+    return {"test_loss": row["test_loss"], "train_loss": row["train_loss"], "train_seconds": row["train_seconds"],
+            "params": sum(p.numel() for p in model.parameters()), "run": Path(directory).name}
 
 
 class Scene:
@@ -167,9 +169,7 @@ class Scene:
         """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one run."""
         trained, row = reproduce.load_runs(self.task, {label: directory})
         model = trained.models[label]
-        out = {"test_loss": row[label]["test_loss"], "train_loss": row[label]["train_loss"],
-               "train_seconds": row[label]["train_seconds"], "params": _params(model),
-               "run": directory.name}
+        out = saved_numbers(row[label], model, directory)
         tic = time.perf_counter()
         energy = registry.evaluate(trained) if protocols else {}
         for name, result in energy.items():
