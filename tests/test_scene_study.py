@@ -173,8 +173,9 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
-    assert set(entry["rungs"]) == set(scene_study.rungs())
-    assert len(entry["grid"]) == 4 * 3 and entry["card"] is not None
+    assert set(entry["rungs"]) == set(scene_study.task_rungs("spring"))
+    assert len(entry["grid"]) == len(entry["rungs"]) * 3 and entry["card"] is not None
+    assert all("train_cost" in m for m in entry["grid"].values())
     assert entry["speed"]["separable"]["fastest"] is not None
     saved = json.loads((tmp_path / "scene_study.json").read_text())
     assert saved["scenes"]["spring"]["card"] == json.loads(json.dumps(entry["card"]))

@@ -30,6 +30,7 @@ are reused when the args match). Writes ``<out>/scene_study.json`` (every number
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import sys
 import time
@@ -74,6 +75,20 @@ DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and s
 def rungs() -> tuple[str, ...]:
     """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)."""
     return tuple(hnn.cli.model_choices())
+
+
+def task_rungs(task: str) -> list[str]:
+    """The rungs of ``task``: the kinds its ``--model`` takes that can fit its states."""
+    return [label for label in reproduce.row_models(task, rungs()) if _fits(task, label)]
+
+
+@functools.cache
+def _fits(task: str, label: str) -> bool:
+    """False for a kind whose model reads the state's second half as velocities: every scene's states
+    are canonical [q, p] (``hnn.objectives.check_coordinates`` would refuse its run)."""
+    config = hnn.tasks.task_config(task, {"model": label})
+    model = config.make_objective().build({**config.to_dict(), "kind": config.kind})
+    return not getattr(model, "needs_velocities", False)
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
                "name": "real-dhnn"}
 DHNN_MODELS = ("baseline", "hnn", "dissipative")
@@ -118,7 +133,8 @@ def train(batches, out: Path, args) -> tuple[dict, dict]:
     for rows, seeds, steps, models in batches:
         models = rungs() if models is None else models
         # plan() always takes the paper's pair: keep only the kinds asked for
-        jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models) if job.config.model in models]
+        jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models)
+                 if job.config.model in models and _fits(job.task, job.config.model)]
     runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
@@ -319,7 +335,7 @@ def main(argv=None) -> dict:
     for task in scenes:
         entry = {"divergence": (states.get(task) or {}).get("divergence"), "rungs": {}, "grid": {}, "speed": {}}
         cells = {}
-        for label in reproduce.row_models(task, rungs()):
+        for label in task_rungs(task):
             result = measured.get(("rung", task, label))
             if result is None:
                 continue
@@ -328,7 +344,7 @@ def main(argv=None) -> dict:
             cells[(label, *DEFAULT_CELL)] = per_seed[min(per_seed)]
             if "speed" in result:
                 entry["speed"][label] = result["speed"]
-        for label in reproduce.row_models(task, rungs()):
+        for label in task_rungs(task):
             for key, m in measured.get(("cells", task, label), {}).items():
                 entry["grid"][key] = m
                 width, fraction = key.split("@")[1].split("x")
@@ -368,7 +384,7 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -
     speed study of the first seed where the scene has a truth to roll out), then each rung's grid."""
     units = {}
     for task in scenes:
-        for label in reproduce.row_models(task, rungs()):
+        for label in task_rungs(task):
             per_seed = {seed: str(run) for seed in seeds
                         if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}"),
                                       Path)}
@@ -376,7 +392,7 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -
                 speed = seeds[0] if seeds[0] in per_seed and "dts" in SCENE[task] else None
                 units[("rung", task, label)] = ("rung", task, label, per_seed, speed)
     for task in scenes:
-        for label in reproduce.row_models(task, rungs()):
+        for label in task_rungs(task):
             cells = {}
             for row in (r for r in grid_rows if r["task"] == task):
                 run = runs.get(f"{row['row']}/{label}/seed0")
