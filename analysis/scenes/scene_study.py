@@ -24,7 +24,9 @@ has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3bo
    2.4 (1 - cos q) + p^2, beside their published numbers.
 
 Training goes through each task's ``train.py`` (as ``reproduce.py``, whose runs in ``<out>/runs``
-are reused when the args match). Writes ``<out>/scene_study.json`` (every number), 
+are reused when the args match), in one sweep; the measuring is shared out over ``--jobs``
+processes (``scene_measure``). Training seconds are each model's controlled cost
+(``scene_measure.training_cost``), not the runs' recorded wall times. Writes ``<out>/scene_study.json`` (every number), 
 ``<out>/scene_study.md`` and ``<out>/figures/scenes-pareto.png``.
 """
 from __future__ import annotations
@@ -285,7 +287,8 @@ def _parser() -> argparse.ArgumentParser:
                         f"{QUICK_FRACTIONS}, one seed, short drift runs; output in results-quick/")
     p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
     p.add_argument("--seeds", type=int, default=3, help="seeds of the per-rung rows and the chosen cells (quick: 1)")
-    p.add_argument("--jobs", type=int, default=1, help="training processes, as reproduce.py --jobs")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="training processes, as reproduce.py --jobs; then as many measuring processes (local backend)")
     sweep.add_backend_flags(p)
     p.add_argument("--update-docs", dest="update_docs", action="store_true",
                    help="write docs/scenes.md and the README's model guide (full settings only)")
