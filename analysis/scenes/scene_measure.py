@@ -46,10 +46,10 @@ def training_cost(task: str, args: dict) -> dict:
     fastest of ``BURSTS`` bursts), and ``seconds`` = its ``total_steps + 1`` steps at that rate."""
     config = hnn.tasks.task_config(task, args)
     objective = config.make_objective()
-    key = config.dataset_key()
-    if key not in _DATASETS:
-        _DATASETS[key] = config.dataset()
-    dataset = objective.prepare(_DATASETS[key])
+    data_key = config.dataset_key()
+    if data_key not in _DATASETS:
+        _DATASETS[data_key] = config.dataset()
+    dataset = objective.prepare(_DATASETS[data_key])
     saved = {**config.to_dict(), "kind": config.kind}
     torch.manual_seed(config.seed)
     model = objective.build(saved).to(config.device)
