@@ -47,6 +47,28 @@ def test_compare_reports_the_ratio_of_medians_and_the_fastest_layout():
 
 
 def test_a_product_the_floor_cannot_time_is_refused():
-    a = torch.randn(3, 4, 5)
-    with pytest.raises(NotImplementedError, match="bmm"):
-        floor.products(lambda: torch.bmm(a, a.transpose(1, 2)))
+    a = torch.randn(4, 5)
+    with pytest.raises(NotImplementedError, match="mv"):
+        floor.products(lambda: torch.mv(a, a[0]))
+
+
+def test_batched_products_are_counted_with_their_batch_and_timed_as_batched():
+    a, b = torch.randn(3, 4, 5), torch.randn(3, 5, 6)
+    shapes = floor.products(lambda: (torch.bmm(a, b), torch.baddbmm(torch.zeros(3, 4, 6), a, b)))
+    assert shapes == [(3, 4, 5, 6), (3, 4, 5, 6)]
+    label, fn, seconds = floor._fastest_layout(3, 4, 5, 6, repeats=3)
+    assert fn().shape in {(3, 4, 6), (3, 6, 4)} and seconds > 0
+
+
+def test_the_group_table_is_rewritten_alone_and_the_other_jobs_leave_it(tmp_path, monkeypatch):
+    (tmp_path / "docs").mkdir()
+    page = tmp_path / "docs" / "speed.md"
+    page.write_text("intro\n<!-- benchmark:begin -->\nold main\n<!-- benchmark:end -->\nafter\n")
+    monkeypatch.setattr(hnn.tasks, "repo_root", lambda: tmp_path)
+    first = benchmark._benchmark_section(None, "stamp A\n\ngroup table A")
+    assert first.startswith("old main") and first.endswith("stamp A\n\ngroup table A")
+    page.write_text(f"intro\n<!-- benchmark:begin -->\n{first}\n<!-- benchmark:end -->\nafter\n")
+    again = benchmark._benchmark_section("new main", None)          # a run without the group job
+    assert again == f"new main\n\n{benchmark.GROUP_MARK}\n\nstamp A\n\ngroup table A"
+    page.write_text(f"intro\n<!-- benchmark:begin -->\n{again}\n<!-- benchmark:end -->\nafter\n")
+    assert benchmark._benchmark_section(None, "stamp B\n\ngroup table B").count("group table") == 1

@@ -8,7 +8,7 @@ import torch
 
 import hnn
 from hnn_analysis.paper import reproduce
-from hnn_analysis.scenes import scene_metrics as sm, scene_study
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -173,11 +173,33 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
-    assert set(entry["rungs"]) == set(scene_study.rungs())
-    assert len(entry["grid"]) == 4 * 3 and entry["card"] is not None
+    assert set(entry["rungs"]) == set(scene_study.task_rungs("spring"))
+    assert len(entry["grid"]) == len(entry["rungs"]) * 3 and entry["card"] is not None
+    assert all("train_cost" in m for m in entry["grid"].values())
     assert entry["speed"]["separable"]["fastest"] is not None
     saved = json.loads((tmp_path / "scene_study.json").read_text())
     assert saved["scenes"]["spring"]["card"] == json.loads(json.dumps(entry["card"]))
     text = (tmp_path / "scene_study.md").read_text()
     assert "QUICK smoke run" in text and "Scene cards" in text
     assert (tmp_path / "figures" / "scenes-pareto.png").stat().st_size > 10_000
+
+
+def test_models_measured_together_get_the_numbers_each_gets_alone(tmp_path):
+    # runs trained as one group (hnn.grouped), measured as the study's grid is: one energy call for all
+    configs = [hnn.tasks.task_config("spring", {"seed": s, "train_fraction": f, "hidden_dim": 16, "total_steps": 30,
+                                                "save_dir": str(tmp_path)}) for s, f in ((0, 1.0), (1, 0.5), (2, 1.0))]
+    folders = hnn.grouped.train_group(configs)
+    scene = scene_study.Scene("spring", quick=True)
+    together = scene_measure.measure_models(scene, {i: ("hnn", folder) for i, folder in enumerate(folders)})
+    rebuilt = scene_study.Scene("spring", quick=True, state=scene.state())     # a worker's copy of the truth
+    assert torch.equal(rebuilt.truth, scene.truth) and rebuilt.divergence == scene.divergence
+    for i, folder in enumerate(folders):
+        alone = rebuilt.measure("hnn", folder)
+        for key in ("energy_mse_paper", "energy_mse_corrected", "test_loss", "params"):
+            assert together[i][key] == alone[key], key
+        for key in ("error", "valid_time", "blew_up"):
+            assert together[i]["rollout"][key] == alone["rollout"][key], key
+        cost = together[i]["train_cost"]
+        assert cost["steps"] == 31 and cost["seconds"] == pytest.approx(31 / cost["steps_per_s"])
+    # the models differ: equal numbers above are not one model's numbers copied
+    assert len({m["energy_mse_corrected"][0] for m in together.values()}) == 3

@@ -67,6 +67,8 @@ def energy_plot(result: dict, path) -> Path:
                     label=f"{NAMES[label]} (MSE {result[label]['mse']:.2e})")
     ax.set_xlabel("frame")
     ax.set_ylabel("energy 1.9 (1 - cos q) + p^2")
+    # log: a baseline that blows up (1e6) would flatten the truth and the HNN into one line at 0
+    ax.set_yscale("log")
     ax.set_title("Pixel pendulum: energy of the decoded paths")
     ax.legend(fontsize=8)
     return save_figure(fig, path)

@@ -76,13 +76,15 @@ def rollout_errors(f, truth: torch.Tensor, t: np.ndarray) -> dict:
     return out
 
 
-def divergence_time(dynamics, x0: torch.Tensor, t: np.ndarray, seed: int = 0) -> dict:
+def divergence_time(dynamics, x0: torch.Tensor, t: np.ndarray, seed: int = 0,
+                    truth: torch.Tensor | None = None) -> dict:
     """When the truth from ``x0 + PERTURBATION * (random unit vector)`` leaves ``VALID_ERROR`` of the
-    truth from ``x0`` (median over starts; the horizon if never)."""
+    truth from ``x0`` (median over starts; the horizon if never). ``truth``: the ``REFERENCE``
+    rollout from ``x0`` over ``t``, if the caller has it already."""
     rng = np.random.default_rng(seed)
     direction = rng.standard_normal(tuple(x0.shape))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    a = quiet_rollout(dynamics, x0, t, **REFERENCE)
+    a = quiet_rollout(dynamics, x0, t, **REFERENCE) if truth is None else truth
     b = quiet_rollout(dynamics, x0 + PERTURBATION * torch.as_tensor(direction, dtype=x0.dtype), t, **REFERENCE)
     s = summarize_errors(relative_error(b, a), t)
     return {"divergence_time": s["valid_time"], "divergence_times": s["valid_times"], "horizon": s["horizon"]}
@@ -119,11 +121,11 @@ def describe(options: dict) -> str:
     return f"{name} dt={options['dt']:g}" if "dt" in options else f"{name} rtol={options['rtol']:g}"
 
 
-def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict]) -> dict:
+def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict], repeats: int = 3) -> dict:
     """Every setting of ``ladder`` (each method's from coarse to fine, stopping at the first that
     reaches ``TARGET``) scored by its max relative error over the batch and times against
-    ``REFERENCE`` of the same field ``f``; ``{"rows", "fastest", "fastest_symplectic"}``, the last two
-    the quickest settings reaching ``TARGET`` (None when none does)."""
+    ``REFERENCE`` of the same field ``f`` (the median of ``repeats`` timings); ``{"rows", "fastest",
+    "fastest_symplectic"}``, the last two the quickest settings reaching ``TARGET`` (None when none does)."""
     reference = quiet_rollout(f, x0, t, **REFERENCE)
     rows, reached = [], set()
     for options in ladder:
@@ -133,7 +135,7 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict]) ->
         row = {"setting": describe(options), "options": options,
                "symplectic": hnn.get_solver(options["method"]).symplectic}
         try:
-            seconds, traj, stats = speed_accuracy.timed_rollout(f, x0, t, options, 3, enough=0.5)
+            seconds, traj, stats = speed_accuracy.timed_rollout(f, x0, t, options, repeats, enough=0.5)
         except hnn.DivergenceError as err:
             row.update(status=type(err).__name__)
             rows.append(row)

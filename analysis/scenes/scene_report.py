@@ -5,6 +5,7 @@ docs/figures/scenes-pareto.png.
 """
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
 
@@ -12,13 +13,14 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib import ticker  # noqa: E402
 
 import hnn  # noqa: E402
 from hnn.io import atomic_write, write_json  # noqa: E402
 
 hnn.tasks.import_analysis()
 from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm  # noqa: E402
 
 
 
@@ -70,7 +72,7 @@ def rung_table(results: dict) -> list[str]:
             cells.append("n/a" if not ro or ro["valid_time"] is None else f"{ro['valid_time']:.3g} / {ro['horizon']:.3g}")
             cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
             lines.append(f"| {task} | {label} | {m['params']} | " + " | ".join(cells)
-                         + f" | {_g(m.get('train_seconds'))} |")
+                         + f" | {_g(scene_measure.cost_seconds(m))} |")
     return lines
 
 
@@ -124,7 +126,7 @@ def grid_tables(results: dict) -> list[str]:
             ro = m.get("rollout") or {}
             lines.append(f"| {label} | {width} | {fraction} | {m['params']} | {_g(m['test_loss'][0])} | "
                          f"{_g(energy[0] if energy else None)} | {_g(ro.get('error'))} | "
-                         f"{_g(m.get('train_seconds'))} | {_g(ro.get('seconds'))} |")
+                         f"{_g(scene_measure.cost_seconds(m))} | {_g(ro.get('seconds'))} |")
         lines += ["", "</details>"]
     return lines
 
@@ -140,7 +142,9 @@ def _cell_order(key: str):
 def card_table(results: dict) -> list[str]:
     lines = ["**Scene cards**: the smallest model (fewest parameters, then the cheapest to train) whose energy "
              "MSE (corrected protocol, else the paper's) and rollout error both come within 2x of the best of its "
-             "scene, over every rung and (spring, pend, 2body) every width and training fraction.", "",
+             "scene, over every rung and (spring, pend, 2body) every width and training fraction. Train s, here and "
+             "below: the run's steps at the steps per second of that model alone on one thread, timed by this study "
+             "over a short burst (not the run's recorded wall time, which depends on what else the machine did).", "",
              "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds |",
              "| --- | --- | ---: | --- | --- | ---: | --- |"]
     for task, entry in results["scenes"].items():
@@ -219,24 +223,29 @@ def pareto_figure(results: dict, path: Path) -> None:
     fig, axes = plt.subplots(len(scenes), 2, figsize=(9, 2.6 * len(scenes)), squeeze=False)
     for ax_row, task in zip(axes, scenes):
         cells = _all_cells(results["scenes"][task])
-        for ax, xkey, xlabel in ((ax_row[0], "train_seconds", "training s"), (ax_row[1], None, "rollout s")):
+        for ax, xkey, xlabel in ((ax_row[0], "train", "training s (one thread)"), (ax_row[1], None, "rollout s")):
             points = []
             for key, m in cells.items():
                 label = key.split("@")[0]
                 ro = m.get("rollout")
-                x = m.get("train_seconds") if xkey else (ro or {}).get("seconds")
+                x = scene_measure.cost_seconds(m) if xkey else (ro or {}).get("seconds")
                 if ro and x:
                     points.append((x, ro["error"]))
                     ax.scatter(x, ro["error"], s=14, color=color(label), label=label)
+            if not points:      # pixels: its rollout comes from the energy protocol, untimed
+                ax.axis("off")
+                ax.text(0.5, 0.5, f"{task}: no {xlabel} measured", ha="center", va="center", transform=ax.transAxes)
+                continue
             front, best = [], float("inf")
             for x, y in sorted(points):
                 if y < best:
                     front.append((x, y))
                     best = y
-            if front:
-                ax.plot(*zip(*front), color="k", lw=0.8, alpha=0.6)
+            ax.plot(*zip(*front), color="k", lw=0.8, alpha=0.6)
             ax.set_xscale("log")
             ax.set_yscale("log")
+            for axis, values in ((ax.xaxis, [x for x, _ in points]), (ax.yaxis, [y for _, y in points])):
+                _log_ticks(axis, min(values), max(values))
             ax.set_xlabel(xlabel)
             ax.set_ylabel(f"{task}: rollout error")
             handles, labels = ax.get_legend_handles_labels()
@@ -246,10 +255,20 @@ def pareto_figure(results: dict, path: Path) -> None:
     if results["meta"]["quick"]:
         title = "QUICK smoke run, not the study's settings. " + title
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.99))
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format="png"))
     plt.close(fig)
+
+
+def _log_ticks(axis, lo: float, hi: float) -> None:
+    """Labels a log axis can hold without overlapping: at powers of ten over 2+ decades, also at 2 and
+    5 times them over less, at 1-6 and 8 times them under 0.7 of a decade; plain numbers, no minor labels."""
+    decades = math.log10(hi / lo) if lo > 0 else math.inf
+    subs = (1.0,) if decades > 2 else (1.0, 2.0, 5.0) if decades > 0.7 else (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
+    axis.set_major_locator(ticker.LogLocator(10, subs=subs))
+    axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
+    axis.set_minor_formatter(ticker.NullFormatter())
 
 
 def _all_cells(entry: dict) -> dict:

@@ -24,12 +24,15 @@ has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3bo
    2.4 (1 - cos q) + p^2, beside their published numbers.
 
 Training goes through each task's ``train.py`` (as ``reproduce.py``, whose runs in ``<out>/runs``
-are reused when the args match). Writes ``<out>/scene_study.json`` (every number), 
+are reused when the args match), in one sweep; the measuring is shared out over ``--jobs``
+processes (``scene_measure``). Training seconds are each model's controlled cost
+(``scene_measure.training_cost``), not the runs' recorded wall times. Writes ``<out>/scene_study.json`` (every number), 
 ``<out>/scene_study.md`` and ``<out>/figures/scenes-pareto.png``.
 """
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import sys
 import time
@@ -42,7 +45,7 @@ import hnn
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis.paper import registry, reproduce  # noqa: E402
-from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm  # noqa: E402
 from hnn_analysis.speed import speed_accuracy  # noqa: E402
 from hnn_analysis import sweep  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
@@ -74,6 +77,20 @@ DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and s
 def rungs() -> tuple[str, ...]:
     """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)."""
     return tuple(hnn.cli.model_choices())
+
+
+def task_rungs(task: str) -> list[str]:
+    """The rungs of ``task``: the kinds its ``--model`` takes that can fit its states."""
+    return [label for label in reproduce.row_models(task, rungs()) if _fits(task, label)]
+
+
+@functools.cache
+def _fits(task: str, label: str) -> bool:
+    """False for a kind whose model reads the state's second half as velocities: every scene's states
+    are canonical [q, p] (``hnn.objectives.check_coordinates`` would refuse its run)."""
+    config = hnn.tasks.task_config(task, {"model": label})
+    model = config.make_objective().build({**config.to_dict(), "kind": config.kind})
+    return not getattr(model, "needs_velocities", False)
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
                "name": "real-dhnn"}
 DHNN_MODELS = ("baseline", "hnn", "dissipative")
@@ -109,12 +126,17 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     return rows
 
 
-def train(rows, seeds, out: Path, steps, args, models=None) -> tuple[dict, dict]:
-    """``({row/label/seed: run folder or the error of a failed run}, seconds)``: reuse what matches,
-    train the rest (``args.jobs`` processes, on ``args.backend``)."""
-    models = rungs() if models is None else models
-    # plan() always takes the paper's pair: keep only the kinds asked for
-    jobs = [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models) if job.config.model in models]
+def train(batches, out: Path, args) -> tuple[dict, dict]:
+    """``({row/label/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
+    ``(rows, seeds, steps, models or None for every rung)``: reuse what matches, train the rest
+    in one sweep (``args.jobs`` processes, on ``args.backend``), so the pool starts once and the
+    longest runs of every batch go first."""
+    jobs = []
+    for rows, seeds, steps, models in batches:
+        models = rungs() if models is None else models
+        # plan() always takes the paper's pair: keep only the kinds asked for
+        jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models)
+                 if job.config.model in models and _fits(job.task, job.config.model)]
     runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
@@ -126,37 +148,46 @@ def train(rows, seeds, out: Path, steps, args, models=None) -> tuple[dict, dict]
 # measuring one scene
 
 
-def _params(model) -> int:
-    return sum(p.numel() for p in model.parameters())
+def saved_numbers(row: dict, model, directory: Path) -> dict:
+    """What a measured model's entry takes from its saved run: ``row`` is its ``reproduce.load_runs`` row."""
+    return {"test_loss": row["test_loss"], "train_loss": row["train_loss"], "train_seconds": row["train_seconds"],
+            "params": sum(p.numel() for p in model.parameters()), "run": Path(directory).name}
 
 
 class Scene:
     """A scene's truth: start states, the true trajectories over ``HORIZON`` training lengths, and
     the time over which the truth itself diverges from starts ``PERTURBATION`` apart."""
 
-    def __init__(self, task: str, quick: bool):
+    def __init__(self, task: str, quick: bool, state: dict | None = None):
         self.task, self.system, self.cfg = task, hnn.load_task(task), SCENE[task]
         self.truth = None
         if "T" in self.cfg:
             horizon = HORIZON * self.cfg["T"]
             self.t = np.linspace(0.0, horizon, (50 if quick else 100) * HORIZON + 1)
             self.x0 = speed_accuracy.start_states(task, self.system, STARTS // 2 if quick else STARTS)
+            if state is not None:       # another process integrated this truth already (``state()``)
+                self.truth, self.divergence = torch.as_tensor(state["truth"]), state["divergence"]
+                return
             with torch.no_grad():
                 self.truth = sm.quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
-            self.divergence = sm.divergence_time(self.system.dynamics, self.x0, self.t)
+            self.divergence = sm.divergence_time(self.system.dynamics, self.x0, self.t, truth=self.truth)
         elif task == "real":
             # no truth past the measurements: the measured test segment, from its first state
             data = hnn.load_task("real").get_dataset()
             self.truth = torch.as_tensor(data["test_x"], dtype=torch.float64)[None]
             self.t = np.asarray(data["test_t"], dtype=np.float64) - float(data["test_t"][0])
 
+    def state(self) -> dict | None:
+        """What another process needs to rebuild this scene without integrating its truth again."""
+        if "T" not in self.cfg:
+            return None
+        return {"truth": self.truth.numpy(), "divergence": self.divergence}
+
     def measure(self, label: str, directory: Path, protocols: bool = True) -> dict:
         """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one run."""
         trained, row = reproduce.load_runs(self.task, {label: directory})
         model = trained.models[label]
-        out = {"test_loss": row[label]["test_loss"], "train_loss": row[label]["train_loss"],
-               "train_seconds": row[label]["train_seconds"], "params": _params(model),
-               "run": directory.name}
+        out = saved_numbers(row[label], model, directory)
         tic = time.perf_counter()
         energy = registry.evaluate(trained) if protocols else {}
         for name, result in energy.items():
@@ -203,7 +234,7 @@ def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
     ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick)
-    result = sm.speed_at_accuracy(f, x0, t, ladder)
+    result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
     if scene.task in DRIFT_SCENES and not hnn.MODEL_KINDS[label].dissipative:
         period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
         budget = 2.0 if quick else DRIFT_BUDGET
@@ -227,8 +258,9 @@ def _key_metric(m: dict) -> tuple[float | None, float | None]:
 
 
 def scene_card(cells: dict) -> dict | None:
-    """The smallest model (parameters, then training seconds) within ``CARD_FACTOR`` of the scene's
-    best energy MSE and best rollout error. ``cells`` is ``{(label, width, fraction): measured}``."""
+    """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) within
+    ``CARD_FACTOR`` of the scene's best energy MSE and best rollout error. ``cells`` is ``{(label,
+    width, fraction): measured}``."""
     scored = {k: _key_metric(m) for k, m in cells.items()}
     best_e = min((e for e, _ in scored.values() if e is not None), default=None)
     best_r = min((r for _, r in scored.values() if r is not None), default=None)
@@ -237,9 +269,9 @@ def scene_card(cells: dict) -> dict | None:
           and (best_r is None or (r is not None and r <= CARD_FACTOR * best_r))]
     if not ok:
         return None
-    pick = min(ok, key=lambda k: (cells[k]["params"], cells[k]["train_seconds"] or 0.0))
+    pick = min(ok, key=lambda k: (cells[k]["params"], scene_measure.cost_seconds(cells[k]) or 0.0))
     return {"label": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
-            **{k: cells[pick][k] for k in ("params", "train_seconds")},
+            "params": cells[pick]["params"], "train_seconds": scene_measure.cost_seconds(cells[pick]),
             "energy": scored[pick][0], "rollout": scored[pick][1]}
 
 
@@ -255,7 +287,8 @@ def _parser() -> argparse.ArgumentParser:
                         f"{QUICK_FRACTIONS}, one seed, short drift runs; output in results-quick/")
     p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
     p.add_argument("--seeds", type=int, default=3, help="seeds of the per-rung rows and the chosen cells (quick: 1)")
-    p.add_argument("--jobs", type=int, default=1, help="training processes, as reproduce.py --jobs")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="training processes, as reproduce.py --jobs; then as many measuring processes (local backend)")
     sweep.add_backend_flags(p)
     p.add_argument("--update-docs", dest="update_docs", action="store_true",
                    help="write docs/scenes.md and the README's model guide (full settings only)")
@@ -287,51 +320,39 @@ def main(argv=None) -> dict:
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
     dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in scenes else []
     tic = time.perf_counter()
-    runs, _ = train([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, out, steps, args)
-    more, _ = train([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], out, steps, args)
-    runs.update(more)
-    more, _ = train(grid_rows, [0], out, steps, args)
-    runs.update(more)
-    if dhnn_rows:
-        # the D-HNN protocol's own 5000 steps (DHNN_FIELDS) even in a quick run: 5000 small steps are seconds
-        more, _ = train(dhnn_rows, [0], out, None, args, DHNN_MODELS)
-        runs.update(more)
+    runs, _ = train([([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, steps, None),
+                     ([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], steps, None),
+                     (grid_rows, [0], steps, None),
+                     # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
+                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args)
     results["seconds"]["training"] = time.perf_counter() - tic
 
-    # 2. measure, on one thread: the rollouts here are batches of 4-15 states, which a second
-    # thread does not speed up, and two threads on a busy 2-core machine ran them many times slower
+    # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
+    # states, which a second thread does not speed up; --jobs processes share the units
+    tic = time.perf_counter()
+    units = measure_units(scenes, runs, seeds, grid_rows)
+    measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
-    tic = time.perf_counter()
     cells_by_scene = {}
     for task in scenes:
-        scene = Scene(task, args.quick)
-        entry = {"divergence": getattr(scene, "divergence", None), "rungs": {}, "grid": {}, "speed": {}}
+        entry = {"divergence": (states.get(task) or {}).get("divergence"), "rungs": {}, "grid": {}, "speed": {}}
         cells = {}
-        for label in reproduce.row_models(task, rungs()):
-            per_seed = {}
-            for seed in seeds:
-                run = runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}")
-                if isinstance(run, Path):
-                    per_seed[seed] = scene.measure(label, run)
-            if not per_seed:
+        for label in task_rungs(task):
+            result = measured.get(("rung", task, label))
+            if result is None:
                 continue
+            per_seed = result["per_seed"]
             entry["rungs"][label] = {"per_seed": per_seed, **_across(per_seed)}
-            cells[(label, *DEFAULT_CELL)] = per_seed[seeds[0]]
-            if seeds[0] in per_seed and "dts" in scene.cfg:     # a scene with a truth to roll out
-                model = hnn.load_run(run_of(runs, task, DEFAULT_CELL, label, seeds[0]))[0]
-                entry["speed"][label] = speed_study(scene, label, model, args.quick)
-            print(f"  {task:7s} {label:11s} measured", flush=True)
-        for row in (r for r in grid_rows if r["task"] == task):
-            for label in reproduce.row_models(task, rungs()):
-                run = runs.get(f"{row['row']}/{label}/seed0")
-                if isinstance(run, Path):
-                    m = scene.measure(label, run, protocols=True)
-                    entry["grid"][f"{label}@{row['cell'][0]}x{row['cell'][1]:g}"] = m
-                    cells[(label, *row["cell"])] = m
-        if entry["grid"]:
-            print(f"  {task:7s} grid of {len(entry['grid'])} models measured", flush=True)
-        cells_by_scene[task] = (scene, cells)
+            cells[(label, *DEFAULT_CELL)] = per_seed[min(per_seed)]
+            if "speed" in result:
+                entry["speed"][label] = result["speed"]
+        for label in task_rungs(task):
+            for key, m in measured.get(("cells", task, label), {}).items():
+                entry["grid"][key] = m
+                width, fraction = key.split("@")[1].split("x")
+                cells[(label, int(width), float(fraction))] = m
+        cells_by_scene[task] = cells
         results["scenes"][task] = entry
     if dhnn_rows:
         results["dhnn"] = _dhnn(runs, dhnn_rows[0])
@@ -339,16 +360,17 @@ def main(argv=None) -> dict:
 
     # 3. the cards; more seeds at a chosen grid cell
     tic = time.perf_counter()
-    for task, (scene, cells) in cells_by_scene.items():
+    for task, cells in cells_by_scene.items():
         card = scene_card(cells)
         results["scenes"][task]["card"] = card
         if card and task in GRID_SCENES and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
             row = _row(task, (card["width"], card["fraction"]), args.quick)
-            more, _ = train([row], seeds, out, steps, args, (card["label"],))
+            more, _ = train([([row], seeds, steps, (card["label"],))], out, args)
             runs.update(more)
-            per_seed = {s: scene.measure(card["label"], more[f"{row['row']}/{card['label']}/seed{s}"])
-                        for s in seeds if isinstance(more.get(f"{row['row']}/{card['label']}/seed{s}"), Path)}
-            card["seeds"] = _across(per_seed)
+            keys = {s: f"{row['row']}/{card['label']}/seed{s}" for s in seeds}
+            found = {s: (card["label"], more[k]) for s, k in keys.items() if isinstance(more.get(k), Path)}
+            scene = Scene(task, args.quick, states.get(task))
+            card["seeds"] = _across(scene_measure.measure_models(scene, found))
     results["seconds"]["cards"] = time.perf_counter() - tic
     torch.set_num_threads(threads)
     results["seconds"]["total"] = time.perf_counter() - start
@@ -360,8 +382,28 @@ def main(argv=None) -> dict:
     return results
 
 
-def run_of(runs: dict, task: str, cell: tuple, label: str, seed: int) -> Path:
-    return runs[f"{task}@{cell[0]}x{cell[1]:g}/{label}/seed{seed}"]
+def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -> dict:
+    """``{key: scene_measure unit}``: per scene, each rung at the default cell (its seeds, and the
+    speed study of the first seed where the scene has a truth to roll out), then each rung's grid."""
+    units = {}
+    for task in scenes:
+        for label in task_rungs(task):
+            per_seed = {seed: str(run) for seed in seeds
+                        if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}"),
+                                      Path)}
+            if per_seed:
+                speed = seeds[0] if seeds[0] in per_seed and "dts" in SCENE[task] else None
+                units[("rung", task, label)] = ("rung", task, label, per_seed, speed)
+    for task in scenes:
+        for label in task_rungs(task):
+            cells = {}
+            for row in (r for r in grid_rows if r["task"] == task):
+                run = runs.get(f"{row['row']}/{label}/seed0")
+                if isinstance(run, Path):
+                    cells[f"{label}@{row['cell'][0]}x{row['cell'][1]:g}"] = (label, str(run))
+            if cells:
+                units[("cells", task, label)] = ("cells", task, cells)
+    return units
 
 
 def _across(per_seed: dict) -> dict:

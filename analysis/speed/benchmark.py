@@ -6,6 +6,7 @@
     python analysis/speed/benchmark.py --jobs floor    # only the training steps against their floor
     python analysis/speed/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
     python analysis/speed/benchmark.py --jobs group    # only grouped training against separate runs
+    python analysis/speed/benchmark.py --jobs group --update-docs   # rewrite only the group table and its stamp
 
 ``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
 HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
@@ -20,7 +21,10 @@ loss and its gradients against the original's formulation on one batch.
 and against torchdiffeq and scipy, by ``analysis/speed/benchmark_rollouts.py`` (its docstring says how).
 
 ``group``: G spring HNNs trained as one program (``hnn.grouped``) against G separate runs, per width
-and G, in model-steps per second, by ``analysis/speed/benchmark_group.py`` (its docstring says how).
+and G, in model-steps per second, and the grouped step against its batched products' floor, by
+``analysis/speed/benchmark_group.py`` (its docstring says how). ``--update-docs`` keeps its table
+apart in the generated section of docs/speed.md, under its own stamp: a run with ``--jobs group``
+rewrites that part alone, a run without it leaves that part as it was.
 
 Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same inputs:
 
@@ -455,6 +459,22 @@ def _ceiling(results: dict, floors: dict | None, steps: int) -> str:
             "per step can beat that.")
 
 
+GROUP_MARK = "<!-- the group job's part: `--jobs group --update-docs` rewrites it alone -->"
+
+
+def _benchmark_section(main: str | None, group: str | None) -> str:
+    """The generated section of docs/speed.md: ``main`` (the other jobs' tables under their stamp),
+    then ``GROUP_MARK`` and ``group`` (the group table under its own); None keeps that part as it is."""
+    page = hnn.tasks.repo_root() / readme.PAGES["benchmark"]
+    begin, end = "<!-- benchmark:begin -->", "<!-- benchmark:end -->"
+    content = page.read_text() if page.exists() else ""
+    current = content.split(begin, 1)[1].split(end, 1)[0].strip() if begin in content and end in content else ""
+    old_main, _, old_group = current.partition(GROUP_MARK)
+    main = (old_main if main is None else main).strip()
+    group = (old_group if group is None else group).strip()
+    return main + (f"\n\n{GROUP_MARK}\n\n{group}" if group else "")
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     steps = 200 if args.quick else 2000
@@ -522,11 +542,13 @@ def main(argv=None) -> int:
         busy = max(env["load_average_before"], env["load_average_after"])
         shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
                   "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")
-        head = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
-                f"{', ' + env['cpu'] if env['cpu'] else ''}, {env['torch_threads']} threads for the comparisons, "
-                f"{args.repeats} interleaved rounds.{shared}")
-        readme.update_section("benchmark", "\n\n".join(t for t in (head, floor_table, table, rollout_table, group_table)
-                                                          if t))
+        stamp = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
+                 f"{', ' + env['cpu'] if env['cpu'] else ''}")
+        head = (f"{stamp}, {env['torch_threads']} threads for the comparisons, {args.repeats} interleaved "
+                f"rounds.{shared}")
+        body = "\n\n".join(t for t in (floor_table, table, rollout_table) if t)
+        readme.update_section("benchmark", _benchmark_section(head + "\n\n" + body if body else None,
+                                                              f"{stamp}.{shared}\n\n{group_table}" if group else None))
         print("updated docs/speed.md")
     if failed:
         print("FAILED checks: " + "; ".join(failed), file=sys.stderr)

@@ -15,6 +15,7 @@ the ratio of the fastest rounds.
 """
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from typing import Callable
@@ -23,11 +24,12 @@ import numpy as np
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
-# operand positions of the (M, K) and (K, N) matrices in each product op the floor knows
-_PRODUCT_OPS = {torch.ops.aten.mm.default: (0, 1), torch.ops.aten.addmm.default: (1, 2)}
+# operand positions of the (M, K) and (K, N) matrices in each product op the floor knows; the
+# batched ones multiply (B, M, K) by (B, K, N) and are recorded as (B, M, K, N)
+_PRODUCT_OPS = {torch.ops.aten.mm.default: (0, 1), torch.ops.aten.addmm.default: (1, 2),
+                torch.ops.aten.bmm.default: (0, 1), torch.ops.aten.baddbmm.default: (1, 2)}
 # products the floor would miss if a step used them: refuse rather than understate the floor
-_UNHANDLED = {torch.ops.aten.bmm.default, torch.ops.aten.baddbmm.default, torch.ops.aten.mv.default,
-              torch.ops.aten.addmv.default, torch.ops.aten.dot.default}
+_UNHANDLED = {torch.ops.aten.mv.default, torch.ops.aten.addmv.default, torch.ops.aten.dot.default}
 
 
 class _ProductRecorder(TorchDispatchMode):
@@ -39,15 +41,15 @@ class _ProductRecorder(TorchDispatchMode):
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         if func in _PRODUCT_OPS:
             i, j = _PRODUCT_OPS[func]
-            (m, k), n = args[i].shape, args[j].shape[1]
-            self.shapes.append((m, k, n))
+            self.shapes.append(tuple(args[i].shape) + (args[j].shape[-1],))
         elif func in _UNHANDLED:
             self.unhandled.append(str(func))
         return func(*args, **(kwargs or {}))
 
 
-def products(step: Callable[[], object]) -> list[tuple[int, int, int]]:
-    """``(M, K, N)`` of every matrix product one call of ``step`` performs, in call order."""
+def products(step: Callable[[], object]) -> list[tuple[int, ...]]:
+    """``(M, K, N)`` of every matrix product one call of ``step`` performs, in call order
+    (``(B, M, K, N)`` for a batched one)."""
     recorder = _ProductRecorder()
     with recorder:
         step()
@@ -66,36 +68,60 @@ def _median_seconds(fn: Callable[[], object], repeats: int) -> float:
     return statistics.median(times)
 
 
-def _layouts(m: int, k: int, n: int, dtype: torch.dtype = torch.float32, with_numpy: bool = False):
-    """The eight ways to compute one (M, K) @ (K, N) product: ``(label, fn)`` on fresh operands; with
-    ``with_numpy`` also numpy's ``dot`` on the same operands (an evaluation path may use either)."""
-    gen = torch.Generator().manual_seed(m * 1_000_003 + k * 1009 + n)
+def _layouts(*shape: int, dtype: torch.dtype = torch.float32, with_numpy: bool = False):
+    """The eight ways to compute one (M, K) @ (K, N) product (``shape`` ``(M, K, N)``), or one batched
+    (B, M, K) @ (B, K, N) product (``(B, M, K, N)``): ``(label, fn)`` on fresh operands; with
+    ``with_numpy`` also numpy's ``dot`` on the same operands of a 2-D one (an evaluation path may
+    use either)."""
+    *batch, m, k, n = shape
+    gen = torch.Generator().manual_seed(m * 1_000_003 + k * 1009 + n + 7 * sum(batch))
+    product = torch.bmm if batch else torch.mm
     for swapped in (False, True):               # C, or C^T = B^T A^T into a (N, M) result
         p, q = (n, m) if swapped else (m, n)
         for left_t in (False, True):
             for right_t in (False, True):
-                left = torch.randn((k, p) if left_t else (p, k), generator=gen, dtype=dtype)
-                right = torch.randn((q, k) if right_t else (k, q), generator=gen, dtype=dtype)
-                left, right = (left.T if left_t else left), (right.T if right_t else right)
-                out = torch.empty(p, q, dtype=dtype)
+                left = torch.randn((*batch, k, p) if left_t else (*batch, p, k), generator=gen, dtype=dtype)
+                right = torch.randn((*batch, q, k) if right_t else (*batch, k, q), generator=gen, dtype=dtype)
+                left, right = (left.mT if left_t else left), (right.mT if right_t else right)
+                out = torch.empty(*batch, p, q, dtype=dtype)
                 label = f"{'C^T' if swapped else 'C'} {'col' if left_t else 'row'}/{'col' if right_t else 'row'}"
-                yield label, lambda left=left, right=right, out=out: torch.mm(left, right, out=out)
-                if with_numpy:
+                yield label, lambda left=left, right=right, out=out: product(left, right, out=out)
+                if with_numpy and not batch:
                     a, b, c = left.numpy(), right.numpy(), out.numpy()
                     yield "numpy " + label, lambda a=a, b=b, c=c: np.dot(a, b, out=c)
 
 
-def _fastest_layout(m: int, k: int, n: int, repeats: int = 15, dtype: torch.dtype = torch.float32,
-                    with_numpy: bool = False):
-    """``(label, fn, seconds)`` of the layout of this product that runs fastest here and now."""
+def _fastest_layout(*shape: int, repeats: int = 15, dtype: torch.dtype = torch.float32, with_numpy: bool = False):
+    """``(label, fn, seconds)`` of the layout of this product (``_layouts``' ``shape``) that runs
+    fastest here and now."""
     best = None
-    for label, fn in _layouts(m, k, n, dtype, with_numpy):
+    for label, fn in _layouts(*shape, dtype=dtype, with_numpy=with_numpy):
         fn()
         fn()
         seconds = _median_seconds(fn, repeats)
         if best is None or seconds < best[2]:
             best = (label, fn, seconds)
     return best
+
+
+def _floor(shapes, dtype: torch.dtype = torch.float32, with_numpy: bool = False):
+    """``(fn, {shape: (label, fn, seconds)})``: ``fn`` runs every product of ``shapes`` once, each in
+    its fastest layout."""
+    fastest = {shape: _fastest_layout(*shape, dtype=dtype, with_numpy=with_numpy) for shape in sorted(set(shapes))}
+    runners = [fastest[shape][1] for shape in shapes]
+
+    def floor():
+        for run in runners:
+            run()
+    return floor, fastest
+
+
+def floor_ms(shapes: list[tuple[int, ...]], rounds: int = 50) -> float:
+    """The median milliseconds of the products ``shapes`` run back to back, each in its fastest layout
+    (float32, the current thread count): the floor alone, for a step timed elsewhere."""
+    floor, _ = _floor(shapes)
+    floor()
+    return _median_seconds(floor, rounds) * 1e3
 
 
 def compare(step: Callable[[], object], shapes: list[tuple[int, int, int]], rounds: int = 200,
@@ -107,12 +133,7 @@ def compare(step: Callable[[], object], shapes: list[tuple[int, int, int]], roun
     spring step 25% slower at 2 threads when alternated one by one)."""
     for _ in range(warmup):
         step()
-    fastest = {shape: _fastest_layout(*shape, dtype=dtype, with_numpy=with_numpy) for shape in sorted(set(shapes))}
-    runners = [fastest[shape][1] for shape in shapes]
-
-    def floor():
-        for run in runners:
-            run()
+    floor, fastest = _floor(shapes, dtype, with_numpy)
 
     t_step, t_floor = [], []
     while len(t_step) < rounds:
@@ -127,7 +148,7 @@ def compare(step: Callable[[], object], shapes: list[tuple[int, int, int]], roun
     # machine their ratio is the steadier one
     return {"threads": torch.get_num_threads(), "rounds": rounds, "step_ms": step_s * 1e3, "floor_ms": floor_s * 1e3,
             "ratio": step_s / floor_s, "best_step_ms": min(t_step) * 1e3, "best_floor_ms": min(t_floor) * 1e3,
-            "best_ratio": min(t_step) / min(t_floor), "products": len(shapes), "gflop": sum(2 * m * k * n for m, k, n in shapes) / 1e9,
+            "best_ratio": min(t_step) / min(t_floor), "products": len(shapes), "gflop": sum(2 * math.prod(shape) for shape in shapes) / 1e9,
             "per_shape": [{"shape": list(shape), "count": shapes.count(shape), "layout": fastest[shape][0],
                            "ms": fastest[shape][2] * 1e3} for shape in sorted(set(shapes), key=shapes.index)]}
 

@@ -1,0 +1,179 @@
+"""The scene study's measuring, as units of work that run here or in ``--jobs`` worker processes.
+
+    measured = scene_measure.run(units, jobs=2)      # {unit key: result}, as the units finish
+
+A unit is plain data (it crosses process boundaries): ``("rung", task, label, {seed: run folder},
+seed of the speed study or None)`` or ``("cells", task, {cell key: (label, run folder)})``.
+Each scene's truth (``scene_study.Scene``) is built once, by the first unit of that scene, and
+handed to the others as arrays, so a second worker does not integrate it again.
+
+Within a unit the models of one scene share their energy protocols' truth: ``measure_models``
+evaluates them in one ``hnn.evaluate_energy`` call per protocol (the truth is integrated once, each
+model rolled out as alone, so the numbers equal one model's call). The rollout error stays one
+rollout per model, because its wall time is the model's rollout cost in the Pareto plot.
+
+``training_cost``: what one run's training costs under control, the steps per second of that
+model alone on one thread over a short burst (in the study's own process, beside at most its
+other worker), times the run's steps; the recorded wall time of a run says more about what else
+the machine did while it trained.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import hnn
+from hnn.runs import training_subset
+
+hnn.tasks.import_analysis()
+from hnn_analysis.paper import registry, reproduce  # noqa: E402
+from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+
+BURST_SECONDS = 0.15     # the timed bursts of a training-cost measurement last about this long
+BURSTS = 3               # ... in this many bursts (the fastest counts)
+BURST_STEPS = (5, 400)   # ... of at least / at most this many steps each
+_DATASETS: dict = {}     # this process's datasets of training-cost measurements, by dataset key
+
+
+def training_cost(task: str, args: dict) -> dict:
+    """``{"steps_per_s", "steps", "seconds"}``: one thread's training steps per second of the run
+    with saved ``args`` (a fresh model of its config on its data, after a few warm-up steps; the
+    fastest of ``BURSTS`` bursts), and ``seconds`` = its ``total_steps + 1`` steps at that rate."""
+    config = hnn.tasks.task_config(task, args)
+    objective = config.make_objective()
+    data_key = config.dataset_key()
+    if data_key not in _DATASETS:
+        _DATASETS[data_key] = config.dataset()
+    dataset = objective.prepare(_DATASETS[data_key])
+    saved = {**config.to_dict(), "kind": config.kind}
+    torch.manual_seed(config.seed)
+    model = objective.build(saved).to(config.device)
+    x, y = (dataset[key] for key in objective.arrays[:2])
+    x, y = training_subset(x, y, config.train_fraction, config.seed)
+    options = dict(learn_rate=config.learn_rate, weight_decay=config.weight_decay, batch_size=config.batch_size,
+                   seed=config.seed, print_every=10 ** 9, progress=False,
+                   **objective.train_options(model, saved, dataset))
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        warm = hnn.train(model, x, y, total_steps=2, **options)          # 3 steps: one-time setup, a first rate
+        per_step = warm["seconds"] / 3
+        steps = int(np.clip(BURST_SECONDS / BURSTS / max(per_step, 1e-6), *BURST_STEPS))
+        # the fastest of a few bursts: what the model's steps cost when nothing else interferes
+        rate = max(steps / hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"] for _ in range(BURSTS))
+    finally:
+        torch.set_num_threads(threads)
+    return {"steps_per_s": rate, "steps": config.total_steps + 1, "seconds": (config.total_steps + 1) / rate}
+
+
+def cost_seconds(measured: dict) -> float | None:
+    """A measured model's training seconds: its ``training_cost`` where the study measured one,
+    else the run's recorded wall time."""
+    cost = measured.get("train_cost")
+    return cost["seconds"] if cost else measured.get("train_seconds")
+
+
+def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
+    """``{key: measured}`` of ``runs`` (``{key: (label, run folder)}``, models of ``scene``): each as
+    ``Scene.measure`` gives it, plus ``train_cost`` (``training_cost``). The energy protocols run
+    once for all of them (one truth); a task with its own ``evaluate`` (pixels) goes model by model."""
+    from hnn_analysis.scenes.scene_study import saved_numbers
+    if not runs:
+        return {}
+    if hnn.task_spec(scene.task).evaluate is not None:
+        return {key: scene.measure(label, directory, protocols) | {"train_cost": _cost(scene.task, directory)}
+                for key, (label, directory) in runs.items()}
+    tic = time.perf_counter()
+    trained, rows = reproduce.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
+    energy = registry.evaluate(trained) if protocols else {}
+    shared = (time.perf_counter() - tic) / len(runs)
+    out = {}
+    for key, (_, directory) in runs.items():
+        model = trained.models[key]
+        m = saved_numbers(rows[key], model, directory)
+        for name, result in energy.items():
+            m[f"energy_mse_{name}"] = [result[key]["mse"], result[key]["mse_se"]]
+        tic = time.perf_counter()
+        if scene.truth is not None:
+            m["rollout"] = sm.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, scene.truth, scene.t)
+        m["evaluate_seconds"] = shared + time.perf_counter() - tic
+        m["train_cost"] = _cost(scene.task, directory)
+        out[key] = m
+    return out
+
+
+def _cost(task: str, directory) -> dict:
+    return training_cost(task, hnn.load_run(directory)[1])
+
+
+# ----------------------------------------------------------------------------------------------
+# units, here or in worker processes
+
+
+def _scene(task: str, quick: bool, state: dict | None, cache: dict):
+    from hnn_analysis.scenes.scene_study import Scene
+    if task not in cache:
+        cache[task] = Scene(task, quick, state)
+    return cache[task]
+
+
+_SCENES: dict = {}      # this process's scenes, by task (a worker keeps them between its units)
+
+
+def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict, dict | None]:
+    """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread."""
+    from hnn_analysis.scenes.scene_study import speed_study
+    torch.set_num_threads(1)      # rollouts of 4-15 states: a second thread only adds contention
+    kind, task = unit[0], unit[1]
+    scene = _scene(task, quick, state, _SCENES)
+    if kind == "rung":
+        _, _, label, per_seed, speed_seed = unit
+        measured = measure_models(scene, {seed: (label, Path(d)) for seed, d in per_seed.items()})
+        result = {"per_seed": measured}
+        if speed_seed is not None:
+            result["speed"] = speed_study(scene, label, hnn.load_run(Path(per_seed[speed_seed]))[0], quick)
+        print(f"  {task:7s} {label:11s} measured", flush=True)
+    elif kind == "cells":
+        _, _, runs = unit
+        result = measure_models(scene, {k: (label, Path(d)) for k, (label, d) in runs.items()})
+        if len(runs) > 1:
+            print(f"  {task:7s} {len(runs)} models measured", flush=True)
+    else:
+        raise ValueError(f"unknown unit kind {kind!r}")
+    return result, scene.state()
+
+
+def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
+    """``({key: result}, {task: the scene's state})`` of ``units`` (``{key: unit}``): here (``jobs``
+    1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
+    which the others reuse)."""
+    results, states = {}, {}
+    if jobs <= 1:
+        for key, unit in units.items():
+            results[key], states[unit[1]] = run_unit(unit, quick)
+        return results, states
+    by_task: dict[str, list] = {}
+    for key, unit in units.items():
+        by_task.setdefault(unit[1], []).append(key)
+    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
+    with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context,
+                                                initializer=hnn.tasks.import_analysis) as pool:
+        # the first unit of every scene now; the rest of a scene once its truth is known
+        running = {pool.submit(run_unit, units[keys[0]], quick): keys[0] for keys in by_task.values()}
+        waiting = {task: keys[1:] for task, keys in by_task.items()}
+        while running:
+            done, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
+            for future in done:
+                key = running.pop(future)
+                results[key], state = future.result()
+                task = units[key][1]
+                if task not in states:
+                    states[task] = state
+                    for other in waiting.pop(task, []):
+                        running[pool.submit(run_unit, units[other], quick, state)] = other
+    return results, states
