@@ -18,7 +18,11 @@ def test_tiny_peers_table(tmp_path):
     for rung in peers.RUNGS:
         entry = row[rung]
         assert "blew_up" in entry or (entry["n"] == 3 and 0 < entry["median"] <= 1), (rung, entry)
-        assert row["seconds"][rung] > 0
+        cost = row["seconds"][rung]            # steps at a rate timed alone on one thread, and the wall time
+        assert cost["steps"] == 3 and cost["seconds"] > 0 and cost["wall"] > 0
+        curve = results["curves"]["chain1"][rung]   # held-out loss at steps 0 and 2, in CHNN epochs of 4 steps
+        assert curve["epochs"] == [0.0, 0.5] and len(curve["test_loss"]) == 2
+    assert (tmp_path / "figures" / "peers-curves.png").stat().st_size > 0
     # the chaos floor of one bob from 3 starts: the published one is 4.9e-5 (100 starts)
     assert 1e-5 < row["floor"]["mean"] < 2e-4
     text = (tmp_path / "peers.md").read_text()

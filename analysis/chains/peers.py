@@ -29,7 +29,8 @@ import hnn
 from hnn.io import atomic_write, write_json
 from hnn_analysis import readme, sweep
 from hnn_analysis.paper.reproduce import portable_command
-from hnn_analysis.provenance import provenance
+from hnn_analysis.provenance import machine, provenance
+from hnn_analysis.scenes.scene_measure import training_cost
 
 RUNGS = ("hnn", "mechanical", "second_order", "baseline")
 # the LNN protocol trains on derivatives of [q, qdot] (the mechanical HNN's through its mass matrix)
@@ -120,9 +121,16 @@ def _loaded(runs: dict, row: str, rungs, seed: int) -> dict:
 
 
 def _seconds(runs: dict, row: str, rungs, seed: int) -> dict:
+    """Each rung's training cost on one quiet thread (``scene_measure.training_cost``: its steps at the
+    rate of short timed bursts of the same config), not the run's wall time, which counts whatever else
+    the machine did meanwhile (kept as ``wall``)."""
     found = {rung: runs.get(f"{row}/{rung}/seed{seed}") for rung in rungs}
-    return {rung: json.loads((folder / "metrics.json").read_text()).get("train_seconds")
-            for rung, folder in found.items() if isinstance(folder, Path)}
+    out = {}
+    for rung, folder in found.items():
+        if isinstance(folder, Path):
+            cost = training_cost("chain", hnn.load_run(folder)[1])
+            out[rung] = {**cost, "wall": json.loads((folder / "metrics.json").read_text()).get("train_seconds")}
+    return out
 
 
 def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
@@ -178,8 +186,13 @@ def markdown(results: dict) -> str:
         lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
                   "pipeline and say nothing about the rungs; the full table comes from `python analysis/peers.py "
                   "--jobs 2 --update-docs`.", ""]
-    lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')}; {meta.get('cores', '?')} cores; "
-              f"training {meta['seconds']['training']:.0f} s, measuring {meta['seconds']['measuring']:.0f} s. "
+    walls = [s["wall"] for row in results["rows"].values() for s in row["seconds"].values() if s.get("wall")]
+    trained = (f"training {meta['seconds']['training']:.0f} s" if meta["seconds"]["training"]
+               else f"every run reused (their recorded training wall times sum to {sum(walls):.0f} s)")
+    lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}); "
+              f"{trained}, measuring {meta['seconds']['measuring']:.0f} s. Training seconds in the tables: each "
+              "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "
+              "quiet core; its recorded wall time is in peers.json). "
               f"Each CHNN-protocol rung trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
@@ -187,14 +200,14 @@ def markdown(results: dict) -> str:
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published NeuralODE | published floor | "
-              + " | ".join(f"ours: {rung}" for rung in RUNGS) + " | our floor | our training s |",
+              + " | ".join(f"ours: {rung}" for rung in RUNGS) + " | our floor | our training s (one thread) |",
               "| --- " * (6 + len(RUNGS)) + "| --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
         n = int(name[len("chain"):])
         peer = published.get(n, {})
-        seconds = ", ".join(f"{rung} {s:.0f}" for rung, s in row["seconds"].items() if s is not None)
+        seconds = ", ".join(f"{rung} {s['seconds']:.0f}" for rung, s in row["seconds"].items())
         lines.append(f"| {n} | " + " | ".join(
             f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "NeuralODE", "floor"))
             + " | " + " | ".join(_cell(row.get(rung)) for rung in RUNGS)
@@ -204,9 +217,11 @@ def markdown(results: dict) -> str:
         lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
         lines += ["", "### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = 100 s, "
                   "mean (median) over the starts (ours: dopri5 at rtol 1e-8)", "",
-                  "| rung | energy error | training s |", "| --- | --- | --- |"]
+                  "| rung | energy error | training s (one thread) |", "| --- | --- | --- |"]
         lines += [f"| published {k} | {v:.2g} | |" for k, v in lnn_published.items()]
-        lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | {lnn['seconds'].get(rung) or 0:.1f} |" for rung in LNN_RUNGS]
+        lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | "
+                  f"{lnn['seconds'][rung]['seconds']:.0f} |" if rung in lnn["seconds"] else f"| ours: {rung} | not trained | |"
+                  for rung in LNN_RUNGS]
     return "\n".join(lines) + "\n"
 
 
