@@ -11,6 +11,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from .errors import DivergenceError
+
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
     """``a`` as a ``(rows, width)`` tensor, or a ValueError that names the problem and the fix."""
@@ -190,6 +192,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 for group in optim.param_groups:
                     group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)
             stats["train_loss"].append(optimizer_step(loss, xb, yb, optim, clip_grad))
+            if not math.isfinite(stats["train_loss"][-1]):
+                raise DivergenceError(f"the training loss is {stats['train_loss'][-1]} at step {step} of "
+                                      f"{total_steps}; the model's weights are no longer finite. Lower --learn_rate, "
+                                      "set --clip_grad (e.g. 1.0) or train in --dtype float64")
             for callback in callbacks:
                 callback(step + 1, total_steps + 1)
             if has_test and (step % test_every == 0 or step == total_steps):

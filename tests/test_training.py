@@ -145,3 +145,12 @@ def test_configs_off_the_papers_optimizer_train_alone_not_in_a_group():
     assert hnn.grouped.group_key(config) is not None
     for change in ({"optimizer": "adamw"}, {"schedule": "cosine"}, {"clip_grad": 1.0}):
         assert hnn.grouped.group_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None
+
+
+def test_a_loss_that_turns_nan_stops_training_and_names_its_step(spring):
+    d = spring.get_dataset(seed=0, noise_std=0.0)
+    model = hnn.build_model(2, 16)
+    with torch.no_grad():
+        model.differentiable_model.linear3.weight.mul_(1e30)     # the loss overflows float32 at once
+    with pytest.raises(hnn.DivergenceError, match="at step 0 of 10.*--clip_grad"):
+        hnn.train(model, d["x"], d["dxdt"], total_steps=10)
