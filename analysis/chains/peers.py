@@ -153,12 +153,15 @@ def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
 
 def curves_figure(found: dict, path: Path) -> Path:
     """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each rung (log axis)."""
+    from matplotlib.ticker import NullFormatter
+
     from hnn_analysis.paper.figures import plt, save_figure
     fig, axes = plt.subplots(1, len(found), figsize=(3.3 * len(found), 3.0), squeeze=False)
     for ax, (row, by_rung) in zip(axes[0], found.items()):
         for rung, curve in by_rung.items():
             ax.plot(curve["epochs"], curve["test_loss"], label=rung, lw=1.2)
         ax.set_yscale("log")
+        ax.yaxis.set_minor_formatter(NullFormatter())     # labelled minor ticks overlap on a short decade
         ax.set_title(f"N = {row[len('chain'):]}, CHNN protocol" if row.startswith("chain") else "LNN double pendulum",
                      fontsize=9)
         ax.set_xlabel("epochs (800 snippets)" if row.startswith("chain") else "steps (batch of states)", fontsize=8)
