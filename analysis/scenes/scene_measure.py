@@ -19,6 +19,8 @@ the machine did while it trained.
 """
 from __future__ import annotations
 
+import copy
+
 import concurrent.futures
 import multiprocessing
 import time
@@ -60,12 +62,19 @@ def training_cost(task: str, args: dict) -> dict:
                    **objective.train_options(model, saved, dataset))
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
+    start = copy.deepcopy(model.state_dict())
+
+    def burst(steps: int) -> float:
+        # every burst from the same start: a fresh Adam's first steps are full-size, and bursts chained
+        # from one model drove a chain rung's weights to divergence
+        model.load_state_dict(start)
+        return hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"]
+
     try:
-        warm = hnn.train(model, x, y, total_steps=2, **options)          # 3 steps: one-time setup, a first rate
-        per_step = warm["seconds"] / 3
+        per_step = burst(3) / 3                                           # one-time setup, a first rate
         steps = int(np.clip(BURST_SECONDS / BURSTS / max(per_step, 1e-6), *BURST_STEPS))
         # the fastest of a few bursts: what the model's steps cost when nothing else interferes
-        rate = max(steps / hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"] for _ in range(BURSTS))
+        rate = max(steps / burst(steps) for _ in range(BURSTS))
     finally:
         torch.set_num_threads(threads)
     return {"steps_per_s": rate, "steps": config.total_steps + 1, "seconds": (config.total_steps + 1) / rate}
