@@ -542,8 +542,8 @@ def main(argv=None) -> int:
         busy = max(env["load_average_before"], env["load_average_after"])
         shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
                   "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")
-        stamp = (f"`{command}` on {datetime.date.today().isoformat()}, torch {env['torch']}, {env['cores']} cores"
-                 f"{', ' + env['cpu'] if env['cpu'] else ''}")
+        stamp = (f"`{command}` on {datetime.date.today().isoformat()} (commit {env['commit']}), torch {env['torch']}, "
+                 f"{env['cores']} cores{', ' + env['cpu'] if env['cpu'] else ''}")
         head = (f"{stamp}, {env['torch_threads']} threads for the comparisons, {args.repeats} interleaved "
                 f"rounds.{shared}")
         body = "\n\n".join(t for t in (floor_table, table, rollout_table) if t)
