@@ -261,7 +261,8 @@ def headline_markdown(results: dict) -> str:
     if wide:
         wide.sort(reverse=True)
         lines += ["", "Wider across seeds than the paper's ± (standard deviation over it, widest first): "
-                  + "; ".join(f"{text} {ratio:.2g}x" for ratio, text in wide) + "."]
+                  + "; ".join(f"{text} {ratio:.0f}x" if ratio >= 10 else f"{text} {ratio:.1f}x"
+                              for ratio, text in wide) + "."]
     return "\n".join(lines) + "\n"
 
 
