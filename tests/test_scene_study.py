@@ -8,7 +8,7 @@ import torch
 
 import hnn
 from hnn_analysis.paper import reproduce
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_study
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -112,6 +112,21 @@ def test_scene_card_picks_the_smallest_model_within_2x_of_both_bests():
     assert (card["label"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
     assert card["best_energy"] == 1e-4 and card["best_rollout"] == 0.09
     assert scene_study.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["label"] == "hnn"
+
+
+def test_scene_card_falls_back_to_the_model_nearest_both_bests():
+    # the best energy and the best rollout come from two models, each far off on the other error:
+    # nothing is within 2x of both, and the card names the smallest larger ratio (here 3x, not 10x)
+    cells = {("mechanical", 16, 0.5): _cell(500, 1e-5, 0.9),        # best energy, 10x the best rollout
+             ("separable", 16, 1.0): _cell(600, 1e-3, 0.09),        # best rollout, 100x the best energy
+             ("hnn", 200, 1.0): _cell(41200, 3e-5, 0.18),           # 3x and 2x: the nearest
+             ("hnn", 32, 1.0): _cell(1200, 4e-5, 0.3)}              # smaller, but 4x and 3.3x
+    card = scene_study.scene_card(cells)
+    assert (card["label"], card["width"]) == ("hnn", 200)
+    assert card["within"] == pytest.approx(3.0)
+    assert "none within 2x of both bests; nearest: hnn, width 200" in scene_report.card_name(card)
+    normal = scene_study.scene_card({("hnn", 32, 1.0): _cell(1200, 1e-4, 0.1)})
+    assert normal["within"] == 1.0 and scene_report.card_name(normal) == "hnn, width 32, 1 of the data"
 
 
 def test_dhnn_split_uses_central_differences_on_their_rows():

@@ -20,7 +20,7 @@ from hnn.io import atomic_write, write_json  # noqa: E402
 
 hnn.tasks.import_analysis()
 from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm  # noqa: E402
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study  # noqa: E402
 
 
 
@@ -139,10 +139,20 @@ def _cell_order(key: str):
     return order, int(width), float(fraction)
 
 
+def card_name(card: dict) -> str:
+    """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
+    name = f"{card['label']}, width {card['width']}, {card['fraction']:g} of the data"
+    within = card.get("within", 1.0)
+    if within > scene_study.CARD_FACTOR:
+        return f"none within {scene_study.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
+    return name
+
+
 def card_table(results: dict) -> list[str]:
     lines = ["**Scene cards**: the smallest model (fewest parameters, then the cheapest to train) whose energy "
              "MSE (corrected protocol, else the paper's) and rollout error both come within 2x of the best of its "
-             "scene, over every rung and (spring, pend, 2body) every width and training fraction. Train s, here and "
+             "scene, over every rung and (spring, pend, 2body) every width and training fraction (where none does, "
+             "the model nearest both bests: the smallest larger ratio, which the row gives). Train s, here and "
              "below: the run's steps at the steps per second of that model alone on one thread, timed by this study "
              "over a short burst (not the run's recorded wall time, which depends on what else the machine did).", "",
              "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds |",
@@ -150,13 +160,12 @@ def card_table(results: dict) -> list[str]:
     for task, entry in results["scenes"].items():
         card = entry.get("card")
         if not card:
-            lines.append(f"| {task} | none within 2x of both bests | | | | | |")
+            lines.append(f"| {task} | no model measured on both | | | | | |")
             continue
         seeds = card.get("seeds", {})
         over = ", ".join(f"{k.replace('_seeds', '')} {_pm(v)}" for k, v in seeds.items()
                          if k in ("error_seeds", "energy_mse_corrected_seeds", "energy_mse_paper_seeds"))
-        lines.append(f"| {task} | {card['label']}, width {card['width']}, {card['fraction']:g} of the data | "
-                     f"{card['params']} | {_g(card['energy'])} ({_g(card['best_energy'])}) | "
+        lines.append(f"| {task} | {card_name(card)} | {card['params']} | {_g(card['energy'])} ({_g(card['best_energy'])}) | "
                      f"{_g(card['rollout'])} ({_g(card['best_rollout'])}) | {_g(card['train_seconds'])} | {over} |")
     return lines
 
@@ -207,8 +216,7 @@ def guide(results: dict) -> str:
     for task, entry in results["scenes"].items():
         card = entry.get("card")
         if card:
-            lines.append(f"| {task} | {card['label']}, width {card['width']}, {card['fraction']:g} of the data | "
-                         f"{_g(card['energy'])} / {_g(card['rollout'])} | {_g(card['train_seconds'])} |")
+            lines.append(f"| {task} | {card_name(card)} | {_g(card['energy'])} / {_g(card['rollout'])} | {_g(card['train_seconds'])} |")
     meta = results["meta"]
     lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every rung, the grids, "
               "the speed at equal accuracy and the D-HNN comparison: [docs/scenes.md](docs/scenes.md)."]
@@ -221,6 +229,7 @@ def pareto_figure(results: dict, path: Path) -> None:
     if not scenes:
         return
     fig, axes = plt.subplots(len(scenes), 2, figsize=(9, 2.6 * len(scenes)), squeeze=False)
+    legend = {}     # one legend for the figure: a legend in every panel covered its points
     for ax_row, task in zip(axes, scenes):
         cells = _all_cells(results["scenes"][task])
         for ax, xkey, xlabel in ((ax_row[0], "train", "training s (one thread)"), (ax_row[1], None, "rollout s")):
@@ -249,13 +258,16 @@ def pareto_figure(results: dict, path: Path) -> None:
             ax.set_xlabel(xlabel)
             ax.set_ylabel(f"{task}: rollout error")
             handles, labels = ax.get_legend_handles_labels()
-            unique = dict(zip(labels, handles))
-            ax.legend(unique.values(), unique.keys(), fontsize=7)
+            legend.update(zip(labels, handles))
     title = "Scene study: rollout error vs cost (black: Pareto front)"
     if results["meta"]["quick"]:
         title = "QUICK smoke run, not the study's settings. " + title
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0, 1, 0.99))
+    inch = 1 / fig.get_figheight()              # one inch in figure coordinates
+    fig.suptitle(title, fontsize=10, y=1 - 0.1 * inch, va="top")
+    fig.legend(legend.values(), legend.keys(), loc="upper center", ncol=len(legend), fontsize=8,
+               bbox_to_anchor=(0.5, 1 - 0.3 * inch), frameon=False)
+    top = 1 - 0.6 * inch                         # the panels start below the title and the legend
+    fig.tight_layout(rect=(0, 0, 1, top))
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format="png"))
     plt.close(fig)

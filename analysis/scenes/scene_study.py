@@ -260,19 +260,31 @@ def _key_metric(m: dict) -> tuple[float | None, float | None]:
 def scene_card(cells: dict) -> dict | None:
     """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) within
     ``CARD_FACTOR`` of the scene's best energy MSE and best rollout error. ``cells`` is ``{(label,
-    width, fraction): measured}``."""
+    width, fraction): measured}``. Where no model is within ``CARD_FACTOR`` of both (the two bests
+    come from different models), the model nearest both: the smallest larger of its two ratios.
+    ``within`` is the pick's larger ratio to the bests (at most ``CARD_FACTOR`` unless it fell back)."""
     scored = {k: _key_metric(m) for k, m in cells.items()}
     best_e = min((e for e, _ in scored.values() if e is not None), default=None)
     best_r = min((r for _, r in scored.values() if r is not None), default=None)
-    ok = [k for k, (e, r) in scored.items()
-          if (best_e is None or (e is not None and e <= CARD_FACTOR * best_e))
-          and (best_r is None or (r is not None and r <= CARD_FACTOR * best_r))]
-    if not ok:
+
+    def within(key) -> float:
+        e, r = scored[key]
+        ratios = [(value / best if best > 0 else 1.0) if value is not None else math.inf
+                  for value, best in ((e, best_e), (r, best_r)) if best is not None]
+        return max(ratios, default=1.0)
+
+    if not scored:
         return None
-    pick = min(ok, key=lambda k: (cells[k]["params"], scene_measure.cost_seconds(cells[k]) or 0.0))
+    ok = [k for k in scored if within(k) <= CARD_FACTOR]
+    def size(key) -> tuple:
+        return cells[key]["params"], scene_measure.cost_seconds(cells[key]) or 0.0
+
+    pick = min(ok, key=size) if ok else min(scored, key=lambda k: (within(k), *size(k)))
+    if not math.isfinite(within(pick)):
+        return None
     return {"label": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
             "params": cells[pick]["params"], "train_seconds": scene_measure.cost_seconds(cells[pick]),
-            "energy": scored[pick][0], "rollout": scored[pick][1]}
+            "energy": scored[pick][0], "rollout": scored[pick][1], "within": within(pick)}
 
 
 # ----------------------------------------------------------------------------------------------
