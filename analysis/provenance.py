@@ -45,3 +45,30 @@ def provenance() -> dict:
 def machine(meta: dict) -> str:
     """The box a timing was taken on, as a stamp names it: ``'2 cores, AVX512'``."""
     return f"{meta.get('cores', '?')} cores, {meta.get('cpu', 'unknown CPU')}"
+
+
+def cpu_snapshot() -> dict:
+    """Wall clock, this process's CPU seconds (with its finished children) and, on Linux, the CPU
+    seconds every process on the machine has run since boot; two snapshots give ``others_load``."""
+    import resource
+    import time
+    own = time.process_time() + sum(getattr(resource.getrusage(resource.RUSAGE_CHILDREN), f)
+                                    for f in ("ru_utime", "ru_stime"))
+    try:
+        # /proc/stat's first line: user nice system idle iowait irq softirq steal ..., in clock ticks
+        ticks = [int(v) for v in open("/proc/stat").readline().split()[1:9]]
+        machine_busy = (sum(ticks[:3]) + sum(ticks[5:8])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError):
+        machine_busy = None
+    return {"wall": time.perf_counter(), "own": own, "machine_busy": machine_busy}
+
+
+def others_load(start: dict, end: dict) -> float:
+    """Mean number of cores other processes kept busy between two ``cpu_snapshot()`` calls.
+
+    The load average cannot tell: a benchmark's own thread adds 1.0 to it. Off Linux, falls back
+    to the one-minute load average at ``end``, which then includes this process."""
+    if start["machine_busy"] is None or end["machine_busy"] is None:
+        return os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
+    wall = max(end["wall"] - start["wall"], 1e-9)
+    return max(0.0, (end["machine_busy"] - start["machine_busy"] - (end["own"] - start["own"])) / wall)

@@ -1,4 +1,9 @@
 """analysis/speed/floor.py: the matrix products a training step performs, as the benchmark's floor counts them."""
+import os
+import subprocess
+import sys
+import time
+
 import pytest
 import torch
 
@@ -72,3 +77,23 @@ def test_the_group_table_is_rewritten_alone_and_the_other_jobs_leave_it(tmp_path
     assert again == f"new main\n\n{benchmark.GROUP_MARK}\n\nstamp A\n\ngroup table A"
     page.write_text(f"intro\n<!-- benchmark:begin -->\n{again}\n<!-- benchmark:end -->\nafter\n")
     assert benchmark._benchmark_section(None, "stamp B\n\ngroup table B").count("group table") == 1
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="the machine's CPU seconds come from Linux's /proc/stat")
+def test_the_benchmarks_own_work_does_not_count_as_a_shared_machine():
+    from hnn_analysis.provenance import cpu_snapshot, others_load
+    start = cpu_snapshot()
+    t = time.perf_counter()
+    while time.perf_counter() - t < 0.6:   # one core busy in this process: load average would read ~1
+        pass
+    own = others_load(start, cpu_snapshot())
+    # a child burning one core while this process sleeps: another process, not yet waited for
+    child = subprocess.Popen([sys.executable, "-c", "import time\nt=time.time()\nwhile time.time()-t<1.5: pass"])
+    time.sleep(0.2)   # past the child's interpreter start-up
+    start = cpu_snapshot()
+    time.sleep(0.8)
+    other = others_load(start, cpu_snapshot())
+    child.wait()
+    # the margins leave room for whatever else the test machine runs
+    assert own < 0.5, own
+    assert other > 0.6, other

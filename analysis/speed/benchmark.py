@@ -58,7 +58,6 @@ import argparse
 import copy
 import dataclasses
 import datetime
-import os
 import statistics
 import sys
 import time
@@ -77,7 +76,7 @@ from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis.speed import benchmark_group, benchmark_rollouts, floor  # noqa: E402
 from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import provenance  # noqa: E402
+from hnn_analysis.provenance import cpu_snapshot, others_load, provenance  # noqa: E402
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -481,8 +480,8 @@ def main(argv=None) -> int:
     protocol = hnn.get_protocol("spring", "corrected")
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
-    env = {**provenance(), "torch_threads": args.threads, "cpu": _cpu_flags(),
-           "load_average_before": os.getloadavg()[0]}
+    env = {**provenance(), "torch_threads": args.threads, "cpu": _cpu_flags()}
+    started = cpu_snapshot()
     print(f"torch {env['torch']} ({env['torch_threads']} threads), numpy {env['numpy']}, scipy {env['scipy']}; "
           f"{args.repeats} interleaved round(s) per job{' (quick)' if args.quick else ''}", flush=True)
 
@@ -512,7 +511,7 @@ def main(argv=None) -> int:
         rollouts = benchmark_rollouts.job_rollout(model, rounds=max(20, args.floor_rounds // 2),
                                                   repeats=max(1, min(args.repeats, 3)))
     group = benchmark_group.job_group(args.quick, repeats=max(1, min(args.repeats, 3))) if "group" in args.jobs else None
-    env["load_average_after"] = os.getloadavg()[0]
+    env["others_load"] = others_load(started, cpu_snapshot())
 
     checked = {**({"floor": floors} if floors else {}), **results}
     failed = [f"{job}: {c['name']}" for job, r in checked.items() for c in r["checks"] if not c["passed"]]
@@ -539,9 +538,10 @@ def main(argv=None) -> int:
     print(f"\nwrote {args.out}")
     if args.update_docs:
         command = " ".join(["python analysis/speed/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
-        busy = max(env["load_average_before"], env["load_average_after"])
-        shared = (f" **The machine was shared while measuring** (load average {busy:.1f} on {env['cores']} cores): "
-                  "other processes slowed both sides of every ratio, unevenly." if busy > 0.5 else "")
+        busy = env["others_load"]
+        shared = (f" **The machine was shared while measuring** (other processes kept {busy:.1f} of "
+                  f"{env['cores']} cores busy on average): they slowed both sides of every ratio, unevenly."
+                  if busy > 0.3 else "")
         stamp = (f"`{command}` on {datetime.date.today().isoformat()} (commit {env['commit']}), torch {env['torch']}, "
                  f"{env['cores']} cores{', ' + env['cpu'] if env['cpu'] else ''}")
         head = (f"{stamp}, {env['torch_threads']} threads for the comparisons, {args.repeats} interleaved "
