@@ -7,6 +7,7 @@ Every generated section is written only this way, never by hand, by the command 
     python analysis/speed/benchmark.py --update-docs        # docs/speed.md
     python analysis/speed/speed_accuracy.py --update-docs   # docs/integrators.md
     python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
+    python analysis/speed/ray_overhead.py [--full] --update-docs   # docs/sweeps.md: Ray against local
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
     python analysis/readme.py check                          # which pages are older than the code
 
@@ -27,7 +28,7 @@ from hnn.io import atomic_write
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
          "speed-accuracy": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
-         "peers": "docs/peers.md"}
+         "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md"}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -37,7 +38,9 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "speed-accuracy": "python analysis/speed/speed_accuracy.py --update-docs",
            "scenes": "python analysis/scene_study.py --jobs 2 --update-docs",
            "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
-           "peers": "python analysis/peers.py --jobs 2 --update-docs"}
+           "peers": "python analysis/peers.py --jobs 2 --update-docs",
+           "ray-quick": "python analysis/speed/ray_overhead.py --update-docs",
+           "ray-full": "python analysis/speed/ray_overhead.py --full --update-docs"}
 # the code whose changes can move a generated number (git pathspecs)
 CODE = ("hnn", "experiment-*")
 # the few figures the README shows (about 1.2 MB in all), copied from a full run's figures/

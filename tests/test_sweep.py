@@ -323,3 +323,17 @@ def test_grouped_sweeps_save_the_runs_of_lone_ones(backend, n_jobs, tmp_path):
         assert mine["history"].get("group_size", 1) == (1 if "w200" in key else 4)
         for name in LOSSES:
             assert mine[name] == pytest.approx(theirs[name], rel=1e-4), (key, name)
+
+
+def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times():
+    from hnn_analysis.speed import ray_overhead
+    assert ray_overhead.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
+    a = {"meta": {"commit": "x"}, "seconds": {"total": 1.0},
+         "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5, "ok": True}}}}
+    b = {"meta": {"commit": "y"}, "seconds": {"total": 9.0},
+         "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5 * (1 + 1e-12), "ok": True}},
+                   "pend": {"hnn": {"loss": 2.0}}}}
+    got = ray_overhead.compare(a, b)
+    # times, provenance and booleans are not results; NaN on both sides counts as equal
+    assert (got["numbers"], got["equal"], got["only_one_side"]) == (3, 2, 1)
+    assert got["worst_relative_difference"] == pytest.approx(1e-12, rel=1e-3)
