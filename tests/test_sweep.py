@@ -329,7 +329,7 @@ def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times(
     from hnn_analysis.speed import ray_overhead
     assert ray_overhead.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
     a = {"meta": {"commit": "x"}, "seconds": {"total": 1.0},
-         "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5, "ok": True}}}}
+         "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5, "ok": True, "train_seconds": 3.0}}}}
     b = {"meta": {"commit": "y"}, "seconds": {"total": 9.0},
          "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5 * (1 + 1e-12), "ok": True}},
                    "pend": {"hnn": {"loss": 2.0}}}}

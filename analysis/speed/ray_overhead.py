@@ -40,9 +40,9 @@ def order(repeats: int) -> list[str]:
 
 
 def numbers(tree, prefix: str = "") -> dict[str, float]:
-    """The numeric leaves of a ``results.json`` tree by path, without its times and provenance."""
+    """The numeric leaves of a ``results.json`` tree by path, without its times (``*seconds*``) and provenance."""
     if isinstance(tree, dict):
-        return {k: v for key, sub in tree.items() if key not in ("seconds", "meta")
+        return {k: v for key, sub in tree.items() if key != "meta" and "seconds" not in key
                 for k, v in numbers(sub, f"{prefix}/{key}").items()}
     if isinstance(tree, list):
         return {k: v for i, sub in enumerate(tree) for k, v in numbers(sub, f"{prefix}/{i}").items()}
@@ -56,9 +56,11 @@ def compare(a: dict, b: dict) -> dict:
     x, y = numbers(a), numbers(b)
     shared = sorted(set(x) & set(y))
     equal = sum(x[k] == y[k] or (x[k] != x[k] and y[k] != y[k]) for k in shared)   # NaN == NaN here
-    gaps = [abs(x[k] - y[k]) / max(abs(x[k]), abs(y[k])) for k in shared if x[k] != y[k] and x[k] == x[k] and y[k] == y[k]]
+    gaps = {k: abs(x[k] - y[k]) / max(abs(x[k]), abs(y[k])) for k in shared
+            if x[k] != y[k] and x[k] == x[k] and y[k] == y[k]}
     return {"numbers": len(shared), "equal": equal, "only_one_side": len(set(x) ^ set(y)),
-            "worst_relative_difference": max(gaps, default=0.0)}
+            "worst_relative_difference": max(gaps.values(), default=0.0),
+            "largest_differences": dict(sorted(gaps.items(), key=lambda kv: -kv[1])[:10])}
 
 
 def run_once(backend: str, full: bool, workdir: Path) -> tuple[dict, dict]:
@@ -129,6 +131,7 @@ def section(result: dict) -> str:
               f"the local runs spread over {max(local) - min(local):.1f} s. The first run of each backend gave "
               f"{cmp['equal']} of {cmp['numbers']} numbers in `results.json` bit for bit equal "
               f"(worst relative difference {cmp['worst_relative_difference']:.1e}"
+              + (f", in {next(iter(cmp['largest_differences']))}" if cmp["largest_differences"] else "")
               + (f", {cmp['only_one_side']} on one side only" if cmp["only_one_side"] else "") + ")."]
     return "\n".join(lines)
 
