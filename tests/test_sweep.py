@@ -155,9 +155,11 @@ def test_only_the_sweep_imports_ray():
     root = hnn.tasks.repo_root()
     sources = [p for folder in ["hnn", "analysis", *[d.name for d in root.glob("experiment-*")]]
                for p in (root / folder).rglob("*.py")]
-    importing = [p.relative_to(root).as_posix() for p in sources
-                 if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines())]
-    assert importing == ["analysis/sweep.py"]
+    importing = sorted(p.relative_to(root).as_posix() for p in sources
+                       if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
+    # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
+    # each inside a function that names the extra when it is missing; nothing else may.
+    assert importing == ["analysis/speed/ray_overhead.py", "analysis/sweep.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():
