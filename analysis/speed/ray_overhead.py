@@ -98,8 +98,8 @@ def ray_fixed_cost(tries: int = 3) -> list[dict]:
     return out
 
 
-def _span(values) -> str:
-    return f"{min(values):.1f}-{max(values):.1f}"
+def _span(values, scale: float = 1.0) -> str:
+    return f"{scale * min(values):.1f}-{scale * max(values):.1f}"
 
 
 def section(result: dict) -> str:
@@ -114,7 +114,7 @@ def section(result: dict) -> str:
              f"in the order {', '.join(r['backend'] for r in runs)}; one-minute load average before each run "
              f"{_span([r['load_before'] for r in runs])} (a run just ended raises it).", "",
              f"Ray's fixed cost, {len(fixed)} tries: `ray.init` {_span([f['init'] for f in fixed])} s, its first task "
-             f"{_span([f['first_task'] for f in fixed])} s, `ray.shutdown` {_span([f['shutdown'] for f in fixed])} s.", "",
+             f"{_span([f['first_task'] for f in fixed], 1e3)} ms, `ray.shutdown` {_span([f['shutdown'] for f in fixed])} s.", "",
              "```bash",
              f"python analysis/reproduce.py{'' if full else ' --quick'} --jobs 2 --out DIR                 # --backend local",
              f"python analysis/reproduce.py{'' if full else ' --quick'} --jobs 2 --backend ray --out DIR",
