@@ -29,7 +29,7 @@ from hnn.io import write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import machine, provenance  # noqa: E402
+from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance  # noqa: E402
 
 BACKENDS = ("local", "ray")
 
@@ -70,7 +70,11 @@ def run_once(backend: str, full: bool, workdir: Path) -> tuple[dict, dict]:
     subprocess.run(["git", "clone", "-q", "--shared", str(root), str(clone)], check=True)
     cmd = [sys.executable, str(root / "analysis" / "reproduce.py"), "--jobs", "2", "--backend", backend,
            "--out", str(out)] + ([] if full else ["--quick"])
-    load = os.getloadavg()[0]
+    # how busy other processes kept the machine just before: the load average cannot say (a run just
+    # ended still weighs on it), the machine's CPU seconds over a second of sleep can
+    before = cpu_snapshot()
+    time.sleep(1.0)
+    others = others_load(before, cpu_snapshot())
     start = time.perf_counter()
     with open(workdir / "log.txt", "w") as log:
         done = subprocess.run(cmd, env={**os.environ, "HNN_REPO": str(clone)}, stdout=log, stderr=subprocess.STDOUT)
@@ -79,7 +83,7 @@ def run_once(backend: str, full: bool, workdir: Path) -> tuple[dict, dict]:
         raise RuntimeError(f"{' '.join(cmd)} failed with code {done.returncode}; its log: {workdir / 'log.txt'}")
     results = json.loads((out / "results.json").read_text())
     seconds = results["seconds"]
-    return ({"backend": backend, "load_before": load, "wall": wall, "training": seconds["training"],
+    return ({"backend": backend, "others_before": others, "wall": wall, "training": seconds["training"],
              "evaluation": seconds["evaluation"]}, results)
 
 
@@ -98,8 +102,8 @@ def ray_fixed_cost(tries: int = 3) -> list[dict]:
     return out
 
 
-def _span(values, scale: float = 1.0) -> str:
-    return f"{scale * min(values):.1f}-{scale * max(values):.1f}"
+def _span(values, scale: float = 1.0, digits: int = 1) -> str:
+    return f"{scale * min(values):.{digits}f}-{scale * max(values):.{digits}f}"
 
 
 def section(result: dict) -> str:
@@ -111,8 +115,8 @@ def section(result: dict) -> str:
     cmp = result["comparison"]
     lines = [f"`{meta['command']}` on {meta['date']} (commit {meta['commit']}, {machine(meta)}, torch "
              f"{meta['torch']}, Ray {result['ray']}): {len(runs) // 2} run(s) of each backend from nothing, "
-             f"in the order {', '.join(r['backend'] for r in runs)}; one-minute load average before each run "
-             f"{_span([r['load_before'] for r in runs])} (a run just ended raises it).", "",
+             f"in the order {', '.join(r['backend'] for r in runs)}; other processes kept "
+             f"{_span([r['others_before'] for r in runs], digits=2)} cores busy in the second before each run.", "",
              f"Ray's fixed cost, {len(fixed)} tries: `ray.init` {_span([f['init'] for f in fixed])} s, its first task "
              f"{_span([f['first_task'] for f in fixed], 1e3)} ms, `ray.shutdown` {_span([f['shutdown'] for f in fixed])} s.", "",
              "```bash",
