@@ -55,12 +55,18 @@ def cpu_snapshot() -> dict:
     own = time.process_time() + sum(getattr(resource.getrusage(resource.RUSAGE_CHILDREN), f)
                                     for f in ("ru_utime", "ru_stime"))
     try:
-        # /proc/stat's first line: user nice system idle iowait irq softirq steal ..., in clock ticks
-        ticks = [int(v) for v in open("/proc/stat").readline().split()[1:9]]
-        machine_busy = (sum(ticks[:3]) + sum(ticks[5:8])) / os.sysconf("SC_CLK_TCK")
+        with open("/proc/stat") as stat:
+            machine_busy = busy_seconds(stat.readline(), os.sysconf("SC_CLK_TCK"))
     except (OSError, ValueError):
         machine_busy = None
     return {"wall": time.perf_counter(), "own": own, "machine_busy": machine_busy}
+
+
+def busy_seconds(cpu_line: str, ticks_per_second: int) -> float:
+    """The CPU seconds all cores were busy since boot, from /proc/stat's first line (``cpu user nice
+    system idle iowait irq softirq steal ...`` in clock ticks): everything but idle and iowait."""
+    ticks = [int(v) for v in cpu_line.split()[1:9]]
+    return (sum(ticks[:3]) + sum(ticks[5:8])) / ticks_per_second
 
 
 def others_load(start: dict, end: dict) -> float:
