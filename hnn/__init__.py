@@ -11,21 +11,23 @@ from .integrate import rollout
 from .fixed_step import YOSHIDA_WEIGHTS, rk4_step
 from .solvers import SOLVERS, SYMPLECTIC_METHODS, Solver, get_solver, register_solver
 from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
-from .models import HNN, MLP, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
+from .interface import COORDINATES, Model
+from .models import HNN, MLP, Baseline, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
 from .structured import DissipativeHNN, SeparableHNN
-from .objectives import MODEL_KINDS, DerivativeObjective, ModelKind, Objective, PixelObjective, register_model_kind
-from .config import RunConfig
+from .objectives import DerivativeObjective, Objective, PixelObjective
 from .mechanical import MechanicalHNN, SecondOrderNODE
-from .trajectory import OBJECTIVES, TrajectoryObjective, get_objective, snippet_loss
+from .trajectory import TrajectoryObjective, snippet_loss
+from .kinds import MODEL_KINDS, OBJECTIVES, ModelKind, get_objective
+from .config import RunConfig
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import TaskSpec, available_tasks, load_task, task_spec
 from .training import train
 from .gifs import write_gif
-from . import cli, grouped, nbody, objectives, paper, trajectory
+from . import cli, grouped, interface, kinds, nbody, objectives, paper, trajectory
 from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
 
 __all__ = [
-    "HNN", "MLP", "MLPAutoencoder", "PixelHNN", "build_model", "get_nonlinearity", "permutation_tensor",
+    "Model", "COORDINATES", "Baseline", "HNN", "MLP", "MLPAutoencoder", "PixelHNN", "build_model", "get_nonlinearity", "permutation_tensor",
     "rollout", "rk4_step", "DivergenceError", "ConvergenceError", "SYMPLECTIC_METHODS", "YOSHIDA_WEIGHTS",
     "SOLVERS", "Solver", "get_solver", "register_solver",
     "train",
@@ -33,8 +35,8 @@ __all__ = [
     "RunConfig", "run_experiment", "run_dir", "save_run", "load_run", "find_run",
     "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "SecondOrderNODE",
     "TrajectoryObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
-    "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind", "register_model_kind",
+    "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "grouped", "nbody", "objectives",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "grouped", "interface", "kinds", "nbody", "objectives",
     "paper",
 ]

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from . import objectives
+from . import kinds
 from .io import check_save_dir
 
 USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it
@@ -156,7 +156,7 @@ def model_choices(cls=None) -> list[str]:
     """The model kinds ``--model`` of config class ``cls`` takes: its ``MODELS``, else every
     registered kind without a family prefix (the pixel kinds are the pixel task's own)."""
     declared = getattr(cls, "MODELS", None)
-    return list(declared) if declared else [kind for kind in objectives.MODEL_KINDS if "-" not in kind]
+    return list(declared) if declared else [kind for kind in kinds.MODEL_KINDS if "-" not in kind]
 
 
 def _flag_type(cls, f: dataclasses.Field, meta: dict):

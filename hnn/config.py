@@ -23,8 +23,8 @@ from typing import Any, ClassVar
 
 from . import cli
 from .models import FIELD_TYPES, NONLINEARITIES
-from .objectives import DerivativeObjective, Objective, objective_for
-from .trajectory import OBJECTIVES, get_objective
+from .kinds import OBJECTIVES, get_objective, objective_for
+from .objectives import DerivativeObjective, Objective
 
 
 def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False) -> Any:

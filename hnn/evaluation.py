@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from .integrate import rollout
+from .interface import declared
 from .metrics import energy_mse
 from .solvers import get_solver
 from .tasks import PROTOCOLS
@@ -170,15 +171,28 @@ def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol) -> torc
         return rollout(f, x0, t_eval, **protocol.rollout_options())
 
 
-def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dict | None = None) -> dict:
+def _model_rollout(model, run, x0: torch.Tensor, observed: str) -> torch.Tensor:
+    """``run(field, start)`` of ``model`` from observed starts ``x0`` in ``observed`` coordinates,
+    in the model's own dtype and state, mapped back to observed states ``(batch, T, dim)``."""
+    dtype = next(model.parameters()).dtype
+    x = declared(model).state_from(x0.to(dtype), observed)
+    traj = run(model.time_derivative, x)
+    with torch.no_grad():
+        return model.observed_from(traj.reshape(-1, traj.shape[-1]), observed).reshape(traj.shape)
+
+
+def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dict | None = None,
+                    observed: str = "canonical") -> dict:
     """Run ``protocol`` on the true ``system`` (a task's data module) and each model.
 
     Args:
         system: has ``hamiltonian(x)`` on ``(batch, dim)`` tensors, and ``dynamics(x)`` (or,
             for ``'seeds'`` protocols, ``initial_state(seed)``) as the protocol needs.
-        models: ``{label: model}``; each model's ``time_derivative`` is integrated in the
-            model's own dtype, as the original did (float32).
+        models: ``{label: model}`` (``hnn.Model``); each model's field is integrated in the
+            model's own dtype, as the original did (float32), and in its own state: the starts are
+            mapped from ``observed`` coordinates into it and its path back (``hnn.Model.state_from``).
         dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).
+        observed: the coordinates of the system's states (``dataset["state"]``; ``'canonical'``).
 
     Returns:
         ``{'protocol': {...}, 'x0': ..., 't_truth': (trials, T), 'truth': (trials, T, dim),
@@ -186,7 +200,7 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
         (trials = 1 for a test segment).
     """
     if protocol.x0 == "test_segment":
-        return _evaluate_segment(system, models, protocol, dataset)
+        return _evaluate_segment(system, models, protocol, dataset, observed)
     x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64)
     t0, t1 = protocol.t_span
     trials = np.arange(protocol.num_trials)
@@ -199,15 +213,15 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     out = {"protocol": asdict(protocol), "x0": x0.numpy(), "truth": truth.numpy(), "energy_truth": e_true,
            "t_truth": t0 + truth_spans[:, None] * np.linspace(0, 1, protocol.num_points)}
     for label, model in models.items():
-        dtype = next(model.parameters()).dtype
-        traj = _rollout_scaled(model.time_derivative, x0.to(dtype), model_spans, protocol.num_points, protocol)
+        traj = _model_rollout(model, lambda f, x: _rollout_scaled(f, x, model_spans, protocol.num_points, protocol),
+                              x0, observed)
         e_model = _energy(system, protocol, traj)
         mse, se = energy_mse(e_true, e_model, protocol.splits)
         out[label] = {"traj": traj.to(torch.float64).numpy(), "energy": e_model, "mse": mse, "mse_se": se}
     return out
 
 
-def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: dict | None) -> dict:
+def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: dict | None, observed: str) -> dict:
     """The real pendulum's protocol: integrate from the first measured test state over the
     measured times and compare energies step by step (± over contiguous time chunks)."""
     if dataset is None or "test_t" not in dataset:
@@ -219,8 +233,7 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     out = {"protocol": asdict(protocol), "x0": measured[:1].numpy(), "truth": measured[None].numpy(),
            "energy_truth": e_true[None], "t_truth": t[None]}
     for label, model in models.items():
-        dtype = next(model.parameters()).dtype
-        traj = _protocol_rollout(model.time_derivative, measured[:1].to(dtype), t, protocol)[0]
+        traj = _model_rollout(model, lambda f, x: _protocol_rollout(f, x, t, protocol), measured[:1], observed)[0]
         e_model = _energy(system, protocol, traj)
         mse, se = energy_mse(e_true, e_model, protocol.splits)
         out[label] = {"traj": traj.to(torch.float64).numpy()[None], "energy": e_model[None], "mse": mse, "mse_se": se}
@@ -253,8 +266,9 @@ def energy_bump(model, x0, t_flow: float = 6.0, t_bump: float = 0.1, t_after: fl
     along the path, and its mean and spread in the two flow stages (spreads near 0 and a higher
     mean after: the bump stays).
     """
-    if getattr(model, "baseline", False):
-        raise ValueError("the energy bump needs an HNN: a baseline has no H to climb")
+    if not declared(model).conservative:
+        raise ValueError(f"the energy bump needs a model with a conserved H; {type(model).__name__} declares "
+                         "conservative=False (a baseline has no H to climb)")
     model = float64_copy(model)
     x = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(1, -1))
     t_after = t_flow if t_after is None else t_after

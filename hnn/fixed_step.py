@@ -33,6 +33,7 @@ import numpy as np
 import torch
 
 from .errors import ConvergenceError, divergence_error
+from .interface import SplitField
 
 Field = Callable[[torch.Tensor], torch.Tensor]
 
@@ -69,14 +70,10 @@ def _rk4_increment(f: Field, x: torch.Tensor, h: float) -> torch.Tensor:
 
 
 def separable_halves(f: Field):
-    """``(dT/dp, dV/dq)`` as two functions of ``(batch, n)`` halves when ``f`` is the ``time_derivative``
-    of a model that offers them (``kinetic_gradient(p)``, ``potential_gradient(q)``, as
-    ``hnn.SeparableHNN``), so a stage that reads one half of the field evaluates only that half; else None."""
-    owner = getattr(f, "__self__", None)
-    if getattr(f, "__name__", None) != "time_derivative" or owner is None:
-        return None
-    kinetic, potential = getattr(owner, "kinetic_gradient", None), getattr(owner, "potential_gradient", None)
-    return (kinetic, potential) if callable(kinetic) and callable(potential) else None
+    """``(dT/dp, dV/dq)`` as two functions of ``(batch, n)`` halves when ``f`` is a
+    ``hnn.interface.SplitField`` (a separable model's ``field``), so a stage that reads one half of
+    the field evaluates only that half; else None."""
+    return (f.kinetic_gradient, f.potential_gradient) if isinstance(f, SplitField) else None
 
 
 class Stepper:

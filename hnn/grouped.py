@@ -33,6 +33,7 @@ import torch
 from tqdm.auto import tqdm
 
 from .models import HNN, MLP, FIELD_ROWS
+from .kinds import model_from_args
 from .objectives import DerivativeObjective
 from .runs import finish_run, run_dir, training_subset
 from .structured import SeparableHNN
@@ -343,7 +344,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
         torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
         np.random.seed(config.seed)
-        models.append(objective.build(args).to(config.device))
+        models.append(model_from_args(args).to(config.device))
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         data.append(training_subset(x, y, config.train_fraction, config.seed))
         tests.append((test_x, test_y))

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from .fixed_step import Field
+from .interface import Model
 from .solvers import Solver, get_solver
 from .tanh_mlp import frozen_weights
 
@@ -66,7 +67,8 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
 
     Args:
         f: maps a ``(batch, dim)`` tensor to ``dx/dt`` of the same shape (a model's
-            ``time_derivative`` or a task's true dynamics).
+            ``time_derivative`` or a task's true dynamics), or an ``hnn.Model``, whose declared
+            ``field`` is stepped (a separable model's halves one at a time where a stage reads one).
         x0: initial states, ``(batch, dim)`` (a single state ``(dim,)`` is treated as batch 1).
             Its dtype is the dtype ``f`` is evaluated in.
         t_eval: 1-D times (units of the system), starting at the time of ``x0``.
@@ -109,6 +111,8 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
     """
     solver = get_solver(method)
+    if isinstance(f, Model):
+        f = f.field
     if differentiable and solver.adaptive:
         raise ValueError(f"{method} chooses its steps outside autograd and cannot give a differentiable rollout; "
                          "use a fixed-step method (rk4, leapfrog, midpoint, yoshida4) with differentiable=True")

@@ -19,15 +19,15 @@ default base (``hnn.rollout`` would silently be wrong, ``hnn.trajectory`` refuse
     traj = hnn.rollout(model.time_derivative, x, t_eval, method="dopri5", rtol=1e-7)
     z_t = model.observed_from_state(traj.reshape(-1, 4))
 
-Registered as the model kinds ``'mechanical'`` and ``'second_order'`` (``hnn.MODEL_KINDS``).
+The model kinds ``'mechanical'`` and ``'second_order'`` (rows of ``hnn.MODEL_KINDS``).
 """
 from __future__ import annotations
 
 import torch
 from torch import nn
 
+from .interface import Model
 from .models import MLP
-from .objectives import DerivativeObjective, register_model_kind
 
 
 def _check_width(input_dim, kind: str) -> int:
@@ -41,7 +41,7 @@ def _embed(q: torch.Tensor, periodic: bool) -> torch.Tensor:
     return torch.cat([torch.cos(q), torch.sin(q)], dim=1) if periodic else q
 
 
-class _StateCheck(nn.Module):
+class _StateCheck(Model):
     input_dim: int
 
     def _check_input(self, x: torch.Tensor) -> None:
@@ -62,10 +62,11 @@ class MechanicalHNN(_StateCheck):
 
     Valid where T is quadratic in p with a configuration-dependent mass (any holonomic
     mechanical system in generalized coordinates). Not separable: roll out with ``midpoint``
-    (symplectic for any H) or ``dopri5``; ``separable`` is False so ``hnn.trajectory`` refuses
-    ``leapfrog`` for it.
+    (symplectic for any H) or ``dopri5``; ``hnn.trajectory`` refuses ``leapfrog`` for it.
+    Declares ``maps = ('velocity',)``: observed [q, qdot] map to [q, p] through its mass matrix.
     """
-    separable = False
+    conservative = True
+    maps = ("velocity",)
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False,
                  eps: float = 1e-4):
@@ -148,11 +149,11 @@ class SecondOrderNODE(_StateCheck):
 
     Valid on states of positions and *velocities* (v = dq/dt), e.g. trajectories observed as
     [q, qdot]; on canonical [q, p] it is wrong unless p = qdot (unit mass). No energy, not
-    symplectic, not separable: roll out with ``rk4`` or ``dopri5``. The objectives refuse it
-    on a task whose states are canonical (``needs_velocities``).
+    symplectic, not separable: roll out with ``rk4`` or ``dopri5``. Declares ``coordinates =
+    'velocity'`` and takes no other: the objectives refuse it on canonical states.
     """
-    separable = False
-    needs_velocities = True
+    coordinates = "velocity"
+    takes = {"cartesian": "positions and velocities of bodies: a second-order field of any state [q, qdot]"}
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
         super().__init__()
@@ -170,12 +171,3 @@ class SecondOrderNODE(_StateCheck):
         self._check_input(z)
         return torch.cat([z[:, self.n:], self.acceleration(z)], dim=1)
 
-
-def _builder(cls):
-    def build(args: dict) -> nn.Module:
-        return cls(args["input_dim"], args["hidden_dim"], args["nonlinearity"], periodic=args.get("periodic", False))
-    return build
-
-
-register_model_kind("mechanical", DerivativeObjective, _builder(MechanicalHNN), conservative=True, color="tab:olive")
-register_model_kind("second_order", DerivativeObjective, _builder(SecondOrderNODE), color="tab:orange")

@@ -12,6 +12,7 @@ from torch import nn
 
 from . import tanh_mlp
 from .fixed_step import rk4_step
+from .interface import ANY_STATE, UNIT_MASS, Model
 
 _NONLINEARITIES = {
     "tanh": tanh_mlp.fast_tanh,
@@ -133,15 +134,17 @@ def _autograd_input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_g
         return torch.autograd.grad(out[:, k].sum(), x_in, create_graph=create_graph)[0]
 
 
-class HNN(nn.Module):
+class HNN(Model):
     """Hamiltonian Neural Network (Greydanus et al. 2019).
 
     ``differentiable_model`` maps ``(batch, input_dim)`` to two scalar fields ``(F1, F2)``
     (shape ``(batch, 2)``), or, with ``baseline=True``, directly to ``dx/dt`` of shape
-    ``(batch, input_dim)``. ``time_derivative`` builds the vector field from the autograd
-    gradient: the solenoidal part ``grad F2 @ M.T`` (Hamilton's equations with H = F2), the
-    conservative part ``grad F1``, or both.
+    ``(batch, input_dim)`` (then the instance declares ``conservative=False``, as ``hnn.Baseline``).
+    ``time_derivative`` builds the vector field from the autograd gradient: the solenoidal part
+    ``grad F2 @ M.T`` (Hamilton's equations with H = F2), the conservative part ``grad F1``, or both.
     """
+    conservative = True
+    takes = UNIT_MASS
 
     def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = "solenoidal",
                  baseline: bool = False, assume_canonical_coords: bool = True):
@@ -162,6 +165,8 @@ class HNN(nn.Module):
                 "(the paper's choice) or another smooth activation", stacklevel=2)
         self.input_dim = input_dim
         self.baseline = baseline
+        if baseline:
+            self.conservative, self.takes = False, ANY_STATE
         self.field_type = field_type
         self.assume_canonical_coords = assume_canonical_coords
         self.differentiable_model = differentiable_model
@@ -242,15 +247,24 @@ class HNN(nn.Module):
         return torch.stack([{0: eye, 1: hamilton}[k] for k in rows])
 
 
+class Baseline(HNN):
+    """The paper's baseline: an MLP ``(batch, input_dim) -> dx/dt``, no H, any state it is given."""
+    conservative = False
+    takes = ANY_STATE
+
+    def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = "solenoidal"):
+        super().__init__(input_dim, differentiable_model, field_type, baseline=True)
+
+
 def build_model(input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", baseline: bool = False,
                 field_type: str = "solenoidal") -> HNN:
-    """The paper's model for one task: ``HNN(input_dim, MLP(input_dim, hidden_dim, out))``.
+    """The paper's model for one task: ``HNN(input_dim, MLP(input_dim, hidden_dim, out))``, or ``Baseline``.
 
     ``out`` is 2 (F1, F2) for the HNN and ``input_dim`` (dx/dt directly) for the baseline.
     """
-    output_dim = input_dim if baseline else 2
-    return HNN(input_dim, MLP(input_dim, hidden_dim, output_dim, nonlinearity),
-               field_type=field_type, baseline=baseline)
+    if baseline:
+        return Baseline(input_dim, MLP(input_dim, hidden_dim, input_dim, nonlinearity), field_type)
+    return HNN(input_dim, MLP(input_dim, hidden_dim, 2, nonlinearity), field_type=field_type)
 
 
 class MLPAutoencoder(nn.Module):
@@ -297,14 +311,16 @@ class MLPAutoencoder(nn.Module):
         return self.decode(self.encode(x))
 
 
-class PixelHNN(nn.Module):
+class PixelHNN(Model):
     """An autoencoder whose latent z = [q, p] moves by an HNN (or, as the baseline, by a plain MLP).
 
     ``loss(x, x_next)`` is the paper's per-sample objective for a pair of pixel observations one
     frame apart, ``(batch, input_dim)`` each: reconstruction + canonical-coordinate term + 0.1 x
     the latent-dynamics term, where the latent moves by one step of size 1 (one frame) of
-    ``time_derivative`` (Euler as the paper, or RK4).
+    ``time_derivative`` (Euler as the paper, or RK4). Its ``time_derivative`` reads latents.
     """
+    coordinates = "latent"
+    conservative = True
 
     def __init__(self, input_dim: int, latent_dim: int = 2, hidden_dim: int = 200, nonlinearity: str = "tanh",
                  baseline: bool = False, field_type: str = "solenoidal", autoencoder_nonlinearity: str = "relu"):
@@ -314,6 +330,8 @@ class PixelHNN(nn.Module):
         self.autoencoder = MLPAutoencoder(input_dim, hidden_dim, latent_dim, autoencoder_nonlinearity)
         self.hnn = build_model(latent_dim, hidden_dim, nonlinearity, baseline, field_type)
         self.input_dim, self.latent_dim, self.baseline = input_dim, latent_dim, baseline
+        if baseline:
+            self.conservative = False
 
     def encode(self, x: torch.Tensor) -> torch.Tensor:
         return self.autoencoder.encode(x)
@@ -328,6 +346,7 @@ class PixelHNN(nn.Module):
     def hamiltonian(self, z: torch.Tensor) -> torch.Tensor:
         """The learned H of latents ``(batch, latent_dim)``, ``(batch,)`` (HNN only)."""
         return self.hnn.hamiltonian(z)
+
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """The pixels one frame later: decode(z + dz/dt) with z = encode(x)."""
@@ -356,3 +375,12 @@ class PixelHNN(nn.Module):
         n = self.latent_dim // 2
         cc = (z[:, n:] - (z_next[:, :n] - z[:, :n])).pow(2).mean(dim=1)
         return ae + cc + 0.1 * hnn
+
+
+class PixelBaseline(PixelHNN):
+    """``PixelHNN`` whose latent moves by a plain MLP (the paper's pixel baseline): no H."""
+    conservative = False
+
+    def __init__(self, input_dim: int, latent_dim: int = 2, hidden_dim: int = 200, nonlinearity: str = "tanh",
+                 field_type: str = "solenoidal", autoencoder_nonlinearity: str = "relu"):
+        super().__init__(input_dim, latent_dim, hidden_dim, nonlinearity, True, field_type, autoencoder_nonlinearity)

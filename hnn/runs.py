@@ -21,7 +21,8 @@ import torch
 
 from . import cli
 from .io import atomic_folder, check_save_dir, write_json
-from .objectives import Objective, model_from_args
+from .kinds import model_from_args
+from .objectives import Objective
 from .training import train
 
 
@@ -85,7 +86,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
-    model = objective.build(saved).to(config.device)
+    model = model_from_args(saved).to(config.device)
     x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
     stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,

@@ -17,6 +17,7 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
+from .interface import UNIT_MASS, Model
 from .models import HNN, MLP, permutation_tensor
 
 _BLOCK_MAX_WIDTH = 128     # SeparableHNN: both networks as one block network up to this many units together
@@ -37,8 +38,11 @@ def _scalar_gradient(net: nn.Module, x: torch.Tensor, create_graph: bool) -> tor
         return torch.autograd.grad(net(x_in)[:, 0].sum(), x_in, create_graph=create_graph)[0]
 
 
-class SeparableHNN(nn.Module):
+class SeparableHNN(Model):
     """H(q, p) = T(p) + V(q), each an MLP of ``hidden_dim`` units on its half of ``x = [q, p]``."""
+    conservative = True
+    separable = True
+    takes = UNIT_MASS
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh"):
         super().__init__()
@@ -121,7 +125,10 @@ class SeparableHNN(nn.Module):
 
 
 class DissipativeHNN(HNN):
-    """dx/dt = J grad H + grad D: the paper's HNN with both fields of one MLP (F2 = H, F1 = D)."""
+    """dx/dt = J grad H + grad D: the paper's HNN with both fields of one MLP (F2 = H, F1 = D).
+    It has an H (``hamiltonian``), but its flow loses it on purpose: not ``conservative``."""
+    conservative = False
+    dissipative = True
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh"):
         _check_even(input_dim, "DissipativeHNN")

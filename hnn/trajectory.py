@@ -12,14 +12,14 @@ squared error):
 
 A run with ``objective='trajectory'`` (``hnn.RunConfig``) cuts its task's paths (``x`` and
 ``test_x``, path after path, ``t_eval`` long) into non-overlapping snippets of
-``snippet_steps + 1`` states. Where a task observes [q, qdot] (its dataset's ``"state":
-"velocity"``), a model with ``state_from_observed`` / ``observed_from_state``
-(``hnn.MechanicalHNN``: [q, qdot] <-> [q, p]) is rolled out in its own state and compared after
-mapping back; otherwise the model rolls out the observed state itself.
+``snippet_steps + 1`` states. The dataset's states are in the coordinates it declares
+(``dataset["state"]``); a model that maps them into its own (``hnn.Model.maps``, e.g.
+``hnn.MechanicalHNN``: [q, qdot] <-> [q, p]) is rolled out in its own state and compared after
+mapping back; a model that reads them as they are rolls them out itself.
 
-The integrator defaults to ``rk4``, and to ``leapfrog`` for a separable model
-(``hnn.SeparableHNN``, or ``model.separable``): symplectic for it at two field calls a step.
-A method that ``hnn.SOLVERS`` declares ``needs_separable`` is refused for other models.
+The integrator defaults to ``rk4``, and to ``leapfrog`` for a model that declares ``separable``
+(``hnn.SeparableHNN``): symplectic for it at two field calls a step. A method that
+``hnn.SOLVERS`` declares ``needs_separable`` is refused for other models.
 """
 from __future__ import annotations
 
@@ -28,22 +28,17 @@ import torch
 from torch import nn
 
 from .integrate import rollout
+from .interface import declared
 from .metrics import mean_and_se
-from .objectives import DerivativeObjective, Objective, check_coordinates
+from .objectives import Objective, observed_coordinates
 from .solvers import SOLVERS, get_solver
-from .structured import SeparableHNN
 
 SNIPPET_LOSSES = ("mae", "l2")
 
 
-def is_separable(model: nn.Module) -> bool:
-    """Whether ``model``'s field is separable, H = T(p) + V(q) (``model.separable`` if it says)."""
-    return bool(getattr(model, "separable", isinstance(model, SeparableHNN)))
-
-
 def default_method(model: nn.Module) -> str:
-    """``'leapfrog'`` for a separable model, else ``'rk4'``."""
-    return "leapfrog" if is_separable(model) else "rk4"
+    """``'leapfrog'`` for a model that declares ``separable``, else ``'rk4'``."""
+    return "leapfrog" if declared(model).separable else "rk4"
 
 
 def check_method(method: str, model: nn.Module) -> None:
@@ -53,34 +48,25 @@ def check_method(method: str, model: nn.Module) -> None:
         fixed = sorted(name for name, s in SOLVERS.items() if not s.adaptive)
         raise ValueError(f"trajectory training steps through a fixed-step method; {method!r} is not one "
                          f"(choose one of {fixed})")
-    if solver.needs_separable and not is_separable(model):
+    if solver.needs_separable and not declared(model).separable:
         raise ValueError(f"{method!r} is exact only for a separable H = T(p) + V(q), and "
                          f"{type(model).__name__} is not separable; use method='rk4' or 'midpoint'")
 
 
-def state_from_observed(model: nn.Module, z: torch.Tensor) -> torch.Tensor:
-    """The model's state for observed states ``z`` ``(batch, width)`` (z itself for most models)."""
-    convert = getattr(model, "state_from_observed", None)
-    return convert(z) if convert is not None else z
-
-
-def observed_from_state(model: nn.Module, x: torch.Tensor) -> torch.Tensor:
-    """Observed states for the model's states ``x`` ``(batch, width)`` (x itself for most models)."""
-    convert = getattr(model, "observed_from_state", None)
-    return convert(x) if convert is not None else x
-
-
-def rollout_observed(model: nn.Module, z0: torch.Tensor, t_eval, method: str = "dopri5", **options) -> torch.Tensor:
+def rollout_observed(model: nn.Module, z0: torch.Tensor, t_eval, observed: str, method: str = "dopri5",
+                     **options) -> torch.Tensor:
     """Observed states ``(batch, len(t_eval), width)`` of ``model`` rolled out by ``hnn.rollout``
-    from observed starts ``z0`` ``(batch, width)``, for evaluation (no autograd graph is kept)."""
+    from observed starts ``z0`` ``(batch, width)`` in ``observed`` coordinates (a key of
+    ``hnn.interface.COORDINATES``), in the model's own state between the maps; for evaluation
+    (no autograd graph is kept)."""
+    declared(model)
     with torch.no_grad():
-        x0 = state_from_observed(model, z0)
-        xs = rollout(model.time_derivative, x0, t_eval, method=method, **options)
-        return observed_from_state(model, xs.reshape(-1, xs.shape[-1])).reshape(xs.shape)
+        xs = rollout(model.field, model.state_from(z0, observed), t_eval, method=method, **options)
+        return model.observed_from(xs.reshape(-1, xs.shape[-1]), observed).reshape(xs.shape)
 
 
 def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, method: str | None = None,
-                    substeps: int = 1, velocities: bool = True) -> torch.Tensor:
+                    substeps: int = 1, observed: str = "canonical") -> torch.Tensor:
     """Predicted observed states ``(batch, points, width)`` from ``z0`` ``(batch, width)``, ``dt`` apart.
 
     Differentiable in the model's parameters: ``hnn.rollout(..., differentiable=True)`` with the
@@ -94,23 +80,20 @@ def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, 
         raise ValueError(f"dt must be a positive finite time step, got {dt!r}")
     method = method or default_method(model)
     check_method(method, model)
-    x = state_from_observed(model, z0) if velocities else z0
-    xs = rollout(model.time_derivative, x, dt * np.arange(points), method=method, differentiable=True,
-                 dt=dt / substeps)
-    if not velocities:
-        return xs
-    return observed_from_state(model, xs.reshape(-1, xs.shape[-1])).reshape(xs.shape)
+    xs = rollout(model.field, model.state_from(z0, observed), dt * np.arange(points), method=method,
+                 differentiable=True, dt=dt / substeps)
+    return model.observed_from(xs.reshape(-1, xs.shape[-1]), observed).reshape(xs.shape)
 
 
 def snippet_loss(model: nn.Module, snippets: torch.Tensor, dt: float, method: str | None = None,
                  loss: str = "mae", substeps: int = 1, start: torch.Tensor | None = None,
-                 velocities: bool = True) -> torch.Tensor:
+                 observed: str = "canonical") -> torch.Tensor:
     """Per-snippet error ``(batch,)`` of the model rolled out from each snippet's first state.
 
     ``snippets`` ``(batch, points, width)`` are observed states ``dt`` apart; ``start`` (default
-    ``snippets[:, 0]``) is where the rollout begins (e.g. a noisy copy). ``velocities``: the
-    snippets are ``[q, qdot]``, mapped through the model's ``state_from_observed`` if it has one
-    (False: they are the model's own states). The error is the mean
+    ``snippets[:, 0]``) is where the rollout begins (e.g. a noisy copy). ``observed``: the
+    snippets' coordinates, mapped into the model's own where it declares the map (``hnn.Model``).
+    The error is the mean
     over points 1.. and components of |z^ - z| (``'mae'``) or (z^ - z)^2 (``'l2'``); CHNN's MAE
     also averages in point 0, where the error is zero, so theirs is (points-1)/points of ours.
     """
@@ -119,7 +102,7 @@ def snippet_loss(model: nn.Module, snippets: torch.Tensor, dt: float, method: st
     if snippets.dim() != 3:
         raise ValueError(f"snippets must have shape (batch, points, width), got {tuple(snippets.shape)}")
     z0 = snippets[:, 0] if start is None else start
-    pred = rollout_snippet(model, z0, snippets.shape[1], dt, method, substeps, velocities)
+    pred = rollout_snippet(model, z0, snippets.shape[1], dt, method, substeps, observed)
     error = pred[:, 1:] - snippets[:, 1:]
     return (error.abs() if loss == "mae" else error.pow(2)).mean(dim=(1, 2))
 
@@ -167,9 +150,9 @@ class TrajectoryObjective(Objective):
     arrays = ("snippets", "snippets", "test_snippets", "test_snippets")
 
     def __init__(self, dt: float | None = None, loss: str = "mae", method: str | None = None, substeps: int = 1,
-                 steps: int = 4, velocities: bool = True):
+                 steps: int = 4, observed: str = "canonical"):
         self.dt, self.loss, self.method, self.substeps, self.steps = dt, loss, method, substeps, steps
-        self.velocities = velocities
+        self.observed = observed
 
     def prepare(self, dataset: dict) -> dict:
         if all(key in dataset for key in self.arrays):
@@ -194,13 +177,12 @@ class TrajectoryObjective(Objective):
                 raise ValueError(f"snippets of {y.shape[1]} columns are not whole states of width {width}")
             snippets = y.reshape(len(y), -1, width)
             return snippet_loss(model, snippets, dt, self.method, self.loss, self.substeps, start=x[:, :width],
-                                velocities=self.velocities)
+                                observed=self.observed)
         return loss
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
-        check_coordinates(model, dataset, maps_velocities=True)
-        # observed [q, qdot] go through a mechanical model's mass matrix; canonical states do not
-        self.velocities = dataset.get("state", "canonical") == "velocity"
+        self.observed = observed_coordinates(dataset)
+        declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
         self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
         self.loss = args.get("snippet_loss", self.loss)
         self.method = args.get("snippet_method", self.method)
@@ -216,13 +198,3 @@ class TrajectoryObjective(Objective):
             per_snippet = torch.cat([loss(y[i:i + chunk], y[i:i + chunk]).detach() for i in range(0, len(y), chunk)])
         return mean_and_se(per_snippet)
 
-
-# objective name -> class: RunConfig.objective's choices
-OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective}
-
-
-def get_objective(name: str, **options) -> Objective:
-    """A new objective called ``name`` (``'derivative'`` or ``'trajectory'``), built with ``options``."""
-    if name not in OBJECTIVES:
-        raise ValueError(f"unknown objective {name!r}; choose one of {sorted(OBJECTIVES)}")
-    return OBJECTIVES[name](**options)

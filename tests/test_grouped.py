@@ -28,7 +28,7 @@ def _spring_cells(widths, seeds, fractions):
 
 def _model(width: int, seed: int, kind: str = "hnn"):
     torch.manual_seed(seed)
-    return hnn.objectives.model_from_args({"kind": kind, "input_dim": 2, "hidden_dim": width, "nonlinearity": "tanh",
+    return hnn.kinds.model_from_args({"kind": kind, "input_dim": 2, "hidden_dim": width, "nonlinearity": "tanh",
                                           "field_type": "solenoidal"})
 
 

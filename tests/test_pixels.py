@@ -281,7 +281,7 @@ def test_add_energy_raises_the_learned_energy():
     assert np.ptp(H[stage == 0]) < 1e-6 and np.ptp(H[stage == 2]) < 1e-6
     assert bump["H_after"] > bump["H_before"] + 1e-3
     np.testing.assert_allclose(bump["t"][-1], 10.5)
-    with pytest.raises(ValueError, match="needs an HNN"):
+    with pytest.raises(ValueError, match="needs a model with a conserved H"):
         hnn.energy_bump(PixelHNN(8, 2, 16, baseline=True), [0.5, 0.0])
 
 

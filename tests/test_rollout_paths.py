@@ -49,7 +49,7 @@ def test_leapfrog_on_the_separable_halves_is_the_whole_field_leapfrog():
     t = np.linspace(0.0, 3.0, 7)
     for method in ("leapfrog", "yoshida4"):
         halves, whole = {}, {}
-        fast = hnn.rollout(model.time_derivative, x0, t, method=method, dt=0.1, stats=halves)
+        fast = hnn.rollout(model, x0, t, method=method, dt=0.1, stats=halves)     # its declared SplitField
         slow = hnn.rollout(lambda x: model.time_derivative(x), x0, t, method=method, dt=0.1, stats=whole)
         torch.testing.assert_close(fast, slow, rtol=1e-12, atol=1e-12)
         # a half counts a half: 30 steps (90 for yoshida4) of two halves, plus the first dV/dq

@@ -235,33 +235,6 @@ def test_display_only_fields_and_save_dir_are_not_the_identity(tmp_path):
         assert dataclasses.replace(base, **other).key() != base.key(), other
 
 
-class _Scaled(torch.nn.Module):
-    """A toy model kind: the HNN's field times a learned scalar (stands in for a new rung)."""
-
-    def __init__(self, inner):
-        super().__init__()
-        self.inner, self.scale = inner, torch.nn.Parameter(torch.ones(()))
-
-    def time_derivative(self, x):
-        return self.scale * self.inner.time_derivative(x)
-
-
-def test_a_new_model_kind_is_one_registry_entry(tmp_path, monkeypatch):
-    monkeypatch.setattr(hnn.objectives, "MODEL_KINDS", dict(hnn.objectives.MODEL_KINDS))
-
-    def build(args):
-        return _Scaled(hnn.build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"]))
-
-    hnn.objectives.register_model_kind("scaled", hnn.DerivativeObjective, build)
-    with pytest.raises(ValueError, match="registered already"):
-        hnn.objectives.register_model_kind("scaled", hnn.DerivativeObjective, build)
-    assert "scaled" in hnn.cli.make_parser(hnn.load_task("spring", "train").Config).format_help()   # a --model choice
-    args = dataclasses.replace(_args(tmp_path, 3), model="scaled")
-    run = hnn.run_experiment(args)
-    model, saved, metrics = hnn.load_run(run)
-    assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
-
-
 def test_train_fraction_draws_a_seeded_ordered_subset_of_the_training_rows():
     x = torch.arange(40.0).reshape(20, 2)
     y = -x

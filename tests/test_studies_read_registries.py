@@ -1,10 +1,12 @@
-"""The integrator study and the scene study measure what the registries hold: a solver registered
-with hnn.register_solver and a model kind registered with hnn.register_model_kind show up in both
-studies' outputs, with no list in the studies touched (a new solver or kind is one place)."""
+"""Everything reads the registries: a solver registered with hnn.register_solver, and a toy model
+kind (one module, here the class ``_Scaled``, plus one row of hnn.MODEL_KINDS) reach ``--model``,
+a run and ``hnn.load_run``, both studies' outputs and the peers table, with no list anywhere touched
+(a new solver or kind is one place)."""
 import pytest
 import torch
 
 import hnn
+from hnn_analysis.chains import peers
 from hnn_analysis.scenes import scene_metrics, scene_report, scene_study
 from hnn_analysis.speed import speed_accuracy
 
@@ -17,28 +19,28 @@ class _Euler(hnn.fixed_step.Stepper):
         return x + h * self.f(x)
 
 
-class _Scaled(torch.nn.Module):
-    """A toy model kind: the HNN's field times a learned scalar."""
+class _Scaled(hnn.Model):
+    """A toy model kind: the HNN's field times a learned scalar (its H is still conserved)."""
+    conservative = True
+    takes = hnn.interface.UNIT_MASS          # like the HNN, it reads observed [q, qdot] as [q, p]
 
     def __init__(self, inner):
         super().__init__()
         self.inner, self.scale = inner, torch.nn.Parameter(torch.ones(()))
+        self.input_dim = inner.input_dim
 
     def hamiltonian(self, x):
         return self.inner.hamiltonian(x)
 
-    def time_derivative(self, x):
+    def time_derivative(self, x, t=None):
         return self.scale * self.inner.time_derivative(x)
 
 
 @pytest.fixture
 def toys(monkeypatch):
-    """'toy-euler' in hnn.SOLVERS and 'scaled' in hnn.MODEL_KINDS, for one test."""
-    monkeypatch.setattr(hnn.objectives, "MODEL_KINDS", dict(hnn.objectives.MODEL_KINDS))
-    monkeypatch.setattr(hnn, "MODEL_KINDS", hnn.objectives.MODEL_KINDS)
-    hnn.register_model_kind("scaled", hnn.DerivativeObjective, lambda args: _Scaled(
-        hnn.build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"])), conservative=True,
-        color="tab:olive")
+    """'toy-euler' in hnn.SOLVERS and the row 'scaled' in hnn.MODEL_KINDS, for one test."""
+    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.ModelKind(_Scaled, lambda args: _Scaled(
+        hnn.build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"])), color="tab:olive"))
     hnn.register_solver(hnn.solvers.fixed_step_solver("toy-euler", _Euler, order=1))
     yield
     del hnn.SOLVERS["toy-euler"]
@@ -95,3 +97,19 @@ def test_a_new_rollout_metric_is_one_entry_and_the_scene_study_reports_it(toys, 
     err = hnn.metrics.relative_error(torch.zeros(1, 3, 2), torch.ones(1, 3, 2))     # pred 0: e(t) = 1
     assert hnn.metrics.summarize_errors(err, torch.arange(3.0).numpy())["final_error"] == 1.0
     assert 0 < rollout["final_error"] <= 1 and rollout["error"] > 0
+
+
+def test_a_new_kind_reaches_the_flags_a_run_load_run_and_the_peers_table(toys, tmp_path):
+    trainer = hnn.load_task("spring", "train")
+    assert "scaled" in hnn.cli.make_parser(trainer.Config).format_help()          # a --model choice
+    run = trainer.main(["--model", "scaled", "--total_steps", "3", "--hidden_dim", "8", "--save_dir", str(tmp_path)])
+    model, saved, metrics = hnn.load_run(run)
+    assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
+    # the peers table: the chain's observed [q, qdot] are read by the toy (as the HNN reads them)
+    assert "scaled" in peers.rungs()
+    tiny = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
+            "test_starts": 2, "lnn_starts": 0, "lnn_fields": {}, "rungs": ("hnn", "scaled")}
+    results = peers.main(["--out", str(tmp_path / "peers")], settings=tiny)
+    assert "ours: scaled" in (tmp_path / "peers" / "peers.md").read_text()
+    entry = results["rows"]["chain1"]["scaled"]
+    assert "blew_up" in entry or 0 < entry["median"] <= 1

@@ -9,7 +9,7 @@ spring = hnn.load_task("spring")
 SpringConfig = hnn.load_task("spring", "train").Config
 
 
-class _TrueSpring(torch.nn.Module):
+class _TrueSpring(hnn.Model):
     """The spring's true field as a model (for the noise floor of the snippet loss)."""
     input_dim = 2
 
@@ -63,8 +63,8 @@ def test_unknown_or_unfit_objective_is_refused(tmp_path, capsys):
         hnn.TrajectoryObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
 
 
-class _Linear(torch.nn.Module):
-    """dx/dt = A x, A learned."""
+class _Linear(hnn.Model):
+    """dx/dt = A x, A learned: a black-box linear field of canonical states."""
 
     def __init__(self):
         super().__init__()

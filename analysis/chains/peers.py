@@ -3,8 +3,8 @@
     python analysis/peers.py --jobs 2 --update-docs      # the whole table (about an hour on 2 cores)
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
 
-Trains our rungs (``RUNGS``: the paper's HNN, the mechanical HNN, the second-order NODE and the
-baseline) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
+Trains our rungs (``rungs()``: every registered kind that reads the chain's observed states, from
+``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
 N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), through
 ``analysis/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
 protocol (``experiment-chain/protocols.py``): CHNN's geometric-mean relative error of the
@@ -32,9 +32,6 @@ from hnn_analysis.paper.reproduce import portable_command
 from hnn_analysis.provenance import machine, provenance
 from hnn_analysis.scenes.scene_measure import training_cost
 
-RUNGS = ("hnn", "mechanical", "second_order", "baseline")
-# the LNN protocol trains on derivatives of [q, qdot] (the mechanical HNN's through its mass matrix)
-LNN_RUNGS = RUNGS
 BOBS = (1, 2, 3, 5)
 # --quick: a smoke run of every stage, minutes not an hour
 QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 64, "total_steps": 100},
@@ -48,14 +45,22 @@ FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_
         "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
 
 
+def rungs() -> tuple[str, ...]:
+    """The kinds the table trains: every one that the chain task's ``--model`` takes and whose model
+    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.ModelKind.reads``). The LNN
+    protocol trains the same rungs on derivatives of [q, qdot]."""
+    config = hnn.load_task("chain", "train").Config
+    return tuple(kind for kind in hnn.cli.model_choices(config) if hnn.MODEL_KINDS[kind].reads("velocity"))
+
+
 def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
     """One ``sweep.Job`` per (protocol row, rung): ``chain<N>/<rung>/seed<seed>`` and ``lnn/<rung>/seed<seed>``."""
     jobs = []
     for n in settings["bobs"]:
-        for rung in RUNGS:
+        for rung in settings["rungs"]:
             fields = {"bobs": n, "model": rung, "seed": seed, "save_dir": str(out / "runs"), **settings["fields"]}
             jobs.append(sweep.Job(f"chain{n}/{rung}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
-    for rung in LNN_RUNGS if settings["lnn_starts"] else ():
+    for rung in settings["rungs"] if settings["lnn_starts"] else ():
         fields = {"bobs": 2, "protocol": "lnn", "objective": "derivative", "model": rung, "seed": seed,
                   "save_dir": str(out / "runs"), **settings["lnn_fields"]}
         jobs.append(sweep.Job(f"lnn/{rung}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
@@ -65,7 +70,8 @@ def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
 def _rollout(model, z0: torch.Tensor, t_eval, rtol: float) -> tuple[torch.Tensor | None, str | None]:
     """The model's observed path from ``z0`` by dopri5 in float64, or ``(None, why)`` if it blows up."""
     try:
-        return hnn.trajectory.rollout_observed(model.double(), z0, t_eval, method="dopri5", rtol=rtol, atol=rtol), None
+        return hnn.trajectory.rollout_observed(model.double(), z0, t_eval, "velocity", method="dopri5", rtol=rtol,
+                                                atol=rtol), None
     except hnn.DivergenceError as err:
         return None, str(err).split(";")[0]
 
@@ -105,13 +111,14 @@ def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
     data = hnn.load_task("chain")
     rows = {}
     for n in settings["bobs"]:
-        models = _loaded(runs, f"chain{n}", RUNGS, seed)
+        models = _loaded(runs, f"chain{n}", settings["rungs"], seed)
         rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"]),
-                             "seconds": _seconds(runs, f"chain{n}", RUNGS, seed)}
+                             "seconds": _seconds(runs, f"chain{n}", settings["rungs"], seed)}
     if not settings["lnn_starts"]:
         return rows
-    models = _loaded(runs, "lnn", LNN_RUNGS, seed)
-    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"]), "seconds": _seconds(runs, "lnn", LNN_RUNGS, seed)}
+    models = _loaded(runs, "lnn", settings["rungs"], seed)
+    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"]),
+                   "seconds": _seconds(runs, "lnn", settings["rungs"], seed)}
     return rows
 
 
@@ -140,7 +147,7 @@ def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
     rows = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
     out = {}
     for row in rows:
-        for rung in RUNGS:
+        for rung in settings["rungs"]:
             folder = runs.get(f"{row}/{rung}/seed{seed}")
             if not isinstance(folder, Path):
                 continue
@@ -184,6 +191,7 @@ def markdown(results: dict) -> str:
     """The generated section of docs/peers.md: the peers' numbers beside ours, same metric."""
     published = hnn.load_task("chain", "protocols").CHNN_PUBLISHED
     meta = results["meta"]
+    names = meta["rungs"]
     lines = []
     if meta["quick"]:
         lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
@@ -203,8 +211,8 @@ def markdown(results: dict) -> str:
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published NeuralODE | published floor | "
-              + " | ".join(f"ours: {rung}" for rung in RUNGS) + " | our floor | our training s (one thread) |",
-              "| --- " * (6 + len(RUNGS)) + "| --- |"]
+              + " | ".join(f"ours: {rung}" for rung in names) + " | our floor | our training s (one thread) |",
+              "| --- " * (6 + len(names)) + "| --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
@@ -213,7 +221,7 @@ def markdown(results: dict) -> str:
         seconds = ", ".join(f"{rung} {s['seconds']:.0f}" for rung, s in row["seconds"].items())
         lines.append(f"| {n} | " + " | ".join(
             f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "NeuralODE", "floor"))
-            + " | " + " | ".join(_cell(row.get(rung)) for rung in RUNGS)
+            + " | " + " | ".join(_cell(row.get(rung)) for rung in names)
             + f" | {_cell(row['floor'])} | {seconds} |")
     lnn = results["rows"].get("lnn")
     if lnn is not None:
@@ -224,7 +232,7 @@ def markdown(results: dict) -> str:
         lines += [f"| published {k} | {v:.2g} | |" for k, v in lnn_published.items()]
         lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | "
                   f"{lnn['seconds'][rung]['seconds']:.0f} |" if rung in lnn["seconds"] else f"| ours: {rung} | not trained | |"
-                  for rung in LNN_RUNGS]
+                  for rung in names]
     return "\n".join(lines) + "\n"
 
 
@@ -249,7 +257,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
     if args.update_docs and (args.quick or settings is not None):
         parser.error("--update-docs writes full-settings results into docs/peers.md; drop --quick")
     sweep.check_backend(parser, args)
-    settings = settings or (QUICK if args.quick else FULL)
+    full = settings is None and not args.quick
+    settings = {"rungs": rungs(), **(settings or (QUICK if args.quick else FULL))}
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"
     jobs = plan(settings, out, args.seed)
     runs, todo = sweep.reuse(jobs)
@@ -265,7 +274,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
             target = hnn.tasks.repo_root() / "docs" / "figures" / "peers-curves.png"
             atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
-                        "quick": settings is not FULL,     # --quick or a test's settings: not the table
+                        "quick": not full,     # --quick or a test's settings: not the table
+                        "rungs": list(settings["rungs"]),
                         "steps": jobs[0].config.total_steps if jobs else None,
                         "optimizer": jobs[0].config.optimizer if jobs else None,
                         "schedule": jobs[0].config.schedule if jobs else None,

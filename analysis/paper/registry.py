@@ -50,7 +50,8 @@ def energy_protocols(trained: Trained) -> dict:
     dataset = trained.dataset if any(p.x0 == "test_segment" for p in protocols) else None
     out = {}
     for protocol in protocols:
-        result = hnn.evaluate_energy(trained.system, trained.models, protocol, dataset)
+        result = hnn.evaluate_energy(trained.system, trained.models, protocol, dataset,
+                                     observed=(dataset or {}).get("state", "canonical"))
         result["description"] = protocol.describe()
         out[protocol.name] = result
     return out

@@ -86,11 +86,10 @@ def task_rungs(task: str) -> list[str]:
 
 @functools.cache
 def _fits(task: str, label: str) -> bool:
-    """False for a kind whose model reads the state's second half as velocities: every scene's states
-    are canonical [q, p] (``hnn.objectives.check_coordinates`` would refuse its run)."""
+    """Whether the kind's model reads the scene's states, canonical [q, p] (its declared coordinates;
+    the objectives would refuse its run otherwise)."""
     config = hnn.tasks.task_config(task, {"model": label})
-    model = config.make_objective().build({**config.to_dict(), "kind": config.kind})
-    return not getattr(model, "needs_velocities", False)
+    return hnn.MODEL_KINDS[config.kind].reads("canonical")
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
                "name": "real-dhnn"}
 DHNN_MODELS = ("baseline", "hnn", "dissipative")
@@ -230,7 +229,7 @@ def _periods(scene: Scene) -> float:
 def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
     """Speed at equal accuracy of one model, and the drift of its energy over the long run."""
     model64 = hnn.evaluation.float64_copy(model)
-    f = model64.time_derivative
+    f = model64.field
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
     ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick)

@@ -95,7 +95,7 @@ def step_table(repeats: int) -> list[dict]:
         model = build(kind, STEP_WIDTH).double()
         x0 = 0.5 * torch.randn(STEP_BATCH, DIM, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
         stats = {}
-        hnn.rollout(model.time_derivative, x0, t, method=method, dt=STEP_DT, stats=stats)
+        hnn.rollout(model.field, x0, t, method=method, dt=STEP_DT, stats=stats)
         if kind == "separable":   # the step calls the two halves (nfev counts each as a half)
             q, p = x0[:, :DIM // 2], x0[:, DIM // 2:]
             calls = [functools.partial(model.kinetic_gradient, p), functools.partial(model.potential_gradient, q)]
@@ -109,7 +109,7 @@ def step_table(repeats: int) -> list[dict]:
                     call()
         timed = {"step": [], "calls": []}
         for _ in range(repeats):
-            step = functools.partial(hnn.rollout, model.time_derivative, x0, t, method=method, dt=STEP_DT)
+            step = functools.partial(hnn.rollout, model.field, x0, t, method=method, dt=STEP_DT)
             for name, fn in (("step", step), ("calls", field_calls)):
                 tic = time.perf_counter()
                 fn()
@@ -117,7 +117,7 @@ def step_table(repeats: int) -> list[dict]:
         graph_us = None
         if method in ("leapfrog", "midpoint"):   # what the README's snippet cost before: a graph through every step
             tic = time.perf_counter()
-            hnn.rollout(model.time_derivative, x0, t, method=method, dt=STEP_DT, differentiable=True)
+            hnn.rollout(model.field, x0, t, method=method, dt=STEP_DT, differentiable=True)
             graph_us = (time.perf_counter() - tic) / steps * 1e6
         step_us, calls_us = statistics.median(timed["step"]), statistics.median(timed["calls"])
         rows.append({"method": method, "kind": kind, "step_us": step_us, "field_calls_per_step": stats["nfev"] / steps,

@@ -145,7 +145,7 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
             print(f"  {task} {label}: not found at {hnn.run_dir(args)}, skipped", flush=True)
             continue
         model, saved_args, _ = hnn.load_run(found)
-        per_dtype = {name: copy.deepcopy(model).to(dtype).time_derivative for name, dtype in DTYPES.items()}
+        per_dtype = {name: copy.deepcopy(model).to(dtype).field for name, dtype in DTYPES.items()}
         model64 = copy.deepcopy(model).double()
         x0 = None
         if isinstance(model, hnn.PixelHNN):
@@ -262,7 +262,7 @@ def extremes(quick: bool, runs: Path | None, notes: list) -> list[dict]:
                 t = np.linspace(0, 5, 51)
                 exact = torch.tensor([[[radius * np.cos(2 * s), -radius * np.sin(2 * s)] for s in t]])
                 method = "midpoint" if label == "hnn" else "rk4"
-                run(f"spring {label}, radius {radius:g} (trained on 0.1 .. 1)", model.time_derivative,
+                run(f"spring {label}, radius {radius:g} (trained on 0.1 .. 1)", model.field,
                     spring.hamiltonian, x0, t, exact, method=method, dt=0.02)
                 out[-1]["error_relative"] = out[-1].get("error", float("nan")) / radius
     return out

@@ -1,0 +1,146 @@
+"""The model interface: what every model kind declares, and what every consumer reads.
+
+A model is an ``hnn.Model``: an ``nn.Module`` with ``time_derivative(x)`` on its own state ``x``
+of shape ``(batch, dim)``, and class-level declarations instead of abilities found by probing:
+
+- ``coordinates``: the state its ``time_derivative`` reads, a key of ``COORDINATES``
+  (``'canonical'`` [q, p], ``'velocity'`` [q, qdot], ``'cartesian'`` [x, xdot] of bodies,
+  ``'cartesian_canonical'`` [x, p] of bodies, ``'latent'`` a pixel model's learned [q, p]).
+- ``takes``: other observed coordinates it reads as its own state without a map, each with the
+  assumption that makes that right (the paper's HNN reads [q, qdot] as [q, p]: unit mass).
+- ``maps``: observed coordinates it maps into its own state and back, through
+  ``state_from_observed(z)``, ``observed_from_state(x)`` and ``observed_time_derivative(z)``
+  (a mechanical HNN: [q, qdot] -> [q, M(q) qdot] by its learned mass matrix).
+- ``conservative``: it has ``hamiltonian(x)``, an H its flow conserves.
+- ``separable``: that H is T(p) + V(q), with ``kinetic_gradient(p)`` and ``potential_gradient(q)``;
+  its ``field`` is then a ``SplitField`` that explicit symplectic solvers evaluate half by half.
+- ``dissipative``: its flow loses energy on purpose (no energy drift is measured).
+
+Consumers (objectives, the integrators, the studies) read these and call ``state_from``,
+``observed_from`` and ``observed_field`` with the coordinates a dataset declares
+(``dataset["state"]``); a pair that does not fit is one ``ValueError`` naming the fix.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+import torch
+from torch import nn
+
+COORDINATES = {
+    "canonical": "[q, p]: generalized positions and their canonical momenta",
+    "velocity": "[q, qdot]: generalized positions and their velocities (as observed)",
+    "cartesian": "[x, xdot]: Cartesian positions of the bodies, flattened, and their velocities (as observed)",
+    "cartesian_canonical": "[x, p]: Cartesian positions of the bodies, flattened, and their momenta",
+    "latent": "[q, p]: a pixel model's learned latent coordinates",
+}
+
+# what a kind that reads [q, p] assumes when it is given observed [q, qdot] as they are
+UNIT_MASS = {"velocity": "reads qdot as p: Hamilton's equations hold for it only where the mass matrix is the "
+                         "identity in these coordinates; on observed velocities choose mechanical"}
+# a black-box field reads any state: it assumes nothing about what the halves are
+ANY_STATE = {name: "a black-box field: no structure assumed" for name in COORDINATES}
+
+
+class SplitField:
+    """A separable field dx/dt = (dT/dp, -dV/dq) given by its two halves, each ``(batch, n)`` -> ``(batch, n)``.
+
+    Callable as a whole field; explicit symplectic steppers (``leapfrog``, ``yoshida4``) call
+    ``kinetic_gradient`` and ``potential_gradient`` alone where a stage reads one half.
+    """
+
+    def __init__(self, whole: Callable, kinetic_gradient: Callable, potential_gradient: Callable):
+        self.whole, self.kinetic_gradient, self.potential_gradient = whole, kinetic_gradient, potential_gradient
+
+    def __call__(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        return self.whole(x)
+
+
+class Model(nn.Module):
+    """The interface of every model kind; subclasses set the declarations and ``time_derivative``."""
+
+    coordinates: ClassVar[str] = "canonical"
+    takes: ClassVar[dict[str, str]] = {}
+    maps: ClassVar[tuple[str, ...]] = ()
+    conservative: ClassVar[bool] = False
+    separable: ClassVar[bool] = False
+    dissipative: ClassVar[bool] = False
+    input_dim: int
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        for name in (cls.coordinates, *cls.takes, *cls.maps):
+            if name not in COORDINATES:
+                raise TypeError(f"{cls.__name__} declares coordinates {name!r}; known: {sorted(COORDINATES)}")
+        if cls.separable and not all(callable(getattr(cls, name, None)) for name in ("kinetic_gradient",
+                                                                                    "potential_gradient")):
+            raise TypeError(f"{cls.__name__} declares separable=True: give it kinetic_gradient(p) and "
+                            "potential_gradient(q)")
+        if cls.conservative and cls.hamiltonian is Model.hamiltonian:
+            raise TypeError(f"{cls.__name__} declares conservative=True: give it hamiltonian(x)")
+
+    def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        """``dx/dt`` ``(batch, dim)`` at the model's own states ``x`` ``(batch, dim)``."""
+        raise NotImplementedError(f"{type(self).__name__} must implement time_derivative")
+
+    def hamiltonian(self, x: torch.Tensor) -> torch.Tensor:
+        """The learned H ``(batch,)`` at ``x`` ``(batch, dim)``; only where ``conservative``."""
+        raise TypeError(f"{type(self).__name__} learns no Hamiltonian (conservative=False); choose a conservative "
+                        "kind such as hnn, separable or mechanical")
+
+    @property
+    def field(self) -> Callable:
+        """What an integrator steps: ``time_derivative``, or a ``SplitField`` when ``separable``."""
+        if self.separable:
+            return SplitField(self.time_derivative, self.kinetic_gradient, self.potential_gradient)
+        return self.time_derivative
+
+    # -- observed coordinates ----------------------------------------------------------------------
+
+    def relation(self, observed: str) -> str:
+        """How this model reads states in ``observed`` coordinates: ``'own'`` (its state, or one it
+        takes as its state) or ``'mapped'`` (through ``state_from_observed``); else ValueError."""
+        if observed == self.coordinates or observed in self.takes:
+            return "own"
+        if observed in self.maps:
+            return "mapped"
+        if observed not in COORDINATES:
+            raise ValueError(f"unknown coordinates {observed!r}; known: {sorted(COORDINATES)}")
+        readable = sorted({self.coordinates, *self.takes, *self.maps})
+        raise ValueError(f"{type(self).__name__} reads {COORDINATES[self.coordinates]} and cannot be fit to states "
+                         f"in {observed!r} coordinates ({COORDINATES[observed]}); it reads {readable}: choose "
+                         "another --model (hnn.MODEL_KINDS declares what each reads)")
+
+    def state_from(self, z: torch.Tensor, observed: str) -> torch.Tensor:
+        """The model's own state for observed states ``z`` ``(batch, dim)`` in ``observed`` coordinates."""
+        return z if self.relation(observed) == "own" else self.state_from_observed(z)
+
+    def observed_from(self, x: torch.Tensor, observed: str) -> torch.Tensor:
+        """Observed states in ``observed`` coordinates for the model's own states ``x`` ``(batch, dim)``."""
+        return x if self.relation(observed) == "own" else self.observed_from_state(x)
+
+    def observed_field(self, observed: str) -> Callable:
+        """``z -> dz/dt`` on observed states in ``observed`` coordinates, along the model's flow."""
+        return self.time_derivative if self.relation(observed) == "own" else self.observed_time_derivative
+
+    def state_from_observed(self, z: torch.Tensor) -> torch.Tensor:
+        """Own state from an observed one, for the coordinates in ``maps``."""
+        raise NotImplementedError(f"{type(self).__name__} declares maps={self.maps} but no state_from_observed")
+
+    def observed_from_state(self, x: torch.Tensor) -> torch.Tensor:
+        """Observed state from the model's own, for the coordinates in ``maps``."""
+        raise NotImplementedError(f"{type(self).__name__} declares maps={self.maps} but no observed_from_state")
+
+    def observed_time_derivative(self, z: torch.Tensor) -> torch.Tensor:
+        """d/dt of an observed state along the model's flow, for the coordinates in ``maps``."""
+        raise NotImplementedError(f"{type(self).__name__} declares maps={self.maps} but no observed_time_derivative")
+
+
+def declared(model) -> Model:
+    """``model`` itself if it is an ``hnn.Model`` (whose declarations a consumer reads), else a
+    TypeError naming the fix."""
+    if not isinstance(model, Model):
+        raise TypeError(f"{type(model).__name__} is not an hnn.Model: subclass hnn.Model and declare its "
+                        "coordinates, conservative, separable (see hnn/interface.py)")
+    return model
