@@ -21,6 +21,7 @@ import torch
 
 from . import cli
 from .io import atomic_folder, check_save_dir, write_json
+from . import mechanical  # noqa: F401  (registers the mechanical kinds, which load_run may rebuild)
 from .objectives import Objective, model_from_args
 from .training import train
 
