@@ -260,6 +260,10 @@ def test_staleness_check_flags_a_page_stamped_before_a_code_change(tmp_path, mon
     (tmp_path / "experiment-x" / "data.py").write_text("a = 2\n")     # a task's code counts too
     _git(tmp_path, "commit", "-qam", "a task change")
     assert len(readme.stale(["headline"])) == 1
+    (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
+    (tmp_path / "hnn" / "x.py").write_text("a = 3\n")
+    _git(tmp_path, "commit", "-qam", f"a message changes\n\n{readme.UNCHANGED} only what is printed")
+    assert readme.stale(["headline"]) == []                      # a commit that says it moves no number
 
 
 def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results):
