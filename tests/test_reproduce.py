@@ -54,6 +54,8 @@ def test_compare_edges():
 
 
 def test_tables_marks_missing_and_stages(results):
+    quick = reproduce.tables_markdown(results)
+    results["meta"].update(quick=False, mode="full settings")     # marks are for full settings
     table = reproduce.tables_markdown(results)
     marks = reproduce.MARKS
     assert _cell(table, "Train loss", "baseline").endswith(marks["within"])    # exactly at the ±
@@ -62,8 +64,8 @@ def test_tables_marks_missing_and_stages(results):
     assert _cell(table, "Test loss", "hnn").endswith(marks["within"])
     assert _cell(table, "Energy MSE", "baseline").endswith(marks["within"])
     assert _cell(table, "Energy MSE", "hnn").endswith(marks["within"])
-    assert reproduce.LEGEND in table and "QUICK" in table.splitlines()[0]
-    assert "| 1.05x |" in table                                  # the ratio column stays
+    assert reproduce.LEGEND in table and "QUICK" in quick.splitlines()[0]
+    assert "| 1.05x |" in table and "| 1.05x |" in quick                                 # the ratio column stays
     # tasks absent from the checkout are listed; a present one without data is reported as skipped
     missing = next(line for line in table.splitlines() if line.startswith("Not yet in this checkout"))
     assert "real" in missing and "2body" in missing and "pixels" in missing and "spring" not in missing
@@ -297,3 +299,10 @@ def test_a_task_with_min_seeds_trains_more_seeds_only_across_seeds():
     assert one["pixels"]["seeds"] == [7]                         # one seed stays one seed
     jobs = reproduce.plan(list(rows.values()), [0, 1, 2], Path("runs"), 3)
     assert sorted({j.config.seed for j in jobs if j.task == "pixels"}) == [0, 1, 2, 3, 4]
+
+
+def test_quick_tables_carry_no_marks_against_the_paper_and_say_why(results):
+    quick = reproduce.tables_markdown(results)
+    table_rows = [line for line in quick.splitlines() if line.startswith("| ") and "---" not in line]
+    assert table_rows and not any(mark in line for line in table_rows for mark in reproduce.MARKS.values())
+    assert reproduce.QUICK_NOTE in quick and "astronomical" in quick and reproduce.LEGEND not in quick
