@@ -9,10 +9,13 @@ Every generated section is written only this way, never by hand, by the command 
     python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
     python analysis/speed/ray_overhead.py [--full] --update-docs   # docs/sweeps.md: Ray against local
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
+    python analysis/readme.py kinds                          # README.md and docs/python.md: the model kinds
     python analysis/readme.py check                          # which pages are older than the code
 
 A page's stamp names the commit that made it; ``check`` (and ``reproduce.py`` before it writes)
-warns about every section stamped before the last change to ``hnn/`` or ``experiment-*/``.
+warns about every section stamped before the last change to ``hnn/`` or ``experiment-*/`` (a
+commit that says ``Numbers-unchanged: <why>`` in its message does not count), and
+about a model-kind section that differs from what ``hnn.kind_docs`` and ``hnn.MODEL_KINDS`` make.
 """
 import argparse
 import json
@@ -41,6 +44,11 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
            "ray-quick": "python analysis/speed/ray_overhead.py --update-docs",
            "ray-full": "python analysis/speed/ray_overhead.py --full --update-docs"}
+# sections written from the code's declarations, not measured: name -> (page, the text's maker)
+DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
+# a commit whose message holds a line "Numbers-unchanged: <why>" says it moves no generated number
+# (imports, messages, flags that change what is printed): it leaves the stamps current
+UNCHANGED = "Numbers-unchanged:"
 # the code whose changes can move a generated number (git pathspecs)
 CODE = ("hnn", "experiment-*")
 # the few figures the README shows (about 1.2 MB in all), copied from a full run's figures/
@@ -48,9 +56,36 @@ CURATED = ("spring-fields.png", "real-fields.png", "2body-orbits.png", "3body-or
            "pixels-compare-static.png")
 
 
+def _page(name: str) -> str:
+    return PAGES.get(name) or DECLARED.get(name, "README.md")
+
+
+def kinds_text(name: str) -> str:
+    """Section ``kinds`` (the README's line per kind) or ``kinds-python`` (docs/python.md's paragraph
+    per kind): every kind of ``hnn.MODEL_KINDS``, in its order, as ``hnn.kind_docs`` describes it."""
+    kinds = list(hnn.MODEL_KINDS)
+    missing = [kind for kind in kinds if kind not in hnn.kind_docs.KIND_DOCS]
+    if missing:
+        raise ValueError(f"model kind(s) {', '.join(missing)} registered but not described: add an entry to "
+                         "KIND_DOCS in hnn/kind_docs.py")
+    return hnn.kind_docs.readme_lines(kinds) if name == "kinds" else hnn.kind_docs.python_paragraphs(kinds)
+
+
+def declared_out_of_date(root: Path | None = None) -> list[str]:
+    """One line per ``DECLARED`` section that is not what the code makes today, with its fix."""
+    texts = {name: section_text(name, root) for name in DECLARED}
+    try:
+        kinds_text("kinds")
+    except ValueError as err:
+        return [str(err)]
+    return [f"{DECLARED[name]} ({name}) is not what hnn.kind_docs and hnn.MODEL_KINDS make; refresh it: "
+            "python analysis/readme.py kinds"
+            for name, text in texts.items() if text is not None and text.strip() != kinds_text(name).strip()]
+
+
 def update_section(name: str, text: str) -> Path:
-    """Replace section ``name`` of its page (``PAGES``) with ``text``; returns the page."""
-    page = hnn.tasks.repo_root() / PAGES.get(name, "README.md")
+    """Replace section ``name`` of its page (``PAGES``, ``DECLARED``) with ``text``; returns the page."""
+    page = hnn.tasks.repo_root() / _page(name)
     begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
     content = page.read_text() if page.exists() else ""
     if begin not in content or end not in content:
@@ -63,7 +98,7 @@ def update_section(name: str, text: str) -> Path:
 
 def section_text(name: str, root: Path | None = None) -> str | None:
     """The text of section ``name`` on its page, or None when the page or its markers are missing."""
-    page = (root or hnn.tasks.repo_root()) / PAGES.get(name, "README.md")
+    page = (root or hnn.tasks.repo_root()) / _page(name)
     content = page.read_text() if page.exists() else ""
     begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
     if begin not in content or end not in content:
@@ -77,10 +112,11 @@ def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
 
 def stale(names=None, root: Path | None = None) -> list[str]:
     """One line per generated section whose numbers may be older than the code: its stamp (the first
-    ``commit <hash>`` in it) names a commit that lacks the last change to ``hnn/`` or ``experiment-*/``,
+    ``commit <hash>`` in it) names a commit that lacks the last change to ``hnn/`` or ``experiment-*/``
+    (but for commits whose message has a ``Numbers-unchanged: <why>`` line),
     or it has no stamp at all; each line says how to refresh it. Empty outside a git checkout."""
     root = root or hnn.tasks.repo_root()
-    last = _git(root, "log", "-1", "--format=%h %cs", "--", *CODE)
+    last = _git(root, "log", "-1", "--format=%h %cs", "--invert-grep", f"--grep=^{UNCHANGED}", "--", *CODE)
     if last.returncode != 0 or not last.stdout.strip():
         return []
     change, day = last.stdout.split()
@@ -162,13 +198,17 @@ def timing_text(results: dict) -> str:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("what", choices=["timing", "check"],
-                   help="timing: the full-run section from a results.json; check: list the stale pages "
-                        "(exit code 1 if any)")
+    p.add_argument("what", choices=["timing", "kinds", "check"],
+                   help="timing: the full-run section from a results.json; kinds: the model kinds of README.md "
+                        "and docs/python.md; check: list the stale pages (exit code 1 if any)")
     p.add_argument("results", type=Path, nargs="?", help="a results.json written by analysis/reproduce.py")
     args = p.parse_args(argv)
+    if args.what == "kinds":
+        for name in DECLARED:
+            print(f"updated the {name} section of {update_section(name, kinds_text(name))}")
+        return
     if args.what == "check":
-        lines = stale()
+        lines = stale() + declared_out_of_date()
         print("\n".join(lines) if lines else "every generated page is stamped at or after the last code change")
         raise SystemExit(1 if lines else 0)
     if args.results is None:

@@ -12,6 +12,11 @@ reported by name with its error and the others go on; ``exit_if_failed`` ends th
 code 1 and the list. A task that cannot run here at all (missing data or optional packages) is
 skipped with its reason once. Ray is optional and imported only for ``backend="ray"``.
 
+A SIGINT (Ctrl-C) or SIGTERM (``kill``, a job scheduler) to the sweep's own process cancels the
+runs not started, stops the workers (a run in progress leaves no folder: it is written whole or
+not at all), keeps every finished run, says so in one line and exits with 130 or 143; a worker
+whose parent process is gone stops by itself.
+
 With ``group="auto"`` the runs that can train as one program (``hnn.grouped.group_key``: one
 task, kind and width, seeds and fractions apart) and are narrow enough for grouping to pay
 (``GROUP_MAX_WIDTH``, measured by ``analysis/speed/benchmark.py --jobs group``) train as groups,
@@ -35,6 +40,7 @@ from tqdm.auto import tqdm
 
 import hnn
 from hnn_analysis.provenance import cores
+from hnn_analysis.stopping import interruptible, in_worker, stop_pool, worker_start
 
 BACKENDS = ("local", "ray")
 GROUP_MODES = ("auto", "off")
@@ -200,13 +206,21 @@ def _unit_results(unit: list[Job], result):
 
 
 def _in_pool(units: list[list[Job]], n_jobs: int, threads: int):
-    """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads finish them."""
+    """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads
+    finish them; on an interrupt (or any exception) the runs not started are cancelled and the
+    workers stopped, not waited for."""
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
-    with concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context) as pool:
-        futures = {pool.submit(*_submit(unit), threads): unit for unit in units}
+    pool = concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context, initializer=worker_start,
+                                                  initargs=(os.getpid(),))
+    try:
+        futures = {pool.submit(in_worker, *_submit(unit), threads): unit for unit in units}
         for future in concurrent.futures.as_completed(futures):
             error = future.exception()
             yield from _unit_results(futures[future], error if error is not None else future.result())
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
 def _on_ray(units: list[list[Job]], threads: int, address: str | None):
@@ -343,8 +357,8 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     tic, runs, per_run = time.perf_counter(), {}, {}
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
-    with tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr, disable=None,
-              dynamic_ncols=True) as bar:
+    with interruptible(runs, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
+                                          disable=None, dynamic_ncols=True) as bar:
         data, data_seconds, skipped = _build_datasets(jobs, bar)
         runs.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
         todo = [job for job in jobs if job.task not in skipped]

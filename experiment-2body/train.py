@@ -17,7 +17,7 @@ HERE = Path(__file__).resolve().parent
 
 
 @dataclass
-class Config(hnn.nbody.OrbitConfig):
+class Config(hnn.orbit_config.OrbitConfig):
     """Task 4: two bodies under Newtonian gravity (G = 1, unit masses)."""
     name: str = "2body"
     input_dim: int = 8
@@ -32,8 +32,8 @@ class Config(hnn.nbody.OrbitConfig):
 
 
 def main(argv=None):
-    """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
-    return hnn.run_experiment(hnn.cli.parse(Config, argv))
+    """Train one model, or reuse the complete run of these settings (--force retrains); returns its run folder."""
+    return hnn.cli.train(Config, argv)
 
 
 if __name__ == "__main__":

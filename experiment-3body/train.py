@@ -16,7 +16,7 @@ HERE = Path(__file__).resolve().parent
 
 
 @dataclass
-class Config(hnn.nbody.OrbitConfig):
+class Config(hnn.orbit_config.OrbitConfig):
     """Task 4b: three bodies under Newtonian gravity (G = 1, unit masses)."""
     name: str = "3body"
     input_dim: int = 12
@@ -27,8 +27,8 @@ class Config(hnn.nbody.OrbitConfig):
 
 
 def main(argv=None):
-    """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
-    return hnn.run_experiment(hnn.cli.parse(Config, argv))
+    """Train one model, or reuse the complete run of these settings (--force retrains); returns its run folder."""
+    return hnn.cli.train(Config, argv)
 
 
 if __name__ == "__main__":

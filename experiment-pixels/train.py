@@ -32,7 +32,7 @@ class Config(hnn.RunConfig):
                               parse=int_at_least(2, even=True, why=" (z = [q, p])"))
     input_noise: float = setting(0.0, "std of Gaussian noise added to the latent z before the latent field",
                                  parse=nonnegative_float)
-    ae_nonlinearity: str = setting("relu", "activation of the autoencoder", choices=hnn.models.NONLINEARITIES)
+    ae_nonlinearity: str = setting("relu", "activation of the autoencoder", choices=hnn.names.NONLINEARITIES)
     trials: int = setting(200, "rendered trajectories (the first 20%% test)",
                           parse=int_at_least(5, why=" (the first 20% of them are the test set)"))
     timesteps: int = setting(103, "frames per trajectory (each gives timesteps - 3 rows)",
@@ -57,7 +57,7 @@ class Config(hnn.RunConfig):
                                                    render_size=self.render_size, trials=self.trials,
                                                    timesteps=self.timesteps)
 
-    def make_objective(self) -> hnn.Objective:
+    def make_objective(self):
         # the autoencoder + latent HNN of hnn.PixelHNN, fit on pairs of frames one frame apart
         if self.objective != "derivative":
             raise ValueError(f"objective={self.objective!r}: the pixel task fits its autoencoder and latent field "
@@ -73,7 +73,7 @@ class Config(hnn.RunConfig):
 
 def main(argv=None):
     """Train one model, then measure its energy MSE; returns its run folder."""
-    return hnn.run_experiment(hnn.cli.parse(Config, argv))
+    return hnn.cli.train(Config, argv)
 
 
 if __name__ == "__main__":

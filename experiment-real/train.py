@@ -35,8 +35,8 @@ class Config(hnn.RunConfig):
 
 
 def main(argv=None):
-    """Train one model; returns its run folder (checkpoint, args.json, metrics.json)."""
-    return hnn.run_experiment(hnn.cli.parse(Config, argv))
+    """Train one model, or reuse the complete run of these settings (--force retrains); returns its run folder."""
+    return hnn.cli.train(Config, argv)
 
 
 if __name__ == "__main__":

@@ -5,26 +5,67 @@ the training loop, the paper's metrics, and saved runs.
     model = hnn.HNN(2, hnn.MLP(2, 200, 2))
     stats = hnn.train(model, x, dxdt)
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
+
+``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
+at once: the light modules (``cli``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
+and ``RunConfig`` load on use, and the first use of any other name loads the whole package.
 """
-from .errors import ConvergenceError, DivergenceError
-from .integrate import rollout
-from .fixed_step import YOSHIDA_WEIGHTS, rk4_step
-from .solvers import SOLVERS, SYMPLECTIC_METHODS, Solver, get_solver, register_solver
-from .metrics import batch_means_se, derivative_loss, energy_mse, mean_and_se
-from .interface import COORDINATES, Model
-from .models import HNN, MLP, Baseline, MLPAutoencoder, PixelHNN, build_model, get_nonlinearity, permutation_tensor
-from .structured import DissipativeHNN, SeparableHNN
-from .objectives import DerivativeObjective, Objective, PixelObjective
-from .mechanical import MechanicalHNN, SecondOrderNODE
-from .trajectory import TrajectoryObjective, snippet_loss
-from .kinds import MODEL_KINDS, OBJECTIVES, ModelKind, get_objective
-from .config import RunConfig
-from .runs import find_run, load_run, run_dir, run_experiment, save_run
-from .tasks import TaskSpec, available_tasks, load_task, task_spec
-from .training import train
-from .gifs import write_gif
-from . import cli, grouped, interface, kinds, nbody, objectives, paper, trajectory
-from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
+import importlib
+
+_LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config")
+
+
+# module -> the public names it gives the package, in the order they load
+_PUBLIC = {
+    "errors": ("ConvergenceError", "DivergenceError"),
+    "integrate": ("rollout",),
+    "fixed_step": ("YOSHIDA_WEIGHTS", "rk4_step"),
+    "solvers": ("SOLVERS", "SYMPLECTIC_METHODS", "Solver", "get_solver", "register_solver"),
+    "metrics": ("batch_means_se", "derivative_loss", "energy_mse", "mean_and_se"),
+    "interface": ("COORDINATES", "Model"),
+    "models": ("HNN", "MLP", "Baseline", "MLPAutoencoder", "PixelHNN", "build_model", "get_nonlinearity",
+               "permutation_tensor"),
+    "structured": ("DissipativeHNN", "SeparableHNN"),
+    "objectives": ("DerivativeObjective", "Objective", "PixelObjective"),
+    "config": ("RunConfig",),
+    "mechanical": ("MechanicalHNN", "SecondOrderNODE"),
+    "trajectory": ("TrajectoryObjective", "snippet_loss"),
+    "kinds": ("MODEL_KINDS", "OBJECTIVES", "ModelKind", "get_objective"),
+    "runs": ("find_run", "load_run", "run_dir", "run_experiment", "save_run"),
+    "tasks": ("TaskSpec", "available_tasks", "load_task", "task_spec"),
+    "training": ("train",),
+    "gifs": ("write_gif",),
+    "evaluation": ("PROTOCOLS", "EnergyProtocol", "energy_bump", "evaluate_energy", "get_protocol"),
+    "cli": (), "grouped": (), "nbody": (), "paper": (), "kind_docs": (),
+}
+
+
+def _load_all() -> None:
+    """Import every module of ``_PUBLIC`` and bind its names (this is where torch and scipy load;
+    every built-in model kind is registered after it)."""
+    for module, names in _PUBLIC.items():
+        loaded = importlib.import_module(f"{__name__}.{module}")
+        globals().update({name: getattr(loaded, name) for name in names})
+
+
+def __getattr__(name: str):
+    """A light module or ``RunConfig`` alone; any other name loads the whole package first."""
+    if name in _LIGHT:
+        return importlib.import_module(f"{__name__}.{name}")
+    if name == "RunConfig":
+        return importlib.import_module(f"{__name__}.config").RunConfig
+    if name.startswith("__"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    _load_all()
+    if name not in globals():
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return globals()[name]
+
+
+def __dir__():
+    _load_all()
+    return sorted(globals())
+
 
 __all__ = [
     "Model", "COORDINATES", "Baseline", "HNN", "MLP", "MLPAutoencoder", "PixelHNN", "build_model", "get_nonlinearity", "permutation_tensor",
@@ -37,6 +78,6 @@ __all__ = [
     "TrajectoryObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
     "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "grouped", "interface", "kinds", "nbody", "objectives",
-    "paper",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "grouped", "interface", "kinds", "nbody",
+    "objectives", "paper", "kind_docs",
 ]

@@ -3,10 +3,18 @@
 Every field of the config is a flag with the field's name and default (``--input_dim``,
 ``--total_steps``, ``--verbose``, ...); ``--baseline``, the original's flag, means ``--model
 baseline``. A bad flag or value stops the parse with the usage and one ``error: ...`` line
-naming the value and the fix (exit code 2, as argparse); so does a ``--save_dir`` that is a file
-or cannot be written, before anything trains. ``run_main`` runs a ``train.py`` as a command: the
-package's input errors raised while running (a missing data file, say) become such a line too,
-and it prints the run folder at the end.
+naming the value and the fix (exit code 2, as argparse); a misspelled flag gets the nearest
+real one ("did you mean --total_steps?"), and no flag is taken for an abbreviation of another. So
+does a ``--save_dir`` that is a file or cannot be written, before anything trains.
+
+``train(Config, argv)`` is a ``train.py``'s whole command: it parses, reuses the complete run of the
+same settings (``--force`` retrains and replaces it) or trains one, and prints one line saying
+where the run is and what happened to it. ``run_main`` runs it: the package's input errors raised
+while running (a missing data file, say) become one ``error:`` line, and Ctrl-C one line saying
+what was kept. Nothing here imports torch: ``--help`` and flag errors answer before it loads.
+
+    def main(argv=None):
+        return hnn.cli.train(Config, argv)
 
     if __name__ == "__main__":
         hnn.cli.run_main(main)
@@ -15,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
 import inspect
 import math
 import re
@@ -22,12 +31,11 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import torch
-
-from . import kinds
+from . import kind_docs
 from .io import check_save_dir
 
 USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it
+INTERRUPTED = 130   # the shell's code for a command ended by Ctrl-C (128 + SIGINT)
 # Exceptions that mean "the input is wrong", not "the code is": values the parser cannot check
 # (the package raises ValueError naming the value and the fix), missing data files, and a
 # --save_dir that cannot be written. Anything else keeps its traceback.
@@ -43,14 +51,29 @@ class Parser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``."""
 
     def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
+        # "--total_step 30" must not silently mean --total_steps: no abbreviations
+        super().__init__(*args, allow_abbrev=False, **kwargs)
         # argparse (before 3.13) reads "--learn_rate -1e-3" as a flag missing its value; no
         # option here looks like a number, so let every negative number reach the type check
         self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message):
         self.print_usage(sys.stderr)
-        self.exit(USAGE_ERROR, f"error: {_one_line(message)}\n")
+        self.exit(USAGE_ERROR, f"error: {_one_line(message)}{self._suggestion(message)}\n")
+
+    def _suggestion(self, message: str) -> str:
+        """"; did you mean --x?" for each unknown flag of an "unrecognized arguments" ``message``
+        that is close to a real one; empty otherwise."""
+        if not message.startswith("unrecognized arguments:"):
+            return ""
+        known = [flag for flag in self._option_string_actions if flag.startswith("--")]
+        hints = []
+        for word in message.split(":", 1)[1].split():
+            flag = word.split("=", 1)[0]
+            close = difflib.get_close_matches(flag, known, n=1, cutoff=0.6) if flag.startswith("--") else []
+            if close:
+                hints.append(f"{flag}: did you mean {close[0]}?")
+        return "; " + "; ".join(hints) if hints else ""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -123,7 +146,11 @@ def _fixed_width(width: int, task: str, state: str) -> Callable[[str], int]:
 
 
 def device(text: str) -> str:
-    """``--device``: a torch device string this machine has (kept as text: it is saved in args.json)."""
+    """``--device``: a torch device string this machine has (kept as text: it is saved in args.json).
+    The default, cpu, is taken without loading torch."""
+    if text == "cpu":
+        return text
+    import torch     # only to check a device other than the cpu
     try:
         found = torch.device(text)
     except RuntimeError:
@@ -152,11 +179,18 @@ def field_meta(cls: type, name: str) -> dict:
     return {}
 
 
+def registered_kinds() -> list[str]:
+    """Every model kind: those ``hnn.kind_docs`` describes (known without torch), then any other
+    that ``hnn.MODEL_KINDS`` holds once its module is loaded (a kind registered at run time)."""
+    loaded = sys.modules.get(f"{__package__}.kinds")
+    return list(dict.fromkeys([*kind_docs.KIND_DOCS, *(loaded.MODEL_KINDS if loaded else ())]))
+
+
 def model_choices(cls=None) -> list[str]:
     """The model kinds ``--model`` of config class ``cls`` takes: its ``MODELS``, else every
     registered kind without a family prefix (the pixel kinds are the pixel task's own)."""
     declared = getattr(cls, "MODELS", None)
-    return list(declared) if declared else [kind for kind in kinds.MODEL_KINDS if "-" not in kind]
+    return list(declared) if declared else [kind for kind in registered_kinds() if "-" not in kind]
 
 
 def _flag_type(cls, f: dataclasses.Field, meta: dict):
@@ -184,8 +218,10 @@ def make_parser(cls, description: str | None = None) -> Parser:
             p.add_argument(f"--{f.name}", action="store_true", help=text)
         elif f.name == "model":
             # no argparse default, so that --baseline can tell an explicit --model from none
-            p.add_argument("--model", choices=model_choices(cls), default=argparse.SUPPRESS,
-                           help=f"{text} (default: {f.default})")
+            kinds = model_choices(cls)
+            prefix = getattr(cls, "KIND_PREFIX", "")
+            p.add_argument("--model", choices=kinds, default=argparse.SUPPRESS,
+                           help=f"{kind_docs.model_help(kinds, prefix)} (default: {f.default})")
             p.add_argument("--baseline", action="store_true",
                            help="train the baseline (an MLP predicting dx/dt directly): the original's flag, the "
                                 "same as --model baseline")
@@ -197,7 +233,12 @@ def make_parser(cls, description: str | None = None) -> Parser:
 
 def parse(cls, argv: Sequence[str] | None = None):
     """The config of class ``cls`` that the command line ``argv`` (default ``sys.argv[1:]``) asks
-    for; a bad flag or value exits with one ``error:`` line (code 2)."""
+    for; a bad flag or value exits with one ``error:`` line (code 2). Creates ``--save_dir``."""
+    return _parse(cls, argv)[0]
+
+
+def _parse(cls, argv: Sequence[str] | None) -> tuple:
+    """``(config, the save_dir this parse created or None)``."""
     parser = make_parser(cls)
     values = vars(parser.parse_args(argv))
     # the original's --baseline is --model baseline: this is the one place it is mapped
@@ -207,11 +248,12 @@ def parse(cls, argv: Sequence[str] | None = None):
             parser.error(f"--baseline contradicts --model {model}; pass one of them")
         model = "baseline"
     values["model"] = model
+    created = None if Path(values["save_dir"]).exists() else Path(values["save_dir"])
     try:
         check_save_dir(values["save_dir"])
     except ValueError as err:
         parser.error(f"--{err}")
-    return cls(**values)
+    return cls(**values), created
 
 
 def check(config) -> None:
@@ -236,27 +278,50 @@ def check(config) -> None:
 # running a train.py as a command
 
 
-def _wants_debug(argv: Sequence[str]) -> bool:
-    """Whether ``argv`` holds ``--debug`` (or an abbreviation argparse would accept)."""
-    pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("--debug", action="store_true")
-    return pre.parse_known_args(list(argv))[0].debug
+def train(cls, argv: Sequence[str] | None = None) -> Path:
+    """A ``train.py``'s command: the run of config class ``cls`` that ``argv`` asks for; returns its folder.
+
+    A complete run of the same settings (``RunConfig.identity``) in ``--save_dir`` is reused, not
+    retrained; ``--force`` retrains it and replaces its folder. Prints one line: where the run
+    is and what happened to it (trained, reused, replaced; a ``--save_dir`` created on the way).
+    Torch loads after the flags and the config's own input checks pass.
+    """
+    config, created = _parse(cls, argv)
+    config.check_inputs()
+    from .runs import find_run, run_experiment      # the heavy imports, once the input is known good
+    found = find_run(config)
+    if found is not None and not config.force:
+        print(f"reused the complete run at {found}: it was trained with these settings already, so nothing "
+              "trained (--force retrains it and replaces the folder)")
+        return found
+    folder = run_experiment(config)
+    notes = [f"created {created}, which did not exist"] if created else []
+    if found is not None:
+        notes.append("replaced the complete run of the same settings that was there (--force)")
+    print(f"saved the run to {folder}" + (f" ({'; '.join(notes)})" if notes else ""))
+    return folder
 
 
 def run_main(main: Callable[[list[str]], Path], argv: Sequence[str] | None = None) -> Path:
-    """Run a ``train.py``'s ``main(argv)`` as a command (``argv`` defaults to ``sys.argv[1:]``).
+    """Run a ``train.py``'s ``main(argv)`` as a command (``argv`` defaults to ``sys.argv[1:]``);
+    returns what it returns (the run folder; ``main`` says where it went).
 
-    Prints ``saved the run to <folder>`` at the end and returns the folder. An input error
-    raised while running (one of ``INPUT_ERRORS``) becomes one ``error: <message>`` line on
-    stderr and exit code 2, or, with ``--debug``, propagates with its traceback.
+    An input error raised while running (one of ``INPUT_ERRORS``) becomes one ``error: <message>``
+    line on stderr and exit code 2; Ctrl-C one line saying what was kept, and exit code 130. With
+    ``--debug`` both propagate with their traceback.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
+    debug = "--debug" in argv
     try:
-        folder = main(argv)
+        return main(argv)
     except INPUT_ERRORS as err:
-        if _wants_debug(argv):
+        if debug:
             raise
         print(f"error: {_one_line(err) or type(err).__name__}", file=sys.stderr)
         sys.exit(USAGE_ERROR)
-    print(f"saved the run to {folder}")
-    return folder
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print("interrupted: the run in progress was discarded (a run folder is written whole or not at all); "
+              "every run saved before stays", file=sys.stderr)
+        sys.exit(INTERRUPTED)

@@ -22,9 +22,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .models import FIELD_TYPES, NONLINEARITIES
-from .kinds import OBJECTIVES, get_objective, objective_for
-from .objectives import DerivativeObjective, Objective
+from .names import FIELD_TYPES, NONLINEARITIES, OBJECTIVES
 
 
 def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False) -> Any:
@@ -55,18 +53,18 @@ class RunConfig:
     nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
     total_steps: int = setting(2000, "optimizer steps; the loop runs total_steps + 1, as the original",
                                parse=cli.int_at_least(0))
-    print_every: int = setting(200, "print (and test) every N steps", parse=cli.int_at_least(1))
+    print_every: int = setting(200, "print (and test) every N steps; changes what is printed and the test loss's "
+                                    "sampling in metrics.json, never what is trained", parse=cli.int_at_least(1),
+                               display_only=True)
     name: str = setting("run", "run name, the prefix of the run folder")
-    model: str = setting("hnn", "model kind: hnn (the paper's), baseline (an MLP predicting dx/dt directly; also "
-                                "--baseline), separable (H = T(p) + V(q): explicit leapfrog is symplectic for it) "
-                                "or dissipative (J grad H + grad D: learns friction)")
+    model: str = setting("hnn", "model kind (hnn.kind_docs describes each)")
     use_rk4: bool = setting(False, "fit the RK4 average slope of the learned field over one data time step dt, "
                                    "(x(t+dt) - x(t))/dt of one RK4 step, to the true dx/dt (the original crashed on "
                                    "this flag); default: fit dx/dt itself")
     objective: str = setting("derivative", "what the model is fit to: derivative (dx/dt at every state, the paper's) "
                                            "or trajectory (its rollout over snippets of snippet_steps + 1 observed "
                                            "states, through RK4, or leapfrog for a separable model; what measured "
-                                           "paths without derivatives allow)", choices=tuple(OBJECTIVES))
+                                           "paths without derivatives allow)", choices=OBJECTIVES)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
@@ -75,8 +73,10 @@ class RunConfig:
     save_dir: str = setting(".", "folder that receives the run folder <name>-<model>-seed<seed>-<hash>/")
     device: str = setting("cpu", "torch device, e.g. cpu or cuda", parse=cli.device)
     dtype: str = setting("float32", "dtype of the model and the data", choices=("float32", "float64"))
-    debug: bool = setting(False, "on an input error (a missing data file, say), show the full traceback instead "
-                                 "of one error: line", display_only=True)
+    debug: bool = setting(False, "on an input error (a missing data file, say) or Ctrl-C, show the full traceback "
+                                 "instead of one line", display_only=True)
+    force: bool = setting(False, "retrain and replace a complete run of the same settings in save_dir, which "
+                                 "is otherwise reused", display_only=True)
 
     # what the state's width measures, for --input_dim's error; the model kinds --model takes
     # (None: every registered kind without a family prefix); the prefix of this task's kinds
@@ -97,9 +97,16 @@ class RunConfig:
         """The arrays this run trains on (``self.make_objective().arrays`` and, for ``use_rk4``, ``dt``)."""
         raise NotImplementedError(f"{type(self).__name__} must implement dataset()")
 
-    def make_objective(self) -> Objective:
+    def check_inputs(self) -> None:
+        """Raise one of ``hnn.cli.INPUT_ERRORS`` naming the fix when this run's input is missing
+        (a data file, say), before torch loads; nothing to check by default."""
+
+    def make_objective(self):
         """What this run fits: the objective its model kind is registered with, or with ``objective=
         'trajectory'`` a ``TrajectoryObjective`` of ``snippet_steps`` (for kinds fit on dx/dt only)."""
+        # deferred: the registry loads torch, and a config is parsed before torch (train.py --help)
+        from .kinds import OBJECTIVES, get_objective, objective_for
+        from .objectives import DerivativeObjective
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective={self.objective!r}: choose one of {', '.join(OBJECTIVES)}")
         registered = objective_for(self.kind)

@@ -8,7 +8,7 @@ once, by its model class (``hnn.Model``); the row names that class, so ``--model
 ``hnn.load_run``, both studies and the peers table read the same declaration. A new kind is one
 model module and one row here:
 
-    MODEL_KINDS["toy"] = ModelKind(ToyModel, lambda args: ToyModel(args["input_dim"]), summary="...")
+    MODEL_KINDS["toy"] = ModelKind(ToyModel, lambda args: ToyModel(args["input_dim"]))     # and its prose in hnn/kind_docs.py
 """
 from __future__ import annotations
 
@@ -32,12 +32,12 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 class ModelKind:
     """A model kind: its ``model`` class (whose declarations the studies read), ``build(args)``
     (its untrained model from a run's args; also rebuilds it on load), the ``objective`` class
-    that trains it by default, its plot ``color`` and a one-line ``summary`` for ``--help`` and docs."""
+    that trains it by default and its plot ``color``. Its prose for readers (``--help``, the README,
+    docs/python.md) is ``hnn.kind_docs.KIND_DOCS[kind]``, torch-free so ``--help`` answers at once."""
     model: type
     build: Callable[[dict], nn.Module]
     objective: type = DerivativeObjective
     color: str = "tab:gray"
-    summary: str = ""
 
     def __post_init__(self):
         if not (isinstance(self.model, type) and issubclass(self.model, Model)):
@@ -93,22 +93,14 @@ def _second_order(cls) -> Callable[[dict], nn.Module]:
 
 # the one place a kind is named; a run's config says which (RunConfig.kind), its args.json too
 MODEL_KINDS: dict[str, ModelKind] = {
-    "hnn": ModelKind(HNN, lambda args: _mlp(args, False), color="tab:blue",
-                     summary="the paper's HNN: one MLP H(q, p), dx/dt = J grad H"),
-    "baseline": ModelKind(Baseline, lambda args: _mlp(args, True), color="tab:red",
-                          summary="the paper's baseline: an MLP that predicts dx/dt directly, no H"),
-    "separable": ModelKind(SeparableHNN, _structured(SeparableHNN), color="tab:green",
-                           summary="H = T(p) + V(q), two MLPs: leapfrog and yoshida4 are symplectic for it"),
-    "dissipative": ModelKind(DissipativeHNN, _structured(DissipativeHNN), color="tab:purple",
-                             summary="dx/dt = J grad H + grad D: an H and a learned dissipation (D-HNN)"),
-    "mechanical": ModelKind(MechanicalHNN, _second_order(MechanicalHNN), color="tab:olive",
-                            summary="H = p^T M^-1(q) p / 2 + V(q), learned mass matrix; maps observed [q, qdot]"),
-    "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange",
-                              summary="dq/dt = v, dv/dt = f(q, v): a second-order MLP on observed velocities, no H"),
-    "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue",
-                           summary="an autoencoder whose latent [q, p] moves by an HNN"),
-    "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red",
-                                summary="an autoencoder whose latent moves by an MLP"),
+    "hnn": ModelKind(HNN, lambda args: _mlp(args, False), color="tab:blue"),
+    "baseline": ModelKind(Baseline, lambda args: _mlp(args, True), color="tab:red"),
+    "separable": ModelKind(SeparableHNN, _structured(SeparableHNN), color="tab:green"),
+    "dissipative": ModelKind(DissipativeHNN, _structured(DissipativeHNN), color="tab:purple"),
+    "mechanical": ModelKind(MechanicalHNN, _second_order(MechanicalHNN), color="tab:olive"),
+    "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange"),
+    "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue"),
+    "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red"),
 }
 
 # objective name -> class: RunConfig.objective's choices

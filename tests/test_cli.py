@@ -119,10 +119,33 @@ def test_run_main_turns_an_input_error_into_one_line(capsys):
     assert capsys.readouterr().err == "error: bad value 7 for --thing; pass 8\n"
 
 
-@pytest.mark.parametrize("flag", ["--debug", "--deb"])
-def test_run_main_debug_reraises(flag):
+def test_run_main_debug_reraises():
     with pytest.raises(FileNotFoundError, match="nowhere"):
-        hnn.cli.run_main(_raises(FileNotFoundError("nowhere")), ["--seed", "1", flag])
+        hnn.cli.run_main(_raises(FileNotFoundError("nowhere")), ["--seed", "1", "--debug"])
+
+
+def test_no_flag_is_an_abbreviation_and_a_misspelling_gets_the_nearest_flag(capsys):
+    Config = hnn.load_task("spring", "train").Config
+    for argv, hint in ((["--total_step", "30"], "did you mean --total_steps?"),
+                       (["--deb"], "did you mean --debug?"),
+                       (["--hiden_dim=8"], "--hiden_dim: did you mean --hidden_dim?")):
+        with pytest.raises(SystemExit) as info:
+            hnn.cli.parse(Config, argv)
+        assert info.value.code == 2
+        assert hint in _assert_one_error(capsys.readouterr().err, argv[0].split("=")[0])
+    with pytest.raises(SystemExit):
+        hnn.cli.parse(Config, ["--zzzz"])
+    assert "did you mean" not in capsys.readouterr().err      # nothing near: no guess
+
+
+def test_ctrl_c_is_one_line_and_exit_130(capsys):
+    with pytest.raises(SystemExit) as info:
+        hnn.cli.run_main(_raises(KeyboardInterrupt()), [])
+    assert info.value.code == 130
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("interrupted:") and "discarded" in err and "stays" in err
+    with pytest.raises(KeyboardInterrupt):
+        hnn.cli.run_main(_raises(KeyboardInterrupt()), ["--debug"])
 
 
 def test_run_main_leaves_bugs_alone():
@@ -130,9 +153,44 @@ def test_run_main_leaves_bugs_alone():
         hnn.cli.run_main(_raises(ZeroDivisionError("a bug, not bad input")), [])
 
 
-def test_run_main_prints_the_run_folder(tmp_path, capsys):
-    assert hnn.cli.run_main(lambda argv: tmp_path / "run", []) == tmp_path / "run"
-    assert capsys.readouterr().out == f"saved the run to {tmp_path / 'run'}\n"
+def test_a_rerun_reuses_the_complete_run_and_force_replaces_it(tmp_path, capsys):
+    Config = hnn.load_task("spring", "train").Config
+    save_dir = tmp_path / "new" / "deeper"
+    argv = ["--total_steps", "2", "--hidden_dim", "8", "--save_dir", str(save_dir)]
+    run = hnn.cli.train(Config, argv)
+    assert capsys.readouterr().out.splitlines()[-1] == f"saved the run to {run} (created {save_dir}, which did not exist)"
+    stamp = (run / "model.tar").stat().st_mtime_ns
+    # display-only flags (print_every, verbose) are not a new run: the same folder, reused, nothing trained
+    assert hnn.cli.train(Config, argv + ["--print_every", "7"]) == run
+    assert capsys.readouterr().out.splitlines()[-1].startswith(f"reused the complete run at {run}: ")
+    assert (run / "model.tar").stat().st_mtime_ns == stamp
+    assert hnn.cli.train(Config, argv + ["--force"]) == run
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert line == f"saved the run to {run} (replaced the complete run of the same settings that was there (--force))"
+    assert hnn.load_run(run)[1]["total_steps"] == 2
+
+
+def test_display_only_flags_stay_out_of_the_identity():
+    Config = hnn.load_task("spring", "train").Config
+    base = Config()
+    for field in ("print_every", "verbose", "debug", "force"):
+        assert field in Config.display_only()
+    other = Config(print_every=7, verbose=True, debug=True, force=True, save_dir="elsewhere")
+    assert other.key() == base.key() and hnn.run_dir(other).name == hnn.run_dir(base).name
+    assert Config(total_steps=7).key() != base.key()       # a field that changes what is trained does
+
+
+def test_help_and_flag_errors_answer_before_torch_loads():
+    """``--help`` and a bad flag load no torch, scipy, matplotlib or gymnasium (timings: not here)."""
+    heavy = ("torch", "scipy", "matplotlib", "gymnasium")
+    code = ("import runpy, sys\nsys.argv = [sys.argv[1], *sys.argv[2:]]\ntry:\n    runpy.run_path(sys.argv[0], "
+            "run_name='__main__')\nexcept SystemExit:\n    pass\nprint(sorted(m for m in %r if m in sys.modules))" % (heavy,))
+    env = {**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"}
+    for task in hnn.available_tasks():
+        for argv in (["--help"], ["--total_step", "3"]):
+            out = subprocess.run([sys.executable, "-c", code, f"experiment-{task}/train.py", *argv], cwd=REPO,
+                                 env=env, capture_output=True, text=True, timeout=120)
+            assert out.stdout.splitlines()[-1] == "[]", (task, argv, out.stdout[-300:], out.stderr[-300:])
 
 
 def test_main_raises_for_programs_and_debug_does_not_change_the_run(tmp_path):

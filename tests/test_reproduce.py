@@ -54,6 +54,8 @@ def test_compare_edges():
 
 
 def test_tables_marks_missing_and_stages(results):
+    quick = reproduce.tables_markdown(results)
+    results["meta"].update(quick=False, mode="full settings")     # marks are for full settings
     table = reproduce.tables_markdown(results)
     marks = reproduce.MARKS
     assert _cell(table, "Train loss", "baseline").endswith(marks["within"])    # exactly at the ±
@@ -62,8 +64,8 @@ def test_tables_marks_missing_and_stages(results):
     assert _cell(table, "Test loss", "hnn").endswith(marks["within"])
     assert _cell(table, "Energy MSE", "baseline").endswith(marks["within"])
     assert _cell(table, "Energy MSE", "hnn").endswith(marks["within"])
-    assert reproduce.LEGEND in table and "QUICK" in table.splitlines()[0]
-    assert "| 1.05x |" in table                                  # the ratio column stays
+    assert reproduce.LEGEND in table and "QUICK" in quick.splitlines()[0]
+    assert "| 1.05x |" in table and "| 1.05x |" in quick                                 # the ratio column stays
     # tasks absent from the checkout are listed; a present one without data is reported as skipped
     missing = next(line for line in table.splitlines() if line.startswith("Not yet in this checkout"))
     assert "real" in missing and "2body" in missing and "pixels" in missing and "spring" not in missing
@@ -260,6 +262,10 @@ def test_staleness_check_flags_a_page_stamped_before_a_code_change(tmp_path, mon
     (tmp_path / "experiment-x" / "data.py").write_text("a = 2\n")     # a task's code counts too
     _git(tmp_path, "commit", "-qam", "a task change")
     assert len(readme.stale(["headline"])) == 1
+    (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
+    (tmp_path / "hnn" / "x.py").write_text("a = 3\n")
+    _git(tmp_path, "commit", "-qam", f"a message changes\n\n{readme.UNCHANGED} only what is printed")
+    assert readme.stale(["headline"]) == []                      # a commit that says it moves no number
 
 
 def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results):
@@ -293,3 +299,10 @@ def test_a_task_with_min_seeds_trains_more_seeds_only_across_seeds():
     assert one["pixels"]["seeds"] == [7]                         # one seed stays one seed
     jobs = reproduce.plan(list(rows.values()), [0, 1, 2], Path("runs"), 3)
     assert sorted({j.config.seed for j in jobs if j.task == "pixels"}) == [0, 1, 2, 3, 4]
+
+
+def test_quick_tables_carry_no_marks_against_the_paper_and_say_why(results):
+    quick = reproduce.tables_markdown(results)
+    table_rows = [line for line in quick.splitlines() if line.startswith("| ") and "---" not in line]
+    assert table_rows and not any(mark in line for line in table_rows for mark in reproduce.MARKS.values())
+    assert reproduce.QUICK_NOTE in quick and "astronomical" in quick and reproduce.LEGEND not in quick

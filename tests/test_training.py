@@ -154,3 +154,22 @@ def test_a_loss_that_turns_nan_stops_training_and_names_its_step(spring):
         model.differentiable_model.linear3.weight.mul_(1e30)     # the loss overflows float32 at once
     with pytest.raises(hnn.DivergenceError, match="at step 0 of 10.*--clip_grad"):
         hnn.train(model, d["x"], d["dxdt"], total_steps=10)
+
+
+def test_data_far_from_unit_scale_warns_and_a_hamiltonian_rescaling_does_not(spring):
+    """A spring in raw units (q in 1e2, p in 2.5e2, as a measured oscillator) warns; divided by
+    the spreads (one degree of freedom: any pair of factors keeps Hamilton's equations) it does not."""
+    import warnings
+    d = spring.get_dataset(seed=0)
+    raw_x, raw_dxdt = (torch.as_tensor(d[key]) * torch.tensor([100.0, 250.0]) for key in ("x", "dxdt"))
+    model = hnn.HNN(2, hnn.MLP(2, 8, 2))
+    with pytest.warns(UserWarning) as record:
+        hnn.train(model, raw_x, raw_dxdt, total_steps=0)
+    assert [str(w.message).split(" (")[0] for w in record] == ["x is far from unit scale", "dxdt is far from unit scale"]
+    assert "Scale your states" in str(record[0].message)
+    with pytest.warns(UserWarning, match="dxdt is far from unit scale"):
+        hnn.train(model, d["x"], d["dxdt"] * 1e-4, total_steps=0)
+    spread = raw_x.std(dim=0)                   # q by q's spread, p by p's; their derivatives alike
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        hnn.train(model, raw_x / spread, raw_dxdt / spread, total_steps=0)
