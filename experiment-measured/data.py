@@ -115,8 +115,8 @@ def load(data, time: str = "t", q: str = "", v: str = "", p: str = "", trial: st
                 raise ValueError(f"{table.path}: {where[i]}: trial {ids[i]:g} starts again after other trials; the "
                                  "rows of one trial must be contiguous (sort the file by trial, then time)")
         elif i and not t[i] > t[i - 1]:
-            raise ValueError(f"{table.path}: {where[i]}: time {time}={t[i]!r} does not increase within trial "
-                             f"{ids[i]:g} (the row before has {t[i - 1]!r}); sort each trial by time, drop repeated "
+            raise ValueError(f"{table.path}: {where[i]}: time {time}={float(t[i])!r} does not increase within trial "
+                             f"{ids[i]:g} (the row before has {float(t[i - 1])!r}); sort each trial by time, drop repeated "
                              "samples, or name the trial column with --trial")
         seen.add(ids[i])
     mask = np.array([name in angles for name in q_names])
