@@ -18,6 +18,11 @@ none (it is left out). Or name the derivative columns yourself (``dxdt``, 2n of 
 **Angles** (``periodic``) are unwrapped within each trial before differencing (so a wrap from
 pi to -pi is not a jump), then wrapped to [-pi, pi) in the states the models see.
 
+**Snippets** (``--objective trajectory``): non-overlapping runs of ``snippet_steps + 1``
+consecutive samples of one part of one trial whose every step is within ``UNIFORM`` of the
+nominal step (the median step over the file), since the rollout steps by one fixed ``dt``; the
+angles of a snippet stay continuous from its wrapped first state.
+
 **Split** by time: the last ``test_fraction`` of each trial's rows is held out, never a shuffle.
 
 **Scale** (``Scale``), fit on the training rows: q' = (q - q0) / a, s' = s / b for the second
@@ -41,6 +46,7 @@ import hnn
 
 reader = hnn.load_task("measured", "reader")
 
+UNIFORM = 0.05          # a snippet's steps may differ from the nominal step by this fraction of it
 MIN_ROWS = 2            # a trial's train part and its held-out part need at least this many rows each
 ASSUMES = ("on [q, v] the hnn, separable and dissipative rungs take v for the momentum: they assume p = m v with "
            "one constant mass m for every coordinate (right for a point mass on a spring, equal masses, a rigid "
@@ -215,19 +221,43 @@ def prepared(rec: Recording, rows: np.ndarray, max_gap: float) -> tuple[np.ndarr
     return t[ok], q[ok], s[ok], d[ok]
 
 
+def snippets(rec: Recording, scale: Scale, parts: list[np.ndarray], steps: int, dt: float) -> np.ndarray:
+    """Flattened snippets ``(k, (steps + 1) * 2n)`` of scaled states from the row sets ``parts`` (module docstring)."""
+    n, out = rec.q.shape[1], []
+    for rows in parts:
+        t, x = rec.t[rows], scale.x(rec.q[rows], rec.s[rows])
+        i = 0
+        while i + steps < len(rows):
+            if np.all(np.abs(np.diff(t[i:i + steps + 1]) - dt) <= UNIFORM * dt):
+                snip = x[i:i + steps + 1].copy()
+                angles = snip[:, :n][:, rec.periodic]
+                snip[:, :n][:, rec.periodic] = angles + (wrap(angles[0]) - angles[0])
+                out.append(snip.reshape(-1))
+                i += steps + 1
+            else:
+                i += 1
+    if not out:
+        raise ValueError(f"{rec.path}: no {steps + 1} consecutive samples of a trial part are {dt:.4g} apart (within "
+                         f"{UNIFORM:.0%}); --objective trajectory needs even steps: lower --snippet_steps or use "
+                         "--objective derivative")
+    return np.stack(out).astype(np.float32)
+
+
 def get_dataset(data, time: str = "t", q: str = "", v: str = "", p: str = "", trial: str = "", periodic: str = "",
-                dxdt: str = "", test_fraction: float = 0.3, max_gap: float = 3.0) -> dict:
+                dxdt: str = "", test_fraction: float = 0.3, max_gap: float = 3.0, snippet_steps: int | None = None) -> dict:
     """Scaled training and held-out rows of the measurements (see the module's docstring).
 
     Returns float32 ``x``, ``dxdt``, ``test_x``, ``test_dxdt`` ``(rows, 2n)`` (angles wrapped),
     float64 ``t``, ``test_t`` (seconds, your units), ``dt`` (the scaled nominal step), ``state``,
-    ``scale`` (``Scale.to_dict()``), ``periodic`` and ``cache_key`` (the file's name and digest).
+    ``scale`` (``Scale.to_dict()``), ``periodic`` and ``cache_key`` (the file's name and digest);
+    with ``snippet_steps``, ``snippets`` and ``test_snippets`` too (``snippets``).
     """
     if not max_gap >= 1:
         raise ValueError(f"--max_gap {max_gap!r}: must be at least 1 nominal step")
     rec = load(data, time, q, v, p, trial, periodic, dxdt)
     parts = {"train": [], "test": []}
-    for train_rows, test_rows in split_rows(rec, test_fraction):
+    split = split_rows(rec, test_fraction)
+    for train_rows, test_rows in split:
         parts["train"].append(prepared(rec, train_rows, max_gap))
         parts["test"].append(prepared(rec, test_rows, max_gap))
     joined = {k: [np.concatenate(col) for col in zip(*v)] for k, v in parts.items()}
@@ -237,7 +267,8 @@ def get_dataset(data, time: str = "t", q: str = "", v: str = "", p: str = "", tr
                              f"alone between gaps larger than --max_gap {max_gap:g} nominal steps); raise --max_gap")
     n = rec.q.shape[1]
     scale = Scale.fit(joined["train"][1], joined["train"][2], rec.periodic, rec.state)
-    out = {"dt": float(np.median(np.diff(rec.t[rec.trials()[0]]))) / scale.tau, "state": rec.state,
+    nominal = float(np.median(np.concatenate([np.diff(rec.t[rows]) for rows in rec.trials()])))
+    out = {"dt": nominal / scale.tau, "state": rec.state,
            "scale": scale.to_dict(), "periodic": rec.periodic.tolist(),
            "cache_key": f"{Path(rec.path).name}-{rec.sha256[:12]}"}
     for part, prefix in (("train", ""), ("test", "test_")):
@@ -247,4 +278,7 @@ def get_dataset(data, time: str = "t", q: str = "", v: str = "", p: str = "", tr
         out[prefix + "x"] = x.astype(np.float32)
         out[prefix + "dxdt"] = scale.dxdt(d_[:, :n], d_[:, n:]).astype(np.float32)
         out[prefix + "t"] = t_
+        if snippet_steps is not None:
+            rows = [pair[0 if part == "train" else 1] for pair in split]
+            out[prefix + "snippets"] = snippets(rec, scale, rows, snippet_steps, nominal)
     return out

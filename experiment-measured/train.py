@@ -58,7 +58,7 @@ class Config(hnn.RunConfig):
     save_dir: str = str(HERE)
     STATE: ClassVar[str] = "state [q, v] or [q, p]"
     DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("data", "time", "q", "v", "p", "trial", "periodic", "dxdt",
-                                                 "test_fraction", "max_gap")
+                                                 "test_fraction", "max_gap", "objective", "snippet_steps")
 
     def __post_init__(self):
         q = hnn.load_task("measured", "reader").names(self.q)
@@ -71,7 +71,8 @@ class Config(hnn.RunConfig):
 
     def dataset(self) -> dict:
         return hnn.load_task("measured").get_dataset(self.data, self.time, self.q, self.v, self.p, self.trial,
-                                                     self.periodic, self.dxdt, self.test_fraction, self.max_gap)
+                                                     self.periodic, self.dxdt, self.test_fraction, self.max_gap,
+                                                     self.snippet_steps if self.objective == "trajectory" else None)
 
     def finish(self, directory, dataset: dict) -> None:
         """The scale beside the run: its numbers in your units are q = q' a + q0, s = s' b, t = t' tau."""

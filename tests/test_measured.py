@@ -261,3 +261,23 @@ def test_the_docs_scene_study_command_runs_verbatim(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     card = json.loads((tmp_path / "double-linear" / "scene.json").read_text())
     assert card["chosen"] and len(card["rows"]) == 6
+
+
+def test_trajectory_snippets_are_consecutive_even_steps_inside_one_part(tmp_path):
+    t = np.arange(60) * 0.1
+    t[25:] += 0.03                    # one step 30% long: no snippet may span it
+    path = _write_csv(tmp_path / "even.csv", {"t": t, "x": t, "v": np.ones(60)})     # x = t names its row
+    d = data.get_dataset(path, q="x", v="v", snippet_steps=4)
+    a, q0 = d["scale"]["a"], d["scale"]["q0"][0]
+    found = []
+    for part in ("snippets", "test_snippets"):
+        x = d[part].reshape(len(d[part]), 5, 2)[:, :, 0] * a + q0
+        rows = [int(np.argmin(np.abs(t - snip[0]))) for snip in x]
+        for snip, row in zip(x, rows):
+            np.testing.assert_allclose(snip, t[row:row + 5], atol=1e-5)      # five consecutive samples
+        found.append(rows)
+    # train rows 0-41 cut at the long step (0-24, 25-41), held-out rows 42-59; non-overlapping
+    assert found == [[0, 5, 10, 15, 20, 25, 30, 35], [42, 47, 52]]
+    config = train.Config(data=str(path), q="x", v="v", model="mechanical", objective="trajectory", hidden_dim=8,
+                          total_steps=5, save_dir=str(tmp_path))
+    assert math.isfinite(hnn.load_run(hnn.run_experiment(config))[2]["test_loss"])
