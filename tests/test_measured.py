@@ -281,3 +281,12 @@ def test_trajectory_snippets_are_consecutive_even_steps_inside_one_part(tmp_path
     config = train.Config(data=str(path), q="x", v="v", model="mechanical", objective="trajectory", hidden_dim=8,
                           total_steps=5, save_dir=str(tmp_path))
     assert math.isfinite(hnn.load_run(hnn.run_experiment(config))[2]["test_loss"])
+
+
+def test_the_velocity_mismatch_measures_how_far_v_is_from_dq_dt(tmp_path):
+    cols = _damped(trials=2, n=200)
+    fields = dict(time="time", q="x", v="v", p="", trial="run", periodic="", dxdt="", test_fraction=0.3, max_gap=3.0)
+    exact = measured_study.velocity_mismatch({**fields, "data": str(_write_csv(tmp_path / "a.csv", cols))})
+    cols["v"] = list(1.2 * np.asarray(cols["v"]))       # velocities 20% too large: dq/dt - v = -v / 6
+    off = measured_study.velocity_mismatch({**fields, "data": str(_write_csv(tmp_path / "b.csv", cols))})
+    assert exact[0] < 5e-3 and off[0] == pytest.approx(1 / 6, abs=5e-3)
