@@ -12,7 +12,7 @@ measured on the held-out tail of every trial (``measured_metrics``): the predict
 drift with ``--energy``, the derivative loss (on the scaled states, so dimensionless) and the
 training (``scene_measure.training_cost``, one thread) and rollout seconds. The card picks the
 smallest model (parameters, then training seconds) within ``CARD_FACTOR`` of the best median
-prediction error. Writes ``<out>/scene.json`` and ``<out>/scene.md``; ``--update-docs`` files the
+prediction error (ties: fewer training rows). Writes ``<out>/scene.json`` and ``<out>/scene.md``; ``--update-docs`` files the
 card under the data file's name in docs/measured-scenes.json and rewrites the README's rows of
 measured scenes from that file.
 """
@@ -100,7 +100,8 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
         return None, ["no model was measured"]
     best = min(r["prediction_error"]["median"] for r in measured)
     ok = [r for r in measured if r["prediction_error"]["median"] <= scene_study.CARD_FACTOR * best]
-    chosen = min(ok, key=lambda r: (r["params"], r["train_seconds"] or 0.0))
+    # fewest parameters, then the fewest training rows (both exact), then the fastest to train (a timing)
+    chosen = min(ok, key=lambda r: (r["params"], r["train_fraction"], r["train_seconds"] or 0.0))
     err = chosen["prediction_error"]["median"]
     ratio = err / naive["median"] if naive["median"] > 0 else float("inf")
     said = [f"{chosen['kind']} (width {chosen['hidden_dim']}, {chosen['train_fraction']:g} of the training rows, "
@@ -123,7 +124,8 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
     baseline, structured = best_of(["baseline"]), best_of([k for k in hnn.MODEL_KINDS if k != "baseline"])
     if baseline and structured:
         a, b = baseline["prediction_error"]["median"], structured["prediction_error"]["median"]
-        said.append(f"The plain baseline is {'as good as' if a <= NEAR * b else 'worse than'} the structured rungs "
+        word = "better than" if a * NEAR < b else "as good as" if a <= NEAR * b else "worse than"
+        said.append(f"The plain baseline is {word} the structured rungs "
                     f"here ({a:.4g} against {structured['kind']} {b:.4g}).")
     return chosen, said
 
