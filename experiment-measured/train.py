@@ -40,7 +40,7 @@ class Config(hnn.RunConfig):
     """Your own measurements: trajectories of any system from a file, x = [q, v] or [q, p]."""
     name: str = "measured"
     input_dim: int = setting(2, "width of the state: 2 per --q column (set by --q)", parse=_width)
-    data: str = setting("", "the measurements: a .csv, whitespace-separated text with a header line (a leading % or # "
+    data: str = setting("", "the measurements: a .csv, whitespace-separated text with a header line (a leading %% or # "
                             "allowed), or an .npz of 1-D columns", parse=str)
     time: str = setting("t", "the column of times (seconds, or your unit of time)", parse=str)
     q: str = setting("", "the position columns, comma-separated (e.g. x1,x2)", parse=str)
