@@ -3,6 +3,7 @@
     python analysis/scene_study.py --jobs 2                  # full study (reuses reproduce.py's runs)
     python analysis/scene_study.py --quick                   # smoke run (300 steps, a small grid)
     python analysis/scene_study.py --jobs 2 --update-docs    # docs/scenes.md, the README's model guide
+    python analysis/scene_study.py --data FILE --q x --v v   # your own measurements (measured_study.py)
 
 The rungs are the model kinds each task trains (``--model``): the baseline MLP, the paper's HNN,
 the separable HNN (H = T(p) + V(q)) and the dissipative HNN (J grad H + grad D); the pixel task
@@ -45,7 +46,7 @@ import hnn
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
 from hnn_analysis.paper import registry, reproduce  # noqa: E402
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm  # noqa: E402
+from hnn_analysis.scenes import measured_study, scene_measure, scene_metrics as sm  # noqa: E402
 from hnn_analysis.speed import speed_accuracy  # noqa: E402
 from hnn_analysis import sweep  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
@@ -125,17 +126,19 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     return rows
 
 
-def train(batches, out: Path, args) -> tuple[dict, dict]:
+def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
     """``({row/label/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
     ``(rows, seeds, steps, models or None for every rung)``: reuse what matches, train the rest
     in one sweep (``args.jobs`` processes, on ``args.backend``), so the pool starts once and the
-    longest runs of every batch go first."""
+    longest runs of every batch go first. ``fits(task, kind)``: which kinds fit the rows' states
+    (default: the kinds of canonical states)."""
+    fits = fits or _fits
     jobs = []
     for rows, seeds, steps, models in batches:
         models = rungs() if models is None else models
         # plan() always takes the paper's pair: keep only the kinds asked for
         jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models)
-                 if job.config.model in models and _fits(job.task, job.config.model)]
+                 if job.config.model in models and fits(job.task, job.config.model)]
     runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
@@ -302,7 +305,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="training processes, as reproduce.py --jobs; then as many measuring processes (local backend)")
     sweep.add_backend_flags(p)
     p.add_argument("--update-docs", dest="update_docs", action="store_true",
-                   help="write docs/scenes.md and the README's model guide (full settings only)")
+                   help="write docs/scenes.md and the README's model guide (full settings only); with --data, "
+                        "the README's row of that file")
+    measured_study.add_flags(p)
     return p
 
 
@@ -315,6 +320,8 @@ def main(argv=None) -> dict:
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
     sweep.check_backend(parser, args)
+    if args.data:
+        return measured_study.run(args, argv, parser)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     steps = reproduce.QUICK_STEPS if args.quick else None
     seeds = [0] if args.quick else list(range(args.seeds))

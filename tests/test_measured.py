@@ -1,0 +1,292 @@
+"""Your own measurements (experiment-measured/, analysis/scenes/measured_*.py): reading, differences,
+angles, scaling, the right rung on a synthetic damped oscillator, one error line per bad input."""
+import hashlib
+import json
+import math
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import hnn
+
+hnn.tasks.import_analysis()
+from hnn_analysis.paper import reproduce  # noqa: E402
+from hnn_analysis.scenes import measured_metrics as mm, measured_study, scene_study  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+SYSTEMS = REPO / "experiment-measured" / "systems"
+data = hnn.load_task("measured")
+reader = hnn.load_task("measured", "reader")
+train = hnn.load_task("measured", "train")
+# the digests of the archive members (invar_datasets.zip of Schmidt & Lipson 2009), computed from the archive
+PUBLISHED = {"real_linear_h_1.txt": "bf11e50703376b82566b635771de23845a2546e4b733beb49588c7af4eec26cc",
+             "real_double_linear_h_1.txt": "b258df76a9a6f3dda294feb344160e39ecd3158d8e44b8bfe4ae4aa842c026aa"}
+
+
+def _write_csv(path: Path, columns: dict) -> Path:
+    names = list(columns)
+    rows = np.stack([np.asarray(columns[n], dtype=float) for n in names], axis=1)
+    path.write_text(",".join(names) + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+    return path
+
+
+def _damped(trials: int = 3, n: int = 160, gamma: float = 0.25, omega: float = 2.0, seed: int = 0) -> dict:
+    """x'' = -omega^2 x - 2 gamma x' from random starts, exactly (its analytic solution), on uneven times."""
+    rng = np.random.default_rng(seed)
+    cols = {"run": [], "time": [], "x": [], "v": []}
+    w = math.sqrt(omega ** 2 - gamma ** 2)
+    for k in range(trials):
+        t = np.cumsum(rng.uniform(0.04, 0.06, n))
+        a, b = rng.uniform(-1, 1, 2) + np.array([1.0, 0.0])
+        x = np.exp(-gamma * t) * (a * np.cos(w * t) + b * np.sin(w * t))
+        v = np.exp(-gamma * t) * ((-gamma * a + w * b) * np.cos(w * t) + (-gamma * b - w * a) * np.sin(w * t))
+        cols["run"] += [k] * n
+        cols["time"] += list(t)
+        cols["x"] += list(3.0 * x)          # a position unit that is not the velocity's: the scale must cope
+        cols["v"] += list(3.0 * v)
+    return cols
+
+
+# ----------------------------------------------------------------------------------------------
+# the shipped files
+
+
+def test_the_shipped_real_systems_are_the_published_bytes_and_read_as_the_archive_means():
+    for name, digest in PUBLISHED.items():
+        assert hashlib.sha256((SYSTEMS / name).read_bytes()).hexdigest() == digest, name
+        assert digest in (SYSTEMS / "DATA.md").read_text()
+    table = reader.read_table(SYSTEMS / "real_linear_h_1.txt")
+    assert table.names == ["trial", "t", "x", "v"] and table.values.shape == (870, 4)
+    rec = data.load(SYSTEMS / "real_double_linear_h_1.txt", q="x1,x2", v="v1,v2", trial="trial")
+    assert rec.q.shape == (495, 2) and rec.state == "velocity" and rec.t[0] == pytest.approx(0.033)
+
+
+# ----------------------------------------------------------------------------------------------
+# differences, angles, scale
+
+
+def test_uneven_steps_and_a_gap_are_differenced_to_second_order_against_the_analytic_derivative():
+    def worst(step: float) -> tuple[float, np.ndarray, np.ndarray]:
+        rng = np.random.default_rng(1)
+        t = np.cumsum(rng.uniform(0.5, 1.5, int(6 / step)) * step)
+        t[len(t) // 2:] += 1.0               # a gap of ~1 s, far above 3 nominal steps
+        x = np.stack([np.sin(2 * t), np.exp(-t) * np.cos(t)], axis=1)
+        exact = np.stack([2 * np.cos(2 * t), -np.exp(-t) * (np.cos(t) + np.sin(t))], axis=1)
+        dxdt, ok = data.derivatives(t, x, max_gap=3.0)
+        return float(np.abs(dxdt - exact).max()), dxdt, t
+
+    coarse, fine = worst(0.02)[0], worst(0.01)[0]
+    assert coarse < 2e-3 and 3.0 < coarse / fine < 5.5      # second order: half the step, a quarter the error
+    # a jump of the signal across the gap leaves every derivative alone: no difference spans it
+    _, dxdt, t = worst(0.02)
+    jumped = np.stack([np.sin(2 * t), np.exp(-t) * np.cos(t)], axis=1)
+    jumped[len(t) // 2:] += 100.0
+    np.testing.assert_allclose(data.derivatives(t, jumped)[0], dxdt, atol=1e-9)
+    # a lone sample between two gaps has no derivative and is left out
+    lone = np.array([0.0, 0.1, 0.2, 5.0, 10.0, 10.1, 10.2])
+    assert data.derivatives(lone, lone[:, None] ** 2)[1].tolist() == [True] * 3 + [False] + [True] * 3
+
+
+def test_unwrapped_angles_many_turns_away_give_the_same_data_and_fit_as_wrapped_ones(tmp_path):
+    t = np.linspace(0, 12, 400)
+    theta = 1.3 * t + 0.4 * np.sin(2 * t)            # a rotating arm: it wraps around every ~5 s
+    omega = 1.3 + 0.8 * np.cos(2 * t)
+    wrapped = (theta + math.pi) % (2 * math.pi) - math.pi
+    files = [_write_csv(tmp_path / f"{name}.csv", {"t": t, "a": q, "w": omega})
+             for name, q in (("wrapped", wrapped), ("encoder", theta + 2 * math.pi * 40))]
+    sets = [data.get_dataset(f, q="a", v="w", periodic="a") for f in files]
+    for key in ("x", "dxdt", "test_x", "test_dxdt"):
+        np.testing.assert_allclose(sets[0][key], sets[1][key], atol=2e-5)
+    assert np.abs(sets[0]["x"][:, 0]).max() <= math.pi
+    # the angle's derivative is the angular velocity (no 2 pi jumps at the wraps), in scaled units
+    tau = sets[0]["scale"]["tau"]
+    np.testing.assert_allclose(sets[0]["dxdt"][:, 0] / tau, omega[:len(sets[0]["x"])], atol=3e-3)
+    losses = []
+    for f in files:
+        config = train.Config(data=str(f), q="a", v="w", periodic="a", model="mechanical", hidden_dim=16,
+                              total_steps=30, save_dir=str(tmp_path / "runs"))
+        losses.append(hnn.load_run(hnn.run_experiment(config))[2]["test_loss"])
+    assert losses[0] == pytest.approx(losses[1], rel=1e-3)
+
+
+def test_the_scale_keeps_hamiltons_equations_with_h_over_b_squared():
+    # H = p^2 / (2 m) + k q^2 / 2 with m = 2, k = 8: dq/dt = p / m, dp/dt = -k q
+    rng = np.random.default_rng(0)
+    q, p = rng.normal(5.0, 3.0, (50, 1)), rng.normal(0.0, 40.0, (50, 1))
+    scale = data.Scale.fit(q, p, np.array([False]), "canonical")
+    x = scale.x(q, p)
+    dxdt = scale.dxdt(p / 2.0, -8.0 * q)
+    # H'(q', p') = H(q0 + a q', b p') / b^2: its symplectic gradient (dH'/dp', -dH'/dq')
+    a, b, q0 = scale.a, scale.b, scale.q0[0]
+    dh_dp = b * (b * x[:, 1:]) / 2.0 / b ** 2
+    dh_dq = a * 8.0 * (q0 + a * x[:, :1]) / b ** 2
+    np.testing.assert_allclose(dxdt, np.concatenate([dh_dp, -dh_dq], axis=1), rtol=1e-12)
+    assert abs(x[:, 0].mean()) < 1e-12 and scale.tau == pytest.approx(a / b)
+
+
+# ----------------------------------------------------------------------------------------------
+# the right rung
+
+
+def test_a_damped_oscillator_in_a_csv_round_trips_to_the_dissipative_rung(tmp_path):
+    path = _write_csv(tmp_path / "damped.csv", _damped())
+    rec = data.load(path, time="time", q="x", v="v", trial="run")
+    held = mm.Heldout(data, rec, 0.3, None, 3.0)
+    errors, losses = {}, {}
+    for kind in ("hnn", "dissipative"):
+        config = train.Config(data=str(path), time="time", q="x", v="v", trial="run", model=kind, hidden_dim=32,
+                              total_steps=600, learn_rate=3e-3, save_dir=str(tmp_path / "runs"))
+        run = hnn.run_experiment(config)
+        scale = json.loads((run / "scale.json").read_text())
+        assert scale["state"] == "velocity" and scale["a"] > 0
+        model = mm.Model(data, run, scale, rec.state)
+        errors[kind] = mm.measure(model, held)["prediction_error"]["median"]
+        losses[kind] = model.metrics["test_loss"]
+    # friction is what an energy-conserving flow cannot fit: the dissipative rung wins on both
+    assert losses["dissipative"] < 0.5 * losses["hnn"]
+    assert errors["dissipative"] < 0.5 * errors["hnn"] < held.naive["median"]
+
+
+def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch):
+    path = _write_csv(tmp_path / "damped.csv", _damped(trials=2, n=100))
+    monkeypatch.setattr(reproduce, "QUICK_STEPS", 40)
+    monkeypatch.setattr(measured_study, "QUICK_WIDTHS", (8,))
+    out = tmp_path / "card"
+    scene_study.main(["--data", str(path), "--time", "time", "--q", "x", "--v", "v", "--trial", "run", "--quick",
+                      "--out", str(out), "--energy", "0.5*v**2 + 2*x**2"])
+    card = json.loads((out / "scene.json").read_text())
+    kinds = {row["kind"] for row in card["rows"]}
+    assert kinds == {"baseline", "hnn", "separable", "dissipative", "mechanical", "second_order"}
+    for row in card["rows"]:
+        assert {"kind", "hidden_dim", "train_fraction", "prediction_error", "run"} <= set(row)
+        assert row["prediction_error"]["median"] <= row["prediction_error"]["mean"] * 10
+        assert Path(row["run"]).is_dir() and "energy_drift" in row
+    assert set(card["naive"]) >= {"median", "mean"} and card["chosen"]["run"] in {r["run"] for r in card["rows"]}
+    best = min(r["prediction_error"]["median"] for r in card["rows"])
+    assert card["chosen"]["prediction_error"]["median"] <= 2 * best
+    assert "is enough" in (out / "scene.md").read_text()
+
+
+# ----------------------------------------------------------------------------------------------
+# bad input: one error line each
+
+
+def _error(argv, capsys, main=None) -> str:
+    with pytest.raises(SystemExit) as exit_:
+        (main or (lambda a: hnn.cli.run_main(train.main, a)))(argv)
+    assert exit_.value.code == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+@pytest.mark.parametrize("text, flags, expect", [
+    ("t,x,v\n0,1,2\n0.1,1,2\n0.2,1,2\n0.3,1,2\n0.4,1,2\n0.5,1,2\n", ["--q", "xx"], r"'xx'.*did you mean 'x'"),
+    ("t,x,v\n0,1,2\n0.1,one,2\n", ["--q", "x"], r"line 3, column 'x': 'one' is not a number"),
+    ("t,x,v\n0,1,2\n0.1,1,nan\n", ["--q", "x"], r"line 3, column 'v': the value is nan"),
+    ("t,x,v\n0,1,2\n0.1,1,inf\n", ["--q", "x"], r"line 3, column 'v': the value is inf"),
+    ("t,x,v\n0,1,2\n0.2,1,2\n0.1,1,2\n", ["--q", "x"], r"line 4: time t=0.1 does not increase"),
+    ("t,x,v\n0,1,2\n0.1,1,2\n0.2,1,2\n", ["--q", "x"], r"trial 0 .* has 3 rows: too few to split"),
+    ("", ["--q", "x"], r"the file is empty"),
+    ("% t x v\n", ["--q", "x"], r"no rows of numbers"),
+    ("t,x,v\n0,1,2\n", ["--q", "x", "--v", "v", "--p", "v"], r"--v COLS or .* --p COLS"),
+])
+def test_every_bad_input_is_one_error_line(tmp_path, capsys, text, flags, expect):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    argv = ["--data", str(path), "--save_dir", str(tmp_path)] + flags + (["--v", "v"] if "--v" not in flags else [])
+    assert re.search(expect, _error(argv, capsys)), expect
+
+
+def test_trials_out_of_order_a_short_horizon_tail_and_wrong_rungs_are_one_error_line(tmp_path, capsys):
+    path = _write_csv(tmp_path / "trials.csv", {"run": [0] * 8 + [1] * 8 + [0] * 8, "t": list(range(8)) * 3,
+                                                 "x": np.arange(24.0), "v": np.ones(24)})
+    assert "trial 0 starts again" in _error(["--data", str(path), "--q", "x", "--v", "v", "--trial", "run"], capsys)
+    damped = _write_csv(tmp_path / "damped.csv", _damped(trials=2, n=60))
+    study = ["--data", str(damped), "--time", "time", "--q", "x", "--v", "v", "--trial", "run", "--quick"]
+    line = _error(study + ["--horizon", "50"], capsys, scene_study.main)
+    assert "too short for --horizon 50" in line
+    assert "--energy" in _error(study + ["--energy", "0.5*vv**2"], capsys, scene_study.main)
+    # second_order moves q by a velocity: refused on canonical momenta
+    line = _error(["--data", str(damped), "--time", "time", "--q", "x", "--p", "v", "--trial", "run",
+                   "--model", "second_order", "--total_steps", "1", "--save_dir", str(tmp_path)], capsys)
+    assert "canonical [q, p]" in line
+    line = _error(["--data", str(damped), "--time", "time", "--q", "x,v", "--p", "v,x", "--periodic", "x",
+                   "--model", "mechanical", "--save_dir", str(tmp_path)], capsys)
+    assert "all or none" in line
+
+
+def test_an_npz_of_columns_reads_like_its_csv(tmp_path):
+    cols = _damped(trials=2, n=40)
+    np.savez(tmp_path / "d.npz", **{k: np.asarray(v) for k, v in cols.items()})
+    a = data.get_dataset(tmp_path / "d.npz", time="time", q="x", v="v", trial="run")
+    b = data.get_dataset(_write_csv(tmp_path / "d.csv", cols), time="time", q="x", v="v", trial="run")
+    for key in ("x", "dxdt", "test_x", "test_dxdt"):
+        np.testing.assert_array_equal(a[key], b[key])
+
+
+# ----------------------------------------------------------------------------------------------
+# docs/measured.md, verbatim
+
+
+def _docs_commands() -> list[str]:
+    text = (REPO / "docs" / "measured.md").read_text()
+    blocks = re.findall(r"```bash\n(.*?)```", text, flags=re.S)
+    return [line for block in blocks for line in block.splitlines() if line.startswith("python ")]
+
+
+def _run_doc_command(command: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    argv = [sys.executable] + [arg.replace("results-quick/", f"{tmp_path}/") for arg in shlex.split(command)[1:]]
+    return subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=600,
+                          env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
+
+
+def test_the_docs_train_command_runs_verbatim(tmp_path):
+    commands = _docs_commands()
+    assert len(commands) == 2 and "train.py" in commands[0] and "--quick" in commands[1]
+    done = _run_doc_command(commands[0], tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    run = Path(done.stdout.strip().splitlines()[-1].removeprefix("saved the run to "))
+    assert (run / "scale.json").is_file() and run.parent == tmp_path / "measured-runs"
+
+
+@pytest.mark.slow
+def test_the_docs_scene_study_command_runs_verbatim(tmp_path):
+    done = _run_doc_command(_docs_commands()[1], tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    card = json.loads((tmp_path / "double-linear" / "scene.json").read_text())
+    assert card["chosen"] and len(card["rows"]) == 6
+
+
+def test_trajectory_snippets_are_consecutive_even_steps_inside_one_part(tmp_path):
+    t = np.arange(60) * 0.1
+    t[25:] += 0.03                    # one step 30% long: no snippet may span it
+    path = _write_csv(tmp_path / "even.csv", {"t": t, "x": t, "v": np.ones(60)})     # x = t names its row
+    d = data.get_dataset(path, q="x", v="v", snippet_steps=4)
+    a, q0 = d["scale"]["a"], d["scale"]["q0"][0]
+    found = []
+    for part in ("snippets", "test_snippets"):
+        x = d[part].reshape(len(d[part]), 5, 2)[:, :, 0] * a + q0
+        rows = [int(np.argmin(np.abs(t - snip[0]))) for snip in x]
+        for snip, row in zip(x, rows):
+            np.testing.assert_allclose(snip, t[row:row + 5], atol=1e-5)      # five consecutive samples
+        found.append(rows)
+    # train rows 0-41 cut at the long step (0-24, 25-41), held-out rows 42-59; non-overlapping
+    assert found == [[0, 5, 10, 15, 20, 25, 30, 35], [42, 47, 52]]
+    config = train.Config(data=str(path), q="x", v="v", model="mechanical", objective="trajectory", hidden_dim=8,
+                          total_steps=5, save_dir=str(tmp_path))
+    assert math.isfinite(hnn.load_run(hnn.run_experiment(config))[2]["test_loss"])
+
+
+def test_the_velocity_mismatch_measures_how_far_v_is_from_dq_dt(tmp_path):
+    cols = _damped(trials=2, n=200)
+    fields = dict(time="time", q="x", v="v", p="", trial="run", periodic="", dxdt="", test_fraction=0.3, max_gap=3.0)
+    exact = measured_study.velocity_mismatch({**fields, "data": str(_write_csv(tmp_path / "a.csv", cols))})
+    cols["v"] = list(1.2 * np.asarray(cols["v"]))       # velocities 20% too large: dq/dt - v = -v / 6
+    off = measured_study.velocity_mismatch({**fields, "data": str(_write_csv(tmp_path / "b.csv", cols))})
+    assert exact[0] < 5e-3 and off[0] == pytest.approx(1 / 6, abs=5e-3)
