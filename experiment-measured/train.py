@@ -81,11 +81,12 @@ class Config(hnn.RunConfig):
 
 
 def main(argv=None):
-    """Train one model; returns its run folder (checkpoint, args.json, metrics.json, scale.json)."""
+    """Train one model, or reuse the complete run of these settings (--force retrains); returns its run
+    folder (checkpoint, args.json, metrics.json, scale.json)."""
     config = hnn.cli.parse(Config, argv)
     if config.v and config.model in ("hnn", "separable", "dissipative"):
         print(f"note: {hnn.load_task('measured').ASSUMES}")
-    return hnn.run_experiment(config)
+    return hnn.cli.train(Config, argv)
 
 
 if __name__ == "__main__":

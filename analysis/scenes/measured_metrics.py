@@ -89,7 +89,7 @@ class Model:
         self.params = sum(p.numel() for p in model.parameters())
         self.model = hnn.evaluation.float64_copy(model)
         self.scale = data.Scale(tuple(scale["q0"]), scale["a"], scale["b"], scale["state"])
-        self.observed = state == "velocity" and hasattr(self.model, "state_from_observed")
+        self.observed = state      # the recording's coordinates; the model maps them as it declares
 
     def rollout(self, rec, rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions, observed states)`` in your units ``(len(rows), len(t), n)`` / ``(..., 2n)`` from the
@@ -97,13 +97,11 @@ class Model:
         n = rec.q.shape[1]
         x0 = self.scale.x(rec.q[rows], rec.s[rows])
         x0[:, :n][:, rec.periodic] = (x0[:, :n][:, rec.periodic] + math.pi) % (2 * math.pi) - math.pi
-        x0 = torch.as_tensor(x0, dtype=torch.float64)
-        if self.observed:
-            x0 = self.model.state_from_observed(x0).detach()
-        traj, _ = sm.model_rollout(self.model.time_derivative, x0, np.asarray(t) / self.scale.tau)
-        if self.observed:
-            with torch.no_grad():
-                traj = self.model.observed_from_state(traj.reshape(-1, 2 * n)).reshape(traj.shape)
+        with torch.no_grad():
+            x0 = self.model.state_from(torch.as_tensor(x0, dtype=torch.float64), self.observed)
+        traj, _ = sm.model_rollout(self.model.field, x0, np.asarray(t) / self.scale.tau)
+        with torch.no_grad():
+            traj = self.model.observed_from(traj.reshape(-1, 2 * n), self.observed).reshape(traj.shape)
         traj = traj.detach().numpy()
         s = traj[..., n:] * self.scale.b
         return self.scale.positions(traj), np.concatenate([self.scale.positions(traj), s], axis=-1)
