@@ -168,17 +168,18 @@ def markdown(result: dict) -> str:
 
 
 def guide(registry: dict) -> str:
-    """The README's rows of measured scenes, from the filed cards."""
+    """The README's rows of measured scenes, from the filed cards (each card's command is in
+    docs/measured-scenes.json, and the shipped scenes' commands in docs/measured.md)."""
     lines = ["| measured scene | a model that is enough (within 2x of the best prediction error) | its median prediction "
-             "error, the naive extrapolation's | horizon | train s | command |",
+             "error, the naive extrapolation's | horizon | train s | made |",
              "| --- | --- | --- | ---: | ---: | --- |"]
     for name, entry in sorted(registry.items()):
         c = entry["chosen"]
         lines.append(f"| {name} | {c['kind']}, width {c['hidden_dim']}, {c['train_fraction']:g} of the data | "
                      f"{c['prediction_error']['median']:.3g}, naive {entry['naive']['median']:.3g} "
                      f"({entry['units']}) | {entry['horizon']:.3g} s | {c['train_seconds']:.3g} | "
-                     f"`{entry['command']}` ({entry['date']}, commit {entry['commit']}) |")
-    return "\n".join(lines) + "\n"
+                     f"({entry['date']}, commit {entry['commit']}) |")
+    return "\n".join(lines) + "\n\nEach row's command: [docs/measured-scenes.json](docs/measured-scenes.json).\n"
 
 
 def _update_docs(result: dict) -> None:
