@@ -24,9 +24,11 @@ class Config(hnn.RunConfig):
     input_dim: int = 4
     n_train: int = setting(2000, "training states (random q and qdot)", parse=hnn.cli.int_at_least(1))
     n_test: int = setting(1000, "test states, drawn under seed + 1", parse=hnn.cli.int_at_least(1))
+    mass: float = setting(1.0, "mass of each link in kg (M, V and p scale with it; the motions do not)",
+                          parse=hnn.cli.positive_float)
     periodic: bool = setting(True, "the mechanical and second-order networks see (cos q, sin q): q are angles")
     save_dir: str = str(HERE)
-    DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "n_train", "n_test")
+    DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "n_train", "n_test", "mass")
 
     def __post_init__(self):
         if self.input_dim != 4:
@@ -34,7 +36,9 @@ class Config(hnn.RunConfig):
                              "drop --input_dim")
 
     def dataset(self) -> dict:
-        return hnn.load_task("arm").get_dataset(seed=self.seed, n_train=self.n_train, n_test=self.n_test)
+        data = hnn.load_task("arm")
+        return data.get_dataset(seed=self.seed, n_train=self.n_train, n_test=self.n_test,
+                                arm=data.Arm((self.mass, self.mass)))
 
 
 def main(argv=None):

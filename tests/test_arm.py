@@ -103,3 +103,28 @@ def test_bad_input_is_refused_with_the_fix():
         data.get_dataset(n_train=0)
     with pytest.raises(ValueError, match="input_dim=6"):
         hnn.tasks.task_config("arm", {"input_dim": 6})
+
+
+def _small_run(kind, seed, ds):
+    torch.manual_seed(seed)
+    model = hnn.MODEL_KINDS[kind].build({"input_dim": 4, "hidden_dim": 64, "nonlinearity": "tanh",
+                                         "field_type": "solenoidal", "periodic": True})
+    hnn.train(model, ds["x"], ds["dxdt"], total_steps=500, learn_rate=3e-3, weight_decay=0.0, seed=seed)
+    x, y = torch.tensor(ds["test_x"]), torch.tensor(ds["test_dxdt"])
+    with torch.no_grad():
+        return model, float((model.time_derivative(x) - y).norm() / y.norm())
+
+
+def test_mechanical_rung_learns_the_arms_mass_matrix_and_beats_the_hnn_at_equal_budget():
+    """Fixed-seed regression, 500 full-batch steps on 400 states, width 64: measured field errors
+    0.039 and 0.040 (mechanical) against 0.27 and 0.25 (hnn) at seeds 0 and 1; the bounds leave 2x."""
+    ds = data.get_dataset(seed=0, n_train=400, n_test=400)
+    mechanical, field = _small_run("mechanical", 0, ds)
+    _, hnn_field = _small_run("hnn", 0, ds)
+    assert field < 0.08 and field < hnn_field / 3
+    q = torch.tensor(ds["test_x"][:, :2])
+    learned = mechanical.inverse_mass(q).detach().double()
+    true = torch.linalg.inv(data.Arm().mass_matrix(q.double()))
+    assert (learned - true).norm() / true.norm() < 0.45        # measured 0.23 at seeds 0 and 1
+    # not collapsed in any direction: its smallest eigenvalue tracks the truth's everywhere
+    assert (torch.linalg.eigvalsh(learned)[:, 0] / torch.linalg.eigvalsh(true)[:, 0]).min() > 0.3
