@@ -16,7 +16,7 @@ With a = I_1 + I_2 + m_1 c_1^2 + m_2 (l_1^2 + c_2^2), b = m_2 l_1 c_2, d = I_2 +
     H(q, p) = 1/2 p^T M(q)^-1 p + V(q),  p = M(q) qdot                        (J, kg m^2 / s)
 
 At the defaults (m = l = 1, g = 9.81) M_11 ranges 4x (0.67 to 2.67) and M^-1's largest entry
-8x over q_2: the arm folded (q_2 = pi) and stretched (q_2 = 0) are different inertias.
+4x (3.4 to 13.7) over q_2: the arm folded (q_2 = pi) and stretched (q_2 = 0) are different inertias.
 
 States ``x = [q_1, q_2, p_1, p_2]`` of shape ``(batch, 4)``; the dataset is derivatives of
 canonical states drawn at random (``sample_states``: q ~ U[-pi, pi]^2, qdot ~ U[-3, 3]^2 rad/s),
