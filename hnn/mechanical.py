@@ -61,7 +61,10 @@ class MechanicalHNN(_StateCheck):
         eps: the floor of M^-1's eigenvalues (units of M^-1, e.g. 1 / (kg m^2) for angles).
 
     Valid where T is quadratic in p with a configuration-dependent mass (any holonomic
-    mechanical system in generalized coordinates). Not separable: roll out with ``midpoint``
+    mechanical system in generalized coordinates). Fit on dx/dt by the L2 loss it learns M^-1
+    only as well as that loss weighs dq/dt = M^-1 p: where dp/dt is far larger (heavy bodies,
+    strong gravity) M^-1 can come out wrong in one direction while the loss is low (docs/arm.md:
+    the two-link arm, 3% M^-1 error at 1 kg links, 31% at 10 kg). Not separable: roll out with ``midpoint``
     (symplectic for any H) or ``dopri5``; ``hnn.trajectory`` refuses ``leapfrog`` for it.
     Declares ``maps = ('velocity',)``: observed [q, qdot] map to [q, p] through its mass matrix.
     """

@@ -1,0 +1,100 @@
+"""The two-link arm: the paper's HNN against the mechanical rung at one training budget.
+
+    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--out DIR]
+
+Trains each model at each seed through ``experiment-arm/train.py``'s config (one run at a time,
+reusing complete saved runs), then measures on held-out data of the same seed:
+
+- **field error**: |f_model(x) - f_true(x)| / |f_true(x)| over the 1000 test states (Frobenius);
+- **rollout error**: e(t) = |x^(t) - x(t)| / (|x^(t)| + |x(t)|) over 16 held-out starts and 3 s,
+  geometric mean over t, mean over starts (``hnn.metrics.summarize_errors``); the model is rolled
+  out with dopri5 at rtol 1e-7 in float64, the truth at 1e-10;
+- for the mechanical rung, the error of its learned M^-1(q) against the arm's at the test states.
+
+Prints a table and writes ``arm.json`` (every number, the runs' folders and training seconds)
+under ``--out``. Numbers come from the saved runs, never typed by hand (docs/scenes.md).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from pathlib import Path
+
+import torch
+
+import hnn
+from hnn.io import write_json
+
+RTOL = 1e-7
+
+
+def measure(folder: Path, arm) -> dict:
+    """The field, rollout (and M^-1) errors of the saved run in ``folder`` on the arm ``arm``."""
+    data = hnn.load_task("arm")
+    model, args, metrics = hnn.load_run(folder)
+    model = model.double()
+    ds = hnn.tasks.task_config("arm", args).dataset()
+    x, dxdt = (torch.tensor(ds[k], dtype=torch.float64) for k in ("test_x", "test_dxdt"))
+    with torch.no_grad():
+        pred = model.time_derivative(x)
+    out = {"field_error": float((pred - dxdt).norm() / dxdt.norm()),
+           "train_seconds": metrics["train_seconds"], "test_loss": metrics["test_loss"], "run": str(folder)}
+    x0, t = torch.tensor(ds["rollout_x0"]), ds["t_eval"]
+    paths = hnn.rollout(model.time_derivative, x0, t, method="dopri5", rtol=RTOL, atol=RTOL)
+    out["rollout_error"] = hnn.metrics.summarize_errors(
+        hnn.metrics.relative_error(paths, data.trajectories(arm, x0, t)), t)["error"]
+    if hasattr(model, "inverse_mass"):
+        with torch.no_grad():
+            learned, true = model.inverse_mass(x[:, :2]), torch.linalg.inv(arm.mass_matrix(x[:, :2]))
+        out["inverse_mass_error"] = float((learned - true).norm() / true.norm())
+        out["inverse_mass_min_eig_ratio"] = float((torch.linalg.eigvalsh(learned)[:, 0]
+                                                   / torch.linalg.eigvalsh(true)[:, 0]).min())
+    return out
+
+
+def _summary(rows: list[dict], key: str) -> str:
+    values = [row[key] for row in rows if key in row]
+    if not values:
+        return "-"
+    spread = f" ({min(values):.2e}-{max(values):.2e})" if len(values) > 1 else ""
+    return f"{statistics.median(values):.2e}{spread}"
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=hnn.cli.int_at_least(1), default=3000, help="optimizer steps per run")
+    parser.add_argument("--seeds", type=hnn.cli.int_at_least(0), nargs="+", default=[0, 1, 2])
+    parser.add_argument("--models", nargs="+", default=["hnn", "mechanical"], help="model kinds to train")
+    parser.add_argument("--mass", type=hnn.cli.positive_float, default=1.0, help="mass of each link in kg")
+    parser.add_argument("--out", default="results/arm", help="folder for the runs and arm.json")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    data = hnn.load_task("arm")
+    arm = data.Arm((args.mass, args.mass))
+    out = Path(args.out)
+    results = {}
+    for model in args.models:
+        rows = []
+        for seed in args.seeds:
+            config = hnn.tasks.task_config("arm", {"model": model, "seed": seed, "total_steps": args.steps,
+                                                   "mass": args.mass, "save_dir": str(out / "runs")})
+            folder = hnn.runs.find_run(config) or hnn.run_experiment(config)
+            rows.append({"seed": seed, **measure(folder, arm)})
+            print(f"{model} seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
+                                                       if isinstance(v, float)), flush=True)
+        results[model] = rows
+    print(f"\n| model | field error | rollout error | M^-1 error | train s | ({args.steps} steps, mass {args.mass} kg, "
+          f"median (min-max) over seeds {args.seeds})")
+    print("| --- | --- | --- | --- | --- |")
+    for model, rows in results.items():
+        print(f"| {model} | {_summary(rows, 'field_error')} | {_summary(rows, 'rollout_error')} | "
+              f"{_summary(rows, 'inverse_mass_error')} | {statistics.median(r['train_seconds'] for r in rows):.0f} |")
+    report = {"steps": args.steps, "seeds": args.seeds, "mass": args.mass, "rollout_rtol": RTOL,
+              "torch": torch.__version__, "results": results}
+    write_json(out / "arm.json", json.loads(json.dumps(report)))
+    return report
+
+
+if __name__ == "__main__":
+    main()
