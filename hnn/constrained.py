@@ -137,11 +137,14 @@ class _Constrained(Model):
         self.log_mass = nn.Parameter(torch.zeros(self.n))
         # the graph's arrays in float64, cast once per dtype and device: buffers would be rounded to
         # float32 at build and stay rounded after .double() (a float64 run's rods off by 1e-7)
-        self._exact = graph.arrays()
+        A, offsets, lengths = graph.arrays()
+        # the field works on flat rows: r = x A_d^T + offsets (batch, C d), A_d = A kron I_d
+        self._exact = (A, offsets, lengths, torch.kron(A, torch.eye(self.d, dtype=A.dtype)), offsets.flatten())
         self._cast: dict = {}
 
-    def _arrays(self, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(A, offsets, lengths)`` (``ConstraintGraph.arrays``) in ``like``'s dtype and device."""
+    def _arrays(self, like: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """``(A, offsets, lengths, A_d, flat offsets)`` (``ConstraintGraph.arrays``; A_d = A kron I_d
+        ``(C d, n d)``) in ``like``'s dtype and device."""
         key = (like.dtype, like.device)
         if key not in self._cast:
             self._cast[key] = tuple(a.to(dtype=like.dtype, device=like.device) for a in self._exact)
@@ -166,7 +169,7 @@ class _Constrained(Model):
 
     def _relative(self, X: torch.Tensor, V: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """r = A X + offsets and w = A V, ``(batch, C, d)``, of positions and velocities ``(batch, n, d)``."""
-        A, offsets, _ = self._arrays(X)
+        A, offsets = self._arrays(X)[:2]
         return A @ X + offsets, A @ V
 
     def _split(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -211,24 +214,19 @@ class _Constrained(Model):
         self.check_state(z, observed)
         return super().state_from(z, observed)
 
-    def _stiffness(self, r: torch.Tensor, inverse_mass: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """K = A M^-1 A^T ``(C, C)`` and B = 4 (r r^T) o K ``(batch, C, C)``: G^T M^-1 G of the positions."""
-        A = self._arrays(r)[0]
-        K = (A * inverse_mass) @ A.T
-        return K, 4 * (r @ r.transpose(1, 2)) * K
-
-    def _acceleration(self, X: torch.Tensor, V: torch.Tensor) -> torch.Tensor:
-        """The constrained acceleration ``(batch, n, d)`` at positions and velocities ``(batch, n, d)``."""
+    def _flat(self, x: torch.Tensor, v: torch.Tensor) -> tuple:
+        """What both fields read, on flat rows ``(batch, n d)`` of positions and velocities:
+        ``(M^-1 per coordinate (n d,), A_d, r, w, 4K (C, C), B (batch, C, C))``, r and w ``(batch, C, d)``."""
+        A, _, _, A_d, offsets = self._arrays(x)
         inverse_mass = torch.exp(-self.log_mass)
-        f = -inverse_mass[:, None] * self.potential_gradient(X.flatten(1)).view_as(X)
-        if not self.graph.count:
-            return f
-        r, w = self._relative(X, V)
-        _, B = self._stiffness(r, inverse_mass)
-        A = self._arrays(X)[0]
-        rhs = 2 * (r * (A @ f)).sum(-1) + 2 * w.pow(2).sum(-1)
-        mu = torch.linalg.solve(B, rhs[..., None])
-        return f - inverse_mass[:, None] * (A.T @ (2 * mu * r))
+        K4 = 4 * (A * inverse_mass) @ A.T
+        r = torch.addmm(offsets, x, A_d.T).view(len(x), -1, self.d)
+        w = (v @ A_d.T).view_as(r)
+        return inverse_mass.repeat_interleave(self.d), A_d, r, w, K4, (r @ r.transpose(1, 2)) * K4
+
+    def _spread(self, per_constraint: torch.Tensor, A_d: torch.Tensor) -> torch.Tensor:
+        """A^T applied to per-constraint vectors ``(batch, C, d)``: their sum on each body, ``(batch, n d)``."""
+        return per_constraint.flatten(1) @ A_d
 
 
 class ConstrainedHNN(_Constrained):
@@ -283,23 +281,26 @@ class ConstrainedHNN(_Constrained):
         """z' = P(z) J grad H ``(batch, 2nd)`` by the block closed form (module docstring); a graph
         for training only in grad mode."""
         self._check_input(z)
-        X, V = self._split(z)
-        inverse_mass = torch.exp(-self.log_mass)
-        gV = self.potential_gradient(z[:, :self.nd]).view_as(X)
+        x = z[:, :self.nd]
+        grad_v = self.potential_gradient(x)
         if not self.graph.count:
-            return torch.cat([V.flatten(1), -gV.flatten(1)], dim=1)
-        r, w = self._relative(X, V)
-        K, B = self._stiffness(r, inverse_mass)
-        A = self._arrays(z)[0]
-        # D^T J grad H, in the phi and psi rows
-        b_phi = 2 * (r * w).sum(-1)
-        b_psi = 2 * w.pow(2).sum(-1) - 2 * (r * (A @ (inverse_mass[:, None] * gV))).sum(-1)
-        E = 4 * K * (w @ r.transpose(1, 2) - r @ w.transpose(1, 2))
-        lam_psi = torch.linalg.solve(B, b_phi[..., None])
-        lam_phi = torch.linalg.solve(B, E @ lam_psi - b_psi[..., None])
-        dx = V - inverse_mass[:, None] * (A.T @ (2 * lam_psi * r))
-        dp = -gV + A.T @ (2 * lam_phi * r + 2 * lam_psi * w)
-        return torch.cat([dx.flatten(1), dp.flatten(1)], dim=1)
+            return torch.cat([z[:, self.nd:] * torch.exp(-self.log_mass).repeat_interleave(self.d), -grad_v], dim=1)
+        inverse_mass = torch.exp(-self.log_mass).repeat_interleave(self.d)
+        v = z[:, self.nd:] * inverse_mass
+        inverse_mass, A_d, r, w, K4, B = self._flat(x, v)
+        pull = ((grad_v * inverse_mass) @ A_d.T).view_as(r)          # A M^-1 grad V
+        # D^T J grad H: the phi rows 2 r.w, the psi rows 2 |w|^2 - 2 r.(A M^-1 grad V)
+        b_phi = 2 * (r * w).sum(-1, keepdim=True)
+        b_psi = 2 * (w * w - r * pull).sum(-1, keepdim=True)
+        lu = torch.linalg.lu_factor(B)
+        lam_psi = torch.linalg.lu_solve(*lu, b_phi)                  # (batch, C, 1)
+        # E lam_psi, E = 4K o (w r^T - r w^T), without E: w_c . sum_e 4K_ce s_e r_e - r_c . sum_e 4K_ce s_e w_e
+        rw = (K4 * lam_psi.transpose(1, 2)) @ torch.cat([r, w], dim=2)
+        e_lam = (w * rw[..., :self.d] - r * rw[..., self.d:]).sum(-1, keepdim=True)
+        lam_phi = torch.linalg.lu_solve(*lu, e_lam - b_psi)
+        dx = v - inverse_mass * self._spread(2 * lam_psi * r, A_d)
+        dp = self._spread(2 * (lam_phi * r + lam_psi * w), A_d) - grad_v
+        return torch.cat([dx, dp], dim=1)
 
     def state_from_observed(self, z: torch.Tensor) -> torch.Tensor:
         """[x, p] with p_i = m_i xdot_i, from observed [x, xdot] ``(batch, 2nd)``."""
@@ -339,7 +340,15 @@ class ConstrainedLNN(_Constrained):
         return 0.5 * (V.pow(2).sum(-1) * self.masses()).sum(1) + self.potential(z[:, :self.nd])
 
     def time_derivative(self, z: torch.Tensor, t=None) -> torch.Tensor:
-        """z' = (v, x'') ``(batch, 2nd)``."""
+        """z' = (v, x'') ``(batch, 2nd)``; a graph for training only in grad mode."""
         self._check_input(z)
-        X, V = self._split(z)
-        return torch.cat([z[:, self.nd:], self._acceleration(X, V).flatten(1)], dim=1)
+        x, v = z[:, :self.nd], z[:, self.nd:]
+        grad_v = self.potential_gradient(x)
+        if not self.graph.count:
+            return torch.cat([v, -torch.exp(-self.log_mass).repeat_interleave(self.d) * grad_v], dim=1)
+        inverse_mass, A_d, r, w, _, B = self._flat(x, v)
+        f = -inverse_mass * grad_v                                   # the free acceleration
+        # mu = (G^T M^-1 G)^-1 (G^T f + Gdot^T v): G^T f = 2 r.(A f), Gdot^T v = 2 |w|^2
+        rhs = 2 * (r * (f @ A_d.T).view_as(r) + w * w).sum(-1, keepdim=True)
+        mu = torch.linalg.solve(B, rhs)
+        return torch.cat([v, f - inverse_mass * self._spread(2 * mu * r, A_d)], dim=1)
