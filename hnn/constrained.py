@@ -214,15 +214,18 @@ class _Constrained(Model):
         self.check_state(z, observed)
         return super().state_from(z, observed)
 
-    def _flat(self, x: torch.Tensor, v: torch.Tensor) -> tuple:
-        """What both fields read, on flat rows ``(batch, n d)`` of positions and velocities:
-        ``(M^-1 per coordinate (n d,), A_d, r, w, 4K (C, C), B (batch, C, C))``, r and w ``(batch, C, d)``."""
+    def _flat(self, x: torch.Tensor, v: torch.Tensor, momenta: bool = False) -> tuple:
+        """What both fields read, on flat rows ``(batch, n d)`` of positions and velocities (with
+        ``momenta``: momenta, turned into velocities by M^-1 here): ``(M^-1 per coordinate (n d,), A_d, v, r, w, K (C, C),
+        B/4 = (r r^T) o K (batch, C, C))``, r and w ``(batch, C, d)``."""
         A, _, _, A_d, offsets = self._arrays(x)
         inverse_mass = torch.exp(-self.log_mass)
-        K4 = 4 * (A * inverse_mass) @ A.T
+        K = (A * inverse_mass) @ A.T
+        scale = inverse_mass.repeat_interleave(self.d)
+        v = scale * v if momenta else v
         r = torch.addmm(offsets, x, A_d.T).view(len(x), -1, self.d)
         w = (v @ A_d.T).view_as(r)
-        return inverse_mass.repeat_interleave(self.d), A_d, r, w, K4, (r @ r.transpose(1, 2)) * K4
+        return scale, A_d, v, r, w, K, (r @ r.transpose(1, 2)) * K
 
     def _spread(self, per_constraint: torch.Tensor, A_d: torch.Tensor) -> torch.Tensor:
         """A^T applied to per-constraint vectors ``(batch, C, d)``: their sum on each body, ``(batch, n d)``."""
@@ -285,21 +288,17 @@ class ConstrainedHNN(_Constrained):
         grad_v = self.potential_gradient(x)
         if not self.graph.count:
             return torch.cat([z[:, self.nd:] * torch.exp(-self.log_mass).repeat_interleave(self.d), -grad_v], dim=1)
-        inverse_mass = torch.exp(-self.log_mass).repeat_interleave(self.d)
-        v = z[:, self.nd:] * inverse_mass
-        inverse_mass, A_d, r, w, K4, B = self._flat(x, v)
-        pull = ((grad_v * inverse_mass) @ A_d.T).view_as(r)          # A M^-1 grad V
-        # D^T J grad H: the phi rows 2 r.w, the psi rows 2 |w|^2 - 2 r.(A M^-1 grad V)
-        b_phi = 2 * (r * w).sum(-1, keepdim=True)
-        b_psi = 2 * (w * w - r * pull).sum(-1, keepdim=True)
-        lu = torch.linalg.lu_factor(B)
-        lam_psi = torch.linalg.lu_solve(*lu, b_phi)                  # (batch, C, 1)
-        # E lam_psi, E = 4K o (w r^T - r w^T), without E: w_c . sum_e 4K_ce s_e r_e - r_c . sum_e 4K_ce s_e w_e
-        rw = (K4 * lam_psi.transpose(1, 2)) @ torch.cat([r, w], dim=2)
-        e_lam = (w * rw[..., :self.d] - r * rw[..., self.d:]).sum(-1, keepdim=True)
-        lam_phi = torch.linalg.lu_solve(*lu, e_lam - b_psi)
-        dx = v - inverse_mass * self._spread(2 * lam_psi * r, A_d)
-        dp = self._spread(2 * (lam_phi * r + lam_psi * w), A_d) - grad_v
+        inverse_mass, A_d, v, r, w, K, B4 = self._flat(x, z[:, self.nd:], momenta=True)
+        # with B = 4 B4 and D^T J grad H = (2 r.w, 2 |w|^2 - 2 r.(A M^-1 grad V)), the multipliers
+        # scaled by 2 are sigma = B4^-1 (r.w) and tau = B4^-1 (E sigma / 4 - |w|^2 + r.(A M^-1 grad V)),
+        # E sigma / 4 = w_c . sum_e K_ce sigma_e r_e - r_c . sum_e K_ce sigma_e w_e (E never formed)
+        pull = ((grad_v * inverse_mass) @ A_d.T).view_as(r)
+        lu = torch.linalg.lu_factor(B4)
+        sigma = torch.linalg.lu_solve(*lu, (r * w).sum(-1, keepdim=True))          # (batch, C, 1)
+        rw = (K * sigma.transpose(1, 2)) @ torch.cat([r, w], dim=2)
+        tau = torch.linalg.lu_solve(*lu, (w * (rw[..., :self.d] - w) + r * (pull - rw[..., self.d:])).sum(-1, keepdim=True))
+        dx = v - inverse_mass * self._spread(sigma * r, A_d)
+        dp = self._spread(tau * r + sigma * w, A_d) - grad_v
         return torch.cat([dx, dp], dim=1)
 
     def state_from_observed(self, z: torch.Tensor) -> torch.Tensor:
@@ -346,9 +345,9 @@ class ConstrainedLNN(_Constrained):
         grad_v = self.potential_gradient(x)
         if not self.graph.count:
             return torch.cat([v, -torch.exp(-self.log_mass).repeat_interleave(self.d) * grad_v], dim=1)
-        inverse_mass, A_d, r, w, _, B = self._flat(x, v)
+        inverse_mass, A_d, _, r, w, _, B4 = self._flat(x, v)
         f = -inverse_mass * grad_v                                   # the free acceleration
-        # mu = (G^T M^-1 G)^-1 (G^T f + Gdot^T v): G^T f = 2 r.(A f), Gdot^T v = 2 |w|^2
-        rhs = 2 * (r * (f @ A_d.T).view_as(r) + w * w).sum(-1, keepdim=True)
-        mu = torch.linalg.solve(B, rhs)
-        return torch.cat([v, f - inverse_mass * self._spread(2 * mu * r, A_d)], dim=1)
+        # mu = (G^T M^-1 G)^-1 (G^T f + Gdot^T v) with G^T M^-1 G = 4 B4, G^T f = 2 r.(A f),
+        # Gdot^T v = 2 |w|^2; the force on the bodies A^T (2 mu r) = A^T (nu r), nu = B4^-1 (r.(A f) + |w|^2)
+        nu = torch.linalg.solve(B4, (r * (f @ A_d.T).view_as(r) + w * w).sum(-1, keepdim=True))
+        return torch.cat([v, f - inverse_mass * self._spread(nu * r, A_d)], dim=1)

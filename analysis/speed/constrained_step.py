@@ -102,4 +102,4 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    hnn.cli.run_main(main)
+    main()
