@@ -293,10 +293,10 @@ class ConstrainedHNN(_Constrained):
         # scaled by 2 are sigma = B4^-1 (r.w) and tau = B4^-1 (E sigma / 4 - |w|^2 + r.(A M^-1 grad V)),
         # E sigma / 4 = w_c . sum_e K_ce sigma_e r_e - r_c . sum_e K_ce sigma_e w_e (E never formed)
         pull = ((grad_v * inverse_mass) @ A_d.T).view_as(r)
-        lu = torch.linalg.lu_factor(B4)
-        sigma = torch.linalg.lu_solve(*lu, (r * w).sum(-1, keepdim=True))          # (batch, C, 1)
+        # two solves, not one LU factor and two lu_solves: the factor's own backward cost more than both
+        sigma = torch.linalg.solve(B4, (r * w).sum(-1, keepdim=True))               # (batch, C, 1)
         rw = (K * sigma.transpose(1, 2)) @ torch.cat([r, w], dim=2)
-        tau = torch.linalg.lu_solve(*lu, (w * (rw[..., :self.d] - w) + r * (pull - rw[..., self.d:])).sum(-1, keepdim=True))
+        tau = torch.linalg.solve(B4, (w * (rw[..., :self.d] - w) + r * (pull - rw[..., self.d:])).sum(-1, keepdim=True))
         dx = v - inverse_mass * self._spread(sigma * r, A_d)
         dp = self._spread(tau * r + sigma * w, A_d) - grad_v
         return torch.cat([dx, dp], dim=1)
