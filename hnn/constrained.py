@@ -192,12 +192,15 @@ class _Constrained(Model):
 
     def violation(self, z: torch.Tensor, observed: str | None = None) -> torch.Tensor:
         """How far states ``(batch, 2nd)`` in ``observed`` coordinates (default: its own) are off the
-        constraints, ``(batch,)``, unitless: the largest |phi_c| / l_c^2 and |r_c . w_c| / (|r_c| |w_c|)
-        (the cosine of a rod and its velocity)."""
-        r, w = self._relative(*self._positions_velocities(z, observed))
-        squared = self._arrays(z)[2] ** 2
-        position = (r.pow(2).sum(-1) - squared).abs() / squared
-        velocity = (r * w).sum(-1).abs() / (r.norm(dim=-1) * w.norm(dim=-1)).clamp_min(torch.finfo(z.dtype).tiny)
+        constraints, ``(batch,)``, unitless: the largest |phi_c| / l_c^2 and |r_c . w_c| / (l_c u), u
+        the RMS speed of the row's bodies (not |w_c|: a nearly rigid pair's tiny w_c would turn float32
+        round-off into a large cosine)."""
+        X, V = self._positions_velocities(z, observed)
+        r, w = self._relative(X, V)
+        lengths = self._arrays(z)[2]
+        position = (r.pow(2).sum(-1) - lengths ** 2).abs() / lengths ** 2
+        speed = V.pow(2).sum(-1).mean(-1, keepdim=True).sqrt()
+        velocity = (r * w).sum(-1).abs() / (lengths * speed).clamp_min(torch.finfo(z.dtype).tiny)
         return torch.cat([position, velocity], dim=1).amax(dim=1) if self.graph.count else z.new_zeros(len(z))
 
     def check_state(self, z: torch.Tensor, observed: str | None = None) -> None:
