@@ -206,7 +206,8 @@ class _Constrained(Model):
     def check_state(self, z: torch.Tensor, observed: str | None = None) -> None:
         """ValueError if a state ``(batch, 2nd)`` in ``observed`` coordinates (default: its own) is off
         the constraints by more than ``tolerance``."""
-        off = self.violation(z, observed)
+        with torch.no_grad():       # a check on the data: no graph for training to carry
+            off = self.violation(z, observed)
         if len(off) and float(off.max()) > self.tolerance:
             row = int(off.argmax())
             raise ValueError(f"state row {row} is off the constraints by {float(off[row]):.3g} (relative; tolerance "
