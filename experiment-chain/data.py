@@ -162,6 +162,25 @@ class Chain:
         qdot = (rods[..., 0] * rod_vel[..., 1] - rods[..., 1] * rod_vel[..., 0]) / (rods ** 2).sum(-1)
         return torch.cat([q, qdot], dim=1)
 
+    def constraint_graph(self) -> hnn.ConstraintGraph:
+        """The rods as an ``hnn.ConstraintGraph`` (what the Cartesian kinds are given): bob 0 tethered
+        to the pivot at the origin by rod 0, bob k linked to bob k-1 by rod k; 2 dimensions."""
+        return hnn.ConstraintGraph(self.n, 2, tethers=((0, (0.0, 0.0), self.lengths[0]),),
+                                   links=tuple((k - 1, k, self.lengths[k]) for k in range(1, self.n)))
+
+    def to_cartesian(self, z: torch.Tensor) -> torch.Tensor:
+        """Flat Cartesian states [x, xdot] ``(..., 4N)`` (bob after bob, (x, y) each, then their
+        velocities) of observed states ``z = [q, qdot]`` ``(..., 2N)``."""
+        return self.cartesian(torch.as_tensor(z)).flatten(-3)
+
+    def from_flat_cartesian(self, states: torch.Tensor) -> torch.Tensor:
+        """Observed states ``z = [q, qdot]`` ``(batch, 2N)`` of flat Cartesian states ``(batch, 4N)`` on the rods."""
+        states = torch.as_tensor(states)
+        if states.dim() != 2 or states.shape[1] != 4 * self.n:
+            raise ValueError(f"Cartesian states of a {self.n}-bob chain have shape (batch, {4 * self.n}), "
+                             f"got {tuple(states.shape)}")
+        return self.from_cartesian(states.reshape(len(states), 2, self.n, 2))
+
     def constraints(self, cart: torch.Tensor) -> torch.Tensor:
         """Rod constraints of Cartesian states ``(batch, 2, N, 2)`` -> ``(batch, 2N)``: |r_k|^2 - l_k^2
         and d/dt of it, 2 r_k . w_k (r_k, w_k: rod k's vector and its velocity)."""
@@ -190,6 +209,35 @@ class Chain:
             scale = flat.pow(2).mean().sqrt()
             flat = flat + step.clamp(-scale / 2, scale / 2)
         raise RuntimeError(f"the constraint projection did not reach tol={tol} in {max_iter} iterations")
+
+
+def observed_coordinates(kind: str) -> str:
+    """The coordinates a model of ``kind`` sees the chain in: ``'velocity'`` [q, qdot] where it reads
+    them (as they are, or mapped), else ``'cartesian'`` [x, xdot] of the bobs where it reads those
+    (the constrained kinds), else a ValueError naming the fix."""
+    row = hnn.kinds.get_kind(kind)
+    for observed in ("velocity", "cartesian"):
+        if row.reads(observed):
+            return observed
+    raise ValueError(f"the {kind} kind reads neither the chain's angles [q, qdot] nor its Cartesian [x, xdot]; "
+                     "choose a kind that does (hnn.MODEL_KINDS declares what each reads)")
+
+
+def cartesian_dataset(chain: Chain, data: dict) -> dict:
+    """``data`` (observed [q, qdot] rows and their d/dt) in flat Cartesian coordinates [x, xdot]
+    ``(rows, 4N)``: positions by ``to_cartesian``, their d/dt along the same path by its Jacobian."""
+    out = dict(data)
+    for split in ("", "test_"):
+        z = torch.as_tensor(data[split + "x"], dtype=torch.float64)
+        dz = torch.as_tensor(data[split + "dxdt"], dtype=torch.float64)
+        states, rates = torch.func.jvp(chain.to_cartesian, (z,), (dz,))
+        out[split + "x"], out[split + "dxdt"] = states.numpy(), rates.numpy()
+    return {**out, "state": "cartesian"}
+
+
+def chain_for(bobs: int, unit: bool = False, protocol: str = "chnn") -> Chain:
+    """The chain of a protocol: ``chnn_chain(bobs, unit)``, or the LNN double pendulum."""
+    return lnn_double_pendulum() if protocol == "lnn" else chnn_chain(bobs, unit)
 
 
 def _chnn_draws(n: int, seed: int = 0) -> np.ndarray:
@@ -280,7 +328,7 @@ def get_dataset(bobs: int = 2, unit: bool = False, protocol: str = "chnn", seed:
     if protocol == "lnn" and (bobs != 2 or unit):
         raise ValueError(f"the LNN protocol is the double pendulum with m = l = 1: pass --bobs 2 without --unit, "
                          f"got bobs={bobs}, unit={unit}")
-    chain = lnn_double_pendulum() if protocol == "lnn" else chnn_chain(bobs, unit)
+    chain = chain_for(bobs, unit, protocol)
     params = {"bobs": bobs, "unit": unit, "protocol": protocol, "seed": seed, "n_train": n_train, "n_test": n_test,
               "points": points, "dt": dt, "version": 1}
 

@@ -3,7 +3,9 @@
     python experiment-chain/train.py --bobs 2 --model mechanical --verbose       # CHNN's protocol
     python experiment-chain/train.py --protocol lnn --objective derivative --model mechanical
 
-States are observed [q, qdot] (absolute angles from the downward vertical and their rates).
+States are observed [q, qdot] (absolute angles from the downward vertical and their rates); the
+Cartesian kinds (``--model constrained``, ``constrained_lagrangian``) see the same paths as the
+bobs' [x, xdot] and are given the rods as their constraint graph (``Config.model_facts``).
 The defaults are CHNN's training setting (Finzi et al. 2020, docs/peers.md): 800 paths of 100
 states 0.03 s apart, fit by rolling out 4-step snippets (RK4, MAE), weight decay 1e-4,
 learning rate 3e-3, batch 200, 256 hidden units; their 2000 epochs of 4 batches are 8000 steps.
@@ -56,9 +58,23 @@ class Config(hnn.RunConfig):
         self.input_dim = 2 * self.bobs
 
     def dataset(self) -> dict:
-        return hnn.load_task("chain").get_dataset(bobs=self.bobs, unit=self.unit, protocol=self.protocol,
-                                                  seed=self.seed, n_train=self.n_train, n_test=self.n_test,
-                                                  save_dir=self.save_dir)
+        """Observed [q, qdot], or for a kind that reads Cartesian bodies only (``data.observed_coordinates``)
+        the same states as [x, xdot] of the bobs (``"state": "cartesian"``)."""
+        data = hnn.load_task("chain")
+        found = data.get_dataset(bobs=self.bobs, unit=self.unit, protocol=self.protocol, seed=self.seed,
+                                 n_train=self.n_train, n_test=self.n_test, save_dir=self.save_dir)
+        if data.observed_coordinates(self.kind) == "cartesian":
+            return data.cartesian_dataset(data.chain_for(self.bobs, self.unit, self.protocol), found)
+        return found
+
+    def dataset_key(self) -> tuple:
+        # angle and Cartesian runs of one chain read the same paths in different coordinates
+        return super().dataset_key() + (hnn.load_task("chain").observed_coordinates(self.kind),)
+
+    def model_facts(self) -> dict:
+        """The rods as the Cartesian kinds' constraint graph."""
+        chain = hnn.load_task("chain").chain_for(self.bobs, self.unit, self.protocol)
+        return {"constraints": chain.constraint_graph().to_dict()}
 
 
 def main(argv=None):

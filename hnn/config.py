@@ -141,8 +141,14 @@ class RunConfig:
         """Equal for runs that train on the same dataset."""
         return (type(self).__module__, type(self).__qualname__) + tuple(getattr(self, name) for name in self.DATASET_FIELDS)
 
+    def model_facts(self) -> dict:
+        """What a model kind's build reads that no flag sets, facts the task declares (the chain's
+        ``constraints`` graph, for the Cartesian kinds); saved in args.json beside the fields."""
+        return {}
+
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields and the ``model_facts()``: what a run's args.json holds (``from_dict`` reads the fields)."""
+        return {**dataclasses.asdict(self), **self.model_facts()}
 
     @classmethod
     def from_dict(cls, values: dict) -> RunConfig:

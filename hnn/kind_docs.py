@@ -74,6 +74,24 @@ KIND_DOCS = {
         coordinates="observed [q, qdot] only (the objectives refuse it on canonical [q, p])",
         integrator="`rk4` or `dopri5`",
         when="a structured baseline for mechanical systems with friction or forcing, beside `mechanical`"),
+    "constrained": KindDoc(
+        line="CHNN (Finzi et al. 2020): point masses in Cartesian [x, p], a learned potential V(x) and one mass "
+             "per body, the task's rigid links and tethers enforced by projection",
+        assumes="bodies of constant mass joined by known rigid constraints (a chain, a linkage), a conserved "
+                "energy 1/2 sum |p_i|^2 / m_i + V(x)",
+        coordinates="Cartesian positions of the bodies and their momenta; it maps observed [x, xdot] through its "
+                    "masses. The task gives the constraint graph (the chain task converts its angles)",
+        integrator="`dopri5` or `rk4` (the projection keeps the constraints; its H is not separable)",
+        when="linkages and chains whose constraints you know: it models what the scene is, and beats the "
+             "generalized-coordinate rungs on chains (docs/peers.md)"),
+    "constrained_lagrangian": KindDoc(
+        line="CLNN (Finzi et al. 2020): the constrained rung in Lagrangian form, Cartesian [x, xdot], the "
+             "constraint forces solved for",
+        assumes="as `constrained`: bodies of constant mass, known rigid constraints, a potential V(x)",
+        coordinates="Cartesian positions of the bodies and their velocities, as observed",
+        integrator="`dopri5` or `rk4`",
+        when="as `constrained`, when you would rather not map velocities to momenta; the same cost per step "
+             "or less"),
     "pixel-hnn": KindDoc(
         line="the pixel task's HNN: an autoencoder of frames and an HNN on its 2-D latent "
              "(`experiment-pixels/train.py --model hnn`)",

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from .constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
 from .interface import Model
 from .mechanical import MechanicalHNN, SecondOrderNODE
 from .models import HNN, Baseline, PixelBaseline, PixelHNN, build_model
@@ -91,6 +92,16 @@ def _second_order(cls) -> Callable[[dict], nn.Module]:
     return build
 
 
+def _constrained(cls) -> Callable[[dict], nn.Module]:
+    def build(args: dict) -> nn.Module:
+        if "constraints" not in args:
+            raise ValueError(f"the {args.get('kind')} kind needs the task's constraint graph (args['constraints'], "
+                             "from its config's model_facts()); this task declares none: train it on the chain task "
+                             "(experiment-chain) or give the task's Config a model_facts() with 'constraints'")
+        return cls(ConstraintGraph.from_dict(args["constraints"]), args["hidden_dim"], args["nonlinearity"])
+    return build
+
+
 # the one place a kind is named; a run's config says which (RunConfig.kind), its args.json too
 MODEL_KINDS: dict[str, ModelKind] = {
     "hnn": ModelKind(HNN, lambda args: _mlp(args, False), color="tab:blue"),
@@ -99,6 +110,8 @@ MODEL_KINDS: dict[str, ModelKind] = {
     "dissipative": ModelKind(DissipativeHNN, _structured(DissipativeHNN), color="tab:purple"),
     "mechanical": ModelKind(MechanicalHNN, _second_order(MechanicalHNN), color="tab:olive"),
     "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange"),
+    "constrained": ModelKind(ConstrainedHNN, _constrained(ConstrainedHNN), color="tab:cyan"),
+    "constrained_lagrangian": ModelKind(ConstrainedLNN, _constrained(ConstrainedLNN), color="tab:pink"),
     "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue"),
     "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red"),
 }

@@ -29,7 +29,7 @@ def _check_even(input_dim: int, kind: str) -> int:
     return input_dim // 2
 
 
-def _scalar_gradient(net: nn.Module, x: torch.Tensor, create_graph: bool) -> torch.Tensor:
+def scalar_gradient(net: nn.Module, x: torch.Tensor, create_graph: bool) -> torch.Tensor:
     """d(net(x)[:, 0])/dx, ``(batch, width of x)``: the MLP's closed form where it applies, else autograd."""
     if isinstance(net, MLP) and net._closed_form_applies():
         return net.input_gradient(x, 0, create_graph)
@@ -103,12 +103,12 @@ class SeparableHNN(Model):
     def kinetic_gradient(self, p: torch.Tensor) -> torch.Tensor:
         """dT/dp = dq/dt, ``(batch, n)`` -> ``(batch, n)``: the half of the field that reads p alone."""
         kernel = self._kernel("kinetic_net", p)
-        return kernel(p) if kernel is not None else _scalar_gradient(self.kinetic_net, p, torch.is_grad_enabled())
+        return kernel(p) if kernel is not None else scalar_gradient(self.kinetic_net, p, torch.is_grad_enabled())
 
     def potential_gradient(self, q: torch.Tensor) -> torch.Tensor:
         """dV/dq = -dp/dt, ``(batch, n)`` -> ``(batch, n)``: the half of the field that reads q alone."""
         kernel = self._kernel("potential_net", q)
-        return kernel(q) if kernel is not None else _scalar_gradient(self.potential_net, q, torch.is_grad_enabled())
+        return kernel(q) if kernel is not None else scalar_gradient(self.potential_net, q, torch.is_grad_enabled())
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """``dx/dt = (dT/dp, -dV/dq)``, ``(batch, 2n)``; a graph for training only in grad mode."""

@@ -47,10 +47,12 @@ FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_
 
 def rungs() -> tuple[str, ...]:
     """The kinds the table trains: every one that the chain task's ``--model`` takes and whose model
-    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.ModelKind.reads``). The LNN
-    protocol trains the same rungs on derivatives of [q, qdot]."""
+    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.ModelKind.reads``), or else the
+    bobs' Cartesian [x, xdot] (the constrained kinds: ``experiment-chain/data.py``'s
+    ``observed_coordinates``). The LNN protocol trains the same rungs on derivatives of the same states."""
     config = hnn.load_task("chain", "train").Config
-    return tuple(kind for kind in hnn.cli.model_choices(config) if hnn.MODEL_KINDS[kind].reads("velocity"))
+    return tuple(kind for kind in hnn.cli.model_choices(config)
+                 if any(hnn.MODEL_KINDS[kind].reads(observed) for observed in ("velocity", "cartesian")))
 
 
 def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
@@ -67,13 +69,18 @@ def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
     return jobs
 
 
-def _rollout(model, z0: torch.Tensor, t_eval, rtol: float) -> tuple[torch.Tensor | None, str | None]:
-    """The model's observed path from ``z0`` by dopri5 in float64, or ``(None, why)`` if it blows up."""
+def _rollout(chain, rung: str, model, z0: torch.Tensor, t_eval, rtol: float) -> tuple[torch.Tensor | None, str | None]:
+    """The model's path from observed ``z0`` ``(batch, 2N)`` by dopri5 in float64, as Cartesian bobs
+    ``(batch, T, 2, N, 2)`` (positions, velocities), or ``(None, why)`` if it blows up. A rung of the
+    chain's angles is mapped to the bobs; a Cartesian rung starts from the bobs and is read as it is."""
+    observed = hnn.load_task("chain").observed_coordinates(rung)
+    start = chain.to_cartesian(z0) if observed == "cartesian" else z0
     try:
-        return hnn.trajectory.rollout_observed(model.double(), z0, t_eval, "velocity", method="dopri5", rtol=rtol,
-                                                atol=rtol), None
+        path = hnn.trajectory.rollout_observed(model.double(), start, t_eval, observed, method="dopri5", rtol=rtol,
+                                               atol=rtol)
     except hnn.DivergenceError as err:
         return None, str(err).split(";")[0]
+    return (path.reshape(*path.shape[:2], 2, chain.n, 2) if observed == "cartesian" else chain.cartesian(path)), None
 
 
 def measure_chnn(chain, models: dict, starts: int) -> dict:
@@ -82,12 +89,12 @@ def measure_chnn(chain, models: dict, starts: int) -> dict:
     spec = protocols.CHNN
     z0 = protocols.chnn_test_starts(chain, starts)
     t = spec["dt"] * np.arange(spec["points"])
-    truth = hnn.load_task("chain").trajectories(chain, z0, t)
+    truth = chain.cartesian(hnn.load_task("chain").trajectories(chain, z0, t))
     result = {"floor": protocols.summary(protocols.chaos_floor(chain, z0))}
     for rung, model in models.items():
-        pred, blew_up = _rollout(model, z0, t, spec["model_rtol"])
+        pred, blew_up = _rollout(chain, rung, model, z0, t, spec["model_rtol"])
         result[rung] = ({"blew_up": blew_up} if pred is None
-                        else protocols.summary(protocols.rollout_error(chain, pred, truth)))
+                        else protocols.summary(protocols.geometric_mean(protocols.relative_errors(pred, truth))))
     return result
 
 
@@ -100,9 +107,10 @@ def measure_lnn(models: dict, starts: int) -> dict:
     true_end = data.trajectories(chain, z0, t, rtol=protocols.LNN["truth_rtol"], atol=protocols.LNN["truth_rtol"])[:, -1]
     result = {}
     for rung, model in models.items():
-        pred, blew_up = _rollout(model, z0, t, 1e-8)
+        pred, blew_up = _rollout(chain, rung, model, z0, t, 1e-8)
+        end = None if pred is None else chain.from_cartesian(pred[:, -1])
         result[rung] = ({"blew_up": blew_up} if pred is None
-                        else protocols.summary(protocols.energy_error(chain, pred[:, -1], true_end)))
+                        else protocols.summary(protocols.energy_error(chain, end, true_end)))
     return result
 
 
