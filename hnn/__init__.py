@@ -17,13 +17,14 @@ from .structured import DissipativeHNN, SeparableHNN
 from .objectives import DerivativeObjective, Objective, PixelObjective
 from .mechanical import MechanicalHNN, SecondOrderNODE
 from .trajectory import TrajectoryObjective, snippet_loss
+from .dgnet import DiscreteGradientObjective
 from .kinds import MODEL_KINDS, OBJECTIVES, ModelKind, get_objective
 from .config import RunConfig
 from .runs import find_run, load_run, run_dir, run_experiment, save_run
 from .tasks import TaskSpec, available_tasks, load_task, task_spec
 from .training import train
 from .gifs import write_gif
-from . import cli, grouped, interface, kinds, nbody, objectives, paper, trajectory
+from . import cli, discrete_gradient, grouped, interface, kinds, nbody, objectives, paper, trajectory
 from .evaluation import PROTOCOLS, EnergyProtocol, energy_bump, evaluate_energy, get_protocol
 
 __all__ = [
@@ -34,9 +35,9 @@ __all__ = [
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "RunConfig", "run_experiment", "run_dir", "save_run", "load_run", "find_run",
     "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "SecondOrderNODE",
-    "TrajectoryObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
+    "TrajectoryObjective", "DiscreteGradientObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
     "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "grouped", "interface", "kinds", "nbody", "objectives",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "discrete_gradient", "grouped", "interface", "kinds", "nbody", "objectives",
     "paper",
 ]

@@ -47,10 +47,12 @@ def gonzalez(hamiltonian: Callable, x0: torch.Tensor, x1: torch.Tensor) -> torch
     return grad + torch.where(dd > 0, excess / dd.clamp_min(torch.finfo(dd.dtype).tiny), 0.0) * d
 
 
-def _canonical(dim: int, like: torch.Tensor) -> torch.Tensor:
-    n = dim // 2
-    eye = torch.eye(n, dtype=like.dtype, device=like.device)
-    return torch.cat([torch.cat([torch.zeros_like(eye), eye], 1), torch.cat([-eye, torch.zeros_like(eye)], 1)])
+def structured(g: torch.Tensor, S: torch.Tensor | None) -> torch.Tensor:
+    """``S g`` for gradients ``g`` ``(batch, dim)``; S None: the canonical [[0, I], [-I, 0]], (dH/dp, -dH/dq)."""
+    if S is None:
+        n = g.shape[1] // 2
+        return torch.cat([g[:, n:], -g[:, :n]], 1)
+    return g @ S.to(g).T
 
 
 def energy_parts(f, dim: int, method: str = "discrete_gradient"):
@@ -87,9 +89,7 @@ class DiscreteGradient(Stepper):
 
     def _flow(self, x0: torch.Tensor, x1: torch.Tensor) -> torch.Tensor:
         """S grad-bar H(x0, x1), ``(batch, dim)``."""
-        if self.S is None:
-            self.S = _canonical(x0.shape[1], x0)
-        return self.dg(x0, x1) @ self.S.to(x0.dtype).T
+        return structured(self.dg(x0, x1), self.S)
 
     def _check_structure(self, x: torch.Tensor) -> None:
         """The field must be S grad H (S grad-bar H(x, x)): else this method integrates another flow."""

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from .dgnet import DiscreteGradientObjective
 from .interface import Model
 from .mechanical import MechanicalHNN, SecondOrderNODE
 from .models import HNN, Baseline, PixelBaseline, PixelHNN, build_model
@@ -112,7 +113,8 @@ MODEL_KINDS: dict[str, ModelKind] = {
 }
 
 # objective name -> class: RunConfig.objective's choices
-OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective}
+OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective,
+              "discrete_gradient": DiscreteGradientObjective}
 
 
 def get_kind(kind: str) -> ModelKind:
