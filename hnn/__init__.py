@@ -16,6 +16,7 @@ from .models import HNN, MLP, Baseline, MLPAutoencoder, PixelHNN, build_model, g
 from .structured import DissipativeHNN, SeparableHNN
 from .objectives import DerivativeObjective, Objective, PixelObjective
 from .mechanical import MechanicalHNN, SecondOrderNODE
+from .lagrangian import LagrangianNN, SingularLagrangianError
 from .trajectory import TrajectoryObjective, snippet_loss
 from .dgnet import DiscreteGradientObjective
 from .kinds import MODEL_KINDS, OBJECTIVES, ModelKind, get_objective
@@ -34,7 +35,7 @@ __all__ = [
     "train",
     "derivative_loss", "mean_and_se", "batch_means_se", "energy_mse",
     "RunConfig", "run_experiment", "run_dir", "save_run", "load_run", "find_run",
-    "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "SecondOrderNODE",
+    "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "SecondOrderNODE", "LagrangianNN", "SingularLagrangianError",
     "TrajectoryObjective", "DiscreteGradientObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
     "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",

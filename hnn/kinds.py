@@ -20,6 +20,7 @@ from torch import nn
 
 from .dgnet import DiscreteGradientObjective
 from .interface import Model
+from .lagrangian import LagrangianNN
 from .mechanical import MechanicalHNN, SecondOrderNODE
 from .models import HNN, Baseline, PixelBaseline, PixelHNN, build_model
 from .objectives import DerivativeObjective, PixelObjective
@@ -106,6 +107,8 @@ MODEL_KINDS: dict[str, ModelKind] = {
                             summary="H = p^T M^-1(q) p / 2 + V(q), learned mass matrix; maps observed [q, qdot]"),
     "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange",
                               summary="dq/dt = v, dv/dt = f(q, v): a second-order MLP on observed velocities, no H"),
+    "lagrangian": ModelKind(LagrangianNN, _second_order(LagrangianNN), color="tab:brown",
+                            summary="LNN: a black-box L(q, qdot) MLP on observed velocities, qddot by Euler-Lagrange"),
     "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue",
                            summary="an autoencoder whose latent [q, p] moves by an HNN"),
     "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red",
