@@ -26,15 +26,18 @@ from __future__ import annotations
 import torch
 from torch.func import grad, jacfwd, vmap
 
+from .errors import DivergenceError
 from .mechanical import _check_width, _embed, _StateCheck
 from .models import MLP
 
 
-class SingularLagrangianError(ValueError):
-    """d2L/dqdot2 is singular (or too ill-conditioned to solve) at the ``states`` (row indices) named."""
+class SingularLagrangianError(DivergenceError, ValueError):
+    """d2L/dqdot2 is singular (or too ill-conditioned to solve) at the ``states`` (row indices) named.
+
+    A ``DivergenceError`` too, so code that reports failed rollouts by name reports this one."""
 
     def __init__(self, message: str, states=()):
-        super().__init__(message)
+        super().__init__(message, states)
         self.states = list(states)
 
 
