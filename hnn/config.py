@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import inspect
 import json
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -64,7 +65,10 @@ class RunConfig:
     objective: str = setting("derivative", "what the model is fit to: derivative (dx/dt at every state, the paper's) "
                                            "or trajectory (its rollout over snippets of snippet_steps + 1 observed "
                                            "states, through RK4, or leapfrog for a separable model; what measured "
-                                           "paths without derivatives allow)", choices=OBJECTIVES)
+                                           "paths without derivatives allow) or discrete_gradient (DGNet's: "
+                                           "(x_{n+1} - x_n)/dt by the discrete gradient of the learned H between "
+                                           "the two states; conservative kinds, tasks with paths)",
+                             choices=OBJECTIVES)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
@@ -115,7 +119,8 @@ class RunConfig:
         if not isinstance(registered, DerivativeObjective):
             raise ValueError(f"objective={self.objective!r} fits a field of the state, and the {self.kind} model "
                              f"trains with {type(registered).__name__}; use objective='derivative'")
-        return get_objective(self.objective, steps=self.snippet_steps)
+        takes_steps = "steps" in inspect.signature(OBJECTIVES[self.objective]).parameters
+        return get_objective(self.objective, **({"steps": self.snippet_steps} if takes_steps else {}))
 
     def finish(self, directory, dataset: dict) -> None:
         """Called after the run is saved in ``directory`` (the pixel task measures its energy here)."""

@@ -12,6 +12,8 @@ of shape ``(batch, dim)``, and class-level declarations instead of abilities fou
   ``state_from_observed(z)``, ``observed_from_state(x)`` and ``observed_time_derivative(z)``
   (a mechanical HNN: [q, qdot] -> [q, M(q) qdot] by its learned mass matrix).
 - ``conservative``: it has ``hamiltonian(x)``, an H its flow conserves.
+  Its ``field`` is then an ``EnergyField``: the flow with its H and the structure matrix S of
+  dx/dt = S grad H, which an energy-preserving solver (``'discrete_gradient'``) reads.
 - ``separable``: that H is T(p) + V(q), with ``kinetic_gradient(p)`` and ``potential_gradient(q)``;
   its ``field`` is then a ``SplitField`` that explicit symplectic solvers evaluate half by half.
 - ``dissipative``: its flow loses energy on purpose (no energy drift is measured).
@@ -43,18 +45,36 @@ UNIT_MASS = {"velocity": "reads qdot as p: Hamilton's equations hold for it only
 ANY_STATE = {name: "a black-box field: no structure assumed" for name in COORDINATES}
 
 
-class SplitField:
+class EnergyField:
+    """A field dx/dt = S grad H(x) that carries its H, for solvers that read H (``'discrete_gradient'``).
+
+    Callable as the field ``whole`` ``(batch, dim) -> (batch, dim)``. ``hamiltonian``:
+    ``(batch, dim) -> (batch,)``; ``structure``: the skew ``(dim, dim)`` S (None: the canonical
+    [[0, I], [-I, 0]] of the state's width); ``discrete_gradient``: an exact discrete gradient
+    ``(x0, x1) -> (batch, dim)`` in closed form where the model has one (None: the solver builds
+    Gonzalez's from ``hamiltonian``). Without ``hamiltonian`` it is a plain field.
+    """
+
+    def __init__(self, whole: Callable, hamiltonian: Callable | None = None, structure: torch.Tensor | None = None,
+                 discrete_gradient: Callable | None = None):
+        self.whole, self.hamiltonian, self.structure = whole, hamiltonian, structure
+        self.discrete_gradient = discrete_gradient
+
+    def __call__(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        return self.whole(x)
+
+
+class SplitField(EnergyField):
     """A separable field dx/dt = (dT/dp, -dV/dq) given by its two halves, each ``(batch, n)`` -> ``(batch, n)``.
 
     Callable as a whole field; explicit symplectic steppers (``leapfrog``, ``yoshida4``) call
     ``kinetic_gradient`` and ``potential_gradient`` alone where a stage reads one half.
+    ``energy``: ``EnergyField``'s keywords (its H T + V, ...).
     """
 
-    def __init__(self, whole: Callable, kinetic_gradient: Callable, potential_gradient: Callable):
-        self.whole, self.kinetic_gradient, self.potential_gradient = whole, kinetic_gradient, potential_gradient
-
-    def __call__(self, x: torch.Tensor, t=None) -> torch.Tensor:
-        return self.whole(x)
+    def __init__(self, whole: Callable, kinetic_gradient: Callable, potential_gradient: Callable, **energy):
+        super().__init__(whole, **energy)
+        self.kinetic_gradient, self.potential_gradient = kinetic_gradient, potential_gradient
 
 
 class Model(nn.Module):
@@ -89,12 +109,28 @@ class Model(nn.Module):
         raise TypeError(f"{type(self).__name__} learns no Hamiltonian (conservative=False); choose a conservative "
                         "kind such as hnn, separable or mechanical")
 
+    def structure(self) -> torch.Tensor | None:
+        """The skew S with ``time_derivative(x) = grad H(x) @ S.T`` where ``conservative``; None: the
+        canonical [[0, I], [-I, 0]] of the state's width (Hamilton's equations)."""
+        return None
+
+    def exact_discrete_gradient(self) -> Callable | None:
+        """A closed-form discrete gradient ``(x0, x1) -> (batch, dim)`` of H, where the model has one:
+        grad-bar H(x0, x1) . (x1 - x0) = H(x1) - H(x0), grad-bar H(x, x) = grad H(x). None by default
+        (an energy-preserving solver then builds Gonzalez's from ``hamiltonian``)."""
+        return None
+
     @property
     def field(self) -> Callable:
-        """What an integrator steps: ``time_derivative``, or a ``SplitField`` when ``separable``."""
+        """What an integrator steps: ``time_derivative``; an ``EnergyField`` carrying H when
+        ``conservative``, a ``SplitField`` (an ``EnergyField`` too) when ``separable``."""
+        if not self.conservative:
+            return self.time_derivative
+        energy = {"hamiltonian": self.hamiltonian, "structure": self.structure(),
+                  "discrete_gradient": self.exact_discrete_gradient()}
         if self.separable:
-            return SplitField(self.time_derivative, self.kinetic_gradient, self.potential_gradient)
-        return self.time_derivative
+            return SplitField(self.time_derivative, self.kinetic_gradient, self.potential_gradient, **energy)
+        return EnergyField(self.time_derivative, **energy)
 
     # -- observed coordinates ----------------------------------------------------------------------
 

@@ -92,6 +92,14 @@ KIND_DOCS = {
         integrator="`dopri5` or `rk4`",
         when="as `constrained`, when you would rather not map velocities to momenta; the same cost per step "
              "or less"),
+    "lagrangian": KindDoc(
+        line="LNN (Cranmer et al. 2020): a black-box L(q, qdot) MLP; qddot from the Euler-Lagrange equations",
+        assumes="a conserved energy E = qdot . dL/dqdot - L and a Lagrangian whose Hessian in qdot is invertible "
+                "(a singular one is an error naming the state)",
+        coordinates="observed [q, qdot] only",
+        integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
+        when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "
+             "field call solves an n x n system per state, so it is the costliest rung per step"),
     "pixel-hnn": KindDoc(
         line="the pixel task's HNN: an autoencoder of frames and an HNN on its 2-D latent "
              "(`experiment-pixels/train.py --model hnn`)",

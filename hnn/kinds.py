@@ -19,7 +19,9 @@ import torch
 from torch import nn
 
 from .constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
+from .dgnet import DiscreteGradientObjective
 from .interface import Model
+from .lagrangian import LagrangianNN
 from .mechanical import MechanicalHNN, SecondOrderNODE
 from .models import HNN, Baseline, PixelBaseline, PixelHNN, build_model
 from .objectives import DerivativeObjective, PixelObjective
@@ -112,12 +114,14 @@ MODEL_KINDS: dict[str, ModelKind] = {
     "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange"),
     "constrained": ModelKind(ConstrainedHNN, _constrained(ConstrainedHNN), color="tab:cyan"),
     "constrained_lagrangian": ModelKind(ConstrainedLNN, _constrained(ConstrainedLNN), color="tab:pink"),
+    "lagrangian": ModelKind(LagrangianNN, _second_order(LagrangianNN), color="tab:brown"),
     "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue"),
     "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red"),
 }
 
 # objective name -> class: RunConfig.objective's choices
-OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective}
+OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective,
+              "discrete_gradient": DiscreteGradientObjective}
 
 
 def get_kind(kind: str) -> ModelKind:

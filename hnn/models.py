@@ -194,6 +194,16 @@ class HNN(Model):
             raise ValueError("a baseline model has no Hamiltonian; build it with baseline=False")
         return self.forward(x)[1].squeeze(1)
 
+    def structure(self) -> torch.Tensor | None:
+        return None if self.assume_canonical_coords else self.M
+
+    def exact_discrete_gradient(self):
+        """DGNet's discrete gradient of the paper's tanh MLP (``hnn.tanh_mlp.discrete_gradient``), else None."""
+        net = self.differentiable_model
+        if self.baseline or self.field_type != "solenoidal" or not (isinstance(net, MLP) and net._closed_form_applies()):
+            return None
+        return lambda x0, x1: tanh_mlp.discrete_gradient(x0, x1, *tanh_mlp.mlp_weights(net)[:4], net.linear3.weight[1])
+
     def time_derivative(self, x: torch.Tensor, t=None, separate_fields: bool = False):
         """``dx/dt`` at ``x``, shape ``(batch, input_dim)``.
 

@@ -7,4 +7,4 @@ names and prose are ``hnn.kind_docs.KIND_DOCS``.
 """
 NONLINEARITIES = ("tanh", "relu", "sigmoid", "softplus", "selu", "elu", "swish")
 FIELD_TYPES = ("solenoidal", "conservative", "both")
-OBJECTIVES = ("derivative", "trajectory")
+OBJECTIVES = ("derivative", "trajectory", "discrete_gradient")

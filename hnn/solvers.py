@@ -18,6 +18,7 @@ from typing import Callable
 import torch
 
 from .adaptive import DEFAULT_SCIPY_METHOD, dop853_rollout, dopri5_rollout, scipy_rollout
+from .discrete_gradient import DiscreteGradient
 from .fixed_step import RK4, Leapfrog, Midpoint, Stepper, Yoshida4, fixed_step_rollout
 
 
@@ -43,6 +44,10 @@ class Solver:
             ``x0`` ``(batch, dim)`` and float64 grid ``t`` (at least 2 times, strictly monotone).
         label: ``label(options) -> str``, how reports name the integrator run with ``options``
             (default: the name, then the options).
+        energy_preserving: one step keeps the field's H exactly (to its implicit solve's
+            tolerance), for any step size, not up to a bounded oscillation.
+        needs_hamiltonian: it reads the field's H (an ``hnn.interface.EnergyField``, the ``field``
+            of a model that declares ``conservative``), not only dx/dt: a plain field is refused.
     """
     name: str
     order: int
@@ -51,6 +56,8 @@ class Solver:
     adaptive: bool
     run: Callable[..., torch.Tensor]
     label: Callable[[dict], str] | None = None
+    energy_preserving: bool = False
+    needs_hamiltonian: bool = False
 
     def describe(self, options: dict) -> str:
         """The integrator's name in reports when run with ``options``, e.g. ``'RK45'`` for solve_ivp's default."""
@@ -58,11 +65,13 @@ class Solver:
 
 
 def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic: bool = False,
-                      needs_separable: bool = False) -> Solver:
+                      needs_separable: bool = False, energy_preserving: bool = False,
+                      needs_hamiltonian: bool = False) -> Solver:
     """A ``Solver`` running ``stepper`` by ``hnn.fixed_step.fixed_step_rollout`` (options ``dt``,
-    ``max_norm``, ``stats``, and the midpoint's ``tol``, ``max_iter``, ``base``)."""
+    ``max_norm``, ``stats``, and the implicit methods' ``tol``, ``max_iter``, ``base``)."""
     run = functools.partial(fixed_step_rollout, method=name, stepper=stepper)
-    return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run)
+    return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run,
+                  energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian)
 
 
 def _scipy_label(options: dict) -> str:
@@ -80,6 +89,8 @@ SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
     fixed_step_solver("midpoint", Midpoint, order=2, symplectic=True),
     # with its default base='leapfrog'; base='midpoint' makes it symplectic for any H
     fixed_step_solver("yoshida4", Yoshida4, order=4, symplectic=True, needs_separable=True),
+    # DGNet's integrator: keeps the field's own H exactly; Gonzalez's discrete gradient, or the field's own
+    fixed_step_solver("discrete_gradient", DiscreteGradient, order=2, energy_preserving=True, needs_hamiltonian=True),
 )}
 
 # the built-in symplectic methods, in registry order (a snapshot: registered ones are in SOLVERS)

@@ -238,3 +238,24 @@ def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, .
         built = EvaluationKernel(weights() if weights else mlp_weights(mlp), rows, None if fold is None else fold())
         entry = kernels[(id(owner), key)] = (owner, built)
     return entry[1]
+
+
+def _tanh_quotient(a0: torch.Tensor, a1: torch.Tensor) -> torch.Tensor:
+    """(tanh a1 - tanh a0) / (a1 - a0), elementwise, and tanh'(a0) where a1 = a0, without cancellation:
+    tanh a1 - tanh a0 = tanh(a1 - a0) (1 - tanh a0 tanh a1), and tanh(d) / d = 1 - d^2 / 3 + O(d^4)."""
+    d = a1 - a0
+    small = d.abs() < 1e-4          # there d^4 / 7.5 < 2e-17: the series is exact to float64 rounding
+    safe = torch.where(small, torch.ones_like(d), d)
+    tanhc = torch.where(small, 1 - d * d / 3, torch.tanh(safe) / safe)
+    return (1 - torch.tanh(a0) * torch.tanh(a1)) * tanhc
+
+
+def discrete_gradient(x0: torch.Tensor, x1: torch.Tensor, W1, b1, W2, b2, w) -> torch.Tensor:
+    """A discrete gradient of F = w . tanh(W2 tanh(W1 x + b1) + b2) between ``x0`` and ``x1``, both
+    ``(batch, n)``: the chain rule with each tanh's derivative replaced by its difference quotient
+    between the two states (DGNet's "automatic discrete differentiation", Matsubara et al. 2020), so
+    ``g . (x1 - x0) = F(x1) - F(x0)`` exactly and ``g(x, x) = dF/dx``. ``(batch, n)``; differentiable."""
+    a0, a1 = nn.functional.linear(x0, W1, b1), nn.functional.linear(x1, W1, b1)
+    c0 = nn.functional.linear(torch.tanh(a0), W2, b2)
+    c1 = nn.functional.linear(torch.tanh(a1), W2, b2)
+    return (((_tanh_quotient(c0, c1) * w) @ W2) * _tanh_quotient(a0, a1)) @ W1

@@ -132,16 +132,18 @@ def test_dopri5_matches_the_analytic_spring_and_runs_backwards(spring):
 # ---------------------------------------------------------------- the registry of solvers
 
 def test_the_registry_names_every_method_and_refuses_unknown_and_duplicate_ones():
-    assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "dop853", "rk4", "leapfrog", "midpoint", "yoshida4"}
+    assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "dop853", "rk4", "leapfrog", "midpoint", "yoshida4",
+                                 "discrete_gradient"}
     assert hnn.SYMPLECTIC_METHODS == ("leapfrog", "midpoint", "yoshida4")
     assert [n for n, s in hnn.SOLVERS.items() if s.adaptive] == ["solve_ivp", "dopri5", "dop853"]
-    with pytest.raises(ValueError, match=r"unknown method 'euler9'; choose one of \['dop853', 'dopri5', 'leapfrog'"):
+    with pytest.raises(ValueError, match=r"unknown method 'euler9'; choose one of \['discrete_gradient', 'dop853', 'dopri5'"):
         hnn.get_solver("euler9")
     with pytest.raises(ValueError, match="already registered"):
         hnn.register_solver(hnn.get_solver("rk4"))
     with pytest.raises(TypeError, match="needs a hnn.Solver"):
         hnn.register_solver("rk4")
-    assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "dop853", "rk4", "leapfrog", "midpoint", "yoshida4"}
+    assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "dop853", "rk4", "leapfrog", "midpoint", "yoshida4",
+                                 "discrete_gradient"}
 
 
 def test_solvers_describe_themselves_for_reports():

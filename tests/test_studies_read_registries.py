@@ -47,9 +47,14 @@ def toys(monkeypatch):
 
 
 def test_both_studies_try_every_registered_solver_that_applies(toys):
+    reads_h = {name for name, solver in hnn.SOLVERS.items() if solver.needs_hamiltonian}
+    assert reads_h == {"discrete_gradient"}
     for separable in (False, True):
-        methods = {options["method"] for options in scene_metrics.settings_ladder((0.1, 0.05), separable, True)}
-        assert methods == set(hnn.SOLVERS) - ({"leapfrog"} if not separable else set()), separable
+        for energy in (False, True):      # a field that carries its H gets the solvers that read it
+            methods = {options["method"] for options in scene_metrics.settings_ladder((0.1, 0.05), separable, True,
+                                                                                       energy)}
+            expected = set(hnn.SOLVERS) - ({"leapfrog"} if not separable else set()) - (set() if energy else reads_h)
+            assert methods == expected, (separable, energy)
         labels = {label for label, _ in speed_accuracy._settings("model", True, (0.1, 0.05), separable)}
         assert "toy-euler" in labels and ("leapfrog" in labels) == separable
 

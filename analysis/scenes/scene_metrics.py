@@ -94,19 +94,19 @@ def divergence_time(dynamics, x0: torch.Tensor, t: np.ndarray, seed: int = 0,
 # speed at equal accuracy
 
 
-def settings_ladder(dts, separable: bool, quick: bool) -> list[dict]:
+def settings_ladder(dts, separable: bool, quick: bool, energy: bool = False) -> list[dict]:
     """The ``hnn.rollout`` settings tried: adaptive ones by tolerance, fixed-step ones by ``dt``.
 
     Leapfrog and yoshida4 on leapfrog are exact symplectic methods only for a separable H, so
     they are tried for separable fields only; every field gets rk4, the implicit midpoint and
-    yoshida4 on it. yoshida4 on the midpoint costs three midpoint solves a step (~30 field calls),
-    so it takes only the four coarsest steps: being of order 4 it reaches 1e-4 there or not at all
+    yoshida4 on it; a field that carries its H (``energy``) the discrete gradient too. yoshida4
+    on the midpoint costs three midpoint solves a step (~30 field calls), so it takes only the four coarsest steps: being of order 4 it reaches 1e-4 there or not at all
     within this study's time.
     """
     rtols = (1e-4, 1e-7) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
     dts = dts[::2] if quick else dts
     # every registered solver that applies (speed_accuracy.solver_settings reads hnn.SOLVERS)
-    out = [options for _, options in speed_accuracy.solver_settings(separable, rtols, dts, ADAPTIVE)]
+    out = [options for _, options in speed_accuracy.solver_settings(separable, rtols, dts, ADAPTIVE, energy)]
     if separable:       # the any-H settings too (yoshida4 on the midpoint), as for a learned H
         out += [options for _, options in speed_accuracy.solver_settings(False, (), dts)
                 if options not in out and "base" in options]

@@ -235,7 +235,8 @@ def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
     f = model64.field
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
-    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick)
+    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick,
+                                getattr(f, "hamiltonian", None) is not None)
     result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
     if scene.task in DRIFT_SCENES and not hnn.MODEL_KINDS[label].dissipative:
         period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])

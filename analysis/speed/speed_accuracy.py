@@ -85,30 +85,33 @@ ADAPTIVE_VARIANTS = {"solve_ivp": ({}, {"scipy_method": "DOP853"})}
 ANY_H_VARIANTS = {"yoshida4": {"base": "midpoint"}}
 
 
-def solver_settings(separable: bool, rtols, dts, adaptive_variants=ADAPTIVE_VARIANTS) -> list[tuple[str, dict]]:
+def solver_settings(separable: bool, rtols, dts, adaptive_variants=ADAPTIVE_VARIANTS,
+                    energy: bool = False) -> list[tuple[str, dict]]:
     """``(method label, rollout options)`` of every solver in ``hnn.SOLVERS`` that applies to a field:
     the adaptive ones at each of ``rtols`` (and their ``adaptive_variants``), the fixed-step ones at
     each of ``dts``; one that ``needs_separable`` only for a ``separable`` H, or else in its
-    ``ANY_H_VARIANTS`` setting."""
+    ``ANY_H_VARIANTS`` setting; one that ``needs_hamiltonian`` only for a field that carries its H
+    (``energy``: an ``hnn.interface.EnergyField``)."""
     solvers = list(hnn.SOLVERS.values())
     out = []
     for rtol in rtols:
         for solver in (s for s in solvers if s.adaptive):
             for extra in adaptive_variants.get(solver.name, ({},)):
                 out.append((solver.describe(extra), {"method": solver.name, **extra, "rtol": rtol, "atol": rtol}))
-    for solver in (s for s in solvers if not s.adaptive):
+    for solver in (s for s in solvers if not s.adaptive and (energy or not s.needs_hamiltonian)):
         extra = {} if separable or not solver.needs_separable else ANY_H_VARIANTS.get(solver.name)
         if extra is not None:
             out += [(solver.name, {"method": solver.name, "dt": dt, **extra}) for dt in dts]
     return out
 
 
-def _settings(kind: str, quick: bool, dts, separable: bool = False) -> list[tuple[str, dict]]:
+def _settings(kind: str, quick: bool, dts, separable: bool = False, energy: bool = False) -> list[tuple[str, dict]]:
     """(method label, rollout options) of the grid; ``kind`` is 'true' (separable H) or 'model'
-    (a learned field, ``separable`` for a model kind with a separable H)."""
+    (a learned field, ``separable`` for a model kind with a separable H, ``energy`` for a field that
+    carries its H)."""
     dts = list(dts) if kind == "true" else list(dts[:MODEL_DTS])
     picked = [dts[i] for i in QUICK_DT_PICK if i < len(dts)] if quick else dts
-    return solver_settings(kind == "true" or separable, QUICK_RTOLS if quick else RTOLS, picked)
+    return solver_settings(kind == "true" or separable, QUICK_RTOLS if quick else RTOLS, picked, energy=energy)
 
 
 def timed_rollout(f, x0, t, options, repeats: int, enough: float = 1.0):
@@ -183,7 +186,8 @@ def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes:
         with torch.no_grad():
             ref = hnn.rollout(per_dtype["float64"], x0, t, scipy_method="DOP853", rtol=1e-12, atol=1e-12)
         separable = kind == "model" and hnn.MODEL_KINDS[label].separable
-        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable):
+        carries_h = getattr(per_dtype["float64"], "hamiltonian", None) is not None
+        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable, carries_h):
             for dname, dtype in DTYPES.items():
                 rtol = options.get("rtol")
                 if rtol is not None and rtol < 100 * torch.finfo(dtype).eps:
