@@ -44,7 +44,7 @@ def measure(folder: Path, arm) -> dict:
     paths = hnn.rollout(model.time_derivative, x0, t, method="dopri5", rtol=RTOL, atol=RTOL)
     out["rollout_error"] = hnn.metrics.summarize_errors(
         hnn.metrics.relative_error(paths, data.trajectories(arm, x0, t)), t)["error"]
-    if hasattr(model, "inverse_mass"):
+    if isinstance(model, hnn.MechanicalHNN):        # the rung that learns M^-1(q)
         with torch.no_grad():
             learned, true = model.inverse_mass(x[:, :2]), torch.linalg.inv(arm.mass_matrix(x[:, :2]))
         out["inverse_mass_error"] = float((learned - true).norm() / true.norm())
