@@ -51,8 +51,8 @@ def rungs() -> tuple[str, ...]:
     bobs' Cartesian [x, xdot] (the constrained kinds: ``experiment-chain/data.py``'s
     ``observed_coordinates``). The LNN protocol trains the same rungs on derivatives of the same states."""
     config = hnn.load_task("chain", "train").Config
-    return tuple(kind for kind in hnn.cli.model_choices(config)
-                 if any(hnn.MODEL_KINDS[kind].reads(observed) for observed in ("velocity", "cartesian")))
+    return tuple(kind for kind in hnn.cli.model_choices(config) if hnn.MODEL_KINDS[kind].studied
+                 and any(hnn.MODEL_KINDS[kind].reads(observed) for observed in ("velocity", "cartesian")))
 
 
 def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:

@@ -62,6 +62,8 @@ def _rungs(columns: dict) -> list[str]:
     dataset = config.dataset()
     kinds = []
     for kind in hnn.cli.model_choices(type(config)):
+        if not hnn.MODEL_KINDS[kind].studied:
+            continue
         try:
             run = hnn.tasks.task_config(TASK, {**columns, "model": kind, "hidden_dim": 4})
             objective = run.make_objective()

@@ -76,8 +76,9 @@ SCENE = {
 DRIFT_SCENES = ("spring", "pend", "2body")
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
 def rungs() -> tuple[str, ...]:
-    """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)."""
-    return tuple(hnn.cli.model_choices())
+    """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)
+    that its row marks ``studied``."""
+    return tuple(kind for kind in hnn.cli.model_choices() if hnn.MODEL_KINDS[kind].studied)
 
 
 def task_rungs(task: str) -> list[str]:
