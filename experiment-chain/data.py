@@ -211,6 +211,14 @@ class Chain:
         raise RuntimeError(f"the constraint projection did not reach tol={tol} in {max_iter} iterations")
 
 
+def structure_holds(kind: str) -> bool:
+    """Whether the chain has the structure a kind declares: the chain loses no energy (a
+    ``dissipative`` kind models friction it does not have) and its kinetic energy depends on the
+    angles, so H is not T(p) + V(q) in the coordinates a ``separable`` kind reads."""
+    row = hnn.kinds.get_kind(kind)
+    return not (row.dissipative or row.separable)
+
+
 def observed_coordinates(kind: str) -> str:
     """The coordinates a model of ``kind`` sees the chain in: ``'velocity'`` [q, qdot] where it reads
     them (as they are, or mapped), else ``'cartesian'`` [x, xdot] of the bobs where it reads those

@@ -26,7 +26,7 @@ def test_tiny_peers_table(tmp_path):
     # the chaos floor of one bob from 3 starts: the published one is 4.9e-5 (100 starts)
     assert 1e-5 < row["floor"]["mean"] < 2e-4
     text = (tmp_path / "peers.md").read_text()
-    assert text.startswith("**QUICK smoke run**") and "| 1 | 1.80e-04 (1.12e-04) | 7.46e-05" in text
+    assert text.startswith("**QUICK smoke run**") and "| 1 | 1.80e-04 (1.12e-04) | 7.46e-05 (6.09e-05) | 7.40e-05" in text
     assert json.loads((tmp_path / "peers.json").read_text())["meta"]["quick"] is True
     assert "From `python analysis/peers.py --out DIR` at commit" in text
     # a rerun trains nothing: every run is found by its config
@@ -38,3 +38,20 @@ def test_update_docs_refuses_a_smoke_run(capsys):
     with pytest.raises(SystemExit):
         peers.main(["--quick", "--update-docs"])
     assert "drop --quick" in capsys.readouterr().err
+
+
+def test_the_card_names_the_cheapest_rung_within_2x_of_the_best():
+    rows = {"chain2": {"a": {"mean": 1e-3}, "b": {"mean": 1.9e-3}, "c": {"mean": 2.1e-3}, "d": {"blew_up": "t = 1"},
+                       "seconds": {"a": {"seconds": 900}, "b": {"seconds": 100}, "c": {"seconds": 10},
+                                   "d": {"seconds": 1}}}}
+    lines = peers.card({"meta": {"rungs": ["a", "b", "c", "d"]}, "rows": rows})
+    # b is within 2x of a and cheaper; c is cheaper still but 2.1x off; d blew up
+    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b |"
+
+
+def test_the_table_trains_the_rungs_whose_structure_the_chain_has():
+    rungs = peers.rungs()
+    assert {"hnn", "mechanical", "constrained", "constrained_lagrangian"} <= set(rungs)
+    # the chain has no friction and its kinetic energy depends on the angles
+    assert not {kind for kind in rungs if hnn.MODEL_KINDS[kind].dissipative or hnn.MODEL_KINDS[kind].separable}
+    assert "dissipative" in hnn.MODEL_KINDS and "separable" in hnn.MODEL_KINDS

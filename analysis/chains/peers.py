@@ -37,10 +37,9 @@ BOBS = (1, 2, 3, 5)
 QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 64, "total_steps": 100},
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
                                                            "total_steps": 100}}
-# 4000 steps of batch 200 (1000 of CHNN's 4-batch epochs, against their 2000): under 5 minutes of one
-# core for the costliest rung (the mechanical HNN through 4-step RK4 snippets: 70 ms a step, measured on
-# a shared 2-core machine; the others 20-37 ms). At N = 2 the mechanical rung's mean error went from
-# 2.8e-2 at 1500 steps to 7.2e-3 at 4000 (docs/peers.md, "What we tried")
+# 4000 steps of batch 200: 1000 of CHNN's 4-batch epochs, against their 2000. Their 8000 steps for
+# every rung would take about 2.4 hours of this 2-core machine (each rung's one-thread rate: docs/peers.md,
+# "What we tried"); at N = 2 the mechanical rung's mean error went from 2.8e-2 at 1500 steps to 7.2e-3 at 4000
 FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_starts": 40,
         "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
 
@@ -49,9 +48,11 @@ def rungs() -> tuple[str, ...]:
     """The kinds the table trains: every one that the chain task's ``--model`` takes and whose model
     reads its observed states [q, qdot] (as they are, or mapped: ``hnn.ModelKind.reads``), or else the
     bobs' Cartesian [x, xdot] (the constrained kinds: ``experiment-chain/data.py``'s
-    ``observed_coordinates``). The LNN protocol trains the same rungs on derivatives of the same states."""
-    config = hnn.load_task("chain", "train").Config
+    ``observed_coordinates``), and whose declared structure the chain has (``structure_holds``: no
+    friction, no H = T(p) + V(q)). The LNN protocol trains the same rungs on derivatives of the same states."""
+    config, chain = hnn.load_task("chain", "train").Config, hnn.load_task("chain")
     return tuple(kind for kind in hnn.cli.model_choices(config) if hnn.MODEL_KINDS[kind].studied
+                 and chain.structure_holds(kind)
                  and any(hnn.MODEL_KINDS[kind].reads(observed) for observed in ("velocity", "cartesian")))
 
 
@@ -218,9 +219,9 @@ def markdown(results: dict) -> str:
               "cosine). Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
-              "| N | published HNN (mechanical) | published CHNN | published NeuralODE | published floor | "
+              "| N | published HNN (mechanical) | published CHNN | published CLNN | published NeuralODE | published floor | "
               + " | ".join(f"ours: {rung}" for rung in names) + " | our floor | our training s (one thread) |",
-              "| --- " * (6 + len(names)) + "| --- |"]
+              "| --- " * (7 + len(names)) + "| --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
@@ -228,9 +229,10 @@ def markdown(results: dict) -> str:
         peer = published.get(n, {})
         seconds = ", ".join(f"{rung} {s['seconds']:.0f}" for rung, s in row["seconds"].items())
         lines.append(f"| {n} | " + " | ".join(
-            f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "NeuralODE", "floor"))
+            f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "CLNN", "NeuralODE", "floor"))
             + " | " + " | ".join(_cell(row.get(rung)) for rung in names)
             + f" | {_cell(row['floor'])} | {seconds} |")
+    lines += card(results)
     lnn = results["rows"].get("lnn")
     if lnn is not None:
         lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
@@ -242,6 +244,28 @@ def markdown(results: dict) -> str:
                   f"{lnn['seconds'][rung]['seconds']:.0f} |" if rung in lnn["seconds"] else f"| ours: {rung} | not trained | |"
                   for rung in names]
     return "\n".join(lines) + "\n"
+
+
+def card(results: dict) -> list[str]:
+    """The chain card's lines: at each N the best rung on the mean, and the rung that is enough, the
+    one of least training seconds (one thread) whose mean is within 2x of the best."""
+    lines = ["", "### Which rung a chain requires (the card)", "",
+             "The best of our rungs on the mean error at each N, and the one that is enough: of the rungs within "
+             "2x of the best, the one that trains in the fewest seconds (one thread).", "",
+             "| N | best | enough (within 2x, fewest training s) | all within 2x |", "| --- | --- | --- | --- |"]
+    for name, row in results["rows"].items():
+        if not name.startswith("chain"):
+            continue
+        means = {rung: row[rung]["mean"] for rung in results["meta"]["rungs"] if "mean" in row.get(rung, {})}
+        if not means:
+            continue
+        best = min(means, key=means.get)
+        near = [rung for rung in means if means[rung] <= 2 * means[best]]
+        seconds = {rung: row["seconds"].get(rung, {}).get("seconds", float("inf")) for rung in near}
+        enough = min(near, key=seconds.get)
+        lines.append(f"| {name[len('chain'):]} | {best} {means[best]:.2e} | {enough} {means[enough]:.2e}, "
+                     f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} |")
+    return lines
 
 
 def _parser() -> argparse.ArgumentParser:
