@@ -24,11 +24,13 @@ from .metrics import derivative_loss, mean_and_se
 
 
 class Objective:
-    """The interface: subclasses implement ``final_loss`` (and ``train_options`` if they need any).
+    """The interface: subclasses implement ``row_loss`` or ``final_loss`` (and ``train_options`` if
+    they need any).
 
     ``arrays`` names the dataset's ``(inputs, targets, test inputs, test targets)``, each ``(rows, width)``.
     """
     arrays: tuple[str, str, str, str] = ("x", "dxdt", "test_x", "test_dxdt")
+    chunk = 4096        # rows per no-grad batch of final_loss
 
     def prepare(self, dataset: dict) -> dict:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
@@ -38,9 +40,20 @@ class Objective:
         """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""
         return {}
 
-    def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        """The ``(mean, ±)`` train or test number saved in metrics.json."""
+    def row_loss(self, model: nn.Module):
+        """``(inputs, targets) -> (rows,)`` or ``(rows, k)``: the loss of each row (its mean over k)."""
         raise NotImplementedError
+
+    def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
+        """The ``(mean, ±)`` train or test number saved in metrics.json: ``row_loss`` over all rows, in
+        no-grad batches of ``chunk`` rows, mean ± std/sqrt(rows)."""
+        param = next(model.parameters())
+        y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
+        x = y if inputs is targets else torch.as_tensor(inputs, dtype=param.dtype, device=param.device)
+        loss, c = self.row_loss(model), self.chunk
+        with torch.no_grad():
+            per_row = [loss(x[i:i + c], y[i:i + c]) for i in range(0, len(y), c)]
+        return mean_and_se(torch.cat([part if part.dim() == 1 else part.mean(1) for part in per_row]))
 
 
 def observed_coordinates(dataset: dict) -> str:
@@ -85,6 +98,8 @@ class PixelObjective(Objective):
     The latent noise (``input_noise``) draws from its own generator seeded ``seed + 2``;
     ``use_rk4`` steps the latent by RK4 instead of Euler.
     """
+    chunk = 4000
+
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
@@ -95,11 +110,5 @@ class PixelObjective(Objective):
             return model.loss(x, x_next, input_noise=args["input_noise"], use_rk4=args["use_rk4"], generator=noise)
         return {"loss": loss}
 
-    def final_loss(self, model: nn.Module, inputs, targets, chunk: int = 4000) -> tuple[float, float]:
-        """The per-sample loss over all rows (in chunks of ``chunk``), mean ± std/sqrt(rows)."""
-        param = next(model.parameters())
-        x = torch.as_tensor(inputs, dtype=param.dtype, device=param.device)
-        x_next = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
-        with torch.no_grad():
-            per_sample = torch.cat([model.loss(x[i:i + chunk], x_next[i:i + chunk]) for i in range(0, len(x), chunk)])
-        return mean_and_se(per_sample)
+    def row_loss(self, model: nn.Module):
+        return model.loss

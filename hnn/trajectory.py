@@ -29,7 +29,6 @@ from torch import nn
 
 from .integrate import rollout
 from .interface import declared
-from .metrics import mean_and_se
 from .objectives import Objective, observed_coordinates
 from .solvers import SOLVERS, get_solver
 
@@ -189,12 +188,7 @@ class TrajectoryObjective(Objective):
         self.substeps = args.get("snippet_substeps", self.substeps)
         return {"loss": self.loss_for(model)}
 
-    def final_loss(self, model: nn.Module, inputs, targets, chunk: int = 4096) -> tuple[float, float]:
-        """The per-snippet loss over all rows, mean ± std/sqrt(rows)."""
-        param = next(model.parameters())
-        y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
-        loss = self.loss_for(model)
-        with torch.no_grad():
-            per_snippet = torch.cat([loss(y[i:i + chunk], y[i:i + chunk]).detach() for i in range(0, len(y), chunk)])
-        return mean_and_se(per_snippet)
+    def row_loss(self, model: nn.Module):
+        """The loss of each snippet, ``(rows,)``."""
+        return self.loss_for(model)
 
