@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from .discrete_gradient import energy_parts, structured
-from .interface import declared
+from .interface import EnergyField, declared
 from .objectives import Objective, observed_coordinates
 
 
@@ -70,7 +70,7 @@ class DiscreteGradientObjective(Objective):
                              "DiscreteGradientObjective(dt=...) or a dataset with 'dt'")
         model = declared(model)
         field = model.field
-        if getattr(field, "hamiltonian", None) is None:
+        if not isinstance(field, EnergyField) or field.hamiltonian is None:
             raise ValueError(f"the discrete-gradient objective fits S grad-bar H of a learned H, and "
                              f"{type(model).__name__} carries none (conservative={model.conservative}): choose a "
                              "conservative kind such as hnn, separable or mechanical")

@@ -28,6 +28,7 @@ from typing import Callable
 import torch
 
 from .fixed_step import ImplicitStepper
+from .interface import EnergyField
 
 
 def gonzalez(hamiltonian: Callable, x0: torch.Tensor, x1: torch.Tensor) -> torch.Tensor:
@@ -56,17 +57,15 @@ def structured(g: torch.Tensor, S: torch.Tensor | None) -> torch.Tensor:
 def energy_parts(f, dim: int, method: str = "discrete_gradient"):
     """``(discrete_gradient(x0, x1), S)`` of a field that carries its H (``hnn.interface.EnergyField``);
     ValueError naming the fix for one that does not."""
-    hamiltonian = getattr(f, "hamiltonian", None)
+    hamiltonian = f.hamiltonian if isinstance(f, EnergyField) else None
     if hamiltonian is None:
         raise ValueError(f"{method} steps x1 = x0 + h S grad-bar H(x0, x1) and needs the field's H, but "
                          f"{getattr(f, '__qualname__', type(f).__name__)} carries none: roll out an hnn.Model that "
                          "declares conservative (hnn.rollout(model, ...)) or wrap a known system's field as "
                          "hnn.interface.EnergyField(f, hamiltonian)")
-    structure = getattr(f, "structure", None)
-    if structure is None and dim % 2:
+    if f.structure is None and dim % 2:
         raise ValueError(f"{method} needs x = [q, p] of even dimension for the canonical S, got dim={dim}")
-    closed = getattr(f, "discrete_gradient", None)
-    return (closed or (lambda x0, x1: gonzalez(hamiltonian, x0, x1))), structure
+    return (f.discrete_gradient or (lambda x0, x1: gonzalez(hamiltonian, x0, x1))), f.structure
 
 
 class DiscreteGradient(ImplicitStepper):

@@ -3,9 +3,9 @@ model axis, every product of a step one batched product over the models.
 
     folders = hnn.grouped.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
 
-A width-16 HNN step is a few microseconds of arithmetic inside a millisecond of dispatch; G of
-them as one batched step share one dispatch (measured 2-3x the model-steps per second of separate
-runs at width 16: ``python analysis/speed/benchmark.py --jobs group``). Each model keeps what its lone run has: its
+A small HNN's step is mostly dispatch, not arithmetic; G of them as one batched step share one
+dispatch (``python analysis/speed/benchmark.py --jobs group`` measures the model-steps per second
+against separate runs). Each model keeps what its lone run has: its
 init (built as ``hnn.run_experiment`` builds it, from its seed), its data subset
 (``train_fraction``), its minibatch stream (its own generator, drawing the lone run's indices),
 its own Adam state (Adam is elementwise, so one optimizer over the stacked tensors is G
@@ -230,9 +230,9 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     else:
         baseline, rows = first.baseline, FIELD_ROWS[first.field_type]
         same = all(isinstance(m, HNN) and m.baseline == baseline and m.input_dim == n
-                   and m.field_type == first.field_type and m.assume_canonical_coords for m in models)
+                   and m.field_type == first.field_type for m in models)
     if not same:
-        raise ValueError("a group's models must be of one kind, width and field type, in canonical coordinates")
+        raise ValueError("a group's models must be of one kind, width and field type")
     weights = _stacked_weights(models)
     kw = dict(width=n, dtype=weights[0].dtype, device=weights[0].device)
     train_rows = _Rows([check_data("x", x, **kw) for x, _ in data], [check_data("dxdt", y, **kw) for _, y in data],

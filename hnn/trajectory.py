@@ -142,9 +142,10 @@ class TrajectoryObjective(Objective):
 
     The dataset's ``snippets`` and ``test_snippets`` are ``(rows, (steps + 1) * width)``
     (flattened snippets) and ``dt`` their spacing; a dataset without them gets them from its
-    ``x`` and ``test_x`` paths (``prepare``: ``t_eval`` gives the states per path). Run options,
-    read from the run's args: ``snippet_steps`` (the config field), ``snippet_loss`` (``'mae'``),
-    ``snippet_method`` (``default_method``), ``snippet_substeps`` (1).
+    ``x`` and ``test_x`` paths (``prepare``: ``t_eval`` gives the states per path). A run's config
+    sets ``steps`` (its ``snippet_steps`` field); ``loss`` (``'mae'``), ``method``
+    (``default_method``) and ``substeps`` (1) are this object's, for ``hnn.run_experiment(config,
+    dataset, TrajectoryObjective(...))``.
     """
     arrays = ("snippets", "snippets", "test_snippets", "test_snippets")
 
@@ -183,9 +184,6 @@ class TrajectoryObjective(Objective):
         self.observed = observed_coordinates(dataset)
         declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
         self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
-        self.loss = args.get("snippet_loss", self.loss)
-        self.method = args.get("snippet_method", self.method)
-        self.substeps = args.get("snippet_substeps", self.substeps)
         return {"loss": self.loss_for(model)}
 
     def row_loss(self, model: nn.Module):
