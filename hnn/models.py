@@ -11,7 +11,6 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from .fixed_step import rk4_step
 from .interface import ANY_STATE, UNIT_MASS, Model
 
 _NONLINEARITIES = {
@@ -300,10 +299,10 @@ class MLPAutoencoder(nn.Module):
 class PixelHNN(Model):
     """An autoencoder whose latent z = [q, p] moves by an HNN (or, as the baseline, by a plain MLP).
 
-    ``loss(x, x_next)`` is the paper's per-sample objective for a pair of pixel observations one
-    frame apart, ``(batch, input_dim)`` each: reconstruction + canonical-coordinate term + 0.1 x
-    the latent-dynamics term, where the latent moves by one step of size 1 (one frame) of
-    ``time_derivative`` (Euler as the paper, or RK4). Its ``time_derivative`` reads latents.
+    It is trained by ``hnn.objectives.pixel_loss(model, x, x_next)``, the paper's per-sample
+    objective for a pair of pixel observations one frame apart: reconstruction + canonical-coordinate
+    term + 0.1 x the latent-dynamics term, where the latent moves by one step of size 1 (one frame)
+    of ``time_derivative``. Its ``time_derivative`` reads latents.
     """
     coordinates = "latent"
     conservative = True
@@ -338,29 +337,6 @@ class PixelHNN(Model):
         """The pixels one frame later: decode(z + dz/dt) with z = encode(x)."""
         z = self.encode(x)
         return self.decode(z + self.time_derivative(z))
-
-    def loss(self, x: torch.Tensor, x_next: torch.Tensor, input_noise: float = 0.0, use_rk4: bool = False,
-             generator: torch.Generator | None = None) -> torch.Tensor:
-        """The per-sample loss ``(batch,)``: ae + cc + 0.1 hnn.
-
-        ae = mean over pixels of (x - decode(z))^2; hnn = mean over latents of
-        (z' - (z + step(z + noise)))^2, one frame step; cc = mean over the n latent pairs of
-        (p - (q' - q))^2, which makes p the per-frame change of q (z = [q, p], z' = encode(x_next)).
-        """
-        if x.shape != x_next.shape:
-            raise ValueError(f"x and x_next must have the same shape, got {tuple(x.shape)} and {tuple(x_next.shape)}")
-        z, z_next = self.encode(torch.cat([x, x_next])).split(len(x))
-        # mse_loss has a fused backward, cheaper than pow(2)'s (docs/speed.md, "Why the fast paths")
-        ae = nn.functional.mse_loss(self.decode(z), x, reduction="none").mean(dim=1)
-        zin = z if not input_noise else z + input_noise * torch.randn(z.shape, generator=generator).to(z)
-        if use_rk4:
-            step = rk4_step(self.time_derivative, zin, 1.0)
-        else:
-            step = self.time_derivative(zin)
-        hnn = (z_next - (z + step)).pow(2).mean(dim=1)
-        n = self.latent_dim // 2
-        cc = (z[:, n:] - (z_next[:, :n] - z[:, :n])).pow(2).mean(dim=1)
-        return ae + cc + 0.1 * hnn
 
 
 class PixelBaseline(PixelHNN):

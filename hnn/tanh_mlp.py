@@ -4,12 +4,11 @@ the tanh as its ``'tanh'`` nonlinearity, the gradient in ``MLP.input_gradient``)
 """
 from __future__ import annotations
 
-import contextlib
-import threading
-
 import numpy as np
 import torch
 from torch import nn
+
+from .modes import frozen_kernels
 
 # torch.tanh is the costliest elementwise pass of an HNN training step on CPU; 2 sigmoid(2a) - 1 is
 # the same function in four cheap passes, with at most 1.8e-7 absolute error in float32 against
@@ -199,24 +198,6 @@ class EvaluationKernel:
                 and x.dtype is self.dtype and self.dtype in _SMALL_BATCH_DTYPES and x.is_cpu)
 
 
-_frozen = threading.local()     # .kernels: {(id(owner), key): (owner, kernel)} inside frozen_weights
-
-
-@contextlib.contextmanager
-def frozen_weights():
-    """Within this context the models' weights do not change, so their fields may run as
-    ``EvaluationKernel``s built once (``hnn.rollout`` runs a non-differentiable rollout in it).
-    Nested contexts share the outer one's kernels; leaving the outermost drops them."""
-    outer = getattr(_frozen, "kernels", None)
-    if outer is None:
-        _frozen.kernels = {}
-    try:
-        yield
-    finally:
-        if outer is None:
-            _frozen.kernels = None
-
-
 def mlp_weights(mlp: nn.Module) -> tuple:
     """``(W1, b1, W2, b2, W3)`` of an ``hnn.MLP``."""
     l1, l2, l3 = mlp.linear1, mlp.linear2, mlp.linear3
@@ -229,7 +210,7 @@ def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, .
     None outside it, or when ``mlp`` is not a tanh MLP the closed form applies to. ``fold``: a
     callable giving the kernel's fold, ``weights`` one giving its weights (default ``mlp``'s),
     called when the kernel is built."""
-    kernels = getattr(_frozen, "kernels", None)
+    kernels = frozen_kernels()
     if kernels is None or not mlp._closed_form_applies():
         return None
     entry = kernels.get((id(owner), key))

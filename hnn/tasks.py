@@ -148,6 +148,16 @@ PROTOCOLS = _FromSpecs("protocols")
 PAPER = _FromSpecs("paper")
 
 
+def get_protocol(task: str, name: str = "paper"):
+    """Protocol ``name`` of ``task`` (an ``hnn.EnergyProtocol``), as its ``task.py`` declares it
+    (``hnn.PROTOCOLS[task][name]``); a ValueError naming the protocols there are."""
+    try:
+        return PROTOCOLS[task][name]
+    except KeyError:
+        raise ValueError(f"no energy protocol {name!r} for task {task!r}; have "
+                         f"{ {t: sorted(p) for t, p in PROTOCOLS.items()} }") from None
+
+
 def task_config(task: str, values: Mapping | None = None):
     """The config of a run of ``task`` (its ``train.py``'s ``Config``) with ``values`` over the
     defaults; a saved run's args.json gives that run's config (its recorded keys aside)."""
