@@ -1,27 +1,20 @@
-"""Fixed-step integrators in torch: classic RK4 and the symplectic leapfrog, implicit midpoint and
-Yoshida's 4th order, all run by one driver, ``fixed_step_rollout``.
+"""Fixed-step integrators in torch, run by one driver (``fixed_step_rollout``) on a batch
+``x = [q, p]`` ``(batch, 2n)`` through the field ``f(x) -> dxdt`` alone (``hnn.rollout(method=...)``):
 
-The symplectic three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vector field
-``f(x) -> dxdt`` alone, and are reached through ``hnn.rollout(..., method=...)``:
+- ``'rk4'``: classic, order 4, not symplectic.
+- ``'leapfrog'`` (Stormer-Verlet, kick-drift-kick), order 2, two ``f`` calls a step; it reads only
+  one half of ``f`` at each stage, so it is symplectic and reversible only for a separable
+  H = T(p) + V(q) (every task's true dynamics; a learned HNN's H is generally not: use midpoint).
+- ``'midpoint'`` (implicit), order 2, symplectic and symmetric for any H:
+  ``x1 = x0 + dt f((x0 + x1) / 2)``, solved by fixed-point iteration to ``tol`` (``ImplicitStepper``,
+  which the discrete gradient shares).
+- ``'yoshida4'``: three steps of a symmetric order-2 base (leapfrog or midpoint), weights w1, w0,
+  w1 below, order 4, still symplectic and symmetric.
 
-- ``'leapfrog'`` (Stormer-Verlet, kick-drift-kick), order 2, two ``f`` calls a step. It reads
-  only the ``q`` half of ``f`` at states where ``p`` has just changed and only the ``p`` half
-  where ``q`` has, so it is exact (symplectic, reversible) only for separable H = T(p) + V(q),
-  as in every task's true dynamics. A learned HNN's H is generally not separable: use
-  ``'midpoint'`` for learned models.
-- ``'midpoint'`` (implicit midpoint rule), order 2, symplectic and symmetric for any H:
-  ``x1 = x0 + dt f((x0 + x1) / 2)``, solved by fixed-point iteration to ``tol``.
-- ``'yoshida4'``: three steps of a symmetric order-2 base (leapfrog or midpoint) with the
-  weights w1, w0, w1 below, order 4, still symplectic and symmetric.
-
-Steps are fixed: each interval of ``t_eval`` is cut into equal steps no longer than ``dt``
-(default one step per interval), signed like ``t_eval`` so integration runs backwards too.
-``'rk4'`` (classic, order 4, not symplectic) runs through the same driver, so every
-fixed-step method reports blow-ups the same way.
-
-Each method is a ``Stepper``: ``step(x, h)`` advances the batch by one step of size ``h``; the
-driver cuts ``t_eval`` into steps and checks the states. ``hnn.solvers`` registers the steppers
-by name, so a new fixed-step method is a ``Stepper`` subclass and one ``register_solver`` call.
+Each interval of ``t_eval`` is cut into equal steps no longer than ``dt`` (default one a step),
+signed like ``t_eval`` (backwards too). Each method is a ``Stepper`` (``step(x, h)``); the driver
+checks the states, so every method reports blow-ups alike; a new one is a subclass and one
+``hnn.solvers.register_solver`` call.
 """
 from __future__ import annotations
 
