@@ -88,19 +88,13 @@ class Stepper:
         """Forget what is carried from step to step: rows of ``x`` were replaced."""
 
     def take_failed(self) -> torch.Tensor | None:
-        """``(batch,)`` rows whose implicit equation was not solved since the last call; None if none can fail."""
+        """``(batch,)`` rows whose implicit equation was not solved since the last call; None if none can
+        fail (a stepper that can fail also gives ``convergence_error(method, rows, times, others)``)."""
         return None
 
     def stats(self) -> dict:
         """What ``rollout(stats={})`` reports: ``nfev``, the number of batched ``f`` calls."""
         return {"nfev": self.nfev}
-
-    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
-        """The error for ``rows`` whose implicit step failed at ``times``, ``others`` rows having diverged besides."""
-        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
-        also = f" ({others} other trajectories diverged)" if others else ""
-        return ConvergenceError(f"{method}: the implicit step did not converge for {len(rows)} trajectories: "
-                                f"{shown}{also}. Reduce dt.", rows, times)
 
 
 class RK4(Stepper):
