@@ -30,9 +30,9 @@ from hnn.io import atomic_write
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
-         "speed-accuracy": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
+         "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
-         "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md"}
+         "peers": "docs/peers.md", "dgnet": "docs/dgnet.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md"}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -40,10 +40,12 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "benchmark": "python analysis/speed/benchmark.py --update-docs --repeats 3",
            "benchmark-pixels": "python analysis/speed/benchmark_pixels.py --update-docs",
            "speed-accuracy": "python analysis/speed/speed_accuracy.py --update-docs",
+           "energy-drift": "python analysis/speed/energy_drift.py --update-docs",
            "scenes": "python analysis/scene_study.py --jobs 2 --update-docs",
            "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
            "measured-guide": "python analysis/scene_study.py --data FILE ... --jobs 2 --update-docs (docs/measured.md)",
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
+           "dgnet": "python analysis/chains/dgnet.py --jobs 2 --update-docs",
            "ray-quick": "python analysis/speed/ray_overhead.py --update-docs",
            "ray-full": "python analysis/speed/ray_overhead.py --full --update-docs"}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)

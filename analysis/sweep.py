@@ -125,7 +125,7 @@ def _unit_cost(unit: list[Job]) -> float:
 
 
 def _group_outcomes(unit: list[Job], outcomes: list[dict]):
-    """``(job, folder or exception)`` of each job of a group from ``hnn.grouped.run_group_task``'s outcomes."""
+    """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
     for job, outcome in zip(unit, outcomes):
         yield job, Path(outcome["folder"]) if "folder" in outcome else RuntimeError(outcome["error"])
 
@@ -165,7 +165,7 @@ def _in_process(units: list[list[Job]], data: dict, bar):
     for unit in units:
         if len(unit) > 1:
             try:
-                outcomes = hnn.grouped.train_group([job.config for job in unit],
+                outcomes = hnn.group_runs.train_group([job.config for job in unit],
                                                    [data[job.config.dataset_key()] for job in unit])
             except Exception as err:        # the whole group failed: each of its runs is reported
                 outcomes = [err] * len(unit)
@@ -191,7 +191,7 @@ def _submit(unit: list[Job]) -> tuple:
     """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
     if len(unit) == 1:
         return hnn.tasks.run_task, unit[0].task, unit[0].fields()
-    return hnn.grouped.run_group_task, unit[0].task, [job.fields() for job in unit]
+    return hnn.group_runs.run_group_task, unit[0].task, [job.fields() for job in unit]
 
 
 def _unit_results(unit: list[Job], result):

@@ -13,4 +13,7 @@ TASK = hnn.TaskSpec(
     },
     figures=("energy", "orbits"),
     cost=60,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    scene_study={"T": 20.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01), "period": None, "periods": 100,
+                 "unit": "orbits", "grid": True, "drift": True},
+    integrator_study={"T": 3.0, "dts": (0.2, 0.1, 0.03, 0.01, 0.002), "batch": 8, "quick": True},
 )

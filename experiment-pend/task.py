@@ -1,4 +1,6 @@
 """Task 2, the ideal pendulum, as reproduce.py and the package see it (hnn.TaskSpec)."""
+import math
+
 import hnn
 
 TASK = hnn.TaskSpec(
@@ -19,4 +21,8 @@ TASK = hnn.TaskSpec(
                      "fields": {"lim": 2.6, "gridsize": 10, "t_span": (0.0, 28.0), "num_points": 1000},
                      "integration": {"t_span": (0.0, 20.0), "num_points": 2000}},
     cost=12,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    # the small-angle period 2 pi / sqrt(6) of H = 3 (1 - cos q) + p^2 (the data swing wider: longer)
+    scene_study={"T": 3.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002), "period": 2 * math.pi / math.sqrt(6),
+                 "periods": 1000, "unit": "small-angle periods", "grid": True, "drift": True},
+    integrator_study={"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8, "quick": True},
 )

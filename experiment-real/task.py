@@ -20,4 +20,5 @@ TASK = hnn.TaskSpec(
     },
     figures=("energy", "real_fields", "energy_bump", "reversibility"),
     cost=8,     # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    scene_study={},
 )

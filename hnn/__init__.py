@@ -9,11 +9,30 @@ the training loop, the paper's metrics, and saved runs.
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
 at once: the light modules (``cli``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
 and ``RunConfig`` load on use, and the first use of any other name loads the whole package.
+
+The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every import against it):
+a module imports its own layer and those below, never one above, and the two middle rooms know
+nothing of each other.
+
+- base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics;
+- integrators (fields in, paths out: no network) | models (networks and their fields: no solver,
+  no objective);
+- training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets;
+- runs: config, cli, run folders, task discovery, the tasks' shared systems.
 """
 import importlib
 
-_LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config")
+_LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
 
+# layer -> its modules; a module may import from its own layer and the ones before it, except that
+# "integrators" and "models" (one level) may not import each other
+_LAYERS = {
+    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "dop853"),
+    "integrators": ("fixed_step", "adaptive", "solvers", "discrete_gradient", "integrate"),
+    "models": ("tanh_mlp", "models", "structured", "mechanical", "constrained", "lagrangian"),
+    "training": ("objectives", "trajectory", "dgnet", "training", "grouped", "kinds", "evaluation", "datasets"),
+    "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "paper", "group_runs"),
+}
 
 # module -> the public names it gives the package, in the order they load
 _PUBLIC = {
@@ -36,11 +55,11 @@ _PUBLIC = {
     "trajectory": ("TrajectoryObjective", "snippet_loss"),
     "kinds": ("MODEL_KINDS", "OBJECTIVES", "ModelKind", "get_objective"),
     "runs": ("find_run", "load_run", "run_dir", "run_experiment", "save_run"),
-    "tasks": ("TaskSpec", "available_tasks", "load_task", "task_spec"),
+    "tasks": ("PROTOCOLS", "TaskSpec", "available_tasks", "get_protocol", "load_task", "task_spec"),
     "training": ("train",),
     "gifs": ("write_gif",),
-    "evaluation": ("PROTOCOLS", "EnergyProtocol", "energy_bump", "evaluate_energy", "get_protocol"),
-    "cli": (), "grouped": (), "nbody": (), "paper": (), "kind_docs": (),
+    "evaluation": ("EnergyProtocol", "energy_bump", "evaluate_energy"),
+    "cli": (), "grouped": (), "group_runs": (), "modes": (), "nbody": (), "paper": (), "kind_docs": (),
 }
 
 
@@ -84,6 +103,6 @@ __all__ = [
     "TrajectoryObjective", "OBJECTIVES", "get_objective", "snippet_loss", "trajectory",
     "Objective", "DerivativeObjective", "PixelObjective", "MODEL_KINDS", "ModelKind",
     "load_task", "available_tasks", "task_spec", "TaskSpec", "write_gif",
-    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "constrained", "discrete_gradient", "grouped", "interface", "kinds", "nbody",
+    "EnergyProtocol", "PROTOCOLS", "get_protocol", "evaluate_energy", "energy_bump", "cli", "constrained", "discrete_gradient", "grouped", "group_runs", "interface", "modes", "kinds", "nbody",
     "objectives", "paper", "kind_docs",
 ]

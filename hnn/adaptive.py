@@ -147,8 +147,8 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3
     iterations; once a quarter of them have finished, the finished ones are dropped, so ``f``
     sees only rows still running: it must treat rows independently (true of dynamics and of
     models), and a ``f`` that keeps per-trajectory state must carry each row's identity in the
-    state itself. The stepping runs in numpy on the states' dtype (a few states cost a
-    microsecond an operation there, several in torch), ``f`` on tensors sharing the arrays' memory.
+    state itself. The stepping runs in numpy on the states' dtype (on a few states an operation
+    costs several times less there than in torch: docs/speed.md, "Why the fast paths"), ``f`` on tensors sharing the arrays' memory.
     """
     return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
 

@@ -24,8 +24,7 @@ import torch
 from torch import nn
 
 from .discrete_gradient import energy_parts, structured
-from .interface import declared
-from .metrics import mean_and_se
+from .interface import EnergyField, declared
 from .objectives import Objective, observed_coordinates
 
 
@@ -71,7 +70,7 @@ class DiscreteGradientObjective(Objective):
                              "DiscreteGradientObjective(dt=...) or a dataset with 'dt'")
         model = declared(model)
         field = model.field
-        if getattr(field, "hamiltonian", None) is None:
+        if not isinstance(field, EnergyField) or field.hamiltonian is None:
             raise ValueError(f"the discrete-gradient objective fits S grad-bar H of a learned H, and "
                              f"{type(model).__name__} carries none (conservative={model.conservative}): choose a "
                              "conservative kind such as hnn, separable or mechanical")
@@ -92,11 +91,6 @@ class DiscreteGradientObjective(Objective):
         self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
         return {"loss": self.loss_for(model)}
 
-    def final_loss(self, model: nn.Module, inputs, targets, chunk: int = 4096) -> tuple[float, float]:
-        """The per-pair loss (mean over components) over all rows, mean ± std/sqrt(rows)."""
-        param = next(model.parameters())
-        y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
-        loss = self.loss_for(model)
-        with torch.no_grad():
-            per_pair = torch.cat([loss(y[i:i + chunk], y[i:i + chunk]).mean(1) for i in range(0, len(y), chunk)])
-        return mean_and_se(per_pair)
+    def row_loss(self, model: nn.Module):
+        """The squared error of each pair's components, ``(rows, width)``."""
+        return self.loss_for(model)

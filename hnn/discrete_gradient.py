@@ -23,13 +23,12 @@ an ``hnn.Model`` that declares ``conservative`` (``hnn.rollout(model, ...)``, wh
 """
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import torch
 
-from .errors import ConvergenceError
-from .fixed_step import Stepper, default_tol
+from .fixed_step import ImplicitStepper
+from .interface import EnergyField
 
 
 def gonzalez(hamiltonian: Callable, x0: torch.Tensor, x1: torch.Tensor) -> torch.Tensor:
@@ -58,43 +57,37 @@ def structured(g: torch.Tensor, S: torch.Tensor | None) -> torch.Tensor:
 def energy_parts(f, dim: int, method: str = "discrete_gradient"):
     """``(discrete_gradient(x0, x1), S)`` of a field that carries its H (``hnn.interface.EnergyField``);
     ValueError naming the fix for one that does not."""
-    hamiltonian = getattr(f, "hamiltonian", None)
+    hamiltonian = f.hamiltonian if isinstance(f, EnergyField) else None
     if hamiltonian is None:
         raise ValueError(f"{method} steps x1 = x0 + h S grad-bar H(x0, x1) and needs the field's H, but "
                          f"{getattr(f, '__qualname__', type(f).__name__)} carries none: roll out an hnn.Model that "
                          "declares conservative (hnn.rollout(model, ...)) or wrap a known system's field as "
                          "hnn.interface.EnergyField(f, hamiltonian)")
-    structure = getattr(f, "structure", None)
-    if structure is None and dim % 2:
+    if f.structure is None and dim % 2:
         raise ValueError(f"{method} needs x = [q, p] of even dimension for the canonical S, got dim={dim}")
-    closed = getattr(f, "discrete_gradient", None)
-    return (closed or (lambda x0, x1: gonzalez(hamiltonian, x0, x1))), structure
+    return (f.discrete_gradient or (lambda x0, x1: gonzalez(hamiltonian, x0, x1))), f.structure
 
 
-class DiscreteGradient(Stepper):
+class DiscreteGradient(ImplicitStepper):
     """x1 = x0 + h S grad-bar H(x0, x1) by fixed-point iteration to ``tol``, started from the last
     increment rescaled (explicit midpoint at first). Checks once that the field is S grad H."""
 
+    name, equation = "discrete_gradient", "x1 = x0 + h S grad-bar H(x0, x1)"
+
     def __init__(self, f, dim: int, dtype: torch.dtype, tol: float | None = None, max_iter: int = 100,
                  **options):
-        super().__init__(f, dim, dtype)
+        super().__init__(f, dim, dtype, tol, max_iter)
         self.dg, self.S = energy_parts(f, dim)
-        self.tol = default_tol(dtype) if tol is None else tol
-        if not (self.tol > 0 and math.isfinite(self.tol)):
-            raise ValueError(f"discrete_gradient needs a positive finite tol, got {tol!r}")
-        if not (isinstance(max_iter, int) and max_iter >= 1):
-            raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
-        self.max_iter, self.iterations, self.max_step_iterations = max_iter, 0, 0
-        self.failed, self.last, self.checked = None, None, False
+        self.last, self.checked = None, False
 
-    def _flow(self, x0: torch.Tensor, x1: torch.Tensor) -> torch.Tensor:
-        """S grad-bar H(x0, x1), ``(batch, dim)``."""
-        return structured(self.dg(x0, x1), self.S)
+    def update(self, x: torch.Tensor, x1: torch.Tensor, h: float) -> torch.Tensor:
+        """x0 + h S grad-bar H(x0, x1), ``(batch, dim)``."""
+        return x + h * structured(self.dg(x, x1), self.S)
 
     def _check_structure(self, x: torch.Tensor) -> None:
         """The field must be S grad H (S grad-bar H(x, x)): else this method integrates another flow."""
         with torch.no_grad():
-            field, ours = self.f(x), self._flow(x, x)
+            field, ours = self.f(x), structured(self.dg(x, x), self.S)
         self.nfev += 1
         scale = 1 + field.abs().max()
         gap = float((field - ours).abs().max() / scale)
@@ -113,39 +106,9 @@ class DiscreteGradient(Stepper):
         else:
             h_last, increment = self.last
             x1 = x + (h / h_last) * increment
-        graph = torch.is_grad_enabled()
-        bound = (x.detach() if graph else x).abs().clamp(min=1.0).mul_(self.tol)
-        for k in range(1, self.max_iter + 1):  # noqa: B007 (k counts the iterations after the loop)
-            x_next = x + h * self._flow(x, x1)
-            self.nfev += 1
-            # as the midpoint's: non-finite rows are left to the divergence check
-            excess = (x_next.detach() - x1.detach()).abs().nan_to_num_(0.0, 0.0, 0.0).sub_(bound)
-            x1 = x_next
-            if float(excess.max()) <= 0:
-                break
-        else:
-            failed = (excess > 0).any(dim=1)
-            self.failed = failed if self.failed is None else self.failed | failed
-        self.iterations += k
-        self.max_step_iterations = max(self.max_step_iterations, k)
+        x1 = self.solve(x, x1, h)
         self.last = (h, (x1 - x).detach())
         return x1
 
     def reset(self, x: torch.Tensor) -> None:
         self.last = None
-
-    def take_failed(self) -> torch.Tensor | None:
-        failed, self.failed = self.failed, None
-        return failed
-
-    def stats(self) -> dict:
-        return {"nfev": self.nfev, "iterations": self.iterations, "max_step_iterations": self.max_step_iterations}
-
-    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
-        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
-        also = f" ({others} other trajectories diverged)" if others else ""
-        return ConvergenceError(
-            f"{method}: the fixed-point iteration x1 = x0 + h S grad-bar H(x0, x1) did not converge to "
-            f"tol={self.tol:g} in max_iter={self.max_iter} iterations for {len(rows)} trajectories: {shown}{also}. "
-            "It needs dt * (Lipschitz constant of the field) below about 2: reduce dt (or raise max_iter).",
-            rows, times)

@@ -1,7 +1,7 @@
 """The errors of a failed rollout, in one module every integrator imports (and nothing else).
 
 ``DivergenceError`` names the trajectories and times that blew up; ``ConvergenceError`` (a
-subclass) says an implicit step's iteration did not converge. Both are also ``hnn.<name>``.
+subclass) says an implicit step's fixed-point iteration did not converge. Both are also ``hnn.<name>``.
 """
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ class DivergenceError(FloatingPointError):
 
 
 class ConvergenceError(DivergenceError):
-    """The implicit midpoint's fixed-point iteration did not converge; ``trajectories``, ``times`` say where.
+    """An implicit step's fixed-point iteration (midpoint, discrete gradient) did not converge;
+    ``trajectories``, ``times`` say where.
 
     A ``DivergenceError``, so code that catches failed rollouts catches this one too.
     """

@@ -27,7 +27,6 @@ from .integrate import rollout
 from .interface import declared
 from .metrics import energy_mse
 from .solvers import get_solver
-from .tasks import PROTOCOLS
 
 
 # A protocol's integrator is data: fields ``method`` (a name in ``hnn.SOLVERS``), ``options`` (its
@@ -108,15 +107,6 @@ class EnergyProtocol:
                      f" t in [{self.t_span[0]:g}, {self.t_span[1]:g}], {self.num_points} points")
         return (f"{self.name}: {where}, {describe_integrator(self)}, energy = {self.energy}"
                 + (f", {'; '.join(quirks)}" if quirks else ""))
-
-
-def get_protocol(task: str, name: str = "paper") -> EnergyProtocol:
-    """Protocol ``name`` of ``task``, as its ``task.py`` declares it (``hnn.PROTOCOLS[task][name]``)."""
-    try:
-        return PROTOCOLS[task][name]
-    except KeyError:
-        raise ValueError(f"no energy protocol {name!r} for task {task!r}; have "
-                         f"{ {t: sorted(p) for t, p in PROTOCOLS.items()} }") from None
 
 
 def start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:

@@ -1,27 +1,20 @@
-"""Fixed-step integrators in torch: classic RK4 and the symplectic leapfrog, implicit midpoint and
-Yoshida's 4th order, all run by one driver, ``fixed_step_rollout``.
+"""Fixed-step integrators in torch, run by one driver (``fixed_step_rollout``) on a batch
+``x = [q, p]`` ``(batch, 2n)`` through the field ``f(x) -> dxdt`` alone (``hnn.rollout(method=...)``):
 
-The symplectic three act on a batch ``x = [q, p]`` of shape ``(batch, 2n)`` through the vector field
-``f(x) -> dxdt`` alone, and are reached through ``hnn.rollout(..., method=...)``:
+- ``'rk4'``: classic, order 4, not symplectic.
+- ``'leapfrog'`` (Stormer-Verlet, kick-drift-kick), order 2, two ``f`` calls a step; it reads only
+  one half of ``f`` at each stage, so it is symplectic and reversible only for a separable
+  H = T(p) + V(q) (every task's true dynamics; a learned HNN's H is generally not: use midpoint).
+- ``'midpoint'`` (implicit), order 2, symplectic and symmetric for any H:
+  ``x1 = x0 + dt f((x0 + x1) / 2)``, solved by fixed-point iteration to ``tol`` (``ImplicitStepper``,
+  which the discrete gradient shares).
+- ``'yoshida4'``: three steps of a symmetric order-2 base (leapfrog or midpoint), weights w1, w0,
+  w1 below, order 4, still symplectic and symmetric.
 
-- ``'leapfrog'`` (Stormer-Verlet, kick-drift-kick), order 2, two ``f`` calls a step. It reads
-  only the ``q`` half of ``f`` at states where ``p`` has just changed and only the ``p`` half
-  where ``q`` has, so it is exact (symplectic, reversible) only for separable H = T(p) + V(q),
-  as in every task's true dynamics. A learned HNN's H is generally not separable: use
-  ``'midpoint'`` for learned models.
-- ``'midpoint'`` (implicit midpoint rule), order 2, symplectic and symmetric for any H:
-  ``x1 = x0 + dt f((x0 + x1) / 2)``, solved by fixed-point iteration to ``tol``.
-- ``'yoshida4'``: three steps of a symmetric order-2 base (leapfrog or midpoint) with the
-  weights w1, w0, w1 below, order 4, still symplectic and symmetric.
-
-Steps are fixed: each interval of ``t_eval`` is cut into equal steps no longer than ``dt``
-(default one step per interval), signed like ``t_eval`` so integration runs backwards too.
-``'rk4'`` (classic, order 4, not symplectic) runs through the same driver, so every
-fixed-step method reports blow-ups the same way.
-
-Each method is a ``Stepper``: ``step(x, h)`` advances the batch by one step of size ``h``; the
-driver cuts ``t_eval`` into steps and checks the states. ``hnn.solvers`` registers the steppers
-by name, so a new fixed-step method is a ``Stepper`` subclass and one ``register_solver`` call.
+Each interval of ``t_eval`` is cut into equal steps no longer than ``dt`` (default one a step),
+signed like ``t_eval`` (backwards too). Each method is a ``Stepper`` (``step(x, h)``); the driver
+checks the states, so every method reports blow-ups alike; a new one is a subclass and one
+``hnn.solvers.register_solver`` call.
 """
 from __future__ import annotations
 
@@ -95,19 +88,13 @@ class Stepper:
         """Forget what is carried from step to step: rows of ``x`` were replaced."""
 
     def take_failed(self) -> torch.Tensor | None:
-        """``(batch,)`` rows whose implicit equation was not solved since the last call; None if none can fail."""
+        """``(batch,)`` rows whose implicit equation was not solved since the last call; None if none can
+        fail (a stepper that can fail also gives ``convergence_error(method, rows, times, others)``)."""
         return None
 
     def stats(self) -> dict:
         """What ``rollout(stats={})`` reports: ``nfev``, the number of batched ``f`` calls."""
         return {"nfev": self.nfev}
-
-    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
-        """The error for ``rows`` whose implicit step failed at ``times``, ``others`` rows having diverged besides."""
-        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
-        also = f" ({others} other trajectories diverged)" if others else ""
-        return ConvergenceError(f"{method}: the implicit step did not converge for {len(rows)} trajectories: "
-                                f"{shown}{also}. Reduce dt.", rows, times)
 
 
 class RK4(Stepper):
@@ -170,20 +157,75 @@ class Leapfrog(Stepper):
         self.accel = None         # the cached dp/dt belongs to the replaced rows too
 
 
-def _checked_tol(tol: float | None, dtype: torch.dtype) -> float:
-    """The midpoint's ``tol`` (default ``default_tol``), refused unless positive and finite;
-    warns below the dtype's eps, which the iteration cannot reach."""
-    if tol is None:
-        tol = default_tol(dtype)
-    if not (tol > 0 and math.isfinite(tol)):
-        raise ValueError(f"midpoint needs a positive finite tol, got {tol!r}")
-    if tol < torch.finfo(dtype).eps:
-        # stacklevel 5: rollout's caller, past _checked_tol, Midpoint, the driver and rollout (for
-        # yoshida4's base, one frame deeper: rollout)
-        warnings.warn(f"midpoint tol={tol:g} is below the machine epsilon of {dtype} "
-                      f"({torch.finfo(dtype).eps:.3g}): the iteration cannot reach it; use tol >= "
-                      f"{default_tol(dtype):.3g} or float64 states", stacklevel=5)
-    return tol
+class ImplicitStepper(Stepper):
+    """A step x1 = x0 + h g(x0, x1) solved by fixed-point iteration to ``tol`` (relative to
+    max(|x|, 1); default ``default_tol``), at most ``max_iter`` iterations a step: the loop, the
+    counters and the convergence report that the implicit methods share (``Midpoint``,
+    ``hnn.discrete_gradient.DiscreteGradient``). A subclass gives ``update`` (the iteration's map),
+    the first iterate, and ``name`` and ``equation`` for its errors."""
+
+    name, equation = "implicit", "x1 = x0 + h g(x0, x1)"
+
+    def __init__(self, f: Field, dim: int, dtype: torch.dtype, tol: float | None = None, max_iter: int = 100,
+                 **options):
+        super().__init__(f, dim, dtype)
+        self.tol = default_tol(dtype) if tol is None else tol
+        if not (self.tol > 0 and math.isfinite(self.tol)):
+            raise ValueError(f"{self.name} needs a positive finite tol, got {tol!r}")
+        if self.tol < torch.finfo(dtype).eps:
+            # stacklevel 5: rollout's caller, past this __init__, the subclass's, the driver and rollout
+            # (for yoshida4's base, one frame deeper: rollout)
+            warnings.warn(f"{self.name} tol={self.tol:g} is below the machine epsilon of {dtype} "
+                          f"({torch.finfo(dtype).eps:.3g}): the iteration cannot reach it; use tol >= "
+                          f"{default_tol(dtype):.3g} or float64 states", stacklevel=5)
+        if not (isinstance(max_iter, int) and max_iter >= 1):
+            raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+        self.max_iter = max_iter
+        self.iterations = self.max_step_iterations = 0
+        self.failed = None          # (batch,) rows whose iteration did not converge in the current interval
+
+    def update(self, x: torch.Tensor, x1: torch.Tensor, h: float) -> torch.Tensor:
+        """The next iterate x0 + h g(x0, x1), ``(batch, dim)``."""
+        raise NotImplementedError
+
+    def solve(self, x: torch.Tensor, x1: torch.Tensor, h: float) -> torch.Tensor:
+        """Iterate ``update`` from the first iterate ``x1`` until the change is below tol; rows that do not
+        get there in ``max_iter`` are marked failed (``take_failed``)."""
+        graph = torch.is_grad_enabled()     # a differentiable rollout: the checks stay off the graph
+        bound = (x.detach() if graph else x).abs().clamp_(min=1.0).mul_(self.tol)
+        for k in range(1, self.max_iter + 1):  # noqa: B007 (k counts the iterations after the loop)
+            x_next = self.update(x, x1, h)
+            self.nfev += 1
+            # converged where the update is below tol (relative to max(|x|, 1)); non-finite rows are
+            # not "unconverged": the divergence check reports them (NaN and inf updates count as 0).
+            # excess = |update| - bound, one reduction an iteration
+            excess = torch.sub(x_next.detach(), x1.detach()) if graph else torch.sub(x_next, x1)
+            excess.abs_().nan_to_num_(0.0, 0.0, 0.0).sub_(bound)
+            x1 = x_next
+            if float(excess.max()) <= 0:
+                break
+        else:
+            failed = (excess > 0).any(dim=1)
+            self.failed = failed if self.failed is None else self.failed | failed
+        self.iterations += k
+        self.max_step_iterations = max(self.max_step_iterations, k)
+        return x1
+
+    def take_failed(self) -> torch.Tensor | None:
+        failed, self.failed = self.failed, None
+        return failed
+
+    def stats(self) -> dict:
+        # iterations: fixed-point iterations over all steps; max_step_iterations: the most in one step
+        return {"nfev": self.nfev, "iterations": self.iterations, "max_step_iterations": self.max_step_iterations}
+
+    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
+        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
+        also = f" ({others} other trajectories diverged)" if others else ""
+        return ConvergenceError(
+            f"{method}: the fixed-point iteration {self.equation} did not converge to tol={self.tol:g} in "
+            f"max_iter={self.max_iter} iterations for {len(rows)} trajectories: {shown}{also}. It needs "
+            "dt * (Lipschitz constant of the field) below about 2: reduce dt (or raise max_iter).", rows, times)
 
 
 MIDPOINT_HISTORY = 7         # increments the midpoint's first guess extrapolates (read at call time)
@@ -191,19 +233,15 @@ MIDPOINT_HISTORY = 7         # increments the midpoint's first guess extrapolate
 _EXTRAPOLATION = {m: tuple((-1) ** (j + 1) * math.comb(m, j) for j in range(1, m + 1)) for m in range(1, 9)}
 
 
-class Midpoint(Stepper):
+class Midpoint(ImplicitStepper):
     """Implicit midpoint by fixed-point iteration, started from the previous increments extrapolated
     (Euler at first)."""
 
+    name, equation = "midpoint", "x1 = x0 + h f((x0 + x1) / 2)"
+
     def __init__(self, f: Field, dim: int, dtype: torch.dtype, tol: float | None = None, max_iter: int = 100,
                  **options):
-        super().__init__(f, dim, dtype)
-        self.tol = _checked_tol(tol, dtype)
-        if not (isinstance(max_iter, int) and max_iter >= 1):
-            raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
-        self.max_iter = max_iter
-        self.iterations = self.max_step_iterations = 0
-        self.failed = None          # (batch,) rows whose iteration did not converge in the current interval
+        super().__init__(f, dim, dtype, tol, max_iter)
         # slot -> (h, [x1 - x of its last steps of size h, newest first]): the next guess. A
         # composition sets ``slot`` to the substep's position, so each position extrapolates its own
         # sequence (equally spaced in time, one a step) instead of its neighbours'
@@ -230,26 +268,12 @@ class Midpoint(Stepper):
             x1.add_(d, alpha=weight)
         return x1
 
+    def update(self, x: torch.Tensor, x1: torch.Tensor, h: float) -> torch.Tensor:
+        return torch.add(x, self.f(torch.lerp(x, x1, 0.5)), alpha=h)
+
     def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
-        x1 = self._guess(x, h)
-        graph = torch.is_grad_enabled()     # a differentiable rollout: the checks stay off the graph
-        bound = (x.detach() if graph else x).abs().clamp_(min=1.0).mul_(self.tol)
-        for k in range(1, self.max_iter + 1):  # noqa: B007 (k counts the iterations after the loop)
-            x_next = torch.add(x, self.f(torch.lerp(x, x1, 0.5)), alpha=h)
-            self.nfev += 1
-            # converged where the update is below tol (relative to max(|x|, 1)); non-finite rows are
-            # not "unconverged": the divergence check reports them (NaN and inf updates count as 0).
-            # excess = |update| - bound, one reduction an iteration
-            excess = torch.sub(x_next.detach(), x1.detach()) if graph else torch.sub(x_next, x1)
-            excess.abs_().nan_to_num_(0.0, 0.0, 0.0).sub_(bound)
-            x1 = x_next
-            if float(excess.max()) <= 0:
-                break
-        else:
-            failed = (excess > 0).any(dim=1)
-            self.failed = failed if self.failed is None else self.failed | failed
-        self.iterations += k
-        self.max_step_iterations = max(self.max_step_iterations, k)
+        x1 = self.solve(x, self._guess(x, h), h)
+        graph = torch.is_grad_enabled()
         # detached: the converged x1 does not depend on the guess
         increment = torch.sub(x1, x).detach() if graph else torch.sub(x1, x)
         h_last, increments = self.last.get(self.slot, (None, []))
@@ -258,22 +282,6 @@ class Midpoint(Stepper):
 
     def reset(self, x: torch.Tensor) -> None:
         self.last = {}
-
-    def take_failed(self) -> torch.Tensor | None:
-        failed, self.failed = self.failed, None
-        return failed
-
-    def stats(self) -> dict:
-        # iterations: fixed-point iterations over all steps; max_step_iterations: the most in one step
-        return {"nfev": self.nfev, "iterations": self.iterations, "max_step_iterations": self.max_step_iterations}
-
-    def convergence_error(self, method: str, rows: list, times: list, others: int) -> ConvergenceError:
-        shown = ", ".join(f"#{i} at t={s:.4g}" for i, s in zip(rows[:10], times[:10]))
-        also = f" ({others} other trajectories diverged)" if others else ""
-        return ConvergenceError(
-            f"{method}: the implicit midpoint iteration did not converge to tol={self.tol:g} in "
-            f"max_iter={self.max_iter} iterations for {len(rows)} trajectories: {shown}{also}. The fixed-point "
-            "iteration needs dt * (Lipschitz constant of f) < 2: reduce dt (or raise max_iter).", rows, times)
 
 
 _YOSHIDA_BASES = {"leapfrog": Leapfrog, "midpoint": Midpoint}

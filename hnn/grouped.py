@@ -1,11 +1,12 @@
 """Many small models of one kind trained as one program: their parameters stacked along a leading
 model axis, every product of a step one batched product over the models.
 
-    folders = hnn.grouped.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
+    stats, failures = hnn.grouped.fit_group(models, data, tests, seeds=[0, 1, 2, 3], total_steps=2000, ...)
+    folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
 
-A width-16 HNN step is a few microseconds of arithmetic inside a millisecond of dispatch; G of
-them as one batched step share one dispatch (measured 2-3x the model-steps per second of separate
-runs at width 16: ``python analysis/speed/benchmark.py --jobs group``). Each model keeps what its lone run has: its
+A small HNN's step is mostly dispatch, not arithmetic; G of them as one batched step share one
+dispatch (``python analysis/speed/benchmark.py --jobs group`` measures the model-steps per second
+against separate runs). Each model keeps what its lone run has: its
 init (built as ``hnn.run_experiment`` builds it, from its seed), its data subset
 (``train_fraction``), its minibatch stream (its own generator, drawing the lone run's indices),
 its own Adam state (Adam is elementwise, so one optimizer over the stacked tensors is G
@@ -26,16 +27,12 @@ floor, so padding 16 to 64 would cost the wide step's products (benchmark ``grou
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
 
-import numpy as np
 import torch
 from tqdm.auto import tqdm
 
 from .models import HNN, MLP, FIELD_ROWS
-from .kinds import model_from_args
 from .objectives import DerivativeObjective
-from .runs import finish_run, run_dir, training_subset
 from .structured import SeparableHNN
 from .tanh_mlp import fast_tanh, fast_tanh_
 from .training import adam_optimizer, check_data, flushes_denormals
@@ -230,9 +227,9 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     else:
         baseline, rows = first.baseline, FIELD_ROWS[first.field_type]
         same = all(isinstance(m, HNN) and m.baseline == baseline and m.input_dim == n
-                   and m.field_type == first.field_type and m.assume_canonical_coords for m in models)
+                   and m.field_type == first.field_type for m in models)
     if not same:
-        raise ValueError("a group's models must be of one kind, width and field type, in canonical coordinates")
+        raise ValueError("a group's models must be of one kind, width and field type")
     weights = _stacked_weights(models)
     kw = dict(width=n, dtype=weights[0].dtype, device=weights[0].device)
     train_rows = _Rows([check_data("x", x, **kw) for x, _ in data], [check_data("dxdt", y, **kw) for _, y in data],
@@ -324,59 +321,4 @@ def _drop(weights, optim, alive, finite, failures, names, step) -> None:
                         value[mine] = 0
 
 
-def train_group(configs: list, datasets: list[dict] | None = None) -> list:
-    """Train ``configs`` (equal ``group_key``s) as one group and save each as its own run folder
-    (as ``hnn.run_experiment`` would); per config its folder, or the ``GroupedRunFailed`` of a
-    model that failed. ``datasets``: each config's dataset (default ``config.dataset()``)."""
-    keys = {group_key(config) for config in configs}
-    if None in keys or len(keys) != 1:
-        raise ValueError("train_group needs configs of one group (equal hnn.grouped.group_key, none None); "
-                         "train the others alone with hnn.run_experiment")
-    from . import cli
-    from .io import check_save_dir
-    for config in configs:
-        cli.check(config)
-        check_save_dir(config.save_dir)
-    datasets = datasets or [config.dataset() for config in configs]
-    objective = configs[0].make_objective()
-    models, data, tests, saved = [], [], [], []
-    for config, dataset in zip(configs, datasets):
-        args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
-        torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
-        np.random.seed(config.seed)
-        models.append(model_from_args(args).to(config.device))
-        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
-        data.append(training_subset(x, y, config.train_fraction, config.seed))
-        tests.append((test_x, test_y))
-        saved.append(args)
-    first = configs[0]
-    stats, failures = fit_group(models, data, tests, seeds=[c.seed for c in configs], total_steps=first.total_steps,
-                                learn_rate=first.learn_rate, weight_decay=first.weight_decay,
-                                batch_size=first.batch_size, print_every=first.print_every,
-                                input_noise=getattr(first, "input_noise", 0.0),
-                                names=[run_dir(c).name for c in configs])
-    out = []
-    for g, config in enumerate(configs):
-        if g in failures:
-            out.append(failures[g])
-            continue
-        (x, y), (test_x, test_y) = data[g], tests[g]
-        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y),
-                               objective.final_loss(models[g], test_x, test_y), None, saved[g])
-        config.finish(directory, datasets[g])
-        out.append(directory)
-    return out
-
-
-def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:
-    """A sweep's group in a worker process or a Ray task: the configs of ``task`` with ``values``
-    trained as one group (``threads`` sets torch's thread count first). Per config
-    ``{"folder": text}`` or ``{"error": message}`` (plain data: it crosses process boundaries)."""
-    from .tasks import task_config
-    if threads is not None:
-        torch.set_num_threads(threads)
-    outcomes = train_group([task_config(task, v) for v in values])
-    return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
-
-
-__all__ = ["GROUPABLE_KINDS", "GroupedRunFailed", "fit_group", "group_key", "run_group_task", "train_group"]
+__all__ = ["GROUPABLE_KINDS", "GroupedRunFailed", "fit_group", "group_key"]

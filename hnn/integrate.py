@@ -14,8 +14,8 @@ import torch
 
 from .fixed_step import Field
 from .interface import EnergyField, Model
+from .modes import frozen_weights
 from .solvers import Solver, get_solver
-from .tanh_mlp import frozen_weights
 
 
 def _as_t_eval(t_eval) -> np.ndarray:

@@ -11,7 +11,6 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from .fixed_step import rk4_step
 from .interface import ANY_STATE, UNIT_MASS, Model
 
 _NONLINEARITIES = {
@@ -71,12 +70,12 @@ class MLP(nn.Module):
 
     def input_gradient(self, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
         """d(self(x)[:, k])/dx, ``(batch, input_dim)``: in closed form when ``_closed_form_applies``
-        (about 2x faster training), else by autograd; with ``create_graph`` it can be differentiated."""
+        (faster training: docs/speed.md), else by autograd; with ``create_graph`` it can be differentiated."""
         if not self._closed_form_applies():
             return _autograd_input_gradient(self, x, k, create_graph)
         l1, l2 = self.linear1, self.linear2
         params = (l1.weight, l1.bias, l2.weight, l2.bias, self.linear3.weight[k])
-        if not torch.is_grad_enabled():     # evaluation: skip the autograd node (~0.1 ms a call)
+        if not torch.is_grad_enabled():     # evaluation: skip the autograd node
             return tanh_mlp._evaluation_input_gradient(x, *params)
         return tanh_mlp._TanhMLPInputGradient.apply(x, *params)
 
@@ -96,24 +95,10 @@ class MLP(nn.Module):
 _CLOSED_FORM_FORWARD = MLP.forward
 
 
-def permutation_tensor(n: int, assume_canonical_coords: bool = True) -> torch.Tensor:
-    """The ``(n, n)`` matrix M with ``dx/dt = grad H @ M.T``.
-
-    Canonical coordinates give ``M = [[0, I], [-I, 0]]`` (Hamilton's equations). The other
-    choice is the original code's Levi-Civita-like sign pattern, kept for parity; it equals the
-    canonical one for n = 2 and is not symplectic in general.
-    """
-    if assume_canonical_coords:
-        eye = torch.eye(n)
-        return torch.cat([eye[n // 2:], -eye[: n // 2]])
-    m = torch.ones(n, n)
-    m *= 1 - torch.eye(n)
-    m[::2] *= -1
-    m[:, ::2] *= -1
-    for i in range(n):
-        for j in range(i + 1, n):
-            m[i, j] *= -1
-    return m
+def permutation_tensor(n: int) -> torch.Tensor:
+    """The ``(n, n)`` matrix M = [[0, I], [-I, 0]] of Hamilton's equations, ``dx/dt = grad H @ M.T``."""
+    eye = torch.eye(n)
+    return torch.cat([eye[n // 2:], -eye[: n // 2]])
 
 
 def _input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
@@ -147,7 +132,7 @@ class HNN(Model):
     takes = UNIT_MASS
 
     def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = "solenoidal",
-                 baseline: bool = False, assume_canonical_coords: bool = True):
+                 baseline: bool = False):
         super().__init__()
         if field_type not in FIELD_TYPES:
             raise ValueError(f"unknown field_type {field_type!r}; choose one of {FIELD_TYPES}")
@@ -168,9 +153,8 @@ class HNN(Model):
         if baseline:
             self.conservative, self.takes = False, ANY_STATE
         self.field_type = field_type
-        self.assume_canonical_coords = assume_canonical_coords
         self.differentiable_model = differentiable_model
-        self.register_buffer("M", permutation_tensor(input_dim, assume_canonical_coords), persistent=False)
+        self.register_buffer("M", permutation_tensor(input_dim), persistent=False)
 
     def _check_input(self, x: torch.Tensor) -> None:
         if x.dim() != 2 or x.shape[1] != self.input_dim:
@@ -194,9 +178,6 @@ class HNN(Model):
             raise ValueError("a baseline model has no Hamiltonian; build it with baseline=False")
         return self.forward(x)[1].squeeze(1)
 
-    def structure(self) -> torch.Tensor | None:
-        return None if self.assume_canonical_coords else self.M
-
     def exact_discrete_gradient(self):
         """DGNet's discrete gradient of the paper's tanh MLP (``hnn.tanh_mlp.discrete_gradient``), else None."""
         net = self.differentiable_model
@@ -204,16 +185,16 @@ class HNN(Model):
             return None
         return lambda x0, x1: tanh_mlp.discrete_gradient(x0, x1, *tanh_mlp.mlp_weights(net)[:4], net.linear3.weight[1])
 
-    def time_derivative(self, x: torch.Tensor, t=None, separate_fields: bool = False):
+    def time_derivative(self, x: torch.Tensor, t=None):
         """``dx/dt`` at ``x``, shape ``(batch, input_dim)``.
 
         The input gradient is autograd's (in closed form for the paper's tanh MLP, checked
         against autograd in the tests). Works with or without ``x.requires_grad`` and inside
         ``torch.no_grad()``: the graph for double backpropagation is built only when grad mode
         is on (training); in evaluation the result is detached. ``t`` is unused (autonomous
-        systems). With ``separate_fields=True`` returns ``[conservative, solenoidal]``.
+        systems).
         """
-        if not separate_fields and not torch.is_grad_enabled():
+        if not torch.is_grad_enabled():
             kernel = self._evaluation_kernel()
             if kernel is not None and kernel.serves(x):
                 return kernel(x)
@@ -227,14 +208,8 @@ class HNN(Model):
             conservative = _input_gradient(net, x, 0, create_graph)
         if self.field_type != "conservative":
             dF2 = _input_gradient(net, x, 1, create_graph)
-            if self.assume_canonical_coords:
-                n = self.input_dim // 2
-                solenoidal = torch.cat([dF2[:, n:], -dF2[:, :n]], dim=1)
-            else:
-                solenoidal = dF2 @ self.M.to(dF2.dtype).T
-        if separate_fields:
-            zero = torch.zeros_like(x)
-            return [zero if conservative is None else conservative, zero if solenoidal is None else solenoidal]
+            n = self.input_dim // 2
+            solenoidal = torch.cat([dF2[:, n:], -dF2[:, :n]], dim=1)
         if conservative is None:
             return solenoidal
         return conservative if solenoidal is None else conservative + solenoidal
@@ -324,10 +299,10 @@ class MLPAutoencoder(nn.Module):
 class PixelHNN(Model):
     """An autoencoder whose latent z = [q, p] moves by an HNN (or, as the baseline, by a plain MLP).
 
-    ``loss(x, x_next)`` is the paper's per-sample objective for a pair of pixel observations one
-    frame apart, ``(batch, input_dim)`` each: reconstruction + canonical-coordinate term + 0.1 x
-    the latent-dynamics term, where the latent moves by one step of size 1 (one frame) of
-    ``time_derivative`` (Euler as the paper, or RK4). Its ``time_derivative`` reads latents.
+    It is trained by ``hnn.objectives.pixel_loss(model, x, x_next)``, the paper's per-sample
+    objective for a pair of pixel observations one frame apart: reconstruction + canonical-coordinate
+    term + 0.1 x the latent-dynamics term, where the latent moves by one step of size 1 (one frame)
+    of ``time_derivative``. Its ``time_derivative`` reads latents.
     """
     coordinates = "latent"
     conservative = True
@@ -362,29 +337,6 @@ class PixelHNN(Model):
         """The pixels one frame later: decode(z + dz/dt) with z = encode(x)."""
         z = self.encode(x)
         return self.decode(z + self.time_derivative(z))
-
-    def loss(self, x: torch.Tensor, x_next: torch.Tensor, input_noise: float = 0.0, use_rk4: bool = False,
-             generator: torch.Generator | None = None) -> torch.Tensor:
-        """The per-sample loss ``(batch,)``: ae + cc + 0.1 hnn.
-
-        ae = mean over pixels of (x - decode(z))^2; hnn = mean over latents of
-        (z' - (z + step(z + noise)))^2, one frame step; cc = mean over the n latent pairs of
-        (p - (q' - q))^2, which makes p the per-frame change of q (z = [q, p], z' = encode(x_next)).
-        """
-        if x.shape != x_next.shape:
-            raise ValueError(f"x and x_next must have the same shape, got {tuple(x.shape)} and {tuple(x_next.shape)}")
-        z, z_next = self.encode(torch.cat([x, x_next])).split(len(x))
-        # mse_loss has a fused backward: a third of pow(2)'s time over 200 x 1568 pixels (0.6 ms a step)
-        ae = nn.functional.mse_loss(self.decode(z), x, reduction="none").mean(dim=1)
-        zin = z if not input_noise else z + input_noise * torch.randn(z.shape, generator=generator).to(z)
-        if use_rk4:
-            step = rk4_step(self.time_derivative, zin, 1.0)
-        else:
-            step = self.time_derivative(zin)
-        hnn = (z_next - (z + step)).pow(2).mean(dim=1)
-        n = self.latent_dim // 2
-        cc = (z[:, n:] - (z_next[:, :n] - z[:, :n])).pow(2).mean(dim=1)
-        return ae + cc + 0.1 * hnn
 
 
 class PixelBaseline(PixelHNN):

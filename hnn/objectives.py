@@ -24,11 +24,13 @@ from .metrics import derivative_loss, mean_and_se
 
 
 class Objective:
-    """The interface: subclasses implement ``final_loss`` (and ``train_options`` if they need any).
+    """The interface: subclasses implement ``row_loss`` or ``final_loss`` (and ``train_options`` if
+    they need any).
 
     ``arrays`` names the dataset's ``(inputs, targets, test inputs, test targets)``, each ``(rows, width)``.
     """
     arrays: tuple[str, str, str, str] = ("x", "dxdt", "test_x", "test_dxdt")
+    chunk = 4096        # rows per no-grad batch of final_loss
 
     def prepare(self, dataset: dict) -> dict:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
@@ -38,9 +40,20 @@ class Objective:
         """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""
         return {}
 
-    def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        """The ``(mean, ±)`` train or test number saved in metrics.json."""
+    def row_loss(self, model: nn.Module):
+        """``(inputs, targets) -> (rows,)`` or ``(rows, k)``: the loss of each row (its mean over k)."""
         raise NotImplementedError
+
+    def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
+        """The ``(mean, ±)`` train or test number saved in metrics.json: ``row_loss`` over all rows, in
+        no-grad batches of ``chunk`` rows, mean ± std/sqrt(rows)."""
+        param = next(model.parameters())
+        y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
+        x = y if inputs is targets else torch.as_tensor(inputs, dtype=param.dtype, device=param.device)
+        loss, c = self.row_loss(model), self.chunk
+        with torch.no_grad():
+            per_row = [loss(x[i:i + c], y[i:i + c]) for i in range(0, len(y), c)]
+        return mean_and_se(torch.cat([part if part.dim() == 1 else part.mean(1) for part in per_row]))
 
 
 def observed_coordinates(dataset: dict) -> str:
@@ -77,14 +90,39 @@ class DerivativeObjective(Objective):
         return derivative_loss(model, inputs, targets, field=self.field)
 
 
+def pixel_loss(model, x: torch.Tensor, x_next: torch.Tensor, input_noise: float = 0.0, use_rk4: bool = False,
+               generator: torch.Generator | None = None) -> torch.Tensor:
+    """The paper's per-sample loss ``(batch,)`` of a ``PixelHNN`` on pairs of observations one frame
+    apart, ``x``, ``x_next`` ``(batch, input_dim)``: ae + cc + 0.1 hnn.
+
+    ae = mean over pixels of (x - decode(z))^2; hnn = mean over latents of
+    (z' - (z + step(z + noise)))^2, one frame step (Euler, or RK4 with ``use_rk4``); cc = mean over
+    the n latent pairs of (p - (q' - q))^2, which makes p the per-frame change of q (z = [q, p],
+    z' = encode(x_next)). ``input_noise``: std of the latent noise, drawn from ``generator``.
+    """
+    if x.shape != x_next.shape:
+        raise ValueError(f"x and x_next must have the same shape, got {tuple(x.shape)} and {tuple(x_next.shape)}")
+    z, z_next = model.encode(torch.cat([x, x_next])).split(len(x))
+    # mse_loss has a fused backward, cheaper than pow(2)'s (docs/speed.md, "Why the fast paths")
+    ae = nn.functional.mse_loss(model.decode(z), x, reduction="none").mean(dim=1)
+    zin = z if not input_noise else z + input_noise * torch.randn(z.shape, generator=generator).to(z)
+    step = rk4_step(model.time_derivative, zin, 1.0) if use_rk4 else model.time_derivative(zin)
+    hnn = (z_next - (z + step)).pow(2).mean(dim=1)
+    n = model.latent_dim // 2
+    cc = (z[:, n:] - (z_next[:, :n] - z[:, :n])).pow(2).mean(dim=1)
+    return ae + cc + 0.1 * hnn
+
+
 class PixelObjective(Objective):
-    """``PixelHNN.loss``: an autoencoder whose latent moves by an HNN (or an MLP), fit on pairs of
+    """``pixel_loss``: an autoencoder whose latent moves by an HNN (or an MLP), fit on pairs of
     observations one frame apart. ``arrays`` names the dataset's (observations, the next ones,
     and their test twins), each ``(rows, input_dim)``.
 
     The latent noise (``input_noise``) draws from its own generator seeded ``seed + 2``;
     ``use_rk4`` steps the latent by RK4 instead of Euler.
     """
+    chunk = 4000
+
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
@@ -92,14 +130,9 @@ class PixelObjective(Objective):
         noise = torch.Generator().manual_seed(args["seed"] + 2)
 
         def loss(x, x_next):
-            return model.loss(x, x_next, input_noise=args["input_noise"], use_rk4=args["use_rk4"], generator=noise)
+            return pixel_loss(model, x, x_next, input_noise=args["input_noise"], use_rk4=args["use_rk4"],
+                              generator=noise)
         return {"loss": loss}
 
-    def final_loss(self, model: nn.Module, inputs, targets, chunk: int = 4000) -> tuple[float, float]:
-        """The per-sample loss over all rows (in chunks of ``chunk``), mean ± std/sqrt(rows)."""
-        param = next(model.parameters())
-        x = torch.as_tensor(inputs, dtype=param.dtype, device=param.device)
-        x_next = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
-        with torch.no_grad():
-            per_sample = torch.cat([model.loss(x[i:i + chunk], x_next[i:i + chunk]) for i in range(0, len(x), chunk)])
-        return mean_and_se(per_sample)
+    def row_loss(self, model: nn.Module):
+        return lambda x, x_next: pixel_loss(model, x, x_next)

@@ -4,19 +4,17 @@ the tanh as its ``'tanh'`` nonlinearity, the gradient in ``MLP.input_gradient``)
 """
 from __future__ import annotations
 
-import contextlib
-import threading
-
 import numpy as np
 import torch
 from torch import nn
 
-# torch.tanh costs about 2 ns an element on CPU (0.3 ms for a 750 x 200 float32 array, more than
-# all the elementwise work of an HNN training step besides); 2 sigmoid(2a) - 1 is the same
-# function in four cheap passes (0.06 ms), with at most 1.8e-7 absolute error in float32 against
+from .modes import frozen_kernels
+
+# torch.tanh is the costliest elementwise pass of an HNN training step on CPU; 2 sigmoid(2a) - 1 is
+# the same function in four cheap passes, with at most 1.8e-7 absolute error in float32 against
 # torch.tanh's 3e-8, below the rounding of the matrix products that read it (float64: 2e-16).
-# Under this many elements the four dispatches cost more than tanh's arithmetic (measured: equal
-# at 15 x 200), so small batches, e.g. an integrator's, keep torch.tanh.
+# Under this many elements the four dispatches cost more than tanh's arithmetic, so small batches,
+# e.g. an integrator's, keep torch.tanh (the timings: docs/speed.md, "Why the fast paths").
 _FAST_TANH_MIN_ELEMENTS = 4096
 
 
@@ -67,8 +65,8 @@ def _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved: bool = True):
     else:                                        # evaluation, often a small batch: scale the rows instead
         W2w, g_h1 = None, (s2 * w) @ W2
     g_a1 = g_h1 * s1                             # dF/da1
-    # MKL multiplies a tall matrix by a thin one (H x n, n = input_dim) 5x faster when the thin
-    # one is column-major (750 x 200 @ 200 x 2: 24 vs 111 us)
+    # MKL multiplies a tall matrix by a thin one (H x n, n = input_dim) faster when the thin one is
+    # column-major (docs/speed.md, "Why the fast paths")
     return g_a1 @ W1.T.contiguous().T, ((h1, h2, s1, s2, g_h1, g_a1, W2w) if saved else ())
 
 
@@ -85,8 +83,8 @@ class _TanhMLPInputGradient(torch.autograd.Function):
 
     Numerically the same as ``autograd.grad(out[:, k].sum(), x, create_graph=True)``, but
     its backward does six large matrix products and a few in-place passes, where autograd's
-    generic double backward allocates some twenty full-size temporaries: about 2x faster
-    training on CPU. ``tests/test_models.py`` checks values and all gradients against autograd.
+    generic double backward allocates some twenty full-size temporaries: faster training on
+    CPU (docs/speed.md). ``tests/test_models.py`` checks values and all gradients against autograd.
     """
 
     @staticmethod
@@ -109,14 +107,14 @@ class _TanhMLPInputGradient(torch.autograd.Function):
         # through s1 = 1 - h1^2 (the -2 folded into beta), plus through a2 = h1 W2^T
         d_h1 = torch.addmm(d_ga1.mul_(g_h1).mul_(h1), d_a2, W2, beta=-2)
         d_a1 = d_h1.mul_(s1)
-        # as the transpose: MKL is 8x faster at a (n x N) @ (N x H) product than at (H x N) @ (N x n)
+        # as the transpose: MKL is faster at a (n x N) @ (N x H) product than at (H x N) @ (N x n)
         d_W1 = torch.addmm(d_gx.T @ g_a1, x.T, d_a1).T
         d_x = d_a1 @ W1.T.contiguous().T if ctx.needs_input_grad[0] else None
         return d_x, d_W1, d_a1.sum(0), d_W2, d_a2.sum(0), d_w
 
 
 # A rollout calls its field thousands of times on a few states, where the four products of the
-# closed form cost a few microseconds each and every further torch call costs one or two more.
+# closed form are small and every further torch call's dispatch costs as much as one of them.
 # ``EvaluationKernel`` is the evaluation path for those calls: the weights are taken once (as
 # numpy arrays and contiguous torch matrices in the layouts the products run fastest), the
 # elementwise passes and the thin products with the input run in numpy on the arrays' own memory,
@@ -124,9 +122,9 @@ class _TanhMLPInputGradient(torch.autograd.Function):
 # threads of its own), and the map from the output gradients to dx/dt (Hamilton's permutation, a
 # sign) is folded into the last product, so nothing is concatenated.
 KERNEL_MAX_ROWS = 64
-# Up to this many rows the hidden x hidden products run in numpy too: a vector-matrix product there
-# costs 3.3 us against torch's 5.5 (float64, 200 units) and OpenBLAS runs it on one thread; from
-# 15 rows on torch's MKL is faster (15 vs 18 us) and numpy's BLAS would start threads of its own.
+# Up to this many rows the hidden x hidden products run in numpy too: a vector-matrix product is
+# cheaper there than through torch's dispatch, and OpenBLAS runs it on one thread; from about 15
+# rows on torch's MKL is faster and numpy's BLAS would start threads of its own (docs/speed.md).
 _NUMPY_PRODUCT_ROWS = 4
 
 
@@ -200,24 +198,6 @@ class EvaluationKernel:
                 and x.dtype is self.dtype and self.dtype in _SMALL_BATCH_DTYPES and x.is_cpu)
 
 
-_frozen = threading.local()     # .kernels: {(id(owner), key): (owner, kernel)} inside frozen_weights
-
-
-@contextlib.contextmanager
-def frozen_weights():
-    """Within this context the models' weights do not change, so their fields may run as
-    ``EvaluationKernel``s built once (``hnn.rollout`` runs a non-differentiable rollout in it).
-    Nested contexts share the outer one's kernels; leaving the outermost drops them."""
-    outer = getattr(_frozen, "kernels", None)
-    if outer is None:
-        _frozen.kernels = {}
-    try:
-        yield
-    finally:
-        if outer is None:
-            _frozen.kernels = None
-
-
 def mlp_weights(mlp: nn.Module) -> tuple:
     """``(W1, b1, W2, b2, W3)`` of an ``hnn.MLP``."""
     l1, l2, l3 = mlp.linear1, mlp.linear2, mlp.linear3
@@ -230,7 +210,7 @@ def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, .
     None outside it, or when ``mlp`` is not a tanh MLP the closed form applies to. ``fold``: a
     callable giving the kernel's fold, ``weights`` one giving its weights (default ``mlp``'s),
     called when the kernel is built."""
-    kernels = getattr(_frozen, "kernels", None)
+    kernels = frozen_kernels()
     if kernels is None or not mlp._closed_form_applies():
         return None
     entry = kernels.get((id(owner), key))

@@ -61,6 +61,16 @@ class TaskSpec:
             ``analysis/reproduce.py``'s default tasks and tables (it still trains and loads).
         min_seeds: a reproduction across seeds (``--seeds`` of 2 or more) trains at least this many
             seeds of the task, for a task whose numbers vary widely from seed to seed.
+        scene_study: the scene study's settings (``analysis/scene_study.py``); None: not one of its
+            scenes. ``T`` (the training trajectories' length, scene time; absent: no rollout
+            metrics), ``dts`` (the speed ladder's fixed steps), ``period``, ``periods``, ``unit``
+            (the long drift run: the period, None to measure it per start, how many, their name),
+            ``grid`` (train the width x data grid), ``drift`` (run the long drift), ``one_seed``
+            (new kinds at the first seed only: a costly scene).
+        integrator_study: the integrator study's settings (``analysis/speed/speed_accuracy.py``);
+            None for a task without true dynamics to measure against. ``T`` (the horizon), ``dts``
+            (fixed steps), ``batch`` (start states), ``model_time`` (the models' time units per
+            scene time unit, default 1), ``quick`` (studied by ``--quick`` too).
     """
     order: float = math.inf
     protocols: Mapping = field(default_factory=dict)
@@ -75,6 +85,8 @@ class TaskSpec:
     load: Callable | None = None
     in_paper: bool = True
     min_seeds: int = 1
+    scene_study: Mapping | None = None
+    integrator_study: Mapping | None = None
 
 
 def repo_root() -> Path:
@@ -146,6 +158,16 @@ class _FromSpecs(Mapping):
 # task -> name -> protocol, and task -> metric -> model -> (mean, ±): the specs' protocols and paper
 PROTOCOLS = _FromSpecs("protocols")
 PAPER = _FromSpecs("paper")
+
+
+def get_protocol(task: str, name: str = "paper"):
+    """Protocol ``name`` of ``task`` (an ``hnn.EnergyProtocol``), as its ``task.py`` declares it
+    (``hnn.PROTOCOLS[task][name]``); a ValueError naming the protocols there are."""
+    try:
+        return PROTOCOLS[task][name]
+    except KeyError:
+        raise ValueError(f"no energy protocol {name!r} for task {task!r}; have "
+                         f"{ {t: sorted(p) for t, p in PROTOCOLS.items()} }") from None
 
 
 def task_config(task: str, values: Mapping | None = None):

@@ -1,4 +1,6 @@
-"""The one training loop every task uses: Adam on the L2 loss of dx/dt."""
+"""The one training loop every task uses: minibatch steps of Adam or AdamW (constant or cosine rate)
+on the L2 loss of dx/dt, or on an objective's own loss of its rows (snippets, pixel pairs, state
+pairs); a test batch on a schedule, a NaN named with its step, a progress bar."""
 from __future__ import annotations
 
 import contextlib
@@ -66,7 +68,7 @@ def adam_optimizer(model, learn_rate: float, weight_decay: float, kind: str = "a
     if kind not in OPTIMIZERS:
         raise ValueError(f"optimizer={kind!r}: choose one of {', '.join(OPTIMIZERS)}")
     device = next(model.parameters()).device
-    # the fused kernel updates all parameters in one pass: the foreach one cost ~1 ms a step here
+    # the fused kernel updates all parameters in one pass, cheaper than the foreach one (docs/speed.md)
     return OPTIMIZERS[kind](model.parameters(), lr=learn_rate, weight_decay=weight_decay,
                             fused=device.type in ("cpu", "cuda"))
 
@@ -91,7 +93,7 @@ def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: tor
     if batch_size is None or batch_size >= len(x):
         return x, y
     ix = torch.randperm(len(x), generator=gen)[:batch_size]
-    # index_select is the same gather as x[ix], 3x faster (200 of 16000 pixel rows: 26 vs 87 us)
+    # index_select is the same gather as x[ix], and faster (docs/speed.md, "Why the fast paths")
     return x.index_select(0, ix), y.index_select(0, ix)
 
 
@@ -131,7 +133,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0) -> dict:
-    """Fit ``model.time_derivative`` to ``dxdt`` with Adam; returns the stats.
+    """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
     is None, else a fresh random minibatch (without replacement) each step, with a test batch
@@ -198,8 +200,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         progress = not verbose and not callbacks and sys.stderr.isatty()
     model.train()
     # Weights that only weight decay moves (e.g. those of pixels that are always dark) shrink
-    # into denormal floats, and CPU arithmetic on denormals is many times slower: the pixel task
-    # slowed from 28 to over 100 ms a step by step 3000. Flush them to zero while training.
+    # into denormal floats, and CPU arithmetic on denormals is many times slower (the pixel task
+    # slowed over 3x by step 3000: docs/speed.md). Flush them to zero while training.
     was_flushing = flushes_denormals()
     torch.set_flush_denormal(True)
     try:

@@ -29,7 +29,6 @@ from torch import nn
 
 from .integrate import rollout
 from .interface import declared
-from .metrics import mean_and_se
 from .objectives import Objective, observed_coordinates
 from .solvers import SOLVERS, get_solver
 
@@ -143,9 +142,10 @@ class TrajectoryObjective(Objective):
 
     The dataset's ``snippets`` and ``test_snippets`` are ``(rows, (steps + 1) * width)``
     (flattened snippets) and ``dt`` their spacing; a dataset without them gets them from its
-    ``x`` and ``test_x`` paths (``prepare``: ``t_eval`` gives the states per path). Run options,
-    read from the run's args: ``snippet_steps`` (the config field), ``snippet_loss`` (``'mae'``),
-    ``snippet_method`` (``default_method``), ``snippet_substeps`` (1).
+    ``x`` and ``test_x`` paths (``prepare``: ``t_eval`` gives the states per path). A run's config
+    sets ``steps`` (its ``snippet_steps`` field); ``loss`` (``'mae'``), ``method``
+    (``default_method``) and ``substeps`` (1) are this object's, for ``hnn.run_experiment(config,
+    dataset, TrajectoryObjective(...))``.
     """
     arrays = ("snippets", "snippets", "test_snippets", "test_snippets")
 
@@ -184,17 +184,9 @@ class TrajectoryObjective(Objective):
         self.observed = observed_coordinates(dataset)
         declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
         self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
-        self.loss = args.get("snippet_loss", self.loss)
-        self.method = args.get("snippet_method", self.method)
-        self.substeps = args.get("snippet_substeps", self.substeps)
         return {"loss": self.loss_for(model)}
 
-    def final_loss(self, model: nn.Module, inputs, targets, chunk: int = 4096) -> tuple[float, float]:
-        """The per-snippet loss over all rows, mean ± std/sqrt(rows)."""
-        param = next(model.parameters())
-        y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
-        loss = self.loss_for(model)
-        with torch.no_grad():
-            per_snippet = torch.cat([loss(y[i:i + chunk], y[i:i + chunk]).detach() for i in range(0, len(y), chunk)])
-        return mean_and_se(per_snippet)
+    def row_loss(self, model: nn.Module):
+        """The loss of each snippet, ``(rows,)``."""
+        return self.loss_for(model)
 

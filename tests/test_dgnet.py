@@ -77,3 +77,24 @@ def test_it_runs_from_the_flags_and_refuses_a_kind_without_h(tmp_path):
                       "--hidden_dim", "8", "--save_dir", str(tmp_path)])
     with pytest.raises(ValueError, match="needs paths"):
         hnn.DiscreteGradientObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
+
+
+def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
+    hnn.tasks.import_analysis()
+    from hnn_analysis.chains import dgnet
+
+    results = dgnet.main(["--steps", "2", "--seeds", "1", "--tasks", "spring", "real", "--out", str(tmp_path)])
+    text = (tmp_path / "dgnet.md").read_text()
+    for task in ("spring", "real"):
+        assert f"### {task}" in text
+        assert set(results["rows"][task]) == set(dgnet.rows_for(task))
+        for label, runs in results["rows"][task].items():
+            energies = runs[0]["energy"]
+            assert set(energies) == set(dgnet.ROWS[label][3]) and all(np.isfinite(v) for v in energies.values())
+    # the real pendulum has no true dx/dt: the paper's objective row is not run there
+    assert "HNN, paper's objective" not in results["rows"]["real"]
+    assert "| DGNet (discrete gradient / discrete gradient) | 1.38e-03 | 5.04e-04 | published, mean of 15 |" in text
+    # the data: every consecutive pair of the 25 training paths of 100 states, at their dt = 20/99
+    data = dgnet.dataset("spring", 0)
+    assert data["pairs"].shape == (25 * 99, 4) and data["dt"] == pytest.approx(20 / 99)
+    np.testing.assert_array_equal(data["pairs"][0], np.concatenate([data["x"][0], data["x"][1]]))

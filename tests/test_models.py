@@ -206,7 +206,7 @@ def test_the_evaluation_kernel_serves_a_few_states_and_agrees_with_the_training_
         before = calls["kernel"]
         with torch.no_grad():
             assert model.time_derivative(x) is not None and calls["kernel"] == before   # outside a rollout: no kernel
-            with hnn.tanh_mlp.frozen_weights():                                      # as inside hnn.rollout
+            with hnn.modes.frozen_weights():                                      # as inside hnn.rollout
                 fast = model.time_derivative(x)
         reference = model.time_derivative(x.clone().requires_grad_(True)).detach()   # the training path
         # the wide separable HNN runs its two networks as two kernels, the narrow one as one block network

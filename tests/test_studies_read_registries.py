@@ -70,8 +70,8 @@ def _untrained_run(task: str, label: str, runs) -> None:
 
 def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path, monkeypatch):
     # a small grid, to keep the test quick: two start states, one tolerance, two steps
-    monkeypatch.setitem(speed_accuracy.TASKS, "spring", {**speed_accuracy.TASKS["spring"], "batch": 2,
-                                                         "dts": (0.1, 0.05)})
+    spring = speed_accuracy.study_settings("spring")
+    monkeypatch.setattr(speed_accuracy, "study_settings", lambda task: {**spring, "batch": 2, "dts": (0.1, 0.05)})
     monkeypatch.setattr(speed_accuracy, "QUICK_RTOLS", (1e-6,))
     for label in ("hnn", "baseline", "scaled"):
         _untrained_run("spring", label, tmp_path)

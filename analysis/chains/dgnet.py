@@ -1,129 +1,243 @@
-"""DGNet's protocol (Matsubara, Ishikawa & Yaguchi, NeurIPS 2020) on the spring, their published
-numbers beside ours.
+"""DGNet's protocol (Matsubara, Ishikawa & Yaguchi, NeurIPS 2020) on the spring, the pendulum and
+the real pendulum: their published rows beside ours, every row of theirs trained here the same way
+(docs/dgnet.md).
 
     python analysis/chains/dgnet.py --steps 300 --seeds 2 --out results-dgnet    # a small budget
-    python analysis/chains/dgnet.py                                               # their 2000 steps, 15 seeds
+    python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their 2000 steps
+    python analysis/chains/dgnet.py --update-docs                                 # 15 seeds: docs/dgnet.md
 
-The protocol, read from their code (tksmatsubara/discrete-autograd, experiment-spring/train_dgnet.py):
-the original HNN spring data with t_span [0, 20] and 5 points per time unit (50 trajectories of
-100 states, dt = 20/99, noise std 0.1 on the states, the first 25 for training); the HNN's MLP (two
-hidden layers of 200 tanh units, orthogonal init); full-batch Adam, lr 1e-3, weight decay 1e-4,
-2000 steps, float32; DGNet fits (x_{n+1} - x_n) / dt of every consecutive pair by the discrete
-gradient of H between the two states. Reported: "derivative", the MSE of the learned dx/dt against
-the true dx/dt at the test states; "energy", over 15 starts with each of q, p uniform in
-+-[0.2, 1.0], the mean over the 100 times of [0, 20] of (E_true - E_model)^2 with E = q^2 + p^2, the
-model rolled out one step per interval by the discrete-gradient method (solved to 1e-12), or by
-adaptive Dormand-Prince (torchdiffeq's defaults, rtol 1e-7, atol 1e-9). Each published number is
-an average over 15 trials (seeds).
+The protocol, read from their code (tksmatsubara/discrete-autograd at e101a09, which overlays the
+original HNN repository and reuses its data generators; experiment-{spring,pend,real}/train_dgnet.py,
+dgnet/ode.py): spring and pendulum data are the HNN recipe on t in [0, 20] at 5 points per time unit
+(50 trajectories of 100 states, dt = 20/99, noise std 0.1 on the states, the first 25 train); the
+real pendulum is the original's file and split (445 training rows, 110 test rows, dt = 1/6). One MLP
+of two hidden layers of 200 tanh units, orthogonal init; full-batch Adam at lr 1e-3, 2000 steps
+(weight decay 1e-4; real 1e-5); float32. Every model fits the finite differences
+(x_{n+1} - x_n) / dt of consecutive states: NODE (an MLP field) and HNN through one adaptive
+Dormand-Prince solve of the interval, SRNN (H = T(p) + V(q)) through one leapfrog step, DGNet through
+the discrete gradient of H between the two states (no solver). Reported: "derivative", the MSE of
+the learned dx/dt at the noisy test states against the true dx/dt there (real: against the test
+forward differences); "energy", over 15 starts with each of q, p uniform in +-[0.2, 1.0], the mean
+over the 100 times of [0, 20] of (E_true - E_model)^2 with E = q^2 + p^2 on both tasks (their
+pendulum metric too, not its H); real: one rollout from the first test state over the 110 test
+times, against the measured states, E = 2.4 (1 - cos q) + p^2. Rollouts by the discrete-gradient
+method, adaptive Dormand-Prince at torchdiffeq's defaults (rtol 1e-7, atol 1e-9) or leapfrog, one
+step per interval. Each published number is an average over 15 trials.
 
-Ours: the same data recipe through ``hnn.datasets.ring_dataset``, ``hnn``'s HNN trained with
-``--objective discrete_gradient`` (its closed-form discrete gradient is DGNet's chain rule); rolled
-out in float64 (theirs: float32 through scipy's fsolve). Our start states draw from their
-distribution with our own seeded generator (theirs continue numpy's global stream). Also our HNN on
-the paper's objective (true dx/dt at the noisy states): not a row of theirs, which trained the HNN
-on the same finite differences through one Dormand-Prince step. Every run saves its config,
-metrics and checkpoint (``--out``/runs); the table is written from ``dgnet.json``.
+Ours, and where it differs: the same data recipes (``hnn.datasets.ring_dataset``; experiment-real's
+original split), our kinds ``baseline`` (NODE), ``hnn``, ``separable`` (SRNN) and ``hnn`` with
+``--objective discrete_gradient`` (DGNet; its closed-form discrete gradient is their chain rule).
+NODE and HNN train through one RK4 step of the interval, not an adaptive Dormand-Prince solve (our
+adaptive solvers are not differentiable; at these intervals RK4's error is far below the data's
+noise); NODE, HNN and SRNN fit the squared state error of that one step, their loss times dt^2 (Adam
+does not see the scale). Rollouts in float64 (theirs: float32, the discrete gradient through
+scipy's fsolve). Our start states draw from their law with our own seeded generator. The real
+pendulum's pairs are consecutive training rows at the nominal dt = 1/6 (theirs pair the same rows
+but fit the forward difference over the true step, which differs at 11 of 444 pairs), and their
+"derivative" there compares a predicted next state with a derivative (dgnet/ode.py returns the
+state when no second state is given): ours is the derivative MSE, not comparable with theirs.
+Not run: their 2-body (10001 minibatch steps on 800 orbits of 500 states per row and seed; its
+published row is shown). Also our HNN on the paper's objective (true dx/dt at the noisy states,
+spring and pendulum). Every run saves its config, metrics and checkpoint (``--out``/runs); the
+table is written from ``dgnet.json``.
 """
 from __future__ import annotations
 
 import argparse
 import statistics
 import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import torch
 
 import hnn
+from hnn.dgnet import pairs_from_paths
 from hnn.io import atomic_write, write_json
+from hnn.trajectory import TrajectoryObjective
 
-# their README's table ("Results on the conservative ODE datasets"), spring: (derivative, energy)
+hnn.tasks.import_analysis()   # hnn_analysis = this repository's analysis/, installed or run by path
+from hnn_analysis import readme  # noqa: E402
+from hnn_analysis.paper.reproduce import portable_command  # noqa: E402
+from hnn_analysis.provenance import machine, provenance  # noqa: E402
+
+# their README's tables ("Results on the conservative ODE datasets"): (derivative, energy), means of 15
 PUBLISHED = {
-    "NODE (ada. DP / ada. DP)": (5.57e-2, 5.74e-1),
-    "HNN (ada. DP / ada. DP)": (3.99e-2, 1.74e-3),
-    "SRNN (leapfrog / leapfrog)": (3.95e-2, 6.90e-4),
-    "DGNet (discrete gradient / ada. DP)": (3.85e-2, 6.16e-4),
-    "DGNet (discrete gradient / discrete gradient)": (3.85e-2, 6.17e-4),
+    "spring": {"NODE (ada. DP / ada. DP)": (5.57e-2, 5.74e-1), "HNN (ada. DP / ada. DP)": (3.99e-2, 1.74e-3),
+               "SRNN (leapfrog / leapfrog)": (3.95e-2, 6.90e-4),
+               "DGNet (discrete gradient / ada. DP)": (3.85e-2, 6.16e-4),
+               "DGNet (discrete gradient / discrete gradient)": (3.85e-2, 6.17e-4)},
+    "pend": {"NODE (ada. DP / ada. DP)": (5.54e-2, 4.62e0), "HNN (ada. DP / ada. DP)": (4.09e-2, 1.66e-2),
+             "SRNN (leapfrog / leapfrog)": (3.92e-2, 1.12e-2),
+             "DGNet (discrete gradient / ada. DP)": (3.93e-2, 1.61e-2),
+             "DGNet (discrete gradient / discrete gradient)": (3.93e-2, 1.08e-2)},
+    "2body": {"NODE (ada. DP / ada. DP)": (2.07e-5, 1.83e-1), "HNN (ada. DP / ada. DP)": (6.21e-6, 8.18e-5),
+              "SRNN (leapfrog / leapfrog)": (4.36e-6, 4.04e-5),
+              "DGNet (discrete gradient / ada. DP)": (7.80e-6, 8.10e-5),
+              "DGNet (discrete gradient / discrete gradient)": (7.80e-6, 8.10e-5)},
+    "real": {"NODE (ada. DP / ada. DP)": (1.37e-3, 5.88e-4), "HNN (ada. DP / ada. DP)": (1.41e-3, 3.44e-3),
+             "SRNN (leapfrog / leapfrog)": (1.38e-3, 9.63e-3),
+             "DGNet (discrete gradient / ada. DP)": (1.38e-3, 4.92e-4),
+             "DGNet (discrete gradient / discrete gradient)": (1.38e-3, 5.04e-4)},
 }
-T_SPAN, TIMESCALE, TRIALS = (0.0, 20.0), 5, 15
+TASKS = ("spring", "pend", "real")
+T_SPAN, TIMESCALE, TRIALS, TRAJECTORIES = (0.0, 20.0), 5, 15, 50
+# how each row predicts; the fixed-step ones take one step per interval of the time grid (``dt`` added)
 PREDICT = {"discrete gradient": {"method": "discrete_gradient"},
-           "ada. DP": {"method": "dopri5", "rtol": 1e-7, "atol": 1e-9}}
-# our rows: label -> (objective, the integrators it is predicted with)
-OURS = {"DGNet": ("discrete_gradient", ("discrete gradient", "ada. DP")),
-        "HNN, paper's objective (true dx/dt)": ("derivative", ("ada. DP",))}
+           "ada. DP": {"method": "dopri5", "rtol": 1e-7, "atol": 1e-9},
+           "leapfrog": {"method": "leapfrog"}}
+ADAPTIVE = ("ada. DP",)
+# our rows: label -> (kind, objective, how it trains (the table's words), the integrators it predicts with)
+ROWS = {"NODE": ("baseline", "trajectory", "RK4 step", ("ada. DP",)),
+        "HNN": ("hnn", "trajectory", "RK4 step", ("ada. DP",)),
+        "SRNN": ("separable", "trajectory", "leapfrog", ("leapfrog",)),
+        "DGNet": ("hnn", "discrete_gradient", "discrete gradient", ("discrete gradient", "ada. DP")),
+        "HNN, paper's objective": ("hnn", "derivative", "true dx/dt", ("ada. DP",))}
 
 
-def dataset(seed: int) -> dict:
-    """Their spring data: the HNN recipe on [0, 20] at 5 points per time unit."""
-    spring = hnn.load_task("spring")
-    return hnn.datasets.ring_dataset(spring.dynamics, seed, 50, T_SPAN, TIMESCALE, spring.RADIUS_RANGE,
-                                     spring.NOISE_STD)
+def dataset(task: str, seed: int) -> dict:
+    """Their data for ``task``, with every consecutive pair of states as ``pairs`` (and as one-step
+    ``snippets`` for the trajectory objective) and their test twins."""
+    system = hnn.load_task(task)
+    if task == "real":
+        data = system.get_dataset()
+        pairs = {key: np.concatenate([data[x][:-1], data[x][1:]], 1) for key, x in (("pairs", "x"),
+                                                                                 ("test_pairs", "test_x"))}
+    else:
+        data = hnn.datasets.ring_dataset(system.dynamics, seed, TRAJECTORIES, T_SPAN, TIMESCALE,
+                                         system.RADIUS_RANGE, system.NOISE_STD)
+        points = len(data["t_eval"])
+        pairs = {"pairs": pairs_from_paths(data["x"], points), "test_pairs": pairs_from_paths(data["test_x"], points)}
+    return {**data, **pairs, "snippets": pairs["pairs"], "test_snippets": pairs["test_pairs"]}
 
 
-def energy_mse(model, seed: int, options: dict) -> float:
-    """Their energy error: mean over ``TRIALS`` starts and 100 times of (E_true - E_model)^2, E = q^2 + p^2."""
-    spring = hnn.load_task("spring")
+def _ring_energy(x: torch.Tensor) -> torch.Tensor:
+    """Their spring and pendulum metric's energy, q^2 + p^2, ``(..., 2)`` -> ``(...)``."""
+    return x[..., 0] ** 2 + x[..., 1] ** 2
+
+
+def _predict(model, x0: torch.Tensor, t: np.ndarray, predict: str) -> torch.Tensor:
+    """``model``'s paths from ``x0`` at ``t`` by the row's integrator ``predict`` (a key of ``PREDICT``)."""
+    step = {} if predict in ADAPTIVE else {"dt": float(t[1] - t[0])}
+    return hnn.rollout(model, x0, t, **PREDICT[predict], **step)
+
+
+def energy_mse(task: str, model, seed: int, predict: str, data: dict) -> float:
+    """Their energy error of ``model`` rolled out by ``predict`` (see the module docstring)."""
+    system = hnn.load_task(task)
+    model = hnn.evaluation.float64_copy(model)
+    if task == "real":
+        t = data["test_t"] - data["test_t"][0]
+        x0 = torch.as_tensor(data["test_x"][:1], dtype=torch.float64)
+        path = _predict(model, x0, t, predict)[0]
+        observed = torch.as_tensor(data["test_x"], dtype=torch.float64)
+        return float((system.hamiltonian(observed) - system.hamiltonian(path)).pow(2).mean())
     rng = np.random.RandomState(10_000 + seed)
     x0 = rng.rand(TRIALS, 2) * 1.6 - 0.8
     x0 += 0.2 * np.sign(x0)
     x0 = torch.as_tensor(x0, dtype=torch.float64)
     t = np.linspace(*T_SPAN, int(TIMESCALE * (T_SPAN[1] - T_SPAN[0])))
-    truth = hnn.rollout(spring.dynamics, x0, t, method="dop853", rtol=1e-12, atol=1e-12)
-    ours = hnn.rollout(hnn.evaluation.float64_copy(model), x0, t, **options)
-    return float((spring.hamiltonian(truth) - spring.hamiltonian(ours)).pow(2).mean())
+    truth = hnn.rollout(system.dynamics, x0, t, method="dop853", rtol=1e-12, atol=1e-12)
+    ours = _predict(model, x0, t, predict)
+    return float((_ring_energy(truth) - _ring_energy(ours)).pow(2).mean())
 
 
-def measure(objective: str, seed: int, steps: int, out: Path) -> dict:
-    """Train one run on their data (saved under ``out``/runs) and measure it on their protocol."""
-    trainer = hnn.load_task("spring", "train")
-    config = trainer.Config(name="spring-dgnet", objective=objective, total_steps=steps, seed=seed,
-                            save_dir=str(out / "runs"))
-    data = dataset(seed)
-    run = hnn.run_experiment(config, data)
+def measure(task: str, label: str, seed: int, steps: int, out: Path) -> dict:
+    """Train one run of row ``label`` on ``task`` (saved under ``out``/runs) and measure it."""
+    kind, objective, _, predicts = ROWS[label]
+    trainer = hnn.load_task(task, "train")
+    config = trainer.Config(name=f"{task}-dgnet", model=kind, objective=objective, snippet_steps=1,
+                            total_steps=steps, seed=seed, save_dir=str(out / "runs"))
+    data = dataset(task, seed)
+    fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
+                               steps=1) if objective == "trajectory" else None)
+    run = hnn.find_run(config) or hnn.run_experiment(config, data, fit)
     model = hnn.load_run(run)[0]
     with torch.no_grad():
         pred = model.time_derivative(torch.as_tensor(data["test_x"]))
         derivative = float((pred - torch.as_tensor(data["test_dxdt"])).pow(2).mean())
     return {"run": str(run), "derivative": derivative,
-            "energy": {name: energy_mse(model, seed, options) for name, options in PREDICT.items()}}
+            "energy": {name: energy_mse(task, model, seed, name, data) for name in predicts}}
+
+
+def _job(args: tuple) -> tuple:
+    torch.set_num_threads(1)
+    task, label, seed, steps, out = args
+    return args[:3], measure(task, label, seed, steps, out)
+
+
+def rows_for(task: str) -> list[str]:
+    """Our rows on ``task``: all, less the paper's objective where the true dx/dt is not known."""
+    return [label for label in ROWS if not (task == "real" and ROWS[label][1] == "derivative")]
 
 
 def table(results: dict) -> str:
-    """The markdown table of ``results`` (``dgnet.json``), published rows first."""
-    lines = ["| model (train / predict) | derivative | energy | source |", "| --- | --- | --- | --- |"]
-    lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |" for name, (d, e) in PUBLISHED.items()]
-    n, steps = results["seeds"], results["steps"]
-    for label, (objective, predicts) in OURS.items():
-        runs = results["rows"][label]
-        d = statistics.mean(r["derivative"] for r in runs)
-        for predict in predicts:
-            energies = [r["energy"][predict] for r in runs]
-            spread = f" (min {min(energies):.2e}, max {max(energies):.2e})" if n > 1 else ""
-            train = "discrete gradient" if objective == "discrete_gradient" else "dx/dt"
-            lines.append(f"| ours: {label} ({train} / {predict}) | {d:.2e} | {statistics.mean(energies):.2e}{spread} "
-                         f"| ours, mean of {n} seeds, {steps} steps |")
-    return "\n".join(lines) + "\n"
+    """The markdown of ``results`` (``dgnet.json``): the stamp, then per task their rows and ours."""
+    n, steps, meta = results["seeds"], results["steps"], results["meta"]
+    lines = [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread "
+             f"a run), {meta['seconds']:.0f} s: {n} seed(s) of their 15 trials, {steps} steps a run (theirs: 2000). "
+             "Their rows are their README's; ours are measured on the same protocol (the differences: "
+             "`analysis/chains/dgnet.py`'s docstring). Energy: mean over the seeds, with their spread.", ""]
+    for task in results["tasks"]:
+        lines += [f"### {task}", "", "| model (train / predict) | derivative | energy | source |",
+                  "| --- | --- | --- | --- |"]
+        lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |"
+                  for name, (d, e) in PUBLISHED[task].items()]
+        for label in rows_for(task):
+            runs = results["rows"][task][label]
+            d = statistics.mean(r["derivative"] for r in runs)
+            for predict in ROWS[label][3]:
+                energies = [r["energy"][predict] for r in runs]
+                spread = f" (min {min(energies):.2e}, max {max(energies):.2e})" if n > 1 else ""
+                lines.append(f"| ours: {label} ({ROWS[label][2]} / {predict}) | {d:.2e} | "
+                             f"{statistics.mean(energies):.2e}{spread} | ours, mean of {n} seeds, {steps} steps |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run")
     parser.add_argument("--steps", type=int, default=2000, help="optimizer steps per run (theirs: 2000)")
     parser.add_argument("--seeds", type=int, default=15, help="seeds 0..seeds-1 (theirs: 15 trials)")
+    parser.add_argument("--jobs", type=int, default=1, help="worker processes, one torch thread each")
     parser.add_argument("--out", type=Path, default=Path("results-dgnet"), help="folder for runs, json, table")
+    parser.add_argument("--update-docs", dest="update_docs", action="store_true",
+                        help="write the table into docs/dgnet.md")
     args = parser.parse_args(argv)
-    if args.steps < 1 or args.seeds < 1:
-        sys.exit(f"error: --steps and --seeds must be positive, got {args.steps} and {args.seeds}")
-    rows = {}
-    for label, (objective, _) in OURS.items():
-        rows[label] = []
-        for seed in range(args.seeds):
-            print(f"{label}: seed {seed + 1}/{args.seeds}", flush=True)
-            rows[label].append(measure(objective, seed, args.steps, args.out))
-    results = {"steps": args.steps, "seeds": args.seeds, "published": PUBLISHED, "rows": rows}
+    argv = sys.argv[1:] if argv is None else list(argv)
+    tic, meta = time.perf_counter(), {**provenance(), "command": portable_command(argv, "analysis/chains/dgnet.py")}
+    if args.steps < 1 or args.seeds < 1 or args.jobs < 1:
+        sys.exit(f"error: --steps, --seeds and --jobs must be positive, got {args.steps}, {args.seeds}, {args.jobs}")
+    work = [(task, label, seed, args.steps, args.out) for seed in range(args.seeds)
+            for task in args.tasks for label in rows_for(task)]
+    done = {}
+
+    def record(i: int, key: tuple, result: dict) -> None:
+        done[key] = result
+        print(f"[{i}/{len(work)}] {key[0]} {key[1]} seed {key[2]}: derivative {result['derivative']:.3g}, "
+              f"energy {', '.join(f'{k} {v:.3g}' for k, v in result['energy'].items())}", flush=True)
+
+    if args.jobs == 1:
+        for i, job in enumerate(work, 1):
+            record(i, *_job(job))
+    else:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            for i, (key, result) in enumerate(pool.map(_job, work), 1):
+                record(i, key, result)
+    rows = {task: {label: [done[(task, label, seed)] for seed in range(args.seeds)] for label in rows_for(task)}
+            for task in args.tasks}
+    meta["seconds"] = time.perf_counter() - tic
+    results = {"meta": meta, "steps": args.steps, "seeds": args.seeds, "tasks": args.tasks, "published": PUBLISHED,
+               "rows": rows}
     write_json(args.out / "dgnet.json", results)
     text = table(results)
     atomic_write(args.out / "dgnet.md", lambda tmp: Path(tmp).write_text(text))
     print(text)
+    if args.update_docs:
+        print(f"updated {readme.update_section('dgnet', text)}")
     return results
 
 

@@ -102,8 +102,7 @@ def speed_table(results: dict) -> list[str]:
 
 
 def _unit(task: str) -> str:
-    from hnn_analysis.scenes.scene_study import SCENE
-    return SCENE[task].get("unit", "periods")
+    return (hnn.task_spec(task).scene_study or {}).get("unit", "periods")
 
 
 def grid_tables(results: dict) -> list[str]:

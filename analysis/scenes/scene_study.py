@@ -51,30 +51,25 @@ from hnn_analysis.speed import speed_accuracy  # noqa: E402
 from hnn_analysis import sweep  # noqa: E402
 from hnn_analysis.provenance import provenance  # noqa: E402
 
-SCENES = ("spring", "pend", "real", "2body", "3body", "pixels")
-GRID_SCENES = ("spring", "pend", "2body")
 WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
 QUICK_WIDTHS, QUICK_FRACTIONS = (16, 200), (0.25, 1.0)
 DEFAULT_CELL = (200, 1.0)
 HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
 STARTS = 8                 # start states of the rollout metrics
 CARD_FACTOR = 2.0          # a scene card's model is within this factor of the best on both errors
-# per scene: the training trajectories' length (scene time units), the fixed steps of the speed
-# ladder, and the long run of the drift: the period (None: measured per start) and how many
-SCENE = {
-    "spring": {"T": 3.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002), "period": math.pi, "periods": 1000,
-               "unit": "periods"},
-    # the small-angle period 2 pi / sqrt(6) of H = 3 (1 - cos q) + p^2 (the data swing wider: longer)
-    "pend": {"T": 3.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002), "period": 2 * math.pi / math.sqrt(6),
-             "periods": 1000, "unit": "small-angle periods"},
-    "2body": {"T": 20.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01), "period": None, "periods": 100,
-              "unit": "orbits"},
-    "3body": {"T": 5.0, "dts": (0.05, 0.02, 0.01, 0.005, 0.002)},
-    "real": {},
-    "pixels": {},
-}
-DRIFT_SCENES = ("spring", "pend", "2body")
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
+
+
+def scenes() -> list[str]:
+    """The study's scenes: the tasks of this checkout whose ``TaskSpec`` declares ``scene_study``."""
+    return [task for task in hnn.available_tasks() if hnn.task_spec(task).scene_study is not None]
+
+
+def scene_settings(task: str) -> dict:
+    """``task``'s scene-study settings (``TaskSpec.scene_study``: T, dts, the drift, grid, one_seed)."""
+    return dict(hnn.task_spec(task).scene_study or {})
+
+
 def rungs() -> tuple[str, ...]:
     """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)
     that its row marks ``studied``."""
@@ -95,9 +90,6 @@ def _fits(task: str, label: str) -> bool:
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
                "name": "real-dhnn"}
 DHNN_MODELS = ("baseline", "hnn", "dissipative")
-# scenes whose new kinds train at the first seed only (a 3-body run is ~10x a spring run); the
-# paper's pair keeps every seed that reproduce.py trained
-ONE_SEED_SCENES = ("3body",)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -122,7 +114,7 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     widths, fractions = (QUICK_WIDTHS, QUICK_FRACTIONS) if quick else (WIDTHS, FRACTIONS)
     rows = [_row(task, DEFAULT_CELL, quick) for task in scenes]
     for task in scenes:
-        if task in GRID_SCENES:
+        if scene_settings(task).get("grid"):
             rows += [_row(task, (w, f), quick) for w in widths for f in fractions if (w, f) != DEFAULT_CELL]
     return rows
 
@@ -162,7 +154,7 @@ class Scene:
     the time over which the truth itself diverges from starts ``PERTURBATION`` apart."""
 
     def __init__(self, task: str, quick: bool, state: dict | None = None):
-        self.task, self.system, self.cfg = task, hnn.load_task(task), SCENE[task]
+        self.task, self.system, self.cfg = task, hnn.load_task(task), scene_settings(task)
         self.truth = None
         if "T" in self.cfg:
             horizon = HORIZON * self.cfg["T"]
@@ -239,7 +231,7 @@ def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
     ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick,
                                 getattr(f, "hamiltonian", None) is not None)
     result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
-    if scene.task in DRIFT_SCENES and not hnn.MODEL_KINDS[label].dissipative:
+    if scene.cfg.get("drift") and not hnn.MODEL_KINDS[label].dissipative:
         period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
         budget = 2.0 if quick else DRIFT_BUDGET
         energy = _energy_fn(scene.system, model, label)
@@ -297,7 +289,7 @@ def scene_card(cells: dict) -> dict | None:
 
 def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="scene_study.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenes", nargs="+", default=None, choices=SCENES, help="scenes to study (default: all present)")
+    p.add_argument("--scenes", nargs="+", default=None, choices=scenes(), help="scenes to study (default: every task that declares scene_study)")
     p.add_argument("--quick", action="store_true",
                    help=f"smoke run: {reproduce.QUICK_STEPS} steps per model, widths {QUICK_WIDTHS} x fractions "
                         f"{QUICK_FRACTIONS}, one seed, short drift runs; output in results-quick/")
@@ -327,7 +319,7 @@ def main(argv=None) -> dict:
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     steps = reproduce.QUICK_STEPS if args.quick else None
     seeds = [0] if args.quick else list(range(args.seeds))
-    scenes = [s for s in (args.scenes or SCENES) if s in hnn.available_tasks()]
+    studied = args.scenes or scenes()
     start = time.perf_counter()
     results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
         "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "seeds": seeds,
@@ -335,13 +327,14 @@ def main(argv=None) -> dict:
         "scenes": {}, "seconds": {}}
 
     # 1. train: every scene's rungs at the default cell (all seeds), the grid (seed 0), the D-HNN split
-    rows = plan_rows(scenes, args.quick)
+    rows = plan_rows(studied, args.quick)
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
-    dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in scenes else []
+    dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
     tic = time.perf_counter()
-    runs, _ = train([([r for r in default_rows if r["task"] not in ONE_SEED_SCENES], seeds, steps, None),
-                     ([r for r in default_rows if r["task"] in ONE_SEED_SCENES], seeds[:1], steps, None),
+    one_seed = {task for task in studied if scene_settings(task).get("one_seed")}
+    runs, _ = train([([r for r in default_rows if r["task"] not in one_seed], seeds, steps, None),
+                     ([r for r in default_rows if r["task"] in one_seed], seeds[:1], steps, None),
                      (grid_rows, [0], steps, None),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
                      (dhnn_rows, [0], steps, DHNN_MODELS)], out, args)
@@ -350,12 +343,12 @@ def main(argv=None) -> dict:
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
     # states, which a second thread does not speed up; --jobs processes share the units
     tic = time.perf_counter()
-    units = measure_units(scenes, runs, seeds, grid_rows)
+    units = measure_units(studied, runs, seeds, grid_rows)
     measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cells_by_scene = {}
-    for task in scenes:
+    for task in studied:
         entry = {"divergence": (states.get(task) or {}).get("divergence"), "rungs": {}, "grid": {}, "speed": {}}
         cells = {}
         for label in task_rungs(task):
@@ -383,7 +376,7 @@ def main(argv=None) -> dict:
     for task, cells in cells_by_scene.items():
         card = scene_card(cells)
         results["scenes"][task]["card"] = card
-        if card and task in GRID_SCENES and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
+        if card and scene_settings(task).get("grid") and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
             row = _row(task, (card["width"], card["fraction"]), args.quick)
             more, _ = train([([row], seeds, steps, (card["label"],))], out, args)
             runs.update(more)
@@ -412,7 +405,7 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -
                         if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}"),
                                       Path)}
             if per_seed:
-                speed = seeds[0] if seeds[0] in per_seed and "dts" in SCENE[task] else None
+                speed = seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task) else None
                 units[("rung", task, label)] = ("rung", task, label, per_seed, speed)
     for task in scenes:
         for label in task_rungs(task):

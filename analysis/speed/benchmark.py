@@ -71,6 +71,7 @@ import hnn
 from hnn.evaluation import start_states
 from hnn.io import write_json
 from hnn.models import PixelHNN
+from hnn.objectives import pixel_loss
 from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
@@ -321,7 +322,7 @@ def _pixel_step():
 
     def step():
         xb, yb = minibatch(x, x_next, PIXEL_BATCH, gen)
-        return optimizer_step(model.loss, xb, yb, optim)
+        return optimizer_step(lambda a, b: pixel_loss(model, a, b), xb, yb, optim)
     return step
 
 
@@ -345,7 +346,7 @@ def _pixel_check() -> dict:
     gen = torch.Generator().manual_seed(1)
     x, x_next = (torch.rand(PIXEL_BATCH, 2 * PIXEL_SIDE ** 2, generator=gen) for _ in range(2))
     params = list(model.parameters())
-    ours, theirs = model.loss(x, x_next).mean(), _original_pixel_loss(model, x, x_next).mean()
+    ours, theirs = pixel_loss(model, x, x_next).mean(), _original_pixel_loss(model, x, x_next).mean()
     g_ours, g_theirs = torch.autograd.grad(ours, params), torch.autograd.grad(theirs, params)
     worst = max(float((a - b).norm() / b.norm().clamp(min=1e-30)) for a, b in zip(g_ours, g_theirs))
     return _check("pixel loss and gradients vs the original's formulation, worst relative difference",

@@ -27,6 +27,7 @@ import torch
 
 import hnn
 from hnn.models import PixelHNN
+from hnn.objectives import pixel_loss
 from hnn.io import write_json
 
 hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
@@ -52,7 +53,7 @@ def time_training(data: dict, baseline: bool, steps: int, seed: int = 0) -> dict
     for _ in range(steps):
         tic = time.perf_counter()
         ix = torch.randperm(len(x), generator=gen)[:200]
-        loss = model.loss(x[ix], x_next[ix]).mean()
+        loss = pixel_loss(model, x[ix], x_next[ix]).mean()
         loss.backward()
         optim.step()
         optim.zero_grad(set_to_none=True)

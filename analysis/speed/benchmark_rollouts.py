@@ -5,7 +5,7 @@ one, ``hnn.rollout`` sees to that):
 
 - field: one ``time_derivative`` call of each model kind (HNN, separable, dissipative, baseline;
   widths 200 and 32; 4 dims) on 1, 15 and 64 states in float32 and float64, as a rollout makes it
-  (no graph, inside ``hnn.tanh_mlp.frozen_weights``),
+  (no graph, inside ``hnn.modes.frozen_weights``),
   against the matrix products its arithmetic needs, each timed alone in its fastest layout
   (``analysis/speed/floor.py``; numpy's ``dot`` competes with torch's), alternated in blocks;
 - step: one step of each fixed-step method (8 float64 states, width 200: leapfrog and yoshida4 on
@@ -76,7 +76,7 @@ def field_table(rounds: int) -> list[dict]:
                         with torch.no_grad():
                             return model.time_derivative(x)
                     shapes = field_products(kind, batch, width)
-                    with hnn.tanh_mlp.frozen_weights():    # as inside hnn.rollout: the field runs as its kernel
+                    with hnn.modes.frozen_weights():    # as inside hnn.rollout: the field runs as its kernel
                         r = floor.compare(call, shapes, rounds=rounds, warmup=max(10, rounds // 10),
                                           block=max(5, rounds // 20), dtype=dtype, with_numpy=True)
                     rows.append({"kind": kind, "width": width, "dtype": dname, "batch": batch,
@@ -104,7 +104,7 @@ def step_table(repeats: int) -> list[dict]:
             calls = [functools.partial(model.time_derivative, x0)] * stats["nfev"]
 
         def field_calls(calls=calls):
-            with torch.no_grad(), hnn.tanh_mlp.frozen_weights():
+            with torch.no_grad(), hnn.modes.frozen_weights():
                 for call in calls:
                     call()
         timed = {"step": [], "calls": []}
@@ -183,7 +183,7 @@ def adaptive_table(model: torch.nn.Module, tolerances=(1e-7, 1e-9), repeats: int
 
             def theirs(times=times, tol=tol):
                 # with the field as fast as inside hnn.rollout (its kernel): the integrators are compared
-                with torch.no_grad(), hnn.tanh_mlp.frozen_weights():
+                with torch.no_grad(), hnn.modes.frozen_weights():
                     return torchdiffeq.odeint(lambda s, x: f(x), x0, times, method="dopri5", rtol=tol, atol=tol)
             row["torchdiffeq_s"], traj = _timed(theirs, repeats)
             row["torchdiffeq_error"] = _error(traj.transpose(0, 1), reference)

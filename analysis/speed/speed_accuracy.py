@@ -50,16 +50,15 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)
 QUICK_RTOLS = (1e-3, 1e-9)
 # per task: the horizon, the fixed steps (two decades), how many start states
-TASKS = {
-    "spring": {"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8},
-    "pend": {"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8},
-    "2body": {"T": 3.0, "dts": (0.2, 0.1, 0.03, 0.01, 0.002), "batch": 8},
-    "3body": {"T": 1.0, "dts": (0.05, 0.02, 0.01, 0.003, 0.0005), "batch": 4},
-    # the true pendulum in seconds; its models move a latent state in frames (20 a second), so
-    # their horizon and steps are scaled by "model_time"
-    "pixels": {"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8, "model_time": 20.0},
-}
-QUICK_TASKS = ("spring", "pend", "2body")
+
+
+def study_settings(task: str) -> dict | None:
+    """``task``'s settings (``TaskSpec.integrator_study``: T, dts, batch, model_time, quick), or None for a
+    task without true dynamics to measure against."""
+    found = hnn.task_spec(task).integrator_study
+    return None if found is None else dict(found)
+
+
 # a model's field costs ~0.1-0.3 ms a call (vs ~0.02 ms for a true one) and the error of a learned
 # model's rollout is measured against its own field: the coarse decade of steps shows the trade
 MODEL_DTS = 3
@@ -155,7 +154,7 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
             # a latent model: its start states are the encoded first frames of training trials, and a
             # baseline's latent has no energy to track
             data = hnn.tasks.run_dataset(task, saved_args)       # the frames the run trained on
-            rows = np.arange(TASKS[task]["batch"]) * (data["params"]["timesteps"] - 3)
+            rows = np.arange(study_settings(task)["batch"]) * (data["params"]["timesteps"] - 3)
             with torch.no_grad():
                 x0 = model64.encode(torch.as_tensor(data["pixels"][rows], dtype=torch.float64))
             energy = None if label == "baseline" else model64.hamiltonian
@@ -176,7 +175,7 @@ def _energy_drift(energy, traj: torch.Tensor) -> float | None:
 
 def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes: list) -> list[dict]:
     system = hnn.load_task(task)
-    cfg = TASKS[task]
+    cfg = study_settings(task)
     true_x0 = start_states(task, system, cfg["batch"])
     rows = []
     for label, (per_dtype, energy, kind, x0) in _fields(task, system, runs, notes).items():
@@ -286,7 +285,7 @@ def markdown(results: dict) -> str:
              "(float64, same field); drift: max |H(t) - H(0)| (learned H for the HNN, true H otherwise); "
              "seconds: median wall time of one batched rollout.", ""]
     for task, rows in results["tasks"].items():
-        cfg = TASKS[task]
+        cfg = study_settings(task)
         lines += [f"**{task}** ({cfg['batch']} start states, t in [0, {cfg['T']:g}])", "",
                   "| model | method | setting | dtype | seconds | nfev | error | energy drift |",
                   "| --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -379,15 +378,16 @@ def main(argv=None) -> dict:
     if not runs.is_dir():
         notes.append(f"no runs folder {runs}: learned models skipped (train them with analysis/reproduce.py)")
         runs = None
-    tasks = args.tasks or [t for t in hnn.available_tasks() if t in (QUICK_TASKS if args.quick else TASKS)]
+    measurable = [t for t in hnn.available_tasks() if study_settings(t) is not None]
+    tasks = args.tasks or [t for t in measurable if study_settings(t).get("quick") or not args.quick]
     for task in hnn.available_tasks():
-        if task not in TASKS:
+        if task not in measurable:
             notes.append(f"{task}: no true dynamics function in its data.py; not measured")
     start = time.perf_counter()
     results = {"tasks": {}, "notes": notes}
     for task in tasks:
-        if task not in TASKS:
-            raise SystemExit(f"task {task!r} has no true dynamics to measure; choose from {sorted(TASKS)}")
+        if task not in measurable:
+            raise SystemExit(f"task {task!r} has no true dynamics to measure; choose from {measurable}")
         t0 = time.perf_counter()
         results["tasks"][task] = measure_task(task, runs, args.quick, 1 if args.quick else args.repeats, notes)
         print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)

@@ -1,0 +1,76 @@
+"""Grouped training as runs: configs that ``hnn.grouped.group_key`` puts together trained as one
+program (``hnn.grouped.fit_group``) and saved each as its own ordinary run folder, as
+``hnn.run_experiment`` saves a lone run.
+
+    folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
+
+``run_group_task`` is the same for a sweep's worker process or Ray task (plain data in and out).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import torch
+
+from . import cli
+from .grouped import fit_group, group_key
+from .io import check_save_dir
+from .kinds import model_from_args
+from .runs import finish_run, run_dir, training_subset
+from .tasks import task_config
+
+
+def train_group(configs: list, datasets: list[dict] | None = None) -> list:
+    """Train ``configs`` (equal ``group_key``s) as one group and save each as its own run folder
+    (as ``hnn.run_experiment`` would); per config its folder, or the ``GroupedRunFailed`` of a
+    model that failed. ``datasets``: each config's dataset (default ``config.dataset()``)."""
+    keys = {group_key(config) for config in configs}
+    if None in keys or len(keys) != 1:
+        raise ValueError("train_group needs configs of one group (equal hnn.grouped.group_key, none None); "
+                         "train the others alone with hnn.run_experiment")
+    for config in configs:
+        cli.check(config)
+        check_save_dir(config.save_dir)
+    datasets = datasets or [config.dataset() for config in configs]
+    objective = configs[0].make_objective()
+    models, data, tests, saved = [], [], [], []
+    for config, dataset in zip(configs, datasets):
+        args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
+        torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
+        np.random.seed(config.seed)
+        models.append(model_from_args(args).to(config.device))
+        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+        data.append(training_subset(x, y, config.train_fraction, config.seed))
+        tests.append((test_x, test_y))
+        saved.append(args)
+    first = configs[0]
+    stats, failures = fit_group(models, data, tests, seeds=[c.seed for c in configs], total_steps=first.total_steps,
+                                learn_rate=first.learn_rate, weight_decay=first.weight_decay,
+                                batch_size=first.batch_size, print_every=first.print_every,
+                                input_noise=getattr(first, "input_noise", 0.0),
+                                names=[run_dir(c).name for c in configs])
+    out = []
+    for g, config in enumerate(configs):
+        if g in failures:
+            out.append(failures[g])
+            continue
+        (x, y), (test_x, test_y) = data[g], tests[g]
+        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y),
+                               objective.final_loss(models[g], test_x, test_y), None, saved[g])
+        config.finish(directory, datasets[g])
+        out.append(directory)
+    return out
+
+
+def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:
+    """A sweep's group in a worker process or a Ray task: the configs of ``task`` with ``values``
+    trained as one group (``threads`` sets torch's thread count first). Per config
+    ``{"folder": text}`` or ``{"error": message}`` (plain data: it crosses process boundaries)."""
+    if threads is not None:
+        torch.set_num_threads(threads)
+    outcomes = train_group([task_config(task, v) for v in values])
+    return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
+
+
+__all__ = ["run_group_task", "train_group"]
