@@ -31,10 +31,11 @@ import time
 import torch
 from tqdm.auto import tqdm
 
-from .models import HNN, MLP, FIELD_ROWS
+from .models.hamiltonian import FIELD_ROWS, HNN
+from .models.mlp import MLP
 from .objectives import DerivativeObjective
-from .structured import SeparableHNN
-from .tanh_mlp import fast_tanh, fast_tanh_
+from .models.structured import SeparableHNN
+from .models.tanh_mlp import fast_tanh, fast_tanh_
 from .training import adam_optimizer, check_data, flushes_denormals
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
@@ -86,7 +87,7 @@ def _stacked_weights(models: list) -> list[torch.Tensor]:
 
 class _GroupedInputGradient(torch.autograd.Function):
     """dF/dx of every model of a group, F = w . tanh(W2 tanh(W1 x + b1) + b2), ``(G, batch, n)``:
-    ``hnn.tanh_mlp._TanhMLPInputGradient`` with a leading model axis (the same closed form and
+    ``hnn.models.tanh_mlp._TanhMLPInputGradient`` with a leading model axis (the same closed form and
     hand-written backward, every product a batched one)."""
 
     @staticmethod
@@ -112,7 +113,7 @@ class _GroupedInputGradient(torch.autograd.Function):
 
 
 def _grouped_input_gradient(x, W1, b1, W2, b2, w):
-    """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.tanh_mlp``'s closed form, batched."""
+    """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.models.tanh_mlp``'s closed form, batched."""
     h1 = fast_tanh_(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
     h2 = fast_tanh_(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
     one = h1.new_ones(())

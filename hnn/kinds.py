@@ -18,14 +18,15 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from .constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
+from .models.constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
 from .dgnet import DiscreteGradientObjective
 from .interface import Model
-from .lagrangian import LagrangianNN
-from .mechanical import MechanicalHNN, SecondOrderNODE
-from .models import HNN, Baseline, PixelBaseline, PixelHNN, build_model
+from .models.lagrangian import LagrangianNN
+from .models.mechanical import MechanicalHNN, SecondOrderNODE
+from .models.hamiltonian import Baseline, HNN, build_model
+from .models.pixel import PixelBaseline, PixelHNN
 from .objectives import DerivativeObjective, PixelObjective
-from .structured import DissipativeHNN, SeparableHNN
+from .models.structured import DissipativeHNN, SeparableHNN
 from .trajectory import TrajectoryObjective
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}

@@ -199,24 +199,6 @@ def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     return str(run_experiment(task_config(task, values)))
 
 
-ANALYSIS = "hnn_analysis"   # the import name of the checkout's analysis/ folder (pyproject maps it)
-
-
-def import_analysis() -> ModuleType:
-    """The analysis package ``hnn_analysis``: the ``analysis/`` folder beside this ``hnn`` when there
-    is one (a checkout, installed or not), else the installed package.
-
-    ``pip install -e .`` maps the name to the folder; this also covers a checkout run without that
-    install, or installed before the mapping existed. The commands in ``analysis/`` call it before
-    importing each other, so ``python analysis/<command>.py`` works either way.
-    """
-    if ANALYSIS not in sys.modules:
-        folder = Path(__file__).resolve().parent.parent / "analysis"
-        if (folder / "__init__.py").is_file():
-            _load(ANALYSIS, folder / "__init__.py", package=folder)
-    return importlib.import_module(ANALYSIS)
-
-
 def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:
     """The file ``path`` executed as module ``mod_name`` (a package searching ``package`` if given)."""
     locations = None if package is None else [str(package)]

@@ -33,7 +33,7 @@ def test_every_kind_is_a_declared_model_whose_declarations_hold(kind):
     # the row reads the class, the instance agrees with it: one declaration
     assert (model.conservative, model.separable, model.dissipative) == (row.conservative, row.separable,
                                                                         row.dissipative)
-    assert row.coordinates in hnn.COORDINATES
+    assert row.coordinates in hnn.interface.COORDINATES
     x = torch.randn(32, _state_width(model), dtype=torch.float64, requires_grad=True)
     dxdt = model.time_derivative(x).detach()
     assert dxdt.shape == x.shape and torch.isfinite(dxdt).all()
@@ -111,7 +111,7 @@ def test_declarations_are_checked_when_a_kind_is_written():
     with pytest.raises(TypeError, match="declares coordinates 'polar'"):
         type("Bad", (hnn.Model,), {"coordinates": "polar"})
     with pytest.raises(TypeError, match="must be an hnn.Model subclass"):
-        hnn.ModelKind(torch.nn.Linear, lambda args: None)
+        hnn.kinds.ModelKind(torch.nn.Linear, lambda args: None)
     with pytest.raises(TypeError, match="is not an hnn.Model"):
         hnn.trajectory.default_method(torch.nn.Linear(2, 2))
 

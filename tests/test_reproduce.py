@@ -8,7 +8,8 @@ import torch
 
 import hnn
 from hnn_analysis.paper import figures, registry, reproduce
-from hnn_analysis import readme, sweep
+from hnn_analysis import readme
+from hnn import sweep
 
 TINY = 20          # training steps of the end-to-end runs
 

@@ -1,4 +1,4 @@
-"""analysis/sweep.py: failed runs are reported and the others train (in this process, in worker
+"""hnn/sweep.py: failed runs are reported and the others train (in this process, in worker
 processes, on Ray), Ray gives the numbers of the local workers, and Ray stays an optional extra."""
 import dataclasses
 import importlib.util
@@ -18,7 +18,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import readme, sweep
+from hnn_analysis import readme
+from hnn import sweep
 from hnn_analysis.paper import reproduce
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
@@ -159,7 +160,7 @@ def test_only_the_sweep_imports_ray():
                        if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
     # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
     # each inside a function that names the extra when it is missing; nothing else may.
-    assert importing == ["analysis/speed/ray_overhead.py", "analysis/sweep.py"]
+    assert importing == ["analysis/speed/ray_overhead.py", "hnn/sweep.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():

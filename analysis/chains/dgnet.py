@@ -57,11 +57,9 @@ import hnn
 from hnn.dgnet import pairs_from_paths
 from hnn.io import atomic_write, write_json
 from hnn.trajectory import TrajectoryObjective
-
-hnn.tasks.import_analysis()   # hnn_analysis = this repository's analysis/, installed or run by path
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.paper.reproduce import portable_command  # noqa: E402
-from hnn_analysis.provenance import machine, provenance  # noqa: E402
+from hnn_analysis import readme
+from hnn_analysis.paper.reproduce import portable_command
+from hnn_analysis.provenance import machine, provenance
 
 # their README's tables ("Results on the conservative ODE datasets"): (derivative, energy), means of 15
 PUBLISHED = {
@@ -153,7 +151,7 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path) -> dict:
     data = dataset(task, seed)
     fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
                                steps=1) if objective == "trajectory" else None)
-    run = hnn.find_run(config) or hnn.run_experiment(config, data, fit)
+    run = hnn.runs.find_run(config) or hnn.run_experiment(config, data, fit)
     model = hnn.load_run(run)[0]
     with torch.no_grad():
         pred = model.time_derivative(torch.as_tensor(data["test_x"]))

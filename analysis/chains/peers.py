@@ -6,7 +6,7 @@
 Trains our rungs (``rungs()``: every registered kind that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
 N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), through
-``analysis/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
+``hnn/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
 protocol (``experiment-chain/protocols.py``): CHNN's geometric-mean relative error of the
 Cartesian rollout (dopri5 at rtol 1e-7, in float64), mean and median over the test starts, with
 the chaos floor; LNN's energy error at T = 100 s. A rollout that blows up is reported by name
@@ -27,7 +27,8 @@ import torch
 
 import hnn
 from hnn.io import atomic_write, write_json
-from hnn_analysis import readme, sweep
+from hnn_analysis import readme
+from hnn import sweep
 from hnn_analysis.paper.reproduce import portable_command
 from hnn_analysis.provenance import machine, provenance
 from hnn_analysis.scenes.scene_measure import training_cost
@@ -46,7 +47,7 @@ FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_
 
 def rungs() -> tuple[str, ...]:
     """The kinds the table trains: every one that the chain task's ``--model`` takes and whose model
-    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.ModelKind.reads``), or else the
+    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.kinds.ModelKind.reads``), or else the
     bobs' Cartesian [x, xdot] (the constrained kinds: ``experiment-chain/data.py``'s
     ``observed_coordinates``), and whose declared structure the chain has (``structure_holds``: no
     friction, no H = T(p) + V(q)). The LNN protocol trains the same rungs on derivatives of the same states."""

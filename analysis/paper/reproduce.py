@@ -9,7 +9,7 @@ its figures, for every task in this checkout.
 
 Trains each model from its task's config (``experiment-<task>/train.py``'s ``Config``; a saved
 run of the same config is reused), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
-first; ``hnn_analysis.sweep``), with one progress line for the whole job; a run that fails is
+first; ``hnn.sweep``), with one progress line for the whole job; a run that fails is
 reported and the others go on (the command then exits with code 1, listing them). Then evaluates
 the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
 its ``experiment-<task>/task.py`` says, through ``hnn_analysis.registry``). Writes
@@ -31,12 +31,11 @@ import numpy as np
 import hnn
 from hnn.paper import PAPER
 from hnn.io import atomic_write, write_json
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis.paper import figures, registry  # noqa: E402
-from hnn_analysis import readme, sweep  # noqa: E402
-from hnn_analysis.provenance import provenance  # noqa: E402
-from hnn_analysis.readme import stage_table  # noqa: E402
+from hnn_analysis.paper import figures, registry
+from hnn_analysis import readme
+from hnn import sweep
+from hnn_analysis.provenance import provenance
+from hnn_analysis.readme import stage_table
 
 MODELS = ("baseline", "hnn")
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))

@@ -27,12 +27,11 @@ import numpy as np
 
 import hnn
 from hnn.io import atomic_write, write_json
-
-hnn.tasks.import_analysis()
-from hnn_analysis import readme, sweep  # noqa: E402
-from hnn_analysis.paper import reproduce  # noqa: E402
-from hnn_analysis.provenance import provenance  # noqa: E402
-from hnn_analysis.scenes import measured_metrics as mm, scene_measure, scene_study  # noqa: E402
+from hnn_analysis import readme
+from hnn import sweep
+from hnn_analysis.paper import reproduce
+from hnn_analysis.provenance import provenance
+from hnn_analysis.scenes import measured_metrics as mm, scene_measure, scene_study
 
 TASK = "measured"
 WIDTHS, FRACTIONS = (32, 200), (0.5, 1.0)

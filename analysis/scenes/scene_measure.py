@@ -31,10 +31,8 @@ import torch
 
 import hnn
 from hnn.runs import training_subset
-
-hnn.tasks.import_analysis()
-from hnn_analysis.paper import registry, reproduce  # noqa: E402
-from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.scenes import scene_metrics as sm
 
 BURST_SECONDS = 0.15     # the timed bursts of a training-cost measurement last about this long
 BURSTS = 3               # ... in this many bursts (the fastest counts)
@@ -170,8 +168,7 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     for key, unit in units.items():
         by_task.setdefault(unit[1], []).append(key)
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
-    with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context,
-                                                initializer=hnn.tasks.import_analysis) as pool:
+    with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
         # the first unit of every scene now; the rest of a scene once its truth is known
         running = {pool.submit(run_unit, units[keys[0]], quick): keys[0] for keys in by_task.values()}
         waiting = {task: keys[1:] for task, keys in by_task.items()}

@@ -17,15 +17,13 @@ from matplotlib import ticker  # noqa: E402
 
 import hnn  # noqa: E402
 from hnn.io import atomic_write, write_json  # noqa: E402
-
-hnn.tasks.import_analysis()
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study  # noqa: E402
+from hnn_analysis import readme
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study
 
 
 
 def color(label: str) -> str:
-    """A model kind's plot colour, as its registration declares it (``hnn.ModelKind.color``)."""
+    """A model kind's plot colour, as its registration declares it (``hnn.kinds.ModelKind.color``)."""
     kind = hnn.MODEL_KINDS.get(label)
     return kind.color if kind else "k"
 

@@ -43,13 +43,11 @@ import numpy as np
 import torch
 
 import hnn
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis.paper import registry, reproduce  # noqa: E402
-from hnn_analysis.scenes import measured_study, scene_measure, scene_metrics as sm  # noqa: E402
-from hnn_analysis.speed import speed_accuracy  # noqa: E402
-from hnn_analysis import sweep  # noqa: E402
-from hnn_analysis.provenance import provenance  # noqa: E402
+from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.scenes import measured_study, scene_measure, scene_metrics as sm
+from hnn_analysis.speed import speed_accuracy
+from hnn import sweep
+from hnn_analysis.provenance import provenance
 
 WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
 QUICK_WIDTHS, QUICK_FRACTIONS = (16, 200), (0.25, 1.0)
@@ -425,11 +423,11 @@ def _across(per_seed: dict) -> dict:
     for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
         values = [m[key][0] for m in per_seed.values() if m.get(key)]
         if values:
-            out[key + "_seeds"] = list(hnn.mean_and_se(values))
+            out[key + "_seeds"] = list(hnn.metrics.mean_and_se(values))
     for key in ("error", "valid_time"):
         values = [m["rollout"][key] for m in per_seed.values() if m.get("rollout", {}).get(key) is not None]
         if values:
-            out[key + "_seeds"] = list(hnn.mean_and_se(values))
+            out[key + "_seeds"] = list(hnn.metrics.mean_and_se(values))
     return out
 
 

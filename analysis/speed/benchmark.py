@@ -73,11 +73,9 @@ from hnn.io import write_json
 from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
 from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis.speed import benchmark_group, benchmark_rollouts, floor  # noqa: E402
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import cpu_snapshot, others_load, provenance  # noqa: E402
+from hnn_analysis.speed import benchmark_group, benchmark_rollouts, floor
+from hnn_analysis import readme
+from hnn_analysis.provenance import cpu_snapshot, others_load, provenance
 
 HIDDEN = 200
 LEARN_RATE = 1e-3
@@ -478,7 +476,7 @@ def _benchmark_section(main: str | None, group: str | None) -> str:
 def main(argv=None) -> int:
     args = parse_args(argv)
     steps = 200 if args.quick else 2000
-    protocol = hnn.get_protocol("spring", "corrected")
+    protocol = hnn.tasks.get_protocol("spring", "corrected")
     if args.quick:
         protocol = dataclasses.replace(protocol, num_trials=5)
     env = {**provenance(), "torch_threads": args.threads, "cpu": _cpu_flags()}

@@ -31,9 +31,7 @@ from scipy.integrate import solve_ivp
 import hnn
 from hnn import nbody
 from hnn.io import write_json
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis.provenance import provenance  # noqa: E402
+from hnn_analysis.provenance import provenance
 
 # Max abs difference of the two sides' states. atol 1e-6 bounds the local error of each of some
 # hundred steps, so each side is up to a few 1e-4 off the exact orbit (measured against DOP853 at

@@ -29,10 +29,8 @@ import hnn
 from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
 from hnn.io import write_json
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import machine, provenance  # noqa: E402
+from hnn_analysis import readme
+from hnn_analysis.provenance import machine, provenance
 
 FULL_STEPS = 10001
 

@@ -28,9 +28,7 @@ import numpy as np
 import torch
 
 import hnn
-
-hnn.tasks.import_analysis()
-from hnn_analysis.speed import floor  # noqa: E402
+from hnn_analysis.speed import floor
 
 KINDS = ("hnn", "separable", "dissipative", "baseline")
 WIDTHS = (200, 32)

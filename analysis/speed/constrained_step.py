@@ -24,9 +24,7 @@ from tqdm.auto import tqdm
 
 import hnn
 from hnn.io import write_json
-
-hnn.tasks.import_analysis()
-from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance  # noqa: E402
+from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance
 
 KINDS = ("hnn", "constrained", "constrained_lagrangian")
 

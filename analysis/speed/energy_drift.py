@@ -26,11 +26,9 @@ import torch
 
 import hnn
 from hnn.io import atomic_write, write_json
-
-hnn.tasks.import_analysis()
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.paper.reproduce import portable_command  # noqa: E402
-from hnn_analysis.provenance import machine, provenance  # noqa: E402
+from hnn_analysis import readme
+from hnn_analysis.paper.reproduce import portable_command
+from hnn_analysis.provenance import machine, provenance
 
 # model kind -> the integrators compared on it
 METHODS = {"hnn": ("rk4", "midpoint", "discrete_gradient"),
@@ -41,7 +39,7 @@ STARTS = 8
 def trained(kind: str, steps: int, out: Path):
     """A spring model of ``kind`` trained ``steps`` steps (reused when saved), in float64."""
     config = hnn.tasks.task_config("spring", {"model": kind, "total_steps": steps, "save_dir": str(out / "runs")})
-    run = hnn.find_run(config) or hnn.run_experiment(config)
+    run = hnn.runs.find_run(config) or hnn.run_experiment(config)
     return hnn.evaluation.float64_copy(hnn.load_run(run)[0])
 
 

@@ -26,10 +26,8 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance  # noqa: E402
+from hnn_analysis import readme
+from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance
 
 BACKENDS = ("local", "ray")
 

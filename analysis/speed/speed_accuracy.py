@@ -41,10 +41,8 @@ import torch
 
 import hnn
 from hnn.io import atomic_write, write_json
-
-hnn.tasks.import_analysis()   # hnn_analysis = this folder, installed or run by path from a checkout
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.provenance import machine, provenance  # noqa: E402
+from hnn_analysis import readme
+from hnn_analysis.provenance import machine, provenance
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)
@@ -139,12 +137,12 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
     # every model kind the task trains (hnn.MODEL_KINDS): those reproduce.py --models trained are measured
     for label in hnn.cli.model_choices(hnn.load_task(task, "train").Config):
         args = hnn.tasks.task_config(task, {"save_dir": str(runs), "seed": 0, "model": label})
-        found = hnn.find_run(args)
+        found = hnn.runs.find_run(args)
         if found is None and label not in ("hnn", "baseline"):
             continue
         if found is None:
-            notes.append(f"{task} {label}: no saved run at {hnn.run_dir(args)} (train it with analysis/reproduce.py); skipped")
-            print(f"  {task} {label}: not found at {hnn.run_dir(args)}, skipped", flush=True)
+            notes.append(f"{task} {label}: no saved run at {hnn.runs.run_dir(args)} (train it with analysis/reproduce.py); skipped")
+            print(f"  {task} {label}: not found at {hnn.runs.run_dir(args)}, skipped", flush=True)
             continue
         model, saved_args, _ = hnn.load_run(found)
         per_dtype = {name: copy.deepcopy(model).to(dtype).field for name, dtype in DTYPES.items()}
@@ -255,7 +253,7 @@ def extremes(quick: bool, runs: Path | None, notes: list) -> list[dict]:
     if runs is not None:
         for label in ("hnn", "baseline"):
             args = hnn.tasks.task_config("spring", {"save_dir": str(runs), "seed": 0, "model": label})
-            found = hnn.find_run(args)
+            found = hnn.runs.find_run(args)
             if found is None:
                 notes.append(f"extremes: spring {label} not found; its out-of-distribution rows are skipped")
                 continue

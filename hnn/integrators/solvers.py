@@ -1,13 +1,13 @@
 """The integrators ``hnn.rollout`` knows, by name, with the properties tests and users rely on.
 
     hnn.get_solver("midpoint")   # Solver(name='midpoint', order=2, symplectic=True, needs_separable=False, ...)
-    hnn.register_solver(hnn.solvers.fixed_step_solver("euler", Euler, order=1))
+    hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("euler", Euler, order=1))
     hnn.rollout(f, x0, t_eval, method="euler", dt=0.01)
 
 Modelled on torchdiffeq's dict of solvers and diffrax's ``order``: a method's order and
 symplecticity are declared beside its name, and the tests read them (the fitted order must be
 ``order``; one step must be symplectic exactly when ``symplectic``), so a new integrator is a
-one-place change: write it (a ``hnn.fixed_step.Stepper`` for a fixed-step one) and register it.
+one-place change: write it (a ``hnn.integrators.fixed_step.Stepper`` for a fixed-step one) and register it.
 """
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ class Solver:
 def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic: bool = False,
                       needs_separable: bool = False, energy_preserving: bool = False,
                       needs_hamiltonian: bool = False) -> Solver:
-    """A ``Solver`` running ``stepper`` by ``hnn.fixed_step.fixed_step_rollout`` (options ``dt``,
+    """A ``Solver`` running ``stepper`` by ``hnn.integrators.fixed_step.fixed_step_rollout`` (options ``dt``,
     ``max_norm``, ``stats``, and the implicit methods' ``tol``, ``max_iter``, ``base``)."""
     run = functools.partial(fixed_step_rollout, method=name, stepper=stepper)
     return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run,

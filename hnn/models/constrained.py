@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from .interface import Model
-from .models import MLP
+from ..interface import Model
+from .mlp import MLP
 from .structured import scalar_gradient
 
 STATE_TOLERANCE = 1e-3     # largest relative constraint violation of a start state (|phi| / l^2, |cos(r, w)|)

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .modes import frozen_kernels
+from ..modes import frozen_kernels
 
 # torch.tanh is the costliest elementwise pass of an HNN training step on CPU; 2 sigmoid(2a) - 1 is
 # the same function in four cheap passes, with at most 1.8e-7 absolute error in float32 against

@@ -1,5 +1,5 @@
 """Dormand & Prince's 8(5,3) Runge-Kutta pair with its 7th-order continuous extension: the
-``'dop853'`` scheme of ``hnn.adaptive.per_row_rollout``, one step size per trajectory.
+``'dop853'`` scheme of ``hnn.integrators.adaptive.per_row_rollout``, one step size per trajectory.
 
 The coefficients are Hairer's (Hairer, Norsett & Wanner, *Solving Ordinary Differential Equations
 I*, 2nd ed., section II.10, and the published DOP853 code). A step is 12 stages; the 13th, ``f`` at

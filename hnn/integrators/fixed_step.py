@@ -14,7 +14,7 @@
 Each interval of ``t_eval`` is cut into equal steps no longer than ``dt`` (default one a step),
 signed like ``t_eval`` (backwards too). Each method is a ``Stepper`` (``step(x, h)``); the driver
 checks the states, so every method reports blow-ups alike; a new one is a subclass and one
-``hnn.solvers.register_solver`` call.
+``hnn.integrators.solvers.register_solver`` call.
 """
 from __future__ import annotations
 
@@ -25,8 +25,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .errors import ConvergenceError, divergence_error
-from .interface import SplitField
+from ..errors import ConvergenceError, divergence_error
+from ..interface import SplitField
 
 Field = Callable[[torch.Tensor], torch.Tensor]
 
@@ -161,7 +161,7 @@ class ImplicitStepper(Stepper):
     """A step x1 = x0 + h g(x0, x1) solved by fixed-point iteration to ``tol`` (relative to
     max(|x|, 1); default ``default_tol``), at most ``max_iter`` iterations a step: the loop, the
     counters and the convergence report that the implicit methods share (``Midpoint``,
-    ``hnn.discrete_gradient.DiscreteGradient``). A subclass gives ``update`` (the iteration's map),
+    ``hnn.integrators.discrete_gradient.DiscreteGradient``). A subclass gives ``update`` (the iteration's map),
     the first iterate, and ``name`` and ``equation`` for its errors."""
 
     name, equation = "implicit", "x1 = x0 + h g(x0, x1)"

@@ -1,11 +1,11 @@
 """Training sweeps: a list of run configs mapped to trained run folders, in this process, in worker
 processes here, or as Ray tasks (on this machine or a cluster), longest first, with one progress bar.
 
-    jobs = [sweep.Job("spring/hnn/seed0", "spring", hnn.tasks.task_config("spring", {"seed": 0}))]
+    jobs = [sweep.Job("spring/hnn/seed0", "spring", tasks.task_config("spring", {"seed": 0}))]
     runs, jobs = sweep.reuse(jobs)                         # saved runs found by their config, the rest
     trained, seconds = sweep.train_jobs(jobs, n_jobs=2, log_dir=out / "logs", backend="ray")
 
-A run is found again by its config (``hnn.find_run``): a rerun trains only what is missing, and
+A run is found again by its config (``hnn.runs.find_run``): a rerun trains only what is missing, and
 a saved run that does not load is reported by name and trained again. Each dataset is built once,
 here, before the map (the cached ones are then read by every worker). A run that fails is
 reported by name with its error and the others go on; ``exit_if_failed`` ends the command with
@@ -38,9 +38,9 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
-import hnn
-from hnn_analysis.provenance import cores
-from hnn_analysis.stopping import interruptible, in_worker, stop_pool, worker_start
+from . import group_runs, grouped, runs, tasks, training
+from .config import RunConfig
+from .stopping import cores, in_worker, interruptible, stop_pool, worker_start
 
 BACKENDS = ("local", "ray")
 GROUP_MODES = ("auto", "off")
@@ -61,7 +61,7 @@ class Job:
     """One run of a sweep: its ``key`` (``row/label/seed<seed>``), its task and its config."""
     key: str
     task: str
-    config: hnn.RunConfig
+    config: RunConfig
 
     @property
     def steps(self) -> int:
@@ -88,10 +88,10 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
     reported by name and left to train again (its folder is replaced)."""
     found, todo = {}, []
     for job in jobs:
-        folder = hnn.find_run(job.config)
+        folder = runs.find_run(job.config)
         try:
             if folder is not None:
-                hnn.load_run(folder)
+                runs.load_run(folder)
                 found[job.key] = folder
                 print(f"  {job.key} reused {folder}", flush=True)
                 continue
@@ -108,7 +108,7 @@ def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
     units, groups = [], {}
     for job in jobs:
-        key = hnn.grouped.group_key(job.config) if group == "auto" else None
+        key = grouped.group_key(job.config) if group == "auto" else None
         if key is None or job.config.hidden_dim > GROUP_MAX_WIDTH:
             units.append([job])
         else:
@@ -121,7 +121,7 @@ def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
 
 def _unit_cost(unit: list[Job]) -> float:
     """Longest first: a group costs about its longest member's time (the models step together)."""
-    return hnn.task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
+    return tasks.task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
 
 
 def _group_outcomes(unit: list[Job], outcomes: list[dict]):
@@ -165,7 +165,7 @@ def _in_process(units: list[list[Job]], data: dict, bar):
     for unit in units:
         if len(unit) > 1:
             try:
-                outcomes = hnn.group_runs.train_group([job.config for job in unit],
+                outcomes = group_runs.train_group([job.config for job in unit],
                                                    [data[job.config.dataset_key()] for job in unit])
             except Exception as err:        # the whole group failed: each of its runs is reported
                 outcomes = [err] * len(unit)
@@ -179,8 +179,8 @@ def _in_process(units: list[list[Job]], data: dict, bar):
             bar.update(step - done[0])
             done[0] = step
         try:
-            with hnn.training.report_progress(advance):
-                outcome = hnn.run_experiment(job.config, data[job.config.dataset_key()])
+            with training.report_progress(advance):
+                outcome = runs.run_experiment(job.config, data[job.config.dataset_key()])
         except Exception as err:        # one bad run must not end the sweep (KeyboardInterrupt still does)
             outcome = err
         bar.update(job.steps - done[0])
@@ -190,8 +190,8 @@ def _in_process(units: list[list[Job]], data: dict, bar):
 def _submit(unit: list[Job]) -> tuple:
     """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
     if len(unit) == 1:
-        return hnn.tasks.run_task, unit[0].task, unit[0].fields()
-    return hnn.group_runs.run_group_task, unit[0].task, [job.fields() for job in unit]
+        return tasks.run_task, unit[0].task, unit[0].fields()
+    return group_runs.run_group_task, unit[0].task, [job.fields() for job in unit]
 
 
 def _unit_results(unit: list[Job], result):
@@ -239,9 +239,9 @@ def _on_ray(units: list[list[Job]], threads: int, address: str | None):
             raise ValueError(f"each run asks Ray for {threads} CPUs ({cores()} cores here // --jobs), but the "
                              f"largest Ray node has {biggest:g}; raise --jobs so each run takes fewer threads")
         # the workers import this checkout's hnn, at the same path on every node (docs/sweeps.md)
-        root = str(Path(hnn.__file__).resolve().parent.parent)
+        root = str(Path(__file__).resolve().parent.parent)
         env = {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
-               "HNN_REPO": str(hnn.tasks.repo_root()), "OMP_NUM_THREADS": str(threads)}
+               "HNN_REPO": str(tasks.repo_root()), "OMP_NUM_THREADS": str(threads)}
         options = dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
         remotes = {}
         refs = {}
@@ -262,7 +262,7 @@ def _on_ray(units: list[list[Job]], threads: int, address: str | None):
                     cause.add_note(str(err))
                 result = cause if isinstance(cause, Exception) else err
             for job, folder in _unit_results(unit, result):
-                if isinstance(folder, Path) and not (folder / hnn.runs.COMPLETE).is_file():
+                if isinstance(folder, Path) and not (folder / runs.COMPLETE).is_file():
                     folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
                                           "here: put --out on storage that every node sees at the same path")
                 yield job, folder
@@ -354,13 +354,13 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         raise ValueError(f"n_jobs {n_jobs}: must be at least 1 (1 = train in this process)")
     in_process = backend == "local" and n_jobs == 1
     threads = torch.get_num_threads() if in_process else max(1, cores() // n_jobs)
-    tic, runs, per_run = time.perf_counter(), {}, {}
+    tic, done, per_run = time.perf_counter(), {}, {}
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
-    with interruptible(runs, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
+    with interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
                                           disable=None, dynamic_ncols=True) as bar:
         data, data_seconds, skipped = _build_datasets(jobs, bar)
-        runs.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
+        done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
         todo = [job for job in jobs if job.task not in skipped]
         units = sorted(plan_units(todo, group), key=_unit_cost, reverse=True)
         if not in_process:
@@ -369,9 +369,9 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                    if backend == "local" else _on_ray(units, threads, ray_address))
         for job, outcome in results:
             if isinstance(outcome, BaseException):
-                runs[job.key] = _failure(job, outcome, log_dir, bar)
+                done[job.key] = _failure(job, outcome, log_dir, bar)
             else:
-                runs[job.key] = outcome
+                done[job.key] = outcome
                 metrics = _metrics(outcome)
                 built = data_seconds.pop(job.config.dataset_key(), 0.0)
                 per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),
@@ -381,18 +381,18 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                 bar.update(job.steps)
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,
                "threads_per_job": threads, "group": group, "runs": per_run}
-    return runs, seconds
+    return done, seconds
 
 
-def failures(runs: dict) -> list[RunFailed]:
+def failures(outcomes: dict) -> list[RunFailed]:
     """The runs of a ``train_jobs`` result that failed (not those whose task cannot run here)."""
-    return [err for err in runs.values() if isinstance(err, RunFailed)]
+    return [err for err in outcomes.values() if isinstance(err, RunFailed)]
 
 
-def exit_if_failed(runs: dict) -> None:
+def exit_if_failed(outcomes: dict) -> None:
     """End the command with code 1 and the list of failed runs, if any (call it after writing
     what did train, so a rerun of the same command trains only what is missing)."""
-    failed = failures(runs)
+    failed = failures(outcomes)
     if failed:
         print(f"{len(failed)} run{'s' if len(failed) > 1 else ''} failed; rerunning the same command trains only "
               "what is missing:\n" + "\n".join(f"  {err}" for err in failed), file=sys.stderr, flush=True)

@@ -17,8 +17,9 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from .interface import UNIT_MASS, Model
-from .models import HNN, MLP, permutation_tensor
+from ..interface import UNIT_MASS, Model
+from .hamiltonian import HNN, permutation_tensor
+from .mlp import MLP
 
 _BLOCK_MAX_WIDTH = 128     # SeparableHNN: both networks as one block network up to this many units together
 

@@ -2,7 +2,7 @@
 
 Every method integrates the whole batch together, evaluating ``f`` once per stage on a
 ``(batch, dim)`` tensor, and returns ``(batch, len(t_eval), dim)``. The methods are the
-entries of ``hnn.solvers.SOLVERS``, looked up by name: ``rollout`` checks the input and
+entries of ``hnn.integrators.solvers.SOLVERS``, looked up by name: ``rollout`` checks the input and
 dispatches, and knows no method by name.
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ import numpy as np
 import torch
 
 from .fixed_step import Field
-from .interface import EnergyField, Model
-from .modes import frozen_weights
+from ..interface import EnergyField, Model
+from ..modes import frozen_weights
 from .solvers import Solver, get_solver
 
 
@@ -78,7 +78,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             step size per trajectory, each controlled as in its own scipy call; options ``rtol``,
             ``atol``), ``'dop853'`` (order 8 with the same per-trajectory control; cheaper than
             dopri5 at tight tolerances), ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
-            ``t_eval`` interval), or the symplectic fixed-step methods of ``hnn.fixed_step``
+            ``t_eval`` interval), or the symplectic fixed-step methods of ``hnn.integrators.fixed_step``
             (option ``dt`` as for rk4): ``'leapfrog'`` (Stormer-Verlet; exact only for
             separable H = T(p) + V(q), e.g. true dynamics), ``'midpoint'`` (implicit midpoint,
             for any H, the choice for learned models; options ``tol`` (default 1e-12 in float64,
@@ -86,7 +86,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             ``'yoshida4'`` (order 4; option ``base='leapfrog'|'midpoint'``); ``'discrete_gradient'``
             (order 2, implicit, keeps the field's own H exactly: ``f`` must carry it, an ``hnn.Model``
             that declares ``conservative`` or an ``hnn.interface.EnergyField``; options ``tol``,
-            ``max_iter`` as the midpoint's; ``hnn.discrete_gradient``). All accept
+            ``max_iter`` as the midpoint's; ``hnn.integrators.discrete_gradient``). All accept
             ``stats={}``, filled with ``nfev``, the number of batched evaluations of ``f`` (and
             for the midpoint ``iterations`` and ``max_step_iterations``), and ``max_norm`` (default
             1e6; None to disable): a state with a component beyond it counts as blown up.

@@ -15,7 +15,7 @@ Legendre transform of L, the Hamiltonian in velocity coordinates): the rung decl
 not S grad E in [q, qdot], so its ``field`` is the plain ``time_derivative``: a solver that reads
 an H (``'discrete_gradient'``) refuses it; roll out with ``dopri5``, ``rk4`` or ``midpoint``.
 
-    model = hnn.LagrangianNN(4, hidden_dim=128, nonlinearity="softplus")
+    model = hnn.models.LagrangianNN(4, hidden_dim=128, nonlinearity="softplus")
     zdot = model.time_derivative(z)             # (batch, 4): [qdot, qddot]
     E = model.energy(z)                          # (batch,)
 
@@ -26,9 +26,9 @@ from __future__ import annotations
 import torch
 from torch.func import grad, jacfwd, vmap
 
-from .errors import DivergenceError
-from .mechanical import _check_width, _embed, _StateCheck
-from .models import MLP
+from ..errors import DivergenceError
+from .mechanical import check_width, embed_angles, StateCheckedModel
+from .mlp import MLP
 
 
 class SingularLagrangianError(DivergenceError, ValueError):
@@ -41,7 +41,7 @@ class SingularLagrangianError(DivergenceError, ValueError):
         self.states = list(states)
 
 
-class LagrangianNN(_StateCheck):
+class LagrangianNN(StateCheckedModel):
     """L(q, qdot), an ``hnn.MLP`` of ``[q, qdot]`` (or ``[cos q, sin q, qdot]`` with ``periodic``) to one value.
 
     Args:
@@ -55,13 +55,13 @@ class LagrangianNN(_StateCheck):
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
         super().__init__()
-        self.n = _check_width(input_dim, "LagrangianNN")
+        self.n = check_width(input_dim, "LagrangianNN")
         self.input_dim, self.periodic = input_dim, bool(periodic)
         self.net = MLP(3 * self.n if periodic else input_dim, hidden_dim, 1, nonlinearity)
 
     def lagrangian_at(self, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
         """L at one state, ``(n,)``, ``(n,)`` -> ``()``: the network; override it to plug in a known L."""
-        return self.net(torch.cat([_embed(q[None], self.periodic), v[None]], dim=1))[0, 0]
+        return self.net(torch.cat([embed_angles(q[None], self.periodic), v[None]], dim=1))[0, 0]
 
     def _gradient_twice(self, state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         gradient = grad(lambda s: self.lagrangian_at(s[:self.n], s[self.n:]))(state)

@@ -3,7 +3,7 @@ process cancels the runs not started, stops the worker processes (a run in progr
 folder: it is written whole or not at all), keeps every finished run, says so in one line and
 exits with 128 + the signal; a worker whose parent process is gone stops by itself.
 
-``analysis/sweep.py`` starts its process pool's workers with ``worker_start``, submits each unit
+``hnn/sweep.py`` starts its process pool's workers with ``worker_start``, submits each unit
 through ``in_worker``, stops the pool with ``stop_pool`` and trains inside ``interruptible``.
 """
 from __future__ import annotations
@@ -26,6 +26,14 @@ class Interrupted(BaseException):
 
     def __str__(self) -> str:
         return signal.Signals(self.signum).name
+
+
+def cores() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
 
 
 def _raise_interrupted(signum, frame):

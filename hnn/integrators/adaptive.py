@@ -3,7 +3,7 @@ and Dormand-Prince 5(4) and 8(5,3) with one step size per trajectory (``'dopri5'
 stepped in numpy).
 
 All take a checked ``(batch, dim)`` ``x0`` and a float64 grid ``t`` from ``rollout`` and return
-``(batch, len(t), dim)``; ``hnn.solvers`` registers them as ``'solve_ivp'``, ``'dopri5'`` and ``'dop853'``.
+``(batch, len(t), dim)``; ``hnn.integrators.solvers`` registers them as ``'solve_ivp'``, ``'dopri5'`` and ``'dop853'``.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import torch
 from scipy.integrate import solve_ivp
 
 from .dop853 import DOP853
-from .errors import DivergenceError, divergence_error
+from ..errors import DivergenceError, divergence_error
 from .fixed_step import Field
 
 DEFAULT_SCIPY_METHOD = "RK45"    # solve_ivp's own default; reports name the integrator by it
@@ -156,7 +156,7 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3
 def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
                    max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
                    stats: dict | None = None) -> torch.Tensor:
-    """Dormand-Prince 8(5,3) (Hairer's DOP853, ``hnn.dop853``) with one step size per trajectory.
+    """Dormand-Prince 8(5,3) (Hairer's DOP853, ``hnn.integrators.dop853``) with one step size per trajectory.
 
     As ``dopri5_rollout`` in all else (rows controlled alone, finished rows dropped, ``f`` must
     treat rows independently), with the method's 7th-order dense output at ``t_eval``: 12 field
@@ -168,7 +168,7 @@ def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3
 
 def per_row_rollout(scheme, name: str, f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float, atol: float,
                     max_norm: float | None, max_iterations: int, stats: dict | None) -> torch.Tensor:
-    """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.dop853.DOP853``, built for the dtype)
+    """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.integrators.dop853.DOP853``, built for the dtype)
     with one step size per row: the driver of ``dopri5_rollout`` and ``dop853_rollout``."""
     with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
         return _per_row(scheme(x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,

@@ -12,7 +12,7 @@ symplectic in general.
 
 Which discrete gradient: where the field brings one in closed form (``EnergyField.discrete_gradient``,
 the paper's tanh HNN: the chain rule of difference quotients that DGNet, Matsubara, Ishikawa &
-Yaguchi 2020, computes by its "automatic discrete differentiation", ``hnn.tanh_mlp.discrete_gradient``),
+Yaguchi 2020, computes by its "automatic discrete differentiation", ``hnn.models.tanh_mlp.discrete_gradient``),
 that one; otherwise Gonzalez's midpoint discrete gradient (1996), built from H alone:
 
     grad-bar H = grad H(m) + [(H(x1) - H(x0) - grad H(m) . d) / |d|^2] d,  m = (x0 + x1) / 2, d = x1 - x0.
@@ -28,7 +28,7 @@ from typing import Callable
 import torch
 
 from .fixed_step import ImplicitStepper
-from .interface import EnergyField
+from ..interface import EnergyField
 
 
 def gonzalez(hamiltonian: Callable, x0: torch.Tensor, x1: torch.Tensor) -> torch.Tensor:

@@ -26,22 +26,25 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from .interface import Model
-from .models import MLP
+from ..interface import Model
+from .mlp import MLP
 
 
-def _check_width(input_dim, kind: str) -> int:
+def check_width(input_dim, kind: str) -> int:
+    """n, the degrees of freedom of a state of width ``input_dim`` = 2n; a clear error otherwise."""
     if not isinstance(input_dim, int) or isinstance(input_dim, bool) or input_dim < 2 or input_dim % 2:
         raise ValueError(f"{kind} needs a state [q, p] or [q, qdot] of even width input_dim >= 2, "
                          f"got {input_dim!r}; pass 2 * (degrees of freedom)")
     return input_dim // 2
 
 
-def _embed(q: torch.Tensor, periodic: bool) -> torch.Tensor:
+def embed_angles(q: torch.Tensor, periodic: bool) -> torch.Tensor:
+    """What a network reads of positions ``(batch, n)``: ``[cos q, sin q]`` ``(batch, 2n)`` for angles, else q."""
     return torch.cat([torch.cos(q), torch.sin(q)], dim=1) if periodic else q
 
 
-class _StateCheck(Model):
+class StateCheckedModel(Model):
+    """A ``Model`` whose ``_check_input`` names the expected ``(batch, input_dim)`` on a wrong shape."""
     input_dim: int
 
     def _check_input(self, x: torch.Tensor) -> None:
@@ -49,7 +52,7 @@ class _StateCheck(Model):
             raise ValueError(f"expected a state of shape (batch, {self.input_dim}), got {tuple(x.shape)}")
 
 
-class MechanicalHNN(_StateCheck):
+class MechanicalHNN(StateCheckedModel):
     """H(q, p) = 1/2 p^T M^-1(q) p + V(q) on ``x = [q, p]`` of shape ``(batch, 2n)``.
 
     Args:
@@ -74,7 +77,7 @@ class MechanicalHNN(_StateCheck):
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False,
                  eps: float = 1e-4):
         super().__init__()
-        self.n = _check_width(input_dim, "MechanicalHNN")
+        self.n = check_width(input_dim, "MechanicalHNN")
         if not eps >= 0:
             raise ValueError(f"eps must be >= 0 (M^-1's eigenvalue floor), got {eps!r}")
         self.input_dim, self.periodic, self.eps = input_dim, bool(periodic), float(eps)
@@ -87,7 +90,7 @@ class MechanicalHNN(_StateCheck):
     def potential_and_factor(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(V(q), L(q))`` from one pass of the MLP, ``(batch, n)`` -> ``(batch,)`` and ``(batch, n, n)``,
         L lower triangular with a positive diagonal. Override it to plug in a known V and L."""
-        out = self.net(_embed(q, self.periodic))
+        out = self.net(embed_angles(q, self.periodic))
         entries = out[:, 1:]
         entries = torch.where(self._rows == self._cols, nn.functional.softplus(entries), entries)
         L = entries.new_zeros(len(q), self.n, self.n)
@@ -147,7 +150,7 @@ class MechanicalHNN(_StateCheck):
         return torch.cat([q, (self.inverse_mass(q) @ p[..., None])[..., 0]], dim=1)
 
 
-class SecondOrderNODE(_StateCheck):
+class SecondOrderNODE(StateCheckedModel):
     """dq/dt = v, dv/dt = f(q, v) on ``z = [q, v]`` of shape ``(batch, 2n)``, f an ``hnn.MLP``.
 
     Valid on states of positions and *velocities* (v = dq/dt), e.g. trajectories observed as
@@ -160,14 +163,14 @@ class SecondOrderNODE(_StateCheck):
 
     def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
         super().__init__()
-        self.n = _check_width(input_dim, "SecondOrderNODE")
+        self.n = check_width(input_dim, "SecondOrderNODE")
         self.input_dim, self.periodic = input_dim, bool(periodic)
         self.acceleration_net = MLP(3 * self.n if periodic else input_dim, hidden_dim, self.n, nonlinearity)
 
     def acceleration(self, z: torch.Tensor) -> torch.Tensor:
         """f(q, v), ``(batch, 2n)`` -> ``(batch, n)``."""
         q, v = z[:, :self.n], z[:, self.n:]
-        return self.acceleration_net(torch.cat([_embed(q, self.periodic), v], dim=1))
+        return self.acceleration_net(torch.cat([embed_angles(q, self.periodic), v], dim=1))
 
     def time_derivative(self, z: torch.Tensor, t=None) -> torch.Tensor:
         """``dz/dt = (v, f(q, v))``, ``(batch, 2n)``."""
