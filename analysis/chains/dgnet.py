@@ -55,9 +55,8 @@ import torch
 
 import hnn
 from hnn.dgnet import pairs_from_paths
-from hnn.io import atomic_write, write_json
 from hnn.trajectory import TrajectoryObjective
-from hnn_analysis import readme
+from hnn_analysis import commands
 from hnn_analysis.paper.reproduce import portable_command
 from hnn_analysis.provenance import machine, provenance
 
@@ -199,16 +198,14 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run")
     parser.add_argument("--steps", type=int, default=2000, help="optimizer steps per run (theirs: 2000)")
-    parser.add_argument("--seeds", type=int, default=15, help="seeds 0..seeds-1 (theirs: 15 trials)")
-    parser.add_argument("--jobs", type=int, default=1, help="worker processes, one torch thread each")
-    parser.add_argument("--out", type=Path, default=Path("results-dgnet"), help="folder for runs, json, table")
-    parser.add_argument("--update-docs", dest="update_docs", action="store_true",
-                        help="write the table into docs/dgnet.md")
+    commands.add_flags(parser, seeds="seeds 0..seeds-1 (theirs: 15 trials)", seeds_default=15,
+                       jobs="worker processes, one torch thread each", out="folder for runs, json, table",
+                       out_default=Path("results-dgnet"), update_docs="write the table into docs/dgnet.md")
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     tic, meta = time.perf_counter(), {**provenance(), "command": portable_command(argv, "analysis/chains/dgnet.py")}
-    if args.steps < 1 or args.seeds < 1 or args.jobs < 1:
-        sys.exit(f"error: --steps, --seeds and --jobs must be positive, got {args.steps}, {args.seeds}, {args.jobs}")
+    if args.steps < 1:
+        sys.exit(f"error: --steps must be positive, got {args.steps}")
     work = [(task, label, seed, args.steps, args.out) for seed in range(args.seeds)
             for task in args.tasks for label in rows_for(task)]
     done = {}
@@ -230,12 +227,8 @@ def main(argv=None) -> dict:
     meta["seconds"] = time.perf_counter() - tic
     results = {"meta": meta, "steps": args.steps, "seeds": args.seeds, "tasks": args.tasks, "published": PUBLISHED,
                "rows": rows}
-    write_json(args.out / "dgnet.json", results)
     text = table(results)
-    atomic_write(args.out / "dgnet.md", lambda tmp: Path(tmp).write_text(text))
-    print(text)
-    if args.update_docs:
-        print(f"updated {readme.update_section('dgnet', text)}")
+    commands.publish(args.out, "dgnet", results, text, {"dgnet": text} if args.update_docs else {})
     return results
 
 

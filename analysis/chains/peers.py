@@ -26,8 +26,8 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.io import atomic_write, write_json
-from hnn_analysis import readme
+from hnn.io import atomic_write
+from hnn_analysis import commands
 from hnn import sweep
 from hnn_analysis.paper.reproduce import portable_command
 from hnn_analysis.provenance import machine, provenance
@@ -271,14 +271,12 @@ def card(results: dict) -> list[str]:
 
 def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="peers.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--quick", action="store_true", help="a smoke run: small data, 100 steps, N = 1, 2 (minutes)")
-    p.add_argument("--out", type=Path, default=None,
-                   help="output folder (default: results/peers, or results-quick/peers with --quick)")
-    p.add_argument("--jobs", type=hnn.cli.int_at_least(1), default=1, help="worker processes (1: in this process)")
+    commands.add_flags(p, quick="a smoke run: small data, 100 steps, N = 1, 2 (minutes)",
+                       out="output folder (default: results/peers, or results-quick/peers with --quick)",
+                       jobs="worker processes (1: in this process)")
     p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of every run")
     sweep.add_backend_flags(p)
-    p.add_argument("--update-docs", dest="update_docs", action="store_true",
-                   help="write the table into docs/peers.md (full settings only)")
+    commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
 
 
@@ -314,12 +312,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
                         "schedule": jobs[0].config.schedule if jobs else None,
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
                "rows": rows, "curves": found}
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "peers.json", results)
     text = markdown(results)
-    atomic_write(out / "peers.md", lambda tmp: Path(tmp).write_text(text))
-    print("\n" + text)
-    if args.update_docs:
-        print(f"updated {readme.update_section('peers', text)}")
+    commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {})
     sweep.exit_if_failed(runs)
     return results

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 import hnn
-from hnn.io import atomic_write, write_json
-from hnn_analysis import readme
+from hnn.io import write_json
+from hnn_analysis import commands, readme
 from hnn import sweep
 from hnn_analysis.paper import reproduce
 from hnn_analysis.provenance import provenance
@@ -239,11 +239,8 @@ def run(args, argv: list[str], parser) -> dict:
         "rows": measured, "naive": held.naive, "chosen": chosen, "card": card,
         "seconds": {"training": training, "measure": time.perf_counter() - tic}}
     result["seconds"]["total"] = time.perf_counter() - start
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "scene.json", result)
-    text = markdown(result)
-    atomic_write(out / "scene.md", lambda tmp: Path(tmp).write_text(text))
-    print("\n" + text + f"\nwrote {out / 'scene.json'}, {out / 'scene.md'}")
+    commands.publish(out, "scene", result, markdown(result))
+    print(f"wrote {out / 'scene.json'}, {out / 'scene.md'}")
     if args.update_docs:
         _update_docs(result)
     sweep.exit_if_failed(runs)

@@ -25,8 +25,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.io import atomic_write, write_json
-from hnn_analysis import readme
+from hnn_analysis import commands
 from hnn_analysis.paper.reproduce import portable_command
 from hnn_analysis.provenance import machine, provenance
 
@@ -81,9 +80,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--steps", type=int, default=10_000, help="integrator steps of each rollout")
     parser.add_argument("--dt", type=float, default=0.1, help="step size (the spring's period is 2 pi)")
     parser.add_argument("--train-steps", dest="train_steps", type=int, default=2000, help="training steps of each model")
-    parser.add_argument("--out", type=Path, default=Path("results/energy_drift"), help="folder for runs and json")
-    parser.add_argument("--update-docs", dest="update_docs", action="store_true",
-                        help="write the table into docs/integrators.md")
+    commands.add_flags(parser, out="folder for runs and json", out_default=Path("results/energy_drift"),
+                       update_docs="write the table into docs/integrators.md")
     args = parser.parse_args(argv)
     if args.steps < 1 or args.train_steps < 1 or not (args.dt > 0 and np.isfinite(args.dt)):
         sys.exit(f"error: --steps and --train-steps must be positive and --dt positive and finite, got "
@@ -99,12 +97,8 @@ def main(argv=None) -> dict:
             rows[kind][method] = drift(model, method, args.steps, args.dt)
             print(f"{kind} {method}: largest drift {rows[kind][method]['max']:.2e}", flush=True)
     results = {"meta": meta, "steps": args.steps, "dt": args.dt, "train_steps": args.train_steps, "rows": rows}
-    write_json(args.out / "energy_drift.json", results)
     text = table(results)
-    atomic_write(args.out / "energy_drift.md", lambda tmp: Path(tmp).write_text(text))
-    print(text)
-    if args.update_docs:
-        print(f"updated {readme.update_section('energy-drift', text)}")
+    commands.publish(args.out, "energy_drift", results, text, {"energy-drift": text} if args.update_docs else {})
     return results
 
 

@@ -40,8 +40,8 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.io import atomic_write, write_json
-from hnn_analysis import readme
+from hnn.io import atomic_write
+from hnn_analysis import commands
 from hnn_analysis.provenance import machine, provenance
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -362,11 +362,10 @@ def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks (default: every task with true dynamics)")
     p.add_argument("--runs", type=Path, default=None, help="saved runs (default <repo>/results/runs)")
-    p.add_argument("--out", type=Path, default=None, help="output folder (default <repo>/results/speed_accuracy)")
-    p.add_argument("--quick", action="store_true", help="fewer settings, one repeat, shorter extremes")
+    commands.add_flags(p, out="output folder (default <repo>/results/speed_accuracy)",
+                       quick="fewer settings, one repeat, shorter extremes")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats per setting (median)")
-    p.add_argument("--update-docs", dest="update_docs", action="store_true",
-                        help="write the generated section of docs/integrators.md")
+    commands.add_flags(p, update_docs="write the generated section of docs/integrators.md")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(argv)
     root = hnn.tasks.repo_root()
@@ -393,16 +392,11 @@ def main(argv=None) -> dict:
     results["extremes"] = extremes(args.quick, runs, notes)
     results["meta"] = {**provenance(), "command": " ".join(["python analysis/speed/speed_accuracy.py"] + argv),
                        "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start}
-    write_json(out / "speed_accuracy.json", results)
-    text = markdown(results)
-    atomic_write(out / "speed_accuracy.md", lambda tmp: Path(tmp).write_text(text))
     summary = summary_markdown(results)
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text(summary))
-    print("\n" + summary)
-    print(f"total {results['meta']['seconds']:.1f} s; wrote {out}")
-    if args.update_docs:
-        readme.update_section("speed-accuracy", summary)
-        print("updated docs/integrators.md")
+    commands.publish(out, "speed_accuracy", results, markdown(results),
+                     {"speed-accuracy": summary} if args.update_docs else {})
+    print(f"total {results['meta']['seconds']:.1f} s; wrote {out} (the summary: {out / 'summary.md'})")
     return results
 
 
