@@ -7,7 +7,7 @@ import torch
 
 import hnn
 from hnn_analysis.chains import peers
-from hnn_analysis.scenes import scene_metrics, scene_report, scene_study
+from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
 from hnn_analysis.speed import speed_accuracy
 
 
@@ -83,13 +83,13 @@ def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solve
 
 
 def test_the_scene_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path):
-    assert "scaled" in scene_study.rungs() and scene_report.color("scaled") == "tab:olive"
+    assert "scaled" in scene_common.rungs() and scene_report.color("scaled") == "tab:olive"
     _untrained_run("spring", "scaled", tmp_path)
     run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
-    scene = scene_study.Scene("spring", quick=True)
+    scene = scene_common.Scene("spring", quick=True)
     measured = scene.measure("scaled", run, protocols=False)
     assert measured["rollout"]["error"] > 0
-    speed = scene_study.speed_study(scene, "scaled", hnn.load_run(run)[0], quick=True)
+    speed = scene_common.speed_study(scene, "scaled", hnn.load_run(run)[0], quick=True)
     assert "toy-euler" in {row["options"]["method"] for row in speed["rows"]}
     assert "drift" in (speed["fastest"] or {}) or speed["fastest"] is None     # a conservative kind: its drift
 
@@ -98,7 +98,7 @@ def test_a_new_rollout_metric_is_one_entry_and_the_scene_study_reports_it(toys, 
     monkeypatch.setitem(hnn.metrics.ROLLOUT_METRICS, "final_error", lambda err, t: float(err[:, -1].mean()))
     _untrained_run("spring", "scaled", tmp_path)
     run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
-    rollout = scene_study.Scene("spring", quick=True).measure("scaled", run, protocols=False)["rollout"]
+    rollout = scene_common.Scene("spring", quick=True).measure("scaled", run, protocols=False)["rollout"]
     err = hnn.metrics.relative_error(torch.zeros(1, 3, 2), torch.ones(1, 3, 2))     # pred 0: e(t) = 1
     assert hnn.metrics.summarize_errors(err, torch.arange(3.0).numpy())["final_error"] == 1.0
     assert 0 < rollout["final_error"] <= 1 and rollout["error"] > 0

@@ -6,7 +6,7 @@
 Every rung that fits the coordinates (``experiment-measured``: all of ``--model``'s kinds on [q, v];
 on [q, p] all but second_order; with some positions periodic and others not, mechanical and
 second_order are left out) trains over a small grid of widths and training fractions, in one
-sweep (``scene_study.train``: reused runs, ``--jobs`` processes, grouped training). Each is then
+sweep (``scene_common.train``: reused runs, ``--jobs`` processes, grouped training). Each is then
 measured on the held-out tail of every trial (``measured_metrics``): the prediction error at
 ``--horizon`` seconds beside the naive extrapolation's, the valid prediction time, the energy
 drift with ``--energy``, the derivative loss (on the scaled states, so dimensionless) and the
@@ -31,7 +31,7 @@ from hnn_analysis import commands, readme
 from hnn import sweep
 from hnn_analysis.paper import reproduce
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes import measured_metrics as mm, scene_measure, scene_study
+from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_measure
 
 TASK = "measured"
 WIDTHS, FRACTIONS = (32, 200), (0.5, 1.0)
@@ -100,14 +100,14 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
     if not measured:
         return None, ["no model was measured"]
     best = min(r["prediction_error"]["median"] for r in measured)
-    ok = [r for r in measured if r["prediction_error"]["median"] <= scene_study.CARD_FACTOR * best]
+    ok = [r for r in measured if r["prediction_error"]["median"] <= scene_common.CARD_FACTOR * best]
     # fewest parameters, then the fewest training rows (both exact), then the fastest to train (a timing)
     chosen = min(ok, key=lambda r: (r["params"], r["train_fraction"], r["train_seconds"] or 0.0))
     err = chosen["prediction_error"]["median"]
     ratio = err / naive["median"] if naive["median"] > 0 else float("inf")
     said = [f"{chosen['kind']} (width {chosen['hidden_dim']}, {chosen['train_fraction']:g} of the training rows, "
             f"{chosen['params']} parameters, {chosen['train_seconds']:.3g} s to train on one thread) is enough: its "
-            f"median prediction error {err:.4g} is within {scene_study.CARD_FACTOR:g}x of the best ({best:.4g}) "
+            f"median prediction error {err:.4g} is within {scene_common.CARD_FACTOR:g}x of the best ({best:.4g}) "
             f"and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
             + ("." if ratio <= 0.5 else "; that is NOT under half the naive one: no rung predicts this scene well.")]
 
@@ -213,7 +213,7 @@ def run(args, argv: list[str], parser) -> dict:
     steps = reproduce.QUICK_STEPS if args.quick else None
     rows = _rows(columns, args.quick)
     tic = time.perf_counter()
-    runs, _ = scene_study.train([(rows, [0], steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
+    runs, _ = scene_common.train([(rows, [0], steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
     training = time.perf_counter() - tic
     tic = time.perf_counter()
     measured = []

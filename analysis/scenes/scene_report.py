@@ -18,7 +18,7 @@ from matplotlib import ticker  # noqa: E402
 import hnn  # noqa: E402
 from hnn.io import atomic_write  # noqa: E402
 from hnn_analysis import commands
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study
+from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
 
 
 
@@ -140,8 +140,8 @@ def card_name(card: dict) -> str:
     """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
     name = f"{card['label']}, width {card['width']}, {card['fraction']:g} of the data"
     within = card.get("within", 1.0)
-    if within > scene_study.CARD_FACTOR:
-        return f"none within {scene_study.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
+    if within > scene_common.CARD_FACTOR:
+        return f"none within {scene_common.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
     return name
 
 
