@@ -128,9 +128,9 @@ def test_second_order_node_moves_q_by_v():
     dz = model.time_derivative(z)
     assert torch.equal(dz[:, :2], z[:, 2:])
     torch.testing.assert_close(dz[:, 2:], model.acceleration(z))
-    assert hnn.MODEL_KINDS["mechanical"].build({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh"}).n == 2
-    assert isinstance(hnn.MODEL_KINDS["second_order"].build({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh",
-                                                          "periodic": True}), hnn.models.SecondOrderNODE)
+    assert hnn.MODEL_KINDS["mechanical"].build(hnn.kinds.ModelSpec("mechanical", input_dim=4, hidden_dim=8)).n == 2
+    second_order = hnn.kinds.ModelSpec("second_order", input_dim=4, hidden_dim=8, periodic=True)
+    assert isinstance(hnn.MODEL_KINDS["second_order"].build(second_order), hnn.models.SecondOrderNODE)
 
 
 def test_bad_input_is_refused_with_the_fix():

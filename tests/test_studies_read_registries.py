@@ -39,8 +39,8 @@ class _Scaled(hnn.Model):
 @pytest.fixture
 def toys(monkeypatch):
     """'toy-euler' in hnn.SOLVERS and the row 'scaled' in hnn.MODEL_KINDS, for one test."""
-    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.kinds.ModelKind(_Scaled, lambda args: _Scaled(
-        hnn.build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"])), color="tab:olive"))
+    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.kinds.ModelKind(_Scaled, lambda spec: _Scaled(
+        hnn.build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity)), color="tab:olive"))
     hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("toy-euler", _Euler, order=1))
     yield
     del hnn.SOLVERS["toy-euler"]
