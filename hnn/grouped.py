@@ -5,7 +5,7 @@ model axis, every product of a step one batched product over the models.
     folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
 
 A small HNN's step is mostly dispatch, not arithmetic; G of them as one batched step share one
-dispatch (``python analysis/speed/benchmark.py --jobs group`` measures the model-steps per second
+dispatch (``python analysis/benchmarks/benchmark.py --jobs group`` measures the model-steps per second
 against separate runs). Each model keeps what its lone run has: its
 init (built as ``hnn.run_experiment`` builds it, from its seed), its data subset
 (``train_fraction``), its minibatch stream (its own generator, drawing the lone run's indices),

@@ -19,7 +19,7 @@ whose parent process is gone stops by itself.
 
 With ``group="auto"`` the runs that can train as one program (``hnn.grouped.group_key``: one
 task, kind and width, seeds and fractions apart) and are narrow enough for grouping to pay
-(``GROUP_MAX_WIDTH``, measured by ``analysis/speed/benchmark.py --jobs group``) train as groups,
+(``GROUP_MAX_WIDTH``, measured by ``analysis/benchmarks/benchmark.py --jobs group``) train as groups,
 each one unit of work for the pool or Ray, each model still saved as its own run folder.
 """
 from __future__ import annotations

@@ -67,7 +67,7 @@ class TaskSpec:
             (the long drift run: the period, None to measure it per start, how many, their name),
             ``grid`` (train the width x data grid), ``drift`` (run the long drift), ``one_seed``
             (new kinds at the first seed only: a costly scene).
-        integrator_study: the integrator study's settings (``analysis/speed/speed_accuracy.py``);
+        integrator_study: the integrator study's settings (``analysis/integrator_study/speed_accuracy.py``);
             None for a task without true dynamics to measure against. ``T`` (the horizon), ``dts``
             (fixed steps), ``batch`` (start states), ``model_time`` (the models' time units per
             scene time unit, default 1), ``quick`` (studied by ``--quick`` too).

@@ -62,7 +62,7 @@ SCHEDULES = ("constant", "cosine")
 
 
 def adam_optimizer(model, learn_rate: float, weight_decay: float, kind: str = "adam") -> torch.optim.Optimizer:
-    """The optimizer ``train`` uses (analysis/speed/benchmark.py times steps with it too): ``kind``
+    """The optimizer ``train`` uses (analysis/benchmarks/benchmark.py times steps with it too): ``kind``
     ``'adam'`` adds ``weight_decay * w`` to the gradient (the paper's), ``'adamw'`` decays the
     weights apart from the gradient's moments (decoupled, Loshchilov & Hutter; CHNN's)."""
     if kind not in OPTIMIZERS:
@@ -99,7 +99,7 @@ def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: tor
 
 def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: torch.optim.Optimizer,
                    clip_grad: float = 0.0) -> float:
-    """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/speed/benchmark.py
+    """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/benchmarks/benchmark.py
     times this very function against the step's matrix-product floor. ``clip_grad`` > 0 scales the
     gradient down to that global norm first."""
     batch_loss = loss(xb, yb).mean()

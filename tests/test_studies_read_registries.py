@@ -8,7 +8,7 @@ import torch
 import hnn
 from hnn_analysis.chains import peers
 from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
-from hnn_analysis.speed import speed_accuracy
+from hnn_analysis.integrator_study import speed_accuracy
 
 
 class _Euler(hnn.integrators.fixed_step.Stepper):

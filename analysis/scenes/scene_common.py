@@ -17,7 +17,7 @@ import hnn
 from hnn import sweep
 from hnn_analysis.paper import registry, reproduce
 from hnn_analysis.scenes import scene_metrics as sm
-from hnn_analysis.speed import speed_accuracy
+from hnn_analysis.integrator_study import speed_accuracy
 
 HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
 STARTS = 8                 # start states of the rollout metrics

@@ -26,7 +26,7 @@ import torch
 import hnn
 from hnn.metrics import energy_drift, relative_error, summarize_errors
 
-from hnn_analysis.speed import speed_accuracy
+from hnn_analysis.integrator_study import speed_accuracy
 
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference

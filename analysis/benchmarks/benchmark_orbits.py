@@ -1,7 +1,7 @@
 """Time the batched orbit generator against one solve_ivp call per orbit.
 
-    python analysis/speed/benchmark_orbits.py                       # 2body, 200 orbits x 50 points, 3 rounds
-    python analysis/speed/benchmark_orbits.py --task 3body --trials 500 --repeats 5
+    python analysis/benchmarks/benchmark_orbits.py                       # 2body, 200 orbits x 50 points, 3 rounds
+    python analysis/benchmarks/benchmark_orbits.py --task 3body --trials 500 --repeats 5
 
 Both sides integrate the same start states (the task's sampler on RandomState(--seed)) with
 scipy's RK45 at rtol 1e-9 and solve_ivp's default atol 1e-6, as the original generator did:

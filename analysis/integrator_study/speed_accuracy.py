@@ -1,8 +1,8 @@
 """The speed / accuracy trade of every integrator, on the true systems and on the trained models.
 
-    python analysis/speed/speed_accuracy.py                       # every task, full grid (a few minutes)
-    python analysis/speed/speed_accuracy.py --quick               # fewer settings (well under a minute)
-    python analysis/speed/speed_accuracy.py --runs results/runs --update-docs
+    python analysis/integrator_study/speed_accuracy.py                       # every task, full grid (a few minutes)
+    python analysis/integrator_study/speed_accuracy.py --quick               # fewer settings (well under a minute)
+    python analysis/integrator_study/speed_accuracy.py --runs results/runs --update-docs
 
 For each task with a true dynamics function (spring, pend, 2body, 3body) and each saved model
 (the HNN and the baseline that ``analysis/reproduce.py`` trains into ``<runs>/<task>-<label>-seed0``;
@@ -390,7 +390,7 @@ def main(argv=None) -> dict:
         print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)
         pareto_plot(task, results["tasks"][task], out / f"pareto-{task}.png")
     results["extremes"] = extremes(args.quick, runs, notes)
-    results["meta"] = {**provenance(), "command": " ".join(["python analysis/speed/speed_accuracy.py"] + argv),
+    results["meta"] = {**provenance(), "command": " ".join(["python analysis/integrator_study/speed_accuracy.py"] + argv),
                        "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start}
     summary = summary_markdown(results)
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text(summary))

@@ -1,16 +1,16 @@
 """Time our implementation against the same work done the way the original code did it.
 
-    python analysis/speed/benchmark.py                 # 5 interleaved rounds of every job
-    python analysis/speed/benchmark.py --quick         # 1 round, fewer training steps and trials
-    python analysis/speed/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
-    python analysis/speed/benchmark.py --jobs floor    # only the training steps against their floor
-    python analysis/speed/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
-    python analysis/speed/benchmark.py --jobs group    # only grouped training against separate runs
-    python analysis/speed/benchmark.py --jobs group --update-docs   # rewrite only the group table and its stamp
+    python analysis/benchmarks/benchmark.py                 # 5 interleaved rounds of every job
+    python analysis/benchmarks/benchmark.py --quick         # 1 round, fewer training steps and trials
+    python analysis/benchmarks/benchmark.py --jobs train,eval --repeats 3 --out results/bench.json
+    python analysis/benchmarks/benchmark.py --jobs floor    # only the training steps against their floor
+    python analysis/benchmarks/benchmark.py --jobs rollout  # only rollouts of learned models against their floor
+    python analysis/benchmarks/benchmark.py --jobs group    # only grouped training against separate runs
+    python analysis/benchmarks/benchmark.py --jobs group --update-docs   # rewrite only the group table and its stamp
 
 ``floor``: one training step of the spring HNN (750 x 2, 200 hidden, full batch) and of the pixel
 HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which costs dense work the
-same) against their matrix-product floor, by ``analysis/speed/floor.py``: every product the step
+same) against their matrix-product floor, by ``analysis/benchmarks/floor.py``: every product the step
 performs (captured during one step, forward, backward and double backward), each timed alone in
 its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
 quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
@@ -18,11 +18,11 @@ The step is ``hnn.training.optimizer_step``, the very function ``hnn.train`` run
 loss and its gradients against the original's formulation on one batch.
 
 ``rollout``: a learned field on a few states, a fixed-step step and dopri5 against their floors
-and against torchdiffeq and scipy, by ``analysis/speed/benchmark_rollouts.py`` (its docstring says how).
+and against torchdiffeq and scipy, by ``analysis/benchmarks/benchmark_rollouts.py`` (its docstring says how).
 
 ``group``: G spring HNNs trained as one program (``hnn.grouped``) against G separate runs, per width
 and G, in model-steps per second, and the grouped step against its batched products' floor, by
-``analysis/speed/benchmark_group.py`` (its docstring says how). ``--update-docs`` keeps its table
+``analysis/benchmarks/benchmark_group.py`` (its docstring says how). ``--update-docs`` keeps its table
 apart in the generated section of docs/speed.md, under its own stamp: a run with ``--jobs group``
 rewrites that part alone, a run without it leaves that part as it was.
 
@@ -73,7 +73,7 @@ from hnn.io import write_json
 from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
 from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
-from hnn_analysis.speed import benchmark_group, benchmark_rollouts, floor
+from hnn_analysis.benchmarks import benchmark_group, benchmark_rollouts, floor
 from hnn_analysis import readme
 from hnn_analysis.provenance import cpu_snapshot, others_load, provenance
 
@@ -536,7 +536,7 @@ def main(argv=None) -> int:
                           "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
-        command = " ".join(["python analysis/speed/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
+        command = " ".join(["python analysis/benchmarks/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
         busy = env["others_load"]
         shared = (f" **The machine was shared while measuring** (other processes kept {busy:.1f} of "
                   f"{env['cores']} cores busy on average): they slowed both sides of every ratio, unevenly."

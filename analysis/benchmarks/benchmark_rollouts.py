@@ -1,4 +1,4 @@
-"""Rollouts of learned models against their arithmetic floor: the ``rollout`` job of ``analysis/speed/benchmark.py``.
+"""Rollouts of learned models against their arithmetic floor: the ``rollout`` job of ``analysis/benchmarks/benchmark.py``.
 
 Three tables, each measured in one process at one torch thread (a rollout of a few states runs on
 one, ``hnn.rollout`` sees to that):
@@ -7,7 +7,7 @@ one, ``hnn.rollout`` sees to that):
   widths 200 and 32; 4 dims) on 1, 15 and 64 states in float32 and float64, as a rollout makes it
   (no graph, inside ``hnn.modes.frozen_weights``),
   against the matrix products its arithmetic needs, each timed alone in its fastest layout
-  (``analysis/speed/floor.py``; numpy's ``dot`` competes with torch's), alternated in blocks;
+  (``analysis/benchmarks/floor.py``; numpy's ``dot`` competes with torch's), alternated in blocks;
 - step: one step of each fixed-step method (8 float64 states, width 200: leapfrog and yoshida4 on
   the separable HNN, rk4 and the midpoint rule on the HNN) against the field calls it makes
   (``stats['nfev']`` per step, the separable halves counted as halves), each timed alone;
@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn_analysis.speed import floor
+from hnn_analysis.benchmarks import floor
 
 KINDS = ("hnn", "separable", "dissipative", "baseline")
 WIDTHS = (200, 32)

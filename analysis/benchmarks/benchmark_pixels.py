@@ -1,8 +1,8 @@
 """Time and size the pixel task: rendering its dataset, one training step, and peak memory.
 
-    python analysis/speed/benchmark_pixels.py                  # render the full dataset, 300 steps per model
-    python analysis/speed/benchmark_pixels.py --steps 10000    # the full training of both models
-    python analysis/speed/benchmark_pixels.py --update-docs  # write the table into docs/speed.md
+    python analysis/benchmarks/benchmark_pixels.py                  # render the full dataset, 300 steps per model
+    python analysis/benchmarks/benchmark_pixels.py --steps 10000    # the full training of both models
+    python analysis/benchmarks/benchmark_pixels.py --update-docs  # write the table into docs/speed.md
 
 Renders the 200 x 103 frames afresh into a temporary folder (gymnasium, ``--workers``
 processes), builds the training arrays, then trains the HNN and the baseline for ``--steps``
@@ -92,7 +92,7 @@ def main(argv=None) -> dict:
               f"full {FULL_STEPS} steps ~ {t['full_training_s_estimate']:.0f} s |" for label, t in train.items()),
             f"| dataset in memory | {arrays_mib:.0f} MiB | cache file {cache_mib:.1f} MiB |",
             f"| peak resident memory | {result['peak_rss_mib']:.0f} MiB | after the data: {peak_after_data:.0f} MiB |"]
-    command = " ".join(["python analysis/speed/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
+    command = " ".join(["python analysis/benchmarks/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
     text = (f"`{command}` on {result['date']} (commit {result['commit']}, {machine(result)}), {result['threads']} "
             f"torch threads, torch {torch.__version__}, "
             f"rendering in {data_workers} processes:\n\n| stage | time / size | note |\n| --- | --- | --- |\n"

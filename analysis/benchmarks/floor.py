@@ -55,7 +55,7 @@ def products(step: Callable[[], object]) -> list[tuple[int, ...]]:
         step()
     if recorder.unhandled:
         raise NotImplementedError(f"the step calls {sorted(set(recorder.unhandled))}, which the floor does not "
-                                  "time; add them to analysis/speed/floor.py's _PRODUCT_OPS")
+                                  "time; add them to analysis/benchmarks/floor.py's _PRODUCT_OPS")
     return recorder.shapes
 
 

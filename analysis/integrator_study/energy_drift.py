@@ -1,7 +1,7 @@
 """Long-horizon drift of the learned H: the energy-preserving integrator beside the symplectic ones.
 
-    python analysis/speed/energy_drift.py                     # 10^4 steps of dt = 0.1 (docs/integrators.md)
-    python analysis/speed/energy_drift.py --steps 2000 --update-docs
+    python analysis/integrator_study/energy_drift.py                     # 10^4 steps of dt = 0.1 (docs/integrators.md)
+    python analysis/integrator_study/energy_drift.py --steps 2000 --update-docs
 
 A spring HNN and a separable HNN are trained (``experiment-spring/train.py``'s config, ``--train-steps``
 steps; a saved run of the same config is reused), then each is rolled out in float64 from 8 start
@@ -87,7 +87,7 @@ def main(argv=None) -> dict:
         sys.exit(f"error: --steps and --train-steps must be positive and --dt positive and finite, got "
                  f"{args.steps}, {args.train_steps}, {args.dt}")
     argv = sys.argv[1:] if argv is None else list(argv)
-    meta = {**provenance(), "command": portable_command(argv, "analysis/speed/energy_drift.py")}
+    meta = {**provenance(), "command": portable_command(argv, "analysis/integrator_study/energy_drift.py")}
     torch.set_num_threads(1)
     rows = {}
     for kind, methods in METHODS.items():

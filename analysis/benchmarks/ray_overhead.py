@@ -1,7 +1,7 @@
 """What Ray costs against the local pool: the same ``reproduce.py`` under both backends, from nothing.
 
-    python analysis/speed/ray_overhead.py --update-docs                # quick settings, 3 runs of each
-    python analysis/speed/ray_overhead.py --full --update-docs         # paper settings (seed 0), 2 of each
+    python analysis/benchmarks/ray_overhead.py --update-docs                # quick settings, 3 runs of each
+    python analysis/benchmarks/ray_overhead.py --full --update-docs         # paper settings (seed 0), 2 of each
 
 Each run is ``python analysis/reproduce.py [--quick] --jobs 2 --backend {local,ray}`` on a fresh
 clone of this checkout's commit (``HNN_REPO`` points the tasks there, so every dataset is generated
@@ -161,7 +161,7 @@ def main(argv=None) -> int:
         sys.exit('ray_overhead.py compares against Ray, which is not installed: pip install -e ".[ray]"')
     mode = "full" if args.full else "quick"
     out = args.out or hnn.tasks.repo_root() / "results" / f"ray_overhead_{mode}.json"
-    meta = {**provenance(), "command": " ".join(["python analysis/speed/ray_overhead.py"]
+    meta = {**provenance(), "command": " ".join(["python analysis/benchmarks/ray_overhead.py"]
                                                  + (sys.argv[1:] if argv is None else list(argv)))}
     meta["date"] = datetime.date.today().isoformat()
     fixed = ray_fixed_cost()

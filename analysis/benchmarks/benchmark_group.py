@@ -1,7 +1,7 @@
-"""Grouped training against separate runs: the ``group`` job of ``analysis/speed/benchmark.py``.
+"""Grouped training against separate runs: the ``group`` job of ``analysis/benchmarks/benchmark.py``.
 
-    python analysis/speed/benchmark.py --jobs group            # widths 16, 32, 64, 200; G = 1, 4, 16, 64
-    python analysis/speed/benchmark.py --jobs group --quick    # widths 16, 64, 200; G = 1, 4, 16
+    python analysis/benchmarks/benchmark.py --jobs group            # widths 16, 32, 64, 200; G = 1, 4, 16, 64
+    python analysis/benchmarks/benchmark.py --jobs group --quick    # widths 16, 64, 200; G = 1, 4, 16
 
 For each hidden width and group size G: G spring HNNs (seeds 0..G-1 for the init and the
 minibatches, the seed-0 dataset, 750 x 2 full batch, as the scene study's grid) trained for the
@@ -24,7 +24,7 @@ import torch
 
 import hnn
 from hnn import grouped
-from hnn_analysis.speed import floor
+from hnn_analysis.benchmarks import floor
 
 WIDTHS, SIZES = (16, 32, 64, 200), (1, 4, 16, 64)
 QUICK_WIDTHS, QUICK_SIZES = (16, 64, 200), (1, 4, 16)

@@ -1,7 +1,7 @@
 """A constrained rung's training step against the paper HNN's on the same chain snippets.
 
-    python analysis/speed/constrained_step.py                   # N = 5, width 256, batch 200
-    python analysis/speed/constrained_step.py --bobs 2 --rounds 10
+    python analysis/benchmarks/constrained_step.py                   # N = 5, width 256, batch 200
+    python analysis/benchmarks/constrained_step.py --bobs 2 --rounds 10
 
 One training step of each kind as ``experiment-chain/train.py`` trains it on CHNN's protocol: the
 snippet loss (4 RK4 steps of the model from each snippet's first state, MAE) of one batch of 200
