@@ -29,14 +29,13 @@ from __future__ import annotations
 import time
 
 import torch
-from tqdm.auto import tqdm
 
 from .models.hamiltonian import FIELD_ROWS, HNN
 from .models.mlp import MLP
 from .objectives import DerivativeObjective
 from .models.structured import SeparableHNN
 from .models.tanh_mlp import fast_tanh, fast_tanh_
-from .training import adam_optimizer, check_data, flushes_denormals
+from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, training_steps
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
@@ -244,11 +243,9 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     alive = torch.ones(len(models), dtype=torch.bool)
     failures: dict[int, GroupedRunFailed] = {}
     train_loss, test_loss, test_steps = [], [], []
-    was_flushing = flushes_denormals()
-    torch.set_flush_denormal(True)     # as hnn.train: weight decay's denormals slow CPU arithmetic
-    try:
+    with flushed_denormals():
         start = time.perf_counter()
-        for step in tqdm(range(total_steps + 1), disable=not progress, desc="group", leave=False):
+        for step in training_steps(total_steps, progress, "group"):
             xb, yb, gens = train_rows.draw()
             if input_noise:
                 noise = torch.stack([torch.cat([torch.randn((c, n), generator=gen), torch.zeros(len(xb[g]) - c, n)])
@@ -265,13 +262,11 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
             train_loss.append(losses.detach())
             if after_step is not None:
                 after_step(step, weights)
-            if test_rows is not None and (step % test_every == 0 or step == total_steps):
+            if test_rows is not None and is_test_step(step, test_every, total_steps):
                 tx, ty, _ = test_rows.draw()
                 with torch.no_grad():
                     test_loss.append(test_rows.loss(_field(weights, tx, baseline, rows), ty))
                 test_steps.append(step)
-    finally:
-        torch.set_flush_denormal(was_flushing)
     seconds = time.perf_counter() - start
     train_loss = torch.stack(train_loss).T.tolist()
     test_loss = torch.stack(test_loss).T.tolist() if test_loss else [[] for _ in models]
