@@ -48,6 +48,20 @@ def test_pairs_are_every_consecutive_pair_of_each_path():
         pairs_from_paths(rows, 4)
 
 
+def test_the_real_pendulums_pairs_never_span_a_gap_in_its_measurements():
+    from hnn_analysis.chains import dgnet
+    data = dgnet.dataset("real", 0)
+    t, dt = data["t"], data["dt"]
+    gaps = int((~np.isclose(np.diff(t), dt)).sum())
+    assert gaps == 11            # 8 gaps of 1/3 s, 2 of 1/2 s, and the 18.5 s test block (the shipped file)
+    assert len(data["pairs"]) == len(t) - 1 - gaps
+    # each pair's second state is the row one dt after its first
+    at = {tuple(row): i for i, row in enumerate(data["x"])}
+    later = np.array([t[at[tuple(p[2:])]] - t[at[tuple(p[:2])]] for p in data["pairs"]])
+    np.testing.assert_allclose(later, dt, rtol=1e-9)
+    assert len(data["test_pairs"]) == len(data["test_t"]) - 1      # the test block has no gap
+
+
 def test_it_learns_the_spring_from_consecutive_states_alone():
     spring = hnn.load_task("spring")
     objective = hnn.dgnet.DiscreteGradientObjective()
