@@ -38,14 +38,15 @@ class ModelSpec:
     """What a kind's builder reads of a run, declared (a run's ``args.json`` holds these among the
     rest of its config; ``from_args`` picks them out).
 
-    kind: a key of ``MODEL_KINDS``; input_dim: the state's width 2n (pixels: the frame's pixels);
+    kind: a key of ``MODEL_KINDS``; input_dim: the state's width 2n (pixels: the frame's pixels; the
+    constrained kinds read theirs from the graph);
     hidden_dim, nonlinearity: the MLPs'; field_type: what the paper's HNN learns (solenoidal,
     conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
     are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
     (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64.
     """
     kind: str
-    input_dim: int
+    input_dim: int | None = None
     hidden_dim: int = 200
     nonlinearity: str = "tanh"
     field_type: str = "solenoidal"
@@ -58,9 +59,8 @@ class ModelSpec:
     @classmethod
     def from_args(cls, args: dict) -> ModelSpec:
         """The spec of a run's (saved) args: its declared fields, the defaults for any it lacks."""
-        missing = [name for name in ("kind", "input_dim") if name not in args]
-        if missing:
-            raise ValueError(f"a run's args need {' and '.join(missing)} to build its model; got keys {sorted(args)}")
+        if "kind" not in args:
+            raise ValueError(f"a run's args need its model's kind to build it; got keys {sorted(args)}")
         values = {f.name: args[f.name] for f in fields(cls) if f.name in args}
         # the measured task's --periodic names the angle columns: a model reads all of its q as angles or none
         if "periodic" in values:

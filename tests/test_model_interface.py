@@ -145,14 +145,16 @@ def test_the_energy_protocol_rolls_a_model_out_in_its_own_state():
     assert np.abs(canonical - out["m"]["traj"]).max() > 1e-6       # a different start state: mapped, not read as is
 
 
-def test_a_model_spec_reads_its_declared_fields_of_a_runs_args_and_names_what_is_missing():
+def test_a_model_spec_reads_its_declared_fields_of_a_runs_args_and_a_missing_one_is_named():
     args = {"kind": "mechanical", "input_dim": 4, "hidden_dim": 8, "learn_rate": 1e-3, "periodic": "theta"}
     spec = hnn.kinds.ModelSpec.from_args(args)
     # the run's other settings (learn_rate) are not the model's; a task's column names mean "angles"
     assert (spec.kind, spec.input_dim, spec.hidden_dim, spec.periodic, spec.nonlinearity) == ("mechanical", 4, 8, True, "tanh")
     assert not hasattr(spec, "learn_rate")
     assert hnn.kinds.model_from_args(args).periodic is True
-    with pytest.raises(ValueError, match="need input_dim to build its model"):
-        hnn.kinds.ModelSpec.from_args({"kind": "hnn"})
+    with pytest.raises(ValueError, match="need its model's kind"):
+        hnn.kinds.ModelSpec.from_args({"input_dim": 2})
+    with pytest.raises(ValueError, match="input_dim must be a positive integer, got None"):
+        hnn.kinds.model_from_args({"kind": "hnn"})
     with pytest.raises(ValueError, match="constraint graph"):
         hnn.MODEL_KINDS["constrained"].build(hnn.kinds.ModelSpec("constrained", input_dim=4))
