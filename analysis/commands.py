@@ -12,7 +12,10 @@ docs/ it is given (``readme.update_section``).
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+import hnn
 
 from hnn.cli import int_at_least
 from hnn.io import atomic_write, write_json
@@ -49,3 +52,15 @@ def publish(out: Path, stem: str, results: dict, text: str, sections: dict | Non
         print(f"updated the {name} section of {page}")
         written.append(page)
     return written
+
+
+def portable_command(argv: list[str], script: str = "analysis/reproduce.py") -> str:
+    """The command ``python <script> <argv>`` as a reader can rerun it: paths inside the checkout
+    made relative to it, and other absolute paths (one machine's folders) shown as ``DIR``."""
+    root, words = hnn.tasks.repo_root().resolve(), []
+    for word in argv:
+        path = Path(word)
+        if path.is_absolute():
+            word = os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
+        words.append(word)
+    return " ".join([f"python {script}"] + words)

@@ -44,7 +44,7 @@ Three jobs of the spring task (H = q^2 + p^2), each run two ways from the same i
    time (a float32 [1, 2] tensor with requires_grad, autograd with create_graph=True) for
    every one of the thousands of RK45 stages.
 
-The "original" side is a small re-enactment written here (the ``_original_*`` functions),
+The "original" side is a small re-enactment written here (``analysis/benchmarks/original.py``),
 not the original code itself; it does the original's work in the original's way on today's
 libraries, with the original's network (``torch.tanh``; ours computes large tanh arrays as
 2 sigmoid(2a) - 1). Each job runs ours, original, ours, original, ... for ``--repeats`` rounds; the
@@ -55,7 +55,6 @@ check fails. Timings on a shared or busy machine are noisy: rerun on an idle one
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 import datetime
 import statistics
@@ -65,30 +64,21 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from scipy.integrate import solve_ivp
 
 import hnn
-from hnn.evaluation import start_states
 from hnn.io import write_json
-from hnn.models import PixelHNN
-from hnn.objectives import pixel_loss
-from hnn.training import adam_optimizer, minibatch, l2_loss, optimizer_step
-from hnn_analysis.benchmarks import benchmark_group, benchmark_rollouts, floor
+from hnn_analysis.benchmarks import benchmark_group, benchmark_rollouts
+from hnn_analysis.benchmarks import floor_job, original
+from hnn_analysis.benchmarks.floor_job import HIDDEN, LEARN_RATE, WEIGHT_DECAY
 from hnn_analysis import readme
 from hnn_analysis.provenance import cpu_snapshot, others_load, provenance
 
-HIDDEN = 200
-LEARN_RATE = 1e-3
-WEIGHT_DECAY = 1e-4
 # Max abs difference of the dataset arrays. Both sides integrate at rtol 1e-10 but with solve_ivp's
 # default atol 1e-6, which dominates for |q|, |p| <= 1: each side is a few 1e-6 off the exact
 # solution (recorded in the JSON), and batched vs per-trajectory step control makes them differ
 # by as much. The noise and the split are identical.
 DATA_TOL = 1e-5
 TRAIN_REL_TOL = 0.02     # relative difference of the final full-set train losses
-# the pixel loss and its gradients on one batch: our tanh (2 sigmoid(2a) - 1) differs from torch's by
-# up to 1.8e-7, and float32 sums in another order; measured 1e-6 or less
-PIXEL_REL_TOL = 1e-4
 EVAL_REL_TOL = 0.01      # relative difference of the energy MSEs
 
 
@@ -118,72 +108,10 @@ def _summary(t_ours, t_orig) -> dict:
             "median_ours": m_ours, "median_original": m_orig, "ratio_original_over_ours": m_orig / m_ours}
 
 
-def _check(name: str, value: float, tolerance: float, detail: dict | None = None) -> dict:
-    ok = bool(np.isfinite(value) and value <= tolerance)
-    return {"name": name, "value": float(value), "tolerance": tolerance, "passed": ok, **(detail or {})}
-
-
-def _rel_diff(a: float, b: float) -> float:
-    return abs(a - b) / max(abs(a), abs(b), 1e-300)
-
-
-def _spring_dynamics_np(t, y):
-    """The true spring field in numpy: (dq/dt, dp/dt) = (2p, -2q)."""
-    return np.array([2 * y[1], -2 * y[0]])
-
-
-class _OriginalMLP(torch.nn.Module):
-    """The original's network (its nn_models.MLP): ``hnn.MLP``'s layers and weights, and ``torch.tanh``
-    (``hnn.MLP`` computes a large tanh as 2 sigmoid(2a) - 1, which the original did not)."""
-
-    def __init__(self, mlp: hnn.MLP):
-        super().__init__()
-        self.linear1, self.linear2, self.linear3 = (copy.deepcopy(layer) for layer in
-                                                    (mlp.linear1, mlp.linear2, mlp.linear3))
-
-    def forward(self, x):
-        h = torch.tanh(self.linear1(x))
-        h = torch.tanh(self.linear2(h))
-        return self.linear3(h)
-
-
-def _original_model(model: hnn.HNN) -> hnn.HNN:
-    """An HNN of the original's network with ``model``'s weights (its field is taken by autograd)."""
-    return hnn.HNN(model.input_dim, _OriginalMLP(model.differentiable_model))
-
-
-def _original_time_derivative(model: hnn.HNN, x: torch.Tensor) -> torch.Tensor:
-    """The original HNN's field: ``grad F2 @ M.T`` by autograd with ``create_graph=True`` (x requires grad)."""
-    F = model.differentiable_model(x)
-    dF2 = torch.autograd.grad(F[:, 1].sum(), x, create_graph=True)[0]
-    return dF2 @ model.M.T
-
-
 # --------------------------------------------------------------------------- job 1: data
 
 def _ours_data(task) -> dict:
     return task.get_dataset(seed=0)
-
-
-def _original_data(seed: int = 0, samples: int = 50, test_split: float = 0.5, noise_std: float = 0.1) -> dict:
-    """One ``solve_ivp`` per trajectory, targets point by point, noise after, concatenate, split."""
-    rng = np.random.RandomState(seed)
-    t_eval = np.linspace(0, 3, 30)
-    xs, dxs = [], []
-    for _ in range(samples):
-        y0 = rng.rand(2) * 2 - 1
-        radius = rng.rand() * 0.9 + 0.1
-        y0 = y0 / np.sqrt((y0 ** 2).sum()) * radius
-        sol = solve_ivp(_spring_dynamics_np, (0, 3), y0, t_eval=t_eval, rtol=1e-10)
-        q, p = sol.y[0], sol.y[1]
-        dydt = np.stack([_spring_dynamics_np(None, y) for y in sol.y.T]).T
-        q = q + rng.randn(*q.shape) * noise_std
-        p = p + rng.randn(*p.shape) * noise_std
-        xs.append(np.stack([q, p]).T)
-        dxs.append(dydt.T)
-    x, dx = np.concatenate(xs), np.concatenate(dxs)
-    split = int(len(x) * (1 - test_split))
-    return {"x": x[:split], "dxdt": dx[:split], "test_x": x[split:], "test_dxdt": dx[split:]}
 
 
 def _exact_error(d: dict, samples: int = 50, points: int = 30) -> float:
@@ -198,10 +126,10 @@ def _exact_error(d: dict, samples: int = 50, points: int = 30) -> float:
 
 
 def job_data(task, repeats: int) -> tuple[dict, dict]:
-    t_ours, t_orig, ours, orig = _interleave(lambda: _ours_data(task), _original_data, repeats)
+    t_ours, t_orig, ours, orig = _interleave(lambda: _ours_data(task), original.original_data, repeats)
     diffs = {k: float(np.abs(ours[k].astype(np.float64) - orig[k]).max()) for k in ("x", "dxdt", "test_x", "test_dxdt")}
     shapes_ok = all(ours[k].shape == orig[k].shape for k in diffs)
-    check = _check("dataset arrays, max abs difference", max(diffs.values()) if shapes_ok else np.inf,
+    check = floor_job.check("dataset arrays, max abs difference", max(diffs.values()) if shapes_ok else np.inf,
                    DATA_TOL, {"per_array": diffs, "exact_solution_error_ours": _exact_error(ours),
                               "exact_solution_error_original": _exact_error(orig)})
     return {**_summary(t_ours, t_orig), "checks": [check]}, ours
@@ -217,35 +145,14 @@ def _ours_train(d: dict, steps: int):
     return model, stats
 
 
-def _original_train(d: dict, steps: int):
-    """The original loop: autograd double backprop, default Adam, full test loss with its graph every step."""
-    torch.manual_seed(0)
-    model = _original_model(hnn.build_model(2, HIDDEN))
-    optim = torch.optim.Adam(model.parameters(), LEARN_RATE, weight_decay=WEIGHT_DECAY)
-    x = torch.tensor(d["x"], requires_grad=True, dtype=torch.float32)
-    test_x = torch.tensor(d["test_x"], requires_grad=True, dtype=torch.float32)
-    dxdt = torch.tensor(d["dxdt"], dtype=torch.float32)
-    test_dxdt = torch.tensor(d["test_dxdt"], dtype=torch.float32)
-    stats = {"train_loss": [], "test_loss": []}
-    for _ in range(steps + 1):
-        loss = ((dxdt - _original_time_derivative(model, x)) ** 2).mean()
-        loss.backward()
-        optim.step()
-        optim.zero_grad()
-        test_loss = ((test_dxdt - _original_time_derivative(model, test_x)) ** 2).mean()
-        stats["train_loss"].append(loss.item())
-        stats["test_loss"].append(test_loss.item())
-    return model, stats
-
-
 def job_train(d: dict, steps: int, repeats: int) -> tuple[dict, hnn.HNN]:
     t_ours, t_orig, (m_ours, _), (m_orig, _) = _interleave(
-        lambda: _ours_train(d, steps), lambda: _original_train(d, steps), repeats)
+        lambda: _ours_train(d, steps), lambda: original.original_train(d, steps), repeats)
     loss_ours = hnn.derivative_loss(m_ours, d["x"], d["dxdt"])[0]
     loss_orig = hnn.derivative_loss(m_orig, d["x"], d["dxdt"])[0]
     test_ours = hnn.derivative_loss(m_ours, d["test_x"], d["test_dxdt"])[0]
     test_orig = hnn.derivative_loss(m_orig, d["test_x"], d["test_dxdt"])[0]
-    check = _check("final full-set train loss, relative difference", _rel_diff(loss_ours, loss_orig),
+    check = floor_job.check("final full-set train loss, relative difference", floor_job.rel_diff(loss_ours, loss_orig),
                    TRAIN_REL_TOL, {"ours": loss_ours, "original": loss_orig,
                                    "test_loss_ours": test_ours, "test_loss_original": test_orig})
     return {**_summary(t_ours, t_orig), "optimizer_steps": steps + 1, "checks": [check]}, m_ours
@@ -257,137 +164,15 @@ def _ours_eval(task, model, protocol) -> float:
     return hnn.evaluate_energy(task, {"hnn": model}, protocol)["hnn"]["mse"]
 
 
-def _original_eval(model, protocol) -> tuple[float, int]:
-    """Per trial: truth by ``solve_ivp`` in numpy, model by ``solve_ivp`` one [1, 2] state per call."""
-    calls = 0
-    model = _original_model(model)
-
-    def fun(t, y):
-        nonlocal calls
-        calls += 1
-        x = torch.tensor(y, requires_grad=True, dtype=torch.float32).view(1, 2)
-        return _original_time_derivative(model, x).data.numpy().reshape(-1)
-
-    t_span = list(protocol.t_span)
-    t_eval = np.linspace(t_span[0], t_span[1], protocol.num_points)
-    per_trial = []
-    for x0 in start_states(protocol):
-        truth = solve_ivp(_spring_dynamics_np, t_span, x0, t_eval=t_eval, rtol=protocol.rtol).y
-        pred = solve_ivp(fun, t_span, x0, t_eval=t_eval, rtol=protocol.rtol).y
-        e_true, e_pred = (truth ** 2).sum(0), (pred ** 2).sum(0)
-        per_trial.append(np.mean((e_true - e_pred) ** 2))
-    return float(np.mean(per_trial)), calls
-
-
 def job_eval(task, model, protocol, repeats: int) -> dict:
     if protocol.energy != "hamiltonian" or protocol.time_rescale:
         raise ValueError("the original-style evaluation here uses H = q^2 + p^2 and no time rescaling")
     t_ours, t_orig, mse_ours, (mse_orig, calls) = _interleave(
-        lambda: _ours_eval(task, model, protocol), lambda: _original_eval(model, protocol), repeats)
-    check = _check("energy MSE, relative difference", _rel_diff(mse_ours, mse_orig), EVAL_REL_TOL,
+        lambda: _ours_eval(task, model, protocol), lambda: original.original_eval(model, protocol), repeats)
+    check = floor_job.check("energy MSE, relative difference", floor_job.rel_diff(mse_ours, mse_orig), EVAL_REL_TOL,
                    {"ours": mse_ours, "original": mse_orig})
     return {**_summary(t_ours, t_orig), "protocol": dataclasses.asdict(protocol),
             "original_model_calls": calls, "checks": [check]}
-
-
-# --------------------------------------------------------------------------- job 4: the floor
-
-PIXEL_ROWS, PIXEL_BATCH, PIXEL_SIDE = 16000, 200, 28
-FLOOR_THREADS = (1, 2)
-FLOOR_TARGET = 1.5
-
-
-def _spring_step(d: dict):
-    """One step of ``hnn.train`` on the spring HNN: full batch, the closed-form field, fused Adam."""
-    torch.manual_seed(0)
-    model = hnn.build_model(2, HIDDEN)
-    x, y = (torch.tensor(d[k], dtype=torch.float32) for k in ("x", "dxdt"))
-    optim = adam_optimizer(model, LEARN_RATE, WEIGHT_DECAY)
-    loss = l2_loss(model.time_derivative)
-    return lambda: optimizer_step(loss, x, y, optim)
-
-
-def _pixel_step():
-    """One step of ``hnn.train`` on the pixel HNN at the paper's settings (batch 200 of 16000 pairs,
-    weight decay 1e-5). The frames are uniform noise, not renders: dense products and elementwise
-    passes cost the same whatever the pixels hold, and rendering takes a minute."""
-    torch.manual_seed(0)
-    model = PixelHNN(2 * PIXEL_SIDE ** 2, 2, HIDDEN)
-    gen = torch.Generator().manual_seed(0)
-    frames = torch.rand(PIXEL_ROWS + 1, 2 * PIXEL_SIDE ** 2, generator=gen)
-    x, x_next = frames[:-1], frames[1:]
-    optim = adam_optimizer(model, LEARN_RATE, 1e-5)
-
-    def step():
-        xb, yb = minibatch(x, x_next, PIXEL_BATCH, gen)
-        return optimizer_step(lambda a, b: pixel_loss(model, a, b), xb, yb, optim)
-    return step
-
-
-def _original_pixel_loss(model: PixelHNN, x: torch.Tensor, x_next: torch.Tensor) -> torch.Tensor:
-    """``PixelHNN.loss`` written the original's way on the same parameters: ``pow(2)`` for the
-    reconstruction, the latent field by autograd through ``torch.tanh``."""
-    z, z_next = model.encode(torch.cat([x, x_next])).split(len(x))
-    ae = (x - model.decode(z)).pow(2).mean(dim=1)
-    net = model.hnn.differentiable_model
-    F = net.linear3(torch.tanh(net.linear2(torch.tanh(net.linear1(z)))))
-    step = torch.autograd.grad(F[:, 1].sum(), z, create_graph=True)[0] @ model.hnn.M.T
-    hnn_term = (z_next - (z + step)).pow(2).mean(dim=1)
-    cc = (z[:, 1:] - (z_next[:, :1] - z[:, :1])).pow(2).mean(dim=1)
-    return ae + cc + 0.1 * hnn_term
-
-
-def _pixel_check() -> dict:
-    """The pixel loss and every parameter's gradient, ours against ``_original_pixel_loss``, on one batch."""
-    torch.manual_seed(0)
-    model = PixelHNN(2 * PIXEL_SIDE ** 2, 2, HIDDEN)
-    gen = torch.Generator().manual_seed(1)
-    x, x_next = (torch.rand(PIXEL_BATCH, 2 * PIXEL_SIDE ** 2, generator=gen) for _ in range(2))
-    params = list(model.parameters())
-    ours, theirs = pixel_loss(model, x, x_next).mean(), _original_pixel_loss(model, x, x_next).mean()
-    g_ours, g_theirs = torch.autograd.grad(ours, params), torch.autograd.grad(theirs, params)
-    worst = max(float((a - b).norm() / b.norm().clamp(min=1e-30)) for a, b in zip(g_ours, g_theirs))
-    return _check("pixel loss and gradients vs the original's formulation, worst relative difference",
-                  max(_rel_diff(ours.item(), theirs.item()), worst), PIXEL_REL_TOL,
-                  {"loss_ours": ours.item(), "loss_original": theirs.item(), "worst_gradient": worst})
-
-
-def job_floor(d: dict, rounds: int) -> dict:
-    """Each step against its matrix-product floor, at 1 and then 2 threads in this process
-    (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
-    steps = {"spring": (_spring_step(d), rounds), "pixels": (_pixel_step(), max(10, rounds // 4))}
-    threads, flushing = torch.get_num_threads(), hnn.training.flushes_denormals()
-    torch.set_flush_denormal(True)
-    out = {}
-    try:
-        for name, (step, n) in steps.items():
-            shapes = floor.products(step)
-            out[name] = {"products": floor.describe_products(shapes), "by_threads": {}}
-            for t in FLOOR_THREADS:
-                torch.set_num_threads(t)
-                out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5),
-                                                                block=max(2, n // 20))
-                r = out[name]["by_threads"][str(t)]
-                print(f"floor {name}, {t} thread(s): step {r['step_ms']:.2f} ms, floor {r['floor_ms']:.2f} ms, "
-                      f"ratio {r['ratio']:.2f} (fastest rounds {r['best_ratio']:.2f})", flush=True)
-    finally:
-        torch.set_num_threads(threads)
-        torch.set_flush_denormal(flushing)
-    out["checks"] = [_pixel_check()]
-    return out
-
-
-def _floor_table(result: dict) -> str:
-    lines = ["| training step | its matrix products | threads | products alone (ms) | step (ms) | step / floor "
-             "| fastest rounds: step / floor |",
-             "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
-    labels = {"spring": f"spring HNN, 750 x 2, {HIDDEN} hidden",
-              "pixels": f"pixel HNN, batch {PIXEL_BATCH}, {2 * PIXEL_SIDE ** 2} pixels"}
-    for name, r in ((k, v) for k, v in result.items() if k in labels):
-        for t, c in r["by_threads"].items():
-            lines.append(f"| {labels[name]} | {r['products']} ({c['gflop']:.2f} GFLOP) | {t} | {c['floor_ms']:.2f} | "
-                         f"{c['step_ms']:.2f} | {c['ratio']:.2f}x | {c['best_ratio']:.2f}x |")
-    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------- main
@@ -487,7 +272,7 @@ def main(argv=None) -> int:
     task = hnn.load_task("spring")   # loading the task module is not part of the work compared
     results, dataset, model, floors = {}, None, None, None
     if "floor" in args.jobs:
-        floors = job_floor(task.get_dataset(seed=0), args.floor_rounds)
+        floors = floor_job.job_floor(task.get_dataset(seed=0), args.floor_rounds)
     torch.set_num_threads(args.threads)
     if "data" in args.jobs:
         results["data"], dataset = job_data(task, args.repeats)
@@ -514,7 +299,7 @@ def main(argv=None) -> int:
 
     checked = {**({"floor": floors} if floors else {}), **results}
     failed = [f"{job}: {c['name']}" for job, r in checked.items() for c in r["checks"] if not c["passed"]]
-    floor_table = _floor_table(floors) if floors else ""
+    floor_table = floor_job.floor_table(floors) if floors else ""
     if floors:
         floor_table += "\n\n" + "\n".join(
             f"Check: {c['name']} = {c['value']:.3g} (tolerance {c['tolerance']:g}): {'pass' if c['passed'] else 'FAIL'}."

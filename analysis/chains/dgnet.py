@@ -63,7 +63,7 @@ import hnn
 from hnn.dgnet import pairs_from_paths
 from hnn.trajectory import TrajectoryObjective
 from hnn_analysis import commands
-from hnn_analysis.paper.reproduce import portable_command
+from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 
 # their README's tables ("Results on the conservative ODE datasets"): (derivative, energy), means of 15

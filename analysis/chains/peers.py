@@ -29,7 +29,7 @@ import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands
 from hnn import sweep
-from hnn_analysis.paper.reproduce import portable_command
+from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 from hnn_analysis.scenes.scene_measure import training_cost
 

@@ -26,7 +26,7 @@ import torch
 
 import hnn
 from hnn_analysis import commands
-from hnn_analysis.paper.reproduce import portable_command
+from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 
 # model kind -> the integrators compared on it

@@ -17,7 +17,7 @@ import hnn
 from hnn import sweep
 from hnn_analysis.paper import registry, reproduce
 from hnn_analysis.scenes import scene_metrics as sm
-from hnn_analysis.integrator_study import speed_accuracy
+from hnn_analysis.integrator_study import settings
 
 HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
 STARTS = 8                 # start states of the rollout metrics
@@ -90,7 +90,7 @@ class Scene:
         if "T" in self.cfg:
             horizon = HORIZON * self.cfg["T"]
             self.t = np.linspace(0.0, horizon, (50 if quick else 100) * HORIZON + 1)
-            self.x0 = speed_accuracy.start_states(task, self.system, STARTS // 2 if quick else STARTS)
+            self.x0 = settings.start_states(task, self.system, STARTS // 2 if quick else STARTS)
             if state is not None:       # another process integrated this truth already (``state()``)
                 self.truth, self.divergence = torch.as_tensor(state["truth"]), state["divergence"]
                 return
