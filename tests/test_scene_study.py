@@ -218,3 +218,12 @@ def test_models_measured_together_get_the_numbers_each_gets_alone(tmp_path):
         assert cost["steps"] == 31 and cost["seconds"] == pytest.approx(31 / cost["steps_per_s"])
     # the models differ: equal numbers above are not one model's numbers copied
     assert len({m["energy_mse_corrected"][0] for m in together.values()}) == 3
+
+
+def test_every_scene_has_rungs_and_the_pixel_scene_measures_its_own_pair():
+    # a pixel model reads frames through its encoder: its scene keeps the paper's pair
+    assert set(scene_common.task_rungs("pixels")) == {"baseline", "hnn"}
+    for task in scene_common.scenes():
+        assert scene_common.task_rungs(task), f"the {task} scene has no rung"
+    # a kind that reads [q, qdot] does not fit a scene of [q, p]
+    assert "second_order" not in scene_common.task_rungs("spring")

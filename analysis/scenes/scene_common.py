@@ -48,10 +48,11 @@ def task_rungs(task: str) -> list[str]:
 
 @functools.cache
 def _fits(task: str, label: str) -> bool:
-    """Whether the kind's model reads the scene's states, canonical [q, p] (its declared coordinates;
-    the objectives would refuse its run otherwise)."""
-    config = hnn.tasks.task_config(task, {"model": label})
-    return hnn.MODEL_KINDS[config.kind].reads("canonical")
+    """Whether the kind's model reads the scene's states: canonical [q, p] (its declared coordinates;
+    the objectives would refuse its run otherwise), or, for a pixel model (``'latent'``), the frames
+    its own encoder maps to its latent [q, p]."""
+    kind = hnn.MODEL_KINDS[hnn.tasks.task_config(task, {"model": label}).kind]
+    return kind.coordinates == "latent" or kind.reads("canonical")
 
 
 def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
