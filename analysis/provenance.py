@@ -14,6 +14,7 @@ import scipy
 import torch
 
 import hnn
+from hnn.stopping import cores
 
 
 def commit() -> str:
@@ -23,14 +24,6 @@ def commit() -> str:
                               cwd=hnn.tasks.repo_root(), check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-
-
-def cores() -> int:
-    """The cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
 
 
 def provenance() -> dict:

@@ -4,10 +4,10 @@ README.md or a page of docs/, and the curated figures in docs/figures/.
 Every generated section is written only this way, never by hand, by the command that measures it:
 
     python analysis/reproduce.py --update-docs        # docs/results.md, the README's headline, docs/figures/
-    python analysis/speed/benchmark.py --update-docs        # docs/speed.md
-    python analysis/speed/speed_accuracy.py --update-docs   # docs/integrators.md
+    python analysis/benchmarks/benchmark.py --update-docs        # docs/speed.md
+    python analysis/integrator_study/speed_accuracy.py --update-docs   # docs/integrators.md
     python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
-    python analysis/speed/ray_overhead.py [--full] --update-docs   # docs/sweeps.md: Ray against local
+    python analysis/benchmarks/ray_overhead.py [--full] --update-docs   # docs/sweeps.md: Ray against local
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
     python analysis/readme.py kinds                          # README.md and docs/python.md: the model kinds
     python analysis/readme.py check                          # which pages are older than the code
@@ -37,17 +37,17 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
            "full-run": "python analysis/readme.py timing results/results.json (after a full reproduce.py)",
-           "benchmark": "python analysis/speed/benchmark.py --update-docs --repeats 3",
-           "benchmark-pixels": "python analysis/speed/benchmark_pixels.py --update-docs",
-           "speed-accuracy": "python analysis/speed/speed_accuracy.py --update-docs",
-           "energy-drift": "python analysis/speed/energy_drift.py --update-docs",
+           "benchmark": "python analysis/benchmarks/benchmark.py --update-docs --repeats 3",
+           "benchmark-pixels": "python analysis/benchmarks/benchmark_pixels.py --update-docs",
+           "speed-accuracy": "python analysis/integrator_study/speed_accuracy.py --update-docs",
+           "energy-drift": "python analysis/integrator_study/energy_drift.py --update-docs",
            "scenes": "python analysis/scene_study.py --jobs 2 --update-docs",
            "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
            "measured-guide": "python analysis/scene_study.py --data FILE ... --jobs 2 --update-docs (docs/measured.md)",
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
            "dgnet": "python analysis/chains/dgnet.py --jobs 2 --update-docs",
-           "ray-quick": "python analysis/speed/ray_overhead.py --update-docs",
-           "ray-full": "python analysis/speed/ray_overhead.py --full --update-docs"}
+           "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
+           "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs"}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)
 DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 # a commit whose message holds a line "Numbers-unchanged: <why>" says it moves no generated number

@@ -162,10 +162,10 @@ class Chain:
         qdot = (rods[..., 0] * rod_vel[..., 1] - rods[..., 1] * rod_vel[..., 0]) / (rods ** 2).sum(-1)
         return torch.cat([q, qdot], dim=1)
 
-    def constraint_graph(self) -> hnn.ConstraintGraph:
-        """The rods as an ``hnn.ConstraintGraph`` (what the Cartesian kinds are given): bob 0 tethered
+    def constraint_graph(self) -> hnn.models.ConstraintGraph:
+        """The rods as an ``hnn.models.ConstraintGraph`` (what the Cartesian kinds are given): bob 0 tethered
         to the pivot at the origin by rod 0, bob k linked to bob k-1 by rod k; 2 dimensions."""
-        return hnn.ConstraintGraph(self.n, 2, tethers=((0, (0.0, 0.0), self.lengths[0]),),
+        return hnn.models.ConstraintGraph(self.n, 2, tethers=((0, (0.0, 0.0), self.lengths[0]),),
                                    links=tuple((k - 1, k, self.lengths[k]) for k in range(1, self.n)))
 
     def to_cartesian(self, z: torch.Tensor) -> torch.Tensor:

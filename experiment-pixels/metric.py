@@ -1,6 +1,6 @@
 """The pixel pendulum's energy metric, its evaluation of a saved run, and its GIFs.
 
-    result = evaluate_pixel_energy(system, models, hnn.get_protocol("pixels", "paper"), dataset)
+    result = evaluate_pixel_energy(system, models, hnn.tasks.get_protocol("pixels", "paper"), dataset)
     evaluate_pixel_run(directory, system, dataset)      # train.py: metrics.json, rollout.npz, GIFs
     evaluate(trained)                                    # reproduce.py: both protocols, both models
 
@@ -26,7 +26,7 @@ import torch
 
 import hnn
 from hnn.evaluation import check_integrator, describe_integrator, energy_bump, float64_copy, rollout_options
-from hnn.integrate import rollout
+from hnn.integrators.integrate import rollout
 from hnn.metrics import energy_mse
 from hnn.io import atomic_write, write_json
 from hnn.runs import load_run, run_dir
@@ -230,7 +230,7 @@ def _compare_gif(directory: Path, args: dict, label: str, truth: np.ndarray, dec
         pair = {label: decoded, "other": f["decoded"]}
     order = ("baseline", "hnn") if label == "baseline" else ("other", "hnn")
     panels = {"truth": truth, **{k: (pair[k] if k in pair else pair["other"]) for k in order}}
-    hnn.write_gif(panels, directory.parent / f"{args['name']}-compare-seed{args['seed']}.gif")
+    hnn.gifs.write_gif(panels, directory.parent / f"{args['name']}-compare-seed{args['seed']}.gif")
 
 
 def _add_energy_gif(directory: Path, model, z0) -> None:
@@ -238,7 +238,7 @@ def _add_energy_gif(directory: Path, model, z0) -> None:
     bump = energy_bump(model, z0, **ADD_ENERGY)
     with torch.no_grad():
         frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
-    hnn.write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
+    hnn.gifs.write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
 
 
 def _print_beside_paper(metrics: dict, label: str, directory: Path) -> None:
@@ -264,7 +264,7 @@ def evaluate_pixel_run(directory, system, dataset: dict, render_size: int = 500,
     write_json(directory / "metrics.json", metrics)
     truth, decoded = result["truth"]["pixels"], result[label]["decoded"]
     atomic_write(directory / "rollout.npz", lambda tmp: _save_rollout(tmp, truth, decoded))
-    hnn.write_gif({"truth": truth, label: decoded}, directory / f"truth-vs-{label}.gif")
+    hnn.gifs.write_gif({"truth": truth, label: decoded}, directory / f"truth-vs-{label}.gif")
     _compare_gif(directory, args, label, truth, decoded)
     if label == "hnn":
         _add_energy_gif(directory, model, result[label]["latents"][0])

@@ -62,7 +62,7 @@ class Config(hnn.RunConfig):
         if self.objective != "derivative":
             raise ValueError(f"objective={self.objective!r}: the pixel task fits its autoencoder and latent field "
                              "on pairs of frames; use objective='derivative'")
-        return hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels"))
+        return hnn.objectives.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels"))
 
     def finish(self, directory, dataset: dict) -> None:
         """The energy MSE (both protocols) and the GIFs, unless ``no_eval``."""

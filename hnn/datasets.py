@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .integrate import rollout
+from .integrators.integrate import rollout
 
 
 def sample_ring(rng: np.random.RandomState, num_trajectories: int, radius_range: tuple[float, float],

@@ -23,10 +23,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from .integrate import rollout
+from .integrators.integrate import rollout
 from .interface import declared
 from .metrics import energy_mse
-from .solvers import get_solver
+from .integrators.solvers import get_solver
 
 
 # A protocol's integrator is data: fields ``method`` (a name in ``hnn.SOLVERS``), ``options`` (its

@@ -5,7 +5,7 @@ model axis, every product of a step one batched product over the models.
     folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
 
 A small HNN's step is mostly dispatch, not arithmetic; G of them as one batched step share one
-dispatch (``python analysis/speed/benchmark.py --jobs group`` measures the model-steps per second
+dispatch (``python analysis/benchmarks/benchmark.py --jobs group`` measures the model-steps per second
 against separate runs). Each model keeps what its lone run has: its
 init (built as ``hnn.run_experiment`` builds it, from its seed), its data subset
 (``train_fraction``), its minibatch stream (its own generator, drawing the lone run's indices),
@@ -29,13 +29,13 @@ from __future__ import annotations
 import time
 
 import torch
-from tqdm.auto import tqdm
 
-from .models import HNN, MLP, FIELD_ROWS
+from .models.hamiltonian import FIELD_ROWS, HNN
+from .models.mlp import MLP
 from .objectives import DerivativeObjective
-from .structured import SeparableHNN
-from .tanh_mlp import fast_tanh, fast_tanh_
-from .training import adam_optimizer, check_data, flushes_denormals
+from .models.structured import SeparableHNN
+from .models.tanh_mlp import fast_tanh, fast_tanh_
+from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, training_steps
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
@@ -86,7 +86,7 @@ def _stacked_weights(models: list) -> list[torch.Tensor]:
 
 class _GroupedInputGradient(torch.autograd.Function):
     """dF/dx of every model of a group, F = w . tanh(W2 tanh(W1 x + b1) + b2), ``(G, batch, n)``:
-    ``hnn.tanh_mlp._TanhMLPInputGradient`` with a leading model axis (the same closed form and
+    ``hnn.models.tanh_mlp._TanhMLPInputGradient`` with a leading model axis (the same closed form and
     hand-written backward, every product a batched one)."""
 
     @staticmethod
@@ -112,7 +112,7 @@ class _GroupedInputGradient(torch.autograd.Function):
 
 
 def _grouped_input_gradient(x, W1, b1, W2, b2, w):
-    """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.tanh_mlp``'s closed form, batched."""
+    """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.models.tanh_mlp``'s closed form, batched."""
     h1 = fast_tanh_(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
     h2 = fast_tanh_(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
     one = h1.new_ones(())
@@ -243,11 +243,9 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     alive = torch.ones(len(models), dtype=torch.bool)
     failures: dict[int, GroupedRunFailed] = {}
     train_loss, test_loss, test_steps = [], [], []
-    was_flushing = flushes_denormals()
-    torch.set_flush_denormal(True)     # as hnn.train: weight decay's denormals slow CPU arithmetic
-    try:
+    with flushed_denormals():
         start = time.perf_counter()
-        for step in tqdm(range(total_steps + 1), disable=not progress, desc="group", leave=False):
+        for step in training_steps(total_steps, progress, "group"):
             xb, yb, gens = train_rows.draw()
             if input_noise:
                 noise = torch.stack([torch.cat([torch.randn((c, n), generator=gen), torch.zeros(len(xb[g]) - c, n)])
@@ -264,13 +262,11 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
             train_loss.append(losses.detach())
             if after_step is not None:
                 after_step(step, weights)
-            if test_rows is not None and (step % test_every == 0 or step == total_steps):
+            if test_rows is not None and is_test_step(step, test_every, total_steps):
                 tx, ty, _ = test_rows.draw()
                 with torch.no_grad():
                     test_loss.append(test_rows.loss(_field(weights, tx, baseline, rows), ty))
                 test_steps.append(step)
-    finally:
-        torch.set_flush_denormal(was_flushing)
     seconds = time.perf_counter() - start
     train_loss = torch.stack(train_loss).T.tolist()
     test_loss = torch.stack(test_loss).T.tolist() if test_loss else [[] for _ in models]

@@ -27,7 +27,7 @@ import torch
 
 from .errors import DivergenceError
 from .orbit_config import MIN_SEPARATION, TASK_MIN_SEPARATION  # noqa: F401  (the tasks read both here)
-from .integrate import rollout
+from .integrators.integrate import rollout
 from .cache import get_cached_dataset
 
 

@@ -1,7 +1,7 @@
 """What a run fits: the dataset arrays a model trains on, its loss and its final numbers.
 
     hnn.run_experiment(config)                                   # config.make_objective(): the kind's
-    hnn.run_experiment(config, dataset, hnn.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
+    hnn.run_experiment(config, dataset, hnn.objectives.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
 An objective gives ``hnn.train`` its options for a model and a dataset, and measures the final
 train and test numbers. Which objective trains which model kind is declared by the kinds'
@@ -18,7 +18,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from .fixed_step import rk4_step
+from .integrators.fixed_step import rk4_step
 from .interface import declared
 from .metrics import derivative_loss, mean_and_se
 

@@ -67,7 +67,7 @@ class TaskSpec:
             (the long drift run: the period, None to measure it per start, how many, their name),
             ``grid`` (train the width x data grid), ``drift`` (run the long drift), ``one_seed``
             (new kinds at the first seed only: a costly scene).
-        integrator_study: the integrator study's settings (``analysis/speed/speed_accuracy.py``);
+        integrator_study: the integrator study's settings (``analysis/integrator_study/speed_accuracy.py``);
             None for a task without true dynamics to measure against. ``T`` (the horizon), ``dts``
             (fixed steps), ``batch`` (start states), ``model_time`` (the models' time units per
             scene time unit, default 1), ``quick`` (studied by ``--quick`` too).
@@ -197,24 +197,6 @@ def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     if threads is not None:
         torch.set_num_threads(threads)
     return str(run_experiment(task_config(task, values)))
-
-
-ANALYSIS = "hnn_analysis"   # the import name of the checkout's analysis/ folder (pyproject maps it)
-
-
-def import_analysis() -> ModuleType:
-    """The analysis package ``hnn_analysis``: the ``analysis/`` folder beside this ``hnn`` when there
-    is one (a checkout, installed or not), else the installed package.
-
-    ``pip install -e .`` maps the name to the folder; this also covers a checkout run without that
-    install, or installed before the mapping existed. The commands in ``analysis/`` call it before
-    importing each other, so ``python analysis/<command>.py`` works either way.
-    """
-    if ANALYSIS not in sys.modules:
-        folder = Path(__file__).resolve().parent.parent / "analysis"
-        if (folder / "__init__.py").is_file():
-            _load(ANALYSIS, folder / "__init__.py", package=folder)
-    return importlib.import_module(ANALYSIS)
 
 
 def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:

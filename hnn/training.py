@@ -8,7 +8,7 @@ import math
 import sys
 import time
 import warnings
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 import torch
@@ -57,12 +57,38 @@ def flushes_denormals() -> bool:
     return bool((tiny / 2 == 0).item())                          # half of it is denormal, or 0 when flushed
 
 
+@contextlib.contextmanager
+def flushed_denormals() -> Iterator[None]:
+    """Inside this block float arithmetic flushes denormals to zero; the caller's setting after.
+
+    Weights that only weight decay moves (e.g. those of pixels that are always dark) shrink into
+    denormal floats, and CPU arithmetic on denormals is many times slower (the pixel task slowed
+    over 3x by step 3000: docs/speed.md): both training loops run inside it."""
+    was_flushing = flushes_denormals()
+    torch.set_flush_denormal(True)
+    try:
+        yield
+    finally:
+        torch.set_flush_denormal(was_flushing)
+
+
+def training_steps(total_steps: int, progress: bool, desc: str = "train") -> Iterable[int]:
+    """The steps 0 .. total_steps of a training loop (the paper's loops run total_steps + 1), with a
+    progress bar when ``progress``."""
+    return tqdm(range(total_steps + 1), disable=not progress, desc=desc, leave=False)
+
+
+def is_test_step(step: int, test_every: int, total_steps: int) -> bool:
+    """Whether a loop evaluates its test batch after ``step``: every ``test_every`` and the last."""
+    return step % test_every == 0 or step == total_steps
+
+
 OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
 SCHEDULES = ("constant", "cosine")
 
 
 def adam_optimizer(model, learn_rate: float, weight_decay: float, kind: str = "adam") -> torch.optim.Optimizer:
-    """The optimizer ``train`` uses (analysis/speed/benchmark.py times steps with it too): ``kind``
+    """The optimizer ``train`` uses (analysis/benchmarks/benchmark.py times steps with it too): ``kind``
     ``'adam'`` adds ``weight_decay * w`` to the gradient (the paper's), ``'adamw'`` decays the
     weights apart from the gradient's moments (decoupled, Loshchilov & Hutter; CHNN's)."""
     if kind not in OPTIMIZERS:
@@ -99,7 +125,7 @@ def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: tor
 
 def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: torch.optim.Optimizer,
                    clip_grad: float = 0.0) -> float:
-    """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/speed/benchmark.py
+    """One optimizer step on the batch; its loss. ``train`` runs this, and analysis/benchmarks/benchmark.py
     times this very function against the step's matrix-product floor. ``clip_grad`` > 0 scales the
     gradient down to that global norm first."""
     batch_loss = loss(xb, yb).mean()
@@ -199,14 +225,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     if progress is None:    # a report_progress caller draws its own display
         progress = not verbose and not callbacks and sys.stderr.isatty()
     model.train()
-    # Weights that only weight decay moves (e.g. those of pixels that are always dark) shrink
-    # into denormal floats, and CPU arithmetic on denormals is many times slower (the pixel task
-    # slowed over 3x by step 3000: docs/speed.md). Flush them to zero while training.
-    was_flushing = flushes_denormals()
-    torch.set_flush_denormal(True)
-    try:
+    with flushed_denormals():
         start = time.perf_counter()
-        for step in tqdm(range(total_steps + 1), disable=not progress, desc="train", leave=False):
+        for step in training_steps(total_steps, progress):
             xb, yb = minibatch(x, dxdt, batch_size, gen)
             if input_noise:
                 xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
@@ -220,7 +241,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                                       "set --clip_grad (e.g. 1.0) or train in --dtype float64")
             for callback in callbacks:
                 callback(step + 1, total_steps + 1)
-            if has_test and (step % test_every == 0 or step == total_steps):
+            if has_test and is_test_step(step, test_every, total_steps):
                 tx, ty = minibatch(test_x, test_dxdt, batch_size, test_gen)
                 with torch.no_grad():
                     stats["test_loss"].append(loss(tx, ty).mean().item())
@@ -228,8 +249,6 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             if verbose and step % print_every == 0:
                 test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
                 print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
-    finally:
-        torch.set_flush_denormal(was_flushing)    # the caller's setting, whatever it was
     model.eval()
     stats["seconds"] = time.perf_counter() - start
     return stats

@@ -5,10 +5,6 @@ import torch
 
 import hnn
 
-# the analysis package (hnn_analysis) is this checkout's analysis/ folder, whether or not the
-# install maps it, so its tests import it by name like any package
-hnn.tasks.import_analysis()
-
 # the real-pendulum measurements ship with the task; a copy named by the user's environment
 # must not change what the tests read
 os.environ.pop("HNN_DATA_DIR", None)
@@ -21,11 +17,9 @@ def _seed():
 
 @pytest.fixture
 def spring():
-    import hnn
     return hnn.load_task("spring")
 
 
 @pytest.fixture
 def pend():
-    import hnn
     return hnn.load_task("pend")

@@ -107,8 +107,7 @@ def test_bad_input_is_refused_with_the_fix():
 
 def _small_run(kind, seed, ds):
     torch.manual_seed(seed)
-    model = hnn.MODEL_KINDS[kind].build({"input_dim": 4, "hidden_dim": 64, "nonlinearity": "tanh",
-                                         "field_type": "solenoidal", "periodic": True})
+    model = hnn.MODEL_KINDS[kind].build(hnn.kinds.ModelSpec(kind, input_dim=4, hidden_dim=64, periodic=True))
     hnn.train(model, ds["x"], ds["dxdt"], total_steps=500, learn_rate=3e-3, weight_decay=0.0, seed=seed)
     x, y = torch.tensor(ds["test_x"]), torch.tensor(ds["test_dxdt"])
     with torch.no_grad():

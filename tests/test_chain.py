@@ -123,18 +123,18 @@ def test_learned_mechanical_hnn_is_positive_definite_and_conserves_its_h():
 
 
 def test_second_order_node_moves_q_by_v():
-    model = hnn.SecondOrderNODE(4, 16).double()
+    model = hnn.models.SecondOrderNODE(4, 16).double()
     z = torch.randn(9, 4, dtype=torch.float64)
     dz = model.time_derivative(z)
     assert torch.equal(dz[:, :2], z[:, 2:])
     torch.testing.assert_close(dz[:, 2:], model.acceleration(z))
-    assert hnn.MODEL_KINDS["mechanical"].build({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh"}).n == 2
-    assert isinstance(hnn.MODEL_KINDS["second_order"].build({"input_dim": 4, "hidden_dim": 8, "nonlinearity": "tanh",
-                                                          "periodic": True}), hnn.SecondOrderNODE)
+    assert hnn.MODEL_KINDS["mechanical"].build(hnn.kinds.ModelSpec("mechanical", input_dim=4, hidden_dim=8)).n == 2
+    second_order = hnn.kinds.ModelSpec("second_order", input_dim=4, hidden_dim=8, periodic=True)
+    assert isinstance(hnn.MODEL_KINDS["second_order"].build(second_order), hnn.models.SecondOrderNODE)
 
 
 def test_bad_input_is_refused_with_the_fix():
-    for cls in (hnn.MechanicalHNN, hnn.SecondOrderNODE):
+    for cls in (hnn.MechanicalHNN, hnn.models.SecondOrderNODE):
         for width in (3, 0, 2.0):
             with pytest.raises(ValueError, match="even width"):
                 cls(width)
@@ -143,19 +143,19 @@ def test_bad_input_is_refused_with_the_fix():
     with pytest.raises(ValueError, match="N >= 1"):
         data.Chain((), ())
     with pytest.raises(ValueError, match="unknown objective 'energy'"):
-        hnn.get_objective("energy")
+        hnn.kinds.get_objective("energy")
     model = hnn.MechanicalHNN(4, 8)
     with pytest.raises(ValueError, match="shape \\(batch, 4\\)"):
         model.time_derivative(torch.zeros(3, 6))
     snippets = torch.zeros(2, 5, 4)
     with pytest.raises(ValueError, match="not separable; use method='rk4'"):
-        hnn.snippet_loss(model, snippets, 0.1, method="leapfrog")
+        hnn.trajectory.snippet_loss(model, snippets, 0.1, method="leapfrog")
     with pytest.raises(ValueError, match="fixed-step"):
-        hnn.snippet_loss(model, snippets, 0.1, method="dopri5")
+        hnn.trajectory.snippet_loss(model, snippets, 0.1, method="dopri5")
     with pytest.raises(ValueError, match="unknown snippet loss"):
-        hnn.snippet_loss(model, snippets, 0.1, loss="huber")
+        hnn.trajectory.snippet_loss(model, snippets, 0.1, loss="huber")
     with pytest.raises(ValueError, match="needs the snippets' time step"):
-        hnn.TrajectoryObjective().loss_for(model)
+        hnn.trajectory.TrajectoryObjective().loss_for(model)
 
 
 # ----------------------------------------------------------------------- trajectory training

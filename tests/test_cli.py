@@ -176,7 +176,7 @@ def test_display_only_flags_stay_out_of_the_identity():
     for field in ("print_every", "verbose", "debug", "force"):
         assert field in Config.display_only()
     other = Config(print_every=7, verbose=True, debug=True, force=True, save_dir="elsewhere")
-    assert other.key() == base.key() and hnn.run_dir(other).name == hnn.run_dir(base).name
+    assert other.key() == base.key() and hnn.runs.run_dir(other).name == hnn.runs.run_dir(base).name
     assert Config(total_steps=7).key() != base.key()       # a field that changes what is trained does
 
 
@@ -240,7 +240,7 @@ def test_script_missing_real_data_debug_shows_the_traceback(tmp_path):
 def test_script_prints_the_saved_run(tmp_path):
     out = _run("spring", "--total_steps", "2", "--save_dir", str(tmp_path))
     assert out.returncode == 0, out.stderr
-    folder = hnn.run_dir(hnn.cli.parse(hnn.load_task("spring", "train").Config, ["--total_steps", "2", "--save_dir",
+    folder = hnn.runs.run_dir(hnn.cli.parse(hnn.load_task("spring", "train").Config, ["--total_steps", "2", "--save_dir",
                                                                                  str(tmp_path)]))
     assert folder.name.startswith("spring-hnn-seed0-") and folder.is_dir()
     assert out.stdout.splitlines()[-1] == f"saved the run to {folder}"
@@ -274,7 +274,7 @@ def test_a_config_runs_from_python_with_no_argv(tmp_path):
     Config = hnn.load_task("spring", "train").Config
     config = Config(total_steps=2, hidden_dim=8, model="baseline", save_dir=str(tmp_path))
     run = hnn.run_experiment(config)
-    assert run == hnn.run_dir(config) == hnn.run_dir(hnn.cli.parse(Config, [
+    assert run == hnn.runs.run_dir(config) == hnn.runs.run_dir(hnn.cli.parse(Config, [
         "--total_steps", "2", "--hidden_dim", "8", "--baseline", "--save_dir", str(tmp_path)]))
     assert hnn.load_run(run)[1]["kind"] == "baseline"
     with pytest.raises(ValueError, match="hidden_dim=0: must be an integer >= 1"):

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
+from hnn.models.constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
 
 data = hnn.load_task("chain")
 

@@ -34,7 +34,7 @@ def test_with_the_true_h_the_loss_is_the_analytic_finite_difference_residual():
     c, s = np.cos(2 * dt), np.sin(2 * dt)
     x1 = torch.stack([x0[:, 0] * c + x0[:, 1] * s, x0[:, 1] * c - x0[:, 0] * s], 1)
     pairs = torch.cat([x0, x1], 1)
-    loss = hnn.DiscreteGradientObjective(dt=dt).loss_for(_TrueSpring().double())(pairs, pairs).mean(1)
+    loss = hnn.dgnet.DiscreteGradientObjective(dt=dt).loss_for(_TrueSpring().double())(pairs, pairs).mean(1)
     expected = 2 * x0.pow(2).sum(1) * (np.sin(dt) / dt - np.cos(dt)) ** 2
     torch.testing.assert_close(loss, expected, rtol=1e-10, atol=1e-16)
     assert expected.min() > 1e-5        # not a vacuous zero at this dt
@@ -48,9 +48,23 @@ def test_pairs_are_every_consecutive_pair_of_each_path():
         pairs_from_paths(rows, 4)
 
 
+def test_the_real_pendulums_pairs_never_span_a_gap_in_its_measurements():
+    from hnn_analysis.chains import dgnet
+    data = dgnet.dataset("real", 0)
+    t, dt = data["t"], data["dt"]
+    gaps = int((~np.isclose(np.diff(t), dt)).sum())
+    assert gaps == 11            # 8 gaps of 1/3 s, 2 of 1/2 s, and the 18.5 s test block (the shipped file)
+    assert len(data["pairs"]) == len(t) - 1 - gaps
+    # each pair's second state is the row one dt after its first
+    at = {tuple(row): i for i, row in enumerate(data["x"])}
+    later = np.array([t[at[tuple(p[2:])]] - t[at[tuple(p[:2])]] for p in data["pairs"]])
+    np.testing.assert_allclose(later, dt, rtol=1e-9)
+    assert len(data["test_pairs"]) == len(data["test_t"]) - 1      # the test block has no gap
+
+
 def test_it_learns_the_spring_from_consecutive_states_alone():
     spring = hnn.load_task("spring")
-    objective = hnn.DiscreteGradientObjective()
+    objective = hnn.dgnet.DiscreteGradientObjective()
     data = objective.prepare(spring.get_dataset(seed=0, noise_std=0.0))
     torch.manual_seed(0)
     model = hnn.build_model(2, 32)
@@ -76,11 +90,10 @@ def test_it_runs_from_the_flags_and_refuses_a_kind_without_h(tmp_path):
         trainer.main(["--objective", "discrete_gradient", "--model", "baseline", "--total_steps", "1",
                       "--hidden_dim", "8", "--save_dir", str(tmp_path)])
     with pytest.raises(ValueError, match="needs paths"):
-        hnn.DiscreteGradientObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
+        hnn.dgnet.DiscreteGradientObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
 
 
 def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
-    hnn.tasks.import_analysis()
     from hnn_analysis.chains import dgnet
 
     results = dgnet.main(["--steps", "2", "--seeds", "1", "--tasks", "spring", "real", "--out", str(tmp_path)])

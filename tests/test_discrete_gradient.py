@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.discrete_gradient import gonzalez
+from hnn.integrators.discrete_gradient import gonzalez
 from hnn.interface import EnergyField
 
 
@@ -130,8 +130,7 @@ def test_a_differentiable_rollout_is_differentiable_in_the_weights():
 
 
 def test_the_drift_study_finds_the_learned_h_kept_by_the_discrete_gradient_alone(tmp_path):
-    hnn.tasks.import_analysis()
-    from hnn_analysis.speed import energy_drift
+    from hnn_analysis.integrator_study import energy_drift
 
     results = energy_drift.main(["--steps", "50", "--dt", "0.3", "--train-steps", "30", "--out", str(tmp_path)])
     for kind, rows in results["rows"].items():

@@ -1,11 +1,11 @@
-"""analysis/speed/floor.py: the matrix products a training step performs, as the benchmark's floor counts them."""
+"""analysis/benchmarks/floor.py: the matrix products a training step performs, as the benchmark's floor counts them."""
 
 import pytest
 import torch
 
 import hnn
 from hnn.training import adam_optimizer, l2_loss, optimizer_step
-from hnn_analysis.speed import benchmark, floor
+from hnn_analysis.benchmarks import benchmark, floor
 
 
 def _baseline_step(rows=10, hidden=8):

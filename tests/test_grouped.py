@@ -98,7 +98,7 @@ def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
                                                 "save_dir": str(tmp_path)}) for s in (0, 1) for f in (0.5, 1.0)]
     assert len({grouped.group_key(c) for c in configs}) == 1
     folders = hnn.group_runs.train_group(configs)
-    assert [hnn.find_run(c) for c in configs] == folders        # found by their configs, as lone runs are
+    assert [hnn.runs.find_run(c) for c in configs] == folders        # found by their configs, as lone runs are
     lone_dir = tmp_path / "lone"
     for config, folder in zip(configs, folders):
         model, args, metrics = hnn.load_run(folder)

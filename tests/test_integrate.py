@@ -134,7 +134,7 @@ def test_dopri5_matches_the_analytic_spring_and_runs_backwards(spring):
 def test_the_registry_names_every_method_and_refuses_unknown_and_duplicate_ones():
     assert set(hnn.SOLVERS) == {"solve_ivp", "dopri5", "dop853", "rk4", "leapfrog", "midpoint", "yoshida4",
                                  "discrete_gradient"}
-    assert hnn.SYMPLECTIC_METHODS == ("leapfrog", "midpoint", "yoshida4")
+    assert hnn.integrators.SYMPLECTIC_METHODS == ("leapfrog", "midpoint", "yoshida4")
     assert [n for n, s in hnn.SOLVERS.items() if s.adaptive] == ["solve_ivp", "dopri5", "dop853"]
     with pytest.raises(ValueError, match=r"unknown method 'euler9'; choose one of \['discrete_gradient', 'dop853', 'dopri5'"):
         hnn.get_solver("euler9")
@@ -157,10 +157,10 @@ def test_solvers_describe_themselves_for_reports():
 
 def test_the_default_protocols_describe_their_integrator_word_for_word_as_before():
     # generated tables quote these
-    assert hnn.get_protocol("spring", "paper").describe() == (
+    assert hnn.tasks.get_protocol("spring", "paper").describe() == (
         "paper: 15 trials (box), t in [0, 21.8], 100 points, RK45 rtol 1e-12 atol 1e-06, energy = q2+p2, "
         "model time x1.09 compounding per trial")
-    assert hnn.get_protocol("real", "paper").describe() == (
+    assert hnn.tasks.get_protocol("real", "paper").describe() == (
         "paper: the measured test segment, its own times, RK45 rtol 0.001 atol 1e-06, energy = hamiltonian")
     assert all(p.method == "solve_ivp" and p.options == () for ps in hnn.PROTOCOLS.values() for p in ps.values())
 
@@ -168,7 +168,7 @@ def test_the_default_protocols_describe_their_integrator_word_for_word_as_before
 def test_an_energy_protocol_swaps_its_integrator_in_one_field(spring):
     torch.manual_seed(0)
     model = hnn.build_model(2, 16)
-    rk45 = dataclasses.replace(hnn.get_protocol("spring", "corrected"), num_trials=5)
+    rk45 = dataclasses.replace(hnn.tasks.get_protocol("spring", "corrected"), num_trials=5)
     dopri5 = dataclasses.replace(rk45, method="dopri5")
     a, b = (hnn.evaluate_energy(spring, {"hnn": model}, p) for p in (rk45, dopri5))
     # the same Dormand-Prince pair, controlled per trajectory: measured 8e-6 apart on the true
@@ -181,7 +181,7 @@ def test_an_energy_protocol_swaps_its_integrator_in_one_field(spring):
 
 
 def test_protocol_options_and_fixed_step_methods(spring):
-    base = dataclasses.replace(hnn.get_protocol("spring", "corrected"), num_trials=5)
+    base = dataclasses.replace(hnn.tasks.get_protocol("spring", "corrected"), num_trials=5)
     dop853 = dataclasses.replace(base, options={"scipy_method": "DOP853"})
     assert dop853.options == (("scipy_method", "DOP853"),) and "DOP853 rtol 1e-12 atol 1e-06" in dop853.describe()
     # a fixed-step method gets no rtol/atol; dt is in the rescaled time s = t / 20 here
@@ -193,4 +193,4 @@ def test_protocol_options_and_fixed_step_methods(spring):
         dataclasses.replace(base, method="rk5")
     # per-trial time scales need every row in every call of f: dopri5 drops finished rows
     with pytest.raises(ValueError, match="keeps every row together"):
-        hnn.evaluate_energy(spring, {}, dataclasses.replace(hnn.get_protocol("spring", "paper"), method="dopri5"))
+        hnn.evaluate_energy(spring, {}, dataclasses.replace(hnn.tasks.get_protocol("spring", "paper"), method="dopri5"))

@@ -11,7 +11,7 @@ import hnn
 chain_data = hnn.load_task("chain")
 
 
-class _BobsL(hnn.LagrangianNN):
+class _BobsL(hnn.models.LagrangianNN):
     """The true L = T - V of ``chain``, written from the bobs' Cartesian positions (not its mass matrix)."""
 
     def __init__(self, chain):
@@ -41,7 +41,7 @@ def test_with_the_true_l_the_acceleration_and_energy_are_the_true_ones(chain):
 
 def test_its_energy_is_conserved_along_its_flow_for_random_weights():
     torch.manual_seed(1)
-    model = hnn.LagrangianNN(4, hidden_dim=32).double()
+    model = hnn.models.LagrangianNN(4, hidden_dim=32).double()
     # a black-box L has no guaranteed kinetic term: this seed's flow stays regular over [0, 0.3] from
     # these starts (other seeds reach states where d2L/dqdot2 is singular and the accelerations blow up)
     z0 = 0.3 * torch.randn(4, 4, dtype=torch.float64)
@@ -57,11 +57,11 @@ def test_its_energy_is_conserved_along_its_flow_for_random_weights():
 
 
 def test_a_degenerate_l_is_an_error_naming_the_states():
-    class Linear(hnn.LagrangianNN):        # L = qdot cos q - V: d2L/dqdot2 = 0 everywhere
+    class Linear(hnn.models.LagrangianNN):        # L = qdot cos q - V: d2L/dqdot2 = 0 everywhere
         def lagrangian_at(self, q, v):
             return (v * torch.cos(q)).sum() - torch.cos(q).sum()
     z = torch.tensor([[0.1, 0.2], [0.3, -0.4]], dtype=torch.float64)
-    with pytest.raises(hnn.SingularLagrangianError, match=r"singular at 2 states.*#0 \[q, qdot\] = \[0\.1, 0\.2\]") as err:
+    with pytest.raises(hnn.models.SingularLagrangianError, match=r"singular at 2 states.*#0 \[q, qdot\] = \[0\.1, 0\.2\]") as err:
         Linear(2, 4).double().time_derivative(z)
     assert err.value.states == [0, 1]
 

@@ -14,21 +14,31 @@ def _layer_of() -> dict:
     return {module: layer for layer, modules in hnn._LAYERS.items() for module in modules}
 
 
+def _unit(path: Path) -> str:
+    """What ``_LAYERS`` lists for a file: its room's folder for a module in one, else its stem."""
+    parts = path.relative_to(PACKAGE).parts
+    return parts[0] if len(parts) > 1 else path.stem
+
+
 def _imports(path: Path) -> set[str]:
-    """The hnn modules that ``path`` imports anywhere in its code."""
+    """The units of ``hnn`` (top-level modules or rooms) that ``path`` imports anywhere in its code."""
+    package = ["hnn", *path.relative_to(PACKAGE).parts[:-1]]
     found = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom):
-            if node.level == 1 and node.module:                 # from .x import y
-                found.add(node.module.split(".")[0])
-            elif node.level == 1:                               # from . import x, y
-                found.update(alias.name for alias in node.names)
-            elif node.level == 0 and node.module and node.module.split(".")[0] == "hnn":
-                parts = node.module.split(".")
-                found.update([parts[1]] if len(parts) > 1 else [alias.name for alias in node.names])
+            base = package[: len(package) - node.level + 1] if node.level else []
+            target = [*base, *(node.module.split(".") if node.module else [])]
+            if target[:1] != ["hnn"]:
+                continue
+            # "from hnn import x" / "from . import x" (at the package's top): x is the unit
+            found.update([target[1]] if len(target) > 1 else [alias.name for alias in node.names])
         elif isinstance(node, ast.Import):
-            found.update(a.name.split(".")[1] for a in node.names if a.name.startswith("hnn.") )
+            found.update(a.name.split(".")[1] for a in node.names if a.name.startswith("hnn."))
     return found
+
+
+def _files() -> list[Path]:
+    return [p for p in PACKAGE.rglob("*.py") if p.name != "__init__.py" or p.parent != PACKAGE]
 
 
 def violations(layer_of: dict, imports: dict) -> list[str]:
@@ -44,7 +54,7 @@ def violations(layer_of: dict, imports: dict) -> list[str]:
 
 
 def test_every_module_has_one_layer():
-    modules = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__"}
+    modules = {_unit(p) for p in _files()}
     listed = [m for ms in hnn._LAYERS.values() for m in ms]
     assert len(listed) == len(set(listed)), "a module is in two layers"
     assert set(listed) == modules, (f"without a layer: {sorted(modules - set(listed))}; "
@@ -53,8 +63,20 @@ def test_every_module_has_one_layer():
 
 def test_no_module_imports_a_higher_layer_or_across_the_middle():
     layer_of = _layer_of()
-    imports = {p.stem: _imports(p) for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
+    imports = {}
+    for path in _files():
+        unit = _unit(path)
+        imports.setdefault(unit, set()).update(_imports(path) - {unit})
     assert violations(layer_of, imports) == []
+
+
+def test_the_rooms_are_folders_and_read_their_own_relative_imports():
+    """A module in a room that imports a sibling counts as its own room (no violation), one that
+    reaches ``..models`` from ``integrators`` counts as the other room."""
+    fixed_step = PACKAGE / "integrators" / "fixed_step.py"
+    assert _unit(fixed_step) == "integrators" and "errors" in _imports(fixed_step)
+    assert "integrators" not in _imports(PACKAGE / "models" / "mlp.py")
+    assert {"integrators", "models"} <= _imports(PACKAGE / "kinds.py") | _imports(PACKAGE / "evaluation.py")
 
 
 def test_the_rules_catch_an_upward_and_a_sideways_import():

@@ -13,10 +13,8 @@ import numpy as np
 import pytest
 
 import hnn
-
-hnn.tasks.import_analysis()
-from hnn_analysis.paper import reproduce  # noqa: E402
-from hnn_analysis.scenes import measured_metrics as mm, measured_study, scene_study  # noqa: E402
+from hnn_analysis.paper import reproduce
+from hnn_analysis.scenes import measured_metrics as mm, measured_study, scene_study
 
 REPO = Path(__file__).resolve().parent.parent
 SYSTEMS = REPO / "experiment-measured" / "systems"

@@ -7,7 +7,7 @@ import hnn
 
 def test_mean_and_se_uses_elements_for_std_and_rows_for_sqrt():
     v = np.array([[1.0, 2.0], [3.0, 5.0], [8.0, 13.0]])
-    mean, se = hnn.mean_and_se(v)
+    mean, se = hnn.metrics.mean_and_se(v)
     assert mean == pytest.approx(32 / 6)
     elems = v.flatten()
     std = np.sqrt(((elems - elems.mean()) ** 2).sum() / 5)     # unbiased, over the 6 elements
@@ -17,9 +17,9 @@ def test_mean_and_se_uses_elements_for_std_and_rows_for_sqrt():
 def test_batch_means_se_is_std_of_contiguous_group_means():
     v = np.arange(15, dtype=float) ** 2
     groups = v.reshape(5, 3).mean(1)
-    assert hnn.batch_means_se(v) == pytest.approx(groups.std() / np.sqrt(5))
+    assert hnn.metrics.batch_means_se(v) == pytest.approx(groups.std() / np.sqrt(5))
     with pytest.raises(ValueError, match="divisible"):
-        hnn.batch_means_se(np.ones(14))
+        hnn.metrics.batch_means_se(np.ones(14))
 
 
 def test_energy_mse_trials_and_single_trajectory():

@@ -33,7 +33,7 @@ def test_every_kind_is_a_declared_model_whose_declarations_hold(kind):
     # the row reads the class, the instance agrees with it: one declaration
     assert (model.conservative, model.separable, model.dissipative) == (row.conservative, row.separable,
                                                                         row.dissipative)
-    assert row.coordinates in hnn.COORDINATES
+    assert row.coordinates in hnn.interface.COORDINATES
     x = torch.randn(32, _state_width(model), dtype=torch.float64, requires_grad=True)
     dxdt = model.time_derivative(x).detach()
     assert dxdt.shape == x.shape and torch.isfinite(dxdt).all()
@@ -111,7 +111,7 @@ def test_declarations_are_checked_when_a_kind_is_written():
     with pytest.raises(TypeError, match="declares coordinates 'polar'"):
         type("Bad", (hnn.Model,), {"coordinates": "polar"})
     with pytest.raises(TypeError, match="must be an hnn.Model subclass"):
-        hnn.ModelKind(torch.nn.Linear, lambda args: None)
+        hnn.kinds.ModelKind(torch.nn.Linear, lambda spec: None)
     with pytest.raises(TypeError, match="is not an hnn.Model"):
         hnn.trajectory.default_method(torch.nn.Linear(2, 2))
 
@@ -143,3 +143,18 @@ def test_the_energy_protocol_rolls_a_model_out_in_its_own_state():
     np.testing.assert_allclose(out["m"]["traj"], expected.numpy(), rtol=1e-10, atol=1e-12)
     canonical = hnn.evaluate_energy(spring, {"m": model}, protocol)["m"]["traj"]
     assert np.abs(canonical - out["m"]["traj"]).max() > 1e-6       # a different start state: mapped, not read as is
+
+
+def test_a_model_spec_reads_its_declared_fields_of_a_runs_args_and_a_missing_one_is_named():
+    args = {"kind": "mechanical", "input_dim": 4, "hidden_dim": 8, "learn_rate": 1e-3, "periodic": "theta"}
+    spec = hnn.kinds.ModelSpec.from_args(args)
+    # the run's other settings (learn_rate) are not the model's; a task's column names mean "angles"
+    assert (spec.kind, spec.input_dim, spec.hidden_dim, spec.periodic, spec.nonlinearity) == ("mechanical", 4, 8, True, "tanh")
+    assert not hasattr(spec, "learn_rate")
+    assert hnn.kinds.model_from_args(args).periodic is True
+    with pytest.raises(ValueError, match="need its model's kind"):
+        hnn.kinds.ModelSpec.from_args({"input_dim": 2})
+    with pytest.raises(ValueError, match="input_dim must be a positive integer, got None"):
+        hnn.kinds.model_from_args({"kind": "hnn"})
+    with pytest.raises(ValueError, match="constraint graph"):
+        hnn.MODEL_KINDS["constrained"].build(hnn.kinds.ModelSpec("constrained", input_dim=4))

@@ -6,8 +6,8 @@ import torch
 
 import hnn
 import hnn.models
-import hnn.tanh_mlp
-from hnn.models import _input_gradient
+import hnn.models.tanh_mlp
+from hnn.models.mlp import input_gradient
 
 
 class ExactH(torch.nn.Module):
@@ -54,7 +54,7 @@ def test_four_dimensional_canonical_field():
 @pytest.fixture(params=["torch.tanh", "2 sigmoid(2a) - 1"])
 def tanh_path(request, monkeypatch):
     """Run a test with the MLPs' tanh taking each of its two ways, whatever the tensors' sizes."""
-    monkeypatch.setattr(hnn.tanh_mlp, "_FAST_TANH_MIN_ELEMENTS", 10 ** 9 if request.param == "torch.tanh" else 0)
+    monkeypatch.setattr(hnn.models.tanh_mlp, "_FAST_TANH_MIN_ELEMENTS", 10 ** 9 if request.param == "torch.tanh" else 0)
     return request.param
 
 
@@ -62,8 +62,8 @@ def tanh_path(request, monkeypatch):
 def test_the_mlps_tanh_is_tanh(tanh_path, dtype, tolerance):
     a = torch.linspace(-12, 12, 200_001, dtype=dtype)
     with torch.no_grad():       # with grad on, an input that needs none takes torch.tanh (safe inside jvp)
-        fast = hnn.tanh_mlp.fast_tanh(a)
-    for out in (fast, hnn.tanh_mlp.fast_tanh_(a.clone())):
+        fast = hnn.models.tanh_mlp.fast_tanh(a)
+    for out in (fast, hnn.models.tanh_mlp.fast_tanh_(a.clone())):
         assert (out.double() - torch.tanh(a.double())).abs().max() <= tolerance
         if tanh_path == "torch.tanh":
             assert torch.equal(out, torch.tanh(a))
@@ -73,9 +73,9 @@ def test_the_mlps_tanh_is_tanh(tanh_path, dtype, tolerance):
 
 def test_the_mlps_tanh_differentiates_twice_as_torch_tanh(tanh_path):
     a = torch.randn(6, 5, dtype=torch.float64, requires_grad=True)
-    assert torch.autograd.gradcheck(hnn.tanh_mlp.fast_tanh, (a,))
-    assert torch.autograd.gradgradcheck(hnn.tanh_mlp.fast_tanh, (a,))
-    g, = torch.autograd.grad(hnn.tanh_mlp.fast_tanh(a).sum(), a, create_graph=True)
+    assert torch.autograd.gradcheck(hnn.models.tanh_mlp.fast_tanh, (a,))
+    assert torch.autograd.gradgradcheck(hnn.models.tanh_mlp.fast_tanh, (a,))
+    g, = torch.autograd.grad(hnn.models.tanh_mlp.fast_tanh(a).sum(), a, create_graph=True)
     g_ref, = torch.autograd.grad(torch.tanh(a).sum(), a, create_graph=True)
     torch.testing.assert_close(g, g_ref, rtol=1e-14, atol=1e-15)
     torch.testing.assert_close(torch.autograd.grad(g.pow(2).sum(), a)[0],
@@ -114,7 +114,7 @@ def test_closed_form_is_used_and_gradcheck(tanh_path):
     net = hnn.MLP(2, 6, 2).double()
     x = torch.randn(5, 2, dtype=torch.float64, requires_grad=True)
     W1, b1, W2, b2, W3 = (p.detach().clone().requires_grad_(True) for p in net.parameters())
-    from hnn.tanh_mlp import _TanhMLPInputGradient
+    from hnn.models.tanh_mlp import _TanhMLPInputGradient
     assert torch.autograd.gradcheck(lambda *a: _TanhMLPInputGradient.apply(*a), (x, W1, b1, W2, b2, W3[1]))
 
 
@@ -128,9 +128,9 @@ def _closed_form_calls(monkeypatch) -> list:
             return real(*args, **kwargs)
         return spy
     for name in ("_tanh_mlp_input_gradient",):
-        monkeypatch.setattr(hnn.tanh_mlp, name, spy_on(getattr(hnn.tanh_mlp, name)))
+        monkeypatch.setattr(hnn.models.tanh_mlp, name, spy_on(getattr(hnn.models.tanh_mlp, name)))
     # the evaluation path of a few states (the rollout kernel)
-    monkeypatch.setattr(hnn.tanh_mlp.EvaluationKernel, "numpy", spy_on(hnn.tanh_mlp.EvaluationKernel.numpy))
+    monkeypatch.setattr(hnn.models.tanh_mlp.EvaluationKernel, "numpy", spy_on(hnn.models.tanh_mlp.EvaluationKernel.numpy))
     return calls
 
 
@@ -194,13 +194,13 @@ def test_the_evaluation_kernel_serves_a_few_states_and_agrees_with_the_training_
     torch.manual_seed(0)
     model = _KINDS[kind]().to(dtype)
     calls = {"kernel": 0}
-    real = hnn.tanh_mlp.EvaluationKernel.numpy
+    real = hnn.models.tanh_mlp.EvaluationKernel.numpy
 
     def spy(*args):
         calls["kernel"] += 1
         return real(*args)
-    monkeypatch.setattr(hnn.tanh_mlp.EvaluationKernel, "numpy", spy)
-    limit = hnn.tanh_mlp.KERNEL_MAX_ROWS
+    monkeypatch.setattr(hnn.models.tanh_mlp.EvaluationKernel, "numpy", spy)
+    limit = hnn.models.tanh_mlp.KERNEL_MAX_ROWS
     for rows in (1, 15, limit, limit + 1):
         x = torch.randn(rows, 4, dtype=dtype)[:, [0, 2, 1, 3]]     # a strided view
         before = calls["kernel"]
@@ -273,7 +273,7 @@ def test_mlp_is_the_papers():
     assert net.linear3.bias is None
     w = net.linear2.weight
     torch.testing.assert_close(w @ w.T, torch.eye(200), atol=1e-5, rtol=0)   # orthogonal init
-    assert math.isclose(float(hnn.permutation_tensor(2)[0, 1]), 1.0)
+    assert math.isclose(float(hnn.models.permutation_tensor(2)[0, 1]), 1.0)
 
 
 def test_bad_input_gives_clear_errors():
@@ -299,7 +299,7 @@ def test_bad_input_gives_clear_errors():
 def test_autograd_path_for_other_nonlinearities_agrees_with_finite_differences():
     net = hnn.MLP(2, 16, 2, nonlinearity="softplus").double()
     x = torch.randn(4, 2, dtype=torch.float64)
-    g = _input_gradient(net, x, 1, create_graph=False)
+    g = input_gradient(net, x, 1, create_graph=False)
     eps = 1e-6
     for j in range(2):
         e = torch.zeros(2, dtype=torch.float64)
@@ -312,7 +312,7 @@ def test_large_tanh_layers_differentiate_through_forward_mode_inside_a_recorded_
     """MechanicalHNN.observed_time_derivative takes a jvp of M^-1(q) while training records the graph:
     there tanh's input reports requires_grad=False, and the in-place fast tanh once clobbered a value
     the backward needed. Gradients must equal those of torch's own tanh (big batch: the fast path)."""
-    import hnn.tanh_mlp as tanh_mlp
+    import hnn.models.tanh_mlp as tanh_mlp
 
     def grads():
         torch.manual_seed(0)

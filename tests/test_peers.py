@@ -4,9 +4,7 @@ import json
 import pytest
 
 import hnn
-
-hnn.tasks.import_analysis()
-from hnn_analysis.chains import peers  # noqa: E402
+from hnn_analysis.chains import peers
 
 TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
         "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}}

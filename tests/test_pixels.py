@@ -179,7 +179,7 @@ def test_pixel_hnn_loss_is_the_papers_sum():
     cc = (z[:, 1] - (z_next[:, 0] - z[:, 0])) ** 2       # the second latent is the per-frame change of the first
     dyn = ((z_next - z - model.time_derivative(z)) ** 2).mean(1)
     torch.testing.assert_close(pixel_loss(model, x, x_next), ae + cc + 0.1 * dyn)
-    rk4 = hnn.rk4_step(model.time_derivative, z, 1.0)
+    rk4 = hnn.integrators.rk4_step(model.time_derivative, z, 1.0)
     torch.testing.assert_close(pixel_loss(model, x, x_next, use_rk4=True), ae + cc + 0.1 * ((z_next - z - rk4) ** 2).mean(1))
     with pytest.raises(ValueError, match="same shape"):
         pixel_loss(model, x, x_next[:3])
@@ -251,7 +251,7 @@ def test_train_script_end_to_end(tmp_path, system):
         assert (tmp_path / args["dataset_cache_key"]).is_file()          # the frames it trained on
     assert (hnn_run / "add-energy.gif").exists()
     assert (tmp_path / "pixels-compare-seed0.gif").exists()
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose", "--render_workers", "2"])) == hnn_run
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose", "--render_workers", "2"])) == hnn_run
 
 
 def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, system, metric):
@@ -268,22 +268,22 @@ def test_compare_gif_finds_the_sibling_run_when_the_name_holds_hnn(tmp_path, sys
         assert f["truth"].dtype == np.float32 and f["truth"].shape == f["decoded"].shape
     args = {"name": "myhnn", "save_dir": "x", "seed": 2, "model": "hnn", "use_rk4": True}
     Config = hnn.load_task("pixels", "train").Config
-    assert metric._sibling_run_name(args) == hnn.run_dir(Config(**{**args, "model": "baseline"})).name
-    assert metric._sibling_run_name({**args, "model": "baseline"}) == hnn.run_dir(Config(**args)).name
+    assert metric._sibling_run_name(args) == hnn.runs.run_dir(Config(**{**args, "model": "baseline"})).name
+    assert metric._sibling_run_name({**args, "model": "baseline"}) == hnn.runs.run_dir(Config(**args)).name
     assert metric._sibling_run_name(args).startswith("myhnn-baseline-rk4-seed2-")
 
 
 def test_add_energy_raises_the_learned_energy():
     torch.manual_seed(0)
     model = PixelHNN(8, 2, 16).double()
-    bump = hnn.energy_bump(model, [0.5, 0.0], t_flow=5.0, t_bump=0.5, t_after=5.0, points=60)
+    bump = hnn.evaluation.energy_bump(model, [0.5, 0.0], t_flow=5.0, t_bump=0.5, t_after=5.0, points=60)
     H, stage = bump["H"], bump["stage"]
     # the symplectic phases keep the latent H; the gradient phase climbs it
     assert np.ptp(H[stage == 0]) < 1e-6 and np.ptp(H[stage == 2]) < 1e-6
     assert bump["H_after"] > bump["H_before"] + 1e-3
     np.testing.assert_allclose(bump["t"][-1], 10.5)
     with pytest.raises(ValueError, match="needs a model with a conserved H"):
-        hnn.energy_bump(PixelHNN(8, 2, 16, baseline=True), [0.5, 0.0])
+        hnn.evaluation.energy_bump(PixelHNN(8, 2, 16, baseline=True), [0.5, 0.0])
 
 
 def test_other_tasks_never_import_gymnasium():

@@ -32,7 +32,7 @@ def spring_runs(tmp_path_factory):
 def energy(spring_runs):
     models = {label: hnn.load_run(run)[0] for label, run in spring_runs.items()}
     spring = hnn.load_task("spring")
-    return {protocol: hnn.evaluate_energy(spring, models, hnn.get_protocol("spring", protocol))
+    return {protocol: hnn.evaluate_energy(spring, models, hnn.tasks.get_protocol("spring", protocol))
             for protocol in ("paper", "corrected")}
 
 

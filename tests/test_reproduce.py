@@ -7,8 +7,9 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis.paper import figures, registry, reproduce
-from hnn_analysis import readme, sweep
+from hnn_analysis.paper import figures, registry, reproduce, tables
+from hnn_analysis import commands, readme
+from hnn import sweep
 
 TINY = 20          # training steps of the end-to-end runs
 
@@ -46,25 +47,25 @@ def _cell(table: str, title: str, label: str) -> str:
 
 
 def test_compare_edges():
-    assert reproduce.compare((1.1, 0.0), (1.0, 0.1)) == "within"        # 1.1 - 1.0 > 0.1 in floats
-    assert reproduce.compare((0.9, 0.0), (1.0, 0.1)) == "within"
-    assert reproduce.compare((1.1000001, 0.0), (1.0, 0.1)) == "worse"
-    assert reproduce.compare((0.8999999, 0.0), (1.0, 0.1)) == "better"
-    assert reproduce.compare(None, (1.0, 0.1)) is None
+    assert tables.compare((1.1, 0.0), (1.0, 0.1)) == "within"        # 1.1 - 1.0 > 0.1 in floats
+    assert tables.compare((0.9, 0.0), (1.0, 0.1)) == "within"
+    assert tables.compare((1.1000001, 0.0), (1.0, 0.1)) == "worse"
+    assert tables.compare((0.8999999, 0.0), (1.0, 0.1)) == "better"
+    assert tables.compare(None, (1.0, 0.1)) is None
 
 
 def test_tables_marks_missing_and_stages(results):
-    quick = reproduce.tables_markdown(results)
+    quick = tables.tables_markdown(results)
     results["meta"].update(quick=False, mode="full settings")     # marks are for full settings
-    table = reproduce.tables_markdown(results)
-    marks = reproduce.MARKS
+    table = tables.tables_markdown(results)
+    marks = tables.MARKS
     assert _cell(table, "Train loss", "baseline").endswith(marks["within"])    # exactly at the ±
     assert _cell(table, "Train loss", "hnn").endswith(marks["better"])
     assert _cell(table, "Test loss", "baseline").endswith(marks["worse"])
     assert _cell(table, "Test loss", "hnn").endswith(marks["within"])
     assert _cell(table, "Energy MSE", "baseline").endswith(marks["within"])
     assert _cell(table, "Energy MSE", "hnn").endswith(marks["within"])
-    assert reproduce.LEGEND in table and "QUICK" in quick.splitlines()[0]
+    assert tables.LEGEND in table and "QUICK" in quick.splitlines()[0]
     assert "| 1.05x |" in table and "| 1.05x |" in quick                                 # the ratio column stays
     # tasks absent from the checkout are listed; a present one without data is reported as skipped
     missing = next(line for line in table.splitlines() if line.startswith("Not yet in this checkout"))
@@ -206,7 +207,7 @@ def test_quick_figures_say_quick_in_their_titles(tmp_path):
 
 def test_the_recorded_command_names_no_folder_of_this_machine(tmp_path):
     root = hnn.tasks.repo_root()
-    command = reproduce.portable_command(["--out", str(root / "results-x"), "--jobs", "2", "--out", str(tmp_path)])
+    command = commands.portable_command(["--out", str(root / "results-x"), "--jobs", "2", "--out", str(tmp_path)])
     assert command == "python analysis/reproduce.py --out results-x --jobs 2 --out DIR"
 
 
@@ -277,18 +278,18 @@ def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results)
     def hnn_energy_cell(values):
         for seed, value in zip("012", values):
             per_seed[seed]["hnn"]["energy_mse_paper"] = [value, 1e-5]
-        text = reproduce.headline_markdown(results)
+        text = tables.headline_markdown(results)
         return text, next(line for line in text.splitlines() if line.startswith("| spring | hnn |")).split("|")
 
     # paper 3.8416e-04 ± 6.53e-05; ours mean 5e-4, std 1e-4, standard error 5.8e-5: the gap 1.16e-4 is
     # wider than either band, so worse; the spread (std) is 1.5x the paper's ±, so it is named under the table
     text, cells = hnn_energy_cell((4e-4, 5e-4, 6e-4))
     assert cells[3].strip() == "3"
-    assert cells[7].strip() == f"0.0005 ± 5.8e-05 {reproduce.MARKS['worse']}"
+    assert cells[7].strip() == f"0.0005 ± 5.8e-05 {tables.MARKS['worse']}"
     assert "spring hnn energy MSE (0.0004 to 0.0006) 1.5x" in text
     # the same mean, std 3e-4: the standard error 1.7e-4 is now the band and covers the gap
     text, cells = hnn_energy_cell((2e-4, 5e-4, 8e-4))
-    assert cells[7].strip() == f"0.0005 ± 0.00017 {reproduce.MARKS['within']}"
+    assert cells[7].strip() == f"0.0005 ± 0.00017 {tables.MARKS['within']}"
 
 
 def test_a_task_with_min_seeds_trains_more_seeds_only_across_seeds():
@@ -302,7 +303,7 @@ def test_a_task_with_min_seeds_trains_more_seeds_only_across_seeds():
 
 
 def test_quick_tables_carry_no_marks_against_the_paper_and_say_why(results):
-    quick = reproduce.tables_markdown(results)
+    quick = tables.tables_markdown(results)
     table_rows = [line for line in quick.splitlines() if line.startswith("| ") and "---" not in line]
-    assert table_rows and not any(mark in line for line in table_rows for mark in reproduce.MARKS.values())
-    assert reproduce.QUICK_NOTE in quick and "astronomical" in quick and reproduce.LEGEND not in quick
+    assert table_rows and not any(mark in line for line in table_rows for mark in tables.MARKS.values())
+    assert tables.QUICK_NOTE in quick and "astronomical" in quick and tables.LEGEND not in quick

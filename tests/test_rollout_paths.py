@@ -125,8 +125,8 @@ def test_the_fused_rk4_increment_is_the_classic_formula(dtype):
     model = _models(dtype)["hnn"]
     x = torch.randn(64, 4, dtype=dtype)
     with torch.no_grad():
-        fused = hnn.rk4_step(model.time_derivative, x, 0.1)
-        classic = hnn.rk4_step(model.time_derivative, x, torch.full((64, 1), 0.1, dtype=dtype))
+        fused = hnn.integrators.rk4_step(model.time_derivative, x, 0.1)
+        classic = hnn.integrators.rk4_step(model.time_derivative, x, torch.full((64, 1), 0.1, dtype=dtype))
     eps = torch.finfo(dtype).eps
     torch.testing.assert_close(fused, classic, rtol=16 * eps, atol=16 * eps)   # a few roundings apart
 

@@ -33,7 +33,7 @@ def _save(args, fill: float, directory=None):
     with torch.no_grad():
         for p in model.parameters():
             p.fill_(fill)
-    return hnn.save_run(directory or hnn.run_dir(args), model, _saved(args), {"train_loss": fill})
+    return hnn.runs.save_run(directory or hnn.runs.run_dir(args), model, _saved(args), {"train_loss": fill})
 
 
 def _snapshot(directory: Path) -> dict:
@@ -46,9 +46,9 @@ def _hidden(save_dir: Path) -> list[str]:
 
 
 def _assert_old_run_intact(old, new, before: dict) -> None:
-    run = hnn.run_dir(old)
+    run = hnn.runs.run_dir(old)
     assert _snapshot(run) == before
-    assert hnn.find_run(old) == run and hnn.find_run(new) is None
+    assert hnn.runs.find_run(old) == run and hnn.runs.find_run(new) is None
     model, args, metrics = hnn.load_run(run)
     assert args["total_steps"] == old.total_steps and metrics["train_loss"] == 0.25
     assert all((p == 0.25).all() for p in model.parameters())
@@ -67,7 +67,7 @@ def test_a_save_failing_between_files_leaves_the_old_run(failing, tmp_path, monk
 
     monkeypatch.setattr(hnn.runs, "write_json", write_json)
     with pytest.raises(OSError, match="disk full"):
-        _save(new, 0.5, hnn.run_dir(old))
+        _save(new, 0.5, hnn.runs.run_dir(old))
     _assert_old_run_intact(old, new, before)
     assert _hidden(tmp_path) == []                     # the half-filled folder is removed
 
@@ -84,7 +84,7 @@ def test_a_failed_move_puts_the_old_run_back(tmp_path, monkeypatch):
 
     monkeypatch.setattr(hnn.io.os, "rename", rename)
     with pytest.raises(OSError, match="rename refused"):
-        _save(new, 0.5, hnn.run_dir(old))
+        _save(new, 0.5, hnn.runs.run_dir(old))
     monkeypatch.undo()
     _assert_old_run_intact(old, new, before)
     assert _hidden(tmp_path) == []
@@ -113,7 +113,7 @@ def rename(src, dst):
 hnn.runs.write_json, os.rename = write_json, rename
 Config = hnn.load_task("spring", "train").Config
 old, new = Config(save_dir=save_dir, total_steps=2, hidden_dim=8), Config(save_dir=save_dir, total_steps=3, hidden_dim=8)
-hnn.save_run(hnn.run_dir(old), hnn.build_model(2, 8), {**new.to_dict(), "kind": "hnn"}, {"train_loss": 0.5})
+hnn.runs.save_run(hnn.runs.run_dir(old), hnn.build_model(2, 8), {**new.to_dict(), "kind": "hnn"}, {"train_loss": 0.5})
 """
 
 
@@ -135,7 +135,7 @@ def test_a_save_killed_between_files_leaves_the_old_run(kill_at, tmp_path):
     assert len(leftover) == 1 and leftover[0].startswith(".spring-hnn-seed0-")   # never looked at
     assert ".tmp-" in leftover[0]
     # a later save into that folder replaces the old run, whatever was left over
-    run = _save(new, 0.5, hnn.run_dir(old))
+    run = _save(new, 0.5, hnn.runs.run_dir(old))
     assert hnn.load_run(run)[1]["total_steps"] == 3 and _hidden(tmp_path) == leftover
 
 
@@ -145,19 +145,19 @@ def test_a_save_killed_between_the_renames_leaves_no_run(tmp_path):
     before = _snapshot(_save(old, 0.25))
     _killed_save(tmp_path, "aside")
     # nothing at the run's path: it trains anew; the old run waits whole in .old-*
-    assert not hnn.run_dir(old).exists()
-    assert hnn.find_run(old) is None
+    assert not hnn.runs.run_dir(old).exists()
+    assert hnn.runs.find_run(old) is None
     [aside] = [p for p in tmp_path.iterdir() if ".old-" in p.name]
     assert _snapshot(aside) == before
     run = _save(old, 0.5)
-    assert hnn.find_run(old) == run
+    assert hnn.runs.find_run(old) == run
 
 
 def test_a_save_replaces_the_old_run_whole_with_ordinary_permissions(tmp_path):
     old, new = _args(tmp_path, 2), _args(tmp_path, 3)
     run = _save(old, 0.25)
     (run / "rollout.npz").write_bytes(b"of the old model")     # written after a save, as pixel runs do
-    assert hnn.find_run(old) == run
+    assert hnn.runs.find_run(old) == run
     assert _save(new, 0.5, run) == run
     assert sorted(p.name for p in run.iterdir()) == ["args.json", hnn.runs.COMPLETE, "metrics.json", "model.tar"]
     assert _hidden(tmp_path) == []
@@ -168,7 +168,7 @@ def test_a_save_replaces_the_old_run_whole_with_ordinary_permissions(tmp_path):
     assert all(p.stat().st_mode & 0o777 == 0o666 & ~_UMASK for p in run.iterdir())
     # files added after the save keep the run complete
     hnn.runs.write_json(run / "metrics.json", {**metrics, "energy_mse": 1.0})
-    assert hnn.find_run(old) == run
+    assert hnn.runs.find_run(old) == run
 
 
 @pytest.mark.parametrize("damage", ["no mark", "file missing"])
@@ -176,7 +176,7 @@ def test_an_incomplete_folder_is_neither_reused_nor_loaded(damage, tmp_path):
     args = _args(tmp_path, 2)
     run = _save(args, 0.25)
     (run / (hnn.runs.COMPLETE if damage == "no mark" else "metrics.json")).unlink()
-    assert hnn.find_run(args) is None
+    assert hnn.runs.find_run(args) is None
     with pytest.raises(RuntimeError, match="interrupted.*delete the folder and retrain"):
         hnn.load_run(run)
 
@@ -260,5 +260,5 @@ def test_a_run_trains_on_its_fraction(tmp_path, monkeypatch):
     assert seen == [75]                                            # 10% of spring's 750 training rows
     assert json.loads((folder / "args.json").read_text())["train_fraction"] == 0.1
     full = trainer.main(argv)
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv)) == full
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--train_fraction", "0.5"])) is None
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv)) == full
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv + ["--train_fraction", "0.5"])) is None

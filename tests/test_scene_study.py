@@ -8,7 +8,7 @@ import torch
 
 import hnn
 from hnn_analysis.paper import reproduce
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_study
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_study, scene_common
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -188,7 +188,7 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
-    assert set(entry["rungs"]) == set(scene_study.task_rungs("spring"))
+    assert set(entry["rungs"]) == set(scene_common.task_rungs("spring"))
     assert len(entry["grid"]) == len(entry["rungs"]) * 3 and entry["card"] is not None
     assert all("train_cost" in m for m in entry["grid"].values())
     assert entry["speed"]["separable"]["fastest"] is not None
@@ -204,9 +204,9 @@ def test_models_measured_together_get_the_numbers_each_gets_alone(tmp_path):
     configs = [hnn.tasks.task_config("spring", {"seed": s, "train_fraction": f, "hidden_dim": 16, "total_steps": 30,
                                                 "save_dir": str(tmp_path)}) for s, f in ((0, 1.0), (1, 0.5), (2, 1.0))]
     folders = hnn.group_runs.train_group(configs)
-    scene = scene_study.Scene("spring", quick=True)
+    scene = scene_common.Scene("spring", quick=True)
     together = scene_measure.measure_models(scene, {i: ("hnn", folder) for i, folder in enumerate(folders)})
-    rebuilt = scene_study.Scene("spring", quick=True, state=scene.state())     # a worker's copy of the truth
+    rebuilt = scene_common.Scene("spring", quick=True, state=scene.state())     # a worker's copy of the truth
     assert torch.equal(rebuilt.truth, scene.truth) and rebuilt.divergence == scene.divergence
     for i, folder in enumerate(folders):
         alone = rebuilt.measure("hnn", folder)
@@ -218,3 +218,12 @@ def test_models_measured_together_get_the_numbers_each_gets_alone(tmp_path):
         assert cost["steps"] == 31 and cost["seconds"] == pytest.approx(31 / cost["steps_per_s"])
     # the models differ: equal numbers above are not one model's numbers copied
     assert len({m["energy_mse_corrected"][0] for m in together.values()}) == 3
+
+
+def test_every_scene_has_rungs_and_the_pixel_scene_measures_its_own_pair():
+    # a pixel model reads frames through its encoder: its scene keeps the paper's pair
+    assert set(scene_common.task_rungs("pixels")) == {"baseline", "hnn"}
+    for task in scene_common.scenes():
+        assert scene_common.task_rungs(task), f"the {task} scene has no rung"
+    # a kind that reads [q, qdot] does not fit a scene of [q, p]
+    assert "second_order" not in scene_common.task_rungs("spring")

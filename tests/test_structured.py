@@ -128,7 +128,7 @@ def test_model_flag_trains_saves_and_reloads_each_kind(kind, cls, tmp_path):
     model, args, metrics = hnn.load_run(run)
     assert type(model) is cls and args["model"] == kind and np.isfinite(metrics["test_loss"])
     spring = hnn.load_task("spring")
-    result = hnn.evaluate_energy(spring, {kind: model}, hnn.get_protocol("spring", "corrected"))
+    result = hnn.evaluate_energy(spring, {kind: model}, hnn.tasks.get_protocol("spring", "corrected"))
     assert np.isfinite(result[kind]["mse"])
 
 

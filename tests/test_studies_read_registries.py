@@ -7,11 +7,11 @@ import torch
 
 import hnn
 from hnn_analysis.chains import peers
-from hnn_analysis.scenes import scene_metrics, scene_report, scene_study
-from hnn_analysis.speed import speed_accuracy
+from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
+from hnn_analysis.integrator_study import speed_accuracy
 
 
-class _Euler(hnn.fixed_step.Stepper):
+class _Euler(hnn.integrators.fixed_step.Stepper):
     """Explicit Euler, ``x + h f(x)``: order 1, not symplectic (a toy solver)."""
 
     def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
@@ -39,9 +39,9 @@ class _Scaled(hnn.Model):
 @pytest.fixture
 def toys(monkeypatch):
     """'toy-euler' in hnn.SOLVERS and the row 'scaled' in hnn.MODEL_KINDS, for one test."""
-    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.ModelKind(_Scaled, lambda args: _Scaled(
-        hnn.build_model(args["input_dim"], args["hidden_dim"], args["nonlinearity"])), color="tab:olive"))
-    hnn.register_solver(hnn.solvers.fixed_step_solver("toy-euler", _Euler, order=1))
+    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.kinds.ModelKind(_Scaled, lambda spec: _Scaled(
+        hnn.build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity)), color="tab:olive"))
+    hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("toy-euler", _Euler, order=1))
     yield
     del hnn.SOLVERS["toy-euler"]
 
@@ -65,7 +65,7 @@ def _untrained_run(task: str, label: str, runs) -> None:
     saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": None}
     torch.manual_seed(0)
     metrics = {"train_loss": 0.1, "train_loss_se": 0.0, "test_loss": 0.1, "test_loss_se": 0.0, "train_seconds": 0.0}
-    hnn.save_run(hnn.run_dir(config), hnn.runs.model_from_args(saved), saved, metrics)
+    hnn.runs.save_run(hnn.runs.run_dir(config), hnn.runs.model_from_args(saved), saved, metrics)
 
 
 def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path, monkeypatch):
@@ -83,13 +83,13 @@ def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solve
 
 
 def test_the_scene_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path):
-    assert "scaled" in scene_study.rungs() and scene_report.color("scaled") == "tab:olive"
+    assert "scaled" in scene_common.rungs() and scene_report.color("scaled") == "tab:olive"
     _untrained_run("spring", "scaled", tmp_path)
-    run = hnn.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
-    scene = scene_study.Scene("spring", quick=True)
+    run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
+    scene = scene_common.Scene("spring", quick=True)
     measured = scene.measure("scaled", run, protocols=False)
     assert measured["rollout"]["error"] > 0
-    speed = scene_study.speed_study(scene, "scaled", hnn.load_run(run)[0], quick=True)
+    speed = scene_common.speed_study(scene, "scaled", hnn.load_run(run)[0], quick=True)
     assert "toy-euler" in {row["options"]["method"] for row in speed["rows"]}
     assert "drift" in (speed["fastest"] or {}) or speed["fastest"] is None     # a conservative kind: its drift
 
@@ -97,8 +97,8 @@ def test_the_scene_study_measures_a_registered_kind_with_a_registered_solver(toy
 def test_a_new_rollout_metric_is_one_entry_and_the_scene_study_reports_it(toys, tmp_path, monkeypatch):
     monkeypatch.setitem(hnn.metrics.ROLLOUT_METRICS, "final_error", lambda err, t: float(err[:, -1].mean()))
     _untrained_run("spring", "scaled", tmp_path)
-    run = hnn.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
-    rollout = scene_study.Scene("spring", quick=True).measure("scaled", run, protocols=False)["rollout"]
+    run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
+    rollout = scene_common.Scene("spring", quick=True).measure("scaled", run, protocols=False)["rollout"]
     err = hnn.metrics.relative_error(torch.zeros(1, 3, 2), torch.ones(1, 3, 2))     # pred 0: e(t) = 1
     assert hnn.metrics.summarize_errors(err, torch.arange(3.0).numpy())["final_error"] == 1.0
     assert 0 < rollout["final_error"] <= 1 and rollout["error"] > 0

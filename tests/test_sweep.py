@@ -1,4 +1,4 @@
-"""analysis/sweep.py: failed runs are reported and the others train (in this process, in worker
+"""hnn/sweep.py: failed runs are reported and the others train (in this process, in worker
 processes, on Ray), Ray gives the numbers of the local workers, and Ray stays an optional extra."""
 import dataclasses
 import importlib.util
@@ -18,7 +18,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import readme, sweep
+from hnn_analysis import readme
+from hnn import sweep
 from hnn_analysis.paper import reproduce
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
@@ -159,7 +160,7 @@ def test_only_the_sweep_imports_ray():
                        if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
     # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
     # each inside a function that names the extra when it is missing; nothing else may.
-    assert importing == ["analysis/speed/ray_overhead.py", "analysis/sweep.py"]
+    assert importing == ["analysis/benchmarks/ray_overhead.py", "hnn/sweep.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():
@@ -328,7 +329,7 @@ def test_grouped_sweeps_save_the_runs_of_lone_ones(backend, n_jobs, tmp_path):
 
 
 def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times():
-    from hnn_analysis.speed import ray_overhead
+    from hnn_analysis.benchmarks import ray_overhead
     assert ray_overhead.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
     a = {"meta": {"commit": "x"}, "seconds": {"total": 1.0},
          "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5, "ok": True, "train_seconds": 3.0}}}}

@@ -9,8 +9,8 @@ import pytest
 import torch
 
 import hnn
-import hnn.fixed_step
-import hnn.solvers
+import hnn.integrators.fixed_step
+import hnn.integrators.solvers
 
 SPRING_OMEGA = 2.0          # the repo's spring: H = q^2 + p^2, dq/dt = 2p, dp/dt = -2q
 PEND_SEPARATRIX_H = 6.0     # the repo's pendulum: H = 3(1 - cos q) + p^2; H = 6 at the upright rest
@@ -76,14 +76,14 @@ def test_convergence_order_on_the_analytic_spring_is_the_declared_one(method, op
 def test_a_perturbed_yoshida_weight_fails_the_order_check(monkeypatch):
     # 2 w1 + w0 = 1 still holds, so the composition stays consistent and symmetric (order 2), but
     # 2 w1^3 + w0^3 != 0: the h^3 term no longer cancels. The order check must see it.
-    w1 = hnn.YOSHIDA_WEIGHTS[0] + 0.05
-    monkeypatch.setattr(hnn.fixed_step, "YOSHIDA_WEIGHTS", (w1, 1 - 2 * w1, w1))
+    w1 = hnn.integrators.YOSHIDA_WEIGHTS[0] + 0.05
+    monkeypatch.setattr(hnn.integrators.fixed_step, "YOSHIDA_WEIGHTS", (w1, 1 - 2 * w1, w1))
     slope = order_of("yoshida4")
     assert abs(slope - 4) > 0.3 and abs(slope - 2) < 0.3, slope
 
 
 def test_yoshida_weights_are_the_derived_ones():
-    w1, w0, w1b = hnn.YOSHIDA_WEIGHTS
+    w1, w0, w1b = hnn.integrators.YOSHIDA_WEIGHTS
     assert w1 == w1b
     assert abs(2 * w1 + w0 - 1) < 1e-15 and abs(2 * w1 ** 3 + w0 ** 3) < 1e-14
 
@@ -150,7 +150,7 @@ def test_methods_declared_not_symplectic_fail_the_check(method):
 
 # ---------------------------------------------------------------- a new stepper is one registration
 
-class _Euler(hnn.fixed_step.Stepper):
+class _Euler(hnn.integrators.fixed_step.Stepper):
     """Explicit Euler, ``x + h f(x)``: order 1, not symplectic."""
 
     def step(self, x: torch.Tensor, h: float) -> torch.Tensor:
@@ -161,7 +161,7 @@ class _Euler(hnn.fixed_step.Stepper):
 @pytest.fixture
 def euler():
     """``'euler'`` in the registry for one test."""
-    solver = hnn.register_solver(hnn.solvers.fixed_step_solver("euler", _Euler, order=1))
+    solver = hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("euler", _Euler, order=1))
     yield solver
     del hnn.SOLVERS["euler"]
 
@@ -339,18 +339,18 @@ def test_midpoint_extrapolated_guess_converges_to_the_old_guesss_result_in_fewer
     x0 = 1.5 * (2 * torch.rand(8, 2, generator=torch.Generator().manual_seed(0), dtype=torch.float64) - 1)
     t = np.linspace(0, 10, 11)
     runs = {}
-    for history in (1, hnn.fixed_step.MIDPOINT_HISTORY):
-        monkeypatch.setattr(hnn.fixed_step, "MIDPOINT_HISTORY", history)
+    for history in (1, hnn.integrators.fixed_step.MIDPOINT_HISTORY):
+        monkeypatch.setattr(hnn.integrators.fixed_step, "MIDPOINT_HISTORY", history)
         stats = {}
         runs[history] = hnn.rollout(f, x0, t, method=method, dt=0.01, stats=stats, **options), stats["iterations"]
-    (old, old_iterations), (new, new_iterations) = runs[1], runs[hnn.fixed_step.MIDPOINT_HISTORY]
+    (old, old_iterations), (new, new_iterations) = runs[1], runs[hnn.integrators.fixed_step.MIDPOINT_HISTORY]
     # each solve's two results lie within about tol (1e-12, relative to max(|x|, 1)) of the fixed
     # point; 1000 steps (of three solves in yoshida4) carry the differences along
     torch.testing.assert_close(new, old, rtol=0, atol=3000 * 1e-12 * 1.5)
     assert new_iterations <= fewer * old_iterations, (new_iterations, old_iterations)
 
 
-@pytest.mark.parametrize("method", hnn.SYMPLECTIC_METHODS)
+@pytest.mark.parametrize("method", hnn.integrators.SYMPLECTIC_METHODS)
 def test_symplectic_methods_report_blow_ups_with_trajectory_and_time(method):
     # H = 10 (p^2 - q^2), separable as leapfrog needs: q' = 20 p, p' = 20 q. q + p grows like
     # exp(20 t) and passes 1e6 near t = 0.7; q - p decays. Rows 0 and 2 blow up, row 1 decays
@@ -363,7 +363,7 @@ def test_symplectic_methods_report_blow_ups_with_trajectory_and_time(method):
     assert all(0.65 < s < 0.8 for s in info.value.times), info.value.times
 
 
-@pytest.mark.parametrize("method", hnn.SYMPLECTIC_METHODS)
+@pytest.mark.parametrize("method", hnn.integrators.SYMPLECTIC_METHODS)
 def test_shapes_dtypes_and_default_dt(spring, method):
     x0 = torch.randn(5, 2)
     stats = {}

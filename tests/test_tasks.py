@@ -96,7 +96,7 @@ def test_a_new_task_is_one_folder_that_reproduce_runs(tmp_path, monkeypatch):
     # its own field is a flag and a config field: --samples 10 trains on 10 trajectories in another folder
     config = hnn.cli.parse(hnn.load_task("toy", "train").Config, ["--samples", "10", "--total_steps", "1",
                                                                  "--save_dir", str(out / "runs")])
-    assert config.samples == 10 and hnn.run_dir(config) != run
+    assert config.samples == 10 and hnn.runs.run_dir(config) != run
     assert len(config.dataset()["x"]) == len(hnn.tasks.run_dataset("toy", saved)["x"]) // 2
 
 
@@ -116,7 +116,7 @@ def test_tasks_are_found_by_folder_in_their_declared_order(tmp_path, monkeypatch
 
 def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
     spec = hnn.task_spec("spring")
-    assert hnn.PROTOCOLS["spring"]["paper"] is spec.protocols["paper"] is hnn.get_protocol("spring")
+    assert hnn.PROTOCOLS["spring"]["paper"] is spec.protocols["paper"] is hnn.tasks.get_protocol("spring")
     assert hnn.paper.PAPER["spring"]["test_loss"]["hnn"] == (3.5928e-02, 1.8328e-03)
     assert list(hnn.paper.PAPER) == hnn.tasks.paper_tasks()
     assert set(hnn.PROTOCOLS) == set(hnn.tasks.paper_tasks())
@@ -125,7 +125,7 @@ def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
     with pytest.raises(TypeError):
         hnn.PROTOCOLS["spring"]["paper"] = None
     with pytest.raises(ValueError, match="no energy protocol 'corrected' for task '2body'"):
-        hnn.get_protocol("2body", "corrected")
+        hnn.tasks.get_protocol("2body", "corrected")
     assert hnn.tasks.PROTOCOLS.get("nosuch") is None and "nosuch" not in hnn.paper.PAPER
 
 

@@ -81,12 +81,12 @@ def test_train_script_end_to_end(task, extra, tmp_path, capsys):
 def test_runs_are_reused_only_for_identical_args(tmp_path):
     trainer = hnn.load_task("spring", "train")
     argv = ["--total_steps", "2", "--save_dir", str(tmp_path)]
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv)) is None
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv)) is None
     run = trainer.main(argv)
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv)) == run
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose"])) == run        # display only
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv[:1] + ["3"] + argv[2:])) is None
-    assert hnn.find_run(hnn.cli.parse(trainer.Config, argv + ["--learn_rate", "0.01"])) is None
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv)) == run
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv + ["--verbose"])) == run        # display only
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv[:1] + ["3"] + argv[2:])) is None
+    assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv + ["--learn_rate", "0.01"])) is None
 
 
 def test_unreadable_checkpoint_says_what_to_do(tmp_path):

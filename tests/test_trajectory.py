@@ -30,7 +30,7 @@ def test_spring_trains_on_its_paths_from_the_command_line(tmp_path):
     model, args, metrics = hnn.load_run(run)
     assert args["objective"] == "trajectory" and args["snippet_steps"] == 4
     data = spring.get_dataset(seed=0)
-    objective = hnn.TrajectoryObjective(dt=data["dt"], steps=4)
+    objective = hnn.trajectory.TrajectoryObjective(dt=data["dt"], steps=4)
     floor, _ = objective.final_loss(_TrueSpring(), *[objective.prepare(data)["test_snippets"]] * 2)
     assert metrics["history"]["test_loss"][0] > 1.5 * floor
     assert metrics["test_loss"] < 1.1 * floor     # measured 1.03x at 100 steps
@@ -60,7 +60,7 @@ def test_unknown_or_unfit_objective_is_refused(tmp_path, capsys):
     with pytest.raises(ValueError, match="on pairs of frames; use objective=.derivative."):
         hnn.load_task("pixels", "train").Config(objective="trajectory").make_objective()
     with pytest.raises(ValueError, match="no 'snippets' and no 'dt' and 't_eval'"):
-        hnn.TrajectoryObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
+        hnn.trajectory.TrajectoryObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
 
 
 class _Linear(hnn.Model):
@@ -86,7 +86,7 @@ def test_trajectory_training_recovers_a_linear_oscillator():
     snippets = torch.stack([amplitude[:, None] * torch.cos(angle), -omega * amplitude[:, None] * torch.sin(angle)], -1)
     flat = snippets.reshape(64, -1)
     model = _Linear()
-    loss = hnn.TrajectoryObjective(dt=dt, loss="l2").loss_for(model)
+    loss = hnn.trajectory.TrajectoryObjective(dt=dt, loss="l2").loss_for(model)
     stats = hnn.train(model, flat, flat, total_steps=1500, learn_rate=3e-2, weight_decay=0.0, loss=loss, progress=False)
     # RK4's one-step error at omega dt = 0.2 biases A by about (omega dt)^4 / 120 relative: 1e-5
     torch.testing.assert_close(model.A.detach(), torch.tensor([[0.0, 1.0], [-omega ** 2, 0.0]], dtype=torch.float64),

@@ -14,9 +14,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-
-hnn.tasks.import_analysis()
-from hnn_analysis.chains.peers import measure_chnn  # noqa: E402
+from hnn_analysis.chains.peers import measure_chnn
 
 
 def main(argv=None) -> dict:

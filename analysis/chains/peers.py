@@ -6,7 +6,7 @@
 Trains our rungs (``rungs()``: every registered kind that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
 N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), through
-``analysis/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
+``hnn/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
 protocol (``experiment-chain/protocols.py``): CHNN's geometric-mean relative error of the
 Cartesian rollout (dopri5 at rtol 1e-7, in float64), mean and median over the test starts, with
 the chaos floor; LNN's energy error at T = 100 s. A rollout that blows up is reported by name
@@ -26,9 +26,10 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.io import atomic_write, write_json
-from hnn_analysis import readme, sweep
-from hnn_analysis.paper.reproduce import portable_command
+from hnn.io import atomic_write
+from hnn_analysis import commands
+from hnn import sweep
+from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 from hnn_analysis.scenes.scene_measure import training_cost
 
@@ -46,7 +47,7 @@ FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_
 
 def rungs() -> tuple[str, ...]:
     """The kinds the table trains: every one that the chain task's ``--model`` takes and whose model
-    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.ModelKind.reads``), or else the
+    reads its observed states [q, qdot] (as they are, or mapped: ``hnn.kinds.ModelKind.reads``), or else the
     bobs' Cartesian [x, xdot] (the constrained kinds: ``experiment-chain/data.py``'s
     ``observed_coordinates``), and whose declared structure the chain has (``structure_holds``: no
     friction, no H = T(p) + V(q)). The LNN protocol trains the same rungs on derivatives of the same states."""
@@ -270,14 +271,12 @@ def card(results: dict) -> list[str]:
 
 def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="peers.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--quick", action="store_true", help="a smoke run: small data, 100 steps, N = 1, 2 (minutes)")
-    p.add_argument("--out", type=Path, default=None,
-                   help="output folder (default: results/peers, or results-quick/peers with --quick)")
-    p.add_argument("--jobs", type=hnn.cli.int_at_least(1), default=1, help="worker processes (1: in this process)")
+    commands.add_flags(p, quick="a smoke run: small data, 100 steps, N = 1, 2 (minutes)",
+                       out="output folder (default: results/peers, or results-quick/peers with --quick)",
+                       jobs="worker processes (1: in this process)")
     p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of every run")
     sweep.add_backend_flags(p)
-    p.add_argument("--update-docs", dest="update_docs", action="store_true",
-                   help="write the table into docs/peers.md (full settings only)")
+    commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
 
 
@@ -313,12 +312,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
                         "schedule": jobs[0].config.schedule if jobs else None,
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
                "rows": rows, "curves": found}
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "peers.json", results)
     text = markdown(results)
-    atomic_write(out / "peers.md", lambda tmp: Path(tmp).write_text(text))
-    print("\n" + text)
-    if args.update_docs:
-        print(f"updated {readme.update_section('peers', text)}")
+    commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {})
     sweep.exit_if_failed(runs)
     return results

@@ -26,7 +26,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 import hnn  # noqa: E402
 from hnn.io import atomic_write  # noqa: E402
 
-# the truth in black, each model kind in the colour it registered (hnn.ModelKind.color)
+# the truth in black, each model kind in the colour it registered (hnn.kinds.ModelKind.color)
 COLORS = {"truth": "black", **{kind: spec.color for kind, spec in hnn.MODEL_KINDS.items()}}
 NAMES = {"truth": "Ground truth", "baseline": "Baseline NN", "hnn": "Hamiltonian NN"}
 DPI = 150

@@ -1,6 +1,6 @@
 """The paper's "other mischief" for 1-DOF tasks: the energy bump and time reversibility.
 
-    hnn.energy_bump(model, x0, ...)           # flow, climb grad H, flow again: the learned H steps up
+    hnn.evaluation.energy_bump(model, x0, ...)           # flow, climb grad H, flow again: the learned H steps up
     reversibility(models, x0, horizons)       # forward T then backward T: |x_back - x0| per model
     mischief_figures(task, system, models, x0, fig_dir)   # both, as PNGs, and their numbers
 
@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn_analysis.paper.figures import COLORS, NAMES, save_figure  # noqa: E402
+from hnn_analysis.paper.figures import COLORS, NAMES, save_figure
 
 # flow for t_flow, climb the gradient of the learned H for t_bump, flow again for t_flow
 BUMP = {"t_flow": 6.0, "t_bump": 0.1, "points": 300}

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn_analysis.paper.figures import COLORS, NAMES, save_figure  # noqa: E402
+from hnn_analysis.paper.figures import COLORS, NAMES, save_figure
 
 SIDE = 28
 
@@ -101,17 +101,17 @@ def phase_space(models: dict, dataset: dict, path, points: int = 3000) -> Path:
 def compare(result: dict, gif_path, png_path) -> None:
     """The test frames, truth | baseline | HNN, as a GIF, and ``compare_static`` as a PNG."""
     panels = {"truth": result["truth"]["pixels"], **{k: result[k]["decoded"] for k in ("baseline", "hnn") if k in result}}
-    hnn.write_gif(panels, gif_path)
+    hnn.gifs.write_gif(panels, gif_path)
     compare_static(result, png_path)
 
 
 def add_energy(model, z0, gif_path, png_path, settings: dict) -> dict:
-    """The paper's add-energy demo (``hnn.energy_bump(model, z0, **settings)``), decoded to frames
+    """The paper's add-energy demo (``hnn.evaluation.energy_bump(model, z0, **settings)``), decoded to frames
     (GIF) and plotted (latent path, learned H)."""
-    bump = hnn.energy_bump(model, z0, **settings)
+    bump = hnn.evaluation.energy_bump(model, z0, **settings)
     with torch.no_grad():
         frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
-    hnn.write_gif({"add energy": frames[::3]}, gif_path)
+    hnn.gifs.write_gif({"add energy": frames[::3]}, gif_path)
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(9, 3.5), constrained_layout=True)
     for stage, name in enumerate(("flow", "climb grad H", "flow again")):
         sel = bump["stage"] == stage

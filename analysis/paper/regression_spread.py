@@ -42,7 +42,7 @@ def _measure(seeds: list[int], steps: int | None) -> list[dict]:
             for label, (_, _, metrics) in loaded.items():
                 row[f"{label}_train_loss"], row[f"{label}_test_loss"] = metrics["train_loss"], metrics["test_loss"]
             for protocol in PROTOCOLS:
-                result = hnn.evaluate_energy(spring, models, hnn.get_protocol("spring", protocol))
+                result = hnn.evaluate_energy(spring, models, hnn.tasks.get_protocol("spring", protocol))
                 for label in LABELS:
                     row[f"{label}_energy_{protocol}"] = result[label]["mse"]
                 row[f"ratio_{protocol}"] = result["baseline"]["mse"] / result["hnn"]["mse"]

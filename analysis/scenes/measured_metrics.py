@@ -23,9 +23,7 @@ import numpy as np
 import torch
 
 import hnn
-
-hnn.tasks.import_analysis()
-from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.scenes import scene_metrics as sm
 
 VALID_FRACTION = 0.1       # a prediction is valid while its position error is under this fraction of the spread
 VALID_STARTS = 4           # starts per trial of the valid-time rollouts (evenly over the tail's first half)

@@ -6,7 +6,7 @@
 Every rung that fits the coordinates (``experiment-measured``: all of ``--model``'s kinds on [q, v];
 on [q, p] all but second_order; with some positions periodic and others not, mechanical and
 second_order are left out) trains over a small grid of widths and training fractions, in one
-sweep (``scene_study.train``: reused runs, ``--jobs`` processes, grouped training). Each is then
+sweep (``scene_common.train``: reused runs, ``--jobs`` processes, grouped training). Each is then
 measured on the held-out tail of every trial (``measured_metrics``): the prediction error at
 ``--horizon`` seconds beside the naive extrapolation's, the valid prediction time, the energy
 drift with ``--energy``, the derivative loss (on the scaled states, so dimensionless) and the
@@ -26,13 +26,12 @@ from pathlib import Path
 import numpy as np
 
 import hnn
-from hnn.io import atomic_write, write_json
-
-hnn.tasks.import_analysis()
-from hnn_analysis import readme, sweep  # noqa: E402
-from hnn_analysis.paper import reproduce  # noqa: E402
-from hnn_analysis.provenance import provenance  # noqa: E402
-from hnn_analysis.scenes import measured_metrics as mm, scene_measure, scene_study  # noqa: E402
+from hnn.io import write_json
+from hnn_analysis import commands, readme
+from hnn import sweep
+from hnn_analysis.paper import reproduce
+from hnn_analysis.provenance import provenance
+from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_measure
 
 TASK = "measured"
 WIDTHS, FRACTIONS = (32, 200), (0.5, 1.0)
@@ -101,14 +100,14 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
     if not measured:
         return None, ["no model was measured"]
     best = min(r["prediction_error"]["median"] for r in measured)
-    ok = [r for r in measured if r["prediction_error"]["median"] <= scene_study.CARD_FACTOR * best]
+    ok = [r for r in measured if r["prediction_error"]["median"] <= scene_common.CARD_FACTOR * best]
     # fewest parameters, then the fewest training rows (both exact), then the fastest to train (a timing)
     chosen = min(ok, key=lambda r: (r["params"], r["train_fraction"], r["train_seconds"] or 0.0))
     err = chosen["prediction_error"]["median"]
     ratio = err / naive["median"] if naive["median"] > 0 else float("inf")
     said = [f"{chosen['kind']} (width {chosen['hidden_dim']}, {chosen['train_fraction']:g} of the training rows, "
             f"{chosen['params']} parameters, {chosen['train_seconds']:.3g} s to train on one thread) is enough: its "
-            f"median prediction error {err:.4g} is within {scene_study.CARD_FACTOR:g}x of the best ({best:.4g}) "
+            f"median prediction error {err:.4g} is within {scene_common.CARD_FACTOR:g}x of the best ({best:.4g}) "
             f"and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
             + ("." if ratio <= 0.5 else "; that is NOT under half the naive one: no rung predicts this scene well.")]
 
@@ -214,7 +213,7 @@ def run(args, argv: list[str], parser) -> dict:
     steps = reproduce.QUICK_STEPS if args.quick else None
     rows = _rows(columns, args.quick)
     tic = time.perf_counter()
-    runs, _ = scene_study.train([(rows, [0], steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
+    runs, _ = scene_common.train([(rows, [0], steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
     training = time.perf_counter() - tic
     tic = time.perf_counter()
     measured = []
@@ -240,11 +239,8 @@ def run(args, argv: list[str], parser) -> dict:
         "rows": measured, "naive": held.naive, "chosen": chosen, "card": card,
         "seconds": {"training": training, "measure": time.perf_counter() - tic}}
     result["seconds"]["total"] = time.perf_counter() - start
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "scene.json", result)
-    text = markdown(result)
-    atomic_write(out / "scene.md", lambda tmp: Path(tmp).write_text(text))
-    print("\n" + text + f"\nwrote {out / 'scene.json'}, {out / 'scene.md'}")
+    commands.publish(out, "scene", result, markdown(result))
+    print(f"wrote {out / 'scene.json'}, {out / 'scene.md'}")
     if args.update_docs:
         _update_docs(result)
     sweep.exit_if_failed(runs)

@@ -4,7 +4,7 @@
 
 A unit is plain data (it crosses process boundaries): ``("rung", task, label, {seed: run folder},
 seed of the speed study or None)`` or ``("cells", task, {cell key: (label, run folder)})``.
-Each scene's truth (``scene_study.Scene``) is built once, by the first unit of that scene, and
+Each scene's truth (``scene_common.Scene``) is built once, by the first unit of that scene, and
 handed to the others as arrays, so a second worker does not integrate it again.
 
 Within a unit the models of one scene share their energy protocols' truth: ``measure_models``
@@ -31,10 +31,8 @@ import torch
 
 import hnn
 from hnn.runs import training_subset
-
-hnn.tasks.import_analysis()
-from hnn_analysis.paper import registry, reproduce  # noqa: E402
-from hnn_analysis.scenes import scene_metrics as sm  # noqa: E402
+from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.scenes import scene_common, scene_metrics as sm
 
 BURST_SECONDS = 0.15     # the timed bursts of a training-cost measurement last about this long
 BURSTS = 3               # ... in this many bursts (the fastest counts)
@@ -91,7 +89,6 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
     """``{key: measured}`` of ``runs`` (``{key: (label, run folder)}``, models of ``scene``): each as
     ``Scene.measure`` gives it, plus ``train_cost`` (``training_cost``). The energy protocols run
     once for all of them (one truth); a task with its own ``evaluate`` (pixels) goes model by model."""
-    from hnn_analysis.scenes.scene_study import saved_numbers
     if not runs:
         return {}
     if hnn.task_spec(scene.task).evaluate is not None:
@@ -104,7 +101,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
     out = {}
     for key, (_, directory) in runs.items():
         model = trained.models[key]
-        m = saved_numbers(rows[key], model, directory)
+        m = scene_common.saved_numbers(rows[key], model, directory)
         for name, result in energy.items():
             m[f"energy_mse_{name}"] = [result[key]["mse"], result[key]["mse_se"]]
         tic = time.perf_counter()
@@ -125,9 +122,8 @@ def _cost(task: str, directory) -> dict:
 
 
 def _scene(task: str, quick: bool, state: dict | None, cache: dict):
-    from hnn_analysis.scenes.scene_study import Scene
     if task not in cache:
-        cache[task] = Scene(task, quick, state)
+        cache[task] = scene_common.Scene(task, quick, state)
     return cache[task]
 
 
@@ -136,7 +132,6 @@ _SCENES: dict = {}      # this process's scenes, by task (a worker keeps them be
 
 def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict, dict | None]:
     """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread."""
-    from hnn_analysis.scenes.scene_study import speed_study
     torch.set_num_threads(1)      # rollouts of 4-15 states: a second thread only adds contention
     kind, task = unit[0], unit[1]
     scene = _scene(task, quick, state, _SCENES)
@@ -145,7 +140,7 @@ def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict,
         measured = measure_models(scene, {seed: (label, Path(d)) for seed, d in per_seed.items()})
         result = {"per_seed": measured}
         if speed_seed is not None:
-            result["speed"] = speed_study(scene, label, hnn.load_run(Path(per_seed[speed_seed]))[0], quick)
+            result["speed"] = scene_common.speed_study(scene, label, hnn.load_run(Path(per_seed[speed_seed]))[0], quick)
         print(f"  {task:7s} {label:11s} measured", flush=True)
     elif kind == "cells":
         _, _, runs = unit
@@ -170,8 +165,7 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     for key, unit in units.items():
         by_task.setdefault(unit[1], []).append(key)
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
-    with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context,
-                                                initializer=hnn.tasks.import_analysis) as pool:
+    with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
         # the first unit of every scene now; the rest of a scene once its truth is known
         running = {pool.submit(run_unit, units[keys[0]], quick): keys[0] for keys in by_task.values()}
         waiting = {task: keys[1:] for task, keys in by_task.items()}

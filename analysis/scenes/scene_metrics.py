@@ -26,7 +26,7 @@ import torch
 import hnn
 from hnn.metrics import energy_drift, relative_error, summarize_errors
 
-from hnn_analysis.speed import speed_accuracy
+from hnn_analysis.integrator_study import settings
 
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference
@@ -105,10 +105,10 @@ def settings_ladder(dts, separable: bool, quick: bool, energy: bool = False) -> 
     """
     rtols = (1e-4, 1e-7) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
     dts = dts[::2] if quick else dts
-    # every registered solver that applies (speed_accuracy.solver_settings reads hnn.SOLVERS)
-    out = [options for _, options in speed_accuracy.solver_settings(separable, rtols, dts, ADAPTIVE, energy)]
+    # every registered solver that applies (settings.solver_settings reads hnn.SOLVERS)
+    out = [options for _, options in settings.solver_settings(separable, rtols, dts, ADAPTIVE, energy)]
     if separable:       # the any-H settings too (yoshida4 on the midpoint), as for a learned H
-        out += [options for _, options in speed_accuracy.solver_settings(False, (), dts)
+        out += [options for _, options in settings.solver_settings(False, (), dts)
                 if options not in out and "base" in options]
     return [o for o in out if o.get("base") != "midpoint" or o["dt"] in dts[:4]]
 
@@ -135,7 +135,7 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict], re
         row = {"setting": describe(options), "options": options,
                "symplectic": hnn.get_solver(options["method"]).symplectic}
         try:
-            seconds, traj, stats = speed_accuracy.timed_rollout(f, x0, t, options, repeats, enough=0.5)
+            seconds, traj, stats = settings.timed_rollout(f, x0, t, options, repeats, enough=0.5)
         except hnn.DivergenceError as err:
             row.update(status=type(err).__name__)
             rows.append(row)

@@ -16,16 +16,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib import ticker  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn.io import atomic_write, write_json  # noqa: E402
-
-hnn.tasks.import_analysis()
-from hnn_analysis import readme  # noqa: E402
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_study  # noqa: E402
+from hnn.io import atomic_write  # noqa: E402
+from hnn_analysis import commands
+from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
 
 
 
 def color(label: str) -> str:
-    """A model kind's plot colour, as its registration declares it (``hnn.ModelKind.color``)."""
+    """A model kind's plot colour, as its registration declares it (``hnn.kinds.ModelKind.color``)."""
     kind = hnn.MODEL_KINDS.get(label)
     return kind.color if kind else "k"
 
@@ -142,8 +140,8 @@ def card_name(card: dict) -> str:
     """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
     name = f"{card['label']}, width {card['width']}, {card['fraction']:g} of the data"
     within = card.get("within", 1.0)
-    if within > scene_study.CARD_FACTOR:
-        return f"none within {scene_study.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
+    if within > scene_common.CARD_FACTOR:
+        return f"none within {scene_common.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
     return name
 
 
@@ -290,22 +288,16 @@ def _all_cells(entry: dict) -> dict:
 
 
 def write(results: dict, out: Path, update_docs: bool) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "scene_study.json", results)
     text = markdown(results)
-    atomic_write(out / "scene_study.md", lambda tmp: Path(tmp).write_text(text))
+    commands.publish(out, "scene_study", results, text,
+                     {"scenes": text, "model-guide": guide(results)} if update_docs else {})
     figure = out / "figures" / "scenes-pareto.png"
     pareto_figure(results, figure)
-    print("\n" + text)
     print(f"wrote {out / 'scene_study.json'}, {out / 'scene_study.md'}, {figure}")
-    if update_docs:
-        written = [readme.update_section("scenes", text), readme.update_section("model-guide", guide(results))]
-        if figure.exists():
-            target = hnn.tasks.repo_root() / "docs" / "figures" / figure.name
-            atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
-            written.append(target)
-        for path in written:
-            print(f"updated {path}")
+    if update_docs and figure.exists():
+        target = hnn.tasks.repo_root() / "docs" / "figures" / figure.name
+        atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
+        print(f"updated {target}")
 
 
 def main(argv=None) -> None:

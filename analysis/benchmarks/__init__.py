@@ -1,0 +1,2 @@
+"""Benchmarks: the training step, rollouts, the pixel model, grouped training and the Ray cost, each
+against the arithmetic floor or the original's code measured in the same process."""

@@ -1,0 +1,175 @@
+"""One scene of the scene study: its settings (each task's ``TaskSpec.scene_study``), the rungs
+that fit it, the training of its rows (one sweep), its truth (``Scene``: start states, the true
+trajectories, the time over which the truth itself diverges) and the measurements of one model on
+it (losses, energy MSE, rollout error, speed at equal accuracy, drift). ``scene_study`` (the
+command), ``scene_measure`` (its worker processes) and ``measured_study`` (your own file) build
+on it."""
+from __future__ import annotations
+
+import functools
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import hnn
+from hnn import sweep
+from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.scenes import scene_metrics as sm
+from hnn_analysis.integrator_study import settings
+
+HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
+STARTS = 8                 # start states of the rollout metrics
+CARD_FACTOR = 2.0          # a scene card's model is within this factor of the best on both errors
+DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
+
+
+def scenes() -> list[str]:
+    """The study's scenes: the tasks of this checkout whose ``TaskSpec`` declares ``scene_study``."""
+    return [task for task in hnn.available_tasks() if hnn.task_spec(task).scene_study is not None]
+
+
+def scene_settings(task: str) -> dict:
+    """``task``'s scene-study settings (``TaskSpec.scene_study``: T, dts, the drift, grid, one_seed)."""
+    return dict(hnn.task_spec(task).scene_study or {})
+
+
+def rungs() -> tuple[str, ...]:
+    """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)
+    that its row marks ``studied``."""
+    return tuple(kind for kind in hnn.cli.model_choices() if hnn.MODEL_KINDS[kind].studied)
+
+
+def task_rungs(task: str) -> list[str]:
+    """The rungs of ``task``: the kinds its ``--model`` takes that can fit its states."""
+    return [label for label in reproduce.row_models(task, rungs()) if _fits(task, label)]
+
+
+@functools.cache
+def _fits(task: str, label: str) -> bool:
+    """Whether the kind's model reads the scene's states: canonical [q, p] (its declared coordinates;
+    the objectives would refuse its run otherwise), or, for a pixel model (``'latent'``), the frames
+    its own encoder maps to its latent [q, p]."""
+    kind = hnn.MODEL_KINDS[hnn.tasks.task_config(task, {"model": label}).kind]
+    return kind.coordinates == "latent" or kind.reads("canonical")
+
+
+def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
+    """``({row/label/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
+    ``(rows, seeds, steps, models or None for every rung)``: reuse what matches, train the rest
+    in one sweep (``args.jobs`` processes, on ``args.backend``), so the pool starts once and the
+    longest runs of every batch go first. ``fits(task, kind)``: which kinds fit the rows' states
+    (default: the kinds of canonical states)."""
+    fits = fits or _fits
+    jobs = []
+    for rows, seeds, steps, models in batches:
+        models = rungs() if models is None else models
+        # plan() always takes the paper's pair: keep only the kinds asked for
+        jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models)
+                 if job.config.model in models and fits(job.task, job.config.model)]
+    runs, jobs = sweep.reuse(jobs)
+    print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
+    runs.update(trained)
+    return runs, seconds
+
+
+def saved_numbers(row: dict, model, directory: Path) -> dict:
+    """What a measured model's entry takes from its saved run: ``row`` is its ``reproduce.load_runs`` row."""
+    return {"test_loss": row["test_loss"], "train_loss": row["train_loss"], "train_seconds": row["train_seconds"],
+            "params": sum(p.numel() for p in model.parameters()), "run": Path(directory).name}
+
+
+class Scene:
+    """A scene's truth: start states, the true trajectories over ``HORIZON`` training lengths, and
+    the time over which the truth itself diverges from starts ``PERTURBATION`` apart."""
+
+    def __init__(self, task: str, quick: bool, state: dict | None = None):
+        self.task, self.system, self.cfg = task, hnn.load_task(task), scene_settings(task)
+        self.truth = None
+        if "T" in self.cfg:
+            horizon = HORIZON * self.cfg["T"]
+            self.t = np.linspace(0.0, horizon, (50 if quick else 100) * HORIZON + 1)
+            self.x0 = settings.start_states(task, self.system, STARTS // 2 if quick else STARTS)
+            if state is not None:       # another process integrated this truth already (``state()``)
+                self.truth, self.divergence = torch.as_tensor(state["truth"]), state["divergence"]
+                return
+            with torch.no_grad():
+                self.truth = sm.quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
+            self.divergence = sm.divergence_time(self.system.dynamics, self.x0, self.t, truth=self.truth)
+        elif task == "real":
+            # no truth past the measurements: the measured test segment, from its first state
+            data = hnn.load_task("real").get_dataset()
+            self.truth = torch.as_tensor(data["test_x"], dtype=torch.float64)[None]
+            self.t = np.asarray(data["test_t"], dtype=np.float64) - float(data["test_t"][0])
+
+    def state(self) -> dict | None:
+        """What another process needs to rebuild this scene without integrating its truth again."""
+        if "T" not in self.cfg:
+            return None
+        return {"truth": self.truth.numpy(), "divergence": self.divergence}
+
+    def measure(self, label: str, directory: Path, protocols: bool = True) -> dict:
+        """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one run."""
+        trained, row = reproduce.load_runs(self.task, {label: directory})
+        model = trained.models[label]
+        out = saved_numbers(row[label], model, directory)
+        tic = time.perf_counter()
+        energy = registry.evaluate(trained) if protocols else {}
+        for name, result in energy.items():
+            out[f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
+        if self.truth is not None:
+            out["rollout"] = sm.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, self.truth, self.t)
+        elif self.task == "pixels" and "corrected" in energy:
+            # the decoded frames of the corrected protocol's trajectory against the rendered ones
+            result = energy["corrected"]
+            truth = torch.as_tensor(result["truth"]["pixels"], dtype=torch.float64)[None]
+            decoded = torch.as_tensor(result[label]["decoded"], dtype=torch.float64)[None]
+            frames = np.arange(truth.shape[1], dtype=np.float64)
+            out["rollout"] = hnn.metrics.summarize_errors(hnn.metrics.relative_error(decoded, truth), frames)
+            # the decoder's own reconstruction error of a frame is ~0.3 in this measure: no frame is
+            # ever within 0.1, so a valid time in pixel space says nothing
+            out["rollout"]["valid_time"] = None
+        out["evaluate_seconds"] = time.perf_counter() - tic
+        return out
+
+
+def _energy_fn(system, model, label: str):
+    """The learned H of an H-model, else the system's own H (the drift a baseline shows)."""
+    if hnn.MODEL_KINDS[label].conservative:
+        return hnn.evaluation.float64_copy(model).hamiltonian
+    return system.hamiltonian
+
+
+def _periods(scene: Scene) -> float:
+    """The period of the long drift run: the scene's, or for the orbits the median circular-orbit
+    period 2 pi r / v of body 0 about the centre of mass."""
+    if scene.cfg["period"] is not None:
+        return scene.cfg["period"]
+    x = scene.x0.numpy()
+    n = x.shape[1] // 4     # bodies; x = [qx_i, qy_i, px_i, py_i] blocks of n
+    r = np.hypot(x[:, 0], x[:, n])
+    v = np.hypot(x[:, 2 * n], x[:, 3 * n])
+    return float(np.median(2 * np.pi * r / v))
+
+
+def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
+    """Speed at equal accuracy of one model, and the drift of its energy over the long run."""
+    model64 = hnn.evaluation.float64_copy(model)
+    f = model64.field
+    x0 = scene.x0[:4]
+    t = np.linspace(0.0, scene.cfg["T"], 31)
+    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick,
+                                getattr(f, "hamiltonian", None) is not None)
+    result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
+    if scene.cfg.get("drift") and not hnn.MODEL_KINDS[label].dissipative:
+        period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
+        budget = 2.0 if quick else DRIFT_BUDGET
+        energy = _energy_fn(scene.system, model, label)
+        for key in ("fastest", "fastest_symplectic"):
+            pick = result[key]
+            if pick is not None:
+                pick["drift"] = sm.long_drift(f, energy, x0[:2], pick["options"], period, periods, budget)
+        result["period"] = period
+    return result

@@ -1,0 +1,296 @@
+"""The adaptive integrators behind ``hnn.rollout``: scipy's ``solve_ivp`` on the flattened batch,
+and Dormand-Prince 5(4) and 8(5,3) with one step size per trajectory (``'dopri5'``, ``'dop853'``,
+stepped in numpy).
+
+All take a checked ``(batch, dim)`` ``x0`` and a float64 grid ``t`` from ``rollout`` and return
+``(batch, len(t), dim)``; ``hnn.integrators.solvers`` registers them as ``'solve_ivp'``, ``'dopri5'`` and ``'dop853'``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.integrate import solve_ivp
+
+from .dop853 import DOP853
+from ..errors import DivergenceError, divergence_error
+from .fixed_step import Field
+
+DEFAULT_SCIPY_METHOD = "RK45"    # solve_ivp's own default; reports name the integrator by it
+
+
+def scipy_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
+                  scipy_method: str = DEFAULT_SCIPY_METHOD, max_norm: float | None = 1e6,
+                  stats: dict | None = None) -> torch.Tensor:
+    """scipy's adaptive solver on the flattened batch: one call, one batched ``f`` per stage."""
+    batch, dim = x0.shape
+    dtype, device = x0.dtype, x0.device
+    nfev = 0
+
+    def fun(time, y):
+        nonlocal nfev
+        nfev += 1
+        if max_norm is not None and not np.abs(y).max() <= max_norm:
+            rows = np.nonzero(~(np.abs(y.reshape(batch, dim)) <= max_norm).all(axis=1))[0].tolist()
+            raise divergence_error(f"solve_ivp: states beyond max_norm={max_norm:g}", rows,
+                                   [float(time)] * len(rows))
+        x = torch.from_numpy(y.reshape(batch, dim))
+        if x.dtype != dtype or x.device != device:
+            x = x.to(dtype=dtype, device=device)
+        dxdt = f(x).detach()
+        if dxdt.shape != x.shape:
+            raise ValueError(f"f must map (batch, dim) = {tuple(x.shape)} to the same shape, got {tuple(dxdt.shape)}")
+        out = dxdt.cpu().numpy().reshape(-1)
+        if not np.isfinite(out).all():
+            rows = np.nonzero(~np.isfinite(out.reshape(batch, dim)).all(axis=1))[0].tolist()
+            raise divergence_error("solve_ivp: non-finite dx/dt", rows, [float(time)] * len(rows))
+        return out
+
+    y0 = x0.detach().cpu().numpy().astype(np.float64).reshape(-1)
+    with torch.no_grad():
+        sol = solve_ivp(fun, (t[0], t[-1]), y0, method=scipy_method, t_eval=t, rtol=rtol, atol=atol)
+    if stats is not None:
+        stats["nfev"] = nfev
+    if not sol.success:
+        raise DivergenceError(f"solve_ivp ({scipy_method}, rtol={rtol}, atol={atol}) failed at "
+                              f"t={sol.t[-1] if len(sol.t) else t[0]:.4g}: {sol.message}")
+    y = sol.y.reshape(batch, dim, len(t)).transpose(0, 2, 1)
+    return torch.from_numpy(np.ascontiguousarray(y)).to(dtype=dtype, device=device)
+
+
+
+# Dormand-Prince 5(4): the tableau of scipy's RK45, with a step size per trajectory
+_DP_A = (
+    (),
+    (1 / 5,),
+    (3 / 40, 9 / 40),
+    (44 / 45, -56 / 15, 32 / 9),
+    (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+    (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656),
+    (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84),   # = the 5th-order solution (FSAL)
+)
+_DP_E = (-71 / 57600, 0.0, 71 / 16695, -71 / 1920, 17253 / 339200, -22 / 525, 1 / 40)
+# its 4th-order continuous extension (Dormand & Prince; the coefficients scipy's RK45 uses):
+# y(t + s h) = y + h * sum_j k_j * sum_m P[j][m] s^(m+1)
+_DP_P = (
+    (1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432),
+    (0.0, 0.0, 0.0, 0.0),
+    (0.0, 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799),
+    (0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072),
+    (0.0, 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632),
+    (0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844),
+    (0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423),
+)
+
+
+class _Dopri5:
+    """The Dormand-Prince 5(4) scheme of ``per_row_rollout`` (scipy's RK45 step-size rule:
+    error exponent 1/5, a step grows at most 10x and shrinks at most 5x, no PI term: ``beta`` =
+    0.04 cost about as much more as it gained in error here)."""
+
+    order = 5
+    stages = 7
+    fsal = 6
+    safety, min_factor, max_factor, beta = 0.9, 0.2, 10.0, 0.0
+
+    def __init__(self, dtype: torch.dtype):
+        A = torch.zeros((7, 7), dtype=dtype)
+        for i, a in enumerate(_DP_A):
+            A[i, :len(a)] = torch.tensor(a, dtype=dtype)
+        self.A_rows = [A[s, :s] for s in range(7)]
+        self.E = torch.tensor(_DP_E, dtype=dtype)
+        self.PT = torch.tensor(_DP_P, dtype=dtype).T.contiguous()   # (4, 7)
+
+    def attempt(self, field, y, hx, K, flat, scale_tol):
+        rows, dim = y.shape
+        for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
+            stage = (self.A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
+            stage *= hx
+            stage += y
+            K[s] = field(stage)
+        err = (self.E @ flat).numpy().reshape(rows, dim)
+        err *= hx
+        err /= scale_tol(y, stage)
+        err *= err
+        return stage, np.sqrt(err.mean(1)).astype(np.float64, copy=False), 6
+
+    def dense(self, field, y, y_new, hx, K):
+        Q = (self.PT @ torch.from_numpy(K.reshape(7, -1))).numpy().reshape(4, *y.shape)
+
+        def evaluate(sigma, j):
+            powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
+            return y[j] + hx[j] * (powers[:, :, None] * Q[:, j]).sum(0)
+        return evaluate, 0
+
+
+def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
+    """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU."""
+    def field(y: np.ndarray) -> np.ndarray:
+        x = torch.from_numpy(y)
+        if device.type != "cpu":
+            x = x.to(device)
+        dxdt = f(x)
+        if dxdt.shape != x.shape:
+            raise ValueError(f"f must map (batch, dim) = {tuple(x.shape)} to the same shape, got {tuple(dxdt.shape)}")
+        return dxdt.detach().cpu().numpy()
+    return field
+
+
+def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
+                   max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
+                   stats: dict | None = None) -> torch.Tensor:
+    """RK45 (Dormand-Prince) with one adaptive step size per trajectory.
+
+    Each row is controlled by its own error norm, exactly the norm of one scipy ``solve_ivp``
+    call on that row, so one hard trajectory no longer sets the step of the whole batch (as it
+    does in ``'solve_ivp'``, whose norm is the RMS over the batch). Outputs at ``t_eval`` come
+    from the method's 4th-order dense output, as in scipy. All rows advance in lockstep
+    iterations; once a quarter of them have finished, the finished ones are dropped, so ``f``
+    sees only rows still running: it must treat rows independently (true of dynamics and of
+    models), and a ``f`` that keeps per-trajectory state must carry each row's identity in the
+    state itself. The stepping runs in numpy on the states' dtype (on a few states an operation
+    costs several times less there than in torch: docs/speed.md, "Why the fast paths"), ``f`` on tensors sharing the arrays' memory.
+    """
+    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
+
+
+def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
+                   max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
+                   stats: dict | None = None) -> torch.Tensor:
+    """Dormand-Prince 8(5,3) (Hairer's DOP853, ``hnn.integrators.dop853``) with one step size per trajectory.
+
+    As ``dopri5_rollout`` in all else (rows controlled alone, finished rows dropped, ``f`` must
+    treat rows independently), with the method's 7th-order dense output at ``t_eval``: 12 field
+    calls a step, 3 more on the rows that have an output time inside it. Order 8: at tight
+    tolerances it takes several times fewer steps than dopri5 for the same error.
+    """
+    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
+
+
+def per_row_rollout(scheme, name: str, f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float, atol: float,
+                    max_norm: float | None, max_iterations: int, stats: dict | None) -> torch.Tensor:
+    """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.integrators.dop853.DOP853``, built for the dtype)
+    with one step size per row: the driver of ``dopri5_rollout`` and ``dop853_rollout``."""
+    with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
+        return _per_row(scheme(x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,
+                        max_norm, max_iterations, stats)
+
+
+def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations,
+             stats) -> torch.Tensor:
+    batch, dim = x0.shape
+    num_t = len(t)
+    direction = 1.0 if t[-1] > t[0] else -1.0
+    y = x0.detach().cpu().numpy().copy()
+    dtype = y.dtype
+    k1 = field(y).astype(dtype, copy=True)
+    nfev = 1
+    rejected = 0                        # row-steps rejected by the error test
+    err_old = np.full(batch, 1e-4)
+    tc = np.full(batch, float(t[0]))
+    exponent = 1.0 / scheme.order       # the error estimate is one order lower: err ~ h^order
+    # scipy's initial step guess (Hairer, Norsett & Wanner), per row
+    scale0 = atol + rtol * np.abs(y)
+    d0 = np.sqrt(((y / scale0) ** 2).mean(1))
+    d1 = np.sqrt(((k1 / scale0) ** 2).mean(1))
+    h0 = np.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / d1).astype(np.float64)
+    y1 = y + (direction * h0).astype(dtype)[:, None] * k1
+    d2 = np.sqrt((((field(y1) - k1) / scale0) ** 2).mean(1)).astype(np.float64) / h0
+    nfev += 1
+    h1 = np.where((d1 <= 1e-15) & (d2 <= 1e-15), np.maximum(h0 * 1e-3, 1e-6),
+                  (0.01 / np.maximum(d1.astype(np.float64), d2)) ** exponent)
+    prop = np.minimum(100 * h0, h1)                      # proposed |step| per row
+    out = np.empty((batch, num_t, dim), dtype=dtype)
+    out[:, 0] = y
+    nxt = np.ones(batch, dtype=np.int64)
+    done = np.zeros(batch, dtype=bool)
+    bad_time = np.full(batch, np.nan)
+    rows = np.arange(batch)
+    eps = float(np.finfo(np.float64).eps)
+    K = np.empty((scheme.stages, batch, dim), dtype=dtype)            # the stage derivatives
+    t_end = float(t[-1])
+    near = 1e-12 * max(abs(t_end), 1.0)
+
+    def scale_tol(y, y_new):
+        scale = np.maximum(np.abs(y), np.abs(y_new))
+        scale *= rtol
+        scale += atol
+        return scale
+
+    for _ in range(max_iterations):
+        live = int(np.count_nonzero(~done))
+        if live == 0:
+            break
+        if live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
+            keep = ~done
+            y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
+            err_old = err_old[keep]
+            K = np.empty((scheme.stages, live, dim), dtype=dtype)
+        gap = np.abs(t_end - tc)
+        clipped = prop >= gap                         # this step ends on the last time
+        h = np.minimum(prop, gap)
+        h[done] = 0.0
+        h *= direction
+        hx = h.astype(dtype, copy=False)[:, None]
+        K[0] = k1
+        # the tableau products in torch: its small products give each row the same bits whatever
+        # the other rows (numpy's BLAS does not), so a row's trajectory does not depend on the batch
+        flat = torch.from_numpy(K.reshape(scheme.stages, -1))
+        y_new, err_norm, calls = scheme.attempt(field, y, hx, K, flat, scale_tol)
+        nfev += calls
+        # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm
+        largest = np.abs(y_new).max(1)
+        finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
+        running = ~done
+        blown = ~finite & running
+        too_small = running & finite & (err_norm > 1) & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
+        for mask in (blown, too_small):
+            if mask.any():
+                bad_time[rows[mask]] = tc[mask]
+                done |= mask
+        accept = ~done & (err_norm <= 1)
+        t_new = np.where(clipped, t_end, tc + h)
+        due = accept & (direction * (t[np.minimum(nxt, num_t - 1)] - t_new) <= near)
+        if due.any():
+            # every output time inside (tc, t_new] of an accepted row, from the dense output
+            i = np.flatnonzero(due)
+            evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], np.ascontiguousarray(K[:, i]))
+            nfev += calls
+            j = np.arange(len(i))
+            while len(j):
+                ij = i[j]
+                tn = t[nxt[ij]]
+                sigma = ((tn - tc[ij]) / h[ij]).astype(dtype)
+                out[rows[ij], nxt[ij]] = evaluate(sigma, j)
+                nxt[ij] += 1
+                more = nxt[ij] < num_t
+                more[more] = direction * (t[nxt[ij[more]]] - t_new[ij[more]]) <= near
+                j = j[more]
+            done |= nxt >= num_t
+        if accept.all():
+            y, k1, tc = y_new, K[scheme.fsal].copy(), t_new
+        else:
+            y = np.where(accept[:, None], y_new, y)
+            k1 = np.where(accept[:, None], K[scheme.fsal], k1)
+            tc = np.where(accept, t_new, tc)
+        # the step-size rule: a safety factor, the scheme's PI term (beta), bounded growth and
+        # shrinking, no growth right after a rejection
+        factor = np.maximum(err_norm, 1e-300) ** -(exponent - 0.75 * scheme.beta)
+        factor *= scheme.safety
+        if scheme.beta:
+            factor *= err_old ** scheme.beta
+            err_old = np.where(accept, np.maximum(err_norm, 1e-4), err_old)
+        np.minimum(np.maximum(factor, scheme.min_factor, out=factor), scheme.max_factor, out=factor)
+        reject = ~accept
+        if reject.any():
+            rejected += int(np.count_nonzero(reject & ~done))
+            factor[reject] = np.minimum(factor[reject], 1.0)
+        prop = np.abs(h) * factor
+    else:
+        raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")
+    if stats is not None:
+        stats.update(nfev=nfev, rejected=rejected)
+    diverged = np.flatnonzero(~np.isnan(bad_time)).tolist()
+    if diverged:
+        raise divergence_error(f"{name} (rtol={rtol}, atol={atol}, max_norm={max_norm})", diverged,
+                               bad_time[diverged].tolist())
+    return torch.from_numpy(out).to(x0.device)

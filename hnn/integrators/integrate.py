@@ -1,0 +1,139 @@
+"""Batched integration of dx/dt = f(x): one front door, ``rollout``.
+
+Every method integrates the whole batch together, evaluating ``f`` once per stage on a
+``(batch, dim)`` tensor, and returns ``(batch, len(t_eval), dim)``. The methods are the
+entries of ``hnn.integrators.solvers.SOLVERS``, looked up by name: ``rollout`` checks the input and
+dispatches, and knows no method by name.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+
+from .fixed_step import Field
+from ..interface import EnergyField, Model
+from ..modes import frozen_weights
+from .solvers import Solver, get_solver
+
+
+def _as_t_eval(t_eval) -> np.ndarray:
+    t = np.asarray(t_eval.detach().cpu() if torch.is_tensor(t_eval) else t_eval, dtype=np.float64)
+    if t.ndim != 1 or len(t) < 2:
+        raise ValueError(f"t_eval must be a 1-D grid of at least 2 times, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError("t_eval contains NaN or inf")
+    steps = np.diff(t)
+    if not (np.all(steps > 0) or np.all(steps < 0)):
+        raise ValueError("t_eval must be strictly increasing (or strictly decreasing to integrate backwards)")
+    return t
+
+
+def _check_tolerance(solver: Solver, dtype: torch.dtype, options: dict) -> None:
+    """Warn when an adaptive method is asked for a relative accuracy ``dtype`` cannot deliver."""
+    rtol = options.get("rtol")
+    eps = torch.finfo(dtype).eps
+    if solver.adaptive and rtol is not None and rtol < 100 * eps:
+        # f is evaluated in dtype: its rounding (~eps relative) caps the accuracy of every stage
+        warnings.warn(f"{solver.name}: rtol={rtol:g} is tighter than {dtype} can honour (100 * eps = "
+                      f"{100 * eps:.3g}); the error will stall near eps: use rtol >= {100 * eps:.3g} or float64 "
+                      "states", stacklevel=3)
+
+
+def _as_batch(x0) -> torch.Tensor:
+    """``x0`` as a finite floating ``(batch, dim)`` tensor (a single ``(dim,)`` state becomes batch 1)."""
+    x0 = torch.as_tensor(x0)
+    if x0.dim() == 1:
+        x0 = x0[None]
+    if x0.dim() != 2:
+        raise ValueError(f"x0 must have shape (batch, dim), got {tuple(x0.shape)}")
+    if not x0.is_floating_point():
+        x0 = x0.to(torch.get_default_dtype())
+    if not torch.isfinite(x0).all():
+        rows = torch.nonzero(~torch.isfinite(x0).all(dim=1)).flatten().tolist()
+        raise ValueError(f"x0 has non-finite values in rows {rows[:10]}")
+    return x0
+
+
+# Rollouts of at most this many states run on one torch thread: their products are too small to
+# split, and two processes each spinning two threads on two cores slow each other many times over.
+SMALL_BATCH_ROWS = 64
+
+
+def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: bool = False,
+            **options) -> torch.Tensor:
+    """Integrate ``dx/dt = f(x)`` from every state of ``x0`` and sample at ``t_eval``.
+
+    Args:
+        f: maps a ``(batch, dim)`` tensor to ``dx/dt`` of the same shape (a model's
+            ``time_derivative`` or a task's true dynamics), or an ``hnn.Model``, whose declared
+            ``field`` is stepped (a separable model's halves one at a time where a stage reads one).
+        x0: initial states, ``(batch, dim)`` (a single state ``(dim,)`` is treated as batch 1).
+            Its dtype is the dtype ``f`` is evaluated in.
+        t_eval: 1-D times (units of the system), starting at the time of ``x0``.
+        method: a name in ``hnn.SOLVERS`` (``hnn.register_solver`` adds one); built in:
+            ``'solve_ivp'`` (scipy, adaptive; options ``rtol``, ``atol``,
+            ``scipy_method='RK45'|'DOP853'|...``), ``'dopri5'`` (the same RK45 in torch with one
+            step size per trajectory, each controlled as in its own scipy call; options ``rtol``,
+            ``atol``), ``'dop853'`` (order 8 with the same per-trajectory control; cheaper than
+            dopri5 at tight tolerances), ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
+            ``t_eval`` interval), or the symplectic fixed-step methods of ``hnn.integrators.fixed_step``
+            (option ``dt`` as for rk4): ``'leapfrog'`` (Stormer-Verlet; exact only for
+            separable H = T(p) + V(q), e.g. true dynamics), ``'midpoint'`` (implicit midpoint,
+            for any H, the choice for learned models; options ``tol`` (default 1e-12 in float64,
+            8 eps in float32) and ``max_iter`` (100) of its fixed-point iteration) and
+            ``'yoshida4'`` (order 4; option ``base='leapfrog'|'midpoint'``); ``'discrete_gradient'``
+            (order 2, implicit, keeps the field's own H exactly: ``f`` must carry it, an ``hnn.Model``
+            that declares ``conservative`` or an ``hnn.interface.EnergyField``; options ``tol``,
+            ``max_iter`` as the midpoint's; ``hnn.integrators.discrete_gradient``). All accept
+            ``stats={}``, filled with ``nfev``, the number of batched evaluations of ``f`` (and
+            for the midpoint ``iterations`` and ``max_step_iterations``), and ``max_norm`` (default
+            1e6; None to disable): a state with a component beyond it counts as blown up.
+            Fixed-step methods take ``t_eval`` in either direction (backwards for reversibility).
+        differentiable: False (default): no autograd graph, whatever the caller's grad mode (the
+            result does not require grad, memory does not grow with the horizon, and ``f`` runs its
+            evaluation path). True: every step is recorded by autograd, in grad mode whatever the
+            caller's, so the result can be differentiated with respect to ``x0`` and ``f``'s
+            parameters (trajectory training, one-step Jacobians); fixed-step methods only (the
+            adaptive ones choose their steps outside autograd).
+
+    Batches of at most ``SMALL_BATCH_ROWS`` (64) states run on one torch thread, and the caller's
+    thread count is restored afterwards: their products are too small to share between threads.
+
+    Returns:
+        ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
+
+    Raises:
+        ValueError: for an unknown ``method`` (naming the registered ones) or bad ``x0``, ``t_eval``.
+        DivergenceError: when states or derivatives become non-finite or states exceed
+            ``max_norm``, naming the trajectories and times (never a silent NaN);
+            ``hnn.ConvergenceError`` (a subclass) when the midpoint iteration does not converge.
+
+    Warns (``UserWarning``) when ``rtol`` (adaptive methods: solve_ivp, dopri5) is below 100 eps
+    of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
+    """
+    solver = get_solver(method)
+    if isinstance(f, Model):
+        f = f.field
+    if type(f) is EnergyField and not solver.needs_hamiltonian:
+        f = f.whole         # a solver that reads no H steps the plain field: one call less per evaluation
+    if differentiable and solver.adaptive:
+        raise ValueError(f"{method} chooses its steps outside autograd and cannot give a differentiable rollout; "
+                         "use a fixed-step method (rk4, leapfrog, midpoint, yoshida4) with differentiable=True")
+    x0 = _as_batch(x0)
+    _check_tolerance(solver, x0.dtype, options)
+    t = _as_t_eval(t_eval)
+    threads = torch.get_num_threads()
+    one_thread = threads != 1 and len(x0) <= SMALL_BATCH_ROWS
+    if one_thread:
+        torch.set_num_threads(1)
+    try:
+        if differentiable:
+            with torch.enable_grad():
+                return solver.run(f, x0, t, **options)
+        with torch.no_grad(), frozen_weights():     # the weights cannot change: fields may run as kernels
+            return solver.run(f, x0, t, **options)
+    finally:
+        if one_thread:
+            torch.set_num_threads(threads)

@@ -1,0 +1,118 @@
+"""The integrators ``hnn.rollout`` knows, by name, with the properties tests and users rely on.
+
+    hnn.get_solver("midpoint")   # Solver(name='midpoint', order=2, symplectic=True, needs_separable=False, ...)
+    hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("euler", Euler, order=1))
+    hnn.rollout(f, x0, t_eval, method="euler", dt=0.01)
+
+Modelled on torchdiffeq's dict of solvers and diffrax's ``order``: a method's order and
+symplecticity are declared beside its name, and the tests read them (the fitted order must be
+``order``; one step must be symplectic exactly when ``symplectic``), so a new integrator is a
+one-place change: write it (a ``hnn.integrators.fixed_step.Stepper`` for a fixed-step one) and register it.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+
+from .adaptive import DEFAULT_SCIPY_METHOD, dop853_rollout, dopri5_rollout, scipy_rollout
+from .discrete_gradient import DiscreteGradient
+from .fixed_step import RK4, Leapfrog, Midpoint, Stepper, Yoshida4, fixed_step_rollout
+
+
+def _name_and_options(name: str, options: dict) -> str:
+    return " ".join([name, *(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}" for k, v in options.items())])
+
+
+@dataclass(frozen=True)
+class Solver:
+    """One integrator of ``hnn.rollout``.
+
+    Attributes:
+        name: its ``method=``.
+        order: the global error is O(step^order); for an adaptive method, the order of the
+            solution it advances (its error estimate is one order lower).
+        symplectic: one step is a symplectic map, J^T Omega J = Omega, for a Hamiltonian field.
+        needs_separable: symplectic only for a separable H = T(p) + V(q) (it reads the q and p
+            halves of f at different states), as the tasks' true dynamics; not for a learned H.
+            yoshida4 declares it for its default ``base='leapfrog'``; ``base='midpoint'`` lifts it.
+        adaptive: steps controlled by ``rtol``/``atol`` (and ``rollout`` warns for ``rtol`` below
+            100 eps of the dtype); otherwise fixed steps of at most ``dt``.
+        run: ``run(f, x0, t, **options) -> (batch, len(t), dim)``, given ``rollout``'s checked
+            ``x0`` ``(batch, dim)`` and float64 grid ``t`` (at least 2 times, strictly monotone).
+        label: ``label(options) -> str``, how reports name the integrator run with ``options``
+            (default: the name, then the options).
+        energy_preserving: one step keeps the field's H exactly (to its implicit solve's
+            tolerance), for any step size, not up to a bounded oscillation.
+        needs_hamiltonian: it reads the field's H (an ``hnn.interface.EnergyField``, the ``field``
+            of a model that declares ``conservative``), not only dx/dt: a plain field is refused.
+    """
+    name: str
+    order: int
+    symplectic: bool
+    needs_separable: bool
+    adaptive: bool
+    run: Callable[..., torch.Tensor]
+    label: Callable[[dict], str] | None = None
+    energy_preserving: bool = False
+    needs_hamiltonian: bool = False
+
+    def describe(self, options: dict) -> str:
+        """The integrator's name in reports when run with ``options``, e.g. ``'RK45'`` for solve_ivp's default."""
+        return self.label(options) if self.label else _name_and_options(self.name, options)
+
+
+def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic: bool = False,
+                      needs_separable: bool = False, energy_preserving: bool = False,
+                      needs_hamiltonian: bool = False) -> Solver:
+    """A ``Solver`` running ``stepper`` by ``hnn.integrators.fixed_step.fixed_step_rollout`` (options ``dt``,
+    ``max_norm``, ``stats``, and the implicit methods' ``tol``, ``max_iter``, ``base``)."""
+    run = functools.partial(fixed_step_rollout, method=name, stepper=stepper)
+    return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run,
+                  energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian)
+
+
+def _scipy_label(options: dict) -> str:
+    return options.get("scipy_method", DEFAULT_SCIPY_METHOD)
+
+
+SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
+    # order 5 is RK45's, solve_ivp's default; scipy_method='DOP853' is order 8
+    Solver("solve_ivp", 5, symplectic=False, needs_separable=False, adaptive=True, run=scipy_rollout,
+           label=_scipy_label),
+    Solver("dopri5", 5, symplectic=False, needs_separable=False, adaptive=True, run=dopri5_rollout),
+    Solver("dop853", 8, symplectic=False, needs_separable=False, adaptive=True, run=dop853_rollout),
+    fixed_step_solver("rk4", RK4, order=4),
+    fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True),
+    fixed_step_solver("midpoint", Midpoint, order=2, symplectic=True),
+    # with its default base='leapfrog'; base='midpoint' makes it symplectic for any H
+    fixed_step_solver("yoshida4", Yoshida4, order=4, symplectic=True, needs_separable=True),
+    # DGNet's integrator: keeps the field's own H exactly; Gonzalez's discrete gradient, or the field's own
+    fixed_step_solver("discrete_gradient", DiscreteGradient, order=2, energy_preserving=True, needs_hamiltonian=True),
+)}
+
+# the built-in symplectic methods, in registry order (a snapshot: registered ones are in SOLVERS)
+SYMPLECTIC_METHODS = tuple(name for name, solver in SOLVERS.items() if solver.symplectic)
+
+
+def register_solver(solver: Solver) -> Solver:
+    """Add ``solver`` to ``SOLVERS``, so ``rollout(method=solver.name)`` runs it; returns it.
+
+    Raises ``ValueError`` if the name is taken (``del SOLVERS[name]`` first to replace one).
+    """
+    if not isinstance(solver, Solver):
+        raise TypeError(f"register_solver needs a hnn.Solver, got {type(solver).__name__}")
+    if solver.name in SOLVERS:
+        raise ValueError(f"a solver named {solver.name!r} is already registered")
+    SOLVERS[solver.name] = solver
+    return solver
+
+
+def get_solver(name: str) -> Solver:
+    """The registered ``Solver`` called ``name``; ``ValueError`` listing the names otherwise."""
+    try:
+        return SOLVERS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown method {name!r}; choose one of {sorted(SOLVERS)}") from None

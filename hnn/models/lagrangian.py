@@ -1,0 +1,121 @@
+"""The Lagrangian neural network (LNN, Cranmer, Greydanus, Hoyer, Battaglia, Spergel & Ho 2020): a
+black-box L(q, qdot), one MLP, whose accelerations come from the Euler-Lagrange equations:
+
+    d/dt dL/dqdot = dL/dq   =>   qddot = (d2L/dqdot2)^-1 [dL/dq - (d2L/dqdot dq) qdot]
+
+on observed ``z = [q, qdot]`` of shape ``(batch, 2n)`` (``coordinates = 'velocity'``): no canonical
+momenta, no mass matrix, any L. The three derivatives are taken per state by ``torch.func``
+(``jacfwd`` of ``grad``: the Hessian of L and its gradient in one pass) and batched by ``vmap``. Where d2L/dqdot2 is singular the
+equations do not determine qddot: ``time_derivative`` raises ``SingularLagrangianError`` naming the
+states (LNN's code takes a pseudo-inverse there instead, silently).
+
+Its energy E(q, qdot) = qdot . dL/dqdot - L is conserved by its flow for any weights (the
+Legendre transform of L, the Hamiltonian in velocity coordinates): the rung declares
+``conservative`` with ``hamiltonian(z) = energy(z)``, what the energy metrics read. Its flow is
+not S grad E in [q, qdot], so its ``field`` is the plain ``time_derivative``: a solver that reads
+an H (``'discrete_gradient'``) refuses it; roll out with ``dopri5``, ``rk4`` or ``midpoint``.
+
+    model = hnn.models.LagrangianNN(4, hidden_dim=128, nonlinearity="softplus")
+    zdot = model.time_derivative(z)             # (batch, 4): [qdot, qddot]
+    E = model.energy(z)                          # (batch,)
+
+The model kind ``'lagrangian'`` (a row of ``hnn.MODEL_KINDS``).
+"""
+from __future__ import annotations
+
+import torch
+from torch.func import grad, jacfwd, vmap
+
+from ..errors import DivergenceError
+from .mechanical import check_width, embed_angles, StateCheckedModel
+from .mlp import MLP
+
+
+class SingularLagrangianError(DivergenceError, ValueError):
+    """d2L/dqdot2 is singular (or too ill-conditioned to solve) at the ``states`` (row indices) named.
+
+    A ``DivergenceError`` too, so code that reports failed rollouts by name reports this one."""
+
+    def __init__(self, message: str, states=()):
+        super().__init__(message, states)
+        self.states = list(states)
+
+
+class LagrangianNN(StateCheckedModel):
+    """L(q, qdot), an ``hnn.MLP`` of ``[q, qdot]`` (or ``[cos q, sin q, qdot]`` with ``periodic``) to one value.
+
+    Args:
+        input_dim: 2n, the width of z = [q, qdot].
+        hidden_dim, nonlinearity: of the MLP (smooth activations only: the field differentiates L twice).
+        periodic: q are angles (the network sees cos q, sin q; LNN's code wraps q mod 2 pi instead).
+    """
+    coordinates = "velocity"
+    takes = {"cartesian": "positions and velocities of bodies: L(x, xdot) of any state [q, qdot]"}
+    conservative = True
+
+    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
+        super().__init__()
+        self.n = check_width(input_dim, "LagrangianNN")
+        self.input_dim, self.periodic = input_dim, bool(periodic)
+        self.net = MLP(3 * self.n if periodic else input_dim, hidden_dim, 1, nonlinearity)
+
+    def lagrangian_at(self, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        """L at one state, ``(n,)``, ``(n,)`` -> ``()``: the network; override it to plug in a known L."""
+        return self.net(torch.cat([embed_angles(q[None], self.periodic), v[None]], dim=1))[0, 0]
+
+    def _gradient_twice(self, state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        gradient = grad(lambda s: self.lagrangian_at(s[:self.n], s[self.n:]))(state)
+        return gradient, gradient
+
+    def lagrangian(self, z: torch.Tensor) -> torch.Tensor:
+        """L(q, qdot), ``(batch, 2n)`` -> ``(batch,)``."""
+        self._check_input(z)
+        return vmap(self.lagrangian_at)(z[:, :self.n], z[:, self.n:])
+
+    def energy(self, z: torch.Tensor) -> torch.Tensor:
+        """E = qdot . dL/dqdot - L, ``(batch, 2n)`` -> ``(batch,)``; differentiable in ``z`` and the weights."""
+        self._check_input(z)
+        with torch.enable_grad():
+            z_in = z if z.requires_grad else z.detach().requires_grad_(True)
+            L = self.lagrangian(z_in)
+            dL = torch.autograd.grad(L.sum(), z_in, create_graph=True)[0]
+        return (z[:, self.n:] * dL[:, self.n:]).sum(1) - L
+
+    def hamiltonian(self, z: torch.Tensor) -> torch.Tensor:
+        """The conserved energy E(q, qdot) (``energy``), ``(batch,)``: H in velocity coordinates."""
+        return self.energy(z)
+
+    @property
+    def field(self):
+        # E is conserved, but the flow is not S grad E in [q, qdot]: no solver may step it as an H's
+        return self.time_derivative
+
+    def acceleration(self, z: torch.Tensor) -> torch.Tensor:
+        """qddot from the Euler-Lagrange equations, ``(batch, 2n)`` -> ``(batch, n)``; SingularLagrangianError
+        where d2L/dqdot2 cannot be solved."""
+        self._check_input(z)
+        n, v = self.n, z[:, self.n:]
+        # one forward-over-reverse pass per state: the whole Hessian of L in z, with its gradient as aux
+        hess, dL = vmap(jacfwd(self._gradient_twice, has_aux=True))(z)            # (batch, 2n, 2n), (batch, 2n)
+        hess_vv, mixed = hess[:, n:, n:], hess[:, n:, :n]                          # mixed[b, i, j] = d2L/dqdot_i dq_j
+        rhs = dL[:, :n] - (mixed @ v[..., None])[..., 0]
+        qddot, info = torch.linalg.solve_ex(hess_vv, rhs[..., None])
+        qddot = qddot[..., 0]
+        with torch.no_grad():
+            cond = torch.linalg.cond(hess_vv.detach())
+            bad = (info != 0) | ~torch.isfinite(cond) | (cond > 1 / torch.finfo(z.dtype).eps) \
+                | ~torch.isfinite(qddot).all(1)
+        if bad.any():
+            rows = torch.nonzero(bad).flatten().tolist()
+            shown = "; ".join(f"#{i} [q, qdot] = {[round(float(c), 4) for c in z[i]]} (cond {float(cond[i]):.3g})"
+                              for i in rows[:5])
+            raise SingularLagrangianError(
+                f"LagrangianNN: d2L/dqdot2 is singular at {len(rows)} states, where the Euler-Lagrange equations do "
+                f"not determine qddot: {shown}. A learned L needs a nondegenerate kinetic term there: train longer "
+                "or on states nearer these, or choose --model mechanical (its mass matrix is positive definite by "
+                "construction)", rows)
+        return qddot
+
+    def time_derivative(self, z: torch.Tensor, t=None) -> torch.Tensor:
+        """``dz/dt = (qdot, qddot)``, ``(batch, 2n)``; a graph for training only in grad mode."""
+        return torch.cat([z[:, self.n:], self.acceleration(z)], dim=1)

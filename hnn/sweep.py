@@ -1,0 +1,399 @@
+"""Training sweeps: a list of run configs mapped to trained run folders, in this process, in worker
+processes here, or as Ray tasks (on this machine or a cluster), longest first, with one progress bar.
+
+    jobs = [sweep.Job("spring/hnn/seed0", "spring", tasks.task_config("spring", {"seed": 0}))]
+    runs, jobs = sweep.reuse(jobs)                         # saved runs found by their config, the rest
+    trained, seconds = sweep.train_jobs(jobs, n_jobs=2, log_dir=out / "logs", backend="ray")
+
+A run is found again by its config (``hnn.runs.find_run``): a rerun trains only what is missing, and
+a saved run that does not load is reported by name and trained again. Each dataset is built once,
+here, before the map (the cached ones are then read by every worker). A run that fails is
+reported by name with its error and the others go on; ``exit_if_failed`` ends the command with
+code 1 and the list. A task that cannot run here at all (missing data or optional packages) is
+skipped with its reason once. Ray is optional and imported only for ``backend="ray"``.
+
+A SIGINT (Ctrl-C) or SIGTERM (``kill``, a job scheduler) to the sweep's own process cancels the
+runs not started, stops the workers (a run in progress leaves no folder: it is written whole or
+not at all), keeps every finished run, says so in one line and exits with 130 or 143; a worker
+whose parent process is gone stops by itself.
+
+With ``group="auto"`` the runs that can train as one program (``hnn.grouped.group_key``: one
+task, kind and width, seeds and fractions apart) and are narrow enough for grouping to pay
+(``GROUP_MAX_WIDTH``, measured by ``analysis/benchmarks/benchmark.py --jobs group``) train as groups,
+each one unit of work for the pool or Ray, each model still saved as its own run folder.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import multiprocessing
+import os
+import socket
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from tqdm.auto import tqdm
+
+from . import group_runs, grouped, runs, tasks, training
+from .config import RunConfig
+from .stopping import cores, in_worker, interruptible, stop_pool, worker_start
+
+BACKENDS = ("local", "ray")
+GROUP_MODES = ("auto", "off")
+# Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
+# 1 thread, two runs): 2.3-2.6x at width 16 with G 4 and 3.1-3.4x with G 16; 1.3x at width 64
+# with G 4 but 0.9-1.4x with G 16; 0.6-0.7x at width 200 with G 4 and 16. A group's activations
+# (G x rows x width) outgrow the cache that a lone run's stay in: groups stop at this many hidden
+# units in all (16 models of width 16, 4 of width 64) and at this width
+GROUP_HIDDEN_UNITS = 256
+GROUP_MAX_WIDTH = 64
+RAY_INSTALL = 'pip install -e ".[ray]"'
+# what a dataset raises when its task cannot run here: missing data or optional packages
+_CANNOT_RUN = (FileNotFoundError, ImportError)
+
+
+@dataclass
+class Job:
+    """One run of a sweep: its ``key`` (``row/label/seed<seed>``), its task and its config."""
+    key: str
+    task: str
+    config: RunConfig
+
+    @property
+    def steps(self) -> int:
+        """Optimizer steps (the loop runs total_steps + 1)."""
+        return self.config.total_steps + 1
+
+    def fields(self) -> dict:
+        """The config as a worker elsewhere receives it: ``save_dir`` absolute (a Ray worker runs
+        in a folder of its own; save_dir is not part of a run's identity, so its folder is the same)."""
+        return {**self.config.to_dict(), "save_dir": str(Path(self.config.save_dir).resolve())}
+
+
+class RunFailed(Exception):
+    """A run that raised or whose worker died: its ``key``, the error ``message`` and the ``log``
+    file holding its traceback (None when there is none)."""
+
+    def __init__(self, key: str, message: str, log: Path | None = None):
+        self.key, self.message, self.log = key, message, log
+        super().__init__(f"{key}: {message}" + (f" (log: {log})" if log else ""))
+
+
+def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
+    """``({key: saved run folder}, jobs left to train)``; a saved run that does not load is
+    reported by name and left to train again (its folder is replaced)."""
+    found, todo = {}, []
+    for job in jobs:
+        folder = runs.find_run(job.config)
+        try:
+            if folder is not None:
+                runs.load_run(folder)
+                found[job.key] = folder
+                print(f"  {job.key} reused {folder}", flush=True)
+                continue
+        except (RuntimeError, OSError, ValueError, KeyError) as err:
+            print(f"  {job.key}: {err}; training it again", flush=True)
+        todo.append(job)
+    return found, todo
+
+
+def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
+    """``jobs`` as units of work: with ``group="auto"`` the jobs of one ``hnn.grouped.group_key`` at
+    most ``GROUP_MAX_WIDTH`` wide, up to ``GROUP_HIDDEN_UNITS`` hidden units together, each other job alone."""
+    if group not in GROUP_MODES:
+        raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
+    units, groups = [], {}
+    for job in jobs:
+        key = grouped.group_key(job.config) if group == "auto" else None
+        if key is None or job.config.hidden_dim > GROUP_MAX_WIDTH:
+            units.append([job])
+        else:
+            groups.setdefault(key, []).append(job)
+    for members in groups.values():
+        size = max(1, GROUP_HIDDEN_UNITS // members[0].config.hidden_dim)
+        units += [members[i:i + size] for i in range(0, len(members), size)]
+    return units
+
+
+def _unit_cost(unit: list[Job]) -> float:
+    """Longest first: a group costs about its longest member's time (the models step together)."""
+    return tasks.task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
+
+
+def _group_outcomes(unit: list[Job], outcomes: list[dict]):
+    """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
+    for job, outcome in zip(unit, outcomes):
+        yield job, Path(outcome["folder"]) if "folder" in outcome else RuntimeError(outcome["error"])
+
+
+def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
+    """Each distinct dataset of ``jobs`` built once: ``({dataset key: data}, {dataset key: seconds},
+    {task: the error of a task that cannot run here})``."""
+    data, seconds, skipped = {}, {}, {}
+    for job in jobs:
+        key = job.config.dataset_key()
+        if key in data or job.task in skipped:
+            continue
+        tic = time.perf_counter()
+        try:
+            data[key] = job.config.dataset()
+        except _CANNOT_RUN as err:
+            skipped[job.task] = err
+            bar.write(f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
+            continue
+        seconds[key] = time.perf_counter() - tic
+    return data, seconds, skipped
+
+
+def _failure(job: Job, err: BaseException, log_dir: Path, bar) -> RunFailed:
+    """Report a failed run by name with its error, its traceback in ``<log_dir>/<key>.log``."""
+    log = Path(log_dir) / f"{job.key.replace('/', '-')}.log"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    log.write_text("".join(traceback.format_exception(err)))
+    failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log)
+    bar.write(f"  {job.key} FAILED: {failed.message} (log: {log})")
+    return failed
+
+
+def _in_process(units: list[list[Job]], data: dict, bar):
+    """Yield ``(job, folder or exception)`` for each run trained here, one unit after another, on
+    the datasets built; the bar moves with every step of a lone run, after a group."""
+    for unit in units:
+        if len(unit) > 1:
+            try:
+                outcomes = group_runs.train_group([job.config for job in unit],
+                                                   [data[job.config.dataset_key()] for job in unit])
+            except Exception as err:        # the whole group failed: each of its runs is reported
+                outcomes = [err] * len(unit)
+            for job, outcome in zip(unit, outcomes):
+                bar.update(job.steps)
+                yield job, outcome
+            continue
+        job, done = unit[0], [0]
+
+        def advance(step: int, total: int, done=done) -> None:
+            bar.update(step - done[0])
+            done[0] = step
+        try:
+            with training.report_progress(advance):
+                outcome = runs.run_experiment(job.config, data[job.config.dataset_key()])
+        except Exception as err:        # one bad run must not end the sweep (KeyboardInterrupt still does)
+            outcome = err
+        bar.update(job.steps - done[0])
+        yield job, outcome
+
+
+def _submit(unit: list[Job]) -> tuple:
+    """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
+    if len(unit) == 1:
+        return tasks.run_task, unit[0].task, unit[0].fields()
+    return group_runs.run_group_task, unit[0].task, [job.fields() for job in unit]
+
+
+def _unit_results(unit: list[Job], result):
+    """``(job, folder or exception)`` of each job of a finished unit (``result``: its worker's return)."""
+    if isinstance(result, BaseException):
+        for job in unit:
+            yield job, result
+    elif len(unit) == 1:
+        yield unit[0], Path(result)
+    else:
+        yield from _group_outcomes(unit, result)
+
+
+def _in_pool(units: list[list[Job]], n_jobs: int, threads: int):
+    """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads
+    finish them; on an interrupt (or any exception) the runs not started are cancelled and the
+    workers stopped, not waited for."""
+    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
+    pool = concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context, initializer=worker_start,
+                                                  initargs=(os.getpid(),))
+    try:
+        futures = {pool.submit(in_worker, *_submit(unit), threads): unit for unit in units}
+        for future in concurrent.futures.as_completed(futures):
+            error = future.exception()
+            yield from _unit_results(futures[future], error if error is not None else future.result())
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
+
+
+def _on_ray(units: list[list[Job]], threads: int, address: str | None):
+    """Yield ``(job, folder or exception)`` as Ray tasks of ``threads`` CPUs each finish them; a run
+    whose node dies is retried once elsewhere, then reported."""
+    ray = _import_ray()
+    started = not ray.is_initialized()
+    if started:
+        if address is not None:
+            _probe(address)
+        ray.init(address=address, num_cpus=None if address else cores(), include_dashboard=False,
+                 log_to_driver=False, logging_level="ERROR")
+    try:
+        biggest = max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node["Alive"]), default=0)
+        if biggest < threads:      # Ray would queue such a task forever
+            raise ValueError(f"each run asks Ray for {threads} CPUs ({cores()} cores here // --jobs), but the "
+                             f"largest Ray node has {biggest:g}; raise --jobs so each run takes fewer threads")
+        # the workers import this checkout's hnn, at the same path on every node (docs/sweeps.md)
+        root = str(Path(__file__).resolve().parent.parent)
+        env = {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
+               "HNN_REPO": str(tasks.repo_root()), "OMP_NUM_THREADS": str(threads)}
+        options = dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
+        remotes = {}
+        refs = {}
+        for unit in units:
+            function, *arguments = _submit(unit)
+            remote = remotes.setdefault(function, ray.remote(function).options(**options))
+            refs[remote.remote(*arguments, threads)] = unit
+        while refs:
+            [ref], _ = ray.wait(list(refs), num_returns=1)
+            unit = refs.pop(ref)
+            try:
+                result = ray.get(ref)
+            except ray.exceptions.RayError as err:
+                # the run's own exception when it raised (its remote traceback as a note, for the
+                # log); Ray's when the worker or its node died
+                cause = getattr(err, "cause", None)
+                if isinstance(cause, Exception):
+                    cause.add_note(str(err))
+                result = cause if isinstance(cause, Exception) else err
+            for job, folder in _unit_results(unit, result):
+                if isinstance(folder, Path) and not (folder / runs.COMPLETE).is_file():
+                    folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
+                                          "here: put --out on storage that every node sees at the same path")
+                yield job, folder
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _metrics(folder: Path) -> dict:
+    try:
+        return json.loads((Path(folder) / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _import_ray():
+    """The ``ray`` module, or an ImportError that says what to install."""
+    try:
+        import ray
+    except ImportError as err:
+        raise ImportError(f"--backend ray needs Ray, which is not installed here: {RAY_INSTALL}") from err
+    return ray
+
+
+def _probe(address: str, timeout: float = 5.0) -> None:
+    """Raise ConnectionError naming the fix when nothing answers at a ``host:port`` (or
+    ``ray://host:port``) address: Ray itself would retry for minutes. Other forms (``auto``) are
+    left to Ray."""
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise ConnectionError(f"--ray-address {address}: nothing answers there ({err.strerror or err}); start Ray "
+                              "on the head node with `ray start --head` and pass the address it prints") from err
+
+
+def add_backend_flags(parser) -> None:
+    """Add ``--backend {local,ray}`` and ``--ray-address ADDR`` to a sweep's ``parser``; check
+    them with ``check_backend`` and pass ``args.backend``, ``args.ray_address`` to ``train_jobs``."""
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="where the runs train: local = in this process (--jobs 1) or in --jobs N worker "
+                             "processes here; ray = one Ray task per run with cores // --jobs threads, as many at "
+                             f"once as Ray has CPUs (needs {RAY_INSTALL}); see docs/sweeps.md")
+    parser.add_argument("--ray-address", dest="ray_address", default=None, metavar="ADDR",
+                        help="with --backend ray: the Ray cluster to join (its head's address, e.g. 10.0.0.1:6379, "
+                             "or auto); default: start a local Ray with this machine's cores. --out must be on "
+                             "storage every node sees at the same path")
+
+
+    parser.add_argument("--group", choices=GROUP_MODES, default="auto",
+                        help="auto: train the runs that can share one program (one task, kind and width up to "
+                             f"{GROUP_MAX_WIDTH}, seeds and data fractions apart) as batched groups, each run "
+                             "still saved as its own folder; off: every run alone")
+
+
+def check_backend(parser, args) -> None:
+    """Bad backend flags exit with one ``error:`` line (``parser.error``, code 2) naming the fix,
+    among them ``--backend ray`` without Ray installed."""
+    if args.ray_address is not None and args.backend != "ray":
+        parser.error(f"--ray-address {args.ray_address}: only used with --backend ray; add --backend ray or drop it")
+    if args.backend == "ray":
+        try:
+            _import_ray()
+            if args.ray_address is not None:
+                _probe(args.ray_address)
+        except (ImportError, ConnectionError) as err:
+            parser.error(str(err))
+
+
+def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "local",
+               ray_address: str | None = None, group: str = "off") -> tuple[dict, dict]:
+    """Train ``jobs``; ``({key: run folder or exception}, seconds)``.
+
+    ``backend="local"``: here (``n_jobs`` 1) or in ``n_jobs`` worker processes with ``cores //
+    n_jobs`` threads each; ``"ray"``: one Ray task per run with as many threads (and CPUs asked of
+    Ray), on the Ray at ``ray_address`` (None: a local one, or the one already initialized). A run
+    that fails maps to a ``RunFailed``, one whose task cannot run here to that task's error.
+    ``seconds`` holds the wall time, the backend, jobs, threads per job and each run's data /
+    train / wall seconds (a dataset's build here counts for the first run that uses it).
+    ``group``: ``"auto"`` trains the runs that can share one program as groups (``plan_units``).
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend {backend!r}: choose one of {', '.join(BACKENDS)}")
+    if ray_address is not None and backend != "ray":
+        raise ValueError(f"ray_address {ray_address!r} is only used with backend='ray'; pass that or drop it")
+    if n_jobs < 1:
+        raise ValueError(f"n_jobs {n_jobs}: must be at least 1 (1 = train in this process)")
+    in_process = backend == "local" and n_jobs == 1
+    threads = torch.get_num_threads() if in_process else max(1, cores() // n_jobs)
+    tic, done, per_run = time.perf_counter(), {}, {}
+    if group not in GROUP_MODES:
+        raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
+    with interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
+                                          disable=None, dynamic_ncols=True) as bar:
+        data, data_seconds, skipped = _build_datasets(jobs, bar)
+        done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
+        todo = [job for job in jobs if job.task not in skipped]
+        units = sorted(plan_units(todo, group), key=_unit_cost, reverse=True)
+        if not in_process:
+            data.clear()        # the workers read the cached datasets themselves
+        results = (_in_process(units, data, bar) if in_process else _in_pool(units, n_jobs, threads)
+                   if backend == "local" else _on_ray(units, threads, ray_address))
+        for job, outcome in results:
+            if isinstance(outcome, BaseException):
+                done[job.key] = _failure(job, outcome, log_dir, bar)
+            else:
+                done[job.key] = outcome
+                metrics = _metrics(outcome)
+                built = data_seconds.pop(job.config.dataset_key(), 0.0)
+                per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),
+                                    "train": metrics.get("train_seconds")}
+                bar.write(f"  {job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)")
+            if not in_process:
+                bar.update(job.steps)
+    seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,
+               "threads_per_job": threads, "group": group, "runs": per_run}
+    return done, seconds
+
+
+def failures(outcomes: dict) -> list[RunFailed]:
+    """The runs of a ``train_jobs`` result that failed (not those whose task cannot run here)."""
+    return [err for err in outcomes.values() if isinstance(err, RunFailed)]
+
+
+def exit_if_failed(outcomes: dict) -> None:
+    """End the command with code 1 and the list of failed runs, if any (call it after writing
+    what did train, so a rerun of the same command trains only what is missing)."""
+    failed = failures(outcomes)
+    if failed:
+        print(f"{len(failed)} run{'s' if len(failed) > 1 else ''} failed; rerunning the same command trains only "
+              "what is missing:\n" + "\n".join(f"  {err}" for err in failed), file=sys.stderr, flush=True)
+        raise SystemExit(1)
