@@ -5,7 +5,7 @@ import torch
 
 import hnn
 from hnn.training import adam_optimizer, l2_loss, optimizer_step
-from hnn_analysis.benchmarks import benchmark, floor
+from hnn_analysis.benchmarks import benchmark, floor, floor_job
 
 
 def _baseline_step(rows=10, hidden=8):
@@ -27,12 +27,12 @@ def test_a_plain_mlp_step_performs_one_product_per_layer_forward_and_two_back_bu
 
 def test_the_hnn_step_performs_six_large_products_and_the_pixel_step_the_layers_count():
     d = hnn.load_task("spring").get_dataset(seed=0)
-    spring = floor.products(benchmark._spring_step(d))
+    spring = floor.products(floor_job.spring_step(d))
     assert floor.describe_products(spring) == "6 x 750x200x200 + 5 small"
     # the pixel step, counted from its layers: the encoder's 4 (on 400 rows: both frames) and the
     # decoder's 4 forward, each with a weight gradient and, but for the encoder's first, an input
     # gradient (15); the latent HNN's closed form, 4 forward and 8 backward (12); 8 + 15 + 12 = 35
-    pixels = floor.products(benchmark._pixel_step())
+    pixels = floor.products(floor_job.pixel_step())
     assert len(pixels) == 35
     assert pixels.count((400, 1568, 200)) == 1 and pixels.count((200, 200, 1568)) == 1
 
