@@ -45,6 +45,12 @@ UNIT_MASS = {"velocity": "reads qdot as p: Hamilton's equations hold for it only
 ANY_STATE = {name: "a black-box field: no structure assumed" for name in COORDINATES}
 
 
+def carries_energy(f) -> bool:
+    """Whether the field ``f`` carries its H (an ``EnergyField`` with a ``hamiltonian``), so that
+    solvers which read H (``needs_hamiltonian``) apply to it."""
+    return isinstance(f, EnergyField) and f.hamiltonian is not None
+
+
 class EnergyField:
     """A field dx/dt = S grad H(x) that carries its H, for solvers that read H (``'discrete_gradient'``).
 

@@ -158,3 +158,11 @@ def test_a_model_spec_reads_its_declared_fields_of_a_runs_args_and_a_missing_one
         hnn.kinds.model_from_args({"kind": "hnn"})
     with pytest.raises(ValueError, match="constraint graph"):
         hnn.MODEL_KINDS["constrained"].build(hnn.kinds.ModelSpec("constrained", input_dim=4))
+
+
+def test_a_conservative_models_field_carries_its_energy_and_a_baselines_does_not():
+    hnn_model = hnn.build_model(2, 16)
+    baseline = hnn.build_model(2, 16, baseline=True)
+    assert hnn.interface.carries_energy(hnn_model.field)
+    assert not hnn.interface.carries_energy(baseline.field)
+    assert not hnn.interface.carries_energy(lambda x, t=None: x)

@@ -127,7 +127,7 @@ def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes:
         with torch.no_grad():
             ref = hnn.rollout(per_dtype["float64"], x0, t, scipy_method="DOP853", rtol=1e-12, atol=1e-12)
         separable = kind == "model" and hnn.MODEL_KINDS[label].separable
-        carries_h = getattr(per_dtype["float64"], "hamiltonian", None) is not None
+        carries_h = hnn.interface.carries_energy(per_dtype["float64"])
         for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable, carries_h):
             for dname, dtype in DTYPES.items():
                 rtol = options.get("rtol")

@@ -161,7 +161,7 @@ def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
     ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick,
-                                getattr(f, "hamiltonian", None) is not None)
+                                hnn.interface.carries_energy(f))
     result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
     if scene.cfg.get("drift") and not hnn.MODEL_KINDS[label].dissipative:
         period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
