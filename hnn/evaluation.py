@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from .integrators.integrate import rollout
-from .interface import declared
+from .interface import declared, gradient_of
 from .metrics import energy_mse
 from .integrators.solvers import get_solver
 
@@ -238,11 +238,7 @@ def float64_copy(model: torch.nn.Module) -> torch.nn.Module:
 
 def gradient_of_h(model):
     """``x -> dH/dx`` ``(batch, 2n)`` of an HNN's learned H: the direction in which H grows fastest."""
-    def grad(x: torch.Tensor) -> torch.Tensor:
-        with torch.enable_grad():
-            x = x.detach().requires_grad_(True)
-            return torch.autograd.grad(model.hamiltonian(x).sum(), x)[0].detach()
-    return grad
+    return lambda x: gradient_of(model.hamiltonian, x, create_graph=False)
 
 
 def energy_bump(model, x0, t_flow: float = 6.0, t_bump: float = 0.1, t_after: float | None = None,

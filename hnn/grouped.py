@@ -34,7 +34,7 @@ from .models.hamiltonian import FIELD_ROWS, HNN
 from .models.mlp import MLP
 from .objectives import DerivativeObjective
 from .models.structured import SeparableHNN
-from .models.tanh_mlp import fast_tanh, fast_tanh_
+from .models.tanh_mlp import closed_form_input_gradient, fast_tanh
 from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, training_steps
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
@@ -84,52 +84,6 @@ def _stacked_weights(models: list) -> list[torch.Tensor]:
     return [torch.stack([ws[i].detach() for ws in layers]).clone().requires_grad_(True) for i in range(5)]
 
 
-class _GroupedInputGradient(torch.autograd.Function):
-    """dF/dx of every model of a group, F = w . tanh(W2 tanh(W1 x + b1) + b2), ``(G, batch, n)``:
-    ``hnn.models.tanh_mlp._TanhMLPInputGradient`` with a leading model axis (the same closed form and
-    hand-written backward, every product a batched one)."""
-
-    @staticmethod
-    def forward(ctx, x, W1, b1, W2, b2, w):
-        g_x, saved = _grouped_input_gradient(x, W1, b1, W2, b2, w)
-        ctx.save_for_backward(x, W1, W2, w, *saved)
-        return g_x
-
-    @staticmethod
-    @torch.autograd.function.once_differentiable
-    def backward(ctx, d_gx):
-        x, W1, W2, w, h1, h2, s1, s2, g_h1, g_a1, W2w = ctx.saved_tensors
-        d_ga1 = torch.bmm(d_gx, W1.transpose(1, 2))
-        d_gh1 = d_ga1 * s1
-        d_W2w = torch.bmm(s2.transpose(1, 2), d_gh1)
-        d_a2 = torch.bmm(d_gh1, (-2 * W2w).transpose(1, 2)).mul_(h2).mul_(s2)
-        d_W2 = torch.baddbmm(d_W2w * w.unsqueeze(2), d_a2.transpose(1, 2), h1)
-        d_w = (d_W2w * W2).sum(2)
-        d_h1 = torch.baddbmm(d_ga1.mul_(g_h1).mul_(h1), d_a2, W2, beta=-2)
-        d_a1 = d_h1.mul_(s1)
-        d_W1 = torch.baddbmm(torch.bmm(g_a1.transpose(1, 2), d_gx), d_a1.transpose(1, 2), x)
-        return None, d_W1, d_a1.sum(1), d_W2, d_a2.sum(1), d_w
-
-
-def _grouped_input_gradient(x, W1, b1, W2, b2, w):
-    """dF/dx ``(G, batch, n)`` and what its backward needs: ``hnn.models.tanh_mlp``'s closed form, batched."""
-    h1 = fast_tanh_(torch.baddbmm(b1.unsqueeze(1), x, W1.transpose(1, 2)))
-    h2 = fast_tanh_(torch.baddbmm(b2.unsqueeze(1), h1, W2.transpose(1, 2)))
-    one = h1.new_ones(())
-    s1, s2 = torch.addcmul(one, h1, h1, value=-1), torch.addcmul(one, h2, h2, value=-1)
-    W2w = w.unsqueeze(2) * W2
-    g_h1 = torch.bmm(s2, W2w)
-    g_a1 = g_h1 * s1
-    return torch.bmm(g_a1, W1), (h1, h2, s1, s2, g_h1, g_a1, W2w)
-
-
-def _input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
-    """dF/dx of every stacked net; a graph for the parameters' gradients only in grad mode."""
-    if torch.is_grad_enabled():
-        return _GroupedInputGradient.apply(x, W1, b1, W2, b2, w)
-    return _grouped_input_gradient(x, W1, b1, W2, b2, w)[0]
-
-
 def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | None) -> torch.Tensor:
     """dx/dt of every model at its own states ``x`` ``(G, batch, n)``: ``(G, batch, n)``; ``rows``
     None for separable models (kinetic nets, then potential nets: ``(dT/dp, -dV/dq)``)."""
@@ -137,7 +91,7 @@ def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | Non
     if rows is None:
         half = x.shape[-1] // 2
         q, p = x[..., :half], x[..., half:]
-        grad = _input_gradient(torch.cat([p, q]), W1, b1, W2, b2, W3[:, 0])
+        grad = closed_form_input_gradient(torch.cat([p, q]), W1, b1, W2, b2, W3[:, 0])
         kinetic, potential = grad.split(len(x))
         return torch.cat([kinetic, -potential], dim=-1)
     if baseline:
@@ -147,7 +101,7 @@ def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | Non
     n = x.shape[-1] // 2
     out = None
     for k in rows:                                   # 0: F1 (conservative), 1: F2 (Hamilton's equations)
-        grad = _input_gradient(x, W1, b1, W2, b2, W3[:, k])
+        grad = closed_form_input_gradient(x, W1, b1, W2, b2, W3[:, k])
         part = grad if k == 0 else torch.cat([grad[..., n:], -grad[..., :n]], dim=-1)
         out = part if out is None else out + part
     return out

@@ -45,6 +45,18 @@ UNIT_MASS = {"velocity": "reads qdot as p: Hamilton's equations hold for it only
 ANY_STATE = {name: "a black-box field: no structure assumed" for name in COORDINATES}
 
 
+def gradient_of(f: Callable, x: torch.Tensor, create_graph: bool | None = None) -> torch.Tensor:
+    """d f/dx by autograd at each row, ``(batch, dim)``, of ``f``: ``(batch, dim) -> (batch,)`` (rows
+    independent): an H's gradient, the one autograd input gradient every network without a closed
+    form uses. ``create_graph`` (default: whether grad mode is on) keeps the graph, so the result can
+    be differentiated again (training through a field); ``x`` itself stays in the graph only then."""
+    if create_graph is None:
+        create_graph = torch.is_grad_enabled()
+    with torch.enable_grad():
+        x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
+        return torch.autograd.grad(f(x_in).sum(), x_in, create_graph=create_graph)[0]
+
+
 def carries_energy(f) -> bool:
     """Whether the field ``f`` carries its H (an ``EnergyField`` with a ``hamiltonian``), so that
     solvers which read H (``needs_hamiltonian``) apply to it."""

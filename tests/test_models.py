@@ -114,8 +114,34 @@ def test_closed_form_is_used_and_gradcheck(tanh_path):
     net = hnn.MLP(2, 6, 2).double()
     x = torch.randn(5, 2, dtype=torch.float64, requires_grad=True)
     W1, b1, W2, b2, W3 = (p.detach().clone().requires_grad_(True) for p in net.parameters())
-    from hnn.models.tanh_mlp import _TanhMLPInputGradient
-    assert torch.autograd.gradcheck(lambda *a: _TanhMLPInputGradient.apply(*a), (x, W1, b1, W2, b2, W3[1]))
+    from hnn.models.tanh_mlp import closed_form_input_gradient
+    assert torch.autograd.gradcheck(closed_form_input_gradient, (x, W1, b1, W2, b2, W3[1]))
+
+
+def test_the_closed_form_of_a_group_is_each_models_own_and_gradchecks(tanh_path):
+    # the same function with a leading model axis: each slice is that model's lone closed form, in
+    # value and in every gradient, and the batched backward passes gradcheck on its own
+    from hnn.models.tanh_mlp import closed_form_input_gradient
+    gen = torch.Generator().manual_seed(3)
+    G, N, n, H = 3, 5, 4, 6
+    args = [torch.randn(*shape, generator=gen, dtype=torch.float64)
+            for shape in ((G, N, n), (G, H, n), (G, H), (G, H, H), (G, H), (G, H))]
+    weights = [a.requires_grad_(True) for a in args[1:]]
+    together = closed_form_input_gradient(args[0], *weights)
+    target = torch.randn(together.shape, generator=gen, dtype=torch.float64)
+    grads = torch.autograd.grad(((together - target) ** 2).sum(), weights)
+    for g in range(G):
+        mine = [w[g].detach().clone().requires_grad_(True) for w in weights]
+        alone = closed_form_input_gradient(args[0][g], *mine)
+        torch.testing.assert_close(together[g], alone, rtol=1e-12, atol=1e-13)
+        for a, b in zip(grads, torch.autograd.grad(((alone - target[g]) ** 2).sum(), mine)):
+            torch.testing.assert_close(a[g], b, rtol=1e-10, atol=1e-12)
+    with torch.no_grad():       # the evaluation path (no autograd node) gives the same values
+        torch.testing.assert_close(closed_form_input_gradient(args[0], *weights), together, rtol=1e-12, atol=1e-13)
+    G, N, n, H = 2, 3, 2, 3                                  # gradcheck at small sizes
+    small = tuple(torch.randn(*shape, generator=gen, dtype=torch.float64, requires_grad=True)
+                  for shape in ((G, N, n), (G, H, n), (G, H), (G, H, H), (G, H), (G, H)))
+    assert torch.autograd.gradcheck(closed_form_input_gradient, small)
 
 
 def _closed_form_calls(monkeypatch) -> list:
@@ -127,7 +153,7 @@ def _closed_form_calls(monkeypatch) -> list:
             calls.append(1)
             return real(*args, **kwargs)
         return spy
-    for name in ("_tanh_mlp_input_gradient",):
+    for name in ("_closed_form",):
         monkeypatch.setattr(hnn.models.tanh_mlp, name, spy_on(getattr(hnn.models.tanh_mlp, name)))
     # the evaluation path of a few states (the rollout kernel)
     monkeypatch.setattr(hnn.models.tanh_mlp.EvaluationKernel, "numpy", spy_on(hnn.models.tanh_mlp.EvaluationKernel.numpy))
@@ -325,3 +351,21 @@ def test_large_tanh_layers_differentiate_through_forward_mode_inside_a_recorded_
     monkeypatch.setattr(tanh_mlp, "_FAST_TANH_MIN_ELEMENTS", 10 ** 9)   # torch.tanh everywhere
     for a, b in zip(fast, grads()):
         assert torch.allclose(a, b, rtol=1e-4, atol=1e-6)  # the two tanh formulas differ in the last bits
+
+
+def test_gradient_of_is_the_analytic_gradient_and_keeps_a_graph_only_when_asked():
+    # H = sum x^3 / 3 + x0 x1: dH/dx = x^2 + (x1, x0), d/dx of that again = 2x + swap
+    x = torch.randn(4, 2, dtype=torch.float64)
+
+    def H(x):
+        return (x ** 3).sum(1) / 3 + x[:, 0] * x[:, 1]
+    expected = x ** 2 + x.flip(1)
+    with torch.no_grad():
+        g = hnn.interface.gradient_of(H, x)
+    torch.testing.assert_close(g, expected, rtol=1e-14, atol=0)
+    assert not g.requires_grad
+    x_in = x.clone().requires_grad_(True)
+    g = hnn.interface.gradient_of(H, x_in)          # grad mode: a graph through x
+    second, = torch.autograd.grad(g[:, 0].sum(), x_in)
+    torch.testing.assert_close(second, torch.stack([2 * x[:, 0], torch.ones(4, dtype=x.dtype)], 1), rtol=1e-14, atol=0)
+    assert not hnn.interface.gradient_of(H, x_in, create_graph=False).requires_grad

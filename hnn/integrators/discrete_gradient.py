@@ -28,17 +28,13 @@ from typing import Callable
 import torch
 
 from .fixed_step import ImplicitStepper
-from ..interface import EnergyField
+from ..interface import EnergyField, gradient_of
 
 
 def gonzalez(hamiltonian: Callable, x0: torch.Tensor, x1: torch.Tensor) -> torch.Tensor:
     """Gonzalez's midpoint discrete gradient of ``hamiltonian`` ``(batch, dim) -> (batch,)`` between
     ``x0`` and ``x1`` ``(batch, dim)``; ``(batch, dim)``. In grad mode it can be differentiated (training)."""
-    create = torch.is_grad_enabled()
-    m = 0.5 * (x0 + x1)
-    with torch.enable_grad():
-        m_in = m if (create and m.requires_grad) else m.detach().requires_grad_(True)
-        grad = torch.autograd.grad(hamiltonian(m_in).sum(), m_in, create_graph=create)[0]
+    grad = gradient_of(hamiltonian, 0.5 * (x0 + x1))
     d = x1 - x0
     dd = (d * d).sum(1, keepdim=True)
     excess = (hamiltonian(x1) - hamiltonian(x0))[:, None] - (grad * d).sum(1, keepdim=True)

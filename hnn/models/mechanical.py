@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from ..interface import Model
+from ..interface import Model, gradient_of
 from .mlp import MLP
 
 
@@ -117,10 +117,7 @@ class MechanicalHNN(StateCheckedModel):
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """``dx/dt = (dH/dp, -dH/dq)`` by autograd, ``(batch, 2n)``; a graph for training only in grad mode."""
         self._check_input(x)
-        create_graph = torch.is_grad_enabled()
-        with torch.enable_grad():
-            x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
-            dH = torch.autograd.grad(self.hamiltonian(x_in).sum(), x_in, create_graph=create_graph)[0]
+        dH = gradient_of(self.hamiltonian, x)
         return torch.cat([dH[:, self.n:], -dH[:, :self.n]], dim=1)
 
     def state_from_observed(self, z: torch.Tensor) -> torch.Tensor:

@@ -6,6 +6,7 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
+from ..interface import gradient_of
 
 _NONLINEARITIES = {
     "tanh": tanh_mlp.fast_tanh,
@@ -54,7 +55,7 @@ class MLP(nn.Module):
             nn.init.orthogonal_(layer.weight)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        # hnn.tanh_mlp._tanh_mlp_input_gradient differentiates this function by hand: edit both together
+        # hnn.models.tanh_mlp.closed_form_input_gradient differentiates this function by hand: edit both together
         # (tests/test_models.py compares the two)
         h = self._act(self.linear1(x))
         h = self._act(self.linear2(h))
@@ -67,9 +68,7 @@ class MLP(nn.Module):
             return autograd_input_gradient(self, x, k, create_graph)
         l1, l2 = self.linear1, self.linear2
         params = (l1.weight, l1.bias, l2.weight, l2.bias, self.linear3.weight[k])
-        if not torch.is_grad_enabled():     # evaluation: skip the autograd node
-            return tanh_mlp._evaluation_input_gradient(x, *params)
-        return tanh_mlp._TanhMLPInputGradient.apply(x, *params)
+        return tanh_mlp.closed_form_input_gradient(x, *params)
 
     def _closed_form_applies(self) -> bool:
         """Whether ``self(x)`` is the network the closed form differentiates: ``MLP.forward`` as
@@ -96,9 +95,9 @@ def input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_graph: bool
 
 def autograd_input_gradient(model: nn.Module, x: torch.Tensor, k: int, create_graph: bool) -> torch.Tensor:
     """d(model(x)[:, k])/dx by autograd, ``(batch, input_dim)``; ``model`` must output ``(batch, 2)``."""
-    with torch.enable_grad():
-        x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
+    def output_k(x_in):
         out = model(x_in)
         if out.dim() != 2 or out.shape[1] != 2:
             raise ValueError(f"an HNN's network must output (batch, 2) = (F1, F2), got {tuple(out.shape)}")
-        return torch.autograd.grad(out[:, k].sum(), x_in, create_graph=create_graph)[0]
+        return out[:, k]
+    return gradient_of(output_k, x, create_graph)

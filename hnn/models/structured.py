@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from ..interface import UNIT_MASS, Model
+from ..interface import UNIT_MASS, Model, gradient_of
 from .hamiltonian import HNN, permutation_tensor
 from .mlp import MLP
 
@@ -34,9 +34,7 @@ def scalar_gradient(net: nn.Module, x: torch.Tensor, create_graph: bool) -> torc
     """d(net(x)[:, 0])/dx, ``(batch, width of x)``: the MLP's closed form where it applies, else autograd."""
     if isinstance(net, MLP) and net._closed_form_applies():
         return net.input_gradient(x, 0, create_graph)
-    with torch.enable_grad():
-        x_in = x if (create_graph and x.requires_grad) else x.detach().requires_grad_(True)
-        return torch.autograd.grad(net(x_in)[:, 0].sum(), x_in, create_graph=create_graph)[0]
+    return gradient_of(lambda x_in: net(x_in)[:, 0], x, create_graph)
 
 
 class SeparableHNN(Model):

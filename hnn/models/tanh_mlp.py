@@ -1,6 +1,8 @@
 """The paper's tanh MLP in arithmetic: a faster tanh, and the closed-form input gradient
-d(w . tanh(W2 tanh(W1 x + b1) + b2))/dx with its hand-written backward (``hnn.MLP`` uses both:
-the tanh as its ``'tanh'`` nonlinearity, the gradient in ``MLP.input_gradient``).
+d(w . tanh(W2 tanh(W1 x + b1) + b2))/dx with its hand-written backward, written once for one model
+or a group's G models along a leading axis (``closed_form_input_gradient``: ``hnn.MLP`` uses it in
+``MLP.input_gradient``, ``hnn.grouped`` for a group's step), and ``EvaluationKernel``, the same
+closed form in numpy for a rollout's few states.
 """
 from __future__ import annotations
 
@@ -52,44 +54,56 @@ def fast_tanh(a: torch.Tensor) -> torch.Tensor:
 
 
 
-def _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved: bool = True):
-    """dF/dx for F = w . tanh(W2 tanh(W1 x + b1) + b2), and (if ``saved``) what its backward needs."""
-    h1 = fast_tanh_(nn.functional.linear(x, W1, b1))
-    h2 = fast_tanh_(nn.functional.linear(h1, W2, b2))
+def _affine(x, W, b):
+    """``x W^T + b``: ``(N, in)`` by ``(out, in)``, or per model with a leading model axis on all three."""
+    if W.dim() == 2:
+        return nn.functional.linear(x, W, b)
+    return torch.baddbmm(b.unsqueeze(1), x, W.mT)
+
+
+def _addmm(c, a, b, beta: float = 1):
+    """``beta c + a @ b``, one product per model when the operands carry a leading model axis."""
+    return torch.addmm(c, a, b, beta=beta) if a.dim() == 2 else torch.baddbmm(c, a, b, beta=beta)
+
+
+def _times_W1(a, W1):
+    """``a @ W1``, ``(..., N, H) @ (..., H, n)``. One model's: MKL multiplies a tall matrix by a thin one
+    (H x n, n = input_dim) faster when the thin one is column-major (docs/speed.md, "Why the fast paths")."""
+    return a @ W1.T.contiguous().T if W1.dim() == 2 else a @ W1
+
+
+def _closed_form(x, W1, b1, W2, b2, w, saved: bool = True):
+    """dF/dx for F = w . tanh(W2 tanh(W1 x + b1) + b2), and (if ``saved``) what its backward needs.
+
+    One model: x ``(N, n)``, W1 ``(H, n)``, b1 ``(H,)``, W2 ``(H, H)``, b2 ``(H,)``, w ``(H,)``; a group of
+    G models: the same with a leading model axis on every argument."""
+    h1 = fast_tanh_(_affine(x, W1, b1))
+    h2 = fast_tanh_(_affine(h1, W2, b2))
     one = h1.new_ones(())
     s1 = torch.addcmul(one, h1, h1, value=-1)    # tanh' = 1 - tanh^2, in one pass
     s2 = torch.addcmul(one, h2, h2, value=-1)
     if saved:
-        W2w = w[:, None] * W2                    # folds the output weights into W2 (no N x H broadcast)
+        W2w = w.unsqueeze(-1) * W2               # folds the output weights into W2 (no N x H broadcast)
         g_h1 = s2 @ W2w                          # dF/dh1
     else:                                        # evaluation, often a small batch: scale the rows instead
-        W2w, g_h1 = None, (s2 * w) @ W2
+        W2w, g_h1 = None, (s2 * w.unsqueeze(-2)) @ W2
     g_a1 = g_h1 * s1                             # dF/da1
-    # MKL multiplies a tall matrix by a thin one (H x n, n = input_dim) faster when the thin one is
-    # column-major (docs/speed.md, "Why the fast paths")
-    return g_a1 @ W1.T.contiguous().T, ((h1, h2, s1, s2, g_h1, g_a1, W2w) if saved else ())
+    return _times_W1(g_a1, W1), ((h1, h2, s1, s2, g_h1, g_a1, W2w) if saved else ())
 
 
-_SMALL_BATCH_DTYPES = (torch.float32, torch.float64)
-
-
-def _evaluation_input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
-    """The closed form without autograd (a few states of a whole field go through ``EvaluationKernel``)."""
-    return _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w, saved=False)[0]
-
-
-class _TanhMLPInputGradient(torch.autograd.Function):
-    """d(out_k)/dx of a tanh ``MLP`` in closed form, with a hand-written backward.
+class _ClosedFormInputGradient(torch.autograd.Function):
+    """``_closed_form`` with a hand-written backward, for one model or a group (a leading model axis).
 
     Numerically the same as ``autograd.grad(out[:, k].sum(), x, create_graph=True)``, but
     its backward does six large matrix products and a few in-place passes, where autograd's
     generic double backward allocates some twenty full-size temporaries: faster training on
-    CPU (docs/speed.md). ``tests/test_models.py`` checks values and all gradients against autograd.
+    CPU (docs/speed.md). ``tests/test_models.py`` checks values and all gradients against autograd
+    and finite differences, one model and a group.
     """
 
     @staticmethod
     def forward(ctx, x, W1, b1, W2, b2, w):
-        g_x, saved = _tanh_mlp_input_gradient(x, W1, b1, W2, b2, w)
+        g_x, saved = _closed_form(x, W1, b1, W2, b2, w)
         ctx.save_for_backward(x, W1, W2, w, *saved)
         return g_x
 
@@ -97,20 +111,35 @@ class _TanhMLPInputGradient(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, d_gx):
         x, W1, W2, w, h1, h2, s1, s2, g_h1, g_a1, W2w = ctx.saved_tensors
-        d_ga1 = d_gx @ W1.T
+        d_ga1 = d_gx @ W1.mT
         d_gh1 = d_ga1 * s1
-        d_W2w = s2.T @ d_gh1
+        d_W2w = s2.mT @ d_gh1
         # tanh'' = -2 tanh tanh': the -2 rides on the small H x H matrix, not on an N x H pass
-        d_a2 = (d_gh1 @ (-2 * W2w).T).mul_(h2).mul_(s2)
-        d_W2 = torch.addmm(d_W2w * w[:, None], d_a2.T, h1)
-        d_w = (d_W2w * W2).sum(1)
+        d_a2 = (d_gh1 @ (-2 * W2w).mT).mul_(h2).mul_(s2)
+        d_W2 = _addmm(d_W2w * w.unsqueeze(-1), d_a2.mT, h1)
+        d_w = (d_W2w * W2).sum(-1)
         # through s1 = 1 - h1^2 (the -2 folded into beta), plus through a2 = h1 W2^T
-        d_h1 = torch.addmm(d_ga1.mul_(g_h1).mul_(h1), d_a2, W2, beta=-2)
+        d_h1 = _addmm(d_ga1.mul_(g_h1).mul_(h1), d_a2, W2, beta=-2)
         d_a1 = d_h1.mul_(s1)
-        # as the transpose: MKL is faster at a (n x N) @ (N x H) product than at (H x N) @ (N x n)
-        d_W1 = torch.addmm(d_gx.T @ g_a1, x.T, d_a1).T
-        d_x = d_a1 @ W1.T.contiguous().T if ctx.needs_input_grad[0] else None
-        return d_x, d_W1, d_a1.sum(0), d_W2, d_a2.sum(0), d_w
+        if W1.dim() == 2:   # as the transpose: MKL is faster at a (n x N) @ (N x H) product than at (H x N) @ (N x n)
+            d_W1 = torch.addmm(d_gx.T @ g_a1, x.T, d_a1).T
+        else:
+            d_W1 = torch.baddbmm(g_a1.mT @ d_gx, d_a1.mT, x)
+        d_x = _times_W1(d_a1, W1) if ctx.needs_input_grad[0] else None
+        return d_x, d_W1, d_a1.sum(-2), d_W2, d_a2.sum(-2), d_w
+
+
+def closed_form_input_gradient(x, W1, b1, W2, b2, w) -> torch.Tensor:
+    """dF/dx for F = w . tanh(W2 tanh(W1 x + b1) + b2), of one model (x ``(N, n)``, W1 ``(H, n)``, b1
+    ``(H,)``, W2 ``(H, H)``, b2 ``(H,)``, w ``(H,)``: ``(N, n)``) or of a group's G models at once (a
+    leading model axis on every argument: ``(G, N, n)``). In grad mode a graph for every gradient
+    (the hand-written backward); in no-grad mode no autograd node (evaluation)."""
+    if torch.is_grad_enabled():
+        return _ClosedFormInputGradient.apply(x, W1, b1, W2, b2, w)
+    return _closed_form(x, W1, b1, W2, b2, w, saved=False)[0]
+
+
+_SMALL_BATCH_DTYPES = (torch.float32, torch.float64)
 
 
 # A rollout calls its field thousands of times on a few states, where the four products of the
@@ -129,7 +158,9 @@ _NUMPY_PRODUCT_ROWS = 4
 
 
 class EvaluationKernel:
-    """dx/dt = sum_k d(out_k)/dx @ fold[k] of a tanh ``MLP`` (or its output itself), without autograd.
+    """dx/dt = sum_k d(out_k)/dx @ fold[k] of a tanh ``MLP`` (or its output itself), without autograd:
+    ``closed_form_input_gradient`` for a rollout's few states, in numpy on weights taken once, every
+    output row and the fold in one product (tests/test_models.py holds the two equal).
 
     Args:
         weights: ``(W1, b1, W2, b2, W3)`` of a tanh MLP ``W3 tanh(W2 tanh(W1 x + b1) + b2)``, e.g.
