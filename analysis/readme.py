@@ -32,7 +32,8 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md",
          "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
-         "peers": "docs/peers.md", "dgnet": "docs/dgnet.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md"}
+         "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
+         **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real")}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -45,7 +46,8 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
            "measured-guide": "python analysis/scene_study.py --data FILE ... --jobs 2 --update-docs (docs/measured.md)",
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
-           "dgnet": "python analysis/chains/dgnet.py --jobs 2 --update-docs",
+           **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --seeds 3 --jobs 2 --update-docs"
+              for task in ("spring", "pend", "real")},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs"}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)

@@ -107,6 +107,12 @@ def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
     # the real pendulum has no true dx/dt: the paper's objective row is not run there
     assert "HNN, paper's objective" not in results["rows"]["real"]
     assert "| DGNet (discrete gradient / discrete gradient) | 1.38e-03 | 5.04e-04 | published, mean of 15 |" in text
+    # --update-docs writes one section per task it ran (each with its stamp), so the others stay
+    from hnn_analysis import readme
+    section = dgnet.task_table(results, "real")
+    assert section.startswith("### real") and "--tasks spring real" in section and "### spring" not in section
+    for task in dgnet.TASKS:
+        assert readme.PAGES[f"dgnet-{task}"] == "docs/dgnet.md" and readme.section_text(f"dgnet-{task}") is not None
     # the data: every consecutive pair of the 25 training paths of 100 states, at their dt = 20/99
     data = dgnet.dataset("spring", 0)
     assert data["pairs"].shape == (25 * 99, 4) and data["dt"] == pytest.approx(20 / 99)

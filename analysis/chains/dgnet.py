@@ -4,7 +4,7 @@ the real pendulum: their published rows beside ours, every row of theirs trained
 
     python analysis/chains/dgnet.py --steps 300 --seeds 2 --out results-dgnet    # a small budget
     python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their 2000 steps
-    python analysis/chains/dgnet.py --update-docs                                 # 15 seeds: docs/dgnet.md
+    python analysis/chains/dgnet.py --tasks pend --seeds 3 --jobs 2 --update-docs  # docs/dgnet.md, pend's section
 
 The protocol, read from their code (tksmatsubara/discrete-autograd at e101a09, which overlays the
 original HNN repository and reuses its data generators; experiment-{spring,pend,real}/train_dgnet.py,
@@ -192,28 +192,31 @@ def rows_for(task: str) -> list[str]:
             and task in ONLY_ON.get(label, (task,))]
 
 
-def table(results: dict) -> str:
-    """The markdown of ``results`` (``dgnet.json``): the stamp, then per task their rows and ours."""
+def task_table(results: dict, task: str) -> str:
+    """The markdown of one ``task`` of ``results`` (``dgnet.json``): the stamp, their rows and ours
+    (docs/dgnet.md's section ``dgnet-<task>``, so a run of some tasks leaves the others' sections)."""
     n, steps, meta = results["seeds"], results["steps"], results["meta"]
-    lines = [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread "
-             f"a run), {meta['seconds']:.0f} s: {n} seed(s) of their 15 trials, {steps} steps a run (theirs: 2000). "
-             "Their rows are their README's; ours are measured on the same protocol (the differences: "
-             "`analysis/chains/dgnet.py`'s docstring). Energy: mean over the seeds, with their spread.", ""]
-    for task in results["tasks"]:
-        lines += [f"### {task}", "", "| model (train / predict) | derivative | energy | source |",
-                  "| --- | --- | --- | --- |"]
-        lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |"
-                  for name, (d, e) in PUBLISHED[task].items()]
-        for label in rows_for(task):
-            runs = results["rows"][task][label]
-            d = statistics.mean(r["derivative"] for r in runs)
-            for predict in ROWS[label][3]:
-                energies = [r["energy"][predict] for r in runs]
-                spread = f" (min {min(energies):.2e}, max {max(energies):.2e})" if n > 1 else ""
-                lines.append(f"| ours: {label} ({ROWS[label][2]} / {predict}) | {d:.2e} | "
-                             f"{statistics.mean(energies):.2e}{spread} | ours, mean of {n} seeds, {steps} steps |")
-        lines.append("")
+    lines = [f"### {task}", "", f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, "
+             f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}): "
+             f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: 2000). Energy: mean over the seeds, "
+             "with their spread.", "", "| model (train / predict) | derivative | energy | source |",
+             "| --- | --- | --- | --- |"]
+    lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |" for name, (d, e) in PUBLISHED[task].items()]
+    for label in rows_for(task):
+        runs = results["rows"][task][label]
+        d = statistics.mean(r["derivative"] for r in runs)
+        for predict in ROWS[label][3]:
+            energies = [r["energy"][predict] for r in runs]
+            spread = f" (min {min(energies):.2e}, max {max(energies):.2e})" if n > 1 else ""
+            lines.append(f"| ours: {label} ({ROWS[label][2]} / {predict}) | {d:.2e} | "
+                         f"{statistics.mean(energies):.2e}{spread} | ours, mean of {n} seeds, {steps} steps |")
     return "\n".join(lines)
+
+
+def table(results: dict) -> str:
+    """The markdown of every task of ``results``: their published rows beside ours (the differences:
+    this module's docstring)."""
+    return "\n\n".join(task_table(results, task) for task in results["tasks"]) + "\n"
 
 
 def main(argv=None) -> dict:
@@ -222,7 +225,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--steps", type=int, default=2000, help="optimizer steps per run (theirs: 2000)")
     commands.add_flags(parser, seeds="seeds 0..seeds-1 (theirs: 15 trials)", seeds_default=15,
                        jobs="worker processes, one torch thread each", out="folder for runs, json, table",
-                       out_default=Path("results-dgnet"), update_docs="write the table into docs/dgnet.md")
+                       out_default=Path("results-dgnet"), update_docs="write each task's table into its section of docs/dgnet.md (the other tasks' stay)")
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     tic, meta = time.perf_counter(), {**provenance(), "command": portable_command(argv, "analysis/chains/dgnet.py")}
@@ -250,7 +253,8 @@ def main(argv=None) -> dict:
     results = {"meta": meta, "steps": args.steps, "seeds": args.seeds, "tasks": args.tasks, "published": PUBLISHED,
                "rows": rows}
     text = table(results)
-    commands.publish(args.out, "dgnet", results, text, {"dgnet": text} if args.update_docs else {})
+    sections = {f"dgnet-{task}": task_table(results, task) for task in args.tasks} if args.update_docs else {}
+    commands.publish(args.out, "dgnet", results, text, sections)
     return results
 
 
