@@ -66,10 +66,16 @@ def _addmm(c, a, b, beta: float = 1):
     return torch.addmm(c, a, b, beta=beta) if a.dim() == 2 else torch.baddbmm(c, a, b, beta=beta)
 
 
+def _mm(a, b):
+    """``a @ b``, one product per model when the operands carry a leading model axis (mm and bmm
+    directly: ``@`` on 3-D operands first checks for broadcasting, a few microseconds a call)."""
+    return torch.mm(a, b) if a.dim() == 2 else torch.bmm(a, b)
+
+
 def _times_W1(a, W1):
     """``a @ W1``, ``(..., N, H) @ (..., H, n)``. One model's: MKL multiplies a tall matrix by a thin one
     (H x n, n = input_dim) faster when the thin one is column-major (docs/speed.md, "Why the fast paths")."""
-    return a @ W1.T.contiguous().T if W1.dim() == 2 else a @ W1
+    return torch.mm(a, W1.T.contiguous().T) if W1.dim() == 2 else torch.bmm(a, W1)
 
 
 def _closed_form(x, W1, b1, W2, b2, w, saved: bool = True):
@@ -84,9 +90,9 @@ def _closed_form(x, W1, b1, W2, b2, w, saved: bool = True):
     s2 = torch.addcmul(one, h2, h2, value=-1)
     if saved:
         W2w = w.unsqueeze(-1) * W2               # folds the output weights into W2 (no N x H broadcast)
-        g_h1 = s2 @ W2w                          # dF/dh1
+        g_h1 = _mm(s2, W2w)                         # dF/dh1
     else:                                        # evaluation, often a small batch: scale the rows instead
-        W2w, g_h1 = None, (s2 * w.unsqueeze(-2)) @ W2
+        W2w, g_h1 = None, _mm(s2 * w.unsqueeze(-2), W2)
     g_a1 = g_h1 * s1                             # dF/da1
     return _times_W1(g_a1, W1), ((h1, h2, s1, s2, g_h1, g_a1, W2w) if saved else ())
 
@@ -111,20 +117,20 @@ class _ClosedFormInputGradient(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, d_gx):
         x, W1, W2, w, h1, h2, s1, s2, g_h1, g_a1, W2w = ctx.saved_tensors
-        d_ga1 = d_gx @ W1.mT
+        d_ga1 = _mm(d_gx, W1.mT)
         d_gh1 = d_ga1 * s1
-        d_W2w = s2.mT @ d_gh1
+        d_W2w = _mm(s2.mT, d_gh1)
         # tanh'' = -2 tanh tanh': the -2 rides on the small H x H matrix, not on an N x H pass
-        d_a2 = (d_gh1 @ (-2 * W2w).mT).mul_(h2).mul_(s2)
+        d_a2 = _mm(d_gh1, (-2 * W2w).mT).mul_(h2).mul_(s2)
         d_W2 = _addmm(d_W2w * w.unsqueeze(-1), d_a2.mT, h1)
         d_w = (d_W2w * W2).sum(-1)
         # through s1 = 1 - h1^2 (the -2 folded into beta), plus through a2 = h1 W2^T
         d_h1 = _addmm(d_ga1.mul_(g_h1).mul_(h1), d_a2, W2, beta=-2)
         d_a1 = d_h1.mul_(s1)
         if W1.dim() == 2:   # as the transpose: MKL is faster at a (n x N) @ (N x H) product than at (H x N) @ (N x n)
-            d_W1 = torch.addmm(d_gx.T @ g_a1, x.T, d_a1).T
+            d_W1 = torch.addmm(torch.mm(d_gx.T, g_a1), x.T, d_a1).T
         else:
-            d_W1 = torch.baddbmm(g_a1.mT @ d_gx, d_a1.mT, x)
+            d_W1 = torch.baddbmm(torch.bmm(g_a1.mT, d_gx), d_a1.mT, x)
         d_x = _times_W1(d_a1, W1) if ctx.needs_input_grad[0] else None
         return d_x, d_W1, d_a1.sum(-2), d_W2, d_a2.sum(-2), d_w
 
