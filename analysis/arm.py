@@ -1,4 +1,4 @@
-"""The two-link arm: the paper's HNN against the mechanical rung at one training budget.
+"""The two-link arm: the paper's HNN against the mechanical kind at one training budget.
 
     python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--out DIR]
 
@@ -9,7 +9,7 @@ reusing complete saved runs), then measures on held-out data of the same seed:
 - **rollout error**: e(t) = |x^(t) - x(t)| / (|x^(t)| + |x(t)|) over 16 held-out starts and 3 s,
   geometric mean over t, mean over starts (``hnn.metrics.summarize_errors``); the model is rolled
   out with dopri5 at rtol 1e-7 in float64, the truth at 1e-10;
-- for the mechanical rung, the error of its learned M^-1(q) against the arm's at the test states.
+- for the mechanical kind, the error of its learned M^-1(q) against the arm's at the test states.
 
 Prints a table and writes ``arm.json`` (every number, the runs' folders and training seconds)
 under ``--out``. Numbers come from the saved runs, never typed by hand (docs/scenes.md).
@@ -44,7 +44,7 @@ def measure(folder: Path, arm) -> dict:
     paths = hnn.rollout(model.time_derivative, x0, t, method="dopri5", rtol=RTOL, atol=RTOL)
     out["rollout_error"] = hnn.metrics.summarize_errors(
         hnn.metrics.relative_error(paths, data.trajectories(arm, x0, t)), t)["error"]
-    if isinstance(model, hnn.MechanicalHNN):        # the rung that learns M^-1(q)
+    if isinstance(model, hnn.MechanicalHNN):        # the kind that learns M^-1(q)
         with torch.no_grad():
             learned, true = model.inverse_mass(x[:, :2]), torch.linalg.inv(arm.mass_matrix(x[:, :2]))
         out["inverse_mass_error"] = float((learned - true).norm() / true.norm())

@@ -2,7 +2,7 @@
 
 Not one of the paper's six tasks (its ``task.py`` keeps it out of ``analysis/reproduce.py``):
 the scene where ``mechanical`` (H = 1/2 p^T M^-1(q) p + V(q)) has to learn a mass matrix that
-varies with q, where the chains' rungs were measured (docs/scenes.md, "The two-link arm").
+varies with q, where the model kinds were measured on chains (docs/scenes.md, "The two-link arm").
 
 Two uniform rods (masses m_k in kg, lengths l_k in metres, centre of mass at l_k / 2, moment of
 inertia m_k l_k^2 / 12 about it) hinged at a fixed shoulder and at the elbow. Generalized

@@ -1,6 +1,6 @@
 """The two-link arm as the package sees it (hnn.TaskSpec): not one of the paper's six tasks.
 
-Measured by analysis/arm.py (field and rollout errors of the rungs at one budget), not by the
+Measured by analysis/arm.py (field and rollout errors of the model kinds at one budget), not by the
 paper's energy MSE; reproduce.py leaves it out.
 """
 import hnn

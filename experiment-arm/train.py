@@ -4,7 +4,7 @@
     python experiment-arm/train.py --model hnn --verbose            # the paper's HNN on [q, p]
 
 States are canonical [q_1, q_2, p_1, p_2] (joint angles in radians, momenta in kg m^2 / s), fit on
-dx/dt at every state (the paper's objective). ``python analysis/arm.py`` trains the rungs at one
+dx/dt at every state (the paper's objective). ``python analysis/arm.py`` trains the kinds at one
 budget and measures the field and rollout errors (docs/scenes.md, "The two-link arm").
 """
 from dataclasses import dataclass

@@ -10,7 +10,7 @@ The defaults are CHNN's training setting (Finzi et al. 2020, docs/peers.md): 800
 states 0.03 s apart, fit by rolling out 4-step snippets (RK4, MAE), weight decay 1e-4,
 learning rate 3e-3, batch 200, 256 hidden units; their 2000 epochs of 4 batches are 8000 steps.
 AdamW with a cosine schedule, as theirs. Not theirs: each step draws from all 20 snippets of
-every path (theirs one a path). ``analysis/peers.py`` trains and measures every rung on it.
+every path (theirs one a path). ``analysis/peers.py`` trains and measures every model kind on it.
 """
 from dataclasses import dataclass
 from pathlib import Path

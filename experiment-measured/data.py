@@ -48,7 +48,7 @@ reader = hnn.load_task("measured", "reader")
 
 UNIFORM = 0.05          # a snippet's steps may differ from the nominal step by this fraction of it
 MIN_ROWS = 2            # a trial's train part and its held-out part need at least this many rows each
-ASSUMES = ("on [q, v] the hnn, separable and dissipative rungs take v for the momentum: they assume p = m v with "
+ASSUMES = ("on [q, v] the hnn, separable and dissipative kinds take v for the momentum: they assume p = m v with "
            "one constant mass m for every coordinate (right for a point mass on a spring, equal masses, a rigid "
            "pendulum's angle; wrong for a configuration-dependent mass: use mechanical, which learns M(q), or "
            "second_order)")

@@ -1,7 +1,7 @@
 """Your own measurements as the package sees them (hnn.TaskSpec): not one of the paper's tasks.
 
 No protocol of the paper applies to a file nobody has seen: ``python analysis/scene_study.py
---data FILE ...`` measures its rungs (docs/measured.md); reproduce.py leaves it out.
+--data FILE ...`` measures its model kinds (docs/measured.md); reproduce.py leaves it out.
 """
 import hnn
 

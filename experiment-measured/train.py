@@ -1,4 +1,4 @@
-"""Train any rung of the model ladder on your own measurements (a CSV, text or .npz file).
+"""Train any model kind on your own measurements (a CSV, text or .npz file).
 
     python experiment-measured/train.py --data experiment-measured/systems/real_linear_h_1.txt \\
         --time t --q x --v v --trial trial --model hnn --verbose
@@ -8,7 +8,7 @@ splits it by time within each trial and scales it so Hamilton's equations keep t
 run folder gets ``scale.json`` beside its config, metrics and checkpoint, so its numbers can be
 turned back into your units. docs/measured.md walks through it.
 
-On [q, v] (``--v``) the hnn, separable and dissipative rungs read v as the momentum (p = m v with
+On [q, v] (``--v``) the hnn, separable and dissipative kinds read v as the momentum (p = m v with
 one constant mass, see data.ASSUMES; printed when you train one); mechanical learns the mass
 matrix M(q) and second_order needs velocities (it is refused on [q, p]).
 """

@@ -83,9 +83,9 @@ KIND_DOCS = {
                     "masses. The task gives the constraint graph (the chain task converts its angles)",
         integrator="`dopri5` or `rk4` (the projection keeps the constraints; its H is not separable)",
         when="linkages and chains whose constraints you know: it models what the scene is, and beats the "
-             "generalized-coordinate rungs on chains (docs/peers.md)"),
+             "generalized-coordinate kinds on chains (docs/peers.md)"),
     "constrained_lagrangian": KindDoc(
-        line="CLNN (Finzi et al. 2020): the constrained rung in Lagrangian form, Cartesian [x, xdot], the "
+        line="CLNN (Finzi et al. 2020): the constrained kind in Lagrangian form, Cartesian [x, xdot], the "
              "constraint forces solved for",
         assumes="as `constrained`: bodies of constant mass, known rigid constraints, a potential V(x)",
         coordinates="Cartesian positions of the bodies and their velocities, as observed",
@@ -99,7 +99,7 @@ KIND_DOCS = {
         coordinates="observed [q, qdot] only",
         integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
         when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "
-             "field call solves an n x n system per state, so it is the costliest rung per step"),
+             "field call solves an n x n system per state, so it is the costliest kind per step"),
     "pixel-hnn": KindDoc(
         line="the pixel task's HNN: an autoencoder of frames and an HNN on its 2-D latent "
              "(`experiment-pixels/train.py --model hnn`)",

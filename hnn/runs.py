@@ -27,12 +27,14 @@ from .training import train
 
 
 def run_label(config) -> str:
-    """The middle of a run folder's name: its ``model``, and ``-rk4`` for ``use_rk4``."""
+    """The middle of a run folder's name: its model kind as ``--model`` names it (``config.model``: the
+    kind without a task's prefix such as ``pixel-``), and ``-rk4`` for ``use_rk4``."""
     return config.model + ("-rk4" if config.use_rk4 else "")
 
 
 def run_dir(config) -> Path:
-    """Where the run of this config lives: ``<save_dir>/<name>-<label>-seed<seed>-<key>``."""
+    """Where the run of this config lives: ``<save_dir>/<name>-<model>-seed<seed>-<key>``, ``<model>``
+    being ``run_label``'s (the kind as ``--model`` names it)."""
     return Path(config.save_dir) / f"{config.name}-{run_label(config)}-seed{config.seed}-{config.key()}"
 
 

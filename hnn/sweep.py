@@ -58,7 +58,7 @@ _CANNOT_RUN = (FileNotFoundError, ImportError)
 
 @dataclass
 class Job:
-    """One run of a sweep: its ``key`` (``row/label/seed<seed>``), its task and its config."""
+    """One run of a sweep: its ``key`` (``row/kind/seed<seed>``), its task and its config."""
     key: str
     task: str
     config: RunConfig

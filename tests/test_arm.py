@@ -1,4 +1,4 @@
-"""The two-link arm task (experiment-arm) against independent truths, and the mechanical rung on it."""
+"""The two-link arm task (experiment-arm) against independent truths, and the mechanical kind on it."""
 import math
 
 import numpy as np
@@ -114,10 +114,10 @@ def _small_run(kind, seed, ds):
         return model, float((model.time_derivative(x) - y).norm() / y.norm())
 
 
-def test_mechanical_rung_learns_the_arms_mass_matrix_and_beats_the_hnn_at_equal_budget():
+def test_mechanical_kind_learns_the_arms_mass_matrix_and_beats_the_hnn_at_equal_budget():
     """Fixed-seed regression, 500 full-batch steps on 400 states, width 64: measured field errors
     0.039-0.040 (mechanical) against 0.25-0.27 (hnn) over seeds 0, 1, 2 (data and init); the bounds
-    leave 2x. Fails where the rung's M^-1 collapses, as issue 32 reported on another scene."""
+    leave 2x. Fails where the mechanical model's M^-1 collapses, as issue 32 reported on another scene."""
     ds = data.get_dataset(seed=0, n_train=400, n_test=400)
     mechanical, field = _small_run("mechanical", 0, ds)
     _, hnn_field = _small_run("hnn", 0, ds)

@@ -83,7 +83,7 @@ def test_chnn_parameters_and_projection():
     assert (moved - cart).abs().max() < 1e-2       # a small perturbation is moved a small way back
 
 
-# ------------------------------------------------------------------------------- the rungs
+# ------------------------------------------------------------------------------- the kinds
 
 class _TrueMechanical(hnn.MechanicalHNN):
     """The mechanical HNN with the chain's M^-1 and V in place of its networks."""
@@ -233,8 +233,8 @@ def test_lnn_energy_error():
 
 # ------------------------------------------------------------------------------ the task folder
 
-def test_chain_task_trains_every_rung_and_reloads(tmp_path):
-    """experiment-chain/train.py: CHNN's paths (their d/dt is the paths' slope), every rung by
+def test_chain_task_trains_every_kind_and_reloads(tmp_path):
+    """experiment-chain/train.py: CHNN's paths (their d/dt is the paths' slope), every kind by
     --model, the angle embedding saved with the run; the chain is not one of the paper's tasks."""
     main = hnn.load_task("chain", "train").main
     common = ["--bobs", "2", "--n_train", "6", "--n_test", "3", "--total_steps", "3", "--hidden_dim", "16",

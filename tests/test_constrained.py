@@ -1,4 +1,4 @@
-"""The constrained rungs (CHNN, CLNN) against truths: the projection is a projection, the flow keeps
+"""The constrained kinds (CHNN, CLNN) against truths: the projection is a projection, the flow keeps
 its constraints and (CHNN) its H, with the chain's true potential and masses both fields are the
 chain's own dynamics in Cartesian coordinates, the fast closed form is the dense P J grad H, its
 gradients match finite differences, and bad input is one clear error."""

@@ -1,4 +1,4 @@
-"""The LNN rung against truths: with the true L of a pendulum and of a chain its Euler-Lagrange
+"""The LNN kind against truths: with the true L of a pendulum and of a chain its Euler-Lagrange
 acceleration is the chain's closed-form dynamics (an independent derivation through the mass
 matrix and Hamilton's equations), its energy is the true one, its own energy is conserved along its
 flow for random weights, and a degenerate L is one clear error naming the states."""

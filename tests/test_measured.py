@@ -1,5 +1,5 @@
 """Your own measurements (experiment-measured/, analysis/scenes/measured_*.py): reading, differences,
-angles, scaling, the right rung on a synthetic damped oscillator, one error line per bad input."""
+angles, scaling, the right kind on a synthetic damped oscillator, one error line per bad input."""
 import hashlib
 import json
 import math
@@ -128,10 +128,10 @@ def test_the_scale_keeps_hamiltons_equations_with_h_over_b_squared():
 
 
 # ----------------------------------------------------------------------------------------------
-# the right rung
+# the right kind
 
 
-def test_a_damped_oscillator_in_a_csv_round_trips_to_the_dissipative_rung(tmp_path):
+def test_a_damped_oscillator_in_a_csv_round_trips_to_the_dissipative_kind(tmp_path):
     path = _write_csv(tmp_path / "damped.csv", _damped())
     rec = data.load(path, time="time", q="x", v="v", trial="run")
     held = mm.Heldout(data, rec, 0.3, None, 3.0)
@@ -145,7 +145,7 @@ def test_a_damped_oscillator_in_a_csv_round_trips_to_the_dissipative_rung(tmp_pa
         model = mm.Model(data, run, scale, rec.state)
         errors[kind] = mm.measure(model, held)["prediction_error"]["median"]
         losses[kind] = model.metrics["test_loss"]
-    # friction is what an energy-conserving flow cannot fit: the dissipative rung wins on both
+    # friction is what an energy-conserving flow cannot fit: the dissipative kind wins on both
     assert losses["dissipative"] < 0.5 * losses["hnn"]
     assert errors["dissipative"] < 0.5 * errors["hnn"] < held.naive["median"]
 
@@ -204,7 +204,7 @@ def test_every_bad_input_is_one_error_line(tmp_path, capsys, text, flags, expect
     assert re.search(expect, _error(argv, capsys)), expect
 
 
-def test_trials_out_of_order_a_short_horizon_tail_and_wrong_rungs_are_one_error_line(tmp_path, capsys):
+def test_trials_out_of_order_a_short_horizon_tail_and_wrong_kinds_are_one_error_line(tmp_path, capsys):
     path = _write_csv(tmp_path / "trials.csv", {"run": [0] * 8 + [1] * 8 + [0] * 8, "t": list(range(8)) * 3,
                                                  "x": np.arange(24.0), "v": np.ones(24)})
     assert "trial 0 starts again" in _error(["--data", str(path), "--q", "x", "--v", "v", "--trial", "run"], capsys)

@@ -13,12 +13,12 @@ TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "to
 def test_tiny_peers_table(tmp_path):
     results = peers.main(["--out", str(tmp_path)], settings=TINY)
     row = results["rows"]["chain1"]
-    for rung in peers.rungs():
-        entry = row[rung]
-        assert "blew_up" in entry or (entry["n"] == 3 and 0 < entry["median"] <= 1), (rung, entry)
-        cost = row["seconds"][rung]            # steps at a rate timed alone on one thread, and the wall time
+    for kind in peers.kinds():
+        entry = row[kind]
+        assert "blew_up" in entry or (entry["n"] == 3 and 0 < entry["median"] <= 1), (kind, entry)
+        cost = row["seconds"][kind]            # steps at a rate timed alone on one thread, and the wall time
         assert cost["steps"] == 3 and cost["seconds"] > 0 and cost["wall"] > 0
-        curve = results["curves"]["chain1"][rung]   # held-out loss at steps 0 and 2, in CHNN epochs of 4 steps
+        curve = results["curves"]["chain1"][kind]   # held-out loss at steps 0 and 2, in CHNN epochs of 4 steps
         assert curve["epochs"] == [0.0, 0.5] and len(curve["test_loss"]) == 2
     assert (tmp_path / "figures" / "peers-curves.png").stat().st_size > 0
     # the chaos floor of one bob from 3 starts: the published one is 4.9e-5 (100 starts)
@@ -38,18 +38,18 @@ def test_update_docs_refuses_a_smoke_run(capsys):
     assert "drop --quick" in capsys.readouterr().err
 
 
-def test_the_card_names_the_cheapest_rung_within_2x_of_the_best():
+def test_the_card_names_the_cheapest_kind_within_2x_of_the_best():
     rows = {"chain2": {"a": {"mean": 1e-3}, "b": {"mean": 1.9e-3}, "c": {"mean": 2.1e-3}, "d": {"blew_up": "t = 1"},
                        "seconds": {"a": {"seconds": 900}, "b": {"seconds": 100}, "c": {"seconds": 10},
                                    "d": {"seconds": 1}}}}
-    lines = peers.card({"meta": {"rungs": ["a", "b", "c", "d"]}, "rows": rows})
+    lines = peers.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})
     # b is within 2x of a and cheaper; c is cheaper still but 2.1x off; d blew up
     assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b |"
 
 
-def test_the_table_trains_the_rungs_whose_structure_the_chain_has():
-    rungs = peers.rungs()
-    assert {"hnn", "mechanical", "constrained", "constrained_lagrangian"} <= set(rungs)
+def test_the_table_trains_the_kinds_whose_structure_the_chain_has():
+    kinds = peers.kinds()
+    assert {"hnn", "mechanical", "constrained", "constrained_lagrangian"} <= set(kinds)
     # the chain has no friction and its kinetic energy depends on the angles
-    assert not {kind for kind in rungs if hnn.MODEL_KINDS[kind].dissipative or hnn.MODEL_KINDS[kind].separable}
+    assert not {kind for kind in kinds if hnn.MODEL_KINDS[kind].dissipative or hnn.MODEL_KINDS[kind].separable}
     assert "dissipative" in hnn.MODEL_KINDS and "separable" in hnn.MODEL_KINDS

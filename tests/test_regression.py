@@ -22,15 +22,15 @@ def spring_runs(tmp_path_factory):
     threads = torch.get_num_threads()
     torch.set_num_threads(1)            # one thread: the same kernels and sums at any OMP_NUM_THREADS
     try:
-        return {label: trainer.main(["--save_dir", str(out)] + (["--baseline"] if label == "baseline" else []))
-                for label in ("baseline", "hnn")}
+        return {kind: trainer.main(["--save_dir", str(out)] + (["--baseline"] if kind == "baseline" else []))
+                for kind in ("baseline", "hnn")}
     finally:
         torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")
 def energy(spring_runs):
-    models = {label: hnn.load_run(run)[0] for label, run in spring_runs.items()}
+    models = {kind: hnn.load_run(run)[0] for kind, run in spring_runs.items()}
     spring = hnn.load_task("spring")
     return {protocol: hnn.evaluate_energy(spring, models, hnn.tasks.get_protocol("spring", protocol))
             for protocol in ("paper", "corrected")}
@@ -39,10 +39,10 @@ def energy(spring_runs):
 def test_spring_losses_match_the_paper(spring_runs):
     # measured: every loss of the 20 trainings lies within 12.3% of the paper's (seed 2's test
     # losses are the farthest; seed 0's all within 0.2%); 20% is 1.6x the worst seed
-    for label, run in spring_runs.items():
+    for kind, run in spring_runs.items():
         _, _, metrics = hnn.load_run(run)
         for key in ("train_loss", "test_loss"):
-            assert metrics[key] == pytest.approx(PAPER["spring"][key][label][0], rel=0.20), (label, key)
+            assert metrics[key] == pytest.approx(PAPER["spring"][key][kind][0], rel=0.20), (kind, key)
 
 
 def test_spring_hnn_conserves_energy_far_better_than_the_baseline(energy):
@@ -59,6 +59,6 @@ def test_spring_energy_mse_near_the_paper(energy):
     # HNN 0.38x-2.21x (seed 0: baseline 1.03x, HNN 0.66x at one thread and 1.25x at two); the band
     # [1/6, 6] keeps 1.7x margin on the widest of them
     r = energy["paper"]
-    for label in ("baseline", "hnn"):
-        paper = PAPER["spring"]["energy_mse"][label][0]
-        assert paper / 6 < r[label]["mse"] < paper * 6, (label, r[label]["mse"], paper)
+    for kind in ("baseline", "hnn"):
+        paper = PAPER["spring"]["energy_mse"][kind][0]
+        assert paper / 6 < r[kind]["mse"] < paper * 6, (kind, r[kind]["mse"], paper)

@@ -16,8 +16,8 @@ TINY = 20          # training steps of the end-to-end runs
 
 def _row(train, test, energy):
     """One task's row of results.json: (mean, ±) pairs for both models."""
-    return {label: {"train_loss": list(train[label]), "test_loss": list(test[label]),
-                    "energy_mse_paper": list(energy[label])} for label in ("baseline", "hnn")}
+    return {kind: {"train_loss": list(train[kind]), "test_loss": list(test[kind]),
+                   "energy_mse_paper": list(energy[kind])} for kind in ("baseline", "hnn")}
 
 
 @pytest.fixture
@@ -39,10 +39,10 @@ def results():
                         "training": 3.5, "evaluation": 7.0, "total": 10.5, "jobs": 1, "threads_per_job": 1}}
 
 
-def _cell(table: str, title: str, label: str) -> str:
-    """The 'ours' cell of the spring row for ``label`` in the table headed ``title``."""
+def _cell(table: str, title: str, kind: str) -> str:
+    """The 'ours' cell of the spring row for ``kind`` in the table headed ``title``."""
     section = table.split(f"**{title}**", 1)[1]
-    row = next(line for line in section.splitlines() if line.startswith(f"| spring | {label} |"))
+    row = next(line for line in section.splitlines() if line.startswith(f"| spring | {kind} |"))
     return row.split("|")[4].strip()
 
 
@@ -102,8 +102,8 @@ def test_a_sweep_reuses_a_run_of_the_same_config_and_keeps_it_beside_others(tmp_
 
 
 def _losses(results: dict) -> dict:
-    return {(task, label): (row[label]["train_loss"], row[label]["test_loss"])
-            for task, row in results["tasks"].items() for label in ("baseline", "hnn")}
+    return {(task, kind): (row[kind]["train_loss"], row[kind]["test_loss"])
+            for task, row in results["tasks"].items() for kind in ("baseline", "hnn")}
 
 
 def test_quick_end_to_end_and_jobs(tmp_path):
@@ -141,8 +141,8 @@ def test_quick_end_to_end_and_jobs(tmp_path):
                           "--jobs", str(jobs), "--no-figures"])
     assert two["seconds"]["jobs"] == jobs and two["seconds"]["threads_per_job"] == 1
     assert _losses(two) == _losses(one)
-    for label in ("baseline", "hnn"):
-        assert two["tasks"]["spring"][label]["energy_mse_paper"] == one["tasks"]["spring"][label]["energy_mse_paper"]
+    for kind in ("baseline", "hnn"):
+        assert two["tasks"]["spring"][kind]["energy_mse_paper"] == one["tasks"]["spring"][kind]["energy_mse_paper"]
 
 
 def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monkeypatch):
@@ -272,7 +272,7 @@ def test_staleness_check_flags_a_page_stamped_before_a_code_change(tmp_path, mon
 def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results):
     results["meta"].update(seeds=[0, 1, 2], quick=False)
     row = results["tasks"]["spring"]
-    per_seed = {seed: {label: dict(row[label]) for label in ("baseline", "hnn")} for seed in "012"}
+    per_seed = {seed: {kind: dict(row[kind]) for kind in ("baseline", "hnn")} for seed in "012"}
     row["per_seed"] = per_seed
 
     def hnn_energy_cell(values):

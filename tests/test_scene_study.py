@@ -109,9 +109,9 @@ def test_scene_card_picks_the_smallest_model_within_2x_of_both_bests():
              ("separable", 32, 0.5): _cell(2300, 1.9e-4, 0.17),  # within 2x of both: the card
              ("baseline", 16, 1.0): _cell(352, 1e-1, 0.09)}      # best rollout, far worse energy
     card = scene_study.scene_card(cells)
-    assert (card["label"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
+    assert (card["kind"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
     assert card["best_energy"] == 1e-4 and card["best_rollout"] == 0.09
-    assert scene_study.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["label"] == "hnn"
+    assert scene_study.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["kind"] == "hnn"
 
 
 def test_scene_card_falls_back_to_the_model_nearest_both_bests():
@@ -122,7 +122,7 @@ def test_scene_card_falls_back_to_the_model_nearest_both_bests():
              ("hnn", 200, 1.0): _cell(41200, 3e-5, 0.18),           # 3x and 2x: the nearest
              ("hnn", 32, 1.0): _cell(1200, 4e-5, 0.3)}              # smaller, but 4x and 3.3x
     card = scene_study.scene_card(cells)
-    assert (card["label"], card["width"]) == ("hnn", 200)
+    assert (card["kind"], card["width"]) == ("hnn", 200)
     assert card["within"] == pytest.approx(3.0)
     assert "none within 2x of both bests; nearest: hnn, width 200" in scene_report.card_name(card)
     normal = scene_study.scene_card({("hnn", 32, 1.0): _cell(1200, 1e-4, 0.1)})
@@ -188,8 +188,8 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
-    assert set(entry["rungs"]) == set(scene_common.task_rungs("spring"))
-    assert len(entry["grid"]) == len(entry["rungs"]) * 3 and entry["card"] is not None
+    assert set(entry["kinds"]) == set(scene_common.task_kinds("spring"))
+    assert len(entry["grid"]) == len(entry["kinds"]) * 3 and entry["card"] is not None
     assert all("train_cost" in m for m in entry["grid"].values())
     assert entry["speed"]["separable"]["fastest"] is not None
     saved = json.loads((tmp_path / "scene_study.json").read_text())
@@ -220,10 +220,10 @@ def test_models_measured_together_get_the_numbers_each_gets_alone(tmp_path):
     assert len({m["energy_mse_corrected"][0] for m in together.values()}) == 3
 
 
-def test_every_scene_has_rungs_and_the_pixel_scene_measures_its_own_pair():
+def test_every_scene_has_kinds_and_the_pixel_scene_measures_its_own_pair():
     # a pixel model reads frames through its encoder: its scene keeps the paper's pair
-    assert set(scene_common.task_rungs("pixels")) == {"baseline", "hnn"}
+    assert set(scene_common.task_kinds("pixels")) == {"baseline", "hnn"}
     for task in scene_common.scenes():
-        assert scene_common.task_rungs(task), f"the {task} scene has no rung"
+        assert scene_common.task_kinds(task), f"the {task} scene has no kind"
     # a kind that reads [q, qdot] does not fit a scene of [q, p]
-    assert "second_order" not in scene_common.task_rungs("spring")
+    assert "second_order" not in scene_common.task_kinds("spring")

@@ -1,4 +1,4 @@
-"""The model ladder's structured rungs: a separable H (explicit leapfrog is symplectic for it) and
+"""The model ladder's structured kinds: a separable H (explicit leapfrog is symplectic for it) and
 the dissipative split dx/dt = J grad H + grad D, checked against analytic truths."""
 import json
 import subprocess

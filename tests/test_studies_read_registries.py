@@ -59,9 +59,9 @@ def test_both_studies_try_every_registered_solver_that_applies(toys):
         assert "toy-euler" in labels and ("leapfrog" in labels) == separable
 
 
-def _untrained_run(task: str, label: str, runs) -> None:
-    """A saved run of ``task``'s default config of kind ``label``, untrained (the studies only roll it out)."""
-    config = hnn.tasks.task_config(task, {"model": label, "seed": 0, "save_dir": str(runs)})
+def _untrained_run(task: str, kind: str, runs) -> None:
+    """A saved run of ``task``'s default config of kind ``kind``, untrained (the studies only roll it out)."""
+    config = hnn.tasks.task_config(task, {"model": kind, "seed": 0, "save_dir": str(runs)})
     saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": None}
     torch.manual_seed(0)
     metrics = {"train_loss": 0.1, "train_loss_se": 0.0, "test_loss": 0.1, "test_loss_se": 0.0, "train_seconds": 0.0}
@@ -73,8 +73,8 @@ def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solve
     spring = speed_accuracy.study_settings("spring")
     monkeypatch.setattr(speed_accuracy, "study_settings", lambda task: {**spring, "batch": 2, "dts": (0.1, 0.05)})
     monkeypatch.setattr(speed_accuracy, "QUICK_RTOLS", (1e-6,))
-    for label in ("hnn", "baseline", "scaled"):
-        _untrained_run("spring", label, tmp_path)
+    for kind in ("hnn", "baseline", "scaled"):
+        _untrained_run("spring", kind, tmp_path)
     notes = []
     rows = speed_accuracy.measure_task("spring", tmp_path, quick=True, repeats=1, notes=notes)
     measured = {(row["model"], row["method"]) for row in rows if row["status"] == "ok"}
@@ -83,7 +83,7 @@ def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solve
 
 
 def test_the_scene_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path):
-    assert "scaled" in scene_common.rungs() and scene_report.color("scaled") == "tab:olive"
+    assert "scaled" in scene_common.kinds() and scene_report.color("scaled") == "tab:olive"
     _untrained_run("spring", "scaled", tmp_path)
     run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
     scene = scene_common.Scene("spring", quick=True)
@@ -111,9 +111,9 @@ def test_a_new_kind_reaches_the_flags_a_run_load_run_and_the_peers_table(toys, t
     model, saved, metrics = hnn.load_run(run)
     assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
     # the peers table: the chain's observed [q, qdot] are read by the toy (as the HNN reads them)
-    assert "scaled" in peers.rungs()
+    assert "scaled" in peers.kinds()
     tiny = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
-            "test_starts": 2, "lnn_starts": 0, "lnn_fields": {}, "rungs": ("hnn", "scaled")}
+            "test_starts": 2, "lnn_starts": 0, "lnn_fields": {}, "kinds": ("hnn", "scaled")}
     results = peers.main(["--out", str(tmp_path / "peers")], settings=tiny)
     assert "ours: scaled" in (tmp_path / "peers" / "peers.md").read_text()
     entry = results["rows"]["chain1"]["scaled"]

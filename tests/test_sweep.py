@@ -27,10 +27,10 @@ needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
 LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
 
 
-def _job(task: str, label: str, runs_dir: Path, steps: int, **fields) -> sweep.Job:
+def _job(task: str, kind: str, runs_dir: Path, steps: int, **fields) -> sweep.Job:
     """A job as reproduce.plan makes it (the scene study too)."""
-    config = hnn.tasks.task_config(task, {"model": label, "save_dir": str(runs_dir), "total_steps": steps, **fields})
-    return sweep.Job(f"{task}/{label}/seed0", task, config)
+    config = hnn.tasks.task_config(task, {"model": kind, "save_dir": str(runs_dir), "total_steps": steps, **fields})
+    return sweep.Job(f"{task}/{kind}/seed0", task, config)
 
 
 @pytest.mark.parametrize("backend, n_jobs", [
@@ -196,9 +196,9 @@ def test_ray_gives_the_numbers_of_the_local_backend(tmp_path):
                                       for side in ("ray", "local"))
         assert {k: ray_metrics[k] for k in LOSSES} == {k: local_metrics[k] for k in LOSSES}, name
     for task in ("spring", "pend"):
-        for label in ("baseline", "hnn"):
+        for kind in ("baseline", "hnn"):
             for key in ("train_loss", "test_loss", "energy_mse_paper", "energy_mse_corrected"):
-                assert on_ray["tasks"][task][label][key] == local["tasks"][task][label][key], (task, label, key)
+                assert on_ray["tasks"][task][kind][key] == local["tasks"][task][kind][key], (task, kind, key)
     # a local rerun on the Ray output reuses every run: the same configs, whatever trained them
     again = reproduce.main(common + ["--out", str(tmp_path / "ray")])
     assert again["seconds"]["runs"] == {}

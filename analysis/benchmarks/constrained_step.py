@@ -1,4 +1,4 @@
-"""A constrained rung's training step against the paper HNN's on the same chain snippets.
+"""A constrained kind's training step against the paper HNN's on the same chain snippets.
 
     python analysis/benchmarks/constrained_step.py                   # N = 5, width 256, batch 200
     python analysis/benchmarks/constrained_step.py --bobs 2 --rounds 10

@@ -36,7 +36,7 @@ def main(argv=None) -> dict:
                      "train_seconds": metrics.get("train_seconds"), "ours": found[saved["model"]],
                      "floor": found["floor"], "published": {k: peer.get(k) for k in ("CHNN", "CLNN", "HNN")}})
         print(json.dumps(rows[-1]), flush=True)
-    print("\n| N | rung | steps | train s (wall) | ours mean (median) | published CHNN | published CLNN | floor |")
+    print("\n| N | kind | steps | train s (wall) | ours mean (median) | published CHNN | published CLNN | floor |")
     print("| --- " * 8 + "|")
     for row in rows:
         ours, pub = row["ours"], row["published"]

@@ -3,7 +3,7 @@
     python analysis/peers.py --jobs 2 --update-docs      # the whole table (about an hour on 2 cores)
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
 
-Trains our rungs (``rungs()``: every registered kind that reads the chain's observed states, from
+Trains our model kinds (``kinds()``: every registered one that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
 N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), through
 ``hnn/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
@@ -39,18 +39,18 @@ QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 6
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
                                                            "total_steps": 100}}
 # 4000 steps of batch 200: 1000 of CHNN's 4-batch epochs, against their 2000. Their 8000 steps for
-# every rung would take about 2.4 hours of this 2-core machine (each rung's one-thread rate: docs/peers.md,
-# "What we tried"); at N = 2 the mechanical rung's mean error went from 2.8e-2 at 1500 steps to 7.2e-3 at 4000
+# every kind would take about 2.4 hours of this 2-core machine (each kind's one-thread rate: docs/peers.md,
+# "What we tried"); at N = 2 the mechanical kind's mean error went from 2.8e-2 at 1500 steps to 7.2e-3 at 4000
 FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_starts": 40,
         "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
 
 
-def rungs() -> tuple[str, ...]:
+def kinds() -> tuple[str, ...]:
     """The kinds the table trains: every one that the chain task's ``--model`` takes and whose model
     reads its observed states [q, qdot] (as they are, or mapped: ``hnn.kinds.ModelKind.reads``), or else the
     bobs' Cartesian [x, xdot] (the constrained kinds: ``experiment-chain/data.py``'s
     ``observed_coordinates``), and whose declared structure the chain has (``structure_holds``: no
-    friction, no H = T(p) + V(q)). The LNN protocol trains the same rungs on derivatives of the same states."""
+    friction, no H = T(p) + V(q)). The LNN protocol trains the same kinds on derivatives of the same states."""
     config, chain = hnn.load_task("chain", "train").Config, hnn.load_task("chain")
     return tuple(kind for kind in hnn.cli.model_choices(config) if hnn.MODEL_KINDS[kind].studied
                  and chain.structure_holds(kind)
@@ -58,24 +58,24 @@ def rungs() -> tuple[str, ...]:
 
 
 def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
-    """One ``sweep.Job`` per (protocol row, rung): ``chain<N>/<rung>/seed<seed>`` and ``lnn/<rung>/seed<seed>``."""
+    """One ``sweep.Job`` per (protocol row, kind): ``chain<N>/<kind>/seed<seed>`` and ``lnn/<kind>/seed<seed>``."""
     jobs = []
     for n in settings["bobs"]:
-        for rung in settings["rungs"]:
-            fields = {"bobs": n, "model": rung, "seed": seed, "save_dir": str(out / "runs"), **settings["fields"]}
-            jobs.append(sweep.Job(f"chain{n}/{rung}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
-    for rung in settings["rungs"] if settings["lnn_starts"] else ():
-        fields = {"bobs": 2, "protocol": "lnn", "objective": "derivative", "model": rung, "seed": seed,
+        for kind in settings["kinds"]:
+            fields = {"bobs": n, "model": kind, "seed": seed, "save_dir": str(out / "runs"), **settings["fields"]}
+            jobs.append(sweep.Job(f"chain{n}/{kind}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
+    for kind in settings["kinds"] if settings["lnn_starts"] else ():
+        fields = {"bobs": 2, "protocol": "lnn", "objective": "derivative", "model": kind, "seed": seed,
                   "save_dir": str(out / "runs"), **settings["lnn_fields"]}
-        jobs.append(sweep.Job(f"lnn/{rung}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
+        jobs.append(sweep.Job(f"lnn/{kind}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
     return jobs
 
 
-def _rollout(chain, rung: str, model, z0: torch.Tensor, t_eval, rtol: float) -> tuple[torch.Tensor | None, str | None]:
+def _rollout(chain, kind: str, model, z0: torch.Tensor, t_eval, rtol: float) -> tuple[torch.Tensor | None, str | None]:
     """The model's path from observed ``z0`` ``(batch, 2N)`` by dopri5 in float64, as Cartesian bobs
-    ``(batch, T, 2, N, 2)`` (positions, velocities), or ``(None, why)`` if it blows up. A rung of the
-    chain's angles is mapped to the bobs; a Cartesian rung starts from the bobs and is read as it is."""
-    observed = hnn.load_task("chain").observed_coordinates(rung)
+    ``(batch, T, 2, N, 2)`` (positions, velocities), or ``(None, why)`` if it blows up. The path of a
+    kind on the chain's angles is mapped to the bobs; a Cartesian kind's starts from the bobs and is read as it is."""
+    observed = hnn.load_task("chain").observed_coordinates(kind)
     start = chain.to_cartesian(z0) if observed == "cartesian" else z0
     try:
         path = hnn.trajectory.rollout_observed(model.double(), start, t_eval, observed, method="dopri5", rtol=rtol,
@@ -86,32 +86,32 @@ def _rollout(chain, rung: str, model, z0: torch.Tensor, t_eval, rtol: float) -> 
 
 
 def measure_chnn(chain, models: dict, starts: int) -> dict:
-    """CHNN's number ``{rung: {mean, median, n, seconds}}`` and the chaos floor, over ``starts`` test starts."""
+    """CHNN's number ``{kind: {mean, median, n, seconds}}`` and the chaos floor, over ``starts`` test starts."""
     protocols = hnn.load_task("chain", "protocols")
     spec = protocols.CHNN
     z0 = protocols.chnn_test_starts(chain, starts)
     t = spec["dt"] * np.arange(spec["points"])
     truth = chain.cartesian(hnn.load_task("chain").trajectories(chain, z0, t))
     result = {"floor": protocols.summary(protocols.chaos_floor(chain, z0))}
-    for rung, model in models.items():
-        pred, blew_up = _rollout(chain, rung, model, z0, t, spec["model_rtol"])
-        result[rung] = ({"blew_up": blew_up} if pred is None
+    for kind, model in models.items():
+        pred, blew_up = _rollout(chain, kind, model, z0, t, spec["model_rtol"])
+        result[kind] = ({"blew_up": blew_up} if pred is None
                         else protocols.summary(protocols.geometric_mean(protocols.relative_errors(pred, truth))))
     return result
 
 
 def measure_lnn(models: dict, starts: int) -> dict:
-    """LNN's |E(z^_T) - E(z_T)| / 29.4 at T = 100 s ``{rung: {mean, median, n}}``, dopri5 at rtol 1e-8 (theirs)."""
+    """LNN's |E(z^_T) - E(z_T)| / 29.4 at T = 100 s ``{kind: {mean, median, n}}``, dopri5 at rtol 1e-8 (theirs)."""
     data, protocols = hnn.load_task("chain"), hnn.load_task("chain", "protocols")
     chain = data.lnn_double_pendulum()
     z0 = data.sample_lnn_starts(starts, torch.Generator().manual_seed(0), train=False)
     t = protocols.lnn_times()
     true_end = data.trajectories(chain, z0, t, rtol=protocols.LNN["truth_rtol"], atol=protocols.LNN["truth_rtol"])[:, -1]
     result = {}
-    for rung, model in models.items():
-        pred, blew_up = _rollout(chain, rung, model, z0, t, 1e-8)
+    for kind, model in models.items():
+        pred, blew_up = _rollout(chain, kind, model, z0, t, 1e-8)
         end = None if pred is None else chain.from_cartesian(pred[:, -1])
-        result[rung] = ({"blew_up": blew_up} if pred is None
+        result[kind] = ({"blew_up": blew_up} if pred is None
                         else protocols.summary(protocols.energy_error(chain, end, true_end)))
     return result
 
@@ -121,62 +121,62 @@ def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
     data = hnn.load_task("chain")
     rows = {}
     for n in settings["bobs"]:
-        models = _loaded(runs, f"chain{n}", settings["rungs"], seed)
+        models = _loaded(runs, f"chain{n}", settings["kinds"], seed)
         rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"]),
-                             "seconds": _seconds(runs, f"chain{n}", settings["rungs"], seed)}
+                             "seconds": _seconds(runs, f"chain{n}", settings["kinds"], seed)}
     if not settings["lnn_starts"]:
         return rows
-    models = _loaded(runs, "lnn", settings["rungs"], seed)
+    models = _loaded(runs, "lnn", settings["kinds"], seed)
     rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"]),
-                   "seconds": _seconds(runs, "lnn", settings["rungs"], seed)}
+                   "seconds": _seconds(runs, "lnn", settings["kinds"], seed)}
     return rows
 
 
-def _loaded(runs: dict, row: str, rungs, seed: int) -> dict:
-    found = {rung: runs.get(f"{row}/{rung}/seed{seed}") for rung in rungs}
-    return {rung: hnn.load_run(folder)[0] for rung, folder in found.items() if isinstance(folder, Path)}
+def _loaded(runs: dict, row: str, kinds, seed: int) -> dict:
+    found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
+    return {kind: hnn.load_run(folder)[0] for kind, folder in found.items() if isinstance(folder, Path)}
 
 
-def _seconds(runs: dict, row: str, rungs, seed: int) -> dict:
-    """Each rung's training cost on one quiet thread (``scene_measure.training_cost``: its steps at the
+def _seconds(runs: dict, row: str, kinds, seed: int) -> dict:
+    """Each kind's training cost on one quiet thread (``scene_measure.training_cost``: its steps at the
     rate of short timed bursts of the same config), not the run's wall time, which counts whatever else
     the machine did meanwhile (kept as ``wall``)."""
-    found = {rung: runs.get(f"{row}/{rung}/seed{seed}") for rung in rungs}
+    found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
     out = {}
-    for rung, folder in found.items():
+    for kind, folder in found.items():
         if isinstance(folder, Path):
             cost = training_cost("chain", hnn.load_run(folder)[1])
-            out[rung] = {**cost, "wall": json.loads((folder / "metrics.json").read_text()).get("train_seconds")}
+            out[kind] = {**cost, "wall": json.loads((folder / "metrics.json").read_text()).get("train_seconds")}
     return out
 
 
 def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
-    """Each run's held-out loss against training: ``{row: {rung: {"epochs": [...], "test_loss": [...]}}}``,
+    """Each run's held-out loss against training: ``{row: {kind: {"epochs": [...], "test_loss": [...]}}}``,
     from the saved histories (a test batch every ``print_every`` steps); x in CHNN's epochs of 800
     snippets (4 steps of batch 200) for the chain rows, in steps for the LNN row."""
     rows = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
     out = {}
     for row in rows:
-        for rung in settings["rungs"]:
-            folder = runs.get(f"{row}/{rung}/seed{seed}")
+        for kind in settings["kinds"]:
+            folder = runs.get(f"{row}/{kind}/seed{seed}")
             if not isinstance(folder, Path):
                 continue
             history = json.loads((folder / "metrics.json").read_text())["history"]
             per_epoch = 1.0 if row == "lnn" else 800 / 200
-            out.setdefault(row, {})[rung] = {"epochs": [step / per_epoch for step in history["test_steps"]],
+            out.setdefault(row, {})[kind] = {"epochs": [step / per_epoch for step in history["test_steps"]],
                                              "test_loss": history["test_loss"]}
     return out
 
 
 def curves_figure(found: dict, path: Path) -> Path:
-    """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each rung (log axis)."""
+    """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each kind (log axis)."""
     from matplotlib.ticker import NullFormatter
 
     from hnn_analysis.paper.figures import plt, save_figure
     fig, axes = plt.subplots(1, len(found), figsize=(3.3 * len(found), 3.0), squeeze=False)
-    for ax, (row, by_rung) in zip(axes[0], found.items()):
-        for rung, curve in by_rung.items():
-            ax.plot(curve["epochs"], curve["test_loss"], label=rung, lw=1.2)
+    for ax, (row, by_kind) in zip(axes[0], found.items()):
+        for kind, curve in by_kind.items():
+            ax.plot(curve["epochs"], curve["test_loss"], label=kind, lw=1.2)
         ax.set_yscale("log")
         ax.yaxis.set_minor_formatter(NullFormatter())     # labelled minor ticks overlap on a short decade
         ax.set_title(f"N = {row[len('chain'):]}, CHNN protocol" if row.startswith("chain") else "LNN double pendulum",
@@ -201,11 +201,11 @@ def markdown(results: dict) -> str:
     """The generated section of docs/peers.md: the peers' numbers beside ours, same metric."""
     published = hnn.load_task("chain", "protocols").CHNN_PUBLISHED
     meta = results["meta"]
-    names = meta["rungs"]
+    names = meta["kinds"]
     lines = []
     if meta["quick"]:
         lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
-                  "pipeline and say nothing about the rungs; the full table comes from `python analysis/peers.py "
+                  "pipeline and say nothing about the kinds; the full table comes from `python analysis/peers.py "
                   "--jobs 2 --update-docs`.", ""]
     walls = [s["wall"] for row in results["rows"].values() for s in row["seconds"].values() if s.get("wall")]
     trained = (f"training {meta['seconds']['training']:.0f} s" if meta["seconds"]["training"]
@@ -214,24 +214,24 @@ def markdown(results: dict) -> str:
               f"{trained}, measuring {meta['seconds']['measuring']:.0f} s. Training seconds in the tables: each "
               "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "
               "quiet core; its recorded wall time is in peers.json). "
-              f"Each CHNN-protocol rung trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
+              f"Each CHNN-protocol kind trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
               "cosine). Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published CLNN | published NeuralODE | published floor | "
-              + " | ".join(f"ours: {rung}" for rung in names) + " | our floor | our training s (one thread) |",
+              + " | ".join(f"ours: {kind}" for kind in names) + " | our floor | our training s (one thread) |",
               "| --- " * (7 + len(names)) + "| --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
         n = int(name[len("chain"):])
         peer = published.get(n, {})
-        seconds = ", ".join(f"{rung} {s['seconds']:.0f}" for rung, s in row["seconds"].items())
+        seconds = ", ".join(f"{kind} {s['seconds']:.0f}" for kind, s in row["seconds"].items())
         lines.append(f"| {n} | " + " | ".join(
             f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "CLNN", "NeuralODE", "floor"))
-            + " | " + " | ".join(_cell(row.get(rung)) for rung in names)
+            + " | " + " | ".join(_cell(row.get(kind)) for kind in names)
             + f" | {_cell(row['floor'])} | {seconds} |")
     lines += card(results)
     lnn = results["rows"].get("lnn")
@@ -239,30 +239,30 @@ def markdown(results: dict) -> str:
         lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
         lines += ["", "### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = 100 s, "
                   "mean (median) over the starts (ours: dopri5 at rtol 1e-8)", "",
-                  "| rung | energy error | training s (one thread) |", "| --- | --- | --- |"]
+                  "| kind | energy error | training s (one thread) |", "| --- | --- | --- |"]
         lines += [f"| published {k} | {v:.2g} | |" for k, v in lnn_published.items()]
-        lines += [f"| ours: {rung} | {_cell(lnn.get(rung))} | "
-                  f"{lnn['seconds'][rung]['seconds']:.0f} |" if rung in lnn["seconds"] else f"| ours: {rung} | not trained | |"
-                  for rung in names]
+        lines += [f"| ours: {kind} | {_cell(lnn.get(kind))} | "
+                  f"{lnn['seconds'][kind]['seconds']:.0f} |" if kind in lnn["seconds"] else f"| ours: {kind} | not trained | |"
+                  for kind in names]
     return "\n".join(lines) + "\n"
 
 
 def card(results: dict) -> list[str]:
-    """The chain card's lines: at each N the best rung on the mean, and the rung that is enough, the
+    """The chain card's lines: at each N the best kind on the mean, and the kind that is enough, the
     one of least training seconds (one thread) whose mean is within 2x of the best."""
-    lines = ["", "### Which rung a chain requires (the card)", "",
-             "The best of our rungs on the mean error at each N, and the one that is enough: of the rungs within "
+    lines = ["", "### Which kind a chain requires (the card)", "",
+             "The best of our kinds on the mean error at each N, and the one that is enough: of the kinds within "
              "2x of the best, the one that trains in the fewest seconds (one thread).", "",
              "| N | best | enough (within 2x, fewest training s) | all within 2x |", "| --- | --- | --- | --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
-        means = {rung: row[rung]["mean"] for rung in results["meta"]["rungs"] if "mean" in row.get(rung, {})}
+        means = {kind: row[kind]["mean"] for kind in results["meta"]["kinds"] if "mean" in row.get(kind, {})}
         if not means:
             continue
         best = min(means, key=means.get)
-        near = [rung for rung in means if means[rung] <= 2 * means[best]]
-        seconds = {rung: row["seconds"].get(rung, {}).get("seconds", float("inf")) for rung in near}
+        near = [kind for kind in means if means[kind] <= 2 * means[best]]
+        seconds = {kind: row["seconds"].get(kind, {}).get("seconds", float("inf")) for kind in near}
         enough = min(near, key=seconds.get)
         lines.append(f"| {name[len('chain'):]} | {best} {means[best]:.2e} | {enough} {means[enough]:.2e}, "
                      f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} |")
@@ -289,7 +289,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
         parser.error("--update-docs writes full-settings results into docs/peers.md; drop --quick")
     sweep.check_backend(parser, args)
     full = settings is None and not args.quick
-    settings = {"rungs": rungs(), **(settings or (QUICK if args.quick else FULL))}
+    settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"
     jobs = plan(settings, out, args.seed)
     runs, todo = sweep.reuse(jobs)
@@ -306,7 +306,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
             atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
                         "quick": not full,     # --quick or a test's settings: not the table
-                        "rungs": list(settings["rungs"]),
+                        "kinds": list(settings["kinds"]),
                         "steps": jobs[0].config.total_steps if jobs else None,
                         "optimizer": jobs[0].config.optimizer if jobs else None,
                         "schedule": jobs[0].config.schedule if jobs else None,

@@ -21,7 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-LABELS = ("baseline", "hnn")
+KINDS = ("baseline", "hnn")
 PROTOCOLS = ("paper", "corrected")
 
 
@@ -34,17 +34,17 @@ def _measure(seeds: list[int], steps: int | None) -> list[dict]:
     with tempfile.TemporaryDirectory() as out:
         for seed in seeds:
             extra = [] if steps is None else ["--total_steps", str(steps)]
-            runs = {label: trainer.main(["--save_dir", out, "--seed", str(seed)] + extra
-                                        + (["--baseline"] if label == "baseline" else [])) for label in LABELS}
-            loaded = {label: hnn.load_run(run) for label, run in runs.items()}
-            models = {label: model for label, (model, _, _) in loaded.items()}
+            runs = {kind: trainer.main(["--save_dir", out, "--seed", str(seed)] + extra
+                                       + (["--baseline"] if kind == "baseline" else [])) for kind in KINDS}
+            loaded = {kind: hnn.load_run(run) for kind, run in runs.items()}
+            models = {kind: model for kind, (model, _, _) in loaded.items()}
             row = {"seed": seed}
-            for label, (_, _, metrics) in loaded.items():
-                row[f"{label}_train_loss"], row[f"{label}_test_loss"] = metrics["train_loss"], metrics["test_loss"]
+            for kind, (_, _, metrics) in loaded.items():
+                row[f"{kind}_train_loss"], row[f"{kind}_test_loss"] = metrics["train_loss"], metrics["test_loss"]
             for protocol in PROTOCOLS:
                 result = hnn.evaluate_energy(spring, models, hnn.tasks.get_protocol("spring", protocol))
-                for label in LABELS:
-                    row[f"{label}_energy_{protocol}"] = result[label]["mse"]
+                for kind in KINDS:
+                    row[f"{kind}_energy_{protocol}"] = result[kind]["mse"]
                 row[f"ratio_{protocol}"] = result["baseline"]["mse"] / result["hnn"]["mse"]
             rows.append(row)
     return rows

@@ -69,8 +69,8 @@ def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
     pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
                             trained.args)
     for name, result in energy.items():
-        for label in trained.models:
-            row[label][f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
+        for kind in trained.models:
+            row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
         row.setdefault("protocols", {})[name] = result.get("description", name)
     t_eval = time.perf_counter() - tic
     if fig_dir is not None:
@@ -155,7 +155,7 @@ def table_rows(tasks: list[str], quick: bool, seeds: list[int] | None = None) ->
 def row_models(task: str, models=MODELS) -> list[str]:
     """The kinds of ``models`` that ``task``'s ``--model`` takes (its config's), the paper's pair first."""
     takes = hnn.cli.model_choices(hnn.load_task(task, "train").Config)
-    return [label for label in dict.fromkeys(MODELS + tuple(models)) if label in takes]
+    return [kind for kind in dict.fromkeys(MODELS + tuple(models)) if kind in takes]
 
 
 def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
@@ -165,11 +165,11 @@ def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
     jobs = []
     for spec in rows:
         for seed in spec.get("seeds") or seeds:
-            for label in row_models(spec["task"], models):
-                fields = {**spec["fields"], "model": label, "seed": seed, "save_dir": str(runs_dir)}
+            for kind in row_models(spec["task"], models):
+                fields = {**spec["fields"], "model": kind, "seed": seed, "save_dir": str(runs_dir)}
                 if steps is not None:
                     fields["total_steps"] = steps
-                jobs.append(sweep.Job(f"{spec['row']}/{label}/seed{seed}", spec["task"],
+                jobs.append(sweep.Job(f"{spec['row']}/{kind}/seed{seed}", spec["task"],
                                       hnn.tasks.task_config(spec["task"], fields)))
     return jobs
 
@@ -178,12 +178,12 @@ def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
 def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
     """One row's seconds: dataset, training per model (summed over seeds), evaluation, figures."""
     stage = {"data": None, "train": {}, "evaluate": 0.0, "figures": 0.0}
-    for seed, by_label in keys.items():
-        for label, key in by_label.items():
+    for seed, by_kind in keys.items():
+        for kind, key in by_kind.items():
             timing = run_seconds.get(key)
             if timing:
                 stage["data"] = (stage["data"] or 0.0) + (timing["data"] or 0.0)
-                stage["train"][label] = stage["train"].get(label, 0.0) + (timing["train"] or 0.0)
+                stage["train"][kind] = stage["train"].get(kind, 0.0) + (timing["train"] or 0.0)
         for part in ("evaluate", "figures"):
             stage[part] += per_seed[str(seed)]["seconds"][part]
     return stage
@@ -198,8 +198,8 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
         if task in results.get("skipped", {}):
             continue
         own = spec.get("seeds") or seeds
-        keys = {seed: {label: f"{name}/{label}/seed{seed}" for label in row_models(task, models)} for seed in own}
-        failed = [runs[k] for by_label in keys.values() for k in by_label.values() if isinstance(runs[k], Exception)]
+        keys = {seed: {kind: f"{name}/{kind}/seed{seed}" for kind in row_models(task, models)} for seed in own}
+        failed = [runs[k] for by_kind in keys.values() for k in by_kind.values() if isinstance(runs[k], Exception)]
         if failed:
             results.setdefault("skipped", {})[task] = str(failed[0])
             print(f"  {task:11s} SKIPPED (the reason is above)", flush=True)
@@ -207,7 +207,7 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
         per_seed = {}
         for seed in own:
             figs = fig_dir if fig_dir is not None and seed == own[0] and spec["note"] is None else None
-            per_seed[str(seed)] = evaluate_task(task, {label: runs[k] for label, k in keys[seed].items()}, figs)
+            per_seed[str(seed)] = evaluate_task(task, {kind: runs[k] for kind, k in keys[seed].items()}, figs)
         row = dict(per_seed[str(own[0])], task=task, note=spec["note"])
         if len(per_seed) > 1:
             row["per_seed"] = per_seed

@@ -54,10 +54,10 @@ def _marked(ours, paper, quick: bool = False) -> str:
     return _fmt(ours) + (f" {MARKS[verdict]}" if verdict else "")
 
 
-def _seed_values(row: dict, label: str, key: str) -> list[float]:
+def _seed_values(row: dict, kind: str, key: str) -> list[float]:
     """One metric of one model at every seed of a row (the first seed alone when it has no ``per_seed``)."""
     runs = row.get("per_seed") or {"only": row}
-    return [r[label][key][0] for r in runs.values() if r[label].get(key)]
+    return [r[kind][key][0] for r in runs.values() if r[kind].get(key)]
 
 
 def across(values: list[float]) -> tuple[float, float] | None:
@@ -67,9 +67,9 @@ def across(values: list[float]) -> tuple[float, float] | None:
     return float(np.mean(values)), float(np.std(values, ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
-def _across_seeds(row: dict, label: str, key: str) -> str:
+def _across_seeds(row: dict, kind: str, key: str) -> str:
     """Mean ± standard error over seeds of one metric, or '' for a single seed."""
-    values = _seed_values(row, label, key) if "per_seed" in row else []
+    values = _seed_values(row, kind, key) if "per_seed" in row else []
     if len(values) < 2:
         return ""
     mean, se = across(values)
@@ -93,10 +93,10 @@ def tables_markdown(results: dict) -> str:
                   f"| task | model | paper | ours | ratio |{' across ' + seeds + ' |' if seeds else ''}",
                   f"| --- | --- | --- | --- | --- |{' --- |' if seeds else ''}"]
         for task, row in results["tasks"].items():
-            for label in MODELS:
-                paper, ours = PAPER.get(row.get("task", task), {}).get(key, {}).get(label), row[label].get(key)
-                extra = f" {_across_seeds(row, label, key)} |" if seeds else ""
-                lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper, quick)} | "
+            for kind in MODELS:
+                paper, ours = PAPER.get(row.get("task", task), {}).get(key, {}).get(kind), row[kind].get(key)
+                extra = f" {_across_seeds(row, kind, key)} |" if seeds else ""
+                lines.append(f"| {task} | {kind} | {_fmt(paper)} | {_marked(ours, paper, quick)} | "
                              f"{_ratio(ours, paper)} |{extra}")
         lines.append("")
     lines += [f"**Energy MSE** (mean ± batch-means standard error over 5 groups, seed {meta['seed']})", "",
@@ -104,11 +104,11 @@ def tables_markdown(results: dict) -> str:
               + (f" paper protocol across {seeds} |" if seeds else ""),
               "| --- | --- | --- | --- | --- | --- |" + (" --- |" if seeds else "")]
     for task, row in results["tasks"].items():
-        for label in MODELS:
-            paper = PAPER.get(row.get("task", task), {}).get("energy_mse", {}).get(label)
-            ours, fixed = row[label].get("energy_mse_paper"), row[label].get("energy_mse_corrected")
-            extra = f" {_across_seeds(row, label, 'energy_mse_paper')} |" if seeds else ""
-            lines.append(f"| {task} | {label} | {_fmt(paper)} | {_marked(ours, paper, quick)} | {_ratio(ours, paper)} | "
+        for kind in MODELS:
+            paper = PAPER.get(row.get("task", task), {}).get("energy_mse", {}).get(kind)
+            ours, fixed = row[kind].get("energy_mse_paper"), row[kind].get("energy_mse_corrected")
+            extra = f" {_across_seeds(row, kind, 'energy_mse_paper')} |" if seeds else ""
+            lines.append(f"| {task} | {kind} | {_fmt(paper)} | {_marked(ours, paper, quick)} | {_ratio(ours, paper)} | "
                          f"{_fmt(fixed) if fixed else 'same as paper'} |{extra}")
     lines += _extra_kinds_table(results, seeds)
     notes = [f"- **{task}**: {row['note']}" for task, row in results["tasks"].items() if row.get("note")]
@@ -135,8 +135,8 @@ def tables_markdown(results: dict) -> str:
 
 def _extra_kinds_table(results: dict, seeds: str) -> list[str]:
     """The rows of the model kinds beyond the paper's pair (``--models``), beside that task's HNN."""
-    rows = [(name, label) for name, row in results["tasks"].items() for label in row
-            if label not in MODELS and isinstance(row[label], dict) and "test_loss" in row[label]]
+    rows = [(name, kind) for name, row in results["tasks"].items() for kind in row
+            if kind not in MODELS and isinstance(row[kind], dict) and "test_loss" in row[kind]]
     if not rows:
         return []
     meta = results["meta"]
@@ -147,11 +147,11 @@ def _extra_kinds_table(results: dict, seeds: str) -> list[str]:
              "| --- | --- | --- | --- | --- | --- |" + (" --- |" if seeds else "")]
     for name in dict.fromkeys(name for name, _ in rows):
         row = results["tasks"][name]
-        for label in ["hnn"] + [lbl for n, lbl in rows if n == name]:
-            r = row[label]
-            extra = f" {_across_seeds(row, label, 'test_loss')} |" if seeds else ""
+        for kind in ["hnn"] + [k for n, k in rows if n == name]:
+            r = row[kind]
+            extra = f" {_across_seeds(row, kind, 'test_loss')} |" if seeds else ""
             fixed = r.get("energy_mse_corrected")
-            lines.append(f"| {name} | {label} | {_fmt(r.get('train_loss'))} | {_fmt(r.get('test_loss'))} | "
+            lines.append(f"| {name} | {kind} | {_fmt(r.get('train_loss'))} | {_fmt(r.get('test_loss'))} | "
                          f"{_fmt(r.get('energy_mse_paper'))} | {_fmt(fixed) if fixed else 'same as paper'} |{extra}")
     return lines
 
@@ -176,20 +176,20 @@ def headline_markdown(results: dict) -> str:
     wide = []
     for name, row in results["tasks"].items():
         paper = PAPER.get(row.get("task", name), {})
-        for label in MODELS:
+        for kind in MODELS:
             cells = []
             for key, ours_key, what in (("test_loss", "test_loss", "test loss"),
                                         ("energy_mse", "energy_mse_paper", "energy MSE")):
-                ref, values = paper.get(key, {}).get(label), _seed_values(row, label, ours_key)
+                ref, values = paper.get(key, {}).get(kind), _seed_values(row, kind, ours_key)
                 ours = across(values)
                 verdict = compare(ours, ref, spread=ours[1] if ours else None)
                 mean = "n/a" if ours is None else _g(ours[0], 3) + (f" ± {_g(ours[1], 2)}" if len(values) > 1 else "")
                 cells += ["n/a" if ref is None else _g(ref[0], 3), mean + (f" {MARKS[verdict]}" if verdict else "")]
                 if ref is not None and len(values) > 1 and np.std(values, ddof=1) > ref[1]:
-                    wide.append((np.std(values, ddof=1) / ref[1], f"{name} {label} {what} "
+                    wide.append((np.std(values, ddof=1) / ref[1], f"{name} {kind} {what} "
                                  f"({_g(min(values), 2)} to {_g(max(values), 2)})"))
             seeds = len(row.get("per_seed") or [0])
-            lines.append(f"| {name} | {label} | {seeds} | " + " | ".join(cells) + " |")
+            lines.append(f"| {name} | {kind} | {seeds} | " + " | ".join(cells) + " |")
     if wide:
         wide.sort(reverse=True)
         lines += ["", "Wider across seeds than the paper's ± (standard deviation over it, widest first): "

@@ -1,9 +1,9 @@
-"""The scene study of your own measurements: which rung of the ladder does this file need?
+"""The scene study of your own measurements: which model kind does this file need?
 
     python analysis/scene_study.py --data osc.csv --time t --q x --v v --trial run --jobs 2 --out results/osc
     python analysis/scene_study.py --data osc.csv --q x --v v --quick        # a smoke run, about a minute
 
-Every rung that fits the coordinates (``experiment-measured``: all of ``--model``'s kinds on [q, v];
+Every model kind that fits the coordinates (``experiment-measured``: all of ``--model``'s kinds on [q, v];
 on [q, p] all but second_order; with some positions periodic and others not, mechanical and
 second_order are left out) trains over a small grid of widths and training fractions, in one
 sweep (``scene_common.train``: reused runs, ``--jobs`` processes, grouped training). Each is then
@@ -55,7 +55,7 @@ def add_flags(parser) -> None:
                        help="an energy of your columns as a numpy expression (e.g. '0.5*v**2 + 2*x**2'): its drift")
 
 
-def _rungs(columns: dict) -> list[str]:
+def _kinds(columns: dict) -> list[str]:
     """The kinds that fit these coordinates: each built on the data and handed to its objective's checks."""
     config = hnn.tasks.task_config(TASK, columns)
     dataset = config.dataset()
@@ -109,7 +109,7 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
             f"{chosen['params']} parameters, {chosen['train_seconds']:.3g} s to train on one thread) is enough: its "
             f"median prediction error {err:.4g} is within {scene_common.CARD_FACTOR:g}x of the best ({best:.4g}) "
             f"and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
-            + ("." if ratio <= 0.5 else "; that is NOT under half the naive one: no rung predicts this scene well.")]
+            + ("." if ratio <= 0.5 else "; that is NOT under half the naive one: no kind predicts this scene well.")]
 
     def best_of(kinds) -> dict | None:
         pool = [r for r in measured if r["kind"] in kinds]
@@ -120,13 +120,13 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
     if conserving and others:
         a, b = conserving["prediction_error"]["median"], others["prediction_error"]["median"]
         verdict = "helped" if a * NEAR < b else "hurt" if b * NEAR < a else "neither helped nor hurt (within 25%)"
-        said.append(f"The energy-conserving rungs {verdict}: best {conserving['kind']} {a:.4g} against best "
+        said.append(f"The energy-conserving kinds {verdict}: best {conserving['kind']} {a:.4g} against best "
                     f"{others['kind']} {b:.4g}.")
     baseline, structured = best_of(["baseline"]), best_of([k for k in hnn.MODEL_KINDS if k != "baseline"])
     if baseline and structured:
         a, b = baseline["prediction_error"]["median"], structured["prediction_error"]["median"]
         word = "better than" if a * NEAR < b else "as good as" if a <= NEAR * b else "worse than"
-        said.append(f"The plain baseline is {word} the structured rungs "
+        said.append(f"The plain baseline is {word} the structured kinds "
                     f"here ({a:.4g} against {structured['kind']} {b:.4g}).")
     return chosen, said
 
@@ -151,7 +151,7 @@ def markdown(result: dict) -> str:
     if meta.get("velocity_mismatch"):
         lines += ["Velocity columns against the finite-difference derivatives of the positions, RMS(dq/dt - v) / "
                   "RMS(v) on the training rows: " + ", ".join(f"{name} {m:.3g}" for name, m in zip(
-                      columns_of(meta["columns"]["q"]), meta["velocity_mismatch"])) + " (rungs that take dq/dt = v "
+                      columns_of(meta["columns"]["q"]), meta["velocity_mismatch"])) + " (kinds that take dq/dt = v "
                   "exactly, second_order and mechanical, and hnn reading v as p, inherit this gap; the baseline learns "
                   "dq/dt freely).", ""]
     energy = any("energy_drift" in r for r in result["rows"])
@@ -205,7 +205,7 @@ def run(args, argv: list[str], parser) -> dict:
         rec = data.load(*(columns[k] for k in ("data", "time", "q", "v", "p", "trial", "periodic", "dxdt")))
         held = mm.Heldout(data, rec, args.test_fraction, args.horizon, args.max_gap)
         energy = mm.energy_function(args.energy, rec)
-        kinds = _rungs(columns)
+        kinds = _kinds(columns)
     except (ValueError, FileNotFoundError) as err:
         parser.error(str(err))
     scene = Path(args.data).stem

@@ -1,5 +1,5 @@
-"""One scene of the scene study: its settings (each task's ``TaskSpec.scene_study``), the rungs
-that fit it, the training of its rows (one sweep), its truth (``Scene``: start states, the true
+"""One scene of the scene study: its settings (each task's ``TaskSpec.scene_study``), the model
+kinds that fit it, the training of its rows (one sweep), its truth (``Scene``: start states, the true
 trajectories, the time over which the truth itself diverges) and the measurements of one model on
 it (losses, energy MSE, rollout error, speed at equal accuracy, drift). ``scene_study`` (the
 command), ``scene_measure`` (its worker processes) and ``measured_study`` (your own file) build
@@ -35,36 +35,36 @@ def scene_settings(task: str) -> dict:
     return dict(hnn.task_spec(task).scene_study or {})
 
 
-def rungs() -> tuple[str, ...]:
+def kinds() -> tuple[str, ...]:
     """The model kinds the study measures: every registered kind a task's --model takes (hnn.MODEL_KINDS)
     that its row marks ``studied``."""
     return tuple(kind for kind in hnn.cli.model_choices() if hnn.MODEL_KINDS[kind].studied)
 
 
-def task_rungs(task: str) -> list[str]:
-    """The rungs of ``task``: the kinds its ``--model`` takes that can fit its states."""
-    return [label for label in reproduce.row_models(task, rungs()) if _fits(task, label)]
+def task_kinds(task: str) -> list[str]:
+    """The model kinds of ``task``: the kinds its ``--model`` takes that can fit its states."""
+    return [kind for kind in reproduce.row_models(task, kinds()) if _fits(task, kind)]
 
 
 @functools.cache
-def _fits(task: str, label: str) -> bool:
+def _fits(task: str, kind: str) -> bool:
     """Whether the kind's model reads the scene's states: canonical [q, p] (its declared coordinates;
     the objectives would refuse its run otherwise), or, for a pixel model (``'latent'``), the frames
     its own encoder maps to its latent [q, p]."""
-    kind = hnn.MODEL_KINDS[hnn.tasks.task_config(task, {"model": label}).kind]
-    return kind.coordinates == "latent" or kind.reads("canonical")
+    spec = hnn.MODEL_KINDS[hnn.tasks.task_config(task, {"model": kind}).kind]
+    return spec.coordinates == "latent" or spec.reads("canonical")
 
 
 def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
-    """``({row/label/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
-    ``(rows, seeds, steps, models or None for every rung)``: reuse what matches, train the rest
+    """``({row/kind/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
+    ``(rows, seeds, steps, models or None for every kind)``: reuse what matches, train the rest
     in one sweep (``args.jobs`` processes, on ``args.backend``), so the pool starts once and the
     longest runs of every batch go first. ``fits(task, kind)``: which kinds fit the rows' states
     (default: the kinds of canonical states)."""
     fits = fits or _fits
     jobs = []
     for rows, seeds, steps, models in batches:
-        models = rungs() if models is None else models
+        models = kinds() if models is None else models
         # plan() always takes the paper's pair: keep only the kinds asked for
         jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models)
                  if job.config.model in models and fits(job.task, job.config.model)]
@@ -110,22 +110,23 @@ class Scene:
             return None
         return {"truth": self.truth.numpy(), "divergence": self.divergence}
 
-    def measure(self, label: str, directory: Path, protocols: bool = True) -> dict:
-        """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one run."""
-        trained, row = reproduce.load_runs(self.task, {label: directory})
-        model = trained.models[label]
-        out = saved_numbers(row[label], model, directory)
+    def measure(self, kind: str, directory: Path, protocols: bool = True) -> dict:
+        """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one
+        run of model kind ``kind``."""
+        trained, row = reproduce.load_runs(self.task, {kind: directory})
+        model = trained.models[kind]
+        out = saved_numbers(row[kind], model, directory)
         tic = time.perf_counter()
         energy = registry.evaluate(trained) if protocols else {}
         for name, result in energy.items():
-            out[f"energy_mse_{name}"] = [result[label]["mse"], result[label]["mse_se"]]
+            out[f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
         if self.truth is not None:
             out["rollout"] = sm.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, self.truth, self.t)
         elif self.task == "pixels" and "corrected" in energy:
             # the decoded frames of the corrected protocol's trajectory against the rendered ones
             result = energy["corrected"]
             truth = torch.as_tensor(result["truth"]["pixels"], dtype=torch.float64)[None]
-            decoded = torch.as_tensor(result[label]["decoded"], dtype=torch.float64)[None]
+            decoded = torch.as_tensor(result[kind]["decoded"], dtype=torch.float64)[None]
             frames = np.arange(truth.shape[1], dtype=np.float64)
             out["rollout"] = hnn.metrics.summarize_errors(hnn.metrics.relative_error(decoded, truth), frames)
             # the decoder's own reconstruction error of a frame is ~0.3 in this measure: no frame is
@@ -135,9 +136,9 @@ class Scene:
         return out
 
 
-def _energy_fn(system, model, label: str):
+def _energy_fn(system, model, kind: str):
     """The learned H of an H-model, else the system's own H (the drift a baseline shows)."""
-    if hnn.MODEL_KINDS[label].conservative:
+    if hnn.MODEL_KINDS[kind].conservative:
         return hnn.evaluation.float64_copy(model).hamiltonian
     return system.hamiltonian
 
@@ -154,19 +155,19 @@ def _periods(scene: Scene) -> float:
     return float(np.median(2 * np.pi * r / v))
 
 
-def speed_study(scene: Scene, label: str, model, quick: bool) -> dict:
-    """Speed at equal accuracy of one model, and the drift of its energy over the long run."""
+def speed_study(scene: Scene, kind: str, model, quick: bool) -> dict:
+    """Speed at equal accuracy of one model of kind ``kind``, and the drift of its energy over the long run."""
     model64 = hnn.evaluation.float64_copy(model)
     f = model64.field
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
-    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[label].separable, quick,
+    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[kind].separable, quick,
                                 hnn.interface.carries_energy(f))
     result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
-    if scene.cfg.get("drift") and not hnn.MODEL_KINDS[label].dissipative:
+    if scene.cfg.get("drift") and not hnn.MODEL_KINDS[kind].dissipative:
         period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
         budget = 2.0 if quick else DRIFT_BUDGET
-        energy = _energy_fn(scene.system, model, label)
+        energy = _energy_fn(scene.system, model, kind)
         for key in ("fastest", "fastest_symplectic"):
             pick = result[key]
             if pick is not None:

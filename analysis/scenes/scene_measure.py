@@ -2,8 +2,8 @@
 
     measured = scene_measure.run(units, jobs=2)      # {unit key: result}, as the units finish
 
-A unit is plain data (it crosses process boundaries): ``("rung", task, label, {seed: run folder},
-seed of the speed study or None)`` or ``("cells", task, {cell key: (label, run folder)})``.
+A unit is plain data (it crosses process boundaries): ``("kind", task, kind, {seed: run folder},
+seed of the speed study or None)`` or ``("cells", task, {cell key: (kind, run folder)})``.
 Each scene's truth (``scene_common.Scene``) is built once, by the first unit of that scene, and
 handed to the others as arrays, so a second worker does not integrate it again.
 
@@ -64,7 +64,7 @@ def training_cost(task: str, args: dict) -> dict:
 
     def burst(steps: int) -> float:
         # every burst from the same start: a fresh Adam's first steps are full-size, and bursts chained
-        # from one model drove a chain rung's weights to divergence
+        # from one model drove a chain model's weights to divergence
         model.load_state_dict(start)
         return hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"]
 
@@ -86,14 +86,14 @@ def cost_seconds(measured: dict) -> float | None:
 
 
 def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
-    """``{key: measured}`` of ``runs`` (``{key: (label, run folder)}``, models of ``scene``): each as
+    """``{key: measured}`` of ``runs`` (``{key: (kind, run folder)}``, models of ``scene``): each as
     ``Scene.measure`` gives it, plus ``train_cost`` (``training_cost``). The energy protocols run
     once for all of them (one truth); a task with its own ``evaluate`` (pixels) goes model by model."""
     if not runs:
         return {}
     if hnn.task_spec(scene.task).evaluate is not None:
-        return {key: scene.measure(label, directory, protocols) | {"train_cost": _cost(scene.task, directory)}
-                for key, (label, directory) in runs.items()}
+        return {key: scene.measure(kind, directory, protocols) | {"train_cost": _cost(scene.task, directory)}
+                for key, (kind, directory) in runs.items()}
     tic = time.perf_counter()
     trained, rows = reproduce.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
     energy = registry.evaluate(trained) if protocols else {}
@@ -133,22 +133,22 @@ _SCENES: dict = {}      # this process's scenes, by task (a worker keeps them be
 def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict, dict | None]:
     """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread."""
     torch.set_num_threads(1)      # rollouts of 4-15 states: a second thread only adds contention
-    kind, task = unit[0], unit[1]
+    unit_type, task = unit[0], unit[1]
     scene = _scene(task, quick, state, _SCENES)
-    if kind == "rung":
-        _, _, label, per_seed, speed_seed = unit
-        measured = measure_models(scene, {seed: (label, Path(d)) for seed, d in per_seed.items()})
+    if unit_type == "kind":
+        _, _, kind, per_seed, speed_seed = unit
+        measured = measure_models(scene, {seed: (kind, Path(d)) for seed, d in per_seed.items()})
         result = {"per_seed": measured}
         if speed_seed is not None:
-            result["speed"] = scene_common.speed_study(scene, label, hnn.load_run(Path(per_seed[speed_seed]))[0], quick)
-        print(f"  {task:7s} {label:11s} measured", flush=True)
-    elif kind == "cells":
+            result["speed"] = scene_common.speed_study(scene, kind, hnn.load_run(Path(per_seed[speed_seed]))[0], quick)
+        print(f"  {task:7s} {kind:11s} measured", flush=True)
+    elif unit_type == "cells":
         _, _, runs = unit
-        result = measure_models(scene, {k: (label, Path(d)) for k, (label, d) in runs.items()})
+        result = measure_models(scene, {k: (kind, Path(d)) for k, (kind, d) in runs.items()})
         if len(runs) > 1:
             print(f"  {task:7s} {len(runs)} models measured", flush=True)
     else:
-        raise ValueError(f"unknown unit kind {kind!r}")
+        raise ValueError(f"unknown unit type {unit_type!r}")
     return result, scene.state()
 
 

@@ -22,10 +22,10 @@ from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
 
 
 
-def color(label: str) -> str:
+def color(kind: str) -> str:
     """A model kind's plot colour, as its registration declares it (``hnn.kinds.ModelKind.color``)."""
-    kind = hnn.MODEL_KINDS.get(label)
-    return kind.color if kind else "k"
+    spec = hnn.MODEL_KINDS.get(kind)
+    return spec.color if spec else "k"
 
 
 def _g(x, digits: int = 3) -> str:
@@ -42,10 +42,10 @@ def _main_metric(m: dict, key: str):
     return (m.get(key) or [None])[0]
 
 
-def rung_table(results: dict) -> list[str]:
+def kind_table(results: dict) -> list[str]:
     seeds = results["meta"]["seeds"]
     many = len(seeds) > 1
-    lines = [f"**Per scene and rung** (width 200, all the data; seed {seeds[0]}"
+    lines = [f"**Per scene and kind** (width 200, all the data; seed {seeds[0]}"
              + (f", and mean ± standard error over seeds {seeds}" if many else "") + "). Rollout error: the "
              "geometric mean over time of |x̂ − x| / (|x̂| + |x|) against the true system, averaged over "
              f"{results['meta'].get('starts', 8)} starts, over 10x the training trajectories' length (pixels: decoded frames against rendered "
@@ -57,19 +57,19 @@ def rung_table(results: dict) -> list[str]:
              "| --- | --- | ---: | --- | --- | --- | --- | --- | --- | ---: |"]
     for task, entry in results["scenes"].items():
         div = entry.get("divergence")
-        for label, rung in entry["rungs"].items():
-            m = rung["per_seed"][str(seeds[0])] if str(seeds[0]) in rung["per_seed"] else \
-                rung["per_seed"][seeds[0]]
+        for kind, measured in entry["kinds"].items():
+            m = measured["per_seed"][str(seeds[0])] if str(seeds[0]) in measured["per_seed"] else \
+                measured["per_seed"][seeds[0]]
             ro = m.get("rollout")
             cells = []
             for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
-                s = rung.get(key + "_seeds")
+                s = measured.get(key + "_seeds")
                 cells.append(_g(_main_metric(m, key)) + (f" ({_pm(s)})" if many and s else ""))
-            err = rung.get("error_seeds")
+            err = measured.get("error_seeds")
             cells.append("n/a" if not ro else _g(ro["error"]) + (f" ({_pm(err)})" if many and err else ""))
             cells.append("n/a" if not ro or ro["valid_time"] is None else f"{ro['valid_time']:.3g} / {ro['horizon']:.3g}")
             cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
-            lines.append(f"| {task} | {label} | {m['params']} | " + " | ".join(cells)
+            lines.append(f"| {task} | {kind} | {m['params']} | " + " | ".join(cells)
                          + f" | {_g(scene_measure.cost_seconds(m))} |")
     return lines
 
@@ -84,7 +84,7 @@ def speed_table(results: dict) -> list[str]:
              "| scene | model | fastest setting | s | drift (long run) | fastest symplectic | s | drift (long run) |",
              "| --- | --- | --- | ---: | --- | --- | ---: | --- |"]
     for task, entry in results["scenes"].items():
-        for label, sp in entry.get("speed", {}).items():
+        for kind, sp in entry.get("speed", {}).items():
             cells = []
             for key in ("fastest", "fastest_symplectic"):
                 pick = sp.get(key)
@@ -95,7 +95,7 @@ def speed_table(results: dict) -> list[str]:
                 drift = "" if d is None else (f"{d['drift']:.2g} over {d['periods_done']} {_unit(task)}"
                                               + (" (blew up)" if d["blew_up"] else ""))
                 cells += [pick["setting"], f"{pick['seconds']:.3g}", drift]
-            lines.append(f"| {task} | {label} | " + " | ".join(cells) + " |")
+            lines.append(f"| {task} | {kind} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -109,19 +109,19 @@ def grid_tables(results: dict) -> list[str]:
         if not entry["grid"]:
             continue
         cells = dict(entry["grid"])
-        for label, rung in entry["rungs"].items():
-            first = next(iter(rung["per_seed"].values()))
-            cells[f"{label}@200x1"] = first
-        lines += ["", f"<details><summary>{task}: width x training fraction, every rung (seed 0)</summary>", "",
+        for kind, measured in entry["kinds"].items():
+            first = next(iter(measured["per_seed"].values()))
+            cells[f"{kind}@200x1"] = first
+        lines += ["", f"<details><summary>{task}: width x training fraction, every kind (seed 0)</summary>", "",
                   "| model | width | fraction | params | test loss | energy MSE | rollout error | train s | "
                   "rollout s |", "| --- | ---: | ---: | ---: | --- | --- | --- | ---: | ---: |"]
         for key in sorted(cells, key=_cell_order):
             m = cells[key]
-            label, cell = key.split("@")
+            kind, cell = key.split("@")
             width, fraction = cell.split("x")
             energy = m.get("energy_mse_corrected") or m.get("energy_mse_paper")
             ro = m.get("rollout") or {}
-            lines.append(f"| {label} | {width} | {fraction} | {m['params']} | {_g(m['test_loss'][0])} | "
+            lines.append(f"| {kind} | {width} | {fraction} | {m['params']} | {_g(m['test_loss'][0])} | "
                          f"{_g(energy[0] if energy else None)} | {_g(ro.get('error'))} | "
                          f"{_g(scene_measure.cost_seconds(m))} | {_g(ro.get('seconds'))} |")
         lines += ["", "</details>"]
@@ -129,16 +129,16 @@ def grid_tables(results: dict) -> list[str]:
 
 
 def _cell_order(key: str):
-    label, cell = key.split("@")
+    kind, cell = key.split("@")
     width, fraction = cell.split("x")
     kinds = list(hnn.MODEL_KINDS)
-    order = kinds.index(label) if label in kinds else len(kinds)
+    order = kinds.index(kind) if kind in kinds else len(kinds)
     return order, int(width), float(fraction)
 
 
 def card_name(card: dict) -> str:
     """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
-    name = f"{card['label']}, width {card['width']}, {card['fraction']:g} of the data"
+    name = f"{card['kind']}, width {card['width']}, {card['fraction']:g} of the data"
     within = card.get("within", 1.0)
     if within > scene_common.CARD_FACTOR:
         return f"none within {scene_common.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
@@ -148,7 +148,7 @@ def card_name(card: dict) -> str:
 def card_table(results: dict) -> list[str]:
     lines = ["**Scene cards**: the smallest model (fewest parameters, then the cheapest to train) whose energy "
              "MSE (corrected protocol, else the paper's) and rollout error both come within 2x of the best of its "
-             "scene, over every rung and (spring, pend, 2body) every width and training fraction (where none does, "
+             "scene, over every kind and (spring, pend, 2body) every width and training fraction (where none does, "
              "the model nearest both bests: the smallest larger ratio, which the row gives). Train s, here and "
              "below: the run's steps at the steps per second of that model alone on one thread, timed by this study "
              "over a short burst (not the run's recorded wall time, which depends on what else the machine did).", "",
@@ -180,9 +180,9 @@ def dhnn_table(results: dict) -> list[str]:
              "the last three logged test losses).", "",
              "| model | test vector-field MSE, ours | theirs | energy MSE, ours | theirs | state MSE along the rollout, "
              "ours |", "| --- | --- | --- | --- | --- | --- |"]
-    for label, ours in d["ours"].items():
-        theirs = d["paper"].get(label, {})
-        lines.append(f"| {label} | {_pm(ours['test_mse'])} | {_pm(theirs.get('test_mse'))} | "
+    for kind, ours in d["ours"].items():
+        theirs = d["paper"].get(kind, {})
+        lines.append(f"| {kind} | {_pm(ours['test_mse'])} | {_pm(theirs.get('test_mse'))} | "
                      f"{_pm(ours['energy_mse'])} | {_pm(theirs.get('energy_mse'))} | {_pm(ours['state_mse'])} |")
     return lines
 
@@ -197,7 +197,7 @@ def markdown(results: dict) -> str:
               f"{sec.get('training', 0):.0f} s, measuring {sec.get('measure', 0):.0f} s, the chosen cells' seeds "
               f"{sec.get('cards', 0):.0f} s, total {sec.get('total', 0):.0f} s (runs that reproduce.py or an "
               "earlier study saved with the same args are reused, not retrained).", ""]
-    for part in (card_table, rung_table, speed_table, dhnn_table):
+    for part in (card_table, kind_table, speed_table, dhnn_table):
         block = part(results)
         if block:
             lines += block + [""]
@@ -215,7 +215,7 @@ def guide(results: dict) -> str:
         if card:
             lines.append(f"| {task} | {card_name(card)} | {_g(card['energy'])} / {_g(card['rollout'])} | {_g(card['train_seconds'])} |")
     meta = results["meta"]
-    lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every rung, the grids, "
+    lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every kind, the grids, "
               "the speed at equal accuracy and the D-HNN comparison: [docs/scenes.md](docs/scenes.md)."]
     return "\n".join(lines) + "\n"
 
@@ -232,12 +232,12 @@ def pareto_figure(results: dict, path: Path) -> None:
         for ax, xkey, xlabel in ((ax_row[0], "train", "training s (one thread)"), (ax_row[1], None, "rollout s")):
             points = []
             for key, m in cells.items():
-                label = key.split("@")[0]
+                kind = key.split("@")[0]
                 ro = m.get("rollout")
                 x = scene_measure.cost_seconds(m) if xkey else (ro or {}).get("seconds")
                 if ro and x:
                     points.append((x, ro["error"]))
-                    ax.scatter(x, ro["error"], s=14, color=color(label), label=label)
+                    ax.scatter(x, ro["error"], s=14, color=color(kind), label=kind)
             if not points:      # pixels: its rollout comes from the energy protocol, untimed
                 ax.axis("off")
                 ax.text(0.5, 0.5, f"{task}: no {xlabel} measured", ha="center", va="center", transform=ax.transAxes)
@@ -282,8 +282,8 @@ def _log_ticks(axis, lo: float, hi: float) -> None:
 
 def _all_cells(entry: dict) -> dict:
     cells = dict(entry.get("grid", {}))
-    for label, rung in entry["rungs"].items():
-        cells[f"{label}@200x1"] = next(iter(rung["per_seed"].values()))
+    for kind, measured in entry["kinds"].items():
+        cells[f"{kind}@200x1"] = next(iter(measured["per_seed"].values()))
     return cells
 
 

@@ -1,22 +1,22 @@
-"""Which model does each scene need? Every rung of the model ladder on every scene, measured.
+"""Which model does each scene need? Every model kind on every scene, measured.
 
     python analysis/scene_study.py --jobs 2                  # full study (reuses reproduce.py's runs)
     python analysis/scene_study.py --quick                   # smoke run (300 steps, a small grid)
     python analysis/scene_study.py --jobs 2 --update-docs    # docs/scenes.md, the README's model guide
     python analysis/scene_study.py --data FILE --q x --v v   # your own measurements (measured_study.py)
 
-The rungs are the model kinds each task trains (``--model``): the baseline MLP, the paper's HNN,
+The kinds are the ones each task trains (``--model``): the baseline MLP, the paper's HNN,
 the separable HNN (H = T(p) + V(q)) and the dissipative HNN (J grad H + grad D); the pixel task
 has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3body, pixels):
 
-1. *Per rung* (width 200, all the data, ``--seeds`` seeds): test loss, energy MSE under each of
+1. *Per kind* (width 200, all the data, ``--seeds`` seeds): test loss, energy MSE under each of
    the task's protocols, the rollout relative error (geometric mean over a horizon 10x the
    training trajectories') and the valid prediction time, beside the time over which the true
    system itself diverges from starts 1e-4 apart.
 2. *Speed at equal accuracy* (seed 0; not pixels): the fastest ``hnn.rollout`` setting that
    reaches error 1e-4 against DOP853 rtol 1e-12 of the same field, and the learned H's drift over
    1000 periods (spring, pend) or 100 orbits (2body) at it and at the fastest symplectic one.
-3. *Capacity and data* (spring, pend, 2body): hidden width x training fraction for every rung at
+3. *Capacity and data* (spring, pend, 2body): hidden width x training fraction for every kind at
    seed 0, then ``--seeds`` seeds at the cell each scene card picks.
 4. *Scene cards*: the smallest model (fewest parameters, then cheapest to train) within 2x of
    the best energy MSE and the best rollout error of its scene; Pareto plots of error against
@@ -43,7 +43,7 @@ import torch
 import hnn
 from hnn_analysis.paper import reproduce
 from hnn_analysis.scenes import measured_study, scene_measure, scene_metrics as sm, scene_report
-from hnn_analysis.scenes.scene_common import CARD_FACTOR, STARTS, Scene, scene_settings, scenes, task_rungs, train
+from hnn_analysis.scenes.scene_common import CARD_FACTOR, STARTS, Scene, scene_settings, scenes, task_kinds, train
 from hnn import sweep
 from hnn_analysis.provenance import provenance
 
@@ -96,7 +96,7 @@ def _key_metric(m: dict) -> tuple[float | None, float | None]:
 
 def scene_card(cells: dict) -> dict | None:
     """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) within
-    ``CARD_FACTOR`` of the scene's best energy MSE and best rollout error. ``cells`` is ``{(label,
+    ``CARD_FACTOR`` of the scene's best energy MSE and best rollout error. ``cells`` is ``{(kind,
     width, fraction): measured}``. Where no model is within ``CARD_FACTOR`` of both (the two bests
     come from different models), the model nearest both: the smallest larger of its two ratios.
     ``within`` is the pick's larger ratio to the bests (at most ``CARD_FACTOR`` unless it fell back)."""
@@ -119,7 +119,7 @@ def scene_card(cells: dict) -> dict | None:
     pick = min(ok, key=size) if ok else min(scored, key=lambda k: (within(k), *size(k)))
     if not math.isfinite(within(pick)):
         return None
-    return {"label": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
+    return {"kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
             "params": cells[pick]["params"], "train_seconds": scene_measure.cost_seconds(cells[pick]),
             "energy": scored[pick][0], "rollout": scored[pick][1], "within": within(pick)}
 
@@ -135,7 +135,7 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"smoke run: {reproduce.QUICK_STEPS} steps per model, widths {QUICK_WIDTHS} x fractions "
                         f"{QUICK_FRACTIONS}, one seed, short drift runs; output in results-quick/")
     p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
-    p.add_argument("--seeds", type=int, default=3, help="seeds of the per-rung rows and the chosen cells (quick: 1)")
+    p.add_argument("--seeds", type=int, default=3, help="seeds of the per-kind rows and the chosen cells (quick: 1)")
     p.add_argument("--jobs", type=int, default=1,
                    help="training processes, as reproduce.py --jobs; then as many measuring processes (local backend)")
     sweep.add_backend_flags(p)
@@ -167,7 +167,7 @@ def main(argv=None) -> dict:
         "jobs": args.jobs, "backend": args.backend, "starts": STARTS // 2 if args.quick else STARTS},
         "scenes": {}, "seconds": {}}
 
-    # 1. train: every scene's rungs at the default cell (all seeds), the grid (seed 0), the D-HNN split
+    # 1. train: every scene's kinds at the default cell (all seeds), the grid (seed 0), the D-HNN split
     rows = plan_rows(studied, args.quick)
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
@@ -190,22 +190,22 @@ def main(argv=None) -> dict:
     torch.set_num_threads(1)
     cells_by_scene = {}
     for task in studied:
-        entry = {"divergence": (states.get(task) or {}).get("divergence"), "rungs": {}, "grid": {}, "speed": {}}
+        entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "speed": {}}
         cells = {}
-        for label in task_rungs(task):
-            result = measured.get(("rung", task, label))
+        for kind in task_kinds(task):
+            result = measured.get(("kind", task, kind))
             if result is None:
                 continue
             per_seed = result["per_seed"]
-            entry["rungs"][label] = {"per_seed": per_seed, **_across(per_seed)}
-            cells[(label, *DEFAULT_CELL)] = per_seed[min(per_seed)]
+            entry["kinds"][kind] = {"per_seed": per_seed, **_across(per_seed)}
+            cells[(kind, *DEFAULT_CELL)] = per_seed[min(per_seed)]
             if "speed" in result:
-                entry["speed"][label] = result["speed"]
-        for label in task_rungs(task):
-            for key, m in measured.get(("cells", task, label), {}).items():
+                entry["speed"][kind] = result["speed"]
+        for kind in task_kinds(task):
+            for key, m in measured.get(("cells", task, kind), {}).items():
                 entry["grid"][key] = m
                 width, fraction = key.split("@")[1].split("x")
-                cells[(label, int(width), float(fraction))] = m
+                cells[(kind, int(width), float(fraction))] = m
         cells_by_scene[task] = cells
         results["scenes"][task] = entry
     if dhnn_rows:
@@ -219,10 +219,10 @@ def main(argv=None) -> dict:
         results["scenes"][task]["card"] = card
         if card and scene_settings(task).get("grid") and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
             row = _row(task, (card["width"], card["fraction"]), args.quick)
-            more, _ = train([([row], seeds, steps, (card["label"],))], out, args)
+            more, _ = train([([row], seeds, steps, (card["kind"],))], out, args)
             runs.update(more)
-            keys = {s: f"{row['row']}/{card['label']}/seed{s}" for s in seeds}
-            found = {s: (card["label"], more[k]) for s, k in keys.items() if isinstance(more.get(k), Path)}
+            keys = {s: f"{row['row']}/{card['kind']}/seed{s}" for s in seeds}
+            found = {s: (card["kind"], more[k]) for s, k in keys.items() if isinstance(more.get(k), Path)}
             scene = Scene(task, args.quick, states.get(task))
             card["seeds"] = _across(scene_measure.measure_models(scene, found))
     results["seconds"]["cards"] = time.perf_counter() - tic
@@ -236,31 +236,31 @@ def main(argv=None) -> dict:
 
 
 def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -> dict:
-    """``{key: scene_measure unit}``: per scene, each rung at the default cell (its seeds, and the
-    speed study of the first seed where the scene has a truth to roll out), then each rung's grid."""
+    """``{key: scene_measure unit}``: per scene, each kind at the default cell (its seeds, and the
+    speed study of the first seed where the scene has a truth to roll out), then each kind's grid."""
     units = {}
     for task in scenes:
-        for label in task_rungs(task):
+        for kind in task_kinds(task):
             per_seed = {seed: str(run) for seed in seeds
-                        if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{label}/seed{seed}"),
+                        if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{kind}/seed{seed}"),
                                       Path)}
             if per_seed:
                 speed = seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task) else None
-                units[("rung", task, label)] = ("rung", task, label, per_seed, speed)
+                units[("kind", task, kind)] = ("kind", task, kind, per_seed, speed)
     for task in scenes:
-        for label in task_rungs(task):
+        for kind in task_kinds(task):
             cells = {}
             for row in (r for r in grid_rows if r["task"] == task):
-                run = runs.get(f"{row['row']}/{label}/seed0")
+                run = runs.get(f"{row['row']}/{kind}/seed0")
                 if isinstance(run, Path):
-                    cells[f"{label}@{row['cell'][0]}x{row['cell'][1]:g}"] = (label, str(run))
+                    cells[f"{kind}@{row['cell'][0]}x{row['cell'][1]:g}"] = (kind, str(run))
             if cells:
-                units[("cells", task, label)] = ("cells", task, cells)
+                units[("cells", task, kind)] = ("cells", task, cells)
     return units
 
 
 def _across(per_seed: dict) -> dict:
-    """Mean ± standard error across seeds of the main numbers of one rung."""
+    """Mean ± standard error across seeds of the main numbers of one kind."""
     out = {}
     for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
         values = [m[key][0] for m in per_seed.values() if m.get(key)]
@@ -276,10 +276,10 @@ def _across(per_seed: dict) -> dict:
 def _dhnn(runs: dict, row: dict) -> dict:
     """The D-HNN protocol's numbers of our models trained on their split (seed 0)."""
     models, dataset = {}, None
-    for label in DHNN_MODELS:
-        run = runs.get(f"{row['row']}/{label}/seed0")
+    for kind in DHNN_MODELS:
+        run = runs.get(f"{row['row']}/{kind}/seed0")
         if isinstance(run, Path):
-            models[label], saved, metrics = hnn.load_run(run)
+            models[kind], saved, metrics = hnn.load_run(run)
             dataset = dataset or hnn.tasks.run_dataset("real", saved)
     if not models:
         return {}

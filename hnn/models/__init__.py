@@ -1,6 +1,6 @@
 """Models: networks and the fields they make. ``mlp`` and its closed-form kernels (``tanh_mlp``),
 the paper's HNN and baseline (``hamiltonian``), the pixel autoencoder (``pixel``), the structured
-rungs (``structured``: separable, dissipative; ``mechanical``: M^-1 and V, the second-order NODE;
+kinds (``structured``: separable, dissipative; ``mechanical``: M^-1 and V, the second-order NODE;
 ``constrained``: CHNN and CLNN on a ``ConstraintGraph``; ``lagrangian``: the LNN). They know no
 solver and no objective: each declares what it can do through ``hnn.interface``."""
 from .constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph

@@ -1,4 +1,4 @@
-"""Constrained rungs: bodies in Cartesian coordinates with known rigid constraints (Finzi, Wang &
+"""Constrained kinds: bodies in Cartesian coordinates with known rigid constraints (Finzi, Wang &
 Wilson, "Simplifying Hamiltonian and Lagrangian Neural Networks via Explicit Constraints", 2020).
 
 A task declares its ``ConstraintGraph``: n point bodies in d dimensions, tethers of body i to a
@@ -123,7 +123,7 @@ class ConstraintGraph:
 
 
 class _Constrained(Model):
-    """What both rungs share: the graph, V(x), the log-masses and the distance algebra."""
+    """What both kinds share: the graph, V(x), the log-masses and the distance algebra."""
 
     def __init__(self, graph: ConstraintGraph, hidden_dim: int = 256, nonlinearity: str = "tanh",
                  tolerance: float = STATE_TOLERANCE):

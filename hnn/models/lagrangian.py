@@ -10,7 +10,7 @@ equations do not determine qddot: ``time_derivative`` raises ``SingularLagrangia
 states (LNN's code takes a pseudo-inverse there instead, silently).
 
 Its energy E(q, qdot) = qdot . dL/dqdot - L is conserved by its flow for any weights (the
-Legendre transform of L, the Hamiltonian in velocity coordinates): the rung declares
+Legendre transform of L, the Hamiltonian in velocity coordinates): the kind declares
 ``conservative`` with ``hamiltonian(z) = energy(z)``, what the energy metrics read. Its flow is
 not S grad E in [q, qdot], so its ``field`` is the plain ``time_derivative``: a solver that reads
 an H (``'discrete_gradient'``) refuses it; roll out with ``dopri5``, ``rk4`` or ``midpoint``.

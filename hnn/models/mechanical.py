@@ -1,4 +1,4 @@
-"""Two rungs for mechanical systems, whose kinetic energy is quadratic in the velocities.
+"""Two model kinds for mechanical systems, whose kinetic energy is quadratic in the velocities.
 
 - ``MechanicalHNN``: H(q, p) = 1/2 p^T M^-1(q) p + V(q), with M^-1(q) = L(q) L(q)^T + eps I
   from a learned lower-triangular L(q) (softplus diagonal): positive definite by construction
