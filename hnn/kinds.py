@@ -153,8 +153,9 @@ MODEL_KINDS: dict[str, ModelKind] = {
     "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange"),
     "constrained": ModelKind(ConstrainedHNN, _constrained(ConstrainedHNN), color="tab:cyan"),
     "constrained_lagrangian": ModelKind(ConstrainedLNN, _constrained(ConstrainedLNN), color="tab:pink"),
-    # not studied by default yet: a barely trained black-box L's flow is stiff, and one dopri5 rollout of it
-    # took minutes in the measured study and over 18 minutes in the tiny peers test (issue #35)
+    # not in the scene studies: a barely trained black-box L's flow is stiff (one dopri5 rollout of it took
+    # minutes in the measured study); the peers' tables train it with the LNN's own activation and give its
+    # rollouts an iteration budget (analysis/chains/peers.py)
     "lagrangian": ModelKind(LagrangianNN, _second_order(LagrangianNN), color="tab:brown", studied=False),
     "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue"),
     "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red"),

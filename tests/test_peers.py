@@ -7,7 +7,7 @@ import hnn
 from hnn_analysis.chains import peers
 
 TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
-        "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}}
+        "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}, "max_iterations": 3000}
 
 
 def test_tiny_peers_table(tmp_path):
@@ -47,8 +47,14 @@ def test_the_card_names_the_cheapest_kind_within_2x_of_the_best():
     assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b |"
 
 
-def test_the_table_trains_the_kinds_whose_structure_the_chain_has():
+def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
     kinds = peers.kinds()
+    # the LNN, the peers' own method, though the scene studies leave it out; with its own activation
+    assert "lagrangian" in kinds and not hnn.MODEL_KINDS["lagrangian"].studied
+    jobs = peers.plan({**TINY, "kinds": kinds, "lnn_starts": 1}, tmp_path)
+    lnn = [job for job in jobs if "/lagrangian/" in job.key]
+    assert len(lnn) == 2 and all(job.config.nonlinearity == "softplus" for job in lnn)
+    assert all(job.config.nonlinearity == "tanh" for job in jobs if "/hnn/" in job.key)
     assert {"hnn", "mechanical", "constrained", "constrained_lagrangian"} <= set(kinds)
     # the chain has no friction and its kinetic energy depends on the angles
     assert not {kind for kind in kinds if hnn.MODEL_KINDS[kind].dissipative or hnn.MODEL_KINDS[kind].separable}
