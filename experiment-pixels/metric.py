@@ -242,7 +242,7 @@ def _add_energy_gif(directory: Path, model, z0) -> None:
 
 
 def _print_beside_paper(metrics: dict, label: str, directory: Path) -> None:
-    paper = hnn.paper.PAPER[NAME]
+    paper = hnn.tasks.PAPER[NAME]
     print(f"{'metric':24s} {'paper':>24s} {'ours':>24s}")
     for key, title in (("train_loss", "train loss"), ("test_loss", "test loss"), ("energy_mse_paper", "energy MSE")):
         ours = metrics[key] if isinstance(metrics[key], list) else [metrics[key], metrics[key + "_se"]]

@@ -34,7 +34,7 @@ _LAYERS = {
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("objectives", "trajectory", "dgnet", "training", "grouped", "kinds", "evaluation", "datasets"),
-    "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "paper", "group_runs",
+    "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
              "stopping", "sweep"),
 }
 

@@ -155,8 +155,12 @@ class _FromSpecs(Mapping):
         return f"{{{', '.join(f'{task!r}: {dict(self[task])!r}' for task in self)}}}"
 
 
-# task -> name -> protocol, and task -> metric -> model -> (mean, ±): the specs' protocols and paper
+# task -> name -> protocol: the specs' protocols
 PROTOCOLS = _FromSpecs("protocols")
+# the published numbers (the original README, one run each at seed 0), the specs' ``paper``:
+# PAPER[task][metric][model] -> (mean, ±), metric train_loss, test_loss or energy_mse, model baseline or
+# hnn; the paper's Table 1 shows them scaled (x10^3; 2-body x10^6; pixel losses x10^5; Table 2, 3-body,
+# x10^2); docs/original.md says how each was measured
 PAPER = _FromSpecs("paper")
 
 

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.paper import PAPER
+from hnn.tasks import PAPER
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,7 @@ def _row(train, test, energy):
 
 @pytest.fixture
 def results():
-    """A hand-made results dict against the paper's spring numbers (hnn.paper.PAPER)."""
+    """A hand-made results dict against the paper's spring numbers (hnn.tasks.PAPER)."""
     # spring paper: train baseline 3.7134e-02 ± 1.9143e-03, hnn 3.6933e-02 ± 1.9128e-03
     #               test baseline 3.6656e-02 ± 1.8652e-03, energy hnn 3.8416e-04 ± 6.53e-05
     edge = 3.7134e-02 + 1.9143e-03          # exactly at the paper's ±: within

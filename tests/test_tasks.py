@@ -81,7 +81,7 @@ def _write_task(root: Path, name: str, files: dict) -> None:
 def test_a_new_task_is_one_folder_that_reproduce_runs(tmp_path, monkeypatch):
     _write_task(tmp_path / "repo", "toy", TOY)
     monkeypatch.setenv("HNN_REPO", str(tmp_path / "repo"))
-    assert hnn.available_tasks() == ["toy"] and list(hnn.PROTOCOLS) == ["toy"] and "toy" not in hnn.paper.PAPER
+    assert hnn.available_tasks() == ["toy"] and list(hnn.PROTOCOLS) == ["toy"] and "toy" not in hnn.tasks.PAPER
     out = tmp_path / "out"
     results = reproduce.main(["--quick", "--steps", "5", "--tasks", "toy", "--out", str(out)])
     row = results["tasks"]["toy"]
@@ -109,7 +109,7 @@ def test_tasks_are_found_by_folder_in_their_declared_order(tmp_path, monkeypatch
     assert hnn.available_tasks() == ["gamma", "beta", "zeta", "alpha"]
     assert hnn.task_spec("alpha") == hnn.TaskSpec()          # no task.py: the default
     assert hnn.task_spec("alpha").figures == ("energy",) and not hnn.task_spec("alpha").protocols
-    assert not dict(hnn.PROTOCOLS) and not dict(hnn.paper.PAPER)
+    assert not dict(hnn.PROTOCOLS) and not dict(hnn.tasks.PAPER)
     with pytest.raises(ValueError, match="unknown task 'notes'"):
         hnn.task_spec("notes")
 
@@ -117,8 +117,8 @@ def test_tasks_are_found_by_folder_in_their_declared_order(tmp_path, monkeypatch
 def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
     spec = hnn.task_spec("spring")
     assert hnn.PROTOCOLS["spring"]["paper"] is spec.protocols["paper"] is hnn.tasks.get_protocol("spring")
-    assert hnn.paper.PAPER["spring"]["test_loss"]["hnn"] == (3.5928e-02, 1.8328e-03)
-    assert list(hnn.paper.PAPER) == hnn.tasks.paper_tasks()
+    assert hnn.tasks.PAPER["spring"]["test_loss"]["hnn"] == (3.5928e-02, 1.8328e-03)
+    assert list(hnn.tasks.PAPER) == hnn.tasks.paper_tasks()
     assert set(hnn.PROTOCOLS) == set(hnn.tasks.paper_tasks())
     # the chain is a task (it trains and loads) but not the paper's: reproduce.py leaves it out
     assert "chain" in hnn.available_tasks() and "chain" not in hnn.tasks.paper_tasks()
@@ -126,7 +126,7 @@ def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
         hnn.PROTOCOLS["spring"]["paper"] = None
     with pytest.raises(ValueError, match="no energy protocol 'corrected' for task '2body'"):
         hnn.tasks.get_protocol("2body", "corrected")
-    assert hnn.tasks.PROTOCOLS.get("nosuch") is None and "nosuch" not in hnn.paper.PAPER
+    assert hnn.tasks.PROTOCOLS.get("nosuch") is None and "nosuch" not in hnn.tasks.PAPER
 
 
 def _code_strings(path: Path) -> list[str]:

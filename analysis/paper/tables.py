@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 import hnn
-from hnn.paper import PAPER
+from hnn.tasks import PAPER
 from hnn_analysis.readme import stage_table
 
 MODELS = ("baseline", "hnn")            # the paper's pair, each task's table rows
