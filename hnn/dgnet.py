@@ -25,7 +25,7 @@ from torch import nn
 
 from .integrators.discrete_gradient import energy_parts, structured
 from .interface import EnergyField, declared
-from .objectives import Objective, observed_coordinates
+from .objectives import Objective, cut_paths, observed_coordinates
 
 
 def pairs_from_paths(rows, path_points: int) -> np.ndarray:
@@ -53,14 +53,7 @@ class DiscreteGradientObjective(Objective):
         self.dt, self.observed = dt, observed
 
     def prepare(self, dataset: dict) -> dict:
-        if all(key in dataset for key in self.arrays):
-            return dataset
-        if "dt" not in dataset or "t_eval" not in dataset:
-            raise ValueError("the discrete-gradient objective needs paths: this task's dataset gives no 'pairs' and "
-                             "no 'dt' and 't_eval' to cut its x into consecutive states; use --objective derivative")
-        points = len(dataset["t_eval"])
-        return {**dataset, "pairs": pairs_from_paths(dataset["x"], points),
-                "test_pairs": pairs_from_paths(dataset["test_x"], points)}
+        return cut_paths(dataset, ("pairs", "test_pairs"), pairs_from_paths, "the discrete-gradient objective")
 
     def loss_for(self, model: nn.Module, dt: float | None = None):
         """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused)."""

@@ -56,6 +56,19 @@ class Objective:
         return mean_and_se(torch.cat([part if part.dim() == 1 else part.mean(1) for part in per_row]))
 
 
+def cut_paths(dataset: dict, names: tuple[str, str], cut, needs: str) -> dict:
+    """``dataset`` with the arrays ``names`` (train, test) cut by ``cut(rows, path_points)`` from its
+    ``x`` and ``test_x`` paths (``t_eval`` gives the states per path), unless it has them already;
+    ``needs`` starts the error for a dataset without paths (no ``dt`` and ``t_eval``)."""
+    if all(name in dataset for name in names):
+        return dataset
+    if "dt" not in dataset or "t_eval" not in dataset:
+        raise ValueError(f"{needs} needs paths: this task's dataset gives no {names[0]!r} and no 'dt' and 't_eval' "
+                         "to cut its x into them; use --objective derivative")
+    points = len(dataset["t_eval"])
+    return {**dataset, names[0]: cut(dataset["x"], points), names[1]: cut(dataset["test_x"], points)}
+
+
 def observed_coordinates(dataset: dict) -> str:
     """The coordinates of ``dataset``'s states (``dataset["state"]``, default ``'canonical'``)."""
     return dataset.get("state", "canonical")

@@ -29,7 +29,7 @@ from torch import nn
 
 from .integrators.integrate import rollout
 from .interface import declared
-from .objectives import Objective, observed_coordinates
+from .objectives import Objective, cut_paths, observed_coordinates
 from .integrators.solvers import SOLVERS, get_solver
 
 SNIPPET_LOSSES = ("mae", "l2")
@@ -155,14 +155,8 @@ class TrajectoryObjective(Objective):
         self.observed = observed
 
     def prepare(self, dataset: dict) -> dict:
-        if all(key in dataset for key in self.arrays):
-            return dataset
-        if "dt" not in dataset or "t_eval" not in dataset:
-            raise ValueError("trajectory training needs paths: this task's dataset gives no 'snippets' and no "
-                             "'dt' and 't_eval' to cut its x into them; use --objective derivative")
-        points = len(dataset["t_eval"])
-        return {**dataset, "snippets": snippets_from_paths(dataset["x"], points, self.steps),
-                "test_snippets": snippets_from_paths(dataset["test_x"], points, self.steps)}
+        return cut_paths(dataset, ("snippets", "test_snippets"),
+                         lambda rows, points: snippets_from_paths(rows, points, self.steps), "trajectory training")
 
     def loss_for(self, model: nn.Module, dt: float | None = None):
         """``(x, y) -> (batch,)`` for ``hnn.train``: x, y flattened snippets (x's first state starts the rollout)."""

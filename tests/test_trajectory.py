@@ -49,6 +49,14 @@ def test_snippets_are_cut_from_whole_paths():
         hnn.trajectory.snippets_from_paths(paths[:-1], 11, 4)
     with pytest.raises(ValueError, match="snippet_steps must be an integer in \\[1, 10\\]"):
         hnn.trajectory.snippets_from_paths(paths, 11, 11)
+    # the objective cuts a dataset's x and test_x paths, and names what it needs where there are none
+    objective = hnn.trajectory.TrajectoryObjective(steps=4)
+    data = objective.prepare({"x": paths, "test_x": paths[:11], "dt": 0.1, "t_eval": np.arange(11) * 0.1})
+    assert data["snippets"].shape == (4, 15) and data["test_snippets"].shape == (2, 15)
+    np.testing.assert_array_equal(data["snippets"], cut)
+    assert objective.prepare(data) is data
+    with pytest.raises(ValueError, match="trajectory training needs paths.*'snippets'.*--objective derivative"):
+        objective.prepare({"x": paths, "test_x": paths})
 
 
 def test_unknown_or_unfit_objective_is_refused(tmp_path, capsys):
