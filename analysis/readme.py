@@ -33,7 +33,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
          "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
-         **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real")}}
+         **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -47,7 +47,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "measured-guide": "python analysis/scene_study.py --data FILE ... --jobs 2 --update-docs (docs/measured.md)",
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
            **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --seeds 3 --jobs 2 --update-docs"
-              for task in ("spring", "pend", "real")},
+              for task in ("spring", "pend", "real", "2body")},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs"}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)

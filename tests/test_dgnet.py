@@ -117,3 +117,44 @@ def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
     data = dgnet.dataset("spring", 0)
     assert data["pairs"].shape == (25 * 99, 4) and data["dt"] == pytest.approx(20 / 99)
     np.testing.assert_array_equal(data["pairs"][0], np.concatenate([data["x"][0], data["x"][1]]))
+
+
+def test_the_2body_data_is_their_recipe_cut_into_consecutive_pairs():
+    from hnn_analysis.chains import dgnet
+    data = dgnet.dataset("2body", 0)
+    # 1000 orbits of 500 states on [0, 25]: the first 200 orbits test, 800 train; width 8, no noise
+    assert data["x"].shape == data["dxdt"].shape == (800 * 500, 8)
+    assert data["test_x"].shape == data["test_dxdt"].shape == (200 * 500, 8)
+    assert data["dt"] == pytest.approx(25 / 499) and len(data["t_eval"]) == 500 and data["t_eval"][-1] == 25.0
+    assert data["pairs"].shape == data["snippets"].shape == (800 * 499, 16)
+    assert data["test_pairs"].shape == (200 * 499, 16)
+    # pairs are consecutive states of one orbit, never across two orbits
+    x, pairs = data["x"], data["pairs"]
+    for k, n in ((0, 0), (498, 498), (499, 500), (len(pairs) - 1, len(x) - 2)):
+        np.testing.assert_array_equal(pairs[k], np.concatenate([x[n], x[n + 1]]))
+    # the original's draws in order: seed 0's first orbit starts at their first energy trial's state
+    system = hnn.load_task("2body")
+    np.testing.assert_allclose(data["test_x"][0], system.initial_state(0), rtol=1e-6)
+    np.testing.assert_allclose(data["test_dxdt"][:500], system.dynamics(torch.as_tensor(data["test_x"][:500],
+                                                                                         dtype=torch.float64)),
+                               rtol=1e-5, atol=1e-6)
+    assert dgnet.SETTINGS["2body"] == {"steps": 10000, "batch_size": 200, "weight_decay": 0.0}
+
+
+def test_the_2body_table_puts_every_published_row_beside_ours(tmp_path, monkeypatch):
+    from hnn_analysis.chains import dgnet
+    monkeypatch.setitem(dgnet.TWO_BODY, "num_trials", 10)       # 8 training orbits: seconds, not minutes
+    results = dgnet.main(["--steps", "2", "--seeds", "1", "--tasks", "2body", "--out", str(tmp_path)])
+    text = (tmp_path / "dgnet.md").read_text()
+    assert "### 2body" in text and "2 steps a run (theirs: 10000) of minibatches of 200" in text
+    for name, (d, e) in dgnet.PUBLISHED["2body"].items():
+        assert f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |" in text
+    assert set(results["rows"]["2body"]) == set(dgnet.rows_for("2body")) and len(dgnet.rows_for("2body")) == 5
+    for label, runs in results["rows"]["2body"].items():
+        assert np.isfinite(runs[0]["derivative"])
+        assert set(runs[0]["energy"]) == set(dgnet.ROWS[label][3])
+        assert all(np.isfinite(v) for v in runs[0]["energy"].values())
+        for predict in dgnet.ROWS[label][3]:
+            assert f"| ours: {label} ({dgnet.ROWS[label][2]} / {predict}) |" in text
+        _, saved, _ = hnn.load_run(runs[0]["run"])
+        assert (saved["batch_size"], saved["total_steps"], saved["weight_decay"]) == (200, 2, 0.0)

@@ -1,51 +1,82 @@
-"""DGNet's protocol (Matsubara, Ishikawa & Yaguchi, NeurIPS 2020) on the spring, the pendulum and
-the real pendulum: their published rows beside ours, every row of theirs trained here the same way
-(docs/dgnet.md).
+"""DGNet's protocol (Matsubara, Ishikawa & Yaguchi, NeurIPS 2020) on the spring, the pendulum, the
+real pendulum and the 2-body task: their published rows beside ours, every row of theirs trained
+here the same way (docs/dgnet.md).
 
     python analysis/chains/dgnet.py --steps 300 --seeds 2 --out results-dgnet    # a small budget
-    python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their 2000 steps
+    python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their steps (SETTINGS)
     python analysis/chains/dgnet.py --tasks pend --seeds 3 --jobs 2 --update-docs  # docs/dgnet.md, pend's section
+    python analysis/chains/dgnet.py --tasks 2body --seeds 3 --jobs 2 --update-docs # 2body's (cost below)
 
 The protocol, read from their code (tksmatsubara/discrete-autograd at e101a09, which overlays the
-original HNN repository and reuses its data generators; experiment-{spring,pend,real}/train_dgnet.py,
-dgnet/ode.py): spring and pendulum data are the HNN recipe on t in [0, 20] at 5 points per time unit
-(50 trajectories of 100 states, dt = 20/99, noise std 0.1 on the states, the first 25 train); the
-real pendulum is the original's file and split (445 training rows, 110 test rows, dt = 1/6). One MLP
-of two hidden layers of 200 tanh units, orthogonal init; full-batch Adam at lr 1e-3, 2000 steps
-(weight decay 1e-4; real 1e-5); float32. Every model fits the finite differences
-(x_{n+1} - x_n) / dt of consecutive states: NODE (an MLP field) and HNN through one adaptive
-Dormand-Prince solve of the interval, SRNN (H = T(p) + V(q)) through one leapfrog step, DGNet through
-the discrete gradient of H between the two states (no solver). Reported: "derivative", the MSE of
-the learned dx/dt at the noisy test states against the true dx/dt there (real: against the test
-forward differences); "energy", over 15 starts with each of q, p uniform in +-[0.2, 1.0], the mean
-over the 100 times of [0, 20] of (E_true - E_model)^2 with E = q^2 + p^2 on both tasks (their
-pendulum metric too, not its H); real: one rollout from the first test state over the 110 test
-times, against the measured states, E = 2.4 (1 - cos q) + p^2. Rollouts by the discrete-gradient
-method, adaptive Dormand-Prince at torchdiffeq's defaults (rtol 1e-7, atol 1e-9) or leapfrog, one
-step per interval. Each published number is an average over 15 trials.
+original HNN repository and reuses its data generators; experiment-{spring,pend,real,2body}/
+train_dgnet.py, dgnet/ode.py): spring and pendulum data are the HNN recipe on t in [0, 20] at 5
+points per time unit (50 trajectories of 100 states, dt = 20/99, noise std 0.1 on the states, the
+first 25 train); the real pendulum is the original's file and split (445 training rows, 110 test
+rows, dt = 1/6). One MLP of two hidden layers of 200 tanh units, orthogonal init; full-batch Adam
+at lr 1e-3, 2000 steps (weight decay 1e-4; real 1e-5); float32. Every model fits the finite
+differences (x_{n+1} - x_n) / dt of consecutive states: NODE (an MLP field) and HNN through one
+adaptive Dormand-Prince solve of the interval, SRNN (H = T(p) + V(q)) through one leapfrog step,
+DGNet through the discrete gradient of H between the two states (no solver). Reported:
+"derivative", the MSE of the learned dx/dt at the noisy test states against the true dx/dt there
+(real: against the test forward differences); "energy", over 15 starts with each of q, p uniform in
++-[0.2, 1.0], the mean over the 100 times of [0, 20] of (E_true - E_model)^2 with E = q^2 + p^2 on
+both tasks (their pendulum metric too, not its H); real: one rollout from the first test state over
+the 110 test times, against the measured states, E = 2.4 (1 - cos q) + p^2. Rollouts by the
+discrete-gradient method, adaptive Dormand-Prince at torchdiffeq's defaults (rtol 1e-7, atol 1e-9)
+or leapfrog, one step per interval. Each published number is an average over 15 trials.
+
+Their 2-body (experiment-2body/train_dgnet.py, with the original's experiment-2body/data.py): the
+original generator called with timesteps=500 and t_span=[0, 25], its other arguments at their
+defaults: 1000 orbits of two unit masses (body 0 at U[0.5, 1.5]^2, the circular-orbit velocity
+scaled by 1 + 0.05 N(0, 1) per orbit, body 1 its mirror), each by scipy's RK45 at rtol 1e-9 (atol
+1e-6), states x = [qx1, qx2, qy1, qy2, px1, px2, py1, py2] (width 8) with no noise; the first 20% of
+the rows (orbits 0-199, 100000 states) test, the rest (800 orbits, 400000 states) train;
+dt = 25/499. Pairs: every consecutive pair of each training orbit (399200), the target
+(x_{n+1} - x_n) / dt. The same MLPs (8 inputs, 200 tanh units twice; SRNN two such nets on q and
+p), Adam at lr 1e-3 without weight decay, 10000 steps (the loop runs 10001) of 200 pairs drawn at
+random each step. "derivative": the MSE of the learned dx/dt over all 100000 test states against
+the generator's analytic dx/dt. "energy": 15 starts, the original's random_config after
+np.random.seed(0..14) (the same at every seed), the true orbit by RK45 (rtol 1e-9) and the model's
+over the 500 times of [0, 25], the mean of (E_true - E_model)^2 with E the physical H (kinetic plus
+-1/r). Their dataset is cached as experiment-2body/2body-orbits-dataset.pkl, a name without the
+seed: unless that file was removed between trials, every trial after the first loaded the first's
+orbits.
 
 Ours, and where it differs: the same data recipes (``hnn.datasets.ring_dataset``; experiment-real's
-original split), our kinds ``baseline`` (NODE), ``hnn``, ``separable`` (SRNN) and ``hnn`` with
-``--objective discrete_gradient`` (DGNet; its closed-form discrete gradient is their chain rule).
-NODE and HNN train through one RK4 step of the interval, not an adaptive Dormand-Prince solve (our
-adaptive solvers are not differentiable; at these intervals RK4's error is far below the data's
-noise); NODE, HNN and SRNN fit the squared state error of that one step, their loss times dt^2, so
-their weight decay is scaled by dt^2 too (Adam does not see a loss's scale, but the L2 decay it adds
-to the gradient does). Rollouts in float64 (theirs: float32, the discrete gradient through
-scipy's fsolve). Our start states draw from their law with our own seeded generator. The real
-pendulum's pairs are consecutive training rows exactly dt = 1/6 apart: its 445 rows skip frames at
-10 places and the test block at one, and those 11 pairs are left out (theirs fit the forward
-difference over the true step there). Their real-pendulum rows most likely trained with their
-``--friction`` flag (a learned friction term; the README lists the task under dissipative data and
-brackets SRNN, the one model that cannot use it): the measured energy falls from 0.90 to 0.74 over
-the test block, so a model that conserves it scores about 1e-2 there; our D-HNN row (``dissipative``,
-H and a learned dissipation) is the model that may lose energy. Their
-"derivative" there compares a predicted next state with a derivative (dgnet/ode.py returns the
-state when no second state is given): ours is the derivative MSE, not comparable with theirs.
-Not run: their 2-body (10001 minibatch steps on 800 orbits of 500 states per row and seed; its
-published row is shown). Also our HNN on the paper's objective (true dx/dt at the noisy states,
-spring and pendulum). Every run saves its config, metrics and checkpoint (``--out``/runs); the
-table is written from ``dgnet.json``.
+original split; 2-body: ``hnn.nbody.orbit_dataset`` with experiment-2body's sampler, ``TWO_BODY``:
+the original's draws in the original's order, so seed s gives the start states of their
+np.random.seed(s), each seed its own, every orbit by a batched Dormand-Prince 5(4) at least as
+accurate as their RK45 call, generated in about a second and not cached), their settings per task
+(``SETTINGS``), our kinds ``baseline`` (NODE), ``hnn``, ``separable`` (SRNN) and ``hnn`` with
+``--objective discrete_gradient`` (DGNet; its closed-form discrete gradient is their chain rule),
+each rolled out on the 2-body as on the other tasks. NODE and HNN
+train through one RK4 step of the interval, not an adaptive Dormand-Prince solve (our adaptive
+solvers are not differentiable; at these intervals RK4's error is far below the data's noise, and
+on the noiseless 2-body data the true field's RK4 step misses the pairs' differences by an MSE of
+2.7e-12 in derivative units, against 5.3e-6 between those differences and the true dx/dt); NODE,
+HNN and SRNN fit the squared state error of that one step, their loss times dt^2, so their weight
+decay is scaled by dt^2 too (Adam does not see a loss's scale, but the L2 decay it adds to the
+gradient does). Rollouts in float64 (theirs: float32, the discrete gradient through scipy's
+fsolve); the 2-body truth by DOP853 at rtol and atol 1e-12. Our ring start states draw from their
+law with our own seeded generator; the 2-body ones are theirs exactly. The real pendulum's pairs are
+consecutive training rows exactly dt = 1/6 apart: its 445 rows skip frames at 10 places and the
+test block at one, and those 11 pairs are left out (theirs fit the forward difference over the true
+step there). Their real-pendulum rows most likely trained with their ``--friction`` flag (a learned
+friction term; the README lists the task under dissipative data and brackets SRNN, the one model
+that cannot use it): the measured energy falls from 0.90 to 0.74 over the test block, so a model
+that conserves it scores about 1e-2 there; our D-HNN row (``dissipative``, H and a learned
+dissipation) is the model that may lose energy. Their "derivative" there compares a predicted next
+state with a derivative (dgnet/ode.py returns the state when no second state is given): ours is the
+derivative MSE, not comparable with theirs. Also our HNN on the paper's objective (the true dx/dt at
+the data's states: noisy on the spring and pendulum, exact on the 2-body). Every run saves its
+config, metrics and checkpoint (``--out``/runs); the table is written from ``dgnet.json``.
+
+The 2-body's cost at their settings, measured here (301-step bursts, one torch thread, on a 2-core
+machine whose load average was 4-5 from other jobs): milliseconds per step NODE 8.8, HNN 11.3, SRNN
+8.9, DGNet 8.0, HNN on the paper's objective 6.5, so 10001 steps take 65-113 s a row, about 435 s
+for the five rows of one seed, plus 7-9 s a run for its data, its final losses over all pairs and
+its energy rollouts (one full HNN run: 124 s, 115 s of them training): about 480 s a seed, 24
+core-minutes for 3 seeds (15 runs), about 12 minutes on 2 workers.
 """
 from __future__ import annotations
 
@@ -85,8 +116,19 @@ PUBLISHED = {
              "DGNet (discrete gradient / ada. DP)": (1.38e-3, 4.92e-4),
              "DGNet (discrete gradient / discrete gradient)": (1.38e-3, 5.04e-4)},
 }
-TASKS = ("spring", "pend", "real")
+TASKS = ("spring", "pend", "real", "2body")
 T_SPAN, TIMESCALE, TRIALS, TRAJECTORIES = (0.0, 20.0), 5, 15, 50
+# their training settings per task (experiment-<task>/train_dgnet.py): optimizer steps (the loop runs
+# steps + 1, theirs too), the minibatch (None: full batch) and Adam's L2 weight decay
+SETTINGS = {"spring": {"steps": 2000, "batch_size": None, "weight_decay": 1e-4},
+            "pend": {"steps": 2000, "batch_size": None, "weight_decay": 1e-4},
+            "real": {"steps": 2000, "batch_size": None, "weight_decay": 1e-5},
+            "2body": {"steps": 10000, "batch_size": 200, "weight_decay": 0.0}}
+# their 2-body data: the original HNN generator called with timesteps=500, t_span=[0, 25] (its other
+# arguments at their defaults: 1000 orbits, the first 20% of rows test, solve_ivp's RK45 at rtol 1e-9
+# and atol 1e-6, every orbit kept), through ours (hnn.nbody.orbit_dataset, experiment-2body's sampler)
+TWO_BODY = {"num_trials": 1000, "num_points": 500, "t_span": (0.0, 25.0), "test_split": 0.2, "rtol": 1e-9,
+            "atol": 1e-6, "min_separation": 0.0}
 # how each row predicts; the fixed-step ones take one step per interval of the time grid (``dt`` added)
 PREDICT = {"discrete gradient": {"method": "discrete_gradient"},
            "ada. DP": {"method": "dopri5", "rtol": 1e-7, "atol": 1e-9},
@@ -111,6 +153,11 @@ def dataset(task: str, seed: int) -> dict:
         data = system.get_dataset()
         pairs = {key: contiguous_pairs(data[x], data[t], data["dt"]) for key, x, t in (("pairs", "x", "t"),
                                                                                        ("test_pairs", "test_x", "test_t"))}
+    elif task == "2body":
+        # about a second a seed (1000 orbits, batched), so drawn afresh by each run rather than cached
+        data = hnn.nbody.orbit_dataset(system.random_config, seed, **TWO_BODY)
+        points = len(data["t_eval"])
+        pairs = {"pairs": pairs_from_paths(data["x"], points), "test_pairs": pairs_from_paths(data["test_x"], points)}
     else:
         data = hnn.datasets.ring_dataset(system.dynamics, seed, TRAJECTORIES, T_SPAN, TIMESCALE,
                                          system.RADIUS_RANGE, system.NOISE_STD)
@@ -148,6 +195,14 @@ def energy_mse(task: str, model, seed: int, predict: str, data: dict) -> float:
         path = _predict(model, x0, t, predict)[0]
         observed = torch.as_tensor(data["test_x"], dtype=torch.float64)
         return float((system.hamiltonian(observed) - system.hamiltonian(path)).pow(2).mean())
+    if task == "2body":
+        # their 15 starts exactly (the original's random_config after np.random.seed(0..14)), at every seed,
+        # over the data's own grid (500 times of [0, 25]); E is the system's H on both sides
+        x0 = torch.as_tensor(np.stack([system.initial_state(i) for i in range(TRIALS)]))
+        t = data["t_eval"]
+        truth = hnn.rollout(system.dynamics, x0, t, method="dop853", rtol=1e-12, atol=1e-12)
+        ours = _predict(model, x0, t, predict)
+        return float((system.hamiltonian(truth) - system.hamiltonian(ours)).pow(2).mean())
     rng = np.random.RandomState(10_000 + seed)
     x0 = rng.rand(TRIALS, 2) * 1.6 - 0.8
     x0 += 0.2 * np.sign(x0)
@@ -165,9 +220,10 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path) -> dict:
     data = dataset(task, seed)
     # the trajectory rows' loss is the state error, dt^2 times their derivative error: Adam does not
     # see that scale, but its L2 weight decay adds to the gradient, so it is scaled by dt^2 as well
-    decay = trainer.Config().weight_decay * (data["dt"] ** 2 if objective == "trajectory" else 1.0)
+    decay = SETTINGS[task]["weight_decay"] * (data["dt"] ** 2 if objective == "trajectory" else 1.0)
     config = trainer.Config(name=f"{task}-dgnet", model=kind, objective=objective, snippet_steps=1,
-                            total_steps=steps, seed=seed, weight_decay=decay, save_dir=str(out / "runs"))
+                            total_steps=steps, batch_size=SETTINGS[task]["batch_size"], seed=seed,
+                            weight_decay=decay, save_dir=str(out / "runs"))
     fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
                                steps=1) if objective == "trajectory" else None)
     run = hnn.runs.find_run(config) or hnn.run_experiment(config, data, fit)
@@ -195,10 +251,12 @@ def rows_for(task: str) -> list[str]:
 def task_table(results: dict, task: str) -> str:
     """The markdown of one ``task`` of ``results`` (``dgnet.json``): the stamp, their rows and ours
     (docs/dgnet.md's section ``dgnet-<task>``, so a run of some tasks leaves the others' sections)."""
-    n, steps, meta = results["seeds"], results["steps"], results["meta"]
+    n, steps, meta = results["seeds"], results["steps"][task], results["meta"]
+    batch = SETTINGS[task]["batch_size"]
     lines = [f"### {task}", "", f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, "
              f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}): "
-             f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: 2000). Energy: mean over the seeds, "
+             f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: {SETTINGS[task]['steps']}) of "
+             f"{'the full batch' if batch is None else f'minibatches of {batch}'}. Energy: mean over the seeds, "
              "with their spread.", "", "| model (train / predict) | derivative | energy | source |",
              "| --- | --- | --- | --- |"]
     lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |" for name, (d, e) in PUBLISHED[task].items()]
@@ -222,16 +280,18 @@ def table(results: dict) -> str:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run")
-    parser.add_argument("--steps", type=int, default=2000, help="optimizer steps per run (theirs: 2000)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="optimizer steps per run (default: theirs, 2000; 2body 10000)")
     commands.add_flags(parser, seeds="seeds 0..seeds-1 (theirs: 15 trials)", seeds_default=15,
                        jobs="worker processes, one torch thread each", out="folder for runs, json, table",
                        out_default=Path("results-dgnet"), update_docs="write each task's table into its section of docs/dgnet.md (the other tasks' stay)")
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     tic, meta = time.perf_counter(), {**provenance(), "command": portable_command(argv, "analysis/chains/dgnet.py")}
-    if args.steps < 1:
+    if args.steps is not None and args.steps < 1:
         sys.exit(f"error: --steps must be positive, got {args.steps}")
-    work = [(task, label, seed, args.steps, args.out) for seed in range(args.seeds)
+    steps = {task: SETTINGS[task]["steps"] if args.steps is None else args.steps for task in args.tasks}
+    work = [(task, label, seed, steps[task], args.out) for seed in range(args.seeds)
             for task in args.tasks for label in rows_for(task)]
     done = {}
 
@@ -250,8 +310,8 @@ def main(argv=None) -> dict:
     rows = {task: {label: [done[(task, label, seed)] for seed in range(args.seeds)] for label in rows_for(task)}
             for task in args.tasks}
     meta["seconds"] = time.perf_counter() - tic
-    results = {"meta": meta, "steps": args.steps, "seeds": args.seeds, "tasks": args.tasks, "published": PUBLISHED,
-               "rows": rows}
+    results = {"meta": meta, "steps": steps, "seeds": args.seeds, "tasks": args.tasks, "published": PUBLISHED,
+               "settings": {task: SETTINGS[task] for task in args.tasks}, "rows": rows}
     text = table(results)
     sections = {f"dgnet-{task}": task_table(results, task) for task in args.tasks} if args.update_docs else {}
     commands.publish(args.out, "dgnet", results, text, sections)
