@@ -119,10 +119,12 @@ def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
 def stale(names=None, root: Path | None = None) -> list[str]:
     """One line per generated section whose numbers may be older than the code: its stamp (the first
     ``commit <hash>`` in it) names a commit that lacks the last change to ``hnn/`` or ``experiment-*/``
-    (but for commits whose message has a ``Numbers-unchanged: <why>`` line),
+    (but for commits whose message has a ``Numbers-unchanged: <why>`` line, and merges),
     or it has no stamp at all; each line says how to refresh it. Empty outside a git checkout."""
     root = root or hnn.tasks.repo_root()
-    last = _git(root, "log", "-1", "--format=%h %cs", "--invert-grep", f"--grep=^{UNCHANGED}", "--", *CODE)
+    # merges left out: a merge's changes are its branch's commits, each with its own message
+    last = _git(root, "log", "-1", "--no-merges", "--format=%h %cs", "--invert-grep", f"--grep=^{UNCHANGED}",
+                "--", *CODE)
     if last.returncode != 0 or not last.stdout.strip():
         return []
     change, day = last.stdout.split()

@@ -267,6 +267,18 @@ def test_staleness_check_flags_a_page_stamped_before_a_code_change(tmp_path, mon
     (tmp_path / "hnn" / "x.py").write_text("a = 3\n")
     _git(tmp_path, "commit", "-qam", f"a message changes\n\n{readme.UNCHANGED} only what is printed")
     assert readme.stale(["headline"]) == []                      # a commit that says it moves no number
+    # a branch of such commits merged: the merge's own message says nothing, its commits do
+    _git(tmp_path, "checkout", "-qb", "side")
+    (tmp_path / "hnn" / "x.py").write_text("a = 4\n")
+    _git(tmp_path, "commit", "-qam", f"a rename\n\n{readme.UNCHANGED} names only")
+    _git(tmp_path, "checkout", "-q", "-")
+    (tmp_path / "hnn" / "y.py").write_text("b = 1\n")                  # main changes hnn/ meanwhile too
+    _git(tmp_path, "add", ".")
+    _git(tmp_path, "commit", "-qm", f"a speed-up\n\n{readme.UNCHANGED} bit-identical")
+    (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
+    _git(tmp_path, "commit", "-qam", "docs")
+    _git(tmp_path, "merge", "-q", "--no-ff", "--no-edit", "side")
+    assert readme.stale(["headline"]) == []
 
 
 def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results):
