@@ -226,7 +226,7 @@ def run(args, argv: list[str], parser) -> dict:
             cost = scene_measure.training_cost(TASK, model.args)
             measured.append({"kind": kind, "hidden_dim": row["cell"][0], "train_fraction": row["cell"][1],
                              "params": model.params, "test_loss": model.metrics["test_loss"],
-                             "train_seconds": cost["seconds"], "run": str(directory),
+                             "train_seconds": cost["seconds"], "run": _in_checkout(directory),
                              **mm.measure(model, held, energy)})
             print(f"  {kind:12s} width {row['cell'][0]:3d} fraction {row['cell'][1]:g}: prediction error "
                   f"{measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})", flush=True)
@@ -260,3 +260,9 @@ def _portable(arg: str) -> str:
         except ValueError:
             return "DIR"
     return shlex.quote(arg)
+
+
+def _in_checkout(directory: Path) -> str:
+    """A run folder as the docs may name it: relative to the checkout when inside it (the docs commands write there), else as given."""
+    root, directory = hnn.tasks.repo_root().resolve(), Path(directory).resolve()
+    return str(directory.relative_to(root)) if directory.is_relative_to(root) else str(directory)
