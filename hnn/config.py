@@ -23,14 +23,18 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .names import FIELD_TYPES, NONLINEARITIES, OBJECTIVES
+from .names import DERIVATIVE_LOSSES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES
 
 
-def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False) -> Any:
+def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False,
+            identity_at_default: bool = True) -> Any:
     """A config field with its flag's ``help`` text; ``parse(text) -> value`` (an argparse
-    ``type``, default: the type of ``default``), ``choices`` and ``display_only`` as in argparse."""
+    ``type``, default: the type of ``default``), ``choices`` and ``display_only`` as in argparse.
+    ``identity_at_default=False``: a field added after runs were saved, which enters a run's identity
+    only when set away from its default, so every run saved before it keeps its folder and is reused."""
     return dataclasses.field(default=default, metadata={"help": help, "parse": parse, "choices": choices,
-                                                        "display_only": display_only})
+                                                        "display_only": display_only,
+                                                        "identity_at_default": identity_at_default})
 
 
 @dataclass
@@ -52,6 +56,10 @@ class RunConfig:
                                          "(the test set stays whole); for studies of how much data a model needs",
                                     parse=cli.fraction)
     nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
+    init: str = setting("orthogonal", "how the MLPs' weights start: orthogonal (the paper's: orthogonal weights, "
+                                      "torch's default biases), zero_bias (DGNet's: orthogonal weights, zero biases) "
+                                      "or lnn (the LNN's: scaled normal weights, zero biases)", choices=INITS,
+                        identity_at_default=False)
     total_steps: int = setting(2000, "optimizer steps; the loop runs total_steps + 1, as the original",
                                parse=cli.int_at_least(0))
     print_every: int = setting(200, "print (and test) every N steps; changes what is printed and the test loss's "
@@ -69,6 +77,9 @@ class RunConfig:
                                            "(x_{n+1} - x_n)/dt by the discrete gradient of the learned H between "
                                            "the two states; conservative kinds, tasks with paths)",
                              choices=OBJECTIVES)
+    derivative_loss: str = setting("l2", "the error of a fit of dx/dt (--objective derivative): l2, squared (the "
+                                         "paper's), or l1, absolute (the LNN's)", choices=DERIVATIVE_LOSSES,
+                                   identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
@@ -114,6 +125,11 @@ class RunConfig:
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective={self.objective!r}: choose one of {', '.join(OBJECTIVES)}")
         registered = objective_for(self.kind)
+        if self.derivative_loss != "l2" and not (self.objective == "derivative"
+                                                 and isinstance(registered, DerivativeObjective)):
+            raise ValueError(f"derivative_loss={self.derivative_loss!r} sets the error of a fit of dx/dt "
+                             f"(objective='derivative'); objective={self.objective!r} of the {self.kind} model has "
+                             "its own loss: drop derivative_loss")
         if self.objective == "derivative":
             return registered
         if not isinstance(registered, DerivativeObjective):
@@ -133,8 +149,12 @@ class RunConfig:
         return tuple(f.name for f in dataclasses.fields(cls) if cli.field_meta(cls, f.name).get("display_only"))
 
     def identity(self) -> dict:
-        """The fields that decide what is trained: all but the display-only ones and ``save_dir``."""
+        """The fields that decide what is trained: all but the display-only ones, ``save_dir``, and a
+        field declared ``identity_at_default=False`` while it holds its default."""
         skip = set(self.display_only()) | {"save_dir"}
+        for f in dataclasses.fields(self):
+            if cli.field_meta(type(self), f.name).get("identity_at_default") is False and getattr(self, f.name) == f.default:
+                skip.add(f.name)
         return {k: v for k, v in dataclasses.asdict(self).items() if k not in skip}
 
     def key(self) -> str:

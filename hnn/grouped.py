@@ -55,9 +55,11 @@ class GroupedRunFailed(Exception):
 def group_key(config) -> tuple | None:
     """Configs with equal keys can train as one group; None for a config that trains alone
     (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
-    optimizer, schedule or gradient clipping other than the paper's constant-rate Adam)."""
+    optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
+    Adam on the squared error)."""
     if (config.kind not in GROUPABLE_KINDS or config.use_rk4 or config.nonlinearity != "tanh"
-            or (config.optimizer, config.schedule, config.clip_grad) != ("adam", "constant", 0.0)
+            or (config.optimizer, config.schedule, config.clip_grad, config.derivative_loss)
+            != ("adam", "constant", 0.0, "l2")
             or type(config.make_objective()) is not DerivativeObjective):
         return None
     return ((type(config).__module__, type(config).__qualname__, config.kind, getattr(config, "input_noise", 0.0))

@@ -24,6 +24,7 @@ from .dgnet import DiscreteGradientObjective
 from .interface import Model
 from .models.lagrangian import LagrangianNN
 from .models.mechanical import MechanicalHNN, SecondOrderNODE
+from .models.mlp import initialize
 from .models.hamiltonian import Baseline, HNN, build_model
 from .models.pixel import PixelBaseline, PixelHNN
 from .objectives import DerivativeObjective, PixelObjective
@@ -43,7 +44,8 @@ class ModelSpec:
     hidden_dim, nonlinearity: the MLPs'; field_type: what the paper's HNN learns (solenoidal,
     conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
     are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
-    (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64.
+    (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
+    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder.
     """
     kind: str
     input_dim: int | None = None
@@ -55,6 +57,7 @@ class ModelSpec:
     periodic: bool = False
     constraints: dict | None = None
     dtype: str = "float32"
+    init: str = "orthogonal"
 
     @classmethod
     def from_args(cls, args: dict) -> ModelSpec:
@@ -189,4 +192,4 @@ def model_from_args(args: dict) -> nn.Module:
     """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded
     (float32 unless its ``dtype`` says otherwise): its ``ModelSpec`` built by the kind's row."""
     spec = ModelSpec.from_args(args)
-    return get_kind(spec.kind).build(spec).to(dtype=DTYPES[spec.dtype])
+    return initialize(get_kind(spec.kind).build(spec), spec.init).to(dtype=DTYPES[spec.dtype])

@@ -85,7 +85,8 @@ class DerivativeObjective(Objective):
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         observed = observed_coordinates(dataset)
-        options = {"input_noise": args.get("input_noise", 0.0), "predict": None}
+        options = {"input_noise": args.get("input_noise", 0.0), "predict": None,
+                   "derivative_loss": args.get("derivative_loss", "l2")}
         if declared(model).relation(observed) == "mapped":
             # a model of its own coordinates fit to d/dt of the observed states through its own map
             if args.get("use_rk4"):

@@ -114,6 +114,17 @@ def l2_loss(predict: Callable) -> Callable:
     return lambda xb, yb: (yb - predict(xb)).pow(2)
 
 
+def l1_loss(predict: Callable) -> Callable:
+    """The LNN's loss (Cranmer et al. 2020): per-element absolute error of ``predict(x)``. The double
+    pendulum's accelerations reach hundreds where its rates are large; squared, those few states
+    drive every step (measured on the LNN's protocol: docs/peers.md)."""
+    return lambda xb, yb: (yb - predict(xb)).abs()
+
+
+# --derivative_loss: the per-element error of a fit of dx/dt
+DERIVATIVE_LOSSES = {"l2": l2_loss, "l1": l1_loss}
+
+
 def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: torch.Generator):
     """The whole set when ``batch_size`` is None or covers it, else a random minibatch without replacement."""
     if batch_size is None or batch_size >= len(x):
@@ -158,7 +169,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
-          optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0) -> dict:
+          optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
+          derivative_loss: str = "l2") -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -183,6 +195,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             ``report_progress`` callback is active (its caller shows progress its own way).
         optimizer, schedule: ``adam_optimizer``'s kind and ``learning_rate``'s schedule.
         clip_grad: clip each step's gradient to this global norm (0: never).
+        derivative_loss: the per-element error of the default loss (``DERIVATIVE_LOSSES``): ``'l2'``
+            squared (the paper's), ``'l1'`` absolute (the LNN's); a custom ``loss`` replaces both.
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -206,10 +220,12 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         test_x, test_dxdt = check_data("test_x", test_x, **kw), check_data("test_dxdt", test_dxdt, **kw)
         if len(test_x) != len(test_dxdt):
             raise ValueError(f"test_x has {len(test_x)} rows but test_dxdt has {len(test_dxdt)}")
+    if derivative_loss not in DERIVATIVE_LOSSES:
+        raise ValueError(f"derivative_loss={derivative_loss!r}: choose one of {', '.join(DERIVATIVE_LOSSES)}")
     if loss is None:        # a fit of dx/dt itself: its arrays are states and their derivatives
         _warn_off_scale("x", x)
         _warn_off_scale("dxdt", dxdt)
-        loss = l2_loss(predict or model.time_derivative)
+        loss = DERIVATIVE_LOSSES[derivative_loss](predict or model.time_derivative)
     if test_every is None:
         test_every = print_every
     if test_every < 1 or print_every < 1:

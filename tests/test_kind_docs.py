@@ -38,5 +38,7 @@ def test_model_help_lists_every_kind_a_task_takes():
 
 def test_the_names_known_before_torch_are_the_modules_own():
     assert hnn.names.NONLINEARITIES == models.NONLINEARITIES
+    assert hnn.names.INITS == models.INITS
     assert hnn.names.FIELD_TYPES == models.FIELD_TYPES
     assert hnn.names.OBJECTIVES == tuple(hnn.kinds.OBJECTIVES)
+    assert hnn.names.DERIVATIVE_LOSSES == tuple(hnn.training.DERIVATIVE_LOSSES)

@@ -7,11 +7,11 @@ from .constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
 from .hamiltonian import FIELD_TYPES, HNN, Baseline, build_model, permutation_tensor
 from .lagrangian import LagrangianNN, SingularLagrangianError
 from .mechanical import MechanicalHNN, SecondOrderNODE
-from .mlp import MLP, NONLINEARITIES, get_nonlinearity
+from .mlp import INITS, MLP, NONLINEARITIES, get_nonlinearity, initialize
 from .pixel import MLPAutoencoder, PixelBaseline, PixelHNN
 from .structured import DissipativeHNN, SeparableHNN
 
-__all__ = ["FIELD_TYPES", "HNN", "MLP", "NONLINEARITIES", "Baseline", "ConstrainedHNN", "ConstrainedLNN",
+__all__ = ["FIELD_TYPES", "HNN", "INITS", "MLP", "NONLINEARITIES", "Baseline", "ConstrainedHNN", "ConstrainedLNN",
            "ConstraintGraph", "DissipativeHNN", "LagrangianNN", "MLPAutoencoder", "MechanicalHNN",
            "PixelBaseline", "PixelHNN", "SecondOrderNODE", "SeparableHNN", "SingularLagrangianError",
-           "build_model", "get_nonlinearity", "permutation_tensor"]
+           "build_model", "get_nonlinearity", "initialize", "permutation_tensor"]

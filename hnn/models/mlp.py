@@ -18,6 +18,10 @@ _NONLINEARITIES = {
     "swish": lambda x: x * torch.sigmoid(x),
 }
 NONLINEARITIES = tuple(_NONLINEARITIES)   # the names get_nonlinearity knows, for --nonlinearity choices
+# how an MLP's weights start (``initialize``), for --init choices: the paper's orthogonal weights with
+# torch's default biases; DGNet's zero biases (Matsubara et al. 2020, dgnet/ode.py); the LNN's scaled normal
+# weights and zero biases (Cranmer et al. 2020, lnn.py custom_init)
+INITS = ("orthogonal", "zero_bias", "lnn")
 # Piecewise-linear activations: their second derivative is zero almost everywhere, so the
 # symplectic gradient of an HNN built on them is piecewise constant in x and the training
 # signal through d(dH/dx)/dtheta is poor.
@@ -80,6 +84,34 @@ class MLP(nn.Module):
                 and own["_act"] is tanh_mlp.fast_tanh and not (own["_forward_hooks"] or own["_forward_pre_hooks"])
                 and type(layers["linear1"]) is nn.Linear and type(layers["linear2"]) is nn.Linear
                 and type(layers["linear3"]) is nn.Linear)
+
+
+def initialize(model: nn.Module, init: str) -> nn.Module:
+    """Re-draw the weights of every ``MLP`` inside ``model`` by the scheme ``init`` (one of ``INITS``), in
+    place; returns ``model``. Draws from torch's global generator, so a seeded run draws the same.
+
+    - ``'orthogonal'``: as ``MLP`` builds them (orthogonal weights, torch's uniform biases): unchanged.
+    - ``'zero_bias'``: orthogonal weights, every bias zero (DGNet's ``reset_parameters``, all its models).
+    - ``'lnn'``: the LNN's init (``custom_init`` of Cranmer et al.'s ``lnn.py``): zero biases and weights
+      N(0, s^2 / n) with n the larger side of the layer's matrix and s = 2.2 for the first layer, 0.58 i for
+      hidden layer i, n for the output (so the output weights' std is sqrt(n)). An L's Euler-Lagrange
+      equations do not see L's scale; the large output and small hidden weights set how Adam moves them.
+    """
+    if init not in INITS:
+        raise ValueError(f"unknown init {init!r}; choose one of {', '.join(INITS)}")
+    if init == "orthogonal":
+        return model
+    for mlp in (m for m in model.modules() if isinstance(m, MLP)):
+        layers = (mlp.linear1, mlp.linear2, mlp.linear3)
+        with torch.no_grad():
+            for i, layer in enumerate(layers):
+                if layer.bias is not None:
+                    layer.bias.zero_()
+                if init == "lnn":
+                    n = max(layer.weight.shape)
+                    scale = 2.2 if i == 0 else n if i == len(layers) - 1 else 0.58 * i
+                    layer.weight.normal_(0.0, scale / n ** 0.5)
+    return model
 
 
 # the forward the closed form was written for, taken at import: a forward patched in later differs
