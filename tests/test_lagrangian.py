@@ -56,14 +56,48 @@ def test_its_energy_is_conserved_along_its_flow_for_random_weights():
     assert drift["dop853"] < 1e-10 and drift["rk4"] > 1e3 * drift["dop853"], drift
 
 
-def test_a_degenerate_l_is_an_error_naming_the_states():
-    class Linear(hnn.models.LagrangianNN):        # L = qdot cos q - V: d2L/dqdot2 = 0 everywhere
-        def lagrangian_at(self, q, v):
-            return (v * torch.cos(q)).sum() - torch.cos(q).sum()
+class _LinearInV(hnn.models.LagrangianNN):        # L = qdot cos q - V: d2L/dqdot2 = 0 everywhere
+    def lagrangian_at(self, q, v):
+        return (v * torch.cos(q)).sum() - torch.cos(q).sum()
+
+
+class _NoKinetic(hnn.models.LagrangianNN):        # L = -V(q): no qdot at all, so no autograd path to it
+    def lagrangian_at(self, q, v):
+        return -torch.cos(q).sum()
+
+
+@pytest.mark.parametrize("degenerate", [_LinearInV, _NoKinetic], ids=["linear-in-qdot", "no-qdot"])
+def test_a_degenerate_l_is_an_error_naming_the_states(degenerate):
     z = torch.tensor([[0.1, 0.2], [0.3, -0.4]], dtype=torch.float64)
     with pytest.raises(hnn.models.SingularLagrangianError, match=r"singular at 2 states.*#0 \[q, qdot\] = \[0\.1, 0\.2\]") as err:
-        Linear(2, 4).double().time_derivative(z)
+        degenerate(2, 4).double().time_derivative(z)
     assert err.value.states == [0, 1]
+
+
+@pytest.mark.parametrize("n", [1, 2, 5])
+def test_the_batched_acceleration_is_each_states_own_euler_lagrange_solve(n):
+    """The batched autograd passes against torch.func's per-state Hessian of the same network L,
+    solved state by state: a batch's rows must not mix, in value or in the weights' gradient."""
+    torch.manual_seed(n)
+    model = hnn.models.LagrangianNN(2 * n, hidden_dim=16, nonlinearity="softplus", periodic=True).double()
+    z = torch.cat([torch.rand(6, n, dtype=torch.float64) * 6, torch.randn(6, n, dtype=torch.float64)], 1)
+
+    def per_state(state):
+        hess = torch.func.hessian(lambda s: model.lagrangian_at(s[:n], s[n:]))(state)
+        dL = torch.func.grad(lambda s: model.lagrangian_at(s[:n], s[n:]))(state)
+        return torch.linalg.solve(hess[n:, n:], dL[:n] - hess[n:, :n] @ state[n:])
+
+    truth = torch.stack([per_state(state) for state in z])
+    ours = model.acceleration(z)
+    torch.testing.assert_close(ours, truth, rtol=1e-10, atol=1e-10)
+    weight = model.net.linear2.weight
+    g_ours, = torch.autograd.grad(ours.pow(2).sum(), weight)
+    g_truth, = torch.autograd.grad(truth.pow(2).sum(), weight)
+    torch.testing.assert_close(g_ours, g_truth, rtol=1e-9, atol=1e-9)
+    with torch.no_grad():                                   # a rollout's call: same numbers, no graph
+        quiet = model.acceleration(z)
+    assert not quiet.requires_grad
+    torch.testing.assert_close(quiet, truth.detach(), rtol=1e-10, atol=1e-10)
 
 
 def test_it_reads_observed_velocities_and_no_solver_steps_its_energy_as_an_h():

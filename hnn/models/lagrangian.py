@@ -4,8 +4,9 @@ black-box L(q, qdot), one MLP, whose accelerations come from the Euler-Lagrange 
     d/dt dL/dqdot = dL/dq   =>   qddot = (d2L/dqdot2)^-1 [dL/dq - (d2L/dqdot dq) qdot]
 
 on observed ``z = [q, qdot]`` of shape ``(batch, 2n)`` (``coordinates = 'velocity'``): no canonical
-momenta, no mass matrix, any L. The three derivatives are taken per state by ``torch.func``
-(``jacfwd`` of ``grad``: the Hessian of L and its gradient in one pass) and batched by ``vmap``. Where d2L/dqdot2 is singular the
+momenta, no mass matrix, any L. The derivatives are batched autograd passes: dL/dz once, then one
+pass per qdot_i for the row d(dL/dqdot_i)/dz (n + 1 backward passes over the whole batch, about half
+the time of a per-state ``vmap(jacfwd(grad))``: docs/speed.md). Where d2L/dqdot2 is singular the
 equations do not determine qddot: ``time_derivative`` raises ``SingularLagrangianError`` naming the
 states (LNN's code takes a pseudo-inverse there instead, silently).
 
@@ -24,7 +25,7 @@ The model kind ``'lagrangian'`` (a row of ``hnn.MODEL_KINDS``).
 from __future__ import annotations
 
 import torch
-from torch.func import grad, jacfwd, vmap
+from torch.func import vmap
 
 from ..errors import DivergenceError
 from .mechanical import check_width, embed_angles, StateCheckedModel
@@ -63,10 +64,6 @@ class LagrangianNN(StateCheckedModel):
         """L at one state, ``(n,)``, ``(n,)`` -> ``()``: the network; override it to plug in a known L."""
         return self.net(torch.cat([embed_angles(q[None], self.periodic), v[None]], dim=1))[0, 0]
 
-    def _gradient_twice(self, state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        gradient = grad(lambda s: self.lagrangian_at(s[:self.n], s[self.n:]))(state)
-        return gradient, gradient
-
     def lagrangian(self, z: torch.Tensor) -> torch.Tensor:
         """L(q, qdot), ``(batch, 2n)`` -> ``(batch,)``."""
         self._check_input(z)
@@ -95,9 +92,17 @@ class LagrangianNN(StateCheckedModel):
         where d2L/dqdot2 cannot be solved."""
         self._check_input(z)
         n, v = self.n, z[:, self.n:]
-        # one forward-over-reverse pass per state: the whole Hessian of L in z, with its gradient as aux
-        hess, dL = vmap(jacfwd(self._gradient_twice, has_aux=True))(z)            # (batch, 2n, 2n), (batch, 2n)
-        hess_vv, mixed = hess[:, n:, n:], hess[:, n:, :n]                          # mixed[b, i, j] = d2L/dqdot_i dq_j
+        # rows of different states never mix, so each derivative of the batch's summed L is every
+        # state's own; the rows need a graph of their own only when the caller trains through them
+        keep = torch.is_grad_enabled()
+        with torch.enable_grad():
+            z_in = z if z.requires_grad else z.detach().requires_grad_(True)
+            dL = torch.autograd.grad(self.lagrangian(z_in).sum(), z_in, create_graph=True)[0]     # (batch, 2n)
+            rows = torch.stack([torch.autograd.grad(dL[:, n + i].sum(), z_in, create_graph=keep, retain_graph=True)[0]
+                                for i in range(n)], dim=1)                        # (batch, n, 2n): d(dL/dqdot_i)/dz
+        if not keep:
+            dL, rows = dL.detach(), rows.detach()
+        hess_vv, mixed = rows[:, :, n:], rows[:, :, :n]                          # mixed[b, i, j] = d2L/dqdot_i dq_j
         rhs = dL[:, :n] - (mixed @ v[..., None])[..., 0]
         qddot, info = torch.linalg.solve_ex(hess_vv, rhs[..., None])
         qddot = qddot[..., 0]
@@ -107,7 +112,7 @@ class LagrangianNN(StateCheckedModel):
                 | ~torch.isfinite(qddot).all(1)
         if bad.any():
             rows = torch.nonzero(bad).flatten().tolist()
-            shown = "; ".join(f"#{i} [q, qdot] = {[round(float(c), 4) for c in z[i]]} (cond {float(cond[i]):.3g})"
+            shown = "; ".join(f"#{i} [q, qdot] = {[round(float(c), 4) for c in z[i].detach()]} (cond {float(cond[i]):.3g})"
                               for i in rows[:5])
             raise SingularLagrangianError(
                 f"LagrangianNN: d2L/dqdot2 is singular at {len(rows)} states, where the Euler-Lagrange equations do "
