@@ -40,6 +40,7 @@ from tqdm.auto import tqdm
 
 from . import group_runs, grouped, runs, tasks, training
 from .config import RunConfig
+from .errors import DivergenceError
 from .stopping import cores, in_worker, interruptible, stop_pool, worker_start
 
 BACKENDS = ("local", "ray")
@@ -76,10 +77,12 @@ class Job:
 
 class RunFailed(Exception):
     """A run that raised or whose worker died: its ``key``, the error ``message`` and the ``log``
-    file holding its traceback (None when there is none)."""
+    file holding its traceback (None when there is none). ``diverged``: the model itself failed
+    (an ``hnn.DivergenceError``: a loss that is no longer finite, a field that cannot be solved), a
+    result of its config that a rerun repeats, which a study may report as such."""
 
-    def __init__(self, key: str, message: str, log: Path | None = None):
-        self.key, self.message, self.log = key, message, log
+    def __init__(self, key: str, message: str, log: Path | None = None, diverged: bool = False):
+        self.key, self.message, self.log, self.diverged = key, message, log, diverged
         super().__init__(f"{key}: {message}" + (f" (log: {log})" if log else ""))
 
 
@@ -154,7 +157,7 @@ def _failure(job: Job, err: BaseException, log_dir: Path, bar) -> RunFailed:
     log = Path(log_dir) / f"{job.key.replace('/', '-')}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
     log.write_text("".join(traceback.format_exception(err)))
-    failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log)
+    failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log, diverged=isinstance(err, DivergenceError))
     bar.write(f"  {job.key} FAILED: {failed.message} (log: {log})")
     return failed
 

@@ -50,10 +50,12 @@ FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_
 # (``studied=False``: a barely trained black-box L's flow is stiff); here it trains with the LNN's own
 # choices (KIND_FIELDS) and its rollouts have a budget (``max_iterations``)
 PEER_KINDS = ("lagrangian",)
-# what a kind trains with beyond a protocol's fields: the LNN notebook's softplus at lr 1e-3; at the
-# chain's tanh and 3e-3 its derivative loss diverged on LNN's protocol (2.7e7 after 300 steps, where
-# softplus at 1e-3 reached 1.4e2 by 2000 steps; measured here)
-KIND_FIELDS = {"lagrangian": {"nonlinearity": "softplus", "learn_rate": 1e-3}}
+# what a kind trains with beyond a protocol's fields: the LNN notebook's softplus at lr 1e-3 and its init
+# (lnn.py custom_init); at the chain's tanh and 3e-3 its derivative loss diverged on LNN's protocol (2.7e7
+# after 300 steps, where softplus at 1e-3 reached 1.4e2 by 2000 steps; measured here)
+KIND_FIELDS = {"lagrangian": {"nonlinearity": "softplus", "learn_rate": 1e-3, "init": "lnn"}}
+# and on the LNN protocol's derivatives its notebook's L1 loss (docs/peers.md, "The LNN on its own protocol")
+LNN_KIND_FIELDS = {"lagrangian": {"derivative_loss": "l1"}}
 # dopri5 iterations a model's rollout may take before it is reported as too stiff to finish: far above
 # what a trained model's rollouts take, reached only by a flow that forces tiny steps
 MAX_ITERATIONS = 100_000
@@ -81,7 +83,8 @@ def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
             jobs.append(sweep.Job(f"chain{n}/{kind}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
     for kind in settings["kinds"] if settings["lnn_starts"] else ():
         fields = {"bobs": 2, "protocol": "lnn", "objective": "derivative", "model": kind, "seed": seed,
-                  "save_dir": str(out / "runs"), **settings["lnn_fields"], **KIND_FIELDS.get(kind, {})}
+                  "save_dir": str(out / "runs"), **settings["lnn_fields"], **KIND_FIELDS.get(kind, {}),
+                  **LNN_KIND_FIELDS.get(kind, {})}
         jobs.append(sweep.Job(f"lnn/{kind}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
     return jobs
 
@@ -133,19 +136,28 @@ def measure_lnn(models: dict, starts: int, max_iterations: int = MAX_ITERATIONS)
 
 
 def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
-    """Every protocol row: ``{"chain<N>": {...}, "lnn": {...}}`` from the trained ``runs``."""
+    """Every protocol row: ``{"chain<N>": {...}, "lnn": {...}}`` from the trained ``runs``; a kind
+    whose training diverged (``sweep.RunFailed.diverged``) is ``{"diverged": message}`` there."""
     data = hnn.load_task("chain")
     rows, budget = {}, settings.get("max_iterations", MAX_ITERATIONS)
     for n in settings["bobs"]:
         models = _loaded(runs, f"chain{n}", settings["kinds"], seed)
         rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"], budget),
+                             **_diverged(runs, f"chain{n}", settings["kinds"], seed),
                              "seconds": _seconds(runs, f"chain{n}", settings["kinds"], seed)}
     if not settings["lnn_starts"]:
         return rows
     models = _loaded(runs, "lnn", settings["kinds"], seed)
-    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"], budget),
+    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"], budget), **_diverged(runs, "lnn", settings["kinds"], seed),
                    "seconds": _seconds(runs, "lnn", settings["kinds"], seed)}
     return rows
+
+
+def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:
+    """``{kind: {"diverged": first clause of its error}}`` for the kinds of ``row`` whose model failed in training."""
+    found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
+    return {kind: {"diverged": err.message.split(": A learned")[0].split(";")[0]} for kind, err in found.items()
+            if isinstance(err, sweep.RunFailed) and err.diverged}
 
 
 def _loaded(runs: dict, row: str, kinds, seed: int) -> dict:
@@ -210,6 +222,8 @@ def _cell(entry: dict | None) -> str:
         return "not trained"
     if "blew_up" in entry:
         return f"blew up: {entry['blew_up']}"
+    if "diverged" in entry:
+        return f"failed in training: {entry['diverged']}"
     return f"{entry['mean']:.2e} ({entry['median']:.2e})"
 
 
@@ -258,8 +272,7 @@ def markdown(results: dict) -> str:
                   "| kind | energy error | training s (one thread) |", "| --- | --- | --- |"]
         lines += [f"| published {k} | {v:.2g} | |" for k, v in lnn_published.items()]
         lines += [f"| ours: {kind} | {_cell(lnn.get(kind))} | "
-                  f"{lnn['seconds'][kind]['seconds']:.0f} |" if kind in lnn["seconds"] else f"| ours: {kind} | not trained | |"
-                  for kind in names]
+                  + (f"{lnn['seconds'][kind]['seconds']:.0f} |" if kind in lnn["seconds"] else " |") for kind in names]
     return "\n".join(lines) + "\n"
 
 
@@ -330,5 +343,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
                "rows": rows, "curves": found}
     text = markdown(results)
     commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {})
-    sweep.exit_if_failed(runs)
+    # a model that failed in training is a result of its config (its table cell says how), not a broken run
+    sweep.exit_if_failed({key: outcome for key, outcome in runs.items()
+                          if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})
     return results
