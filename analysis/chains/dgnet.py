@@ -12,8 +12,9 @@ original HNN repository and reuses its data generators; experiment-{spring,pend,
 train_dgnet.py, dgnet/ode.py): spring and pendulum data are the HNN recipe on t in [0, 20] at 5
 points per time unit (50 trajectories of 100 states, dt = 20/99, noise std 0.1 on the states, the
 first 25 train); the real pendulum is the original's file and split (445 training rows, 110 test
-rows, dt = 1/6). One MLP of two hidden layers of 200 tanh units, orthogonal init; full-batch Adam
-at lr 1e-3, 2000 steps (weight decay 1e-4; real 1e-5); float32. Every model fits the finite
+rows, dt = 1/6). One MLP of two hidden layers of 200 tanh units, orthogonal weights and zero biases
+(their ``reset_parameters``, every model of theirs: ``--init zero_bias``, our default here); full-batch
+Adam at lr 1e-3, 2000 steps (weight decay 1e-4; real 1e-5); float32. Every model fits the finite
 differences (x_{n+1} - x_n) / dt of consecutive states: NODE (an MLP field) and HNN through one
 adaptive Dormand-Prince solve of the interval, SRNN (H = T(p) + V(q)) through one leapfrog step,
 DGNet through the discrete gradient of H between the two states (no solver). Reported:
@@ -134,6 +135,10 @@ PREDICT = {"discrete gradient": {"method": "discrete_gradient"},
            "ada. DP": {"method": "dopri5", "rtol": 1e-7, "atol": 1e-9},
            "leapfrog": {"method": "leapfrog"}}
 ADAPTIVE = ("ada. DP",)
+# the stamp's words for --init (a saved dgnet.json without "init" predates the flag: torch's default biases)
+INIT_WORDS = {"zero_bias": "orthogonal weights and zero biases (theirs)",
+              "orthogonal": "orthogonal weights and torch's default biases (the original HNN's; theirs: zero biases)",
+              "lnn": "the LNN's scaled normal weights and zero biases (theirs: orthogonal, zero biases)"}
 # our rows: label -> (kind, objective, how it trains (the table's words), the integrators it predicts with)
 ROWS = {"NODE": ("baseline", "trajectory", "RK4 step", ("ada. DP",)),
         "HNN": ("hnn", "trajectory", "RK4 step", ("ada. DP",)),
@@ -213,8 +218,9 @@ def energy_mse(task: str, model, seed: int, predict: str, data: dict) -> float:
     return float((_ring_energy(truth) - _ring_energy(ours)).pow(2).mean())
 
 
-def measure(task: str, label: str, seed: int, steps: int, out: Path) -> dict:
-    """Train one run of row ``label`` on ``task`` (saved under ``out``/runs) and measure it."""
+def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str = "zero_bias") -> dict:
+    """Train one run of row ``label`` on ``task`` (saved under ``out``/runs), its MLPs started by
+    ``init`` (``hnn.models.INITS``; theirs: ``zero_bias``), and measure it."""
     kind, objective, _, predicts = ROWS[label]
     trainer = hnn.load_task(task, "train")
     data = dataset(task, seed)
@@ -223,7 +229,7 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path) -> dict:
     decay = SETTINGS[task]["weight_decay"] * (data["dt"] ** 2 if objective == "trajectory" else 1.0)
     config = trainer.Config(name=f"{task}-dgnet", model=kind, objective=objective, snippet_steps=1,
                             total_steps=steps, batch_size=SETTINGS[task]["batch_size"], seed=seed,
-                            weight_decay=decay, save_dir=str(out / "runs"))
+                            weight_decay=decay, init=init, save_dir=str(out / "runs"))
     fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
                                steps=1) if objective == "trajectory" else None)
     run = hnn.runs.find_run(config) or hnn.run_experiment(config, data, fit)
@@ -237,8 +243,8 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path) -> dict:
 
 def _job(args: tuple) -> tuple:
     torch.set_num_threads(1)
-    task, label, seed, steps, out = args
-    return args[:3], measure(task, label, seed, steps, out)
+    task, label, seed, steps, out, init = args
+    return args[:3], measure(task, label, seed, steps, out, init)
 
 
 def rows_for(task: str) -> list[str]:
@@ -256,7 +262,8 @@ def task_table(results: dict, task: str) -> str:
     lines = [f"### {task}", "", f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, "
              f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}): "
              f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: {SETTINGS[task]['steps']}) of "
-             f"{'the full batch' if batch is None else f'minibatches of {batch}'}. Energy: mean over the seeds, "
+             f"{'the full batch' if batch is None else f'minibatches of {batch}'}, every MLP started with "
+             f"{INIT_WORDS[results.get('init', 'orthogonal')]}. Energy: mean over the seeds, "
              "with their spread.", "", "| model (train / predict) | derivative | energy | source |",
              "| --- | --- | --- | --- |"]
     lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |" for name, (d, e) in PUBLISHED[task].items()]
@@ -280,6 +287,9 @@ def table(results: dict) -> str:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run")
+    parser.add_argument("--init", choices=hnn.names.INITS, default="zero_bias",
+                        help="how every row's MLPs start: zero_bias (theirs: orthogonal weights, zero biases) or "
+                             "orthogonal (the original HNN's: torch's default biases)")
     parser.add_argument("--steps", type=int, default=None,
                         help="optimizer steps per run (default: theirs, 2000; 2body 10000)")
     commands.add_flags(parser, seeds="seeds 0..seeds-1 (theirs: 15 trials)", seeds_default=15,
@@ -291,7 +301,7 @@ def main(argv=None) -> dict:
     if args.steps is not None and args.steps < 1:
         sys.exit(f"error: --steps must be positive, got {args.steps}")
     steps = {task: SETTINGS[task]["steps"] if args.steps is None else args.steps for task in args.tasks}
-    work = [(task, label, seed, steps[task], args.out) for seed in range(args.seeds)
+    work = [(task, label, seed, steps[task], args.out, args.init) for seed in range(args.seeds)
             for task in args.tasks for label in rows_for(task)]
     done = {}
 
@@ -310,7 +320,8 @@ def main(argv=None) -> dict:
     rows = {task: {label: [done[(task, label, seed)] for seed in range(args.seeds)] for label in rows_for(task)}
             for task in args.tasks}
     meta["seconds"] = time.perf_counter() - tic
-    results = {"meta": meta, "steps": steps, "seeds": args.seeds, "tasks": args.tasks, "published": PUBLISHED,
+    results = {"meta": meta, "steps": steps, "seeds": args.seeds, "tasks": args.tasks, "init": args.init,
+               "published": PUBLISHED,
                "settings": {task: SETTINGS[task] for task in args.tasks}, "rows": rows}
     text = table(results)
     sections = {f"dgnet-{task}": task_table(results, task) for task in args.tasks} if args.update_docs else {}
