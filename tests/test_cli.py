@@ -180,6 +180,17 @@ def test_display_only_flags_stay_out_of_the_identity():
     assert Config(total_steps=7).key() != base.key()       # a field that changes what is trained does
 
 
+def test_a_field_added_later_enters_the_identity_only_away_from_its_default():
+    """--init and --derivative_loss came after runs were saved: at their defaults a config's key is what it
+    was before they existed (the spring default's key below was read off a run saved before them)."""
+    Config = hnn.load_task("spring", "train").Config
+    assert Config().key() == "cbac7a2b"
+    assert "init" not in Config().identity() and "derivative_loss" not in Config().identity()
+    for field, value in (("init", "zero_bias"), ("init", "lnn"), ("derivative_loss", "l1")):
+        other = Config(**{field: value})
+        assert other.identity()[field] == value and other.key() != Config().key()
+
+
 def test_help_and_flag_errors_answer_before_torch_loads():
     """``--help`` and a bad flag load no torch, scipy, matplotlib or gymnasium (timings: not here)."""
     heavy = ("torch", "scipy", "matplotlib", "gymnasium")

@@ -107,6 +107,12 @@ def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
     # the real pendulum has no true dx/dt: the paper's objective row is not run there
     assert "HNN, paper's objective" not in results["rows"]["real"]
     assert "| DGNet (discrete gradient / discrete gradient) | 1.38e-03 | 5.04e-04 | published, mean of 15 |" in text
+    # their code starts every model's MLP with zero biases (dgnet/ode.py reset_parameters): ours too, said
+    assert text.count("every MLP started with orthogonal weights and zero biases (theirs)") == 2
+    model, saved, _ = hnn.load_run(results["rows"]["spring"]["DGNet"][0]["run"])
+    assert saved["init"] == "zero_bias"
+    torch.manual_seed(0)
+    assert not hnn.kinds.model_from_args(saved).differentiable_model.linear1.bias.any()
     # --update-docs writes one section per task it ran (each with its stamp), so the others stay
     from hnn_analysis import readme
     section = dgnet.task_table(results, "real")

@@ -369,3 +369,31 @@ def test_gradient_of_is_the_analytic_gradient_and_keeps_a_graph_only_when_asked(
     second, = torch.autograd.grad(g[:, 0].sum(), x_in)
     torch.testing.assert_close(second, torch.stack([2 * x[:, 0], torch.ones(4, dtype=x.dtype)], 1), rtol=1e-14, atol=0)
     assert not hnn.interface.gradient_of(H, x_in, create_graph=False).requires_grad
+
+
+def test_the_inits_are_the_peers_own():
+    """zero_bias: DGNet's orthogonal weights and zero biases; lnn: the LNN's custom_init, whose weight std is
+    s / sqrt(n) with n the layer's larger side and s = 2.2, 0.58, n for the first, hidden and output layers;
+    every MLP of a model (both of the separable kind's), drawn from the seeded global generator."""
+    torch.manual_seed(0)
+    built = hnn.models.SeparableHNN(4, 300)
+    torch.manual_seed(0)
+    zero = hnn.models.initialize(hnn.models.SeparableHNN(4, 300), "zero_bias")
+    for before, after in zip(built.modules(), zero.modules()):
+        if isinstance(after, torch.nn.Linear):
+            assert after.bias is None or not after.bias.any()
+            assert torch.equal(after.weight, before.weight)         # still the orthogonal draw
+    torch.manual_seed(1)
+    lnn = hnn.models.initialize(hnn.models.LagrangianNN(4, 300), "lnn")
+    layers = (lnn.net.linear1, lnn.net.linear2, lnn.net.linear3)          # (300, 4), (300, 300), (1, 300)
+    for layer, std in zip(layers, (2.2 / math.sqrt(300), 0.58 / math.sqrt(300), math.sqrt(300))):
+        assert layer.weight.std().item() == pytest.approx(std, rel=0.1)     # 300 to 90000 draws each
+        assert layer.bias is None or not layer.bias.any()
+    torch.manual_seed(1)
+    again = hnn.models.initialize(hnn.models.LagrangianNN(4, 300), "lnn")
+    assert all(torch.equal(a, b) for a, b in zip(lnn.parameters(), again.parameters()))
+    # a run's spec applies it after the kind's builder
+    args = {"kind": "hnn", "input_dim": 2, "hidden_dim": 8, "init": "zero_bias"}
+    assert not hnn.kinds.model_from_args(args).differentiable_model.linear1.bias.any()
+    with pytest.raises(ValueError, match="unknown init 'xavier'; choose one of orthogonal, zero_bias, lnn"):
+        hnn.models.initialize(built, "xavier")

@@ -46,7 +46,7 @@ def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp
     good = [_job("spring", "hnn", runs_dir, 20), _job("pend", "hnn", runs_dir, 20)]
     runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend)
     failed = runs["spring/baseline/seed0"]
-    assert isinstance(failed, sweep.RunFailed) and "sideways" in failed.message
+    assert isinstance(failed, sweep.RunFailed) and "sideways" in failed.message and not failed.diverged
     assert "hnn/cli.py" in failed.log.read_text() and "sideways" in failed.log.read_text()   # where it raised
     for job in good:
         run = runs[job.key]
@@ -60,6 +60,19 @@ def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp
     err = capsys.readouterr().err
     assert info.value.code == 1 and "1 run failed" in err and "spring/baseline/seed0: ValueError" in err
     sweep.exit_if_failed({key: run for key, run in runs.items() if run is not failed})   # no failure: returns
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_a_model_that_diverges_is_marked_so(n_jobs, tmp_path):
+    """A run whose model fails (an hnn.DivergenceError: here a fresh black-box L on one bob whose d2L/dqdot2 is
+    singular along its first snippets, as in the peers' table) is a failure its config repeats: marked
+    ``diverged`` so a study can report it as a result, in this process or across a worker's pickling."""
+    job = _job("chain", "lagrangian", tmp_path / "runs", 2, bobs=1, n_train=4, n_test=2, hidden_dim=8,
+               nonlinearity="softplus", init="lnn")
+    runs, _ = sweep.train_jobs([job], n_jobs, tmp_path / "logs")
+    failed = runs[job.key]
+    assert isinstance(failed, sweep.RunFailed) and failed.diverged, failed
+    assert failed.message.startswith("SingularLagrangianError: LagrangianNN: d2L/dqdot2 is singular")
 
 
 def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):

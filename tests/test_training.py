@@ -143,7 +143,7 @@ def test_schedule_and_clipping_change_training_and_bad_values_are_named(spring):
 def test_configs_off_the_papers_optimizer_train_alone_not_in_a_group():
     config = hnn.tasks.task_config("spring", {"hidden_dim": 16})
     assert hnn.grouped.group_key(config) is not None
-    for change in ({"optimizer": "adamw"}, {"schedule": "cosine"}, {"clip_grad": 1.0}):
+    for change in ({"optimizer": "adamw"}, {"schedule": "cosine"}, {"clip_grad": 1.0}, {"derivative_loss": "l1"}):
         assert hnn.grouped.group_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None
 
 
@@ -173,3 +173,34 @@ def test_data_far_from_unit_scale_warns_and_a_hamiltonian_rescaling_does_not(spr
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         hnn.train(model, raw_x / spread, raw_dxdt / spread, total_steps=0)
+
+
+@pytest.mark.parametrize("derivative_loss, error", [("l2", lambda r: r.pow(2)), ("l1", lambda r: r.abs())])
+def test_the_derivative_loss_is_the_error_it_names(spring, tmp_path, derivative_loss, error):
+    """A run's first training loss (full batch, taken before the first step) is the mean squared or absolute
+    error of its untrained model's dx/dt, computed here from the same seeded init; the reported train and
+    test losses stay the squared error either way, so runs of both compare."""
+    d = spring.get_dataset(seed=0)
+    config = hnn.tasks.task_config("spring", {"hidden_dim": 8, "total_steps": 0, "derivative_loss": derivative_loss,
+                                              "save_dir": str(tmp_path)})
+    run = hnn.run_experiment(config)
+    torch.manual_seed(0)
+    untrained = hnn.kinds.model_from_args({"kind": "hnn", "input_dim": 2, "hidden_dim": 8})
+    residual = torch.as_tensor(d["dxdt"], dtype=torch.float32) - untrained.time_derivative(
+        torch.as_tensor(d["x"], dtype=torch.float32))
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["history"]["train_loss"][0] == pytest.approx(error(residual).mean().item(), rel=1e-5)
+    trained, args, _ = hnn.load_run(run)       # after its one step (the loop runs total_steps + 1)
+    assert args["derivative_loss"] == derivative_loss
+    with torch.no_grad():
+        after = torch.as_tensor(d["dxdt"], dtype=torch.float32) - trained.time_derivative(
+            torch.as_tensor(d["x"], dtype=torch.float32))
+    assert metrics["train_loss"] == pytest.approx(after.pow(2).mean().item(), rel=1e-5)
+
+
+def test_a_derivative_loss_with_another_objective_or_an_unknown_one_is_refused(spring):
+    with pytest.raises(ValueError, match="derivative_loss='l1' sets the error of a fit of dx/dt.*drop derivative_loss"):
+        hnn.tasks.task_config("spring", {"objective": "trajectory", "derivative_loss": "l1"}).make_objective()
+    d = spring.get_dataset(seed=0)
+    with pytest.raises(ValueError, match="derivative_loss='l3': choose one of l2, l1"):
+        hnn.train(hnn.build_model(2, 8), d["x"], d["dxdt"], total_steps=0, derivative_loss="l3")
