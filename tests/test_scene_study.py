@@ -75,6 +75,23 @@ def test_speed_ladder_takes_the_first_setting_of_each_method_that_reaches_the_ta
     assert dt["rk4"] > dt["leapfrog"]
 
 
+def test_speed_ladder_of_a_learned_h_picks_its_fastest_energy_preserving_setting():
+    """A field that carries its H (an HNN) gets the discrete gradient in its ladder; the pick is the
+    quickest setting of a solver that declares itself energy-preserving and reaches the target."""
+    torch.manual_seed(0)
+    f = hnn.build_model(2, 16).double().field
+    x0 = torch.tensor([[1.0, 0.0], [0.2, 0.7]], dtype=torch.float64)
+    t = np.linspace(0.0, 3.0, 31)
+    ladder = sm.settings_ladder((0.5, 0.2, 0.1, 0.05, 0.02, 0.01), separable=False, quick=False, energy=True)
+    assert any(o["method"] == "discrete_gradient" for o in ladder)
+    assert not any(o["method"] == "discrete_gradient" for o in sm.settings_ladder((0.1,), False, False))
+    result = sm.speed_at_accuracy(f, x0, t, ladder, repeats=1)
+    pick = result["fastest_energy_preserving"]
+    assert pick["options"]["method"] == "discrete_gradient" and pick["energy_preserving"]
+    assert pick["error"] <= sm.TARGET and not pick["symplectic"]
+    assert all(r["energy_preserving"] == (r["options"]["method"] == "discrete_gradient") for r in result["rows"])
+
+
 def test_long_drift_of_rk4_on_the_oscillator_is_its_exact_amplification_factor(spring):
     # RK4 multiplies the energy of a harmonic oscillator by |R(i h omega)|^2 every step, exactly
     h, omega, periods = math.pi / 8, 2.0, 40            # 2 steps per output interval of pi / 4

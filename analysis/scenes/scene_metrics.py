@@ -125,15 +125,17 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict], re
     """Every setting of ``ladder`` (each method's from coarse to fine, stopping at the first that
     reaches ``TARGET``) scored by its max relative error over the batch and times against
     ``REFERENCE`` of the same field ``f`` (the median of ``repeats`` timings); ``{"rows", "fastest",
-    "fastest_symplectic"}``, the last two the quickest settings reaching ``TARGET`` (None when none does)."""
+    "fastest_symplectic", "fastest_energy_preserving"}``, the last three the quickest settings reaching
+    ``TARGET`` of any solver, of a symplectic one and of one that keeps the field's H (None when none does)."""
     reference = quiet_rollout(f, x0, t, **REFERENCE)
     rows, reached = [], set()
     for options in ladder:
         family = (options["method"], options.get("scipy_method"), options.get("base"))
         if family in reached:
             continue        # the ladder goes from coarse to fine: a finer setting of it is only slower
-        row = {"setting": describe(options), "options": options,
-               "symplectic": hnn.get_solver(options["method"]).symplectic}
+        solver = hnn.get_solver(options["method"])
+        row = {"setting": describe(options), "options": options, "symplectic": solver.symplectic,
+               "energy_preserving": solver.energy_preserving}
         try:
             seconds, traj, stats = settings.timed_rollout(f, x0, t, options, repeats, enough=0.5)
         except hnn.DivergenceError as err:
@@ -147,7 +149,8 @@ def speed_at_accuracy(f, x0: torch.Tensor, t: np.ndarray, ladder: list[dict], re
             reached.add(family)
     ok = sorted((r for r in rows if r["status"] == "ok" and r["error"] <= TARGET), key=lambda r: r["seconds"])
     return {"rows": rows, "fastest": ok[0] if ok else None,
-            "fastest_symplectic": next((r for r in ok if r["symplectic"]), None)}
+            "fastest_symplectic": next((r for r in ok if r["symplectic"]), None),
+            "fastest_energy_preserving": next((r for r in ok if r["energy_preserving"]), None)}
 
 
 def long_drift(f, energy, x0: torch.Tensor, options: dict, period: float, periods: int,
