@@ -165,6 +165,11 @@ def _warn_off_scale(name: str, values: torch.Tensor) -> None:
                       "'Scale your states'", stacklevel=3)
 
 
+def _say_when(err: DivergenceError, when: str) -> None:
+    """Prefix ``err``'s message (its first argument) with where in the loop the model failed."""
+    err.args = (f"at {when}: {err.args[0] if err.args else err}",) + err.args[1:]
+
+
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
@@ -250,7 +255,11 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             if schedule != "constant":
                 for group in optim.param_groups:
                     group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)
-            stats["train_loss"].append(optimizer_step(loss, xb, yb, optim, clip_grad))
+            try:
+                stats["train_loss"].append(optimizer_step(loss, xb, yb, optim, clip_grad))
+            except DivergenceError as err:      # the model's own field failed (a singular L, say): say when
+                _say_when(err, f"training step {step} of {total_steps}")
+                raise
             if not math.isfinite(stats["train_loss"][-1]):
                 raise DivergenceError(f"the training loss is {stats['train_loss'][-1]} at step {step} of "
                                       f"{total_steps}; the model's weights are no longer finite. Lower --learn_rate, "
@@ -259,8 +268,12 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 callback(step + 1, total_steps + 1)
             if has_test and is_test_step(step, test_every, total_steps):
                 tx, ty = minibatch(test_x, test_dxdt, batch_size, test_gen)
-                with torch.no_grad():
-                    stats["test_loss"].append(loss(tx, ty).mean().item())
+                try:
+                    with torch.no_grad():
+                        stats["test_loss"].append(loss(tx, ty).mean().item())
+                except DivergenceError as err:
+                    _say_when(err, f"the test batch after training step {step} of {total_steps}")
+                    raise
                 stats["test_steps"].append(step)
             if verbose and step % print_every == 0:
                 test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""

@@ -4,6 +4,7 @@ import dataclasses
 import importlib.util
 import json
 import os
+import re
 import secrets
 import shutil
 import socket
@@ -72,7 +73,9 @@ def test_a_model_that_diverges_is_marked_so(n_jobs, tmp_path):
     runs, _ = sweep.train_jobs([job], n_jobs, tmp_path / "logs")
     failed = runs[job.key]
     assert isinstance(failed, sweep.RunFailed) and failed.diverged, failed
-    assert failed.message.startswith("SingularLagrangianError: LagrangianNN: d2L/dqdot2 is singular")
+    # the training loop says where the model failed: in a step or in the test batch after it
+    assert re.match(r"SingularLagrangianError: at (the test batch after )?training step [0-2] of 2: LagrangianNN: "
+                    r"d2L/dqdot2 is singular", failed.message), failed.message
 
 
 def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):

@@ -156,10 +156,12 @@ def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
 
 
 def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:
-    """``{kind: {"diverged": first clause of its error}}`` for the kinds of ``row`` whose model failed in training."""
+    """``{kind: {"diverged": the error's type, step and first clause}}`` for the kinds of ``row`` whose model
+    failed in training, e.g. ``'SingularLagrangianError at training step 0 of 4000: LagrangianNN: d2L/dqdot2
+    is singular at 1 states'`` (the states themselves are in the run's log)."""
     found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
-    return {kind: {"diverged": err.message.split(": A learned")[0].split(";")[0]} for kind, err in found.items()
-            if isinstance(err, sweep.RunFailed) and err.diverged}
+    return {kind: {"diverged": err.message.split(", where")[0].replace(": at ", " at ", 1)}
+            for kind, err in found.items() if isinstance(err, sweep.RunFailed) and err.diverged}
 
 
 def _loaded(runs: dict, row: str, kinds, seed: int) -> dict:
