@@ -145,7 +145,7 @@ def latent_path(model, pixels, t_eval, protocol: PixelProtocol) -> torch.Tensor:
     integrated as ``protocol`` says."""
     param = next(model.parameters())
     with torch.no_grad():
-        z0 = model.encode(torch.as_tensor(pixels[:1], dtype=param.dtype))
+        z0 = model.encode(torch.as_tensor(pixels[:1], dtype=param.dtype, device=param.device))
     return rollout(model.time_derivative, z0, t_eval, **rollout_options(protocol))[0]
 
 
@@ -173,7 +173,8 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
             model = float64_copy(model)     # the paper evaluated its float32 models as they are
         param = next(model.parameters())
         with torch.no_grad():
-            latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype))
+            latents = torch.cat([model.encode(torch.as_tensor(dataset["pixels"][i:i + 4000], dtype=param.dtype,
+                                                              device=param.device)).cpu()
                                  for i in range(0, len(dataset["pixels"]), 4000)])
         to_coords = fit_latent_map(latents, fit_coords, protocol.latent_map)
         excess = map_excess(latents, fit_coords, to_coords)
@@ -185,7 +186,8 @@ def evaluate_pixel_energy(system, models: dict, protocol: PixelProtocol, dataset
         z = latent_path(model, trajectory["pixels"], t_eval, protocol)
         with torch.no_grad():
             decoded = model.decode(z.to(param.dtype))
-            coords = to_coords(model.encode(decoded))     # its own encoder (the original used the HNN's)
+            coords = to_coords(model.encode(decoded).cpu())     # its own encoder (the original used the HNN's)
+        z, decoded = z.cpu(), decoded.cpu()         # the maps and energies are measured on the CPU
         if protocol.prepend_truth:
             coords[0] = true_coords[0]
         e_pred = energy_fn(coords)
@@ -237,7 +239,8 @@ def _add_energy_gif(directory: Path, model, z0) -> None:
     """The paper's add-energy demo from the latent ``z0``, decoded to ``add-energy.gif``."""
     bump = energy_bump(model, z0, **ADD_ENERGY)
     with torch.no_grad():
-        frames = model.decode(torch.as_tensor(bump["x"], dtype=next(model.parameters()).dtype)).numpy()
+        param = next(model.parameters())
+        frames = model.decode(torch.as_tensor(bump["x"], dtype=param.dtype, device=param.device)).cpu().numpy()
     hnn.gifs.write_gif({"add energy": frames[::2]}, directory / "add-energy.gif")
 
 

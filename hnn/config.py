@@ -26,15 +26,22 @@ from . import cli
 from .names import DERIVATIVE_LOSSES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES
 
 
+_ANY = object()      # a setting's identity_value when the identity holds the field's own value
+
+
 def setting(default: Any, help: str, *, parse=None, choices=None, display_only: bool = False,
-            identity_at_default: bool = True) -> Any:
+            identity_at_default: bool = True, identity_value: Any = _ANY) -> Any:
     """A config field with its flag's ``help`` text; ``parse(text) -> value`` (an argparse
     ``type``, default: the type of ``default``), ``choices`` and ``display_only`` as in argparse.
     ``identity_at_default=False``: a field added after runs were saved, which enters a run's identity
-    only when set away from its default, so every run saved before it keeps its folder and is reused."""
+    only when set away from its default, so every run saved before it keeps its folder and is reused.
+    ``identity_value``: a field that changes where a run trains, not what it trains (the device),
+    which the identity records as this value whatever it holds: a run is the same run on every device,
+    and the keys saved while the field was part of the identity stay valid."""
     return dataclasses.field(default=default, metadata={"help": help, "parse": parse, "choices": choices,
                                                         "display_only": display_only,
-                                                        "identity_at_default": identity_at_default})
+                                                        "identity_at_default": identity_at_default,
+                                                        "identity_value": identity_value})
 
 
 @dataclass
@@ -86,7 +93,9 @@ class RunConfig:
     field_type: str = setting("solenoidal", "solenoidal (Hamiltonian), conservative, or both", choices=FIELD_TYPES)
     seed: int = setting(0, "seeds the dataset, the init and the minibatches", parse=cli.int_at_least(0))
     save_dir: str = setting(".", "folder that receives the run folder <name>-<model>-seed<seed>-<hash>/")
-    device: str = setting("cpu", "torch device, e.g. cpu or cuda", parse=cli.device)
+    device: str = setting("cpu", "torch device, e.g. cpu, cuda or cuda:1; recorded in args.json, not part of the "
+                                 "run's identity (a run trained on a GPU is reused on a CPU, and the other way)",
+                          parse=cli.device, identity_value="cpu")
     dtype: str = setting("float32", "dtype of the model and the data", choices=("float32", "float64"))
     debug: bool = setting(False, "on an input error (a missing data file, say) or Ctrl-C, show the full traceback "
                                  "instead of one line", display_only=True)
@@ -150,12 +159,16 @@ class RunConfig:
 
     def identity(self) -> dict:
         """The fields that decide what is trained: all but the display-only ones, ``save_dir``, and a
-        field declared ``identity_at_default=False`` while it holds its default."""
-        skip = set(self.display_only()) | {"save_dir"}
+        field declared ``identity_at_default=False`` while it holds its default; a field declared with an
+        ``identity_value`` holds that value."""
+        skip, fixed = set(self.display_only()) | {"save_dir"}, {}
         for f in dataclasses.fields(self):
-            if cli.field_meta(type(self), f.name).get("identity_at_default") is False and getattr(self, f.name) == f.default:
+            meta = cli.field_meta(type(self), f.name)
+            if meta.get("identity_at_default") is False and getattr(self, f.name) == f.default:
                 skip.add(f.name)
-        return {k: v for k, v in dataclasses.asdict(self).items() if k not in skip}
+            if meta.get("identity_value", _ANY) is not _ANY:
+                fixed[f.name] = meta["identity_value"]
+        return {k: fixed.get(k, v) for k, v in dataclasses.asdict(self).items() if k not in skip}
 
     def key(self) -> str:
         """8 hex digits of the SHA-256 of ``identity()`` as JSON: the last part of the run folder's name."""

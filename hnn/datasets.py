@@ -47,7 +47,7 @@ def trajectory_dataset(dynamics, x0: np.ndarray, t_eval: np.ndarray, noise: np.n
         ``x``, ``dxdt``, ``test_x``, ``test_dxdt`` as float32 ``(rows, dim)`` arrays (rows =
         trajectories x T, trajectory-major), ``dt`` (the grid step) and ``t_eval``.
     """
-    x0 = torch.as_tensor(x0, dtype=torch.float64)
+    x0 = torch.as_tensor(x0, dtype=torch.float64, device="cpu")      # datasets are made on the CPU
     clean = rollout(dynamics, x0, t_eval, rtol=rtol)                  # (num, T, dim)
     dxdt = dynamics(clean.reshape(-1, clean.shape[-1])).numpy()
     x = clean.reshape(-1, clean.shape[-1]).numpy() + noise.reshape(-1, noise.shape[-1])

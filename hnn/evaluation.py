@@ -124,7 +124,7 @@ def start_states(protocol: EnergyProtocol, system=None) -> np.ndarray:
 
 
 def _energy(system, protocol: EnergyProtocol, x: torch.Tensor) -> np.ndarray:
-    x = x.to(torch.float64)
+    x = x.to(dtype=torch.float64, device="cpu")         # the true H is measured on the CPU, in float64
     if protocol.energy == "q2+p2":
         return (x ** 2).sum(-1).numpy()
     if protocol.energy == "hamiltonian":
@@ -141,7 +141,7 @@ def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int,
     method that passes every row to every call of ``f`` (not dopri5, which drops finished rows).
     """
     same = bool(np.all(durations == durations[0]))
-    scale = torch.as_tensor(durations[:1] if same else durations, dtype=x0.dtype)[:, None]
+    scale = torch.as_tensor(durations[:1] if same else durations, dtype=x0.dtype, device=x0.device)[:, None]
 
     def scaled(x: torch.Tensor) -> torch.Tensor:
         if len(scale) not in (1, len(x)):
@@ -164,8 +164,8 @@ def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol) -> torc
 def _model_rollout(model, run, x0: torch.Tensor, observed: str) -> torch.Tensor:
     """``run(field, start)`` of ``model`` from observed starts ``x0`` in ``observed`` coordinates,
     in the model's own dtype and state, mapped back to observed states ``(batch, T, dim)``."""
-    dtype = next(model.parameters()).dtype
-    x = declared(model).state_from(x0.to(dtype), observed)
+    param = next(model.parameters())
+    x = declared(model).state_from(x0.to(dtype=param.dtype, device=param.device), observed)
     traj = run(model.time_derivative, x)
     with torch.no_grad():
         return model.observed_from(traj.reshape(-1, traj.shape[-1]), observed).reshape(traj.shape)
@@ -191,7 +191,7 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     """
     if protocol.x0 == "test_segment":
         return _evaluate_segment(system, models, protocol, dataset, observed)
-    x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64)
+    x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64, device="cpu")
     t0, t1 = protocol.t_span
     trials = np.arange(protocol.num_trials)
     rescale = protocol.time_rescale or 1.0
@@ -207,7 +207,8 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
                               x0, observed)
         e_model = _energy(system, protocol, traj)
         mse, se = energy_mse(e_true, e_model, protocol.splits)
-        out[label] = {"traj": traj.to(torch.float64).numpy(), "energy": e_model, "mse": mse, "mse_se": se}
+        out[label] = {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model, "mse": mse,
+                      "mse_se": se}
     return out
 
 
@@ -216,7 +217,7 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     measured times and compare energies step by step (± over contiguous time chunks)."""
     if dataset is None or "test_t" not in dataset:
         raise ValueError("a 'test_segment' protocol needs the task's dataset with test_x and test_t")
-    measured = torch.as_tensor(np.asarray(dataset["test_x"]), dtype=torch.float64)
+    measured = torch.as_tensor(np.asarray(dataset["test_x"]), dtype=torch.float64, device="cpu")
     t = np.asarray(dataset["test_t"], dtype=np.float64)
     t = t - t[0]
     e_true = _energy(system, protocol, measured)
@@ -226,7 +227,8 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
         traj = _model_rollout(model, lambda f, x: _protocol_rollout(f, x, t, protocol), measured[:1], observed)[0]
         e_model = _energy(system, protocol, traj)
         mse, se = energy_mse(e_true, e_model, protocol.splits)
-        out[label] = {"traj": traj.to(torch.float64).numpy()[None], "energy": e_model[None], "mse": mse, "mse_se": se}
+        out[label] = {"traj": traj.to(dtype=torch.float64, device="cpu").numpy()[None], "energy": e_model[None],
+                      "mse": mse, "mse_se": se}
     return out
 
 
@@ -256,7 +258,9 @@ def energy_bump(model, x0, t_flow: float = 6.0, t_bump: float = 0.1, t_after: fl
         raise ValueError(f"the energy bump needs a model with a conserved H; {type(model).__name__} declares "
                          "conservative=False (a baseline has no H to climb)")
     model = float64_copy(model)
-    x = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(1, -1))
+    device = next(model.parameters()).device
+    x0 = x0.detach().cpu().numpy() if torch.is_tensor(x0) else x0
+    x = torch.as_tensor(np.asarray(x0, dtype=np.float64).reshape(1, -1), device=device)
     t_after = t_flow if t_after is None else t_after
     pieces, times, stages, t_start = [], [], [], 0.0
     for stage, (f, span) in enumerate([(model.time_derivative, t_flow), (gradient_of_h(model), t_bump),
@@ -265,13 +269,13 @@ def energy_bump(model, x0, t_flow: float = 6.0, t_bump: float = 0.1, t_after: fl
         t = np.linspace(0.0, span, n)
         with torch.no_grad():
             traj = rollout(f, x, t, rtol=rtol, atol=atol)[0]
-        pieces.append(traj.numpy())
+        pieces.append(traj.cpu().numpy())
         times.append(t_start + t)
         stages.append(np.full(n, stage))
         x, t_start = traj[-1:], t_start + span
     xs, ts, st = np.concatenate(pieces), np.concatenate(times), np.concatenate(stages)
     with torch.no_grad():
-        h = model.hamiltonian(torch.from_numpy(xs)).numpy()
+        h = model.hamiltonian(torch.from_numpy(xs).to(device)).cpu().numpy()
     before, after = h[st == 0], h[st == 2]
     return {"t": ts, "x": xs, "stage": st, "H": h, "H_before": float(before.mean()), "H_after": float(after.mean()),
             "H_spread_before": float(np.ptp(before)), "H_spread_after": float(np.ptp(after))}

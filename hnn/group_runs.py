@@ -1,6 +1,6 @@
-"""Grouped training as runs: configs that ``hnn.grouped.group_key`` puts together trained as one
-program (``hnn.grouped.fit_group``) and saved each as its own ordinary run folder, as
-``hnn.run_experiment`` saves a lone run.
+"""Grouped training as runs: configs that ``unit_key`` puts together trained as one program
+(``hnn.grouped.fit_group`` for the paper's tanh-MLP kinds, ``hnn.stacked.fit_stacked`` for every
+other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` saves a lone run.
 
     folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
 
@@ -15,41 +15,57 @@ import torch
 
 from . import cli
 from .grouped import fit_group, group_key
+from .stacked import fit_stacked, stack_key
+from .training import DERIVATIVE_LOSSES
 from .io import check_save_dir
 from .kinds import model_from_args
 from .runs import finish_run, run_dir, training_subset
 from .tasks import task_config
 
 
+def unit_key(config) -> tuple | None:
+    """Configs with equal keys train as one group: ``("closed_form", ...)`` for the paper's tanh-MLP kinds
+    (``hnn.grouped.fit_group``), ``("stacked", ...)`` for any other kind (``hnn.stacked.fit_stacked``),
+    None for a config that trains alone (the pixel kinds)."""
+    key = group_key(config)
+    if key is not None:
+        return ("closed_form",) + key
+    key = stack_key(config)
+    return None if key is None else ("stacked",) + key
+
+
 def train_group(configs: list, datasets: list[dict] | None = None) -> list:
-    """Train ``configs`` (equal ``group_key``s) as one group and save each as its own run folder
+    """Train ``configs`` (equal ``unit_key``s) as one group and save each as its own run folder
     (as ``hnn.run_experiment`` would); per config its folder, or the ``GroupedRunFailed`` of a
     model that failed. ``datasets``: each config's dataset (default ``config.dataset()``)."""
-    keys = {group_key(config) for config in configs}
+    keys = {unit_key(config) for config in configs}
     if None in keys or len(keys) != 1:
-        raise ValueError("train_group needs configs of one group (equal hnn.grouped.group_key, none None); "
+        raise ValueError("train_group needs configs of one group (equal hnn.group_runs.unit_key, none None); "
                          "train the others alone with hnn.run_experiment")
     for config in configs:
         cli.check(config)
         check_save_dir(config.save_dir)
-    datasets = datasets or [config.dataset() for config in configs]
     objective = configs[0].make_objective()
+    datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
     models, data, tests, saved = [], [], [], []
     for config, dataset in zip(configs, datasets):
         args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
         torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
         np.random.seed(config.seed)
-        models.append(model_from_args(args).to(config.device))
+        models.append(model_from_args(args, config.device))
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         data.append(training_subset(x, y, config.train_fraction, config.seed))
         tests.append((test_x, test_y))
         saved.append(args)
     first = configs[0]
-    stats, failures = fit_group(models, data, tests, seeds=[c.seed for c in configs], total_steps=first.total_steps,
-                                learn_rate=first.learn_rate, weight_decay=first.weight_decay,
-                                batch_size=first.batch_size, print_every=first.print_every,
-                                input_noise=getattr(first, "input_noise", 0.0),
-                                names=[run_dir(c).name for c in configs])
+    shared = dict(seeds=[c.seed for c in configs], total_steps=first.total_steps, learn_rate=first.learn_rate,
+                  weight_decay=first.weight_decay, batch_size=first.batch_size, print_every=first.print_every,
+                  names=[run_dir(c).name for c in configs])
+    if next(iter(keys))[0] == "closed_form":
+        stats, failures = fit_group(models, data, tests, input_noise=getattr(first, "input_noise", 0.0), **shared)
+    else:
+        stats, failures = fit_stacked(models, data, tests, **shared, **_stacked_options(objective, models[0],
+                                                                                          saved[0], datasets))
     out = []
     for g, config in enumerate(configs):
         if g in failures:
@@ -63,6 +79,22 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     return out
 
 
+def _stacked_options(objective, model, args: dict, datasets: list[dict]) -> dict:
+    """``fit_stacked``'s loss and options from ``objective.train_options``, as ``hnn.train`` reads them.
+    The loss is built once for the group: every dataset must give it the same time step and coordinates."""
+    for key in ("dt", "state"):
+        if len({str(d.get(key)) for d in datasets}) > 1:
+            raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
+    options = objective.train_options(model, args, datasets[0])
+    extra = dict(optimizer=args["optimizer"], schedule=args["schedule"], clip_grad=args["clip_grad"],
+                 input_noise=options.get("input_noise", 0.0))
+    if "loss" in options:
+        return {**extra, "loss_of": lambda m: options["loss"]}
+    fit = DERIVATIVE_LOSSES[options.get("derivative_loss", "l2")]
+    predict = options.get("predict")
+    return {**extra, "loss_of": lambda m: fit(predict or m.time_derivative)}
+
+
 def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:
     """A sweep's group in a worker process or a Ray task: the configs of ``task`` with ``values``
     trained as one group (``threads`` sets torch's thread count first). Per config
@@ -73,4 +105,4 @@ def run_group_task(task: str, values: list[Mapping], threads: int | None = None)
     return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
 
 
-__all__ = ["run_group_task", "train_group"]
+__all__ = ["run_group_task", "train_group", "unit_key"]

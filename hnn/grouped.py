@@ -109,38 +109,57 @@ def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | Non
     return out
 
 
-class _Rows:
-    """The rows each model trains on, padded to one ``(G, rows, n)`` stack, and how it draws minibatches."""
+class GroupRows:
+    """The rows each model trains on, padded to one ``(G, rows, n)`` stack, and how it draws minibatches
+    (``fit_group`` and ``hnn.stacked.fit_stacked``). A model's padding repeats its first row at weight 0:
+    a real state, so a model that is singular at a zero state (an LNN) sees none."""
 
     def __init__(self, xs, ys, batch_size, seeds, seed_offset: int):
         self.counts = [len(x) for x in xs]
         most = max(self.counts)
-        self.x = torch.stack([torch.cat([x, x.new_zeros(most - len(x), x.shape[1])]) for x in xs])
-        self.y = torch.stack([torch.cat([y, y.new_zeros(most - len(y), y.shape[1])]) for y in ys])
+        self.x = torch.stack([torch.cat([x, x[:1].expand(most - len(x), -1)]) for x in xs])
+        self.y = torch.stack([torch.cat([y, y[:1].expand(most - len(y), -1)]) for y in ys])
         self.batch_size = batch_size
-        self.gens = [torch.Generator().manual_seed(seed + seed_offset) for seed in seeds]
+        # CPU generators on every device: a seed draws the lone run's rows wherever the group trains
+        self.gens = [torch.Generator("cpu").manual_seed(seed + seed_offset) for seed in seeds]
         sizes = [c if batch_size is None or batch_size >= c else batch_size for c in self.counts]
         self.size = max(sizes)
         # weight of each row in its model's mean: 1/(rows * width) for a drawn row, 0 for padding
-        weight = torch.zeros(len(xs), self.size, dtype=self.x.dtype)
+        weight = torch.zeros(len(xs), self.size, dtype=self.x.dtype, device=self.x.device)
         for g, m in enumerate(sizes):
             weight[g, :m] = 1.0 / (m * self.x.shape[2])
         self.weight = weight
         self.full = all(m == c for m, c in zip(sizes, self.counts))
-        self._models = torch.arange(len(xs))[:, None]
+        self._models = torch.arange(len(xs), device=self.x.device)[:, None]
 
     def draw(self):
         """``(x, y)`` of this step, ``(G, size, n)`` each: the lone run's ``hnn.training.minibatch``
         of every model (its generator advances only when it draws)."""
         if self.full:
             return self.x[:, :self.size], self.y[:, :self.size], self.gens
-        index = torch.zeros(len(self.gens), self.size, dtype=torch.long)
+        index = torch.zeros(len(self.gens), self.size, dtype=torch.long, device="cpu")
         for g, (gen, count) in enumerate(zip(self.gens, self.counts)):
             if self.batch_size >= count:
-                index[g, :count] = torch.arange(count)
+                index[g, :count] = torch.arange(count, device="cpu")
             else:
-                index[g] = torch.randperm(count, generator=gen)[:self.batch_size]
+                index[g] = torch.randperm(count, generator=gen, device="cpu")[:self.batch_size]
+        index = index.to(self.x.device)
         return self.x[self._models, index], self.y[self._models, index], self.gens
+
+    def drawn(self) -> list[int]:
+        """How many real rows each model draws a step."""
+        return [c if self.batch_size is None or self.batch_size >= c else self.batch_size for c in self.counts]
+
+    def noisy(self, xb: torch.Tensor, gens, input_noise: float) -> torch.Tensor:
+        """``xb`` ``(G, size, n)`` plus each model's input noise, drawn from its generator as its lone run
+        draws it (``hnn.train``): the real rows' noise only, in the CPU generator's order."""
+        if not input_noise:
+            return xb
+        n = xb.shape[-1]
+        noise = torch.stack([torch.cat([torch.randn((c, n), generator=gen, device="cpu"),
+                                        torch.zeros(xb.shape[1] - c, n, device="cpu")])
+                             for gen, c in zip(gens, self.drawn())])
+        return xb + input_noise * noise.to(xb)
 
     def loss(self, prediction: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """Each model's mean squared error over its own rows, ``(G,)``."""
@@ -188,31 +207,28 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
         raise ValueError("a group's models must be of one kind, width and field type")
     weights = _stacked_weights(models)
     kw = dict(width=n, dtype=weights[0].dtype, device=weights[0].device)
-    train_rows = _Rows([check_data("x", x, **kw) for x, _ in data], [check_data("dxdt", y, **kw) for _, y in data],
+    train_rows = GroupRows([check_data("x", x, **kw) for x, _ in data], [check_data("dxdt", y, **kw) for _, y in data],
                        batch_size, seeds, 0)
-    test_rows = None if tests is None else _Rows([check_data("test_x", x, **kw) for x, _ in tests],
+    test_rows = None if tests is None else GroupRows([check_data("test_x", x, **kw) for x, _ in tests],
                                                   [check_data("test_dxdt", y, **kw) for _, y in tests],
                                                   batch_size, seeds, 1)
     test_every = print_every if test_every is None else test_every
     names = names or [f"model {g}" for g in range(len(models))]
-    optim = adam_optimizer(_Params(weights), learn_rate, weight_decay)
-    alive = torch.ones(len(models), dtype=torch.bool)
+    optim = adam_optimizer(WeightStack(weights), learn_rate, weight_decay)
+    alive = torch.ones(len(models), dtype=torch.bool, device=weights[0].device)
     failures: dict[int, GroupedRunFailed] = {}
     train_loss, test_loss, test_steps = [], [], []
     with flushed_denormals():
         start = time.perf_counter()
         for step in training_steps(total_steps, progress, "group"):
             xb, yb, gens = train_rows.draw()
-            if input_noise:
-                noise = torch.stack([torch.cat([torch.randn((c, n), generator=gen), torch.zeros(len(xb[g]) - c, n)])
-                                     for g, (gen, c) in enumerate(zip(gens, _drawn(train_rows)))])
-                xb = xb + input_noise * noise.to(xb)
+            xb = train_rows.noisy(xb, gens, input_noise)
             losses = train_rows.loss(_field(weights, xb, baseline, rows), yb)
             # a dropped model's loss is replaced, not multiplied by 0 (NaN * 0 is NaN)
             torch.where(alive, losses, losses.new_zeros(())).sum().backward()
             finite = torch.isfinite(losses)
             if not bool(finite[alive].all()):
-                _drop(weights, optim, alive, finite, failures, names, step)
+                drop_failed(weights, optim, alive, finite, failures, names, step)
             optim.step()
             optim.zero_grad(set_to_none=True)
             train_loss.append(losses.detach())
@@ -241,13 +257,8 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     return stats, failures
 
 
-def _drawn(rows: _Rows) -> list[int]:
-    """How many real rows each model drew this step."""
-    return [c if rows.batch_size is None or rows.batch_size >= c else rows.batch_size for c in rows.counts]
-
-
-class _Params:
-    """The stacked weights as ``adam_optimizer`` asks for a model's: ``parameters()``."""
+class WeightStack:
+    """Stacked weights as ``adam_optimizer`` asks for a model's: ``parameters()`` (here and ``hnn.stacked``)."""
 
     def __init__(self, weights):
         self._weights = weights
@@ -256,16 +267,17 @@ class _Params:
         return iter(self._weights)
 
 
-def _drop(weights, optim, alive, finite, failures, names, step) -> None:
+def drop_failed(weights, optim, alive, finite, failures, names, step, interleaved: bool = True) -> None:
     """Report the newly failed models by name and zero their slices, after the backward of the step
-    that found them."""
+    that found them. ``interleaved``: net j of model g is slice ``j * G + g`` (``fit_group``'s layout);
+    else slice g of every weight is model g's (``hnn.stacked``)."""
     for g in torch.nonzero(alive & ~finite).flatten().tolist():
         alive[g] = False
         failures[g] = GroupedRunFailed(names[g], step, "loss is not finite")
         print(f"  {failures[g]}", flush=True)
         with torch.no_grad():
             for w in weights:       # weights, gradient and Adam state: its slices move no more
-                mine = slice(g, None, len(alive))          # net j of model g is slice j * G + g
+                mine = slice(g, None, len(alive)) if interleaved else g
                 w[mine] = 0
                 w.grad[mine] = 0
                 for value in optim.state.get(w, {}).values():
@@ -273,4 +285,4 @@ def _drop(weights, optim, alive, finite, failures, names, step) -> None:
                         value[mine] = 0
 
 
-__all__ = ["GROUPABLE_KINDS", "GroupedRunFailed", "fit_group", "group_key"]
+__all__ = ["GROUPABLE_KINDS", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key"]

@@ -30,6 +30,8 @@ from typing import ClassVar
 import torch
 from torch import nn
 
+from .modes import in_model_axis
+
 COORDINATES = {
     "canonical": "[q, p]: generalized positions and their canonical momenta",
     "velocity": "[q, qdot]: generalized positions and their velocities (as observed)",
@@ -50,6 +52,8 @@ def gradient_of(f: Callable, x: torch.Tensor, create_graph: bool | None = None) 
     independent): an H's gradient, the one autograd input gradient every network without a closed
     form uses. ``create_graph`` (default: whether grad mode is on) keeps the graph, so the result can
     be differentiated again (training through a field); ``x`` itself stays in the graph only then."""
+    if in_model_axis():         # under vmap over models: autograd.grad cannot run there, torch.func's can
+        return torch.func.grad(lambda x_in: f(x_in).sum())(x)
     if create_graph is None:
         create_graph = torch.is_grad_enabled()
     with torch.enable_grad():

@@ -188,8 +188,13 @@ def objective_for(kind: str):
     return get_kind(kind).objective()
 
 
-def model_from_args(args: dict) -> nn.Module:
+def model_from_args(args: dict, device: torch.device | str = "cpu") -> nn.Module:
     """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded
-    (float32 unless its ``dtype`` says otherwise): its ``ModelSpec`` built by the kind's row."""
+    (float32 unless its ``dtype`` says otherwise): its ``ModelSpec`` built by the kind's row, on ``device``.
+
+    The weights are drawn on the CPU whatever torch's default device, then moved: one seed gives the
+    same initial model on every device (a GPU's generator draws other numbers)."""
     spec = ModelSpec.from_args(args)
-    return initialize(get_kind(spec.kind).build(spec), spec.init).to(dtype=DTYPES[spec.dtype])
+    with torch.device("cpu"):
+        model = initialize(get_kind(spec.kind).build(spec), spec.init)
+    return model.to(dtype=DTYPES[spec.dtype], device=device)

@@ -77,7 +77,7 @@ def energy_mse(energy_true, energy_pred, splits: int = 5) -> tuple[float, float]
 
 def relative_error(pred: torch.Tensor, true: torch.Tensor) -> np.ndarray:
     """e(t) ``(batch, times)`` of two ``(batch, times, dim)`` trajectories; 0 where both are 0."""
-    pred, true = pred.double(), true.double()
+    pred, true = pred.to(dtype=torch.float64, device="cpu"), true.to(dtype=torch.float64, device="cpu")
     den = pred.norm(dim=-1) + true.norm(dim=-1)
     err = (pred - true).norm(dim=-1) / torch.where(den > 0, den, torch.ones_like(den))
     return err.numpy()

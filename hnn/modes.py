@@ -1,6 +1,8 @@
-"""Modes that a caller sets and a lower layer reads, without either importing the other: today one,
-``frozen_weights`` (a rollout promises that no weight changes, so a model may evaluate its field
-through kernels built once per rollout).
+"""Modes that a caller sets and a lower layer reads, without either importing the other: ``frozen_weights``
+(a rollout promises that no weight changes, so a model may evaluate its field through kernels built
+once per rollout) and ``model_axis`` (a group of models runs under ``torch.func.vmap`` over a
+leading model axis: input gradients take ``torch.func.grad``, and checks that read a value are left
+to the group's trainer, which checks each model's loss).
 
     with torch.no_grad(), hnn.modes.frozen_weights():     # as hnn.rollout does
         dxdt = model.time_derivative(x)                    # the model may use a cached kernel
@@ -34,4 +36,24 @@ def frozen_kernels() -> dict | None:
     return getattr(_frozen, "kernels", None)
 
 
-__all__ = ["frozen_kernels", "frozen_weights"]
+@contextlib.contextmanager
+def model_axis():
+    """Within this context models run under ``torch.func.vmap`` over a model axis (``hnn.stacked``):
+    ``torch.autograd.grad`` does not work there (pytorch/functorch#801), so ``hnn.interface.gradient_of``
+    and the models' own second derivatives take ``torch.func``'s, and a check that reads a tensor's
+    value in Python (a singular d2L/dqdot2, a state off its constraints, a blown-up rollout row) is
+    skipped: vmap cannot branch on a value, and the trainer drops a model whose loss is not finite."""
+    outer = getattr(_frozen, "model_axis", False)
+    _frozen.model_axis = True
+    try:
+        yield
+    finally:
+        _frozen.model_axis = outer
+
+
+def in_model_axis() -> bool:
+    """Whether the caller runs inside ``model_axis`` (under vmap over models)."""
+    return getattr(_frozen, "model_axis", False)
+
+
+__all__ = ["frozen_kernels", "frozen_weights", "in_model_axis", "model_axis"]

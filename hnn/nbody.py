@@ -62,11 +62,11 @@ def _incidence(b: int, dtype: torch.dtype, device: torch.device) -> tuple[torch.
     ``q @ D`` gives every pairwise difference q_j - q_i in one product, and ``f @ -D^T`` adds each
     pair's pull f to body i and its reaction -f to body j (each entry is exact: +-1 or 0).
     """
-    i, j = torch.triu_indices(b, b, offset=1)
-    pair = torch.arange(len(i))
-    d = torch.zeros(b, len(i), dtype=dtype)
+    i, j = torch.triu_indices(b, b, offset=1, device="cpu")
+    i, j = i.to(device), j.to(device)
+    pair = torch.arange(len(i), device=device)
+    d = torch.zeros(b, len(i), dtype=dtype, device=device)
     d[i, pair], d[j, pair] = -1.0, 1.0
-    d = d.to(device)
     return d, (-d.T).contiguous()
 
 
@@ -176,8 +176,9 @@ class _Guard:
 
     def __init__(self, batch: int, threshold: float):
         self.threshold2 = threshold ** 2
-        self.closest2 = torch.full((batch,), math.inf, dtype=torch.float64)
-        self.frozen = torch.zeros(batch, dtype=torch.bool)
+        # the guard watches a CPU integration (the datasets' dop853 steps in numpy)
+        self.closest2 = torch.full((batch,), math.inf, dtype=torch.float64, device="cpu")
+        self.frozen = torch.zeros(batch, dtype=torch.bool, device="cpu")
 
     @staticmethod
     def with_ids(x0: np.ndarray) -> torch.Tensor:

@@ -119,7 +119,7 @@ def pixel_loss(model, x: torch.Tensor, x_next: torch.Tensor, input_noise: float 
     z, z_next = model.encode(torch.cat([x, x_next])).split(len(x))
     # mse_loss has a fused backward, cheaper than pow(2)'s (docs/speed.md, "Why the fast paths")
     ae = nn.functional.mse_loss(model.decode(z), x, reduction="none").mean(dim=1)
-    zin = z if not input_noise else z + input_noise * torch.randn(z.shape, generator=generator).to(z)
+    zin = z if not input_noise else z + input_noise * torch.randn(z.shape, generator=generator, device="cpu").to(z)
     step = rk4_step(model.time_derivative, zin, 1.0) if use_rk4 else model.time_derivative(zin)
     hnn = (z_next - (z + step)).pow(2).mean(dim=1)
     n = model.latent_dim // 2

@@ -88,7 +88,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
-    model = model_from_args(saved).to(config.device)
+    model = model_from_args(saved, config.device)
     x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
     stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
@@ -147,8 +147,9 @@ def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Pa
     return directory
 
 
-def load_run(directory) -> tuple[torch.nn.Module, dict, dict]:
-    """``(model in eval mode, args, metrics)`` of a saved run."""
+def load_run(directory, device: torch.device | str = "cpu") -> tuple[torch.nn.Module, dict, dict]:
+    """``(model in eval mode, args, metrics)`` of a saved run, its model on ``device`` (the run's
+    recorded device is where it trained, not where it must be read: a GPU's run loads on a CPU)."""
     directory = Path(directory)
     ckpt = directory / "model.tar"
     if not ckpt.exists():
@@ -160,6 +161,7 @@ def load_run(directory) -> tuple[torch.nn.Module, dict, dict]:
         blob = torch.load(ckpt, map_location="cpu", weights_only=True)
         model = model_from_args(blob["args"])
         model.load_state_dict(blob["state_dict"])
+        model = model.to(device)
     except Exception as err:
         # torch's own message advises weights_only=False, which would run code from the file
         raise RuntimeError(f"{ckpt} does not load ({type(err).__name__}); delete the folder {directory} and "

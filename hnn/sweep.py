@@ -17,10 +17,11 @@ runs not started, stops the workers (a run in progress leaves no folder: it is w
 not at all), keeps every finished run, says so in one line and exits with 130 or 143; a worker
 whose parent process is gone stops by itself.
 
-With ``group="auto"`` the runs that can train as one program (``hnn.grouped.group_key``: one
-task, kind and width, seeds and fractions apart) and are narrow enough for grouping to pay
-(``GROUP_MAX_WIDTH``, measured by ``analysis/benchmarks/benchmark.py --jobs group``) train as groups,
-each one unit of work for the pool or Ray, each model still saved as its own run folder.
+With ``group="auto"`` the runs that can train as one program (``hnn.group_runs.unit_key``: one
+task, kind and width, seeds and fractions apart) train as groups, each one unit of work for the pool
+or Ray (one GPU each on Ray), each model still saved as its own run folder: on the CPU those narrow
+enough for grouping to pay (``GROUP_MAX_WIDTH``, measured by ``analysis/benchmarks/benchmark.py --jobs
+group``), on a GPU all of them (``DEVICE_GROUP_MAX``).
 """
 from __future__ import annotations
 
@@ -32,19 +33,19 @@ import socket
 import sys
 import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
 from tqdm.auto import tqdm
 
-from . import group_runs, grouped, runs, tasks, training
+from . import cli, group_runs, runs, tasks, training
 from .config import RunConfig
 from .errors import DivergenceError
 from .stopping import cores, in_worker, interruptible, stop_pool, worker_start
 
 BACKENDS = ("local", "ray")
-GROUP_MODES = ("auto", "off")
+GROUP_MODES = ("auto", "all", "off")
 # Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
 # 1 thread, two runs): 2.3-2.6x at width 16 with G 4 and 3.1-3.4x with G 16; 1.3x at width 64
 # with G 4 but 0.9-1.4x with G 16; 0.6-0.7x at width 200 with G 4 and 16. A group's activations
@@ -52,6 +53,9 @@ GROUP_MODES = ("auto", "off")
 # units in all (16 models of width 16, 4 of width 64) and at this width
 GROUP_HIDDEN_UNITS = 256
 GROUP_MAX_WIDTH = 64
+# on an accelerator a paper-sized step is launch-bound, and a group of K models costs about one model's
+# step up to K ~ 1000 (docs/gpu.md): groups of any width, up to this many models
+DEVICE_GROUP_MAX = 1024
 RAY_INSTALL = 'pip install -e ".[ray]"'
 # what a dataset raises when its task cannot run here: missing data or optional packages
 _CANNOT_RUN = (FileNotFoundError, ImportError)
@@ -105,19 +109,27 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
 
 
 def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
-    """``jobs`` as units of work: with ``group="auto"`` the jobs of one ``hnn.grouped.group_key`` at
-    most ``GROUP_MAX_WIDTH`` wide, up to ``GROUP_HIDDEN_UNITS`` hidden units together, each other job alone."""
+    """``jobs`` as units of work: the jobs of one ``hnn.group_runs.unit_key`` as groups, each other job
+    alone. ``group="all"``: every kind's groups (all but the pixel kinds); ``"auto"``: on the CPU only the
+    closed-form groups of the paper's tanh-MLP kinds (a CPU sweep trains every other kind alone, as the
+    docs' numbers were made), on another device every kind's; ``"off"``: none. On the CPU a group is at
+    most ``GROUP_MAX_WIDTH`` wide and ``GROUP_HIDDEN_UNITS`` hidden units in all, elsewhere up to
+    ``DEVICE_GROUP_MAX`` models of any width."""
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
     units, groups = [], {}
     for job in jobs:
-        key = grouped.group_key(job.config) if group == "auto" else None
-        if key is None or job.config.hidden_dim > GROUP_MAX_WIDTH:
+        on_cpu = job.config.device == "cpu"
+        key = group_runs.unit_key(job.config) if group != "off" else None
+        if key is not None and group == "auto" and on_cpu and key[0] != "closed_form":
+            key = None
+        if key is None or (on_cpu and job.config.hidden_dim > GROUP_MAX_WIDTH):
             units.append([job])
         else:
             groups.setdefault(key, []).append(job)
     for members in groups.values():
-        size = max(1, GROUP_HIDDEN_UNITS // members[0].config.hidden_dim)
+        on_cpu = members[0].config.device == "cpu"
+        size = max(1, GROUP_HIDDEN_UNITS // members[0].config.hidden_dim) if on_cpu else DEVICE_GROUP_MAX
         units += [members[i:i + size] for i in range(0, len(members), size)]
     return units
 
@@ -250,7 +262,8 @@ def _on_ray(units: list[list[Job]], threads: int, address: str | None):
         refs = {}
         for unit in units:
             function, *arguments = _submit(unit)
-            remote = remotes.setdefault(function, ray.remote(function).options(**options))
+            gpus = 1 if unit[0].config.device.startswith("cuda") else 0     # a group is one program: one GPU
+            remote = remotes.setdefault((function, gpus), ray.remote(function).options(**options, num_gpus=gpus))
             refs[remote.remote(*arguments, threads)] = unit
         while refs:
             [ref], _ = ray.wait(list(refs), num_returns=1)
@@ -304,9 +317,17 @@ def _probe(address: str, timeout: float = 5.0) -> None:
                               "on the head node with `ray start --head` and pass the address it prints") from err
 
 
+def add_device_flag(parser) -> None:
+    """Add ``--device`` (every run's torch device) to an analysis command's ``parser``."""
+    parser.add_argument("--device", type=cli.device, default=None,
+                        help="torch device every run trains on (cpu, cuda, cuda:1); default: each run's own, the "
+                             "cpu. Not part of a run's identity: a run saved on one device is reused on another")
+
+
 def add_backend_flags(parser) -> None:
-    """Add ``--backend {local,ray}`` and ``--ray-address ADDR`` to a sweep's ``parser``; check
-    them with ``check_backend`` and pass ``args.backend``, ``args.ray_address`` to ``train_jobs``."""
+    """Add ``--backend {local,ray}``, ``--ray-address ADDR``, ``--group`` and ``--device`` to a sweep's
+    ``parser``; check them with ``check_backend`` and pass them to ``train_jobs``."""
+    add_device_flag(parser)
     parser.add_argument("--backend", choices=BACKENDS, default="local",
                         help="where the runs train: local = in this process (--jobs 1) or in --jobs N worker "
                              "processes here; ray = one Ray task per run with cores // --jobs threads, as many at "
@@ -318,9 +339,10 @@ def add_backend_flags(parser) -> None:
 
 
     parser.add_argument("--group", choices=GROUP_MODES, default="auto",
-                        help="auto: train the runs that can share one program (one task, kind and width up to "
-                             f"{GROUP_MAX_WIDTH}, seeds and data fractions apart) as batched groups, each run "
-                             "still saved as its own folder; off: every run alone")
+                        help="auto: train the runs that can share one program (one task, kind and width, seeds "
+                             "and data fractions apart) as batched groups, each run still saved as its own folder: "
+                             f"on the CPU the paper's tanh-MLP kinds up to width {GROUP_MAX_WIDTH}, on a GPU every "
+                             "kind; all: every kind on every device; off: every run alone")
 
 
 def check_backend(parser, args) -> None:
@@ -338,7 +360,7 @@ def check_backend(parser, args) -> None:
 
 
 def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "local",
-               ray_address: str | None = None, group: str = "off") -> tuple[dict, dict]:
+               ray_address: str | None = None, group: str = "off", device: str | None = None) -> tuple[dict, dict]:
     """Train ``jobs``; ``({key: run folder or exception}, seconds)``.
 
     ``backend="local"``: here (``n_jobs`` 1) or in ``n_jobs`` worker processes with ``cores //
@@ -348,7 +370,11 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     ``seconds`` holds the wall time, the backend, jobs, threads per job and each run's data /
     train / wall seconds (a dataset's build here counts for the first run that uses it).
     ``group``: ``"auto"`` trains the runs that can share one program as groups (``plan_units``).
+    ``device``: every run's torch device (None: each config's own); on Ray a run or group on a GPU
+    asks for one whole GPU.
     """
+    if device is not None:
+        jobs = [replace(job, config=replace(job.config, device=device)) for job in jobs]
     if backend not in BACKENDS:
         raise ValueError(f"backend {backend!r}: choose one of {', '.join(BACKENDS)}")
     if ray_address is not None and backend != "ray":

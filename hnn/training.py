@@ -19,7 +19,7 @@ from .errors import DivergenceError
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
     """``a`` as a ``(rows, width)`` tensor, or a ValueError that names the problem and the fix."""
-    t = torch.as_tensor(np.asarray(a) if not torch.is_tensor(a) else a).detach()
+    t = (a if torch.is_tensor(a) else torch.as_tensor(np.asarray(a), device=device)).detach()
     if t.dim() != 2:
         raise ValueError(f"{name} must have shape (rows, dim), got {tuple(t.shape)}")
     if width is not None and t.shape[1] != width:
@@ -53,7 +53,7 @@ def report_progress(callback: Callable[[int, int], None]) -> Iterator[None]:
 
 def flushes_denormals() -> bool:
     """Whether this thread's float arithmetic flushes denormals to zero now (torch has no getter)."""
-    tiny = torch.full((1,), torch.finfo(torch.float32).tiny)    # the smallest normal float32
+    tiny = torch.full((1,), torch.finfo(torch.float32).tiny, device="cpu")    # the smallest normal float32
     return bool((tiny / 2 == 0).item())                          # half of it is denormal, or 0 when flushed
 
 
@@ -129,7 +129,8 @@ def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: tor
     """The whole set when ``batch_size`` is None or covers it, else a random minibatch without replacement."""
     if batch_size is None or batch_size >= len(x):
         return x, y
-    ix = torch.randperm(len(x), generator=gen)[:batch_size]
+    # drawn by the CPU generator ``gen`` on every device, so a seed picks the same rows everywhere
+    ix = torch.randperm(len(x), generator=gen, device="cpu")[:batch_size].to(x.device)
     # index_select is the same gather as x[ix], and faster (docs/speed.md, "Why the fast paths")
     return x.index_select(0, ix), y.index_select(0, ix)
 
@@ -239,8 +240,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         raise ValueError(f"clip_grad must be a non-negative norm (0: no clipping), got {clip_grad!r}")
     learning_rate(learn_rate, 0, total_steps, schedule)         # an unknown schedule fails before training
     optim = adam_optimizer(model, learn_rate, weight_decay, optimizer)
-    gen = torch.Generator().manual_seed(seed)
-    test_gen = torch.Generator().manual_seed(seed + 1)
+    gen = torch.Generator("cpu").manual_seed(seed)
+    test_gen = torch.Generator("cpu").manual_seed(seed + 1)
     stats = {"train_loss": [], "test_loss": [], "test_steps": []}
     callbacks = list(_PROGRESS_CALLBACKS)
     if progress is None:    # a report_progress caller draws its own display
@@ -251,7 +252,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         for step in training_steps(total_steps, progress):
             xb, yb = minibatch(x, dxdt, batch_size, gen)
             if input_noise:
-                xb = xb + input_noise * torch.randn(xb.shape, generator=gen).to(xb)
+                xb = xb + input_noise * torch.randn(xb.shape, generator=gen, device="cpu").to(xb)
             if schedule != "constant":
                 for group in optim.param_groups:
                     group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)

@@ -110,15 +110,16 @@ def sample_snippets(paths, points: int, generator: torch.Generator) -> torch.Ten
     """One snippet of ``points`` consecutive states per path, as CHNN draws them: each path
     ``(batch, T, width)`` is cut into ``T // points`` non-overlapping pieces and one piece is
     chosen uniformly. Returns ``(batch, points, width)``."""
-    paths = torch.as_tensor(paths)
+    paths = paths if torch.is_tensor(paths) else torch.as_tensor(paths, device="cpu")
     if paths.dim() != 3:
         raise ValueError(f"paths must have shape (batch, T, width), got {tuple(paths.shape)}")
     if not (isinstance(points, int) and 2 <= points <= paths.shape[1]):
         raise ValueError(f"a snippet needs 2 <= points <= {paths.shape[1]} (the path length), got {points!r}")
     pieces = paths.shape[1] // points
-    start = torch.randint(0, pieces, (len(paths),), generator=generator) * points
-    index = start[:, None] + torch.arange(points)
-    return paths[torch.arange(len(paths))[:, None], index]
+    # drawn by the CPU generator on every device, so a seed picks the same snippets everywhere
+    start = torch.randint(0, pieces, (len(paths),), generator=generator, device="cpu").to(paths.device) * points
+    index = start[:, None] + torch.arange(points, device=paths.device)
+    return paths[torch.arange(len(paths), device=paths.device)[:, None], index]
 
 
 def snippets_from_paths(rows, path_points: int, steps: int) -> np.ndarray:

@@ -117,6 +117,9 @@ def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
 
 def test_configs_that_cannot_group_say_so():
     config = hnn.tasks.task_config("spring", {"use_rk4": True})
-    assert grouped.group_key(config) is None
+    assert grouped.group_key(config) is None          # the closed form's groups: not through an RK4 step
+    assert hnn.group_runs.unit_key(config)[0] == "stacked"
+    pixels = hnn.tasks.task_config("pixels", {})
+    assert hnn.group_runs.unit_key(pixels) is None
     with pytest.raises(ValueError, match="one group"):
-        hnn.group_runs.train_group([config])
+        hnn.group_runs.train_group([pixels])

@@ -92,6 +92,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn import sweep
 from hnn.dgnet import pairs_from_paths
 from hnn.trajectory import TrajectoryObjective
 from hnn_analysis import commands
@@ -218,9 +219,10 @@ def energy_mse(task: str, model, seed: int, predict: str, data: dict) -> float:
     return float((_ring_energy(truth) - _ring_energy(ours)).pow(2).mean())
 
 
-def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str = "zero_bias") -> dict:
-    """Train one run of row ``label`` on ``task`` (saved under ``out``/runs), its MLPs started by
-    ``init`` (``hnn.models.INITS``; theirs: ``zero_bias``), and measure it."""
+def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str = "zero_bias",
+            device: str = "cpu") -> dict:
+    """Train one run of row ``label`` on ``task`` (saved under ``out``/runs) on ``device``, its MLPs
+    started by ``init`` (``hnn.models.INITS``; theirs: ``zero_bias``), and measure it on the CPU."""
     kind, objective, _, predicts = ROWS[label]
     trainer = hnn.load_task(task, "train")
     data = dataset(task, seed)
@@ -229,7 +231,7 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str =
     decay = SETTINGS[task]["weight_decay"] * (data["dt"] ** 2 if objective == "trajectory" else 1.0)
     config = trainer.Config(name=f"{task}-dgnet", model=kind, objective=objective, snippet_steps=1,
                             total_steps=steps, batch_size=SETTINGS[task]["batch_size"], seed=seed,
-                            weight_decay=decay, init=init, save_dir=str(out / "runs"))
+                            weight_decay=decay, init=init, save_dir=str(out / "runs"), device=device)
     fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
                                steps=1) if objective == "trajectory" else None)
     run = hnn.runs.find_run(config) or hnn.run_experiment(config, data, fit)
@@ -243,8 +245,7 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str =
 
 def _job(args: tuple) -> tuple:
     torch.set_num_threads(1)
-    task, label, seed, steps, out, init = args
-    return args[:3], measure(task, label, seed, steps, out, init)
+    return args[:3], measure(*args)
 
 
 def rows_for(task: str) -> list[str]:
@@ -295,13 +296,14 @@ def main(argv=None) -> dict:
     commands.add_flags(parser, seeds="seeds 0..seeds-1 (theirs: 15 trials)", seeds_default=15,
                        jobs="worker processes, one torch thread each", out="folder for runs, json, table",
                        out_default=Path("results-dgnet"), update_docs="write each task's table into its section of docs/dgnet.md (the other tasks' stay)")
+    sweep.add_device_flag(parser)
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     tic, meta = time.perf_counter(), {**provenance(), "command": portable_command(argv, "analysis/chains/dgnet.py")}
     if args.steps is not None and args.steps < 1:
         sys.exit(f"error: --steps must be positive, got {args.steps}")
     steps = {task: SETTINGS[task]["steps"] if args.steps is None else args.steps for task in args.tasks}
-    work = [(task, label, seed, steps[task], args.out, args.init) for seed in range(args.seeds)
+    work = [(task, label, seed, steps[task], args.out, args.init, args.device or "cpu") for seed in range(args.seeds)
             for task in args.tasks for label in rows_for(task)]
     done = {}
 

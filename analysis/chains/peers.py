@@ -334,7 +334,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
     jobs = plan(settings, out, args.seed)
     runs, todo = sweep.reuse(jobs)
     print(f"peers: {len(runs)} runs reused, {len(todo)} to train", flush=True)
-    trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address)
+    trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address,
+                                        device=args.device)
     runs.update(trained)
     tic = time.perf_counter()
     rows = measure(runs, settings, args.seed)

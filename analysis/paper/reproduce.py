@@ -263,7 +263,8 @@ def main(argv=None) -> dict:
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick, seeds)
     runs, jobs = sweep.reuse(plan(rows, seeds, out / "runs", steps, args.models))
-    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
+                                        args.device)
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()

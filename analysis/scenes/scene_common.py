@@ -70,7 +70,8 @@ def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
                  if job.config.model in models and fits(job.task, job.config.model)]
     runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
-    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group)
+    trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
+                                        args.device)
     runs.update(trained)
     return runs, seconds
 

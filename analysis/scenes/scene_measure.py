@@ -52,7 +52,7 @@ def training_cost(task: str, args: dict) -> dict:
     dataset = objective.prepare(_DATASETS[data_key])
     saved = {**config.to_dict(), "kind": config.kind}
     torch.manual_seed(config.seed)
-    model = hnn.kinds.model_from_args(saved).to(config.device)
+    model = hnn.kinds.model_from_args(saved, config.device)
     x, y = (dataset[key] for key in objective.arrays[:2])
     x, y = training_subset(x, y, config.train_fraction, config.seed)
     options = dict(learn_rate=config.learn_rate, weight_decay=config.weight_decay, batch_size=config.batch_size,

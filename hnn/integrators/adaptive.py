@@ -93,12 +93,13 @@ class _Dopri5:
     safety, min_factor, max_factor, beta = 0.9, 0.2, 10.0, 0.0
 
     def __init__(self, dtype: torch.dtype):
-        A = torch.zeros((7, 7), dtype=dtype)
+        cpu = dict(dtype=dtype, device="cpu")        # the stepping runs in numpy, on any device's states
+        A = torch.zeros((7, 7), **cpu)
         for i, a in enumerate(_DP_A):
-            A[i, :len(a)] = torch.tensor(a, dtype=dtype)
+            A[i, :len(a)] = torch.tensor(a, **cpu)
         self.A_rows = [A[s, :s] for s in range(7)]
-        self.E = torch.tensor(_DP_E, dtype=dtype)
-        self.PT = torch.tensor(_DP_P, dtype=dtype).T.contiguous()   # (4, 7)
+        self.E = torch.tensor(_DP_E, **cpu)
+        self.PT = torch.tensor(_DP_P, **cpu).T.contiguous()   # (4, 7)
 
     def attempt(self, field, y, hx, K, flat, scale_tol):
         rows, dim = y.shape

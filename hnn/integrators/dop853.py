@@ -100,7 +100,7 @@ STAGES = 16
 
 
 def _dense(coefficients: dict, length: int, dtype: torch.dtype) -> torch.Tensor:
-    row = torch.zeros(length, dtype=dtype)
+    row = torch.zeros(length, dtype=dtype, device="cpu")     # the stepping runs in numpy
     for j, a in coefficients.items():
         row[j] = a
     return row

@@ -27,6 +27,7 @@ import torch
 
 from ..errors import ConvergenceError, divergence_error
 from ..interface import SplitField
+from ..modes import in_model_axis
 
 Field = Callable[[torch.Tensor], torch.Tensor]
 
@@ -351,14 +352,15 @@ def fixed_step_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, method: str, s
         raise ValueError(f"{method} needs a positive finite dt (the direction comes from t_eval), got {dt!r}")
     stepper = stepper(f, x0.shape[1], x0.dtype, tol=tol, max_iter=max_iter, base=base)
     out, x = [x0], x0
-    first_bad = torch.full((len(x0),), float("nan"), dtype=torch.float64)
-    not_converged = torch.full((len(x0),), float("nan"), dtype=torch.float64)
+    first_bad = torch.full((len(x0),), float("nan"), dtype=torch.float64, device=x0.device)
+    not_converged = torch.full((len(x0),), float("nan"), dtype=torch.float64, device=x0.device)
     for k in range(len(t) - 1):
         span = t[k + 1] - t[k]
         n = _steps(span, dt)
         for _ in range(n):
             x = stepper.step(x, span / n)
-        x = _retire_failed_rows(stepper, x, float(t[k + 1]), max_norm, first_bad, not_converged)
+        if not in_model_axis():     # vmap over models cannot branch on a value: their losses are checked
+            x = _retire_failed_rows(stepper, x, float(t[k + 1]), max_norm, first_bad, not_converged)
         out.append(x)
     if stats is not None:
         stats.update(stepper.stats())

@@ -14,7 +14,7 @@ import torch
 
 from .fixed_step import Field
 from ..interface import EnergyField, Model
-from ..modes import frozen_weights
+from ..modes import frozen_weights, in_model_axis
 from .solvers import Solver, get_solver
 
 
@@ -41,16 +41,36 @@ def _check_tolerance(solver: Solver, dtype: torch.dtype, options: dict) -> None:
                       "states", stacklevel=3)
 
 
-def _as_batch(x0) -> torch.Tensor:
-    """``x0`` as a finite floating ``(batch, dim)`` tensor (a single ``(dim,)`` state becomes batch 1)."""
-    x0 = torch.as_tensor(x0)
+def field_device(f) -> torch.device | None:
+    """The device of the weights behind ``f`` (an ``nn.Module``, or a bound method of one, such as
+    ``model.time_derivative``), or None for a plain function (true dynamics), which runs anywhere."""
+    owner = f if isinstance(f, torch.nn.Module) else getattr(f, "__self__", None)
+    if not isinstance(owner, torch.nn.Module):
+        return None
+    for tensor in owner.parameters():
+        return tensor.device
+    for tensor in owner.buffers():
+        return tensor.device
+    return None
+
+
+def _as_batch(x0, device: torch.device | None) -> torch.Tensor:
+    """``x0`` as a finite floating ``(batch, dim)`` tensor (a single ``(dim,)`` state becomes batch 1):
+    a tensor where it lies, an array on ``device`` (the field's; the CPU for a plain function); a
+    tensor on another device than the field's weights is a ValueError naming both."""
+    if torch.is_tensor(x0):
+        if device is not None and x0.device != device:
+            raise ValueError(f"x0 is on {x0.device} but the model's weights are on {device}: move one to the "
+                             f"other, e.g. x0.to('{device}') or model.to('{x0.device}')")
+    else:
+        x0 = torch.as_tensor(np.asarray(x0), device=device or "cpu")
     if x0.dim() == 1:
         x0 = x0[None]
     if x0.dim() != 2:
         raise ValueError(f"x0 must have shape (batch, dim), got {tuple(x0.shape)}")
     if not x0.is_floating_point():
         x0 = x0.to(torch.get_default_dtype())
-    if not torch.isfinite(x0).all():
+    if not in_model_axis() and not torch.isfinite(x0).all():
         rows = torch.nonzero(~torch.isfinite(x0).all(dim=1)).flatten().tolist()
         raise ValueError(f"x0 has non-finite values in rows {rows[:10]}")
     return x0
@@ -114,6 +134,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
     """
     solver = get_solver(method)
+    device = field_device(f)
     if isinstance(f, Model):
         f = f.field
     if type(f) is EnergyField and not solver.needs_hamiltonian:
@@ -121,7 +142,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     if differentiable and solver.adaptive:
         raise ValueError(f"{method} chooses its steps outside autograd and cannot give a differentiable rollout; "
                          "use a fixed-step method (rk4, leapfrog, midpoint, yoshida4) with differentiable=True")
-    x0 = _as_batch(x0)
+    x0 = _as_batch(x0, device)
     _check_tolerance(solver, x0.dtype, options)
     t = _as_t_eval(t_eval)
     threads = torch.get_num_threads()

@@ -30,6 +30,7 @@ import torch
 from torch import nn
 
 from ..interface import Model
+from ..modes import in_model_axis
 from .mlp import MLP
 from .structured import scalar_gradient
 
@@ -98,14 +99,15 @@ class ConstraintGraph:
     def arrays(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(A (C, n), offsets (C, d), lengths (C,))``, float64: r_c = (A X)_c + offsets_c for
         positions X ``(n, d)``; a tether's row is +1 at its body and its offset -point."""
-        A = torch.zeros(self.count, self.bodies, dtype=torch.float64)
-        offsets = torch.zeros(self.count, self.dim, dtype=torch.float64)
+        exact = dict(dtype=torch.float64, device="cpu")     # cast to each state's dtype and device on use
+        A = torch.zeros(self.count, self.bodies, **exact)
+        offsets = torch.zeros(self.count, self.dim, **exact)
         for c, (body, point, _) in enumerate(self.tethers):
             A[c, body] = 1.0
-            offsets[c] = -torch.tensor(point, dtype=torch.float64)
+            offsets[c] = -torch.tensor(point, **exact)
         for c, (i, j, _) in enumerate(self.links, start=len(self.tethers)):
             A[c, i], A[c, j] = 1.0, -1.0
-        lengths = torch.tensor([row[-1] for row in self.tethers + self.links], dtype=torch.float64)
+        lengths = torch.tensor([row[-1] for row in self.tethers + self.links], **exact)
         return A, offsets, lengths
 
     def to_dict(self) -> dict:
@@ -139,7 +141,7 @@ class _Constrained(Model):
         # float32 at build and stay rounded after .double() (a float64 run's rods off by 1e-7)
         A, offsets, lengths = graph.arrays()
         # the field works on flat rows: r = x A_d^T + offsets (batch, C d), A_d = A kron I_d
-        self._exact = (A, offsets, lengths, torch.kron(A, torch.eye(self.d, dtype=A.dtype)), offsets.flatten())
+        self._exact = (A, offsets, lengths, torch.kron(A, torch.eye(self.d, dtype=A.dtype, device=A.device)), offsets.flatten())
         self._cast: dict = {}
 
     def _arrays(self, like: torch.Tensor) -> tuple[torch.Tensor, ...]:
@@ -205,7 +207,10 @@ class _Constrained(Model):
 
     def check_state(self, z: torch.Tensor, observed: str | None = None) -> None:
         """ValueError if a state ``(batch, 2nd)`` in ``observed`` coordinates (default: its own) is off
-        the constraints by more than ``tolerance``."""
+        the constraints by more than ``tolerance``; not checked under vmap over models (``hnn.modes.model_axis``),
+        where the group's data were checked by each model's lone path."""
+        if in_model_axis():
+            return
         with torch.no_grad():       # a check on the data: no graph for training to carry
             off = self.violation(z, observed)
         if len(off) and float(off.max()) > self.tolerance:

@@ -18,9 +18,10 @@ FIELD_TYPES = ("solenoidal", "conservative", "both")
 FIELD_ROWS = {"solenoidal": (1,), "conservative": (0,), "both": (0, 1)}   # the outputs (F1, F2) each field reads
 
 
-def permutation_tensor(n: int) -> torch.Tensor:
-    """The ``(n, n)`` matrix M = [[0, I], [-I, 0]] of Hamilton's equations, ``dx/dt = grad H @ M.T``."""
-    eye = torch.eye(n)
+def permutation_tensor(n: int, device: torch.device | str | None = None) -> torch.Tensor:
+    """The ``(n, n)`` matrix M = [[0, I], [-I, 0]] of Hamilton's equations, ``dx/dt = grad H @ M.T``, on
+    ``device`` (default: torch's default device, where a model's parameters are made)."""
+    eye = torch.eye(n, device=device)
     return torch.cat([eye[n // 2:], -eye[: n // 2]])
 
 
@@ -133,7 +134,7 @@ class HNN(Model):
 
     def _fold(self, rows: tuple[int, ...]) -> torch.Tensor:
         """How d(F_k)/dx enters dx/dt for each k of ``rows``: F1's gradient as it is, F2's through M^T."""
-        eye, hamilton = torch.eye(self.input_dim), self.M.detach().cpu().T
+        eye, hamilton = torch.eye(self.input_dim, device="cpu"), self.M.detach().cpu().T
         return torch.stack([{0: eye, 1: hamilton}[k] for k in rows])
 
 

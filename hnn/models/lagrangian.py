@@ -28,6 +28,7 @@ import torch
 from torch.func import vmap
 
 from ..errors import DivergenceError
+from ..modes import in_model_axis
 from .mechanical import check_width, embed_angles, StateCheckedModel
 from .mlp import MLP
 
@@ -95,17 +96,25 @@ class LagrangianNN(StateCheckedModel):
         # rows of different states never mix, so each derivative of the batch's summed L is every
         # state's own; the rows need a graph of their own only when the caller trains through them
         keep = torch.is_grad_enabled()
-        with torch.enable_grad():
-            z_in = z if z.requires_grad else z.detach().requires_grad_(True)
-            dL = torch.autograd.grad(self.lagrangian(z_in).sum(), z_in, create_graph=True)[0]     # (batch, 2n)
-            rows = torch.stack([torch.autograd.grad(dL[:, n + i].sum(), z_in, create_graph=keep, retain_graph=True)[0]
-                                for i in range(n)], dim=1)                        # (batch, n, 2n): d(dL/dqdot_i)/dz
+        if in_model_axis():         # under vmap over models (hnn.stacked): torch.func's derivatives
+            dL_of = torch.func.grad(lambda zz: self.lagrangian(zz).sum())
+            dL = dL_of(z)
+            rows = torch.func.jacrev(lambda zz: dL_of(zz)[:, n:].sum(0))(z).movedim(0, 1)
+        else:
+            with torch.enable_grad():
+                z_in = z if z.requires_grad else z.detach().requires_grad_(True)
+                dL = torch.autograd.grad(self.lagrangian(z_in).sum(), z_in, create_graph=True)[0]     # (batch, 2n)
+                rows = torch.stack([torch.autograd.grad(dL[:, n + i].sum(), z_in, create_graph=keep,
+                                                        retain_graph=True)[0]
+                                    for i in range(n)], dim=1)                    # (batch, n, 2n): d(dL/dqdot_i)/dz
         if not keep:
             dL, rows = dL.detach(), rows.detach()
         hess_vv, mixed = rows[:, :, n:], rows[:, :, :n]                          # mixed[b, i, j] = d2L/dqdot_i dq_j
         rhs = dL[:, :n] - (mixed @ v[..., None])[..., 0]
         qddot, info = torch.linalg.solve_ex(hess_vv, rhs[..., None])
         qddot = qddot[..., 0]
+        if in_model_axis():         # vmap cannot branch on a value: a singular model's loss is not finite
+            return qddot
         with torch.no_grad():
             cond = torch.linalg.cond(hess_vv.detach())
             bad = (info != 0) | ~torch.isfinite(cond) | (cond > 1 / torch.finfo(z.dtype).eps) \

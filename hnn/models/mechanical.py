@@ -27,6 +27,7 @@ import torch
 from torch import nn
 
 from ..interface import Model, gradient_of
+from ..modes import in_model_axis
 from .mlp import MLP
 
 
@@ -93,6 +94,10 @@ class MechanicalHNN(StateCheckedModel):
         out = self.net(embed_angles(q, self.periodic))
         entries = out[:, 1:]
         entries = torch.where(self._rows == self._cols, nn.functional.softplus(entries), entries)
+        if in_model_axis():     # vmap has no fast rule for this index_put: place the entries by a 0/1 matrix
+            place = torch.zeros(len(self._rows), self.n * self.n, dtype=entries.dtype, device=entries.device)
+            place[torch.arange(len(self._rows), device=entries.device), self._rows * self.n + self._cols] = 1
+            return out[:, 0], (entries @ place).reshape(len(q), self.n, self.n)
         L = entries.new_zeros(len(q), self.n, self.n)
         L[:, self._rows, self._cols] = entries
         return out[:, 0], L

@@ -7,6 +7,7 @@ from torch import nn
 
 from . import tanh_mlp
 from ..interface import gradient_of
+from ..modes import in_model_axis
 
 _NONLINEARITIES = {
     "tanh": tanh_mlp.fast_tanh,
@@ -77,13 +78,14 @@ class MLP(nn.Module):
     def _closed_form_applies(self) -> bool:
         """Whether ``self(x)`` is the network the closed form differentiates: ``MLP.forward`` as
         defined above (not overridden by a subclass, nor replaced on the class or the instance
-        since), tanh, plain linear layers and no forward hooks. Anything else gets autograd."""
+        since), tanh, plain linear layers and no forward hooks, outside vmap over models (its hand-written
+        backward has no batching rule: ``hnn.modes.model_axis``). Anything else gets autograd."""
         # read from the module's dicts directly: an integrator asks at every field call
         own, layers = self.__dict__, self._modules
         return (type(self).forward is _CLOSED_FORM_FORWARD and "forward" not in own
                 and own["_act"] is tanh_mlp.fast_tanh and not (own["_forward_hooks"] or own["_forward_pre_hooks"])
                 and type(layers["linear1"]) is nn.Linear and type(layers["linear2"]) is nn.Linear
-                and type(layers["linear3"]) is nn.Linear)
+                and type(layers["linear3"]) is nn.Linear and not in_model_axis())
 
 
 def initialize(model: nn.Module, init: str) -> nn.Module:

@@ -72,7 +72,7 @@ class SeparableHNN(Model):
         if torch.is_grad_enabled():
             return None
         net = getattr(self, name)
-        kernel = tanh_mlp.cached_kernel(self, name, net, (0,), lambda: torch.eye(self.n)[None]) \
+        kernel = tanh_mlp.cached_kernel(self, name, net, (0,), lambda: torch.eye(self.n, device="cpu")[None]) \
             if isinstance(net, MLP) else None
         return kernel if kernel is not None and kernel.serves(x) else None
 
@@ -88,7 +88,7 @@ class SeparableHNN(Model):
         if not (isinstance(kinetic, MLP) and isinstance(potential, MLP) and potential._closed_form_applies()
                 and kinetic.linear2.out_features + potential.linear2.out_features <= _BLOCK_MAX_WIDTH):
             return None
-        kernel = tanh_mlp.cached_kernel(self, "block", kinetic, (0,), lambda: permutation_tensor(self.input_dim).T[None],
+        kernel = tanh_mlp.cached_kernel(self, "block", kinetic, (0,), lambda: permutation_tensor(self.input_dim, "cpu").T[None],
                                         self._block_weights)
         return kernel if kernel is not None and kernel.serves(x) else None
 

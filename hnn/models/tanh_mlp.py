@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..modes import frozen_kernels
+from ..modes import frozen_kernels, in_model_axis
 
 # torch.tanh is the costliest elementwise pass of an HNN training step on CPU; 2 sigmoid(2a) - 1 is
 # the same function in four cheap passes, with at most 1.8e-7 absolute error in float32 against
@@ -44,7 +44,8 @@ class _Tanh(torch.autograd.Function):
 
 def fast_tanh(a: torch.Tensor) -> torch.Tensor:
     """The MLPs' ``'tanh'``: ``torch.tanh`` for small inputs, ``2 sigmoid(2a) - 1`` for large ones."""
-    if a.numel() < _FAST_TANH_MIN_ELEMENTS:
+    # under vmap over models (hnn.modes.model_axis) a custom autograd Function has no batching rule
+    if a.numel() < _FAST_TANH_MIN_ELEMENTS or in_model_axis():
         return torch.tanh(a)
     if torch.is_grad_enabled():
         # inside torch.func transforms (jvp, vmap) ``a`` can report requires_grad=False while an outer
@@ -248,7 +249,9 @@ def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, .
     callable giving the kernel's fold, ``weights`` one giving its weights (default ``mlp``'s),
     called when the kernel is built."""
     kernels = frozen_kernels()
-    if kernels is None or not mlp._closed_form_applies():
+    # the kernel steps numpy arrays: a model on an accelerator keeps its torch path (under vmap over
+    # models _closed_form_applies is False)
+    if kernels is None or not mlp._closed_form_applies() or not mlp.linear1.weight.is_cpu:
         return None
     entry = kernels.get((id(owner), key))
     if entry is None or entry[0] is not owner:      # the owner is held, so its id is not reused meanwhile

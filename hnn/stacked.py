@@ -1,0 +1,214 @@
+"""Models of any kind trained as one program: their parameters stacked along a leading model axis and
+every step one ``torch.func.vmap`` over the models (torch's recipe: ``stack_module_state``,
+``functional_call``, ``vmap``).
+
+    stats, failures = hnn.stacked.fit_stacked(models, data, tests, seeds=[0, 1, 2], loss_of=loss_of, ...)
+
+``hnn.grouped.fit_group`` is the faster path for the paper's tanh-MLP kinds (a hand-written batched
+closed form); this one serves every other kind and objective the studies train: the mechanical,
+second-order, constrained and Lagrangian kinds, other activations, trajectory snippets, the discrete
+gradient. It runs inside ``hnn.modes.model_axis``, where input gradients take ``torch.func.grad``
+(``torch.autograd.grad`` does not run under vmap) and checks that read a value are skipped: a
+model whose loss turns NaN or infinite is named and dropped, the others go on.
+
+Each model keeps what its lone run has: its init, its rows and minibatch stream (``GroupRows``), its
+input noise, its own Adam or AdamW state (elementwise, so one optimizer over the stacked tensors is G
+independent ones), its own gradient clipping (each model's norm), the shared rate schedule. Its numbers
+equal its lone run's up to float rounding (tests/test_stacked.py says how close).
+"""
+from __future__ import annotations
+
+import json
+import time
+from typing import Callable
+
+import torch
+from torch import nn
+from torch.func import functional_call, stack_module_state, vmap
+
+from .grouped import GroupRows, WeightStack, drop_failed, group_key
+from .integrators.integrate import rollout
+from .modes import model_axis
+from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, learning_rate, training_steps
+
+
+# the fields that may differ within a stacked group: each model's seed, data fraction and init
+_OWN_FIELDS = ("seed", "train_fraction", "init")
+
+
+def stack_key(config) -> tuple | None:
+    """Configs with equal keys can train as one stacked group (``fit_stacked``); None for a config that
+    ``hnn.grouped.group_key`` groups (its closed form is faster) or that trains alone: the pixel kinds
+    (their objective draws noise of its own). The key is the run's identity less ``_OWN_FIELDS``, and
+    the facts its model is built from (the chain's constraints)."""
+    if group_key(config) is not None or config.kind.startswith("pixel-"):
+        return None
+    same = {k: v for k, v in config.identity().items() if k not in _OWN_FIELDS}
+    return (type(config).__module__, type(config).__qualname__,      # the identity's JSON: a hashable key
+            json.dumps({**same, **config.model_facts()}, sort_keys=True, default=str))
+
+
+class _Loss(nn.Module):
+    """``loss(x, y)`` as a module holding ``model``, so that ``functional_call`` swaps the model's weights."""
+
+    def __init__(self, model: nn.Module, loss: Callable):
+        super().__init__()
+        self.model, self.loss = model, loss
+
+    def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return self.loss(x, y)
+
+
+def _clip_each(grads: list[torch.Tensor], clip: float) -> None:
+    """Scale each model's slice of ``grads`` (leading model axis) to global norm at most ``clip``, in place,
+    as ``torch.nn.utils.clip_grad_norm_`` scales a lone model's."""
+    norms = torch.stack([g.reshape(len(g), -1).pow(2).sum(1) for g in grads]).sum(0).sqrt()
+    scale = (clip / (norms + 1e-6)).clamp(max=1.0)
+    for g in grads:
+        g.mul_(scale.reshape(-1, *[1] * (g.dim() - 1)))
+
+
+def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] | None = None, *,
+                loss_of: Callable[[nn.Module], Callable], seeds: list[int], total_steps: int = 2000,
+                learn_rate: float = 1e-3, weight_decay: float = 1e-4, batch_size: int | None = None,
+                print_every: int = 200, test_every: int | None = None, input_noise: float = 0.0,
+                optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
+                names: list[str] | None = None, progress: bool = False) -> tuple[list[dict | None], dict]:
+    """Train ``models`` (one class and shape, the same structure) together, as ``hnn.train`` trains each
+    alone; their weights are updated in place.
+
+    Args:
+        data, tests: each model's ``(inputs, targets)`` and ``(test inputs, test targets)``, ``(rows, width)``.
+        loss_of: ``loss_of(model) -> (x, y) -> loss per row or element`` (``(rows,)`` or ``(rows, k)``), the
+            loss ``hnn.train`` would minimize for ``model``; called once, on a copy whose weights each
+            model's slice replaces.
+        seeds: each model's ``hnn.train`` seed (its minibatches and input noise).
+        input_noise, optimizer, schedule, clip_grad: as ``hnn.train``'s.
+
+    Returns:
+        ``(stats, failures)`` as ``hnn.grouped.fit_group``'s.
+    """
+    if not models:
+        raise ValueError("fit_stacked needs at least one model")
+    if len(data) != len(models) or len(seeds) != len(models) or (tests is not None and len(tests) != len(models)):
+        raise ValueError(f"{len(models)} models need as many data pairs, seeds and test pairs; got {len(data)}, "
+                         f"{len(seeds)} and {None if tests is None else len(tests)}")
+    shapes = [{k: v.shape for k, v in m.state_dict().items()} for m in models]
+    if any(type(m) is not type(models[0]) or s != shapes[0] for m, s in zip(models, shapes)):
+        raise ValueError("a stacked group's models must be of one class with parameters of the same shapes")
+    params, _ = stack_module_state(models)
+    # buffers hold a model's structure (index maps, Hamilton's matrix), the same in every model: shared,
+    # not stacked (an index buffer batched under vmap would index per model)
+    buffers = dict(models[0].named_buffers())
+    for m in models[1:]:
+        if any(not torch.equal(b, buffers[k]) for k, b in m.named_buffers()):
+            raise ValueError("a stacked group's models must share their buffers (structure, not weights)")
+    names = names or [f"model {g}" for g in range(len(models))]
+    first = next(iter(params.values()))
+    kw = dict(dtype=first.dtype, device=first.device)
+    train_rows = GroupRows([check_data("x", x, **kw) for x, _ in data], [check_data("y", y, **kw) for _, y in data],
+                           batch_size, seeds, 0)
+    test_rows = None if tests is None else GroupRows([check_data("test_x", x, **kw) for x, _ in tests],
+                                                      [check_data("test_y", y, **kw) for _, y in tests],
+                                                      batch_size, seeds, 1)
+    wrapper = _Loss(models[0], loss_of(models[0]))
+    keys = list(params)
+
+    def one(p: dict, b: dict, x: torch.Tensor, y: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+        state = {**{f"model.{k}": v for k, v in p.items()}, **{f"model.{k}": v for k, v in b.items()}}
+        per = functional_call(wrapper, state, (x, y))
+        return (per.reshape(len(x), -1).mean(1) * w).sum()       # the mean over the model's drawn rows
+
+    def losses(rows: GroupRows, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        row_weight = rows.weight * rows.x.shape[2]         # 1 / drawn rows, 0 on padding
+        return vmap(one, in_dims=(0, None, 0, 0, 0))(params, buffers, x, y, row_weight)
+
+    test_every = print_every if test_every is None else test_every
+    weights = [params[k] for k in keys]
+    optim = adam_optimizer(WeightStack(weights), learn_rate, weight_decay, optimizer)
+    alive = torch.ones(len(models), dtype=torch.bool, device=first.device)
+    failures, train_loss, test_loss, test_steps = {}, [], [], []
+    with flushed_denormals(), model_axis():
+        start = time.perf_counter()
+        for step in training_steps(total_steps, progress, "stacked"):
+            xb, yb, gens = train_rows.draw()
+            xb = train_rows.noisy(xb, gens, input_noise)
+            if schedule != "constant":
+                for group in optim.param_groups:
+                    group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)
+            step_losses = losses(train_rows, xb, yb)
+            torch.where(alive, step_losses, step_losses.new_zeros(())).sum().backward()
+            finite = torch.isfinite(step_losses) & torch.stack(
+                [torch.isfinite(w.grad.reshape(len(w), -1)).all(1) for w in weights]).all(0)
+            if not bool(finite[alive].all()):
+                drop_failed(weights, optim, alive, finite, failures, names, step, interleaved=False)
+            if clip_grad > 0:
+                _clip_each([w.grad for w in weights], clip_grad)
+            optim.step()
+            optim.zero_grad(set_to_none=True)
+            train_loss.append(step_losses.detach())
+            if test_rows is not None and is_test_step(step, test_every, total_steps):
+                tx, ty, _ = test_rows.draw()
+                with torch.no_grad():
+                    test_loss.append(losses(test_rows, tx, ty))
+                test_steps.append(step)
+    seconds = time.perf_counter() - start
+    train_loss = torch.stack(train_loss).T.tolist()
+    test_loss = torch.stack(test_loss).T.tolist() if test_loss else [[] for _ in models]
+    stats = []
+    for g, model in enumerate(models):
+        if g in failures:
+            stats.append(None)
+            continue
+        with torch.no_grad():
+            for name, param in model.named_parameters():
+                param.copy_(params[name][g])
+        model.eval()
+        stats.append({"train_loss": train_loss[g], "test_loss": test_loss[g], "test_steps": list(test_steps),
+                      "seconds": seconds / len(models), "group_seconds": seconds, "group_size": len(models)})
+    return stats, failures
+
+
+# the rollout methods vmap can run: explicit fixed steps. The implicit ones (midpoint, discrete gradient)
+# iterate to a tolerance and the adaptive ones choose steps by an error: both branch on values
+VMAP_METHODS = ("rk4", "leapfrog", "yoshida4")
+
+
+class _Rollout(nn.Module):
+    def __init__(self, model: nn.Module, t_eval, method: str, options: dict):
+        super().__init__()
+        self.model, self.t_eval, self.method, self.options = model, t_eval, method, options
+
+    def forward(self, x0: torch.Tensor) -> torch.Tensor:
+        return rollout(self.model, x0, self.t_eval, method=self.method, **self.options)
+
+
+def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: str = "rk4",
+                    **options) -> torch.Tensor:
+    """Every model of a group rolled out from its own starts: ``x0`` ``(G, batch, dim)`` (or ``(batch, dim)``,
+    the same starts for all) -> ``(G, batch, len(t_eval), dim)``, as ``hnn.rollout`` of each model.
+
+    A method of ``VMAP_METHODS`` integrates the whole group in one program (vmap over the stacked
+    weights; ``hnn.rollout``'s checks of blown-up rows are skipped there, so a row that blows up shows
+    as non-finite values); any other method rolls the models out one after another (its steps branch
+    on values). No autograd graph."""
+    x0 = torch.as_tensor(x0)
+    x0 = x0.expand(len(models), *x0.shape) if x0.dim() == 2 else x0
+    if x0.dim() != 3 or len(x0) != len(models):
+        raise ValueError(f"x0 must be (G, batch, dim) with G = {len(models)} models, or (batch, dim); got "
+                         f"{tuple(x0.shape)}")
+    if method not in VMAP_METHODS:
+        return torch.stack([rollout(m, x, t_eval, method=method, **options) for m, x in zip(models, x0)])
+    params, _ = stack_module_state(models)
+    buffers = dict(models[0].named_buffers())
+    wrapper = _Rollout(models[0], t_eval, method, options)
+
+    def one(p: dict, x: torch.Tensor) -> torch.Tensor:
+        state = {**{f"model.{k}": v.detach() for k, v in p.items()}, **{f"model.{k}": v for k, v in buffers.items()}}
+        return functional_call(wrapper, state, (x,))
+
+    with torch.no_grad(), model_axis():
+        return vmap(one)(params, x0)
+
+
+__all__ = ["VMAP_METHODS", "fit_stacked", "rollout_stacked", "stack_key"]

@@ -1,0 +1,105 @@
+"""Groups of every kind the studies train (``hnn.stacked``: torch.func's vmap over a model axis) give
+their members' lone runs, and a member that fails is named and dropped while the others go on."""
+import numpy as np
+import pytest
+import torch
+
+import hnn
+from hnn.group_runs import train_group, unit_key
+
+SMALL = {"total_steps": 20, "hidden_dim": 16}
+CHAIN = {"n_train": 20, "n_test": 5}
+CASES = {
+    "mechanical": ("spring", {"model": "mechanical"}),
+    "softplus-adamw-cosine-clip": ("spring", {"model": "hnn", "nonlinearity": "softplus", "optimizer": "adamw",
+                                              "schedule": "cosine", "clip_grad": 0.5}),
+    "constrained": ("chain", {"model": "constrained", **CHAIN}),
+    "trajectory": ("chain", {"model": "hnn", "objective": "trajectory", **CHAIN}),
+    "second_order-minibatch": ("chain", {"model": "second_order", "batch_size": 16, **CHAIN}),
+    "lagrangian": ("chain", {"model": "lagrangian", "protocol": "lnn", "objective": "derivative", "init": "lnn",
+                             "nonlinearity": "softplus", "derivative_loss": "l1", "n_train": 64, "n_test": 16,
+                             "batch_size": 16}),
+    "discrete_gradient": ("spring", {"model": "hnn", "objective": "discrete_gradient", "nonlinearity": "softplus"}),
+}
+
+
+def _configs(task, values, save_dir, seeds=(0, 1, 2)):
+    return [hnn.tasks.task_config(task, {**SMALL, **values, "seed": s, "save_dir": str(save_dir)}) for s in seeds]
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
+    task, values = CASES[case]
+    configs = _configs(task, values, tmp_path / "group")
+    assert unit_key(configs[0])[0] == "stacked" and len({unit_key(c) for c in configs}) == 1
+    data = [c.dataset() for c in configs]
+    folders = train_group(configs, data)
+    for config, dataset, folder in zip(configs, data, folders):
+        lone = hnn.run_experiment(hnn.tasks.task_config(task, {**config.to_dict(), "save_dir": str(tmp_path / "lone")}),
+                                  dataset)
+        (a, _, ma), (b, _, mb) = hnn.load_run(folder), hnn.load_run(lone)
+        # float32: vmap's batched kernels sum in other orders than a lone model's, 1e-7 relative a step;
+        # 20 Adam steps (the LNN's large init weights most) carry it to at most 2e-5 relative (measured)
+        for name, w in a.state_dict().items():
+            torch.testing.assert_close(w, b.state_dict()[name], rtol=1e-4, atol=1e-5 * b.state_dict()[name].abs().max())
+        np.testing.assert_allclose(ma["history"]["train_loss"], mb["history"]["train_loss"], rtol=1e-4)
+        np.testing.assert_allclose(ma["test_loss"], mb["test_loss"], rtol=1e-4)
+
+
+def test_a_stacked_member_that_fails_is_named_and_dropped_while_the_others_train_on(tmp_path, capsys):
+    configs = _configs("spring", {"model": "mechanical"}, tmp_path, seeds=(0, 1))
+    data = [c.dataset() for c in configs]
+    blown = dict(data[1])
+    blown["dxdt"] = np.asarray(data[1]["dxdt"]) * 1e30       # finite data, an infinite squared error
+    folders = train_group(configs, [data[0], blown])
+    assert isinstance(folders[1], hnn.grouped.GroupedRunFailed) and folders[1].step == 0
+    assert configs[1].name in str(folders[1]) and "not finite" in capsys.readouterr().out
+    lone = hnn.run_experiment(configs[0].__class__(**{**configs[0].to_dict(), "save_dir": str(tmp_path / "l")}),
+                              data[0])
+    for name, w in hnn.load_run(folders[0])[0].state_dict().items():
+        torch.testing.assert_close(w, hnn.load_run(lone)[0].state_dict()[name], rtol=1e-4, atol=1e-6)
+
+
+def test_groups_keep_what_differs_between_models_apart():
+    Spring = hnn.load_task("spring", "train").Config
+    base = Spring(model="mechanical")
+    assert unit_key(base) == unit_key(Spring(model="mechanical", seed=3, train_fraction=0.5, init="zero_bias"))
+    for other in (dict(hidden_dim=8), dict(learn_rate=2e-3), dict(model="dissipative"), dict(clip_grad=1.0)):
+        assert unit_key(Spring(**{"model": "mechanical", **other})) != unit_key(base), other
+    assert unit_key(Spring(model="hnn"))[0] == "closed_form"             # the faster batched closed form
+    assert unit_key(hnn.tasks.task_config("pixels", {})) is None          # its objective draws noise of its own
+
+
+@pytest.mark.parametrize("kind, method", [("hnn", "rk4"), ("separable", "leapfrog"), ("mechanical", "yoshida4"),
+                                          ("hnn", "midpoint"), ("baseline", "dopri5")])
+def test_a_group_rolls_out_as_each_of_its_models(kind, method):
+    args = {**hnn.tasks.task_config("spring", {"hidden_dim": 16, "model": kind}).to_dict(), "kind": kind}
+    models = []
+    for seed in range(3):
+        torch.manual_seed(seed)
+        models.append(hnn.kinds.model_from_args(args).double())
+    x0 = torch.randn(3, 4, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    t_eval, options = np.linspace(0.0, 1.0, 5), ({} if method == "dopri5" else {"dt": 0.05})
+    together = hnn.stacked.rollout_stacked(models, x0, t_eval, method=method, **options)
+    assert together.shape == (3, 4, 5, 2)
+    for g, model in enumerate(models):
+        alone = hnn.rollout(model, x0[g], t_eval, method=method, **options)
+        # float64: the batched products sum in other orders than one model's, a few ulps a step
+        torch.testing.assert_close(together[g], alone, rtol=1e-10, atol=1e-12)
+
+
+def test_a_sweep_groups_every_kind_on_a_gpu_and_the_closed_form_kinds_on_the_cpu():
+    from hnn import sweep
+    Spring = hnn.load_task("spring", "train").Config
+
+    def jobs(device, model, width=16):
+        return [sweep.Job(f"{model}/{s}", "spring", Spring(model=model, seed=s, hidden_dim=width, device=device))
+                for s in range(3)]
+    sizes = lambda units: sorted(len(u) for u in units)      # noqa: E731
+    assert sizes(sweep.plan_units(jobs("cpu", "hnn"))) == [3]                       # closed form: grouped
+    assert sizes(sweep.plan_units(jobs("cpu", "mechanical"))) == [1, 1, 1]          # as the docs' runs trained
+    assert sizes(sweep.plan_units(jobs("cpu", "mechanical"), group="all")) == [3]
+    assert sizes(sweep.plan_units(jobs("cuda", "mechanical"))) == [3]
+    assert sizes(sweep.plan_units(jobs("cuda", "hnn", width=200))) == [3]           # any width on a GPU
+    assert sizes(sweep.plan_units(jobs("cpu", "hnn", width=200))) == [1, 1, 1]      # compute-bound on a CPU
+    assert sizes(sweep.plan_units(jobs("cuda", "mechanical"), group="off")) == [1, 1, 1]
