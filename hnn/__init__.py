@@ -23,6 +23,7 @@ nothing of each other.
 - runs: config, cli, run folders, task discovery, the tasks' shared systems.
 """
 import importlib
+from typing import TYPE_CHECKING
 
 _LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
 
@@ -58,6 +59,23 @@ _PUBLIC = {
 }
 _ROOMS = ("integrators", "models")
 
+if TYPE_CHECKING:     # the public names spelled out for type checkers and editors (tests/test_layers.py
+    # holds them equal to _PUBLIC); at run time __getattr__ binds them on first use, so --help loads no torch
+    from .errors import ConvergenceError, DivergenceError  # noqa: F401
+    from .interface import Model  # noqa: F401
+    from .integrators import SOLVERS, Solver, get_solver, register_solver, rollout  # noqa: F401
+    from .models import (HNN, MLP, PixelHNN, SeparableHNN, DissipativeHNN, MechanicalHNN,  # noqa: F401
+                         ConstrainedHNN, build_model)
+    from .metrics import derivative_loss, energy_mse  # noqa: F401
+    from .objectives import DerivativeObjective, Objective  # noqa: F401
+    from .kinds import MODEL_KINDS, OBJECTIVES  # noqa: F401
+    from .training import train  # noqa: F401
+    from .evaluation import EnergyProtocol, evaluate_energy  # noqa: F401
+    from .config import RunConfig  # noqa: F401
+    from .runs import load_run, run_experiment  # noqa: F401
+    from .tasks import PROTOCOLS, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
+    from . import integrators, models  # noqa: F401
+
 
 def _load_all() -> None:
     """Import every module of every layer and bind the public names (this is where torch and scipy
@@ -85,8 +103,8 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    _load_all()
-    return sorted(globals())
+    # tab completion lists the public names without loading torch
+    return sorted(set(globals()) | set(__all__) | set(_LIGHT))
 
 
 __all__ = [name for names in _PUBLIC.values() for name in names] + list(_ROOMS)

@@ -130,8 +130,9 @@ def test_a_state_and_a_model_on_different_devices_is_one_error_naming_both():
     model = hnn.kinds.model_from_args({**_config("spring", {}, "cpu", ".").to_dict(), "kind": "hnn"}, device="meta")
     with pytest.raises(ValueError, match=r"x0 is on cpu but the model's weights are on meta.*x0.to\('meta'\)"):
         hnn.rollout(model, torch.zeros(2, 2), [0.0, 0.1], method="rk4")
-    with pytest.raises(ValueError, match="x0 is on cpu but the model's weights are on meta"):
-        hnn.rollout(model.time_derivative, torch.zeros(2, 2), [0.0, 0.1], method="rk4")
+    for field in (model.time_derivative, model.field):
+        with pytest.raises(ValueError, match="x0 is on cpu but the model's weights are on meta"):
+            hnn.rollout(field, torch.zeros(2, 2), [0.0, 0.1], method="rk4")
 
 
 def test_a_model_is_drawn_on_the_cpu_whatever_the_default_device():

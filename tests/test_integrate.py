@@ -194,3 +194,30 @@ def test_protocol_options_and_fixed_step_methods(spring):
     # per-trial time scales need every row in every call of f: dopri5 drops finished rows
     with pytest.raises(ValueError, match="keeps every row together"):
         hnn.evaluate_energy(spring, {}, dataclasses.replace(hnn.tasks.get_protocol("spring", "paper"), method="dopri5"))
+
+
+def test_an_option_the_method_does_not_take_is_one_error_naming_its_options():
+    x0, t = torch.ones(1, 2, dtype=torch.float64), [0.0, 0.1]
+    f = lambda x: torch.cat([x[:, 1:], -x[:, :1]], 1)      # noqa: E731
+    with pytest.raises(ValueError, match=r"method 'rk4' takes the options dt, max_norm, stats; got rtol"):
+        hnn.rollout(f, x0, t, method="rk4", rtol=1e-6)
+    with pytest.raises(ValueError, match="'leapfrog' takes .*got tol"):       # it would ignore a tolerance
+        hnn.rollout(f, x0, t, method="leapfrog", tol=1e-9)
+    with pytest.raises(ValueError, match="'dopri5' takes the options rtol, atol.*got dt"):
+        hnn.rollout(f, x0, t, method="dopri5", dt=0.01)
+    for name, solver in hnn.SOLVERS.items():      # what each declares is what its run accepts
+        if not solver.needs_hamiltonian:
+            assert "max_norm" in solver.accepts() and "stats" in solver.accepts(), name
+            hnn.rollout(f, x0, t, method=name, stats={}, max_norm=1e3)
+
+
+def test_a_model_s_bound_field_rolls_out_as_the_model():
+    """Given ``model.time_derivative``, a separable model's leapfrog still steps its halves one at a time."""
+    torch.manual_seed(0)
+    model = hnn.models.SeparableHNN(2, 16).double()
+    x0, t = torch.tensor([[0.5, 0.1]], dtype=torch.float64), np.linspace(0, 1, 5)
+    by_model, by_field = {}, {}
+    a = hnn.rollout(model, x0, t, method="leapfrog", dt=0.1, stats=by_model)
+    b = hnn.rollout(model.time_derivative, x0, t, method="leapfrog", dt=0.1, stats=by_field)
+    torch.testing.assert_close(a, b, rtol=0, atol=0)
+    assert by_field == by_model

@@ -2,6 +2,8 @@
 in hnn/, top-level or inside a function, goes to its own layer or a lower one, and integrators and
 models know nothing of each other."""
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import hnn
@@ -84,3 +86,19 @@ def test_the_rules_catch_an_upward_and_a_sideways_import():
     imports = {"errors": {"runs"}, "integrate": {"models", "errors"}, "models": set(), "runs": {"integrate"}}
     assert violations(layer_of, imports) == ["errors (base) imports runs (runs)",
                                              "integrate (integrators) imports models (models)"]
+
+
+def test_the_public_names_are_spelled_out_for_type_checkers():
+    """``hnn/__init__.py``'s ``if TYPE_CHECKING:`` imports name every public name from its module, as
+    ``_PUBLIC`` binds them at run time: go-to-definition and pyright see what ``hnn.rollout`` is."""
+    tree = ast.parse((PACKAGE / "__init__.py").read_text())
+    block = next(node for node in tree.body if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING")
+    spelled = {(node.module, alias.name) for node in block.body if isinstance(node, ast.ImportFrom) and node.module
+               for alias in node.names}
+    assert spelled == {(module, name) for module, names in hnn._PUBLIC.items() for name in names}
+
+
+def test_dir_lists_the_public_names_without_loading_torch():
+    code = "import sys, hnn; names = dir(hnn); print('rollout' in names, 'torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["True", "False"]

@@ -42,8 +42,11 @@ def _check_tolerance(solver: Solver, dtype: torch.dtype, options: dict) -> None:
 
 
 def field_device(f) -> torch.device | None:
-    """The device of the weights behind ``f`` (an ``nn.Module``, or a bound method of one, such as
-    ``model.time_derivative``), or None for a plain function (true dynamics), which runs anywhere."""
+    """The device of the weights behind ``f`` (an ``nn.Module``, a bound method of one, such as
+    ``model.time_derivative``, or a model's ``field``), or None for a plain function (true dynamics),
+    which runs anywhere."""
+    if isinstance(f, EnergyField):
+        f = f.whole
     owner = f if isinstance(f, torch.nn.Module) else getattr(f, "__self__", None)
     if not isinstance(owner, torch.nn.Module):
         return None
@@ -86,9 +89,9 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     """Integrate ``dx/dt = f(x)`` from every state of ``x0`` and sample at ``t_eval``.
 
     Args:
-        f: maps a ``(batch, dim)`` tensor to ``dx/dt`` of the same shape (a model's
-            ``time_derivative`` or a task's true dynamics), or an ``hnn.Model``, whose declared
-            ``field`` is stepped (a separable model's halves one at a time where a stage reads one).
+        f: maps a ``(batch, dim)`` tensor to ``dx/dt`` of the same shape (a task's true dynamics), or
+            an ``hnn.Model``, whose declared ``field`` is stepped (a separable model's halves one at a
+            time where a stage reads one); a model's bound ``time_derivative`` is taken as the model.
         x0: initial states, ``(batch, dim)`` (a single state ``(dim,)`` is treated as batch 1).
             Its dtype is the dtype ``f`` is evaluated in.
         t_eval: 1-D times (units of the system), starting at the time of ``x0``.
@@ -125,7 +128,9 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
         ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
 
     Raises:
-        ValueError: for an unknown ``method`` (naming the registered ones) or bad ``x0``, ``t_eval``.
+        ValueError: for an unknown ``method`` (naming the registered ones), an option the method does not
+            take (naming the ones it does: ``Solver.accepts``), bad ``x0`` or ``t_eval``, or ``x0`` on
+            another device than the model's weights.
         DivergenceError: when states or derivatives become non-finite or states exceed
             ``max_norm``, naming the trajectories and times (never a silent NaN);
             ``hnn.ConvergenceError`` (a subclass) when the midpoint iteration does not converge.
@@ -134,7 +139,11 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
     """
     solver = get_solver(method)
+    solver.check_options(options)
     device = field_device(f)
+    owner = getattr(f, "__self__", None)
+    if isinstance(owner, Model) and getattr(f, "__func__", None) is getattr(type(owner), "time_derivative", None):
+        f = owner           # a model's own field, given as model.time_derivative: step it as the model declares
     if isinstance(f, Model):
         f = f.field
     if type(f) is EnergyField and not solver.needs_hamiltonian:

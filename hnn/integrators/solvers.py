@@ -12,6 +12,7 @@ one-place change: write it (a ``hnn.integrators.fixed_step.Stepper`` for a fixed
 from __future__ import annotations
 
 import functools
+import inspect
 from dataclasses import dataclass
 from typing import Callable
 
@@ -19,7 +20,7 @@ import torch
 
 from .adaptive import DEFAULT_SCIPY_METHOD, dop853_rollout, dopri5_rollout, scipy_rollout
 from .discrete_gradient import DiscreteGradient
-from .fixed_step import RK4, Leapfrog, Midpoint, Stepper, Yoshida4, fixed_step_rollout
+from .fixed_step import RK4, ImplicitStepper, Leapfrog, Midpoint, Stepper, Yoshida4, fixed_step_rollout
 
 
 def _name_and_options(name: str, options: dict) -> str:
@@ -48,6 +49,8 @@ class Solver:
             tolerance), for any step size, not up to a bounded oscillation.
         needs_hamiltonian: it reads the field's H (an ``hnn.interface.EnergyField``, the ``field``
             of a model that declares ``conservative``), not only dx/dt: a plain field is refused.
+        options: the keyword options ``rollout`` passes it; any other is a ValueError naming these
+            (None: the keywords ``run`` takes).
     """
     name: str
     order: int
@@ -58,20 +61,44 @@ class Solver:
     label: Callable[[dict], str] | None = None
     energy_preserving: bool = False
     needs_hamiltonian: bool = False
+    options: tuple[str, ...] | None = None
+
+    def accepts(self) -> tuple[str, ...]:
+        """The keyword options this method takes (``options``, or ``run``'s keywords past ``f, x0, t``)."""
+        if self.options is not None:
+            return self.options
+        params = list(inspect.signature(self.run).parameters.values())[3:]
+        return tuple(p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY))
+
+    def check_options(self, options: dict) -> None:
+        """ValueError naming this method's options when ``options`` holds another (a tolerance given to a
+        fixed-step method, say, which it would otherwise ignore)."""
+        unknown = sorted(set(options) - set(self.accepts()))
+        if unknown:
+            raise ValueError(f"method {self.name!r} takes the options {', '.join(self.accepts())}; got "
+                             f"{', '.join(unknown)}: drop {'it' if len(unknown) == 1 else 'them'} or choose a "
+                             "method that takes them (hnn.SOLVERS; docs/integrators.md)")
 
     def describe(self, options: dict) -> str:
         """The integrator's name in reports when run with ``options``, e.g. ``'RK45'`` for solve_ivp's default."""
         return self.label(options) if self.label else _name_and_options(self.name, options)
 
 
+# the options of every fixed-step method, and of the implicit ones' fixed-point iteration
+FIXED_STEP_OPTIONS = ("dt", "max_norm", "stats")
+ITERATION_OPTIONS = ("tol", "max_iter")
+
+
 def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic: bool = False,
                       needs_separable: bool = False, energy_preserving: bool = False,
-                      needs_hamiltonian: bool = False) -> Solver:
-    """A ``Solver`` running ``stepper`` by ``hnn.integrators.fixed_step.fixed_step_rollout`` (options ``dt``,
-    ``max_norm``, ``stats``, and the implicit methods' ``tol``, ``max_iter``, ``base``)."""
+                      needs_hamiltonian: bool = False, options: tuple[str, ...] | None = None) -> Solver:
+    """A ``Solver`` running ``stepper`` by ``hnn.integrators.fixed_step.fixed_step_rollout``; its options
+    (default): ``dt``, ``max_norm``, ``stats``, and an ``ImplicitStepper``'s ``tol``, ``max_iter``."""
     run = functools.partial(fixed_step_rollout, method=name, stepper=stepper)
+    if options is None:
+        options = FIXED_STEP_OPTIONS + (ITERATION_OPTIONS if issubclass(stepper, ImplicitStepper) else ())
     return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run,
-                  energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian)
+                  energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian, options=options)
 
 
 def _scipy_label(options: dict) -> str:
@@ -88,7 +115,8 @@ SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
     fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True),
     fixed_step_solver("midpoint", Midpoint, order=2, symplectic=True),
     # with its default base='leapfrog'; base='midpoint' makes it symplectic for any H
-    fixed_step_solver("yoshida4", Yoshida4, order=4, symplectic=True, needs_separable=True),
+    fixed_step_solver("yoshida4", Yoshida4, order=4, symplectic=True, needs_separable=True,
+                      options=FIXED_STEP_OPTIONS + ("base",) + ITERATION_OPTIONS),
     # DGNet's integrator: keeps the field's own H exactly; Gonzalez's discrete gradient, or the field's own
     fixed_step_solver("discrete_gradient", DiscreteGradient, order=2, energy_preserving=True, needs_hamiltonian=True),
 )}
