@@ -25,7 +25,7 @@ from torch import nn
 
 from .integrators.discrete_gradient import energy_parts, structured
 from .interface import EnergyField, declared
-from .objectives import Objective, cut_paths, observed_coordinates
+from .objectives import PathObjective, cut_paths
 
 
 def pairs_from_paths(rows, path_points: int) -> np.ndarray:
@@ -41,7 +41,7 @@ def pairs_from_paths(rows, path_points: int) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([paths[:, :-1], paths[:, 1:]], axis=2).reshape(-1, 2 * rows.shape[1]))
 
 
-class DiscreteGradientObjective(Objective):
+class DiscreteGradientObjective(PathObjective):
     """Fit ``(x1 - x0) / dt`` with ``S grad-bar H(x0, x1)`` on rows ``[x0, x1]`` of consecutive states.
 
     ``dt``: their spacing (default: the dataset's ``dt``). The model must declare ``conservative``:
@@ -79,11 +79,3 @@ class DiscreteGradientObjective(Objective):
             return ((x1 - x0) / dt - structured(dg(x0, x1), S)).pow(2)
         return loss
 
-    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
-        self.observed = observed_coordinates(dataset)
-        self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
-        return {"loss": self.loss_for(model)}
-
-    def row_loss(self, model: nn.Module):
-        """The squared error of each pair's components, ``(rows, width)``."""
-        return self.loss_for(model)

@@ -74,6 +74,26 @@ def observed_coordinates(dataset: dict) -> str:
     return dataset.get("state", "canonical")
 
 
+class PathObjective(Objective):
+    """An objective fit on consecutive observed states ``dt`` apart (the trajectory objective's
+    snippets, DGNet's pairs): a subclass gives ``loss_for(model)``; ``train_options`` reads the
+    dataset's coordinates and time step first, and every row's loss is ``loss_for``'s."""
+    dt: float | None = None
+    observed: str = "canonical"
+
+    def loss_for(self, model: nn.Module):
+        raise NotImplementedError
+
+    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
+        self.observed = observed_coordinates(dataset)
+        declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
+        self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
+        return {"loss": self.loss_for(model)}
+
+    def row_loss(self, model: nn.Module):
+        return self.loss_for(model)
+
+
 class DerivativeObjective(Objective):
     """The paper's objective: fit ``time_derivative(x)`` to ``dxdt`` (an HNN, or an MLP as the baseline).
 

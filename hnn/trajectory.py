@@ -29,7 +29,7 @@ from torch import nn
 
 from .integrators.integrate import rollout
 from .interface import declared
-from .objectives import Objective, cut_paths, observed_coordinates
+from .objectives import PathObjective, cut_paths
 from .integrators.solvers import SOLVERS, get_solver
 
 SNIPPET_LOSSES = ("mae", "l2")
@@ -138,7 +138,7 @@ def snippets_from_paths(rows, path_points: int, steps: int) -> np.ndarray:
     return np.ascontiguousarray(paths.reshape(len(paths), -1, points * rows.shape[1]).reshape(-1, points * rows.shape[1]))
 
 
-class TrajectoryObjective(Objective):
+class TrajectoryObjective(PathObjective):
     """Fit by rolling out over snippets of ``steps + 1`` observed states ``dt`` apart.
 
     The dataset's ``snippets`` and ``test_snippets`` are ``(rows, (steps + 1) * width)``
@@ -175,13 +175,4 @@ class TrajectoryObjective(Objective):
                                 observed=self.observed)
         return loss
 
-    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
-        self.observed = observed_coordinates(dataset)
-        declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
-        self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
-        return {"loss": self.loss_for(model)}
-
-    def row_loss(self, model: nn.Module):
-        """The loss of each snippet, ``(rows,)``."""
-        return self.loss_for(model)
 

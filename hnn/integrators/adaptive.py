@@ -11,7 +11,7 @@ import numpy as np
 import torch
 from scipy.integrate import solve_ivp
 
-from .dop853 import DOP853
+from .dop853 import DOP853, rk_stages
 from ..errors import DivergenceError, divergence_error
 from .fixed_step import Field
 
@@ -103,11 +103,7 @@ class _Dopri5:
 
     def attempt(self, field, y, hx, K, flat, scale_tol):
         rows, dim = y.shape
-        for s in range(1, 7):       # stage s: y + h * sum_j a_sj k_j, as one small matrix product
-            stage = (self.A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
-            stage *= hx
-            stage += y
-            K[s] = field(stage)
+        stage = rk_stages(field, self.A_rows, range(1, 7), y, hx, K, flat)     # the last: the new state (FSAL)
         err = (self.E @ flat).numpy().reshape(rows, dim)
         err *= hx
         err /= scale_tol(y, stage)

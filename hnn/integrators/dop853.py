@@ -106,6 +106,19 @@ def _dense(coefficients: dict, length: int, dtype: torch.dtype) -> torch.Tensor:
     return row
 
 
+def rk_stages(field, A_rows, stages, y: np.ndarray, hx: np.ndarray, K: np.ndarray, flat: torch.Tensor) -> np.ndarray:
+    """The explicit Runge-Kutta stages ``stages`` of every row: ``K[s] = field(y + hx * sum_j A[s, j] K[j])``
+    with ``flat`` the rows of ``K`` flattened (its memory) and ``A_rows[s]`` row s of the tableau, each
+    stage one small matrix product; returns the last stage's state (an FSAL scheme's new state)."""
+    rows, dim = y.shape
+    for s in stages:
+        stage = (A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
+        stage *= hx
+        stage += y
+        K[s] = field(stage)
+    return stage
+
+
 class DOP853:
     """The scheme for ``per_row_rollout``: 8th order, error estimate of order 7 (``err^(-1/8)``),
     Hairer's step-size bounds (a step grows at most 6x and shrinks at most 3x) and his stabilized
@@ -128,11 +141,7 @@ class DOP853:
         """One step of every row from ``y`` with steps ``hx`` ``(rows, 1)`` and ``K[0] = f(y)``:
         fills ``K[1:13]`` and returns ``(y_new, err_norm, field calls)``, ``K[12]`` = f(y_new)."""
         rows, dim = y.shape
-        for s in range(1, 12):
-            stage = (self.A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
-            stage *= hx
-            stage += y
-            K[s] = field(stage)
+        rk_stages(field, self.A_rows, range(1, 12), y, hx, K, flat)
         b, e5, e3 = (self.BE @ flat[:12]).numpy().reshape(3, rows, dim)
         y_new = b * hx
         y_new += y
@@ -151,11 +160,7 @@ class DOP853:
         ``evaluate`` giving the state at ``t + sigma h`` of the rows ``j`` (indices into these rows)."""
         rows, dim = y.shape
         flat = torch.from_numpy(K.reshape(STAGES, -1))
-        for s in (13, 14, 15):
-            stage = (self.A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
-            stage *= hx
-            stage += y
-            K[s] = field(stage)
+        rk_stages(field, self.A_rows, (13, 14, 15), y, hx, K, flat)
         diff = y_new - y
         bspl = hx * K[0] - diff
         high = (self.D @ flat).numpy().reshape(4, rows, dim) * hx
