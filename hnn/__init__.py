@@ -48,7 +48,7 @@ _PUBLIC = {
     "integrators": ("SOLVERS", "Solver", "get_solver", "register_solver", "rollout"),
     "models": ("HNN", "MLP", "PixelHNN", "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "ConstrainedHNN",
                "build_model"),
-    "metrics": ("derivative_loss", "energy_mse"),
+    "metrics": ("derivative_mse", "energy_mse"),
     "objectives": ("DerivativeObjective", "Objective"),
     "kinds": ("MODEL_KINDS", "OBJECTIVES"),
     "training": ("train",),
@@ -66,7 +66,7 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .integrators import SOLVERS, Solver, get_solver, register_solver, rollout  # noqa: F401
     from .models import (HNN, MLP, PixelHNN, SeparableHNN, DissipativeHNN, MechanicalHNN,  # noqa: F401
                          ConstrainedHNN, build_model)
-    from .metrics import derivative_loss, energy_mse  # noqa: F401
+    from .metrics import derivative_mse, energy_mse  # noqa: F401
     from .objectives import DerivativeObjective, Objective  # noqa: F401
     from .kinds import MODEL_KINDS, OBJECTIVES  # noqa: F401
     from .training import train  # noqa: F401

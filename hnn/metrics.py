@@ -1,6 +1,6 @@
 """The paper's metrics, with the paper's error bars.
 
-- ``derivative_loss``: mean of (dx/dt - prediction)^2 over all elements, ± the element-wise
+- ``derivative_mse``: mean of (dx/dt - prediction)^2 over all elements, ± the element-wise
   standard deviation (unbiased) divided by sqrt(number of rows), as the original prints it.
 - ``energy_mse``: squared energy error, mean ± ``batch_means_se`` over 5 contiguous groups
   (the original's ``bootstrap_conf``: a batch-means standard error, not a bootstrap).
@@ -42,7 +42,7 @@ def mean_and_se(values) -> tuple[float, float]:
     return float(v.mean()), float(std / np.sqrt(rows))
 
 
-def derivative_loss(model, x, dxdt, chunk: int = 65536, field=None) -> tuple[float, float]:
+def derivative_mse(model, x, dxdt, chunk: int = 65536, field=None) -> tuple[float, float]:
     """The paper's train/test loss of ``model.time_derivative`` (or ``field``) on ``(x, dxdt)``, both ``(rows, dim)``."""
     param = next(model.parameters())
     x = torch.as_tensor(x, dtype=param.dtype, device=param.device)

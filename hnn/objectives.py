@@ -20,7 +20,7 @@ from torch import nn
 
 from .integrators.fixed_step import rk4_step
 from .interface import declared
-from .metrics import derivative_loss, mean_and_se
+from .metrics import derivative_mse, mean_and_se
 
 
 class Objective:
@@ -121,7 +121,7 @@ class DerivativeObjective(Objective):
         return options
 
     def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        return derivative_loss(model, inputs, targets, field=self.field)
+        return derivative_mse(model, inputs, targets, field=self.field)
 
 
 def pixel_loss(model, x: torch.Tensor, x_next: torch.Tensor, input_noise: float = 0.0, use_rk4: bool = False,

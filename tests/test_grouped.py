@@ -103,7 +103,7 @@ def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
     for config, folder in zip(configs, folders):
         model, args, metrics = hnn.load_run(folder)
         data = config.dataset()
-        test_loss = hnn.derivative_loss(model, data["test_x"], data["test_dxdt"])[0]
+        test_loss = hnn.derivative_mse(model, data["test_x"], data["test_dxdt"])[0]
         assert test_loss == pytest.approx(metrics["test_loss"], rel=1e-6)
         assert metrics["history"]["group_size"] == len(configs)
         assert args["kind"] == "hnn" and json.loads((folder / "args.json").read_text())["seed"] == config.seed

@@ -36,7 +36,7 @@ def test_energy_mse_trials_and_single_trajectory():
         hnn.energy_mse(e_true, e_pred[:, :50])
 
 
-def test_derivative_loss_of_a_perfect_model_is_zero(spring):
+def test_derivative_mse_of_a_perfect_model_is_zero(spring):
     import torch
 
     class Exact(torch.nn.Module):
@@ -47,4 +47,4 @@ def test_derivative_loss_of_a_perfect_model_is_zero(spring):
         def time_derivative(self, x):
             return spring.dynamics(x)
     x = torch.randn(20, 2, dtype=torch.float64)
-    assert hnn.derivative_loss(Exact(), x, spring.dynamics(x)) == (0.0, 0.0)
+    assert hnn.derivative_mse(Exact(), x, spring.dynamics(x)) == (0.0, 0.0)

@@ -148,10 +148,10 @@ def _ours_train(d: dict, steps: int):
 def job_train(d: dict, steps: int, repeats: int) -> tuple[dict, hnn.HNN]:
     t_ours, t_orig, (m_ours, _), (m_orig, _) = _interleave(
         lambda: _ours_train(d, steps), lambda: original.original_train(d, steps), repeats)
-    loss_ours = hnn.derivative_loss(m_ours, d["x"], d["dxdt"])[0]
-    loss_orig = hnn.derivative_loss(m_orig, d["x"], d["dxdt"])[0]
-    test_ours = hnn.derivative_loss(m_ours, d["test_x"], d["test_dxdt"])[0]
-    test_orig = hnn.derivative_loss(m_orig, d["test_x"], d["test_dxdt"])[0]
+    loss_ours = hnn.derivative_mse(m_ours, d["x"], d["dxdt"])[0]
+    loss_orig = hnn.derivative_mse(m_orig, d["x"], d["dxdt"])[0]
+    test_ours = hnn.derivative_mse(m_ours, d["test_x"], d["test_dxdt"])[0]
+    test_orig = hnn.derivative_mse(m_orig, d["test_x"], d["test_dxdt"])[0]
     check = floor_job.check("final full-set train loss, relative difference", floor_job.rel_diff(loss_ours, loss_orig),
                    TRAIN_REL_TOL, {"ours": loss_ours, "original": loss_orig,
                                    "test_loss_ours": test_ours, "test_loss_original": test_orig})
