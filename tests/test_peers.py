@@ -50,7 +50,7 @@ def test_the_card_names_the_cheapest_kind_within_2x_of_the_best():
                                    "d": {"seconds": 1}}}}
     lines = peers.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})
     # b is within 2x of a and cheaper; c is cheaper still but 2.1x off; d blew up
-    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b |"
+    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b | one seed: not tested |"
 
 
 def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
@@ -65,3 +65,25 @@ def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
     # the chain has no friction and its kinetic energy depends on the angles
     assert not {kind for kind in kinds if hnn.MODEL_KINDS[kind].dissipative or hnn.MODEL_KINDS[kind].separable}
     assert "dissipative" in hnn.MODEL_KINDS and "separable" in hnn.MODEL_KINDS
+
+
+def test_seeds_make_each_cell_a_mean_with_its_range_and_the_card_says_what_they_cannot_separate(tmp_path):
+    results = peers.main(["--out", str(tmp_path), "--seeds", "2"], settings={**TINY, "kinds": ("hnn", "mechanical")})
+    assert results["meta"]["seeds"] == [0, 1] and set(results["by_seed"]) == {0, 1}
+    for kind in ("hnn", "mechanical"):
+        one = [results["by_seed"][s]["chain1"][kind] for s in (0, 1)]
+        cell = results["rows"]["chain1"][kind]
+        if all("mean" in e for e in one):
+            assert cell["seeds"] == [e["mean"] for e in one] and cell["mean"] == pytest.approx(sum(cell["seeds"]) / 2)
+            assert cell["low"] == min(cell["seeds"]) and cell["high"] == max(cell["seeds"])
+    assert "2 seeds (0..1) a kind" in (tmp_path / "peers.md").read_text()
+
+
+def test_the_card_names_the_kinds_the_seeds_cannot_separate_from_the_best():
+    def entry(*seeds):
+        return {"mean": sum(seeds) / len(seeds), "seeds": list(seeds), "low": min(seeds), "high": max(seeds)}
+    rows = {"chain2": {"a": entry(1.0e-3, 1.4e-3), "b": entry(1.3e-3, 1.9e-3), "c": entry(1.6e-3, 2.0e-3),
+                       "seconds": {"a": {"seconds": 900}, "b": {"seconds": 100}, "c": {"seconds": 10}}}}
+    line = peers.card({"meta": {"kinds": ["a", "b", "c"]}, "rows": rows})[-1]
+    # b's range overlaps a's (1.3e-3 <= 1.4e-3): the seeds cannot tell them apart; c's does not
+    assert line.startswith("| 2 | a 1.20e-03 |") and line.endswith("| a, b, c | b |")

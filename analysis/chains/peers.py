@@ -1,6 +1,7 @@
 """The peers' published numbers on pendulum chains beside ours, on their own protocols (docs/peers.md).
 
-    python analysis/peers.py --jobs 2 --update-docs      # the whole table (about an hour on 2 cores)
+    python analysis/peers.py --jobs 2 --update-docs      # the whole table, 5 seeds (about 12 hours on 2 cores)
+    python analysis/peers.py --device cuda --update-docs # the same on a GPU, each row's seeds as one group
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
 
 Trains our model kinds (``kinds()``: every registered one that reads the chain's observed states, from
@@ -39,10 +40,13 @@ QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 6
          "max_iterations": 5000,
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
                                                            "total_steps": 100}}
-# 4000 steps of batch 200: 1000 of CHNN's 4-batch epochs, against their 2000. Their 8000 steps for
-# every kind would take about 2.4 hours of this 2-core machine (each kind's one-thread rate: docs/peers.md,
-# "What we tried"); at N = 2 the mechanical kind's mean error went from 2.8e-2 at 1500 steps to 7.2e-3 at 4000
-FULL = {"bobs": BOBS, "fields": {"total_steps": 4000}, "test_starts": 100, "lnn_starts": 40,
+# CHNN's budget: 8000 steps of batch 200, their 2000 epochs of 4 batches, on FULL_SEEDS seeds (#45: a verdict
+# on several seeds). One seed of it for every kind took about 2.4 hours of a 2-core machine (each kind's
+# one-thread rate: docs/peers.md, "What we tried"), so five are about 12 there; on a GPU a row's seeds of one
+# kind train as one group (--device cuda). The table of 4000 steps on one seed came first: at N = 2 the
+# mechanical kind's mean error went from 2.8e-2 at 1500 steps to 7.2e-3 at 4000
+FULL_SEEDS = 5
+FULL = {"bobs": BOBS, "fields": {"total_steps": 8000}, "test_starts": 100, "lnn_starts": 40,
         "lnn_fields": {"n_train": 100000, "n_test": 1000, "objective": "derivative", "total_steps": 8000}}
 
 
@@ -73,6 +77,11 @@ def kinds() -> tuple[str, ...]:
     return tuple(kind for kind in hnn.cli.model_choices(config)
                  if (hnn.MODEL_KINDS[kind].studied or kind in PEER_KINDS) and chain.structure_holds(kind)
                  and any(hnn.MODEL_KINDS[kind].reads(observed) for observed in ("velocity", "cartesian")))
+
+
+def plan_seeds(settings: dict, out: Path, seeds) -> list[sweep.Job]:
+    """``plan``'s jobs for every seed of ``seeds``: the sweep groups a row's seeds of one kind (``--group``)."""
+    return [job for seed in seeds for job in plan(settings, out, seed)]
 
 
 def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
@@ -221,6 +230,34 @@ def curves_figure(found: dict, path: Path) -> Path:
     return save_figure(fig, path)
 
 
+def over_seeds(by_seed: dict) -> dict:
+    """The rows of several seeds (``{seed: measure(...)}``) as one: per kind the mean over the seeds of each
+    seed's mean error, ``seeds`` (each seed's mean, in seed order), ``low``/``high`` (their range) and ``se``
+    (their standard error), the median of the seeds' medians, and ``failed`` (``{seed: why}``: blew up or
+    diverged in training); a kind no seed measured keeps the first seed's failure. The chaos floor and the
+    training seconds are the first seed's (the same starts and config)."""
+    first = by_seed[min(by_seed)]
+    out = {}
+    for row, entries in first.items():
+        merged = {"floor": entries.get("floor"), "seconds": entries.get("seconds", {})}
+        kinds = {k for rows in by_seed.values() for k in rows[row] if k not in ("floor", "seconds")}
+        for kind in sorted(kinds):
+            found = {seed: rows[row].get(kind) for seed, rows in sorted(by_seed.items())}
+            means = {seed: e["mean"] for seed, e in found.items() if e and "mean" in e}
+            failed = {seed: e.get("blew_up") or e.get("diverged") for seed, e in found.items() if e and "mean" not in e}
+            if not means:
+                merged[kind] = next(e for e in found.values() if e)
+                continue
+            values = np.array(list(means.values()))
+            merged[kind] = {"mean": float(values.mean()), "seeds": [float(v) for v in values],
+                            "low": float(values.min()), "high": float(values.max()),
+                            "se": float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0,
+                            "median": float(np.median([found[s]["median"] for s in means])),
+                            "n": found[next(iter(means))]["n"], "failed": failed}
+        out[row] = merged
+    return out
+
+
 def _cell(entry: dict | None) -> str:
     if entry is None:
         return "not trained"
@@ -228,7 +265,17 @@ def _cell(entry: dict | None) -> str:
         return f"blew up: {entry['blew_up']}"
     if "diverged" in entry:
         return f"failed in training: {entry['diverged']}"
+    if len(entry.get("seeds", ())) > 1:         # the mean over seeds, their range and how many
+        failed = f"; {len(entry['failed'])} more failed" if entry.get("failed") else ""
+        return f"{entry['mean']:.2e} ({entry['low']:.1e}..{entry['high']:.1e}, {len(entry['seeds'])} seeds{failed})"
     return f"{entry['mean']:.2e} ({entry['median']:.2e})"
+
+
+def _seeds_sentence(seeds) -> str:
+    if len(seeds) == 1:
+        return f"One seed ({seeds[0]}) a kind: each cell is that run's mean (median) over the test starts."
+    return (f"{len(seeds)} seeds ({seeds[0]}..{seeds[-1]}) a kind: each cell is the mean over the seeds of each "
+            "seed's mean over the test starts, with the seeds' range.")
 
 
 def markdown(results: dict) -> str:
@@ -257,7 +304,8 @@ def markdown(results: dict) -> str:
               f"Each CHNN-protocol kind trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
-              "cosine). Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
+              "cosine). " + _seeds_sentence(meta.get("seeds", [0])) +
+              " Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published CLNN | published NeuralODE | published floor | "
@@ -287,13 +335,26 @@ def markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def inseparable(row: dict, best: str, kinds) -> list[str]:
+    """The kinds of ``kinds`` whose seeds' range of mean errors overlaps ``best``'s (``over_seeds``): the
+    seeds cannot tell them from the best. Empty with one seed, where nothing is separated by seeds."""
+    if len(row[best].get("seeds", ())) < 2:
+        return []
+    return [kind for kind in kinds if kind != best and len(row[kind].get("seeds", ())) > 1
+            and row[kind]["low"] <= row[best]["high"]]
+
+
 def card(results: dict) -> list[str]:
-    """The chain card's lines: at each N the best kind on the mean, and the kind that is enough, the
-    one of least training seconds (one thread) whose mean is within 2x of the best."""
+    """The chain card's lines: at each N the best kind on the mean (over seeds where there are several), the
+    kind that is enough, the one of least training seconds (one thread) whose mean is within 2x of the best,
+    and the kinds the seeds cannot separate from the best (their ranges overlap)."""
     lines = ["", "### Which kind a chain requires (the card)", "",
-             "The best of our kinds on the mean error at each N, and the one that is enough: of the kinds within "
-             "2x of the best, the one that trains in the fewest seconds (one thread).", "",
-             "| N | best | enough (within 2x, fewest training s) | all within 2x |", "| --- | --- | --- | --- |"]
+             "The best of our kinds on the mean error at each N (the mean over seeds), and the one that is enough: "
+             "of the kinds within 2x of the best, the one that trains in the fewest seconds (one thread). With "
+             "several seeds, the last column names the kinds whose seeds' range of errors overlaps the best's: "
+             "the seeds cannot say which of them is better (with one seed it says nothing).", "",
+             "| N | best | enough (within 2x, fewest training s) | all within 2x | seeds cannot separate from the best |",
+             "| --- | --- | --- | --- | --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
@@ -304,8 +365,10 @@ def card(results: dict) -> list[str]:
         near = [kind for kind in means if means[kind] <= 2 * means[best]]
         seconds = {kind: row["seconds"].get(kind, {}).get("seconds", float("inf")) for kind in near}
         enough = min(near, key=seconds.get)
+        tied = inseparable(row, best, means) if len(row[best].get("seeds", ())) > 1 else None
         lines.append(f"| {name[len('chain'):]} | {best} {means[best]:.2e} | {enough} {means[enough]:.2e}, "
-                     f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} |")
+                     f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} | "
+                     f"{'one seed: not tested' if tied is None else ', '.join(tied) or 'none'} |")
     return lines
 
 
@@ -314,7 +377,10 @@ def _parser() -> argparse.ArgumentParser:
     commands.add_flags(p, quick="a smoke run: small data, 100 steps, N = 1, 2 (minutes)",
                        out="output folder (default: results/peers, or results-quick/peers with --quick)",
                        jobs="worker processes (1: in this process)")
-    p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of every run")
+    p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="the first seed")
+    p.add_argument("--seeds", type=hnn.cli.int_at_least(1), default=None,
+                   help="seeds seed .. seed + seeds - 1 of every run, the tables' means over them with their range "
+                        f"(default: {FULL_SEEDS} for the full table, 1 with --quick)")
     sweep.add_backend_flags(p)
     commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
@@ -331,14 +397,16 @@ def main(argv=None, settings: dict | None = None) -> dict:
     full = settings is None and not args.quick
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"
-    jobs = plan(settings, out, args.seed)
+    seeds = range(args.seed, args.seed + (args.seeds or (FULL_SEEDS if full else 1)))
+    jobs = plan_seeds(settings, out, seeds)
     runs, todo = sweep.reuse(jobs)
     print(f"peers: {len(runs)} runs reused, {len(todo)} to train", flush=True)
     trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address,
                                         device=args.device)
     runs.update(trained)
     tic = time.perf_counter()
-    rows = measure(runs, settings, args.seed)
+    by_seed = {seed: measure(runs, settings, seed) for seed in seeds}
+    rows = over_seeds(by_seed) if len(seeds) > 1 else by_seed[args.seed]
     found = curves(runs, settings, args.seed)
     if found:
         figure = curves_figure(found, out / "figures" / "peers-curves.png")
@@ -348,12 +416,12 @@ def main(argv=None, settings: dict | None = None) -> dict:
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
                         "quick": not full,     # --quick or a test's settings: not the table
                         "reused": len(jobs) - len(todo), "trained": len(todo),
-                        "kinds": list(settings["kinds"]),
+                        "kinds": list(settings["kinds"]), "seeds": list(seeds),
                         "steps": jobs[0].config.total_steps if jobs else None,
                         "optimizer": jobs[0].config.optimizer if jobs else None,
                         "schedule": jobs[0].config.schedule if jobs else None,
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
-               "rows": rows, "curves": found}
+               "rows": rows, "by_seed": by_seed if len(seeds) > 1 else None, "curves": found}
     text = markdown(results)
     commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {})
     # a model that failed in training is a result of its config (its table cell says how), not a broken run
