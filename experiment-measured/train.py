@@ -84,6 +84,11 @@ def main(argv=None):
     """Train one model, or reuse the complete run of these settings (--force retrains); returns its run
     folder (checkpoint, args.json, metrics.json, scale.json)."""
     config = hnn.cli.parse(Config, argv)
+    if config.data:
+        rec = hnn.load_task("measured").load(config.data, config.time, config.q, config.v, config.p, config.trial,
+                                             config.periodic, config.dxdt)
+        for note in rec.notes:
+            print(f"note: {note}")
     if config.v and config.model in ("hnn", "separable", "dissipative"):
         print(f"note: {hnn.load_task('measured').ASSUMES}")
     return hnn.cli.train(Config, argv)
