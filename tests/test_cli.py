@@ -148,6 +148,32 @@ def test_ctrl_c_is_one_line_and_exit_130(capsys):
         hnn.cli.run_main(_raises(KeyboardInterrupt()), ["--debug"])
 
 
+def test_a_misspelled_choice_gets_the_nearest_one(capsys):
+    Config = hnn.load_task("spring", "train").Config
+    for argv, hint in ((["--model", "seperable"], "did you mean 'separable'?"),
+                       (["--nonlinearity", "tahn"], "did you mean 'tanh'?")):
+        with pytest.raises(SystemExit):
+            hnn.cli.parse(Config, argv)
+        assert _assert_one_error(capsys.readouterr().err, argv[0], repr(argv[1])).endswith(hint)
+    with pytest.raises(SystemExit):
+        hnn.cli.parse(Config, ["--model", "zzzz"])
+    assert "did you mean" not in capsys.readouterr().err
+    with pytest.raises(ValueError, match="did you mean 'separable'"):
+        hnn.cli.check(Config(model="seperable"))
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt(), ValueError("a bad input found while running")])
+def test_a_run_stopped_before_saving_leaves_no_save_dir_it_created(tmp_path, monkeypatch, stop):
+    Config = hnn.load_task("spring", "train").Config
+    monkeypatch.setattr(hnn.runs, "run_experiment", _raises(stop))
+    (tmp_path / "kept").mkdir()
+    for save_dir in (tmp_path / "new" / "deeper", tmp_path / "kept" / "new", tmp_path / "kept"):
+        with pytest.raises(type(stop)):
+            hnn.cli.train(Config, ["--total_steps", "2", "--save_dir", str(save_dir)])
+        # the folders it created are removed again; the one that was there stays
+        assert [p.name for p in tmp_path.iterdir()] == ["kept"] and not any((tmp_path / "kept").iterdir())
+
+
 def test_run_main_leaves_bugs_alone():
     with pytest.raises(ZeroDivisionError):
         hnn.cli.run_main(_raises(ZeroDivisionError("a bug, not bad input")), [])
