@@ -297,7 +297,8 @@ def train(cls, argv: Sequence[str] | None = None, before: Callable | None = None
     A complete run of the same settings (``RunConfig.identity``) in ``--save_dir`` is reused, not
     retrained; ``--force`` retrains it and replaces its folder. Prints one line: where the run
     is and what happened to it (trained, reused, replaced; a ``--save_dir`` created on the way).
-    Torch loads after the flags and the config's own input checks pass. ``before(config)``, if given,
+    Torch loads after the flags and the config's own input checks pass; the run trains on
+    ``config.threads`` torch threads (the caller's count is restored after). ``before(config)``, if given,
     runs after them (a task's notes on its input). A ``--save_dir`` created here and left empty by an
     error or Ctrl-C is removed again.
     """
@@ -312,7 +313,13 @@ def train(cls, argv: Sequence[str] | None = None, before: Callable | None = None
             print(f"reused the complete run at {found}: it was trained with these settings already, so nothing "
                   "trained (--force retrains it and replaces the folder)")
             return found
-        folder = run_experiment(config)
+        import torch
+        threads = torch.get_num_threads()
+        torch.set_num_threads(config.threads)       # the run's own count (docs/speed.md#threads), the caller's after
+        try:
+            folder = run_experiment(config)
+        finally:
+            torch.set_num_threads(threads)
     except BaseException:
         for new in created:         # deepest first; rmdir refuses a folder that holds anything
             try:

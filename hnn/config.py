@@ -87,6 +87,10 @@ class RunConfig:
     seed: int = setting(0, "seeds the dataset, the init and the minibatches", parse=cli.int_at_least(0))
     save_dir: str = setting(".", "folder that receives the run folder <name>-<model>-seed<seed>-<hash>/")
     device: str = setting("cpu", "torch device, e.g. cpu or cuda", parse=cli.device)
+    threads: int = setting(1, "torch threads of a train.py run: a second speeds a step up on an idle box but slows it "
+                              "many times over on a shared one (docs/speed.md#threads); args.json records the count "
+                              "the run used, which is not part of its identity", parse=cli.int_at_least(1),
+                           display_only=True)
     dtype: str = setting("float32", "dtype of the model and the data", choices=("float32", "float64"))
     debug: bool = setting(False, "on an input error (a missing data file, say) or Ctrl-C, show the full traceback "
                                  "instead of one line", display_only=True)

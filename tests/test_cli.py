@@ -196,6 +196,30 @@ def test_a_rerun_reuses_the_complete_run_and_force_replaces_it(tmp_path, capsys)
     assert hnn.load_run(run)[1]["total_steps"] == 2
 
 
+def test_the_thread_count_is_the_runs_own_recorded_and_outside_its_identity(tmp_path, capsys):
+    import torch
+    Config = hnn.load_task("spring", "train").Config
+    assert Config().threads == 1 and "threads" in Config.display_only()
+    assert Config(threads=2).key() == Config().key()
+    caller = torch.get_num_threads()
+    argv = ["--total_steps", "2", "--hidden_dim", "8", "--save_dir", str(tmp_path)]
+    run = hnn.cli.train(Config, argv + ["--threads", "2"])
+    assert torch.get_num_threads() == caller                  # the caller's count is back
+    args, metrics = hnn.load_run(run)[1:3]
+    assert args["threads"] == 2 and metrics["torch_threads"] == 2
+    assert hnn.cli.train(Config, argv) == run                 # another count: the same run, reused
+    assert capsys.readouterr().out.splitlines()[-1].startswith("reused")
+    hnn.cli.train(Config, argv + ["--force"])                 # the default: one thread, recorded
+    assert hnn.load_run(run)[1]["threads"] == 1 == hnn.load_run(run)[2]["torch_threads"]
+    # from Python a run keeps the caller's count, and records it
+    torch.set_num_threads(2)
+    try:
+        folder = hnn.run_experiment(Config(total_steps=2, hidden_dim=8, seed=1, save_dir=str(tmp_path)))
+    finally:
+        torch.set_num_threads(caller)
+    assert hnn.load_run(folder)[1]["threads"] == 2
+
+
 def test_display_only_flags_stay_out_of_the_identity():
     Config = hnn.load_task("spring", "train").Config
     base = Config()
