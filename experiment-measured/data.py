@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +48,10 @@ reader = hnn.load_task("measured", "reader")
 
 UNIFORM = 0.05          # a snippet's steps may differ from the nominal step by this fraction of it
 MIN_ROWS = 2            # a trial's train part and its held-out part need at least this many rows each
+# a non-periodic --q column that moves this many turns (2 pi) one way in a trial, at least ONE_WAY of all its
+# travel, looks like an unwrapped angle: an oscillating position (a spring's, in pixels) comes back (0.1 or
+# less on the archive's files), a rotating arm does not (0.3 to 0.5 on them)
+TURNS, ONE_WAY = 2, 0.25
 ASSUMES = ("on [q, v] the hnn, separable and dissipative kinds take v for the momentum: they assume p = m v with "
            "one constant mass m for every coordinate (right for a point mass on a spring, equal masses, a rigid "
            "pendulum's angle; wrong for a configuration-dependent mass: use mechanical, which learns M(q), or "
@@ -58,7 +62,8 @@ ASSUMES = ("on [q, v] the hnn, separable and dissipative kinds take v for the mo
 class Recording:
     """Measurements in the user's units: times ``t`` ``(N,)``, positions ``q`` ``(N, n)`` (angles
     unwrapped), their velocities or momenta ``s`` ``(N, n)``, ``trial`` ids ``(N,)``, optional
-    derivative columns ``dxdt`` ``(N, 2n)``; ``state`` is "velocity" or "canonical"."""
+    derivative columns ``dxdt`` ``(N, 2n)``; ``state`` is "velocity" or "canonical"; ``notes``: one
+    line each for the user (how the file was read, a position that looks like an unwrapped angle)."""
     path: str
     t: np.ndarray
     q: np.ndarray
@@ -71,6 +76,7 @@ class Recording:
     where: list                   # where each row is in the file ("line 12")
     dxdt: np.ndarray | None = None
     sha256: str = ""
+    notes: list = field(default_factory=list)
 
     def trials(self) -> list[np.ndarray]:
         """The row indices of each trial, in file order (a trial's rows are contiguous)."""
@@ -130,7 +136,28 @@ def load(data, time: str = "t", q: str = "", v: str = "", p: str = "", trial: st
                     where, deriv, hashlib.sha256(Path(table.path).expanduser().read_bytes()).hexdigest())
     for rows in rec.trials():       # angles as encoders log them may be many turns away; differences need them whole
         rec.q[rows[:, None], np.flatnonzero(mask)] = np.unwrap(qs[rows][:, mask], axis=0)
+    rec.notes = table.notes + _angle_hints(rec)
     return rec
+
+
+def _angle_hints(rec: Recording) -> list[str]:
+    """One line naming the non-periodic positions that turn like unwrapped angles (``TURNS``, ``ONE_WAY``)."""
+    turning = {}
+    for j in np.flatnonzero(~rec.periodic):
+        for rows in rec.trials():
+            q = rec.q[rows, j]
+            net, travel = abs(q[-1] - q[0]), np.abs(np.diff(q)).sum()
+            if net >= TURNS * 2 * math.pi and net >= ONE_WAY * travel:
+                turning[rec.q_names[j]] = f"{net / (2 * math.pi):.1f} turns in trial {rec.trial[rows[0]]:g}"
+                break
+    if not turning:
+        return []
+    said = ", ".join(f"{name!r} ({where})" for name, where in turning.items())
+    verb = "moves" if len(turning) == 1 else "move"
+    return [f"--q {said} {verb} by whole turns of 2 pi one way, as an unwrapped angle does: if "
+            f"{'it is an angle' if len(turning) == 1 else 'they are angles'} in radians, pass --periodic "
+            f"{','.join(turning)} (read as a position, an unwrapped angle never comes back and no kind predicts it well)"]
+
 
 
 def segments(t: np.ndarray, max_gap: float) -> list[np.ndarray]:

@@ -6,10 +6,14 @@
 Text (``.csv``, ``.txt``, anything not ``.npz``): the first non-blank line names the columns,
 optionally after a leading ``%`` or ``#`` (as MATLAB and gnuplot write them); the cells are
 separated by commas if the header has one, else by whitespace. Later lines starting with ``%``
-or ``#`` are comments. A header that names exactly two columns fewer than the rows hold, and
-names neither ``trial`` nor ``t``, is read as Schmidt & Lipson's archive writes its files
-(``% x v`` over the columns trial, t, x, v): the two unnamed leading columns are ``trial`` and
-``t``. ``.npz``: every array of the archive is a column, all 1-D and of one length.
+or ``#`` are comments. A header that names neither ``trial`` nor ``t`` is read as Schmidt &
+Lipson's archive (``invar_datasets.zip``) writes its files, when the rows hold two more cells than
+it names (``% x v`` over trial, t, x, v: the two unnamed leading columns are ``trial`` and ``t``),
+or two more and then as many again (``% o v`` over trial, t, o, v, do/dt, dv/dt: the unnamed
+trailing columns are the archive's own finite-difference derivatives of the named ones, in order,
+named ``d<name>/dt``; ``Table.notes`` says so, and nothing uses them unless ``--dxdt`` names
+them). Any other count of cells is refused with the header line to write. ``.npz``: every array
+of the archive is a column, all 1-D and of one length.
 
 Every malformed input raises ``ValueError`` with one line: the file, the line (text) or row
 (npz), the column, the value and what to do.
@@ -17,7 +21,7 @@ Every malformed input raises ``ValueError`` with one line: the file, the line (t
 from __future__ import annotations
 
 import difflib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +33,14 @@ COMMENTS = ("%", "#")
 @dataclass
 class Table:
     """A table read from ``path``: column ``names`` and float64 ``values`` ``(rows, columns)``;
-    ``lines`` ``(rows,)`` are where each row sits in the file, counted in ``unit`` ("line" or "row")."""
+    ``lines`` ``(rows,)`` are where each row sits in the file, counted in ``unit`` ("line" or "row");
+    ``notes``: one line each about how the file was read (the archive's unnamed columns)."""
     path: str
     names: list[str]
     values: np.ndarray
     lines: np.ndarray
     unit: str = "line"
+    notes: list[str] = field(default_factory=list)
 
     def where(self, row: int) -> str:
         """Where data row ``row`` (0-based) is in the file, e.g. ``'line 12'``."""
@@ -79,6 +85,29 @@ def _header(line: str) -> tuple[list[str], str | None]:
     return [name.strip() for name in text.split(sep)], sep
 
 
+def _archive_names(path, header_line: int, names: list[str], width: int, line: int,
+                   sep: str | None) -> tuple[list[str], list[str]]:
+    """The names of a row of ``width`` cells under the header's ``names``, and the notes on them: the
+    header's own, or the archive's layouts (see the module's docstring); any other width is refused."""
+    if width == len(names):
+        return names, []
+    named = len(names)
+    if not set(ARCHIVE_COLUMNS) & set(names):
+        if width == named + len(ARCHIVE_COLUMNS):
+            return list(ARCHIVE_COLUMNS) + names, []
+        derived = [f"d{name}/dt" for name in names]
+        if width == 2 * named + len(ARCHIVE_COLUMNS) and not set(derived) & set(names):
+            return list(ARCHIVE_COLUMNS) + names + derived, [
+                f"{path}: the rows hold {width} cells under a header naming {named}: read as Schmidt & Lipson's "
+                f"archive writes them, trial, t, the named columns, then d/dt of each ({', '.join(derived)}; the "
+                "archive's own estimates, used only if --dxdt names them)"]
+    lead = [] if set(ARCHIVE_COLUMNS) & set(names) or width < named + 2 else list(ARCHIVE_COLUMNS)
+    write = (lead + names + [f"c{i}" for i in range(len(lead) + named + 1, width + 1)])[:width]
+    header = ",".join(write) if sep == "," else "% " + " ".join(write)
+    raise ValueError(f"{path}: line {line}: {width} cells, but the header (line {header_line}) names {named} columns "
+                     f"({', '.join(names)}); write a header naming every column in order, e.g. {header!r}")
+
+
 def _read_text(path: Path) -> Table:
     try:
         text = path.read_bytes().decode("utf-8-sig")
@@ -100,9 +129,7 @@ def _read_text(path: Path) -> Table:
     body = [(n, line) for n, line in numbered[1:] if not line.startswith(COMMENTS)]
     if not body:
         raise ValueError(f"{path}: the file has a header and no rows of numbers; expected one row per sample")
-    width = len(body[0][1].split(sep))
-    if width == len(names) + len(ARCHIVE_COLUMNS) and not set(ARCHIVE_COLUMNS) & set(names):
-        names = list(ARCHIVE_COLUMNS) + names       # the archive's convention (see the module's docstring)
+    names, notes = _archive_names(path, header_line, names, len(body[0][1].split(sep)), body[0][0], sep)
     rows, lines = [], []
     for number, line in body:
         cells = [cell.strip() for cell in line.split(sep)]
@@ -111,7 +138,7 @@ def _read_text(path: Path) -> Table:
                              f"({', '.join(names)}); every row needs one cell per column")
         rows.append([_number(cell, path, number, name) for cell, name in zip(cells, names)])
         lines.append(number)
-    return Table(str(path), names, np.asarray(rows, dtype=np.float64), np.asarray(lines), "line")
+    return Table(str(path), names, np.asarray(rows, dtype=np.float64), np.asarray(lines), "line", notes)
 
 
 def _read_npz(path: Path) -> Table:

@@ -80,13 +80,22 @@ class Config(hnn.RunConfig):
                                                     "periodic": dataset["periodic"], "data": dataset["cache_key"]})
 
 
+def _notes(config: Config) -> None:
+    """The notes on this input, before training: how the file was read, a position that looks like an
+    unwrapped angle, and what the kind assumes of velocities."""
+    data = hnn.load_task("measured")
+    if config.data:
+        for note in data.load(config.data, config.time, config.q, config.v, config.p, config.trial, config.periodic,
+                              config.dxdt).notes:
+            print(f"note: {note}")
+    if config.v and config.model in ("hnn", "separable", "dissipative"):
+        print(f"note: {data.ASSUMES}")
+
+
 def main(argv=None):
     """Train one model, or reuse the complete run of these settings (--force retrains); returns its run
     folder (checkpoint, args.json, metrics.json, scale.json)."""
-    config = hnn.cli.parse(Config, argv)
-    if config.v and config.model in ("hnn", "separable", "dissipative"):
-        print(f"note: {hnn.load_task('measured').ASSUMES}")
-    return hnn.cli.train(Config, argv)
+    return hnn.cli.train(Config, argv, before=_notes)
 
 
 if __name__ == "__main__":

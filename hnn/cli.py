@@ -63,7 +63,12 @@ class Parser(argparse.ArgumentParser):
 
     def _suggestion(self, message: str) -> str:
         """"; did you mean --x?" for each unknown flag of an "unrecognized arguments" ``message``
-        that is close to a real one; empty otherwise."""
+        that is close to a real one, or "; did you mean 'x'?" for an "invalid choice" close to one of
+        the flag's choices; empty otherwise."""
+        choice = re.match(r"argument (--\w+): invalid choice: '([^']*)'", message)
+        if choice:
+            action = self._option_string_actions.get(choice.group(1))
+            return _did_you_mean(choice.group(2), [str(c) for c in getattr(action, "choices", None) or ()])
         if not message.startswith("unrecognized arguments:"):
             return ""
         known = [flag for flag in self._option_string_actions if flag.startswith("--")]
@@ -74,6 +79,12 @@ class Parser(argparse.ArgumentParser):
             if close:
                 hints.append(f"{flag}: did you mean {close[0]}?")
         return "; " + "; ".join(hints) if hints else ""
+
+
+def _did_you_mean(value: str, choices: Sequence[str]) -> str:
+    """"; did you mean 'x'?" for the choice nearest ``value`` ("seperable" -> separable), or empty."""
+    close = difflib.get_close_matches(value, list(choices), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -238,7 +249,7 @@ def parse(cls, argv: Sequence[str] | None = None):
 
 
 def _parse(cls, argv: Sequence[str] | None) -> tuple:
-    """``(config, the save_dir this parse created or None)``."""
+    """``(config, the folders this parse created for save_dir, deepest first: none if it existed)``."""
     parser = make_parser(cls)
     values = vars(parser.parse_args(argv))
     # the original's --baseline is --model baseline: this is the one place it is mapped
@@ -248,7 +259,8 @@ def _parse(cls, argv: Sequence[str] | None) -> tuple:
             parser.error(f"--baseline contradicts --model {model}; pass one of them")
         model = "baseline"
     values["model"] = model
-    created = None if Path(values["save_dir"]).exists() else Path(values["save_dir"])
+    target = Path(values["save_dir"])
+    created = [folder for folder in (target, *target.parents) if not folder.exists()]
     try:
         check_save_dir(values["save_dir"])
     except ValueError as err:
@@ -264,7 +276,8 @@ def check(config) -> None:
         value, meta = getattr(config, f.name), field_meta(cls, f.name)
         choices = model_choices(cls) if f.name == "model" else meta.get("choices")
         if choices and value not in choices:
-            raise ValueError(f"{f.name}={value!r}: choose one of {', '.join(map(str, choices))}")
+            raise ValueError(f"{f.name}={value!r}: choose one of {', '.join(map(str, choices))}"
+                             + _did_you_mean(str(value), [str(c) for c in choices]))
         if isinstance(value, bool) or (value is None and f.default is None):     # a switch, or an unset option
             continue
         if meta.get("parse") or f.name == "input_dim":
@@ -278,24 +291,43 @@ def check(config) -> None:
 # running a train.py as a command
 
 
-def train(cls, argv: Sequence[str] | None = None) -> Path:
+def train(cls, argv: Sequence[str] | None = None, before: Callable | None = None) -> Path:
     """A ``train.py``'s command: the run of config class ``cls`` that ``argv`` asks for; returns its folder.
 
     A complete run of the same settings (``RunConfig.identity``) in ``--save_dir`` is reused, not
     retrained; ``--force`` retrains it and replaces its folder. Prints one line: where the run
     is and what happened to it (trained, reused, replaced; a ``--save_dir`` created on the way).
-    Torch loads after the flags and the config's own input checks pass.
+    Torch loads after the flags and the config's own input checks pass; the run trains on
+    ``config.threads`` torch threads (the caller's count is restored after). ``before(config)``, if given,
+    runs after them (a task's notes on its input). A ``--save_dir`` created here and left empty by an
+    error or Ctrl-C is removed again.
     """
     config, created = _parse(cls, argv)
-    config.check_inputs()
-    from .runs import find_run, run_experiment      # the heavy imports, once the input is known good
-    found = find_run(config)
-    if found is not None and not config.force:
-        print(f"reused the complete run at {found}: it was trained with these settings already, so nothing "
-              "trained (--force retrains it and replaces the folder)")
-        return found
-    folder = run_experiment(config)
-    notes = [f"created {created}, which did not exist"] if created else []
+    try:
+        config.check_inputs()
+        if before is not None:
+            before(config)
+        from .runs import find_run, run_experiment      # the heavy imports, once the input is known good
+        found = find_run(config)
+        if found is not None and not config.force:
+            print(f"reused the complete run at {found}: it was trained with these settings already, so nothing "
+                  "trained (--force retrains it and replaces the folder)")
+            return found
+        import torch
+        threads = torch.get_num_threads()
+        torch.set_num_threads(config.threads)       # the run's own count (docs/speed.md#threads), the caller's after
+        try:
+            folder = run_experiment(config)
+        finally:
+            torch.set_num_threads(threads)
+    except BaseException:
+        for new in created:         # deepest first; rmdir refuses a folder that holds anything
+            try:
+                new.rmdir()
+            except OSError:
+                break
+        raise
+    notes = [f"created {created[0]}, which did not exist"] if created else []
     if found is not None:
         notes.append("replaced the complete run of the same settings that was there (--force)")
     print(f"saved the run to {folder}" + (f" ({'; '.join(notes)})" if notes else ""))

@@ -96,6 +96,10 @@ class RunConfig:
     device: str = setting("cpu", "torch device, e.g. cpu, cuda or cuda:1; recorded in args.json, not part of the "
                                  "run's identity (a run trained on a GPU is reused on a CPU, and the other way)",
                           parse=cli.device, identity_value="cpu")
+    threads: int = setting(1, "torch threads of a train.py run: a second speeds a step up on an idle box but slows it "
+                              "many times over on a shared one (docs/speed.md#threads); args.json records the count "
+                              "the run used, which is not part of its identity", parse=cli.int_at_least(1),
+                           display_only=True)
     dtype: str = setting("float32", "dtype of the model and the data", choices=("float32", "float64"))
     debug: bool = setting(False, "on an input error (a missing data file, say) or Ctrl-C, show the full traceback "
                                  "instead of one line", display_only=True)

@@ -2,7 +2,7 @@
 ``--help`` and a flag error answer at once: the activations, the inits, the field types and the objectives.
 
 The modules that implement them (``hnn/models/``, ``hnn/trajectory.py``) hold their own
-tables; ``tests/test_startup.py`` checks that these names are exactly theirs. The model kinds'
+tables; ``tests/test_kind_docs.py`` checks that these names are exactly theirs. The model kinds'
 names and prose are ``hnn.kind_docs.KIND_DOCS``.
 """
 NONLINEARITIES = ("tanh", "relu", "sigmoid", "softplus", "selu", "elu", "swish")

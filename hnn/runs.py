@@ -85,7 +85,9 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     missing = [key for key in objective.arrays if key not in dataset]
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
-    saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
+    # the threads it ran on, as torch has them: a train.py sets config.threads; a sweep or a caller its own
+    saved = {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,
+             "dataset_cache_key": dataset.get("cache_key")}
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
     model = model_from_args(saved, config.device)

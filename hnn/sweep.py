@@ -25,6 +25,7 @@ group``), on a GPU all of them (``DEVICE_GROUP_MAX``).
 """
 from __future__ import annotations
 
+import contextlib
 import concurrent.futures
 import json
 import multiprocessing
@@ -359,12 +360,21 @@ def check_backend(parser, args) -> None:
             parser.error(str(err))
 
 
+@contextlib.contextmanager
+def _restored_threads(count: int):
+    """Torch's thread count back to ``count`` on the way out, however the block ends."""
+    try:
+        yield
+    finally:
+        torch.set_num_threads(count)
+
+
 def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "local",
                ray_address: str | None = None, group: str = "off", device: str | None = None) -> tuple[dict, dict]:
     """Train ``jobs``; ``({key: run folder or exception}, seconds)``.
 
-    ``backend="local"``: here (``n_jobs`` 1) or in ``n_jobs`` worker processes with ``cores //
-    n_jobs`` threads each; ``"ray"``: one Ray task per run with as many threads (and CPUs asked of
+    ``backend="local"``: here (``n_jobs`` 1, on one thread, the caller's count restored after) or in
+    ``n_jobs`` worker processes with ``cores // n_jobs`` threads each; ``"ray"``: one Ray task per run with as many threads (and CPUs asked of
     Ray), on the Ray at ``ray_address`` (None: a local one, or the one already initialized). A run
     that fails maps to a ``RunFailed``, one whose task cannot run here to that task's error.
     ``seconds`` holds the wall time, the backend, jobs, threads per job and each run's data /
@@ -382,11 +392,15 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     if n_jobs < 1:
         raise ValueError(f"n_jobs {n_jobs}: must be at least 1 (1 = train in this process)")
     in_process = backend == "local" and n_jobs == 1
-    threads = torch.get_num_threads() if in_process else max(1, cores() // n_jobs)
+    # here, one thread as a train.py (docs/speed.md#threads): on a shared box a second slows runs many times over
+    threads = 1 if in_process else max(1, cores() // n_jobs)
     tic, done, per_run = time.perf_counter(), {}, {}
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
-    with interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
+    caller = torch.get_num_threads()
+    if in_process:
+        torch.set_num_threads(threads)
+    with _restored_threads(caller), interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
                                           disable=None, dynamic_ncols=True) as bar:
         data, data_seconds, skipped = _build_datasets(jobs, bar)
         done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})

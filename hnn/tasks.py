@@ -42,7 +42,7 @@ class TaskSpec:
             has its own ``evaluate``); the one named ``'paper'`` is compared with the paper's number.
         paper: the published numbers, ``{metric: {model: (mean, ±)}}`` for ``train_loss``,
             ``test_loss`` and ``energy_mse``.
-        figures: names in the analysis package's figure registry (``hnn_analysis.registry.FIGURES``),
+        figures: names in the analysis package's figure registry (``hnn_analysis.paper.registry.FIGURES``),
             drawn in this order by ``analysis/reproduce.py``.
         figure_settings: what those figures need from the task, ``{figure name: {setting: value}}``
             plus shared keys (``x0``, the start state of the phase-plane figures).

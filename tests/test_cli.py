@@ -148,6 +148,32 @@ def test_ctrl_c_is_one_line_and_exit_130(capsys):
         hnn.cli.run_main(_raises(KeyboardInterrupt()), ["--debug"])
 
 
+def test_a_misspelled_choice_gets_the_nearest_one(capsys):
+    Config = hnn.load_task("spring", "train").Config
+    for argv, hint in ((["--model", "seperable"], "did you mean 'separable'?"),
+                       (["--nonlinearity", "tahn"], "did you mean 'tanh'?")):
+        with pytest.raises(SystemExit):
+            hnn.cli.parse(Config, argv)
+        assert _assert_one_error(capsys.readouterr().err, argv[0], repr(argv[1])).endswith(hint)
+    with pytest.raises(SystemExit):
+        hnn.cli.parse(Config, ["--model", "zzzz"])
+    assert "did you mean" not in capsys.readouterr().err
+    with pytest.raises(ValueError, match="did you mean 'separable'"):
+        hnn.cli.check(Config(model="seperable"))
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt(), ValueError("a bad input found while running")])
+def test_a_run_stopped_before_saving_leaves_no_save_dir_it_created(tmp_path, monkeypatch, stop):
+    Config = hnn.load_task("spring", "train").Config
+    monkeypatch.setattr(hnn.runs, "run_experiment", _raises(stop))
+    (tmp_path / "kept").mkdir()
+    for save_dir in (tmp_path / "new" / "deeper", tmp_path / "kept" / "new", tmp_path / "kept"):
+        with pytest.raises(type(stop)):
+            hnn.cli.train(Config, ["--total_steps", "2", "--save_dir", str(save_dir)])
+        # the folders it created are removed again; the one that was there stays
+        assert [p.name for p in tmp_path.iterdir()] == ["kept"] and not any((tmp_path / "kept").iterdir())
+
+
 def test_run_main_leaves_bugs_alone():
     with pytest.raises(ZeroDivisionError):
         hnn.cli.run_main(_raises(ZeroDivisionError("a bug, not bad input")), [])
@@ -168,6 +194,30 @@ def test_a_rerun_reuses_the_complete_run_and_force_replaces_it(tmp_path, capsys)
     line = capsys.readouterr().out.splitlines()[-1]
     assert line == f"saved the run to {run} (replaced the complete run of the same settings that was there (--force))"
     assert hnn.load_run(run)[1]["total_steps"] == 2
+
+
+def test_the_thread_count_is_the_runs_own_recorded_and_outside_its_identity(tmp_path, capsys):
+    import torch
+    Config = hnn.load_task("spring", "train").Config
+    assert Config().threads == 1 and "threads" in Config.display_only()
+    assert Config(threads=2).key() == Config().key()
+    caller = torch.get_num_threads()
+    argv = ["--total_steps", "2", "--hidden_dim", "8", "--save_dir", str(tmp_path)]
+    run = hnn.cli.train(Config, argv + ["--threads", "2"])
+    assert torch.get_num_threads() == caller                  # the caller's count is back
+    args, metrics = hnn.load_run(run)[1:3]
+    assert args["threads"] == 2 and metrics["torch_threads"] == 2
+    assert hnn.cli.train(Config, argv) == run                 # another count: the same run, reused
+    assert capsys.readouterr().out.splitlines()[-1].startswith("reused")
+    hnn.cli.train(Config, argv + ["--force"])                 # the default: one thread, recorded
+    assert hnn.load_run(run)[1]["threads"] == 1 == hnn.load_run(run)[2]["torch_threads"]
+    # from Python a run keeps the caller's count, and records it
+    torch.set_num_threads(2)
+    try:
+        folder = hnn.run_experiment(Config(total_steps=2, hidden_dim=8, seed=1, save_dir=str(tmp_path)))
+    finally:
+        torch.set_num_threads(caller)
+    assert hnn.load_run(folder)[1]["threads"] == 2
 
 
 def test_display_only_flags_stay_out_of_the_identity():

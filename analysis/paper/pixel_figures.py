@@ -1,6 +1,6 @@
 """The pixel pendulum's figures: what the models see, what they learned, and what they predict.
 
-Drawn by the figure registry (``hnn_analysis.registry``) under the names the task's ``task.py`` lists:
+Drawn by the figure registry (``hnn_analysis.paper.registry``) under the names the task's ``task.py`` lists:
 
 - ``pixels-compare.gif``: the 200 test frames, truth | baseline | HNN, each decoded from its
   model's latent path (the paper's ``pixels-compare.gif``);

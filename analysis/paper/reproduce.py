@@ -12,7 +12,7 @@ run of the same config is reused), in this process, in ``--jobs N`` worker proce
 first; ``hnn.sweep``), with one progress line for the whole job; a run that fails is
 reported and the others go on (the command then exits with code 1, listing them). Then evaluates
 the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
-its ``experiment-<task>/task.py`` says, through ``hnn_analysis.registry``). Writes
+its ``experiment-<task>/task.py`` says, through ``hnn_analysis.paper.registry``). Writes
 ``<out>/results.json`` (every number, with versions, commit, seed and the time of each stage),
 ``<out>/tables.md`` (built from that JSON: ours beside the paper's, marked, and the stage
 times) and ``<out>/figures/``.
@@ -59,7 +59,7 @@ def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
 
 def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
     """Losses from the saved metrics, energy MSE under every protocol, and the figures (as the
-    task's ``task.py`` says, through ``hnn_analysis.registry``). ``runs`` is ``{label: run
+    task's ``task.py`` says, through ``hnn_analysis.paper.registry``). ``runs`` is ``{label: run
     folder}``; the row's ``"seconds"`` holds the time of the evaluation and of the figures.
     """
     tic = time.perf_counter()

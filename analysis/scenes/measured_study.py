@@ -148,6 +148,7 @@ def markdown(result: dict) -> str:
               "loss: the derivative MSE on the scaled states (dimensionless). Train s: one thread, controlled.", ""]
     if meta.get("assumes"):
         lines += [f"Note: {meta['assumes']}.", ""]
+    lines += [line for note in meta.get("notes") or [] for line in (f"Note: {note}.", "")]
     if meta.get("velocity_mismatch"):
         lines += ["Velocity columns against the finite-difference derivatives of the positions, RMS(dq/dt - v) / "
                   "RMS(v) on the training rows: " + ", ".join(f"{name} {m:.3g}" for name, m in zip(
@@ -164,7 +165,9 @@ def markdown(result: dict) -> str:
                      f"{pe['median']:.4g} / {pe['mean']:.4g} | {r['valid_time']['median']:.3g} | {r['test_loss']:.3g} | "
                      + (f"{drift['model']:.3g} ({drift['measured']:.3g}) | " if drift else "")
                      + f"{r['train_seconds']:.3g} | {r['rollout_seconds']:.3g} |")
-    lines += ["", f"| naive q + h v | | | | {naive['median']:.4g} / {naive['mean']:.4g} | | | | | |"]
+    # the naive extrapolation as the table's last row: its error, and an empty cell for every other column
+    lines.append(f"| naive q + h v | | | | {naive['median']:.4g} / {naive['mean']:.4g} | | | "
+                 + ("| " if energy else "") + "| |")
     return "\n".join(lines) + "\n"
 
 
@@ -203,6 +206,8 @@ def run(args, argv: list[str], parser) -> dict:
     try:
         hnn.tasks.task_config(TASK, columns)
         rec = data.load(*(columns[k] for k in ("data", "time", "q", "v", "p", "trial", "periodic", "dxdt")))
+        for note in rec.notes:
+            print(f"note: {note}", flush=True)
         held = mm.Heldout(data, rec, args.test_fraction, args.horizon, args.max_gap)
         energy = mm.energy_function(args.energy, rec)
         kinds = _kinds(columns)
@@ -234,7 +239,7 @@ def run(args, argv: list[str], parser) -> dict:
     units = "units of " + ", ".join(rec.q_names)
     result = {"scene": scene, "meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
         _portable(a) for a in argv), "quick": args.quick, "jobs": args.jobs, "horizon": held.horizon,
-        "units": units, "state": rec.state, "columns": columns, "data_sha256": rec.sha256,
+        "units": units, "state": rec.state, "columns": columns, "data_sha256": rec.sha256, "notes": rec.notes,
         "assumes": data.ASSUMES if rec.state == "velocity" else None, "velocity_mismatch": velocity_mismatch(columns)},
         "rows": measured, "naive": held.naive, "chosen": chosen, "card": card,
         "seconds": {"training": training, "measure": time.perf_counter() - tic}}
@@ -252,13 +257,14 @@ def columns_of(text: str) -> list[str]:
 
 
 def _portable(arg: str) -> str:
-    """An argument as the command line a reader can paste: paths inside the checkout made relative, quoted."""
+    """An argument as the command line a reader can paste: paths inside the checkout made relative, others
+    outside it as ``FILE`` (a file, e.g. ``--data``) or ``DIR`` (a folder, e.g. ``--out``), quoted."""
     path = Path(arg)
     if path.is_absolute():
         try:
             return str(path.relative_to(hnn.tasks.repo_root()))
         except ValueError:
-            return "DIR"
+            return "FILE" if path.is_file() else "DIR"
     return shlex.quote(arg)
 
 

@@ -1,7 +1,7 @@
 """The integrators ``hnn.rollout`` knows, by name, with the properties tests and users rely on.
 
     hnn.get_solver("midpoint")   # Solver(name='midpoint', order=2, symplectic=True, needs_separable=False, ...)
-    hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("euler", Euler, order=1))
+    hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("euler", Euler, order=1))   # Euler: a Stepper of yours
     hnn.rollout(f, x0, t_eval, method="euler", dt=0.01)
 
 Modelled on torchdiffeq's dict of solvers and diffrax's ``order``: a method's order and

@@ -131,7 +131,7 @@ class _Constrained(Model):
                  tolerance: float = STATE_TOLERANCE):
         super().__init__()
         if not isinstance(graph, ConstraintGraph):
-            raise TypeError(f"{type(self).__name__} needs an hnn.constrained.ConstraintGraph, got {type(graph).__name__}")
+            raise TypeError(f"{type(self).__name__} needs an hnn.models.constrained.ConstraintGraph, got {type(graph).__name__}")
         self.graph, self.n, self.d, self.tolerance = graph, graph.bodies, graph.dim, float(tolerance)
         self.nd = self.n * self.d
         self.input_dim = 2 * self.nd

@@ -85,7 +85,7 @@ class HNN(Model):
         return self.forward(x)[1].squeeze(1)
 
     def exact_discrete_gradient(self):
-        """DGNet's discrete gradient of the paper's tanh MLP (``hnn.tanh_mlp.discrete_gradient``), else None."""
+        """DGNet's discrete gradient of the paper's tanh MLP (``hnn.models.tanh_mlp.discrete_gradient``), else None."""
         net = self.differentiable_model
         if self.baseline or self.field_type != "solenoidal" or not (isinstance(net, MLP) and net._closed_form_applies()):
             return None
@@ -122,7 +122,7 @@ class HNN(Model):
 
 
     def _evaluation_kernel(self):
-        """The field as one ``hnn.tanh_mlp.EvaluationKernel`` (the evaluation path for a few states), or
+        """The field as one ``hnn.models.tanh_mlp.EvaluationKernel`` (the evaluation path for a few states), or
         None when the network is not the paper's tanh MLP."""
         net = self._modules["differentiable_model"]
         if not isinstance(net, MLP):
