@@ -49,7 +49,8 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
     models, data, tests, saved = [], [], [], []
     for config, dataset in zip(configs, datasets):
-        args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
+        args = {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,      # as run_experiment
+                "dataset_cache_key": dataset.get("cache_key")}
         torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
         np.random.seed(config.seed)
         models.append(model_from_args(args, config.device))

@@ -227,9 +227,11 @@ def test_a_custom_objective_trains_through_the_one_runner(tmp_path):
 
 def test_display_only_fields_and_save_dir_are_not_the_identity(tmp_path):
     Pixels = hnn.load_task("pixels", "train").Config
-    assert set(Pixels.display_only()) == {"verbose", "print_every", "debug", "force", "render_workers", "no_eval"}
+    assert set(Pixels.display_only()) == {"verbose", "print_every", "debug", "force", "render_workers", "no_eval",
+                                          "threads"}
     base = Pixels(save_dir=str(tmp_path))
-    for same in (dict(verbose=True), dict(render_workers=3, no_eval=True), dict(save_dir=str(tmp_path / "b"))):
+    for same in (dict(verbose=True), dict(render_workers=3, no_eval=True), dict(save_dir=str(tmp_path / "b")),
+                 dict(threads=2)):
         assert dataclasses.replace(base, **same).key() == base.key(), same
     for other in (dict(trials=50), dict(model="baseline"), dict(learn_rate=2e-3), dict(seed=1)):
         assert dataclasses.replace(base, **other).key() != base.key(), other
