@@ -34,7 +34,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
          "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
-         "many-models": "docs/speed.md", "many-models-gpu": "docs/gpu.md",
+         "many-models": "docs/speed.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -54,6 +54,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "many-models": "python analysis/benchmarks/benchmark_many.py --update-docs",
            "many-models-gpu": "python analysis/benchmarks/benchmark_many.py --devices cuda --update-docs (on a GPU)",
+           "gpu-check": "python analysis/benchmarks/gpu_check.py --update-docs (on a GPU)",
            "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs"}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)
 DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
