@@ -65,3 +65,18 @@ def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
     # the chain has no friction and its kinetic energy depends on the angles
     assert not {kind for kind in kinds if hnn.MODEL_KINDS[kind].dissipative or hnn.MODEL_KINDS[kind].separable}
     assert "dissipative" in hnn.MODEL_KINDS and "separable" in hnn.MODEL_KINDS
+
+
+def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path):
+    kinds = peers.kinds()
+    quick = {job.key: job.config for job in peers.plan({**peers.QUICK, "kinds": kinds}, tmp_path)}
+    full = {job.key: job.config for job in peers.plan({**peers.FULL, "kinds": kinds}, tmp_path)}
+    # the full table trains the LNN its own 60000 steps on its L1 loss; quick trains it the protocol's 100
+    assert full["lnn/lagrangian/seed0"].total_steps == peers.LNN_KIND_FIELDS["lagrangian"]["total_steps"] == 60000
+    assert quick["lnn/lagrangian/seed0"].total_steps == peers.QUICK["lnn_fields"]["total_steps"] == 100
+    assert quick["lnn/lagrangian/seed0"].derivative_loss == full["lnn/lagrangian/seed0"].derivative_loss == "l1"
+    assert max(config.total_steps for config in quick.values()) == 100
+    cuts = peers.quick_cuts()
+    assert "LNN protocol: its lagrangian kind 100 steps of its own 60000" in cuts
+    assert "N = 1, 2 of 1, 2, 3, 5 bobs" in cuts and "CHNN protocol: 100 training steps of 4000" in cuts
+    assert "LNN protocol: 2 energy starts of 40" in cuts and "CHNN protocol: 10 test starts of 100" in cuts
