@@ -80,3 +80,5 @@ def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path)
     assert "LNN protocol: its lagrangian kind 100 steps of its own 60000" in cuts
     assert "N = 1, 2 of 1, 2, 3, 5 bobs" in cuts and "CHNN protocol: 100 training steps of 4000" in cuts
     assert "LNN protocol: 2 energy starts of 40" in cuts and "CHNN protocol: 10 test starts of 100" in cuts
+    assert "LNN protocol: the energy error at T = 10 s of their 100 s" in cuts
+    assert "rollouts stop at 1000 dopri5 iterations (full: 100000)" in cuts

@@ -24,8 +24,9 @@ STARTS = 8                 # start states of the rollout metrics
 CARD_FACTOR = 2.0          # a scene card's model is within this factor of the best on both errors
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
 # --quick (a smoke run within its budget, commands.QUICK_BUDGETS): what each measurement does instead
-QUICK = {"starts": 2, "points": 50, "drift_periods": 3, "drift_budget": 0.5, "timings": 1}
-FULL = {"starts": STARTS, "points": 100, "drift_periods": None, "drift_budget": DRIFT_BUDGET, "timings": 3}
+QUICK = {"starts": 2, "horizon": HORIZON // 2, "points": 50, "drift_periods": 3, "drift_budget": 0.5, "timings": 1}
+FULL = {"starts": STARTS, "horizon": HORIZON, "points": 100, "drift_periods": None, "drift_budget": DRIFT_BUDGET,
+        "timings": 3}
 
 
 def scenes() -> list[str]:
@@ -92,9 +93,9 @@ class Scene:
         self.task, self.system, self.cfg, self.quick = task, hnn.load_task(task), scene_settings(task), quick
         self.truth = None
         if "T" in self.cfg:
-            horizon = HORIZON * self.cfg["T"]
             mode = QUICK if quick else FULL
-            self.t = np.linspace(0.0, horizon, mode["points"] * HORIZON + 1)
+            horizon = mode["horizon"] * self.cfg["T"]
+            self.t = np.linspace(0.0, horizon, mode["points"] * mode["horizon"] + 1)
             self.x0 = settings.start_states(task, self.system, mode["starts"])
             if state is not None:       # another process integrated this truth already (``state()``)
                 self.truth, self.divergence = torch.as_tensor(state["truth"]), state["divergence"]

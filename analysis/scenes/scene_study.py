@@ -98,8 +98,8 @@ def quick_cuts(studied: list[str], seeds: int) -> list[str]:
     cuts += [f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
              f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
              f"1 seed of {seeds}, so no more seeds at the cell a card picks",
-             f"rollout metrics: {quick['starts']} starts of {full['starts']}, {quick['points']} points per training "
-             f"length of {full['points']}",
+             f"rollout metrics: {quick['starts']} starts of {full['starts']}, over {quick['horizon']} training "
+             f"lengths of {full['horizon']}, {quick['points']} points per length of {full['points']}",
              f"speed at accuracy: the {', '.join(QUICK_SPEED_KINDS)} kind only of every kind, the "
              f"{sm.QUICK_DTS} coarsest of every other step size, tolerances "
              f"{', '.join(f'{r:g}' for r in sm.QUICK_RTOLS)} of {', '.join(f'{r:g}' for r in sm.RTOLS)}, each "
@@ -197,7 +197,8 @@ def main(argv=None) -> dict:
     results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
         "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "quick_cuts": cuts, "seeds": seeds,
         "jobs": args.jobs, "backend": args.backend,
-        "starts": (scene_common.QUICK if args.quick else scene_common.FULL)["starts"]},
+        "starts": (scene_common.QUICK if args.quick else scene_common.FULL)["starts"],
+        "horizon": (scene_common.QUICK if args.quick else scene_common.FULL)["horizon"]},
         "scenes": {}, "seconds": {}}
 
     # 1. train: every scene's kinds at the default cell (all seeds), the grid (seed 0), the D-HNN split
