@@ -209,8 +209,8 @@ def test_quick_figures_say_quick_in_their_titles(tmp_path):
 def test_quick_measures_each_energy_protocol_on_fewer_trials_and_says_each_cut(tmp_path):
     cuts = reproduce.quick_cuts(["spring", "pixels"], reproduce.QUICK_STEPS)
     assert cuts == [f"{reproduce.QUICK_STEPS} training steps a model of the tasks' own 2000 (spring), 10000 (pixels)",
-                    "pixels: trials 25 of 200", "energy MSE: 5 trials of each protocol's 15"]
-    assert reproduce.quick_cuts(["pixels"], None) == ["pixels: trials 25 of 200"]     # its own evaluate: kept
+                    "pixels: trials 20 of 200", "energy MSE: 5 trials of each protocol's 15"]
+    assert reproduce.quick_cuts(["pixels"], None) == ["pixels: trials 20 of 200"]     # its own evaluate: kept
     config = hnn.tasks.task_config("spring", {"total_steps": TINY, "save_dir": str(tmp_path)})
     trained, _ = reproduce.load_runs("spring", {"hnn": hnn.run_experiment(config)})
     full, quick = registry.evaluate(trained), registry.evaluate(trained, reproduce.QUICK_TRIALS)

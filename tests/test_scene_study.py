@@ -252,10 +252,10 @@ def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_pat
     # the grid scenes only (spring), at one narrow cell: the grid stage runs, on little
     assert [(row["task"], row["cell"]) for row in grid] == [("spring", (16, 0.25))]
     jobs = reproduce.plan(rows, [0], tmp_path, scene_study.QUICK_STEPS)
-    assert {job.config.total_steps for job in jobs} == {scene_study.QUICK_STEPS} and scene_study.QUICK_STEPS == 100
+    assert {job.config.total_steps for job in jobs} == {scene_study.QUICK_STEPS} and scene_study.QUICK_STEPS == 60
     cuts = scene_study.quick_cuts(["spring", "pixels"], seeds=3)
-    assert cuts[0] == "100 training steps a model of the tasks' own 2000 (spring), 10000 (pixels)"
-    assert "pixels: trials 25 of 200" in cuts and "energy MSE: 5 trials of each protocol's 15" in cuts
+    assert cuts[0] == "60 training steps a model of the tasks' own 2000 (spring), 10000 (pixels)"
+    assert "pixels: trials 20 of 200" in cuts and "energy MSE: 5 trials of each protocol's 15" in cuts
     assert "1 seed of 3, so no more seeds at the cell a card picks" in cuts
     assert "grid: widths 16 x fractions 0.25 of 16, 32, 64, 128, 200 x 0.1, 0.25, 0.5, 1.0" in cuts
     assert any(cut.startswith("speed at accuracy: the hnn kind only") for cut in cuts)

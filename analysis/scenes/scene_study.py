@@ -1,7 +1,7 @@
 """Which model does each scene need? Every model kind on every scene, measured.
 
     python analysis/scene_study.py --jobs 2                  # full study (reuses reproduce.py's runs)
-    python analysis/scene_study.py --quick                   # smoke run (150 steps, a small grid)
+    python analysis/scene_study.py --quick                   # smoke run (60 steps, a small grid)
     python analysis/scene_study.py --jobs 2 --update-docs    # docs/scenes.md, the README's model guide
     python analysis/scene_study.py --data FILE --q x --v v   # your own measurements (measured_study.py)
 
@@ -52,7 +52,7 @@ WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
 # --quick: a grid of one narrow cell beside the default one, fewer steps than reproduce.py --quick, and
 # the speed study of the paper's HNN alone (each cut is printed: quick_cuts)
 QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
-QUICK_STEPS = 100
+QUICK_STEPS = 60
 QUICK_SPEED_KINDS = ("hnn",)
 DEFAULT_CELL = (200, 1.0)
 
