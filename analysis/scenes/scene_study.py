@@ -159,7 +159,8 @@ def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="scene_study.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", nargs="+", default=None, choices=scenes(), help="scenes to study (default: every task that declares scene_study)")
     p.add_argument("--quick", action="store_true",
-                   help=f"smoke run: {QUICK_STEPS} steps per model, widths {QUICK_WIDTHS} x fractions "
+                   help=f"smoke run: {QUICK_STEPS} steps per model (with --data: {reproduce.QUICK_STEPS}, one width), "
+                        f"widths {QUICK_WIDTHS} x fractions "
                         f"{QUICK_FRACTIONS}, one seed, short drift runs (the run prints every cut); output in "
                         f"results-quick/; {commands.budget_words('scene_study')}; with --data: "
                         f"{commands.budget_words('scene_study --data')}")
