@@ -22,9 +22,30 @@ from hnn.io import atomic_write, write_json
 
 from hnn_analysis import readme
 
+# each command's ``--quick`` budget in seconds, from nothing (a fresh output folder, no dataset cached,
+# installs aside) on a quiet 2-core box: a reader's first run of it, which they watch end to end.
+# analysis/benchmarks/quick_budgets.py measures every one against it (docs/speed.md)
+QUICK_BUDGETS = {"reproduce": 60, "scene_study": 90, "scene_study --data": 120, "peers": 180, "dgnet": 120}
+
+
+def budget_words(command: str) -> str:
+    """``'budget 60 s from nothing on a quiet 2-core box'``: the words a ``--quick`` help ends with."""
+    return f"budget {QUICK_BUDGETS[command]} s from nothing on a quiet 2-core box (docs/speed.md)"
+
+
+def say_quick(command: str, cuts: list[str]) -> str:
+    """Print, before a ``--quick`` run starts, what it cuts (each of ``cuts``: one phrase such as
+    ``'300 training steps of 2000'``) and its budget: quick runs every stage on less, and says on
+    what. Returns the text printed."""
+    text = "\n".join([f"--quick: every stage on small settings, within a budget of {QUICK_BUDGETS[command]} s from "
+                       "nothing on a quiet 2-core box; cut:"]
+                      + [f"  - {cut}" for cut in cuts])
+    print(text, flush=True)
+    return text
+
 
 def add_flags(parser, *, quick: str | None = None, out: str | None = None, out_default: Path | None = None,
-              seeds: str | None = None, seeds_default: int = 1, jobs: str | None = None,
+              seeds: str | None = None, seeds_default: int | None = 1, jobs: str | None = None,
               update_docs: str | None = None) -> None:
     """``--quick --out --seeds --jobs --update-docs`` on ``parser``, each only where its help is given."""
     if quick is not None:

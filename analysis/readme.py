@@ -9,6 +9,7 @@ Every generated section is written only this way, never by hand, by the command 
     python analysis/scene_study.py --update-docs      # docs/scenes.md, the README's model guide
     python analysis/benchmarks/ray_overhead.py [--full] --update-docs   # docs/sweeps.md: Ray against local
     python analysis/benchmarks/threads.py --update-docs      # docs/speed.md: what a second thread buys
+    python analysis/benchmarks/quick_budgets.py --update-docs   # docs/speed.md: every --quick against its budget
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
     python analysis/readme.py kinds                          # README.md and docs/python.md: the model kinds
     python analysis/readme.py check                          # which pages are older than the code
@@ -31,6 +32,7 @@ from hnn.io import atomic_write
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md", "threads": "docs/speed.md",
+         "quick-budgets": "docs/speed.md",
          "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
          "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
@@ -43,6 +45,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "benchmark": "python analysis/benchmarks/benchmark.py --update-docs --repeats 3",
            "benchmark-pixels": "python analysis/benchmarks/benchmark_pixels.py --update-docs",
            "threads": "python analysis/benchmarks/threads.py --update-docs",
+           "quick-budgets": "python analysis/benchmarks/quick_budgets.py --update-docs",
            "speed-accuracy": "python analysis/integrator_study/speed_accuracy.py --update-docs",
            "energy-drift": "python analysis/integrator_study/energy_drift.py --update-docs",
            "scenes": "python analysis/scene_study.py --jobs 2 --update-docs",

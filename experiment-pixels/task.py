@@ -22,8 +22,8 @@ TASK = hnn.TaskSpec(
     figures=("pixel_compare", "pixel_energy", "pixel_phase_space", "pixel_add_energy"),
     figure_settings={"pixel_add_energy": metric.ADD_ENERGY},
     cost=250,
-    # --quick renders 50 trajectories instead of 200
-    quick={"trials": 50},
+    # --quick renders 20 trajectories instead of 200 (rendering is most of a quick run's pixel time)
+    quick={"trials": 20},
     # train.py's own evaluation is skipped: reproduce evaluates both models together
     settings={"no_eval": True},
     evaluate=metric.evaluate,

@@ -80,6 +80,29 @@ class Job:
         return {**self.config.to_dict(), "save_dir": str(Path(self.config.save_dir).resolve())}
 
 
+class Progress:
+    """Work done of work to do and the time so far, the tag every progress line of a long command
+    starts with: ``[3/21, 45 s]``. One per stage (a sweep's runs, a study's measurements)::
+
+        progress = sweep.Progress(len(units))
+        for unit in units:
+            ...
+            print(f"  {progress.advance()} {unit} measured", flush=True)
+    """
+
+    def __init__(self, total: int):
+        self.total, self.done, self.start = total, 0, time.perf_counter()
+
+    def tag(self) -> str:
+        """``[done/total, seconds so far]``."""
+        return f"[{self.done}/{self.total}, {time.perf_counter() - self.start:.0f} s]"
+
+    def advance(self, n: int = 1) -> str:
+        """Count ``n`` more done; the tag after it."""
+        self.done += n
+        return self.tag()
+
+
 class RunFailed(Exception):
     """A run that raised or whose worker died: its ``key``, the error ``message`` and the ``log``
     file holding its traceback (None when there is none). ``diverged``: the model itself failed
@@ -159,25 +182,37 @@ def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
             data[key] = job.config.dataset()
         except _CANNOT_RUN as err:
             skipped[job.task] = err
-            bar.write(f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
+            _say(bar, f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
             continue
         seconds[key] = time.perf_counter() - tic
     return data, seconds, skipped
 
 
-def _failure(job: Job, err: BaseException, log_dir: Path, bar) -> RunFailed:
+def _say(bar, line: str) -> None:
+    """Print ``line`` above the bar, flushed: tqdm's ``write`` does not flush, and a command's output
+    piped to a file or a pager (no terminal: no bar either) would hold every line until it ends."""
+    bar.write(line)
+    sys.stdout.flush()
+
+
+# seconds between the lines that say how far a long run is, where no bar is drawn (no terminal)
+HEARTBEAT = 30.0
+
+
+def _failure(job: Job, err: BaseException, log_dir: Path, bar, tag: str = "") -> RunFailed:
     """Report a failed run by name with its error, its traceback in ``<log_dir>/<key>.log``."""
     log = Path(log_dir) / f"{job.key.replace('/', '-')}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
     log.write_text("".join(traceback.format_exception(err)))
     failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log, diverged=isinstance(err, DivergenceError))
-    bar.write(f"  {job.key} FAILED: {failed.message} (log: {log})")
+    _say(bar, f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
     return failed
 
 
-def _in_process(units: list[list[Job]], data: dict, bar):
+def _in_process(units: list[list[Job]], data: dict, bar, progress: Progress):
     """Yield ``(job, folder or exception)`` for each run trained here, one unit after another, on
-    the datasets built; the bar moves with every step of a lone run, after a group."""
+    the datasets built; the bar moves with every step of a lone run, after a group (without a
+    terminal, a lone run says its step every ``HEARTBEAT`` seconds, with ``progress``'s tag)."""
     for unit in units:
         if len(unit) > 1:
             try:
@@ -189,11 +224,14 @@ def _in_process(units: list[list[Job]], data: dict, bar):
                 bar.update(job.steps)
                 yield job, outcome
             continue
-        job, done = unit[0], [0]
+        job, done, said = unit[0], [0], [time.perf_counter()]
 
-        def advance(step: int, total: int, done=done) -> None:
+        def advance(step: int, total: int, done=done, said=said, job=job) -> None:
             bar.update(step - done[0])
             done[0] = step
+            if bar.disable and time.perf_counter() - said[0] > HEARTBEAT:      # no bar: a line now and then
+                said[0] = time.perf_counter()
+                _say(bar, f"  {progress.tag()} {job.key}: step {step} of {total}")
         try:
             with training.report_progress(advance):
                 outcome = runs.run_experiment(job.config, data[job.config.dataset_key()])
@@ -408,18 +446,26 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         units = sorted(plan_units(todo, group), key=_unit_cost, reverse=True)
         if not in_process:
             data.clear()        # the workers read the cached datasets themselves
-        results = (_in_process(units, data, bar) if in_process else _in_pool(units, n_jobs, threads)
+        # one line per run, with the runs done of those to do and the time so far: the bar above is
+        # drawn only on a terminal, and a long run (thousands of steps) leaves it still for minutes
+        progress = Progress(len(todo))
+        results = (_in_process(units, data, bar, progress) if in_process else _in_pool(units, n_jobs, threads)
                    if backend == "local" else _on_ray(units, threads, ray_address))
+        if todo:
+            _say(bar, f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
+                      f"{len(units)} unit{'s' if len(units) != 1 else ''} of work")
         for job, outcome in results:
+            tag = progress.advance() + " "
+            bar.set_postfix_str(f"{progress.done}/{progress.total} runs", refresh=False)
             if isinstance(outcome, BaseException):
-                done[job.key] = _failure(job, outcome, log_dir, bar)
+                done[job.key] = _failure(job, outcome, log_dir, bar, tag)
             else:
                 done[job.key] = outcome
                 metrics = _metrics(outcome)
                 built = data_seconds.pop(job.config.dataset_key(), 0.0)
                 per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),
                                     "train": metrics.get("train_seconds")}
-                bar.write(f"  {job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)")
+                _say(bar, f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)")
             if not in_process:
                 bar.update(job.steps)
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,

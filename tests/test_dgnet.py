@@ -164,3 +164,41 @@ def test_the_2body_table_puts_every_published_row_beside_ours(tmp_path, monkeypa
             assert f"| ours: {label} ({dgnet.ROWS[label][2]} / {predict}) |" in text
         _, saved, _ = hnn.load_run(runs[0]["run"])
         assert (saved["batch_size"], saved["total_steps"], saved["weight_decay"]) == (200, 2, 0.0)
+
+
+def test_quick_runs_every_row_of_every_task_on_one_seed_and_few_steps_and_says_so(tmp_path, monkeypatch, capsys):
+    from hnn_analysis.chains import dgnet
+    asked = []
+
+    def fake_job(args):      # what a run would be asked, without training it
+        task, label, seed, steps, out, init, quick = args
+        asked.append((task, label, seed, steps, quick))
+        return args[:3], {"run": "", "derivative": 1.0, "energy": {p: 1.0 for p in dgnet.ROWS[label][3]}}
+
+    monkeypatch.setattr(dgnet, "_job", fake_job)
+    results = dgnet.main(["--quick", "--out", str(tmp_path)])
+    assert sorted(asked) == sorted((task, label, 0, dgnet.QUICK["steps"], True) for task in dgnet.TASKS
+                                   for label in dgnet.rows_for(task))
+    out = capsys.readouterr().out
+    assert "--quick: every stage on small settings, within a budget of 120 s" in out
+    assert "  - 1 seed of their 15 trials" in out and "100 steps a run of their 2000 (spring)" in out
+    assert "10000 (2body)" in out and f"[{len(asked)}/{len(asked)}, " in out
+    assert "  - 10 paths of their 50 (spring, pend)" in out and "  - 100 orbits of their 1000 (2body)" in out
+    assert (tmp_path / "dgnet.md").read_text().startswith("**QUICK smoke run**")
+    assert results["meta"]["quick"] and results["seeds"] == 1
+    # a seed count or steps given with --quick are kept, and not listed as cut
+    asked.clear()
+    dgnet.main(["--quick", "--seeds", "2", "--tasks", "real", "--out", str(tmp_path)])
+    assert {seed for _, _, seed, _, _ in asked} == {0, 1} and "seed of their" not in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        dgnet.main(["--quick", "--update-docs"])
+
+
+def test_quick_data_are_their_recipe_on_fewer_paths_and_orbits():
+    from hnn_analysis.chains import dgnet
+    quick, full = dgnet.dataset("spring", 0, **dgnet.QUICK_DATA), dgnet.dataset("spring", 0)
+    # half the paths train, as theirs: 5 of 10 paths of 100 states, every consecutive pair
+    assert quick["pairs"].shape == (5 * 99, 4) and full["pairs"].shape == (25 * 99, 4)
+    assert quick["dt"] == full["dt"]
+    orbits = dgnet.dataset("2body", 0, orbits=10)
+    assert len(orbits["pairs"]) == 8 * 499         # 80% of the orbits train, each 500 states

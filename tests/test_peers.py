@@ -87,3 +87,21 @@ def test_the_card_names_the_kinds_the_seeds_cannot_separate_from_the_best():
     line = peers.card({"meta": {"kinds": ["a", "b", "c"]}, "rows": rows})[-1]
     # b's range overlaps a's (1.3e-3 <= 1.4e-3): the seeds cannot tell them apart; c's does not
     assert line.startswith("| 2 | a 1.20e-03 |") and line.endswith("| a, b, c | b |")
+
+
+def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path):
+    kinds = peers.kinds()
+    quick = {job.key: job.config for job in peers.plan({**peers.QUICK, "kinds": kinds}, tmp_path)}
+    full = {job.key: job.config for job in peers.plan({**peers.FULL, "kinds": kinds}, tmp_path)}
+    # the full table trains the LNN its own 60000 steps on its L1 loss; quick trains it the protocol's 100
+    assert full["lnn/lagrangian/seed0"].total_steps == peers.LNN_KIND_FIELDS["lagrangian"]["total_steps"] == 60000
+    assert quick["lnn/lagrangian/seed0"].total_steps == peers.QUICK["lnn_fields"]["total_steps"] == 100
+    assert quick["lnn/lagrangian/seed0"].derivative_loss == full["lnn/lagrangian/seed0"].derivative_loss == "l1"
+    assert max(config.total_steps for config in quick.values()) == 100
+    cuts = peers.quick_cuts()
+    assert "LNN protocol: its lagrangian kind 100 steps of its own 60000" in cuts
+    assert "N = 1, 2 of 1, 2, 3, 5 bobs" in cuts and "CHNN protocol: 100 training steps of 8000" in cuts
+    assert "1 seed of 5 (--seeds sets it)" in cuts
+    assert "LNN protocol: 2 energy starts of 40" in cuts and "CHNN protocol: 10 test starts of 100" in cuts
+    assert "LNN protocol: the energy error at T = 10 s of their 100 s" in cuts
+    assert "rollouts stop at 1000 dopri5 iterations (full: 100000)" in cuts

@@ -3,6 +3,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -203,6 +204,24 @@ def test_quick_figures_say_quick_in_their_titles(tmp_path):
     fig, ax = plt.subplots()
     figures.save_figure(fig, tmp_path / "b.png")
     assert fig._suptitle is None                          # no stamp outside quick runs
+
+
+def test_quick_measures_each_energy_protocol_on_fewer_trials_and_says_each_cut(tmp_path):
+    cuts = reproduce.quick_cuts(["spring", "pixels"], reproduce.QUICK_STEPS)
+    assert cuts == [f"{reproduce.QUICK_STEPS} training steps a model of the tasks' own 2000 (spring), 10000 (pixels)",
+                    "pixels: trials 20 of 200", "energy MSE: 5 trials of each protocol's 15"]
+    assert reproduce.quick_cuts(["pixels"], None) == ["pixels: trials 20 of 200"]     # its own evaluate: kept
+    config = hnn.tasks.task_config("spring", {"total_steps": TINY, "save_dir": str(tmp_path)})
+    trained, _ = reproduce.load_runs("spring", {"hnn": hnn.run_experiment(config)})
+    full, quick = registry.evaluate(trained), registry.evaluate(trained, reproduce.QUICK_TRIALS)
+    for name, result in quick.items():
+        truth, all_truth = np.asarray(result["energy_truth"]), np.asarray(full[name]["energy_truth"])
+        assert len(truth) == 5 and len(all_truth) == 15
+        # the same first trials: a quick run's 5 starts are the full protocol's first 5 (their truths, solved
+        # as one batch of other size by an adaptive solver at atol 1e-6, agree to that tolerance)
+        assert np.array_equal(result["x0"], full[name]["x0"][:5]), name
+        np.testing.assert_allclose(truth, all_truth[:5], atol=1e-3)
+        assert "5 trials" in result["description"]
 
 
 def test_the_recorded_command_names_no_folder_of_this_machine(tmp_path):

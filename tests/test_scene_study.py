@@ -202,7 +202,7 @@ def test_reproduce_models_flag_adds_kinds_only_where_a_task_has_them(tmp_path):
 def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(scene_study, "QUICK_WIDTHS", (8, 200))
     monkeypatch.setattr(scene_study, "QUICK_FRACTIONS", (0.5, 1.0))
-    monkeypatch.setattr(reproduce, "QUICK_STEPS", 20)
+    monkeypatch.setattr(scene_study, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
     assert set(entry["kinds"]) == set(scene_common.task_kinds("spring"))
@@ -244,3 +244,27 @@ def test_every_scene_has_kinds_and_the_pixel_scene_measures_its_own_pair():
         assert scene_common.task_kinds(task), f"the {task} scene has no kind"
     # a kind that reads [q, qdot] does not fit a scene of [q, p]
     assert "second_order" not in scene_common.task_kinds("spring")
+
+
+def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_path):
+    rows = scene_study.plan_rows(["spring", "real"], quick=True)
+    grid = [row for row in rows if row["cell"] != scene_study.DEFAULT_CELL]
+    # the grid scenes only (spring), at one narrow cell: the grid stage runs, on little
+    assert [(row["task"], row["cell"]) for row in grid] == [("spring", (16, 0.25))]
+    jobs = reproduce.plan(rows, [0], tmp_path, scene_study.QUICK_STEPS)
+    assert {job.config.total_steps for job in jobs} == {scene_study.QUICK_STEPS} and scene_study.QUICK_STEPS == 60
+    cuts = scene_study.quick_cuts(["spring", "pixels"], seeds=3)
+    assert cuts[0] == "60 training steps a model of the tasks' own 2000 (spring), 10000 (pixels)"
+    assert "pixels: trials 20 of 200" in cuts and "energy MSE: 5 trials of each protocol's 15" in cuts
+    assert "1 seed of 3, so no more seeds at the cell a card picks" in cuts
+    assert "grid: widths 16 x fractions 0.25 of 16, 32, 64, 128, 200 x 0.1, 0.25, 0.5, 1.0" in cuts
+    assert any(cut.startswith("speed at accuracy: the hnn kind only") for cut in cuts)
+    assert "energy drift: 3 periods of 1000 (spring), at most 0.5 s a setting of 15" in cuts
+    # the speed study runs for the quick kinds only; every kind is still measured
+    runs = {f"spring@200x1/{kind}/seed0": tmp_path for kind in scene_common.task_kinds("spring")}
+    units = scene_study.measure_units(["spring"], runs, [0], [], scene_study.QUICK_SPEED_KINDS)
+    assert {key[2]: unit[4] for key, unit in units.items()} == {kind: 0 if kind == "hnn" else None
+                                                                 for kind in scene_common.task_kinds("spring")}
+    # a quick scene's energy protocols run 5 trials of their 15
+    assert scene_common.Scene("real", quick=True).trials == reproduce.QUICK_TRIALS == 5
+    assert scene_common.Scene("real", quick=False).trials is None

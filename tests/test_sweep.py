@@ -159,6 +159,46 @@ def test_a_ray_address_where_nothing_answers_exits_at_once(capsys):
     assert "ray start --head" in last
 
 
+class _Pipe:
+    """A stdout that is not a terminal, as when a command's output goes to a file: what a reader
+    following it sees is what was flushed, kept as one snapshot per flush."""
+
+    def __init__(self):
+        self.text, self.snapshots = "", []
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        self.snapshots.append(self.text)
+
+    def isatty(self):
+        return False
+
+
+def test_every_run_says_runs_done_of_runs_to_do_and_the_time_so_far_as_it_ends(tmp_path, monkeypatch):
+    pipe = _Pipe()
+    monkeypatch.setattr(sys, "stdout", pipe)
+    monkeypatch.setattr(sweep, "HEARTBEAT", -1.0)        # no terminal: a line on every step of a lone run
+    jobs = [_job("spring", "hnn", tmp_path, 3), _job("pend", "hnn", tmp_path, 3)]
+    runs, _ = sweep.train_jobs(jobs, 1, tmp_path / "logs", group="off")
+    done = [line.strip() for line in pipe.text.splitlines() if " trained " in line]
+    assert len(done) == 2 and all(isinstance(run, Path) for run in runs.values())
+    assert re.match(r"\[1/2, \d+ s\] \S+/hnn/seed0 trained ", done[0]), done
+    assert re.match(r"\[2/2, \d+ s\] \S+/hnn/seed0 trained ", done[1]), done
+    # each line reached the reader when it was written, not when the sweep ended (tqdm's write does not flush)
+    assert any(done[0] in snap and done[1] not in snap for snap in pipe.snapshots), pipe.snapshots
+    # a lone run says its steps where no bar is drawn, with the runs done so far
+    assert re.search(r"\[0/2, \d+ s\] \S+/hnn/seed0: step 2 of 4", pipe.text), pipe.text
+
+
+def test_progress_counts_and_times():
+    progress = sweep.Progress(3)
+    assert progress.tag() == "[0/3, 0 s]"
+    progress.start -= 42.4           # as if started 42 s ago
+    assert progress.advance() == "[1/3, 42 s]" and progress.advance(2) == "[3/3, 42 s]"
+
+
 def test_train_jobs_checks_its_arguments(tmp_path):
     with pytest.raises(ValueError, match="backend 'dask': choose one of local, ray"):
         sweep.train_jobs([], 1, tmp_path, backend="dask")

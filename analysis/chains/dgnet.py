@@ -2,6 +2,7 @@
 real pendulum and the 2-body task: their published rows beside ours, every row of theirs trained
 here the same way (docs/dgnet.md).
 
+    python analysis/chains/dgnet.py --quick                                       # a smoke run (QUICK)
     python analysis/chains/dgnet.py --steps 300 --seeds 2 --out results-dgnet    # a small budget
     python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their steps (SETTINGS)
     python analysis/chains/dgnet.py --tasks pend --seeds 3 --jobs 2 --update-docs  # docs/dgnet.md, pend's section
@@ -149,11 +150,17 @@ ROWS = {"NODE": ("baseline", "trajectory", "RK4 step", ("ada. DP",)),
         # the real pendulum loses energy (0.90 to 0.74 over the test block): a model that may lose it too
         "D-HNN": ("dissipative", "trajectory", "RK4 step", ("ada. DP",))}
 ONLY_ON = {"D-HNN": ("real",)}
+# --quick: every task and row end to end on one seed, few steps and less data (its budget:
+# commands.QUICK_BUDGETS): a ring task's run of 200 steps on their 50 paths took 20 s (2-core box,
+# load 7), most of it the full-batch steps. Its runs are named <task>-dgnet-quick (their data differ)
+QUICK = {"seeds": 1, "steps": 100}
+QUICK_DATA = {"trajectories": 10, "orbits": 100}
 
 
-def dataset(task: str, seed: int) -> dict:
+def dataset(task: str, seed: int, trajectories: int = TRAJECTORIES, orbits: int = TWO_BODY["num_trials"]) -> dict:
     """Their data for ``task``, with every consecutive pair of states as ``pairs`` (and as one-step
-    ``snippets`` for the trajectory objective) and their test twins."""
+    ``snippets`` for the trajectory objective) and their test twins; ``trajectories`` ring paths
+    (spring, pend: theirs 50) or ``orbits`` (2-body: theirs 1000), the first half or 80% to train."""
     system = hnn.load_task(task)
     if task == "real":
         data = system.get_dataset()
@@ -161,11 +168,11 @@ def dataset(task: str, seed: int) -> dict:
                                                                                        ("test_pairs", "test_x", "test_t"))}
     elif task == "2body":
         # about a second a seed (1000 orbits, batched), so drawn afresh by each run rather than cached
-        data = hnn.nbody.orbit_dataset(system.random_config, seed, **TWO_BODY)
+        data = hnn.nbody.orbit_dataset(system.random_config, seed, **{**TWO_BODY, "num_trials": orbits})
         points = len(data["t_eval"])
         pairs = {"pairs": pairs_from_paths(data["x"], points), "test_pairs": pairs_from_paths(data["test_x"], points)}
     else:
-        data = hnn.datasets.ring_dataset(system.dynamics, seed, TRAJECTORIES, T_SPAN, TIMESCALE,
+        data = hnn.datasets.ring_dataset(system.dynamics, seed, trajectories, T_SPAN, TIMESCALE,
                                          system.RADIUS_RANGE, system.NOISE_STD)
         points = len(data["t_eval"])
         pairs = {"pairs": pairs_from_paths(data["x"], points), "test_pairs": pairs_from_paths(data["test_x"], points)}
@@ -220,16 +227,17 @@ def energy_mse(task: str, model, seed: int, predict: str, data: dict) -> float:
 
 
 def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str = "zero_bias",
-            device: str = "cpu") -> dict:
+            quick: bool = False, device: str = "cpu") -> dict:
     """Train one run of row ``label`` on ``task`` (saved under ``out``/runs) on ``device``, its MLPs
-    started by ``init`` (``hnn.models.INITS``; theirs: ``zero_bias``), and measure it on the CPU."""
+    started by ``init`` (``hnn.models.INITS``; theirs: ``zero_bias``), and measure it on the CPU;
+    ``quick``: on ``QUICK_DATA``."""
     kind, objective, _, predicts = ROWS[label]
     trainer = hnn.load_task(task, "train")
-    data = dataset(task, seed)
+    data = dataset(task, seed, **(QUICK_DATA if quick else {}))
     # the trajectory rows' loss is the state error, dt^2 times their derivative error: Adam does not
     # see that scale, but its L2 weight decay adds to the gradient, so it is scaled by dt^2 as well
     decay = SETTINGS[task]["weight_decay"] * (data["dt"] ** 2 if objective == "trajectory" else 1.0)
-    config = trainer.Config(name=f"{task}-dgnet", model=kind, objective=objective, snippet_steps=1,
+    config = trainer.Config(name=f"{task}-dgnet" + ("-quick" if quick else ""), model=kind, objective=objective, snippet_steps=1,
                             total_steps=steps, batch_size=SETTINGS[task]["batch_size"], seed=seed,
                             weight_decay=decay, init=init, save_dir=str(out / "runs"), device=device)
     fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
@@ -282,7 +290,24 @@ def task_table(results: dict, task: str) -> str:
 def table(results: dict) -> str:
     """The markdown of every task of ``results``: their published rows beside ours (the differences:
     this module's docstring)."""
-    return "\n\n".join(task_table(results, task) for task in results["tasks"]) + "\n"
+    quick = results["meta"].get("quick_cuts")
+    head = [f"**QUICK smoke run** (`--quick`, cut: {'; '.join(quick)}): these numbers test the pipeline, not the "
+            "models."] if quick else []
+    return "\n\n".join(head + [task_table(results, task) for task in results["tasks"]]) + "\n"
+
+
+def quick_cuts(tasks, seeds: int | None = None, steps: int | None = None) -> list[str]:
+    """What ``--quick`` cuts on ``tasks`` from their protocol, one phrase each (``seeds``, ``steps``:
+    the ones given on the command line, which quick keeps), as ``main`` prints them."""
+    rings = [task for task in tasks if task in ("spring", "pend")]
+    cuts = [f"{QUICK['seeds']} seed of their {TRIALS} trials"] if seeds is None else []
+    if steps is None:
+        cuts.append(f"{QUICK['steps']} steps a run of their " + ", ".join(f"{SETTINGS[t]['steps']} ({t})" for t in tasks))
+    if rings:
+        cuts.append(f"{QUICK_DATA['trajectories']} paths of their {TRAJECTORIES} ({', '.join(rings)})")
+    if "2body" in tasks:
+        cuts.append(f"{QUICK_DATA['orbits']} orbits of their {TWO_BODY['num_trials']} (2body)")
+    return cuts
 
 
 def main(argv=None) -> dict:
@@ -293,23 +318,38 @@ def main(argv=None) -> dict:
                              "orthogonal (the original HNN's: torch's default biases)")
     parser.add_argument("--steps", type=int, default=None,
                         help="optimizer steps per run (default: theirs, 2000; 2body 10000)")
-    commands.add_flags(parser, seeds="seeds 0..seeds-1 (theirs: 15 trials)", seeds_default=15,
-                       jobs="worker processes, one torch thread each", out="folder for runs, json, table",
-                       out_default=Path("results-dgnet"), update_docs="write each task's table into its section of docs/dgnet.md (the other tasks' stay)")
+    commands.add_flags(parser, quick=f"a smoke run of every task and row: {QUICK['seeds']} seed, {QUICK['steps']} steps a "
+                       f"run (unless --seeds, --steps say otherwise), {QUICK_DATA['trajectories']} ring paths, "
+                       f"{QUICK_DATA['orbits']} 2-body orbits, output in results-quick/dgnet; "
+                       + commands.budget_words("dgnet"),
+                       seeds="seeds 0..seeds-1 (theirs: 15 trials; --quick: 1)", seeds_default=None,
+                       jobs="worker processes, one torch thread each",
+                       out="folder for runs, json, table (default results-dgnet, or results-quick/dgnet with --quick)",
+                       update_docs="write each task's table into its section of docs/dgnet.md (the other tasks' stay)")
     sweep.add_device_flag(parser)
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
+    if args.update_docs and args.quick:
+        parser.error("--update-docs writes full-settings results into docs/dgnet.md; drop --quick")
+    cut = quick_cuts(args.tasks, args.seeds, args.steps) if args.quick else []
+    if args.quick:
+        args.seeds, args.steps = args.seeds or QUICK["seeds"], args.steps or QUICK["steps"]
+        commands.say_quick("dgnet", cut)
+    args.seeds = args.seeds or TRIALS
+    args.out = args.out or (hnn.tasks.repo_root() / "results-quick" / "dgnet" if args.quick else Path("results-dgnet"))
     tic, meta = time.perf_counter(), {**provenance(), "command": portable_command(argv, "analysis/chains/dgnet.py")}
     if args.steps is not None and args.steps < 1:
         sys.exit(f"error: --steps must be positive, got {args.steps}")
     steps = {task: SETTINGS[task]["steps"] if args.steps is None else args.steps for task in args.tasks}
-    work = [(task, label, seed, steps[task], args.out, args.init, args.device or "cpu") for seed in range(args.seeds)
+    work = [(task, label, seed, steps[task], args.out, args.init, args.quick, args.device or "cpu")
+            for seed in range(args.seeds)
             for task in args.tasks for label in rows_for(task)]
-    done = {}
+    done, progress = {}, sweep.Progress(len(work))
+    print(f"{progress.tag()} training and measuring {len(work)} runs", flush=True)
 
     def record(i: int, key: tuple, result: dict) -> None:
         done[key] = result
-        print(f"[{i}/{len(work)}] {key[0]} {key[1]} seed {key[2]}: derivative {result['derivative']:.3g}, "
+        print(f"{progress.advance()} {key[0]} {key[1]} seed {key[2]}: derivative {result['derivative']:.3g}, "
               f"energy {', '.join(f'{k} {v:.3g}' for k, v in result['energy'].items())}", flush=True)
 
     if args.jobs == 1:
@@ -322,7 +362,8 @@ def main(argv=None) -> dict:
     rows = {task: {label: [done[(task, label, seed)] for seed in range(args.seeds)] for label in rows_for(task)}
             for task in args.tasks}
     meta["seconds"] = time.perf_counter() - tic
-    results = {"meta": meta, "steps": steps, "seeds": args.seeds, "tasks": args.tasks, "init": args.init,
+    results = {"meta": {**meta, "quick": args.quick, "quick_cuts": cut}, "steps": steps, "seeds": args.seeds,
+               "tasks": args.tasks, "init": args.init,
                "published": PUBLISHED,
                "settings": {task: SETTINGS[task] for task in args.tasks}, "rows": rows}
     text = table(results)

@@ -35,11 +35,16 @@ from hnn_analysis.provenance import machine, provenance
 from hnn_analysis.scenes.scene_measure import training_cost
 
 BOBS = (1, 2, 3, 5)
-# --quick: a smoke run of every stage, minutes not an hour
+# --quick: a smoke run of every stage within its budget (commands.QUICK_BUDGETS); its LNN trains the
+# protocol's steps (lnn_fields), not its kind's own 60000 (LNN_KIND_FIELDS), and says so (quick_cuts).
+# Its rollouts stop at 1000 iterations: a model of 100 steps rolled out over the LNN protocol's 100 s
+# took up to a minute (2-core box, load 7) to reach 5000 and be reported as too stiff; its energy error
+# is at T = 10 s (lnn_horizon): the truth alone to their T = 100 s (rtol 1e-10) took 25 s
 QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 64, "total_steps": 100},
-         "max_iterations": 5000,
+         "max_iterations": 1000,
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
-                                                           "total_steps": 100}}
+                                                           "total_steps": 100},
+         "lnn_kind_fields": {"lagrangian": {"derivative_loss": "l1"}}, "lnn_horizon": 10.0}
 # CHNN's budget: 8000 steps of batch 200, their 2000 epochs of 4 batches, on FULL_SEEDS seeds (#45: a verdict
 # on several seeds). One seed of it for every kind took about 2.4 hours of a 2-core machine (each kind's
 # one-thread rate: docs/peers.md, "What we tried"), so five are about 12 there; on a GPU a row's seeds of one
@@ -95,9 +100,36 @@ def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
     for kind in settings["kinds"] if settings["lnn_starts"] else ():
         fields = {"bobs": 2, "protocol": "lnn", "objective": "derivative", "model": kind, "seed": seed,
                   "save_dir": str(out / "runs"), **settings["lnn_fields"], **KIND_FIELDS.get(kind, {}),
-                  **LNN_KIND_FIELDS.get(kind, {})}
+                  **settings.get("lnn_kind_fields", LNN_KIND_FIELDS).get(kind, {})}
         jobs.append(sweep.Job(f"lnn/{kind}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
     return jobs
+
+
+def quick_cuts(quick: dict = QUICK, full: dict = FULL) -> list[str]:
+    """What ``quick`` settings cut from ``full``, one phrase each, as the command prints them."""
+    config = hnn.load_task("chain", "train").Config
+    chnn = {**{k: getattr(config, k) for k in ("n_train", "n_test", "hidden_dim", "total_steps")}, **full["fields"]}
+    lnn = {**chnn, **full["lnn_fields"]}
+    steps = {kind: f.get("total_steps") for kind, f in LNN_KIND_FIELDS.items() if f.get("total_steps")}
+    cuts = [f"N = {', '.join(map(str, quick['bobs']))} of {', '.join(map(str, full['bobs']))} bobs",
+            f"1 seed of {FULL_SEEDS} (--seeds sets it)"]
+    words = {"n_train": "training paths", "n_test": "test paths", "hidden_dim": "hidden units",
+             "total_steps": "training steps"}
+    cuts += [f"CHNN protocol: {quick['fields'][k]} {w} of {chnn[k]}" for k, w in words.items() if k in quick["fields"]]
+    cuts.append(f"CHNN protocol: {quick['test_starts']} test starts of {full['test_starts']}")
+    lnn_words = {**words, "n_train": "training states", "n_test": "test states"}
+    cuts += [f"LNN protocol: {quick['lnn_fields'][k]} {w} of {lnn[k]}" for k, w in lnn_words.items()
+             if k in quick["lnn_fields"]]
+    cuts += [f"LNN protocol: its {kind} kind {quick['lnn_fields']['total_steps']} steps of its own {n}"
+             for kind, n in steps.items()
+             if quick.get("lnn_kind_fields", LNN_KIND_FIELDS).get(kind, {}).get("total_steps") is None]
+    cuts.append(f"LNN protocol: {quick['lnn_starts']} energy starts of {full['lnn_starts']}")
+    if quick.get("lnn_horizon"):
+        cuts.append(f"LNN protocol: the energy error at T = {quick['lnn_horizon']:g} s of their "
+                    f"{hnn.load_task('chain', 'protocols').LNN['t_end']:g} s")
+    if "max_iterations" in quick:
+        cuts.append(f"rollouts stop at {quick['max_iterations']} dopri5 iterations (full: {MAX_ITERATIONS})")
+    return cuts
 
 
 def _rollout(chain, kind: str, model, z0: torch.Tensor, t_eval, rtol: float,
@@ -115,8 +147,13 @@ def _rollout(chain, kind: str, model, z0: torch.Tensor, t_eval, rtol: float,
     return (path.reshape(*path.shape[:2], 2, chain.n, 2) if observed == "cartesian" else chain.cartesian(path)), None
 
 
-def measure_chnn(chain, models: dict, starts: int, max_iterations: int = MAX_ITERATIONS) -> dict:
-    """CHNN's number ``{kind: {mean, median, n, seconds}}`` and the chaos floor, over ``starts`` test starts."""
+def _quiet(kind: str) -> None:
+    """A ``measure_*`` caller's progress line for each kind measured: none by default."""
+
+
+def measure_chnn(chain, models: dict, starts: int, max_iterations: int = MAX_ITERATIONS, said=_quiet) -> dict:
+    """CHNN's number ``{kind: {mean, median, n, seconds}}`` and the chaos floor, over ``starts`` test
+    starts; ``said(kind)`` after each kind (a progress line)."""
     protocols = hnn.load_task("chain", "protocols")
     spec = protocols.CHNN
     z0 = protocols.chnn_test_starts(chain, starts)
@@ -127,15 +164,19 @@ def measure_chnn(chain, models: dict, starts: int, max_iterations: int = MAX_ITE
         pred, blew_up = _rollout(chain, kind, model, z0, t, spec["model_rtol"], max_iterations)
         result[kind] = ({"blew_up": blew_up} if pred is None
                         else protocols.summary(protocols.geometric_mean(protocols.relative_errors(pred, truth))))
+        said(kind)
     return result
 
 
-def measure_lnn(models: dict, starts: int, max_iterations: int = MAX_ITERATIONS) -> dict:
-    """LNN's |E(z^_T) - E(z_T)| / 29.4 at T = 100 s ``{kind: {mean, median, n}}``, dopri5 at rtol 1e-8 (theirs)."""
+def measure_lnn(models: dict, starts: int, max_iterations: int = MAX_ITERATIONS, said=_quiet,
+                horizon: float | None = None) -> dict:
+    """LNN's |E(z^_T) - E(z_T)| / 29.4 at T = 100 s ``{kind: {mean, median, n}}``, dopri5 at rtol 1e-8
+    (theirs); ``said(kind)`` after each kind; ``horizon``: T, when not theirs (on their time grid)."""
     data, protocols = hnn.load_task("chain"), hnn.load_task("chain", "protocols")
     chain = data.lnn_double_pendulum()
     z0 = data.sample_lnn_starts(starts, torch.Generator().manual_seed(0), train=False)
     t = protocols.lnn_times()
+    t = t if horizon is None else t[t <= horizon]
     true_end = data.trajectories(chain, z0, t, rtol=protocols.LNN["truth_rtol"], atol=protocols.LNN["truth_rtol"])[:, -1]
     result = {}
     for kind, model in models.items():
@@ -143,6 +184,7 @@ def measure_lnn(models: dict, starts: int, max_iterations: int = MAX_ITERATIONS)
         end = None if pred is None else chain.from_cartesian(pred[:, -1])
         result[kind] = ({"blew_up": blew_up} if pred is None
                         else protocols.summary(protocols.energy_error(chain, end, true_end)))
+        said(kind)
     return result
 
 
@@ -151,15 +193,24 @@ def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
     whose training diverged (``sweep.RunFailed.diverged``) is ``{"diverged": message}`` there."""
     data = hnn.load_task("chain")
     rows, budget = {}, settings.get("max_iterations", MAX_ITERATIONS)
+    names = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
+    progress = sweep.Progress(sum(len(_loaded(runs, row, settings["kinds"], seed, load=False)) for row in names))
+    print(f"  {progress.tag()} measuring {progress.total} models on their protocols", flush=True)
+
+    def said(row: str):
+        return lambda kind: print(f"  {progress.advance()} {row}/{kind} measured", flush=True)
+
     for n in settings["bobs"]:
         models = _loaded(runs, f"chain{n}", settings["kinds"], seed)
-        rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"], budget),
+        rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"], budget,
+                                            said(f"chain{n}")),
                              **_diverged(runs, f"chain{n}", settings["kinds"], seed),
                              "seconds": _seconds(runs, f"chain{n}", settings["kinds"], seed)}
     if not settings["lnn_starts"]:
         return rows
     models = _loaded(runs, "lnn", settings["kinds"], seed)
-    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"], budget), **_diverged(runs, "lnn", settings["kinds"], seed),
+    rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"], budget, said("lnn"), settings.get("lnn_horizon")),
+                   **_diverged(runs, "lnn", settings["kinds"], seed),
                    "seconds": _seconds(runs, "lnn", settings["kinds"], seed)}
     return rows
 
@@ -173,9 +224,11 @@ def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:
             for kind, err in found.items() if isinstance(err, sweep.RunFailed) and err.diverged}
 
 
-def _loaded(runs: dict, row: str, kinds, seed: int) -> dict:
+def _loaded(runs: dict, row: str, kinds, seed: int, load: bool = True) -> dict:
+    """``{kind: its trained model}`` of ``row`` (``load=False``: its run folder)."""
     found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
-    return {kind: hnn.load_run(folder)[0] for kind, folder in found.items() if isinstance(folder, Path)}
+    return {kind: hnn.load_run(folder)[0] if load else folder for kind, folder in found.items()
+            if isinstance(folder, Path)}
 
 
 def _seconds(runs: dict, row: str, kinds, seed: int) -> dict:
@@ -287,7 +340,8 @@ def markdown(results: dict) -> str:
     if meta["quick"]:
         lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
                   "pipeline and say nothing about the kinds; the full table comes from `python analysis/peers.py "
-                  "--jobs 2 --update-docs`.", ""]
+                  "--jobs 2 --update-docs`." + (" Cut: " + "; ".join(meta["quick_cuts"]) + "."
+                                                if meta.get("quick_cuts") else ""), ""]
     walls = [s["wall"] for row in results["rows"].values() for s in row["seconds"].values() if s.get("wall")]
     reused = meta.get("reused", 0)
     if not meta["seconds"]["training"]:
@@ -325,7 +379,8 @@ def markdown(results: dict) -> str:
     lnn = results["rows"].get("lnn")
     if lnn is not None:
         lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
-        lines += ["", "### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = 100 s, "
+        horizon = meta.get("lnn_horizon") or hnn.load_task("chain", "protocols").LNN["t_end"]
+        lines += ["", f"### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = {horizon:g} s, "
                   "mean (median) over the starts (ours: dopri5 at rtol 1e-8)", "",
                   "| kind | energy error | training steps | training s (one thread) |", "| --- | --- | ---: | ---: |"]
         lines += [f"| published {k} | {v:.2g} | | |" for k, v in lnn_published.items()]
@@ -374,7 +429,8 @@ def card(results: dict) -> list[str]:
 
 def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="peers.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    commands.add_flags(p, quick="a smoke run: small data, 100 steps, N = 1, 2 (minutes)",
+    commands.add_flags(p, quick="a smoke run of every stage: small data, 100 steps (the LNN too), N = 1, 2; "
+                       + commands.budget_words("peers"),
                        out="output folder (default: results/peers, or results-quick/peers with --quick)",
                        jobs="worker processes (1: in this process)")
     p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="the first seed")
@@ -397,6 +453,9 @@ def main(argv=None, settings: dict | None = None) -> dict:
     full = settings is None and not args.quick
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"
+    cuts = quick_cuts(settings) if args.quick and not full else []
+    if cuts:
+        commands.say_quick("peers", cuts)
     seeds = range(args.seed, args.seed + (args.seeds or (FULL_SEEDS if full else 1)))
     jobs = plan_seeds(settings, out, seeds)
     runs, todo = sweep.reuse(jobs)
@@ -415,6 +474,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
             atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
                         "quick": not full,     # --quick or a test's settings: not the table
+                        "quick_cuts": cuts, "lnn_horizon": settings.get("lnn_horizon"),
                         "reused": len(jobs) - len(todo), "trained": len(todo),
                         "kinds": list(settings["kinds"]), "seeds": list(seeds),
                         "steps": jobs[0].config.total_steps if jobs else None,

@@ -14,6 +14,7 @@ its name in a task's ``figures``.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,9 +44,11 @@ class Trained:
         return hnn.tasks.run_dataset(self.task, self.args)
 
 
-def energy_protocols(trained: Trained) -> dict:
-    """Every protocol of the task's ``task.py`` through ``hnn.evaluate_energy``; ``{}`` for a task with none."""
-    protocols = list(trained.spec.protocols.values())
+def energy_protocols(trained: Trained, num_trials: int | None = None) -> dict:
+    """Every protocol of the task's ``task.py`` through ``hnn.evaluate_energy``; ``{}`` for a task with
+    none. ``num_trials``: that many trials of each protocol that starts several (a ``--quick`` run's)."""
+    protocols = [p if num_trials is None or p.x0 == "test_segment" else dataclasses.replace(p, num_trials=num_trials)
+                 for p in trained.spec.protocols.values()]
     # only the real pendulum's protocols need the dataset (its measured test segment)
     dataset = trained.dataset if any(p.x0 == "test_segment" for p in protocols) else None
     out = {}
@@ -57,9 +60,12 @@ def energy_protocols(trained: Trained) -> dict:
     return out
 
 
-def evaluate(trained: Trained) -> dict:
-    """``{protocol name: result}``: the task's own ``evaluate``, or ``energy_protocols``."""
-    return (trained.spec.evaluate or energy_protocols)(trained)
+def evaluate(trained: Trained, num_trials: int | None = None) -> dict:
+    """``{protocol name: result}``: the task's own ``evaluate``, or ``energy_protocols`` (of
+    ``num_trials`` trials each when given)."""
+    if trained.spec.evaluate is not None:
+        return trained.spec.evaluate(trained)
+    return energy_protocols(trained, num_trials)
 
 
 # ----------------------------------------------------------------------------------------------

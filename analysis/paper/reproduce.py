@@ -2,7 +2,7 @@
 its figures, for every task in this checkout.
 
     python analysis/reproduce.py                      # full settings, results/
-    python analysis/reproduce.py --quick              # smoke run (300 steps), results-quick/
+    python analysis/reproduce.py --quick              # smoke run (150 steps), results-quick/
     python analysis/reproduce.py --jobs 2             # two training processes, one thread each
     python analysis/reproduce.py --jobs 2 --backend ray   # each run a Ray task (docs/sweeps.md: clusters)
     python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
@@ -28,13 +28,14 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write, write_json
 from hnn_analysis.paper import figures, registry
-from hnn_analysis import readme
+from hnn_analysis import commands, readme
 from hnn import sweep
 from hnn_analysis.provenance import provenance
 from hnn_analysis.commands import portable_command
 from hnn_analysis.paper.tables import MODELS, headline_markdown, tables_markdown
 
-QUICK_STEPS = 300
+QUICK_STEPS = 150        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
+QUICK_TRIALS = 5         # --quick: trials of each energy protocol (theirs: 15; a multiple of its 5 splits)
 HERE = Path(__file__).resolve().parent
 
 
@@ -57,14 +58,15 @@ def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
     return registry.Trained(task, hnn.load_task(task), models, first_args), row
 
 
-def evaluate_task(task: str, runs: dict, fig_dir: Path | None) -> dict:
+def evaluate_task(task: str, runs: dict, fig_dir: Path | None, num_trials: int | None = None) -> dict:
     """Losses from the saved metrics, energy MSE under every protocol, and the figures (as the
     task's ``task.py`` says, through ``hnn_analysis.paper.registry``). ``runs`` is ``{label: run
     folder}``; the row's ``"seconds"`` holds the time of the evaluation and of the figures.
+    ``num_trials``: the trials of each energy protocol, when not its own (``--quick``: ``QUICK_TRIALS``).
     """
     tic = time.perf_counter()
     trained, row = load_runs(task, runs)
-    energy = registry.evaluate(trained)
+    energy = registry.evaluate(trained, num_trials)
     # the figures show the paper's pair; the extra kinds are numbers in their own table
     pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
                             trained.args)
@@ -89,7 +91,8 @@ def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="reproduce.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task of the paper present)")
     p.add_argument("--quick", action="store_true",
-                   help=f"smoke run: {QUICK_STEPS} training steps per model (or --steps), output in results-quick/")
+                   help=f"smoke run: {QUICK_STEPS} training steps per model (or --steps) and each task's own quick "
+                        f"settings (smaller datasets), output in results-quick/; {commands.budget_words('reproduce')}")
     p.add_argument("--steps", type=int, default=None,
                    help="training steps per model, overriding every task's default (with --quick: default "
                         f"{QUICK_STEPS}); a run trained with other steps is retrained")
@@ -190,10 +193,14 @@ def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
 
 
 def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict, fig_dir: Path | None,
-                  models=MODELS) -> None:
+                  models=MODELS, num_trials: int | None = None) -> None:
     """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
     each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
+    progress = sweep.Progress(len(rows))
+    print(f"  {progress.tag()} evaluating {len(rows)} rows" + (" and drawing their figures" if fig_dir else ""),
+          flush=True)
     for spec in rows:
+        progress.advance()
         name, task = spec["row"], spec["task"]
         if task in results.get("skipped", {}):
             continue
@@ -202,12 +209,13 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
         failed = [runs[k] for by_kind in keys.values() for k in by_kind.values() if isinstance(runs[k], Exception)]
         if failed:
             results.setdefault("skipped", {})[task] = str(failed[0])
-            print(f"  {task:11s} SKIPPED (the reason is above)", flush=True)
+            print(f"  {progress.tag()} {task:11s} SKIPPED (the reason is above)", flush=True)
             continue
         per_seed = {}
         for seed in own:
             figs = fig_dir if fig_dir is not None and seed == own[0] and spec["note"] is None else None
-            per_seed[str(seed)] = evaluate_task(task, {kind: runs[k] for kind, k in keys[seed].items()}, figs)
+            per_seed[str(seed)] = evaluate_task(task, {kind: runs[k] for kind, k in keys[seed].items()}, figs,
+                                                num_trials)
         row = dict(per_seed[str(own[0])], task=task, note=spec["note"])
         if len(per_seed) > 1:
             row["per_seed"] = per_seed
@@ -215,7 +223,7 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
         row.pop("seconds", None)
         results["tasks"][name] = row
         results["seconds"]["tasks"][name] = stage
-        print(f"  {name:11s} evaluated ({stage['evaluate']:.1f} s)"
+        print(f"  {progress.tag()} {name:11s} evaluated ({stage['evaluate']:.1f} s)"
               + (f", figures ({stage['figures']:.1f} s)" if fig_dir is not None and spec["note"] is None else ""),
               flush=True)
 
@@ -224,6 +232,25 @@ def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None)
     return {**provenance(), "command": portable_command(argv), "seed": args.seed, "seeds": seeds, "mode": mode,
             "quick": args.quick, "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models),
             "available": hnn.tasks.paper_tasks()}
+
+
+def quick_cuts(tasks: list[str], steps: int | None) -> list[str]:
+    """What ``--quick`` cuts from the tasks' own settings, one phrase each, as ``main`` prints them."""
+    cuts = []
+    if steps is not None:
+        own = {task: hnn.tasks.task_config(task, hnn.task_spec(task).settings).total_steps for task in tasks}
+        cuts.append(f"{steps} training steps a model of the tasks' own "
+                    + ", ".join(f"{n} ({task})" for task, n in own.items()))
+    for task in tasks:
+        spec = hnn.task_spec(task)
+        config = hnn.tasks.task_config(task, spec.settings)
+        cuts += [f"{task}: {key} {value} of {getattr(config, key)}" for key, value in spec.quick.items()]
+    # the tasks measured by hnn.evaluate_energy (a task with its own evaluate keeps its protocols)
+    own = [hnn.task_spec(task).protocols.values() for task in tasks if hnn.task_spec(task).evaluate is None]
+    trials = {protocol.num_trials for protocols in own for protocol in protocols if protocol.x0 != "test_segment"}
+    if trials:
+        cuts.append(f"energy MSE: {QUICK_TRIALS} trials of each protocol's {', '.join(map(str, sorted(trials)))}")
+    return cuts
 
 
 def _mode(args) -> tuple[str, int | None]:
@@ -257,9 +284,13 @@ def main(argv=None) -> dict:
     mode, steps = _mode(args)
     backend = "" if args.backend == "local" else f" --backend {args.backend}"
     print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)
+    cuts = quick_cuts(tasks, steps) if args.quick else []
+    if cuts:
+        commands.say_quick("reproduce", cuts)
     readme.warn_stale(("headline", "results"))
     seeds = list(range(args.seed, args.seed + args.seeds))
-    results = {"meta": _meta(args, argv, seeds, mode, steps), "tasks": {}, "seconds": {"tasks": {}}}
+    results = {"meta": {**_meta(args, argv, seeds, mode, steps), "quick_cuts": cuts}, "tasks": {},
+               "seconds": {"tasks": {}}}
     start = time.perf_counter()
     rows = table_rows(tasks, args.quick, seeds)
     runs, jobs = sweep.reuse(plan(rows, seeds, out / "runs", steps, args.models))
@@ -270,7 +301,8 @@ def main(argv=None) -> dict:
     tic = time.perf_counter()
     figures.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
     try:
-        evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models)
+        evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models,
+                      QUICK_TRIALS if args.quick else None)
     finally:
         figures.set_stamp("")
     results["seconds"]["evaluation"] = time.perf_counter() - tic

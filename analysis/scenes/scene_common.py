@@ -23,6 +23,10 @@ HORIZON = 10               # the rollout metrics' horizon, in training-trajector
 STARTS = 8                 # start states of the rollout metrics
 CARD_FACTOR = 2.0          # a scene card's model is within this factor of the best on both errors
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
+# --quick (a smoke run within its budget, commands.QUICK_BUDGETS): what each measurement does instead
+QUICK = {"starts": 2, "horizon": HORIZON // 2, "points": 50, "drift_periods": 3, "drift_budget": 0.5, "timings": 1}
+FULL = {"starts": STARTS, "horizon": HORIZON, "points": 100, "drift_periods": None, "drift_budget": DRIFT_BUDGET,
+        "timings": 3}
 
 
 def scenes() -> list[str]:
@@ -87,12 +91,13 @@ class Scene:
     the time over which the truth itself diverges from starts ``PERTURBATION`` apart."""
 
     def __init__(self, task: str, quick: bool, state: dict | None = None):
-        self.task, self.system, self.cfg = task, hnn.load_task(task), scene_settings(task)
+        self.task, self.system, self.cfg, self.quick = task, hnn.load_task(task), scene_settings(task), quick
         self.truth = None
         if "T" in self.cfg:
-            horizon = HORIZON * self.cfg["T"]
-            self.t = np.linspace(0.0, horizon, (50 if quick else 100) * HORIZON + 1)
-            self.x0 = settings.start_states(task, self.system, STARTS // 2 if quick else STARTS)
+            mode = QUICK if quick else FULL
+            horizon = mode["horizon"] * self.cfg["T"]
+            self.t = np.linspace(0.0, horizon, mode["points"] * mode["horizon"] + 1)
+            self.x0 = settings.start_states(task, self.system, mode["starts"])
             if state is not None:       # another process integrated this truth already (``state()``)
                 self.truth, self.divergence = torch.as_tensor(state["truth"]), state["divergence"]
                 return
@@ -104,6 +109,11 @@ class Scene:
             data = hnn.load_task("real").get_dataset()
             self.truth = torch.as_tensor(data["test_x"], dtype=torch.float64)[None]
             self.t = np.asarray(data["test_t"], dtype=np.float64) - float(data["test_t"][0])
+
+    @property
+    def trials(self) -> int | None:
+        """The trials of each energy protocol: ``reproduce.QUICK_TRIALS`` in a quick study, else the protocol's."""
+        return reproduce.QUICK_TRIALS if self.quick else None
 
     def state(self) -> dict | None:
         """What another process needs to rebuild this scene without integrating its truth again."""
@@ -118,7 +128,7 @@ class Scene:
         model = trained.models[kind]
         out = saved_numbers(row[kind], model, directory)
         tic = time.perf_counter()
-        energy = registry.evaluate(trained) if protocols else {}
+        energy = registry.evaluate(trained, self.trials) if protocols else {}
         for name, result in energy.items():
             out[f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
         if self.truth is not None:
@@ -169,10 +179,11 @@ def speed_study(scene: Scene, kind: str, model, quick: bool) -> dict:
     t = np.linspace(0.0, scene.cfg["T"], 31)
     ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[kind].separable, quick,
                                 hnn.interface.carries_energy(f))
-    result = sm.speed_at_accuracy(f, x0, t, ladder, 1 if quick else 3)     # quick: a smoke run times once
+    mode = QUICK if quick else FULL
+    result = sm.speed_at_accuracy(f, x0, t, ladder, mode["timings"])     # quick: a smoke run times once
     if scene.cfg.get("drift") and not hnn.MODEL_KINDS[kind].dissipative:
-        period, periods = _periods(scene), (10 if quick else scene.cfg["periods"])
-        budget = 2.0 if quick else DRIFT_BUDGET
+        period, periods = _periods(scene), (mode["drift_periods"] or scene.cfg["periods"])
+        budget = mode["drift_budget"]
         energy = _energy_fn(scene.system, model, kind)
         for key in PICKS:
             pick = result[key]

@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn import sweep
 from hnn.runs import training_subset
 from hnn_analysis.paper import registry, reproduce
 from hnn_analysis.scenes import scene_common, scene_metrics as sm
@@ -96,7 +97,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
                 for key, (kind, directory) in runs.items()}
     tic = time.perf_counter()
     trained, rows = reproduce.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
-    energy = registry.evaluate(trained) if protocols else {}
+    energy = registry.evaluate(trained, scene.trials) if protocols else {}
     shared = (time.perf_counter() - tic) / len(runs)
     out = {}
     for key, (_, directory) in runs.items():
@@ -141,25 +142,32 @@ def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict,
         result = {"per_seed": measured}
         if speed_seed is not None:
             result["speed"] = scene_common.speed_study(scene, kind, hnn.load_run(Path(per_seed[speed_seed]))[0], quick)
-        print(f"  {task:7s} {kind:11s} measured", flush=True)
     elif unit_type == "cells":
         _, _, runs = unit
         result = measure_models(scene, {k: (kind, Path(d)) for k, (kind, d) in runs.items()})
-        if len(runs) > 1:
-            print(f"  {task:7s} {len(runs)} models measured", flush=True)
     else:
         raise ValueError(f"unknown unit type {unit_type!r}")
     return result, scene.state()
+
+
+def _describe(unit: tuple) -> str:
+    """A unit in a progress line: ``'spring  hnn'`` or ``'spring  hnn at 3 grid cells'``."""
+    if unit[0] == "kind":
+        return f"{unit[1]:7s} {unit[2]}" + (f" ({len(unit[3])} seeds)" if len(unit[3]) > 1 else "")
+    kind = next(iter(unit[2].values()))[0] if unit[2] else ""
+    return f"{unit[1]:7s} {kind} at {len(unit[2])} grid cell{'s' if len(unit[2]) != 1 else ''}"
 
 
 def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     """``({key: result}, {task: the scene's state})`` of ``units`` (``{key: unit}``): here (``jobs``
     1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
     which the others reuse)."""
-    results, states = {}, {}
+    results, states, progress = {}, {}, sweep.Progress(len(units))
+    print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
             results[key], states[unit[1]] = run_unit(unit, quick)
+            print(f"  {progress.advance()} {_describe(unit)} measured", flush=True)
         return results, states
     by_task: dict[str, list] = {}
     for key, unit in units.items():
@@ -174,6 +182,7 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
             for future in done:
                 key = running.pop(future)
                 results[key], state = future.result()
+                print(f"  {progress.advance()} {_describe(units[key])} measured", flush=True)
                 task = units[key][1]
                 if task not in states:
                     states[task] = state

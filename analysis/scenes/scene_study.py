@@ -1,7 +1,7 @@
 """Which model does each scene need? Every model kind on every scene, measured.
 
     python analysis/scene_study.py --jobs 2                  # full study (reuses reproduce.py's runs)
-    python analysis/scene_study.py --quick                   # smoke run (300 steps, a small grid)
+    python analysis/scene_study.py --quick                   # smoke run (60 steps, a small grid)
     python analysis/scene_study.py --jobs 2 --update-docs    # docs/scenes.md, the README's model guide
     python analysis/scene_study.py --data FILE --q x --v v   # your own measurements (measured_study.py)
 
@@ -42,13 +42,18 @@ import torch
 
 import hnn
 from hnn_analysis.paper import reproduce
-from hnn_analysis.scenes import measured_study, scene_measure, scene_metrics as sm, scene_report
-from hnn_analysis.scenes.scene_common import CARD_FACTOR, STARTS, Scene, scene_settings, scenes, task_kinds, train
+from hnn_analysis.scenes import measured_study, scene_common, scene_measure, scene_metrics as sm, scene_report
+from hnn_analysis import commands
+from hnn_analysis.scenes.scene_common import CARD_FACTOR, Scene, scene_settings, scenes, task_kinds, train
 from hnn import sweep
 from hnn_analysis.provenance import provenance
 
 WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
-QUICK_WIDTHS, QUICK_FRACTIONS = (16, 200), (0.25, 1.0)
+# --quick: a grid of one narrow cell beside the default one, fewer steps than reproduce.py --quick, and
+# the speed study of the paper's HNN alone (each cut is printed: quick_cuts)
+QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
+QUICK_STEPS = 60
+QUICK_SPEED_KINDS = ("hnn",)
 DEFAULT_CELL = (200, 1.0)
 
 
@@ -82,6 +87,28 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
         if scene_settings(task).get("grid"):
             rows += [_row(task, (w, f), quick) for w in widths for f in fractions if (w, f) != DEFAULT_CELL]
     return rows
+
+
+def quick_cuts(studied: list[str], seeds: int) -> list[str]:
+    """What ``--quick`` cuts from the full study of the scenes ``studied`` (``seeds``: the full
+    study's ``--seeds``), one phrase each, as ``main`` prints them."""
+    quick, full = scene_common.QUICK, scene_common.FULL
+    drift = [task for task in studied if scene_settings(task).get("drift")]
+    cuts = reproduce.quick_cuts(studied, QUICK_STEPS)
+    cuts += [f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
+             f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
+             f"1 seed of {seeds}, so no more seeds at the cell a card picks",
+             f"rollout metrics: {quick['starts']} starts of {full['starts']}, over {quick['horizon']} training "
+             f"lengths of {full['horizon']}, {quick['points']} points per length of {full['points']}",
+             f"speed at accuracy: the {', '.join(QUICK_SPEED_KINDS)} kind only of every kind, the "
+             f"{sm.QUICK_DTS} coarsest of every other step size, tolerances "
+             f"{', '.join(f'{r:g}' for r in sm.QUICK_RTOLS)} of {', '.join(f'{r:g}' for r in sm.RTOLS)}, each "
+             f"setting timed {quick['timings']} time(s) of {full['timings']}"]
+    if drift:
+        cuts.append(f"energy drift: {quick['drift_periods']} periods of " + ", ".join(
+            f"{scene_settings(task)['periods']} ({task})" for task in drift)
+            + f", at most {quick['drift_budget']:g} s a setting of {full['drift_budget']:g}")
+    return cuts
 
 
 # ----------------------------------------------------------------------------------------------
@@ -132,8 +159,11 @@ def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="scene_study.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", nargs="+", default=None, choices=scenes(), help="scenes to study (default: every task that declares scene_study)")
     p.add_argument("--quick", action="store_true",
-                   help=f"smoke run: {reproduce.QUICK_STEPS} steps per model, widths {QUICK_WIDTHS} x fractions "
-                        f"{QUICK_FRACTIONS}, one seed, short drift runs; output in results-quick/")
+                   help=f"smoke run: {QUICK_STEPS} steps per model (with --data: {reproduce.QUICK_STEPS}, one width), "
+                        f"widths {QUICK_WIDTHS} x fractions "
+                        f"{QUICK_FRACTIONS}, one seed, short drift runs (the run prints every cut); output in "
+                        f"results-quick/; {commands.budget_words('scene_study')}; with --data: "
+                        f"{commands.budget_words('scene_study --data')}")
     p.add_argument("--out", type=Path, default=None, help="output folder (default results/ or results-quick/)")
     p.add_argument("--seeds", type=int, default=3, help="seeds of the per-kind rows and the chosen cells (quick: 1)")
     p.add_argument("--jobs", type=int, default=1,
@@ -158,13 +188,18 @@ def main(argv=None) -> dict:
     if args.data:
         return measured_study.run(args, argv, parser)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    steps = reproduce.QUICK_STEPS if args.quick else None
+    steps = QUICK_STEPS if args.quick else None
     seeds = [0] if args.quick else list(range(args.seeds))
     studied = args.scenes or scenes()
+    cuts = quick_cuts(studied, args.seeds) if args.quick else []
+    if cuts:
+        commands.say_quick("scene_study", cuts)
     start = time.perf_counter()
     results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
-        "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "seeds": seeds,
-        "jobs": args.jobs, "backend": args.backend, "starts": STARTS // 2 if args.quick else STARTS},
+        "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "quick_cuts": cuts, "seeds": seeds,
+        "jobs": args.jobs, "backend": args.backend,
+        "starts": (scene_common.QUICK if args.quick else scene_common.FULL)["starts"],
+        "horizon": (scene_common.QUICK if args.quick else scene_common.FULL)["horizon"]},
         "scenes": {}, "seconds": {}}
 
     # 1. train: every scene's kinds at the default cell (all seeds), the grid (seed 0), the D-HNN split
@@ -184,7 +219,7 @@ def main(argv=None) -> dict:
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
     # states, which a second thread does not speed up; --jobs processes share the units
     tic = time.perf_counter()
-    units = measure_units(studied, runs, seeds, grid_rows)
+    units = measure_units(studied, runs, seeds, grid_rows, QUICK_SPEED_KINDS if args.quick else None)
     measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -235,9 +270,10 @@ def main(argv=None) -> dict:
     return results
 
 
-def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -> dict:
+def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], speed_kinds=None) -> dict:
     """``{key: scene_measure unit}``: per scene, each kind at the default cell (its seeds, and the
-    speed study of the first seed where the scene has a truth to roll out), then each kind's grid."""
+    speed study of the first seed where the scene has a truth to roll out, for the ``speed_kinds``
+    only when given), then each kind's grid."""
     units = {}
     for task in scenes:
         for kind in task_kinds(task):
@@ -245,7 +281,8 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict]) -
                         if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{kind}/seed{seed}"),
                                       Path)}
             if per_seed:
-                speed = seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task) else None
+                speed = (seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task)
+                         and (speed_kinds is None or kind in speed_kinds) else None)
                 units[("kind", task, kind)] = ("kind", task, kind, per_seed, speed)
     for task in scenes:
         for kind in task_kinds(task):
