@@ -171,7 +171,8 @@ def test_quick_runs_every_row_of_every_task_on_one_seed_and_few_steps_and_says_s
     asked = []
 
     def fake_job(args):      # what a run would be asked, without training it
-        task, label, seed, steps, out, init, quick = args
+        task, label, seed, steps, out, init, quick, device = args
+        assert device == "cpu"
         asked.append((task, label, seed, steps, quick))
         return args[:3], {"run": "", "derivative": 1.0, "energy": {p: 1.0 for p in dgnet.ROWS[label][3]}}
 
