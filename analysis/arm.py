@@ -1,6 +1,6 @@
 """The two-link arm: the paper's HNN against the mechanical kind at one training budget.
 
-    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--out DIR]
+    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--balance auto] [--out DIR]
 
 Trains each model at each seed through ``experiment-arm/train.py``'s config (one run at a time,
 reusing complete saved runs), then measures on held-out data of the same seed:
@@ -67,6 +67,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--seeds", type=hnn.cli.int_at_least(0), nargs="+", default=[0, 1, 2])
     parser.add_argument("--models", nargs="+", default=["hnn", "mechanical"], help="model kinds to train")
     parser.add_argument("--mass", type=hnn.cli.positive_float, default=1.0, help="mass of each link in kg")
+    parser.add_argument("--balance", choices=hnn.names.BALANCES, default="auto",
+                        help="the runs' --balance: the loss's weights of the components of dx/dt (hnn.balance)")
     parser.add_argument("--out", default="results/arm", help="folder for the runs and arm.json")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -78,19 +80,21 @@ def main(argv=None) -> dict:
         rows = []
         for seed in args.seeds:
             config = hnn.tasks.task_config("arm", {"model": model, "seed": seed, "total_steps": args.steps,
-                                                   "mass": args.mass, "save_dir": str(out / "runs")})
+                                                   "mass": args.mass, "balance": args.balance,
+                                                   "save_dir": str(out / "runs")})
             folder = hnn.runs.find_run(config) or hnn.run_experiment(config)
             rows.append({"seed": seed, **measure(folder, arm)})
             print(f"{model} seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
                                                        if isinstance(v, float)), flush=True)
         results[model] = rows
     print(f"\n| model | field error | rollout error | M^-1 error | train s | ({args.steps} steps, mass {args.mass} kg, "
+          f"balance {args.balance}, "
           f"median (min-max) over seeds {args.seeds})")
     print("| --- | --- | --- | --- | --- |")
     for model, rows in results.items():
         print(f"| {model} | {_summary(rows, 'field_error')} | {_summary(rows, 'rollout_error')} | "
               f"{_summary(rows, 'inverse_mass_error')} | {statistics.median(r['train_seconds'] for r in rows):.0f} |")
-    report = {"steps": args.steps, "seeds": args.seeds, "mass": args.mass, "rollout_rtol": RTOL,
+    report = {"steps": args.steps, "seeds": args.seeds, "mass": args.mass, "balance": args.balance, "rollout_rtol": RTOL,
               "torch": torch.__version__, "results": results}
     write_json(out / "arm.json", json.loads(json.dumps(report)))
     return report

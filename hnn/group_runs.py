@@ -14,10 +14,12 @@ import numpy as np
 import torch
 
 from . import cli
+from .balance import balance_weights
+from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .io import check_save_dir
 from .kinds import model_from_args
-from .runs import finish_run, run_dir, training_subset
+from .runs import finish_run, run_dir, run_experiment, training_subset
 from .tasks import task_config
 
 
@@ -34,6 +36,10 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         check_save_dir(config.save_dir)
     datasets = datasets or [config.dataset() for config in configs]
     objective = configs[0].make_objective()
+    if any(balance_weights(d[objective.arrays[1]], c.balance, c.derivative_loss) is not None
+           for c, d in zip(configs, datasets)):
+        # --balance auto resolved to a balanced loss on these data, which the group's program does not weigh
+        return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
     models, data, tests, saved = [], [], [], []
     for config, dataset in zip(configs, datasets):
         args = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": dataset.get("cache_key")}
@@ -61,6 +67,14 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         config.finish(directory, datasets[g])
         out.append(directory)
     return out
+
+
+def _alone(config, dataset):
+    """``config`` trained alone (``hnn.run_experiment``): its folder, or the DivergenceError of a failed run."""
+    try:
+        return run_experiment(config, dataset)
+    except DivergenceError as err:
+        return err
 
 
 def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from .balance import balance_weights
 from .integrators.fixed_step import rk4_step
 from .interface import declared
 from .metrics import derivative_loss, mean_and_se
@@ -86,7 +87,9 @@ class DerivativeObjective(Objective):
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         observed = observed_coordinates(dataset)
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None,
-                   "derivative_loss": args.get("derivative_loss", "l2")}
+                   "derivative_loss": args.get("derivative_loss", "l2"),
+                   "loss_weights": balance_weights(dataset[self.arrays[1]], args.get("balance", "off"),
+                                                   args.get("derivative_loss", "l2"))}
         if declared(model).relation(observed) == "mapped":
             # a model of its own coordinates fit to d/dt of the observed states through its own map
             if args.get("use_rk4"):
