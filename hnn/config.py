@@ -58,7 +58,9 @@ class RunConfig:
     nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
     init: str = setting("orthogonal", "how the MLPs' weights start: orthogonal (the paper's: orthogonal weights, "
                                       "torch's default biases), zero_bias (DGNet's: orthogonal weights, zero biases) "
-                                      "or lnn (the LNN's: scaled normal weights, zero biases)", choices=INITS,
+                                      "lnn (the LNN's: scaled normal weights, zero biases) or lnn_convex (the LNN's with nonnegative weights after "
+                                      "the first layer: with softplus, L convex in qdot at step 0, so its first steps "
+                                      "train)", choices=INITS,
                         identity_at_default=False)
     total_steps: int = setting(2000, "optimizer steps; the loop runs total_steps + 1, as the original",
                                parse=cli.int_at_least(0))
