@@ -119,7 +119,7 @@ def fit(kind: str, scene: str, cell: str, budget: dict, seed: int = 0) -> tuple[
                 pred = model.time_derivative(data["test"][x_key].to(dtype)).double()
             row["error"] = field_error(pred, data["test"][y_key])
         except (hnn.DivergenceError, ValueError) as err:
-            row["stop"] = f"{type(err).__name__}: {str(err).split('; ')[0][:160]}"
+            row["stop"] = f"{type(err).__name__}: {str(err)[:240]}"
     row["warned"] = sorted({str(w.message).split(" is far")[0] for w in caught if "far from unit scale" in str(w.message)})
     return model, row
 
@@ -136,7 +136,7 @@ def energy_change(model, kind: str, steps: int, dt: float, seed: int = 0) -> dic
     try:
         path = hnn.rollout(model.time_derivative, x0.to(param.dtype), dt * np.arange(steps + 1), method="rk4")
     except hnn.DivergenceError as err:
-        return {"stop": f"DivergenceError: {str(err).split('. ')[0][:160]}"}
+        return {"stop": f"DivergenceError: {str(err)[:240]}"}
     E = _spring_energy(path.double())
     return {"error": float(((E - E[:, :1]).abs() / E[:, :1]).max())}
 
@@ -246,6 +246,77 @@ def text(results: dict, meta: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps: int = 0,
+              save_dir: Path = Path("results/stress/chain")) -> list[dict]:
+    """The LNN on CHNN's chains as the peers' table trains it (softplus, 256 units, rate 1e-3) from each
+    init: per seed the training states (of 40 paths) whose d2L/dqdot2 cannot be solved, the largest
+    acceleration at them, whether the first batch's loss (200 RK4 snippets) is computed and, with
+    ``steps``, whether that many training steps run."""
+    from hnn.models.lagrangian import SingularLagrangianError
+    out = []
+    for n in bobs:
+        for init in inits:
+            for seed in range(seeds):
+                config = hnn.tasks.task_config("chain", {"bobs": n, "model": "lagrangian", "nonlinearity": "softplus",
+                                                         "learn_rate": 1e-3, "init": init, "n_train": 40, "n_test": 10,
+                                                         "seed": seed, "save_dir": str(save_dir)})
+                objective = config.make_objective()
+                data = objective.prepare(config.dataset())
+                saved = {**config.to_dict(), "kind": config.kind}
+                torch.manual_seed(seed)
+                model = hnn.kinds.model_from_args(saved)
+                z = torch.as_tensor(data["x"][:2000], dtype=torch.float32)
+                row = {"bobs": n, "init": init, "seed": seed, "states": len(z)}
+                try:
+                    with torch.no_grad():
+                        row["max_acceleration"] = float(model.acceleration(z).abs().max())
+                    row["singular"] = 0
+                except SingularLagrangianError as err:
+                    row["singular"] = len(err.states)
+                options = objective.train_options(model, saved, data)
+                first = torch.as_tensor(data[objective.arrays[0]][:200], dtype=torch.float32)
+                try:
+                    with torch.no_grad():
+                        row["first_loss"] = float(options["loss"](first, first).mean())
+                except hnn.DivergenceError as err:
+                    row["first_stop"] = f"{type(err).__name__}: {str(err)[:120]}"
+                if steps:
+                    try:
+                        stats = hnn.train(model, data[objective.arrays[0]], data[objective.arrays[1]], total_steps=steps,
+                                          learn_rate=config.learn_rate, weight_decay=config.weight_decay,
+                                          batch_size=config.batch_size, seed=seed, optimizer=config.optimizer,
+                                          schedule=config.schedule, progress=False, **options)
+                        row["trained_loss"] = stats["train_loss"][-1]
+                    except hnn.DivergenceError as err:
+                        row["train_stop"] = f"{type(err).__name__}: {str(err)[:120]}"
+                out.append(row)
+                print(row, flush=True)
+    return out
+
+
+def lnn_start_text(rows: list[dict], meta: dict, steps: int) -> str:
+    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread), "
+             f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU: CHNN's chains, the LNN as the peers' "
+             "table trains it (softplus, 256 units), seeds 0 to "
+             f"{max(r['seed'] for r in rows)}; each seed's own draw of the init.", "",
+             "| bobs | init | seeds whose first batch failed | states with singular d2L/dqdot2 | largest acceleration "
+             "at init (median over seeds, max) |" + (f" seeds that trained {steps} steps |" if steps else ""),
+             "| --- | --- | --- | --- | --- |" + (" --- |" if steps else "")]
+    for n in dict.fromkeys(r["bobs"] for r in rows):
+        for init in dict.fromkeys(r["init"] for r in rows):
+            group = [r for r in rows if r["bobs"] == n and r["init"] == init]
+            failed = [r for r in group if "first_stop" in r]
+            kinds = sorted({r["first_stop"].split(":")[0] for r in failed})
+            acc = [r["max_acceleration"] for r in group if "max_acceleration" in r]
+            cells = [str(n), init, f"{len(failed)} of {len(group)}" + (f" ({', '.join(kinds)})" if kinds else ""),
+                     f"{sum(r['singular'] for r in group)} of {sum(r['states'] for r in group)}",
+                     f"{np.median(acc):.3g}, {max(acc):.3g}" if acc else "-"]
+            if steps:
+                cells.append(f"{sum('trained_loss' in r for r in group)} of {len(group)}")
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     commands.add_flags(parser, quick="two kinds, four cells, 150 steps, a 1000-step horizon, no precision part "
@@ -253,17 +324,30 @@ def main(argv=None) -> dict:
                        out="folder for stress.json and stress.md", out_default=Path("results/stress"),
                        update_docs="write the stress section of docs/stress.md")
     parser.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of the data and the inits")
+    parser.add_argument("--lnn-start", dest="lnn_start", action="store_true",
+                        help="instead of the grid: the LNN's start on CHNN's chains at N = 1, 3, 5 (lnn-start section)")
+    parser.add_argument("--lnn-seeds", dest="lnn_seeds", type=hnn.cli.int_at_least(1), default=5,
+                        help="seeds of --lnn-start")
+    parser.add_argument("--lnn-steps", dest="lnn_steps", type=hnn.cli.int_at_least(0), default=0,
+                        help="training steps of --lnn-start after the first batch (0: none)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     meta = {**provenance(), "command": commands.portable_command(sys.argv[1:] if argv is None else list(argv),
                                                                  "analysis/stress.py")}
     tic, cpu = time.perf_counter(), time.process_time()
-    results = run(args.quick, args.seed)
+    if args.lnn_start:
+        results = {"lnn_start": lnn_start(seeds=args.lnn_seeds, steps=args.lnn_steps, save_dir=args.out / "chain")}
+    else:
+        results = run(args.quick, args.seed)
     meta["seconds"], meta["cpu_seconds"] = time.perf_counter() - tic, time.process_time() - cpu
     meta["load"] = os.getloadavg()[0]
     results["meta"] = meta
-    body = text(results, meta)
-    commands.publish(args.out, "stress", results, body, {"stress": body} if args.update_docs else {})
+    if args.lnn_start:
+        body = lnn_start_text(results["lnn_start"], meta, args.lnn_steps)
+        commands.publish(args.out, "lnn-start", results, body, {"lnn-start": body} if args.update_docs else {})
+    else:
+        body = text(results, meta)
+        commands.publish(args.out, "stress", results, body, {"stress": body} if args.update_docs else {})
     return results
 
 
