@@ -108,3 +108,14 @@ def test_a_run_records_what_auto_resolved_to(tmp_path):
 def test_balance_refuses_an_objective_with_its_own_loss(tmp_path):
     with pytest.raises(ValueError, match="drop balance"):
         _arm_config(tmp_path, balance="rms", objective="discrete_gradient").make_objective()
+
+
+@pytest.mark.filterwarnings("ignore:dxdt is far from unit scale")
+def test_a_group_whose_data_balance_trains_each_run_alone_with_its_weights(tmp_path):
+    """Grouped training weighs no components: where 'auto' balances, each run trains alone, as
+    ``hnn.run_experiment`` would, so its folder is the lone run's (its loss weights recorded)."""
+    configs = [_arm_config(tmp_path, model="hnn", mass=10.0, seed=s) for s in (0, 1)]
+    assert hnn.grouped.group_key(configs[0]) is not None and hnn.grouped.group_key(_arm_config(tmp_path, balance="rms")) is None
+    folders = hnn.group_runs.train_group(configs)
+    assert [f.name for f in folders] == [hnn.runs.run_dir(c).name for c in configs]
+    assert all("loss_weights" in json.loads((f / "args.json").read_text()) for f in folders)
