@@ -76,7 +76,9 @@ def main(argv=None) -> dict:
                              "dx/dt (hnn.balance)")
     parser.add_argument("--out", default="results/arm", help="folder for the runs and arm.json")
     parser.add_argument("--update-docs", dest="update_docs", action="store_true",
-                        help="write the table into docs/stress.md (section arm-balance)")
+                        help="write the table into its section of docs/stress.md (--section)")
+    parser.add_argument("--section", choices=("arm-balance", "arm-balance-long"), default="arm-balance",
+                        help="the section of docs/stress.md that --update-docs writes")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     meta = {**provenance(), "command": portable_command(sys.argv[1:] if argv is None else list(argv), "analysis/arm.py")}
@@ -111,7 +113,7 @@ def main(argv=None) -> dict:
               "rollout_rtol": RTOL, "results": results}
     write_json(out / "arm.json", json.loads(json.dumps(report)))
     if args.update_docs:
-        print(f"updated the arm-balance section of {readme.update_section('arm-balance', body)}")
+        print(f"updated the {args.section} section of {readme.update_section(args.section, body)}")
     return report
 
 

@@ -34,7 +34,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
          "peers": "docs/peers.md", "stress": "docs/stress.md", "lnn-start": "docs/stress.md",
-         "arm-balance": "docs/stress.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
+         "arm-balance": "docs/stress.md", "arm-balance-long": "docs/stress.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -50,7 +50,10 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
            "stress": "python analysis/stress.py --update-docs",
            "lnn-start": "python analysis/stress.py --lnn-start --update-docs",
-           "arm-balance": "python analysis/arm.py --mass 10 --balance off auto --out results/arm-m10 --update-docs",
+           "arm-balance": "python analysis/arm.py --steps 2000 --mass 10 --balance off auto --out results/arm-m10 "
+                          "--update-docs",
+           "arm-balance-long": "python analysis/arm.py --steps 4000 --mass 10 --models mechanical hnn --out "
+                               "results/arm-m10-4k --update-docs --section arm-balance-long",
            **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --seeds 3 --jobs 2 --update-docs"
               for task in ("spring", "pend", "real", "2body")},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
