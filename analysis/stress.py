@@ -31,6 +31,7 @@ part (``lnn_start``), the Cartesian kinds need a constraint graph these scenes d
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -43,7 +44,7 @@ import torch
 
 import hnn
 from hnn.balance import balance_weights
-from hnn_analysis import commands
+from hnn_analysis import commands, readme
 from hnn_analysis.provenance import machine, provenance
 
 arm_data = hnn.load_task("arm")
@@ -317,6 +318,21 @@ def lnn_start_text(rows: list[dict], meta: dict, steps: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _report(path: Path, update_docs: bool) -> dict:
+    """The tables of a saved ``stress.json`` or ``lnn-start.json``, printed and (``update_docs``) written."""
+    results = json.loads(path.read_text())
+    if "lnn_start" in results:
+        steps = int(results["meta"]["command"].split("--lnn-steps")[1].split()[0]) if "--lnn-steps" in \
+            results["meta"]["command"] else 0
+        name, body = "lnn-start", lnn_start_text(results["lnn_start"], results["meta"], steps)
+    else:
+        name, body = "stress", text(results, results["meta"])
+    print(body)
+    if update_docs:
+        print(f"updated the {name} section of {readme.update_section(name, body)}")
+    return results
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     commands.add_flags(parser, quick="two kinds, four cells, 150 steps, a 1000-step horizon, no precision part "
@@ -330,7 +346,12 @@ def main(argv=None) -> dict:
                         help="seeds of --lnn-start")
     parser.add_argument("--lnn-steps", dest="lnn_steps", type=hnn.cli.int_at_least(0), default=0,
                         help="training steps of --lnn-start after the first batch (0: none)")
+    parser.add_argument("--report", type=Path, default=None,
+                        help="measure nothing: rewrite the tables (and with --update-docs the section) from a "
+                             "stress.json or lnn-start.json this command wrote, stamped with its own command and commit")
     args = parser.parse_args(argv)
+    if args.report is not None:
+        return _report(args.report, args.update_docs)
     torch.set_num_threads(1)
     meta = {**provenance(), "command": commands.portable_command(sys.argv[1:] if argv is None else list(argv),
                                                                  "analysis/stress.py")}

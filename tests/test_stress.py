@@ -1,5 +1,7 @@
 """The stress study (analysis/stress.py): its unit changes keep Hamilton's equations, a tiny grid gives
 every cell one of the three outcomes, and each failure mode it meets stops with one clear error."""
+import json
+
 import pytest
 import torch
 
@@ -30,16 +32,22 @@ def test_the_field_error_is_the_same_in_any_units():
     assert stress.field_error(pred * units, true * units) == pytest.approx(stress.field_error(pred, true), rel=1e-12)
 
 
-def test_a_tiny_grid_gives_every_cell_one_outcome(monkeypatch):
+def test_a_tiny_grid_gives_every_cell_one_outcome(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(stress, "QUICK", TINY)
     monkeypatch.setattr(stress, "QUICK_HORIZON", 50)
     results = stress.run(quick=True)
-    text = stress.text(results, {"command": "python analysis/stress.py --quick", "commit": "0000000", "seconds": 1,
-                                 "cpu_seconds": 1, "load": 0.0, "cores": 2, "cpu": "AVX2"})
+    meta = {"command": "python analysis/stress.py --quick", "commit": "0000000", "seconds": 1, "cpu_seconds": 1,
+            "load": 0.0, "cores": 2, "cpu": "AVX2"}
+    text = stress.text(results, meta)
     cells = [line.split(" | ")[1:] for line in text.splitlines()
              if line.startswith("| ") and "nominal" not in line and "---" not in line and "cell" not in line]
     assert cells and all(c.strip(" |").split(" ")[0] in ("works", "degrades", "stops:") for row in cells for c in row)
     assert {r["kind"] for r in results["rows"]} == {"hnn", "mechanical"}
+    # --report rewrites the same tables from the saved JSON
+    saved = tmp_path / "stress.json"
+    saved.write_text(json.dumps({**results, "meta": meta}))
+    stress._report(saved, update_docs=False)
+    assert capsys.readouterr().out.strip().endswith(text.strip().splitlines()[-1])
 
 
 def test_a_training_whose_loss_overflows_is_a_cell_that_stops_naming_the_fix(monkeypatch):
