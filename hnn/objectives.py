@@ -86,10 +86,12 @@ class DerivativeObjective(Objective):
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         observed = observed_coordinates(dataset)
+        balance, targets = args.get("balance", "off"), dataset.get(self.arrays[1])
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None,
                    "derivative_loss": args.get("derivative_loss", "l2"),
-                   "loss_weights": balance_weights(dataset[self.arrays[1]], args.get("balance", "off"),
-                                                   args.get("derivative_loss", "l2"))}
+                   # --balance reads the training targets' sizes; a caller that passes none trains unweighted
+                   "loss_weights": None if balance == "off" or targets is None
+                   else balance_weights(targets, balance, args.get("derivative_loss", "l2"))}
         if declared(model).relation(observed) == "mapped":
             # a model of its own coordinates fit to d/dt of the observed states through its own map
             if args.get("use_rk4"):
