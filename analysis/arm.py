@@ -1,6 +1,6 @@
 """The two-link arm: the paper's HNN against the mechanical kind at one training budget.
 
-    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--out DIR]
+    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--balance off auto] [--out DIR] [--update-docs]
 
 Trains each model at each seed through ``experiment-arm/train.py``'s config (one run at a time,
 reusing complete saved runs), then measures on held-out data of the same seed:
@@ -19,12 +19,16 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
 from pathlib import Path
 
 import torch
 
 import hnn
 from hnn.io import write_json
+from hnn_analysis import readme
+from hnn_analysis.commands import portable_command
+from hnn_analysis.provenance import machine, provenance
 
 RTOL = 1e-7
 
@@ -67,32 +71,49 @@ def main(argv=None) -> dict:
     parser.add_argument("--seeds", type=hnn.cli.int_at_least(0), nargs="+", default=[0, 1, 2])
     parser.add_argument("--models", nargs="+", default=["hnn", "mechanical"], help="model kinds to train")
     parser.add_argument("--mass", type=hnn.cli.positive_float, default=1.0, help="mass of each link in kg")
+    parser.add_argument("--balance", choices=hnn.names.BALANCES, nargs="+", default=["auto"],
+                        help="the runs' --balance, one set of runs each: the loss's weights of the components of "
+                             "dx/dt (hnn.balance)")
     parser.add_argument("--out", default="results/arm", help="folder for the runs and arm.json")
+    parser.add_argument("--update-docs", dest="update_docs", action="store_true",
+                        help="write the table into its section of docs/stress.md (--section)")
+    parser.add_argument("--section", choices=("arm-balance", "arm-balance-long"), default="arm-balance",
+                        help="the section of docs/stress.md that --update-docs writes")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
+    meta = {**provenance(), "command": portable_command(sys.argv[1:] if argv is None else list(argv), "analysis/arm.py")}
     data = hnn.load_task("arm")
     arm = data.Arm((args.mass, args.mass))
     out = Path(args.out)
     results = {}
-    for model in args.models:
-        rows = []
-        for seed in args.seeds:
-            config = hnn.tasks.task_config("arm", {"model": model, "seed": seed, "total_steps": args.steps,
-                                                   "mass": args.mass, "save_dir": str(out / "runs")})
-            folder = hnn.runs.find_run(config) or hnn.run_experiment(config)
-            rows.append({"seed": seed, **measure(folder, arm)})
-            print(f"{model} seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
-                                                       if isinstance(v, float)), flush=True)
-        results[model] = rows
-    print(f"\n| model | field error | rollout error | M^-1 error | train s | ({args.steps} steps, mass {args.mass} kg, "
-          f"median (min-max) over seeds {args.seeds})")
-    print("| --- | --- | --- | --- | --- |")
-    for model, rows in results.items():
-        print(f"| {model} | {_summary(rows, 'field_error')} | {_summary(rows, 'rollout_error')} | "
-              f"{_summary(rows, 'inverse_mass_error')} | {statistics.median(r['train_seconds'] for r in rows):.0f} |")
-    report = {"steps": args.steps, "seeds": args.seeds, "mass": args.mass, "rollout_rtol": RTOL,
-              "torch": torch.__version__, "results": results}
+    for balance in args.balance:
+        for model in args.models:
+            rows = []
+            for seed in args.seeds:
+                config = hnn.tasks.task_config("arm", {"model": model, "seed": seed, "total_steps": args.steps,
+                                                       "mass": args.mass, "balance": balance,
+                                                       "save_dir": str(out / "runs")})
+                folder = hnn.runs.find_run(config) or hnn.run_experiment(config)
+                rows.append({"seed": seed, **measure(folder, arm)})
+                print(f"{model} ({balance}) seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
+                                                                       if isinstance(v, float)), flush=True)
+            results[f"{model} ({balance})"] = rows
+    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread a run): "
+             f"{args.steps} steps a run, links of {args.mass} kg, median (min-max) over seeds "
+             f"{', '.join(map(str, args.seeds))}; train s is each run's own loop, on a shared box.", "",
+             "| model (--balance) | field error | rollout error | M^-1 error | smallest eigenvalue / truth's | train s |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for name, rows in results.items():
+        lines.append(f"| {name} | {_summary(rows, 'field_error')} | {_summary(rows, 'rollout_error')} | "
+                     f"{_summary(rows, 'inverse_mass_error')} | {_summary(rows, 'inverse_mass_min_eig_ratio')} | "
+                     f"{statistics.median(r['train_seconds'] for r in rows):.0f} |")
+    body = "\n".join(lines) + "\n"
+    print("\n" + body)
+    report = {"meta": meta, "steps": args.steps, "seeds": args.seeds, "mass": args.mass, "balance": args.balance,
+              "rollout_rtol": RTOL, "results": results}
     write_json(out / "arm.json", json.loads(json.dumps(report)))
+    if args.update_docs:
+        print(f"updated the {args.section} section of {readme.update_section(args.section, body)}")
     return report
 
 

@@ -12,6 +12,7 @@ Every generated section is written only this way, never by hand, by the command 
     python analysis/benchmarks/quick_budgets.py --update-docs   # docs/speed.md: every --quick against its budget
     python analysis/readme.py timing results/results.json   # docs/speed.md: a saved run's stage times
     python analysis/readme.py kinds                          # README.md and docs/python.md: the model kinds
+    python analysis/stress.py --update-docs           # docs/stress.md: every kind at the extremes
     python analysis/readme.py check                          # which pages are older than the code
 
 A page's stamp names the commit that made it; ``check`` (and ``reproduce.py`` before it writes)
@@ -35,7 +36,9 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "quick-budgets": "docs/speed.md",
          "speed-accuracy": "docs/integrators.md", "energy-drift": "docs/integrators.md", "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
-         "peers": "docs/peers.md", "ray-quick": "docs/sweeps.md", "ray-full": "docs/sweeps.md",
+         "peers": "docs/peers.md", "stress": "docs/stress.md", "lnn-start": "docs/stress.md",
+         "arm-balance": "docs/stress.md", "arm-balance-long": "docs/stress.md", "ray-quick": "docs/sweeps.md",
+         "ray-full": "docs/sweeps.md",
          "many-models": "docs/speed.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
 # section name -> the command that regenerates it (the staleness check's fix)
@@ -52,6 +55,12 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
            "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
            "measured-guide": "python analysis/scene_study.py --data FILE ... --jobs 2 --update-docs (docs/measured.md)",
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
+           "stress": "python analysis/stress.py --update-docs",
+           "lnn-start": "python analysis/stress.py --lnn-start --update-docs",
+           "arm-balance": "python analysis/arm.py --steps 2000 --mass 10 --balance off auto --out results/arm-m10 "
+                          "--update-docs",
+           "arm-balance-long": "python analysis/arm.py --steps 4000 --mass 10 --models mechanical hnn --out "
+                               "results/arm-m10-4k --update-docs --section arm-balance-long",
            **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --seeds 3 --jobs 2 --update-docs"
               for task in ("spring", "pend", "real", "2body")},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",

@@ -34,8 +34,8 @@ _LAYERS = {
     "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds", "evaluation",
-                 "datasets"),
+    "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
+                 "evaluation", "datasets"),
     "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
              "stopping", "sweep"),
 }

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .names import DERIVATIVE_LOSSES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES
+from .names import BALANCES, DERIVATIVE_LOSSES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES
 
 
 _ANY = object()      # a setting's identity_value when the identity holds the field's own value
@@ -65,7 +65,9 @@ class RunConfig:
     nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
     init: str = setting("orthogonal", "how the MLPs' weights start: orthogonal (the paper's: orthogonal weights, "
                                       "torch's default biases), zero_bias (DGNet's: orthogonal weights, zero biases) "
-                                      "or lnn (the LNN's: scaled normal weights, zero biases)", choices=INITS,
+                                      "lnn (the LNN's: scaled normal weights, zero biases) or lnn_convex (the LNN's with nonnegative weights after "
+                                      "the first layer: with softplus, L convex in qdot at step 0, so its first steps "
+                                      "train)", choices=INITS,
                         identity_at_default=False)
     total_steps: int = setting(2000, "optimizer steps; the loop runs total_steps + 1, as the original",
                                parse=cli.int_at_least(0))
@@ -87,6 +89,10 @@ class RunConfig:
     derivative_loss: str = setting("l2", "the error of a fit of dx/dt (--objective derivative): l2, squared (the "
                                          "paper's), or l1, absolute (the LNN's)", choices=DERIVATIVE_LOSSES,
                                    identity_at_default=False)
+    balance: str = setting("auto", "weigh each component of dx/dt in the fit's loss by its RMS over the training "
+                                   "targets, so no unit decides what is learned (--objective derivative): rms (always), "
+                                   "off (the paper's plain loss) or auto (rms where the largest component's RMS exceeds "
+                                   "the smallest's over 10x: hnn.balance)", choices=BALANCES, identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
@@ -143,6 +149,9 @@ class RunConfig:
             raise ValueError(f"derivative_loss={self.derivative_loss!r} sets the error of a fit of dx/dt "
                              f"(objective='derivative'); objective={self.objective!r} of the {self.kind} model has "
                              "its own loss: drop derivative_loss")
+        if self.balance == "rms" and not (self.objective == "derivative" and isinstance(registered, DerivativeObjective)):
+            raise ValueError(f"balance='rms' weighs the components of a fit of dx/dt (objective='derivative'); "
+                             f"objective={self.objective!r} of the {self.kind} model has its own loss: drop balance")
         if self.objective == "derivative":
             return registered
         if not isinstance(registered, DerivativeObjective):

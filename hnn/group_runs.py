@@ -14,12 +14,15 @@ import numpy as np
 import torch
 
 from . import cli
+from .balance import balance_weights
+from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
 from .training import DERIVATIVE_LOSSES
 from .io import check_save_dir
 from .kinds import model_from_args
-from .runs import finish_run, run_dir, training_subset
+from .objectives import DerivativeObjective
+from .runs import finish_run, run_dir, run_experiment, training_subset
 from .tasks import task_config
 
 
@@ -47,6 +50,11 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         check_save_dir(config.save_dir)
     objective = configs[0].make_objective()
     datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
+    if isinstance(objective, DerivativeObjective) and any(
+            balance_weights(d[objective.arrays[1]], c.balance, c.derivative_loss) is not None
+            for c, d in zip(configs, datasets)):
+        # --balance auto resolved to a balanced loss on these data, which a group's program does not weigh
+        return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
     models, data, tests, saved = [], [], [], []
     for config, dataset in zip(configs, datasets):
         args = {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,      # as run_experiment
@@ -94,6 +102,14 @@ def _stacked_options(objective, model, args: dict, datasets: list[dict]) -> dict
     fit = DERIVATIVE_LOSSES[options.get("derivative_loss", "l2")]
     predict = options.get("predict")
     return {**extra, "loss_of": lambda m: fit(predict or m.time_derivative)}
+
+
+def _alone(config, dataset):
+    """``config`` trained alone (``hnn.run_experiment``): its folder, or the DivergenceError of a failed run."""
+    try:
+        return run_experiment(config, dataset)
+    except DivergenceError as err:
+        return err
 
 
 def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:

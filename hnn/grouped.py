@@ -56,8 +56,8 @@ def group_key(config) -> tuple | None:
     """Configs with equal keys can train as one group; None for a config that trains alone
     (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
     optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
-    Adam on the squared error)."""
-    if (config.kind not in GROUPABLE_KINDS or config.use_rk4 or config.nonlinearity != "tanh"
+    Adam on the squared error, or ``balance='rms'``)."""
+    if (config.kind not in GROUPABLE_KINDS or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
             or (config.optimizer, config.schedule, config.clip_grad, config.derivative_loss)
             != ("adam", "constant", 0.0, "l2")
             or type(config.make_objective()) is not DerivativeObjective):

@@ -6,7 +6,8 @@ tables; ``tests/test_kind_docs.py`` checks that these names are exactly theirs. 
 names and prose are ``hnn.kind_docs.KIND_DOCS``.
 """
 NONLINEARITIES = ("tanh", "relu", "sigmoid", "softplus", "selu", "elu", "swish")
-INITS = ("orthogonal", "zero_bias", "lnn")
+INITS = ("orthogonal", "zero_bias", "lnn", "lnn_convex")
 FIELD_TYPES = ("solenoidal", "conservative", "both")
 OBJECTIVES = ("derivative", "trajectory", "discrete_gradient")
 DERIVATIVE_LOSSES = ("l2", "l1")
+BALANCES = ("auto", "off", "rms")

@@ -18,6 +18,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from .balance import balance_weights
 from .integrators.fixed_step import rk4_step
 from .interface import declared
 from .metrics import derivative_mse, mean_and_se
@@ -105,8 +106,12 @@ class DerivativeObjective(Objective):
 
     def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
         observed = observed_coordinates(dataset)
+        balance, targets = args.get("balance", "off"), dataset.get(self.arrays[1])
         options = {"input_noise": args.get("input_noise", 0.0), "predict": None,
-                   "derivative_loss": args.get("derivative_loss", "l2")}
+                   "derivative_loss": args.get("derivative_loss", "l2"),
+                   # --balance reads the training targets' sizes; a caller that passes none trains unweighted
+                   "loss_weights": None if balance == "off" or targets is None
+                   else balance_weights(targets, balance, args.get("derivative_loss", "l2"))}
         if declared(model).relation(observed) == "mapped":
             # a model of its own coordinates fit to d/dt of the observed states through its own map
             if args.get("use_rk4"):

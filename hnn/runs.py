@@ -93,10 +93,13 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     model = model_from_args(saved, config.device)
     x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
+    options = objective.train_options(model, saved, dataset)
+    if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
+        saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
     stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
                   weight_decay=config.weight_decay, batch_size=config.batch_size, seed=config.seed,
                   print_every=config.print_every, verbose=config.verbose, optimizer=config.optimizer,
-                  schedule=config.schedule, clip_grad=config.clip_grad, **objective.train_options(model, saved, dataset))
+                  schedule=config.schedule, clip_grad=config.clip_grad, **options)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
     config.finish(directory, dataset)

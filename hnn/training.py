@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from .balance import weighted
 from .errors import DivergenceError
 
 
@@ -176,7 +177,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
-          derivative_loss: str = "l2") -> dict:
+          derivative_loss: str = "l2", loss_weights=None) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -203,6 +204,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         clip_grad: clip each step's gradient to this global norm (0: never).
         derivative_loss: the per-element error of the default loss (``DERIVATIVE_LOSSES``): ``'l2'``
             squared (the paper's), ``'l1'`` absolute (the LNN's); a custom ``loss`` replaces both.
+        loss_weights: ``(dim,)`` weights of the default loss's components (``hnn.balance``); None: all 1.
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -232,6 +234,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         _warn_off_scale("x", x)
         _warn_off_scale("dxdt", dxdt)
         loss = DERIVATIVE_LOSSES[derivative_loss](predict or model.time_derivative)
+        if loss_weights is not None:
+            loss = weighted(loss, loss_weights)
     if test_every is None:
         test_every = print_every
     if test_every < 1 or print_every < 1:

@@ -11,11 +11,13 @@ TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "to
         "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}, "max_iterations": 3000}
 
 
-def test_tiny_peers_table(tmp_path):
+def test_tiny_peers_table(tmp_path, monkeypatch):
+    # from the LNN's own init (the table's CHNN rows start from lnn_convex), a fresh black-box L on one bob has
+    # d2L/dqdot2 = 0 somewhere along its first snippets: the run fails in training, deterministically, and the
+    # table says so in its cell (the command does not fail for it)
+    monkeypatch.setattr(peers, "CHNN_KIND_FIELDS", {})
     results = peers.main(["--out", str(tmp_path)], settings=TINY)
     row = results["rows"]["chain1"]
-    # a fresh black-box L on one bob has d2L/dqdot2 = 0 somewhere along its first snippets: the LNN's run fails
-    # in training, deterministically, and the table says so in its cell (the command does not fail for it)
     assert re.fullmatch(r"SingularLagrangianError at (the test batch after )?training step [0-2] of 2: LagrangianNN: "
                         r"d2L/dqdot2 is singular at \d+ states", row["lagrangian"]["diverged"]), row["lagrangian"]
     for kind in set(peers.kinds()) - {"lagrangian"}:
@@ -36,6 +38,14 @@ def test_tiny_peers_table(tmp_path):
     # a rerun trains nothing: every run is found by its config
     again = peers.main(["--out", str(tmp_path)], settings=TINY)
     assert again["rows"]["chain1"]["floor"] == row["floor"]
+
+
+def test_the_lnn_chnn_row_trains_from_its_convex_init(tmp_path):
+    """The table's CHNN rows start the LNN from lnn_convex (issue 48): the same tiny table's LNN cell is
+    a number, where from the LNN's own init it failed in training (test_tiny_peers_table)."""
+    assert peers.CHNN_KIND_FIELDS["lagrangian"]["init"] == "lnn_convex"
+    entry = peers.main(["--out", str(tmp_path)], settings=TINY)["rows"]["chain1"]["lagrangian"]
+    assert "diverged" not in entry and entry["n"] == 3 and 0 < entry["median"] <= 1, entry
 
 
 def test_update_docs_refuses_a_smoke_run(capsys):

@@ -68,7 +68,9 @@ class MechanicalHNN(StateCheckedModel):
     mechanical system in generalized coordinates). Fit on dx/dt by the L2 loss it learns M^-1
     only as well as that loss weighs dq/dt = M^-1 p: where dp/dt is far larger (heavy bodies,
     strong gravity) M^-1 can come out wrong in one direction while the loss is low (docs/arm.md:
-    the two-link arm, 3% M^-1 error at 1 kg links, 31% at 10 kg). Not separable: roll out with ``midpoint``
+    the two-link arm, 3% M^-1 error at 1 kg links, 31% at 10 kg); ``--balance`` (on by default where the
+    components' sizes differ over 10x: ``hnn.balance``) weighs each by its own size (docs/stress.md,
+    "Balanced loss"). Not separable: roll out with ``midpoint``
     (symplectic for any H) or ``dopri5``; ``hnn.trajectory`` refuses ``leapfrog`` for it.
     Declares ``maps = ('velocity',)``: observed [q, qdot] map to [q, p] through its mass matrix.
     """

@@ -22,7 +22,7 @@ NONLINEARITIES = tuple(_NONLINEARITIES)   # the names get_nonlinearity knows, fo
 # how an MLP's weights start (``initialize``), for --init choices: the paper's orthogonal weights with
 # torch's default biases; DGNet's zero biases (Matsubara et al. 2020, dgnet/ode.py); the LNN's scaled normal
 # weights and zero biases (Cranmer et al. 2020, lnn.py custom_init)
-INITS = ("orthogonal", "zero_bias", "lnn")
+INITS = ("orthogonal", "zero_bias", "lnn", "lnn_convex")
 # Piecewise-linear activations: their second derivative is zero almost everywhere, so the
 # symplectic gradient of an HNN built on them is piecewise constant in x and the training
 # signal through d(dH/dx)/dtheta is poor.
@@ -98,6 +98,11 @@ def initialize(model: nn.Module, init: str) -> nn.Module:
       N(0, s^2 / n) with n the larger side of the layer's matrix and s = 2.2 for the first layer, 0.58 i for
       hidden layer i, n for the output (so the output weights' std is sqrt(n)). An L's Euler-Lagrange
       equations do not see L's scale; the large output and small hidden weights set how Adam moves them.
+    - ``'lnn_convex'``: the LNN's, with the weights after the first layer made nonnegative (their absolute
+      values). With a convex nondecreasing activation (softplus) the network is then convex in its input at
+      step 0, so an LNN's d2L/dqdot2 starts positive semidefinite at every state: its first accelerations are
+      the data's size (at most 14 on CHNN's chains) where the LNN's reach 10^5 and its first RK4 snippet
+      fails (docs/stress.md, "The LNN's start"). Training moves the weights anywhere after.
     """
     if init not in INITS:
         raise ValueError(f"unknown init {init!r}; choose one of {', '.join(INITS)}")
@@ -109,10 +114,12 @@ def initialize(model: nn.Module, init: str) -> nn.Module:
             for i, layer in enumerate(layers):
                 if layer.bias is not None:
                     layer.bias.zero_()
-                if init == "lnn":
+                if init in ("lnn", "lnn_convex"):
                     n = max(layer.weight.shape)
                     scale = 2.2 if i == 0 else n if i == len(layers) - 1 else 0.58 * i
                     layer.weight.normal_(0.0, scale / n ** 0.5)
+                    if init == "lnn_convex" and i > 0:
+                        layer.weight.abs_()
     return model
 
 

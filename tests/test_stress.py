@@ -1,0 +1,82 @@
+"""The stress study (analysis/stress.py): its unit changes keep Hamilton's equations, a tiny grid gives
+every cell one of the three outcomes, and each failure mode it meets stops with one clear error."""
+import json
+
+import pytest
+import torch
+
+from hnn_analysis import stress
+
+TINY = {"steps": 5, "hidden": 8, "rows": 32, "learn_rate": 1e-3}
+
+
+@pytest.mark.parametrize("cell", [c for c in stress.CELLS if c != "float64"])
+def test_each_unit_change_keeps_hamiltons_equations(cell):
+    """In units where q, p, t read cq, cp, ct times theirs, the spring's data are Hamilton's equations of
+    H' = H cq cp / ct (dq'/dt' = (cq / ct) dH/dp = (cq cp / ct) dH/dp'), checked by autograd."""
+    cq, cp, ct, _, ratio = stress.CELLS[cell]
+    data = stress._in_units(stress._spring(64, 0, ratio), cq, cp, ct)
+    x = data["x"].clone().requires_grad_(True)
+    q, p = x[:, 0] / cq, x[:, 1] / cp
+    H = (0.5 * p ** 2 / ratio + 0.5 * q ** 2) * cq * cp / ct
+    dH = torch.autograd.grad(H.sum(), x)[0]
+    torch.testing.assert_close(data["dxdt"], torch.stack([dH[:, 1], -dH[:, 0]], 1), rtol=1e-12, atol=0)
+    # and the velocity twin is d/dt of [q', dq'/dt']
+    torch.testing.assert_close(data["dzdt"][:, 0], data["z"][:, 1], rtol=1e-12, atol=0)
+
+
+def test_the_field_error_is_the_same_in_any_units():
+    true = torch.randn(50, 4, dtype=torch.float64)
+    pred = true + 0.1 * torch.randn(50, 4, dtype=torch.float64)
+    units = torch.tensor([1e-3, 1e3, 1.0, 1e3], dtype=torch.float64)
+    assert stress.field_error(pred * units, true * units) == pytest.approx(stress.field_error(pred, true), rel=1e-12)
+
+
+def test_a_tiny_grid_gives_every_cell_one_outcome(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(stress, "QUICK", TINY)
+    monkeypatch.setattr(stress, "QUICK_HORIZON", 50)
+    results = stress.run(quick=True)
+    meta = {"command": "python analysis/stress.py --quick", "commit": "0000000", "seconds": 1, "cpu_seconds": 1,
+            "load": 0.0, "cores": 2, "cpu": "AVX2"}
+    text = stress.text(results, meta)
+    cells = [line.split(" | ")[1:] for line in text.splitlines()
+             if line.startswith("| ") and "nominal" not in line and "---" not in line and "cell" not in line]
+    assert cells and all(c.strip(" |").split(" ")[0] in ("works", "degrades", "stops:") for row in cells for c in row)
+    assert {r["kind"] for r in results["rows"]} == {"hnn", "mechanical"}
+    # --report rewrites the same tables from the saved JSON
+    saved = tmp_path / "stress.json"
+    saved.write_text(json.dumps({**results, "meta": meta}))
+    stress._report(saved, update_docs=False)
+    assert capsys.readouterr().out.strip().endswith(text.strip().splitlines()[-1])
+
+
+def test_a_training_whose_loss_overflows_is_a_cell_that_stops_naming_the_fix(monkeypatch):
+    """q and p in units 10^20 times the spring's: float32 squares of the errors overflow, the loss is
+    no longer finite at step 0, and the cell stops with the training's error (its fixes named: a
+    lower rate, clipping, float64), warned about the data's scale before."""
+    monkeypatch.setitem(stress.CELLS, "x1e20", (1e20, 1e20, 1, False, 1))
+    _, row = stress.fit("hnn", "spring", "x1e20", {**TINY, "learn_rate": 1e-3})
+    outcome = stress._outcome(row, {"error": 0.1})
+    assert outcome.startswith("stops: DivergenceError: the training loss is") and "float64" in outcome
+    assert "warned: dxdt, x off unit scale" in outcome
+
+
+class _TrueSpring(torch.nn.Module):
+    """The spring's exact field dx/dt = (p, -q) as a model (a parameter only for the rollout's dtype)."""
+
+    def __init__(self):
+        super().__init__()
+        self.unused = torch.nn.Parameter(torch.zeros((), dtype=torch.float64))
+
+    def time_derivative(self, x, t=None):
+        return torch.stack([x[:, 1], -x[:, 0]], 1)
+
+
+def test_a_rollout_past_rk4s_stability_limit_stops_naming_the_divergence():
+    """RK4 on the exact spring at omega dt = 3.0, past its limit of 2.83: each step multiplies the state
+    by |R(3i)| = 1.5, the rollout passes max_norm within 100 steps and raises, naming the rows, instead
+    of returning a path that cannot be trusted. At 2.5, inside the limit, it runs (and loses energy)."""
+    row = stress.energy_change(_TrueSpring(), "hnn", 100, 3.0)
+    assert row["stop"].startswith("DivergenceError: rk4") and "Reduce the step size" in row["stop"]
+    assert 0.5 < stress.energy_change(_TrueSpring(), "hnn", 100, 2.5)["error"] <= 1.0
+    assert stress.energy_change(_TrueSpring(), "hnn", 100, 0.1)["error"] < 1e-4
