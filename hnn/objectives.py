@@ -118,6 +118,8 @@ class DerivativeObjective(Objective):
                 raise ValueError(f"--use_rk4 steps the model's own state; on observed {observed!r} states drop it")
             self.field = options["predict"] = model.observed_time_derivative
             return options
+        if targets is not None and hasattr(model, "check_data_scale"):     # a model that knows what scale it can learn
+            model.check_data_scale(dataset[self.arrays[0]], targets)
         if args.get("use_rk4"):
             if "dt" not in dataset:
                 raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")

@@ -1,10 +1,12 @@
 """The stress study (analysis/stress.py): its unit changes keep Hamilton's equations, a tiny grid gives
 every cell one of the three outcomes, and each failure mode it meets stops with one clear error."""
 import json
+import warnings
 
 import pytest
 import torch
 
+import hnn
 from hnn_analysis import stress
 
 TINY = {"steps": 5, "hidden": 8, "rows": 32, "learn_rate": 1e-3}
@@ -80,3 +82,18 @@ def test_a_rollout_past_rk4s_stability_limit_stops_naming_the_divergence():
     assert row["stop"].startswith("DivergenceError: rk4") and "Reduce the step size" in row["stop"]
     assert 0.5 < stress.energy_change(_TrueSpring(), "hnn", 100, 2.5)["error"] <= 1.0
     assert stress.energy_change(_TrueSpring(), "hnn", 100, 0.1)["error"] < 1e-4
+
+
+def test_a_mechanical_fit_whose_m_inverse_lies_under_its_floor_warns_naming_the_fix():
+    """q in 10^-3 units (p in 10^3): the spring's M^-1 becomes 10^-6, under MechanicalHNN's floor eps = 1e-4,
+    where the grid measured an error of 300 (docs/stress.md). The derivative objective now says so before
+    training; at the scene's own units it says nothing."""
+    model = hnn.kinds.model_from_args({"kind": "mechanical", "input_dim": 2, "hidden_dim": 8})
+    for cell, warns in (("q x1e-3", True), ("nominal", False)):
+        data = stress._in_units(stress._spring(64, 0, 1.0), *stress.CELLS[cell][:3])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            hnn.DerivativeObjective().train_options(model, {}, {"x": data["x"], "dxdt": data["dxdt"]})
+        floor = [w for w in caught if "eigenvalue floor" in str(w.message)]
+        assert bool(floor) == warns, cell
+        assert not warns or "Scale your states" in str(floor[0].message)

@@ -23,6 +23,8 @@ The model kinds ``'mechanical'`` and ``'second_order'`` (rows of ``hnn.MODEL_KIN
 """
 from __future__ import annotations
 
+import warnings
+
 import torch
 from torch import nn
 
@@ -89,6 +91,18 @@ class MechanicalHNN(StateCheckedModel):
         rows, cols = torch.tril_indices(self.n, self.n)
         self.register_buffer("_rows", rows, persistent=False)
         self.register_buffer("_cols", cols, persistent=False)
+
+    def check_data_scale(self, x, dxdt) -> None:
+        """Warn where canonical data ``x``, ``dxdt`` ``(rows, 2n)`` need an M^-1 near or below ``eps``, the
+        floor of its eigenvalues: their size, rms(dq/dt) / rms(p), is what M^-1 must reach, and below
+        10 eps the model cannot (docs/stress.md: q in 10^-3 units left the spring's error at 300)."""
+        x, dxdt = torch.as_tensor(x), torch.as_tensor(dxdt)
+        p_rms = x[:, self.n:].double().pow(2).mean().sqrt()
+        size = float(dxdt[:, :self.n].double().pow(2).mean().sqrt() / p_rms) if p_rms > 0 else float("inf")
+        if size < 10 * self.eps:
+            warnings.warn(f"the data's M^-1 is about {size:.3g} (rms dq/dt / rms p), within 10x of MechanicalHNN's "
+                          f"eigenvalue floor eps={self.eps:g}: it cannot be learned there. Rescale q and p so "
+                          "that Hamilton's equations still hold (docs/python.md, 'Scale your states')", stacklevel=3)
 
     def potential_and_factor(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(V(q), L(q))`` from one pass of the MLP, ``(batch, n)`` -> ``(batch,)`` and ``(batch, n, n)``,
