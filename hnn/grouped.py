@@ -239,7 +239,18 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
                 with torch.no_grad():
                     test_loss.append(test_rows.loss(_field(weights, tx, baseline, rows), ty))
                 test_steps.append(step)
-    seconds = time.perf_counter() - start
+    def write_back(g: int, model) -> None:
+        for j, net in enumerate(_nets(model)):
+            for param, stacked in zip(_layers(net), weights):
+                param.copy_(stacked[j * len(models) + g])
+    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps, time.perf_counter() - start)
+
+
+def group_stats(models: list, failures: dict, write_back, train_loss: list, test_loss: list, test_steps: list,
+                seconds: float) -> tuple[list[dict | None], dict]:
+    """``(stats, failures)`` of a finished group: each surviving model's weights written back
+    (``write_back(g, model)``, without autograd) and its ``hnn.train``-shaped stats from the per-step
+    ``(G,)`` losses; None for a failed model (``fit_group`` and ``hnn.stacked.fit_stacked``)."""
     train_loss = torch.stack(train_loss).T.tolist()
     test_loss = torch.stack(test_loss).T.tolist() if test_loss else [[] for _ in models]
     stats = []
@@ -248,9 +259,7 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
             stats.append(None)
             continue
         with torch.no_grad():
-            for j, net in enumerate(_nets(model)):
-                for param, stacked in zip(_layers(net), weights):
-                    param.copy_(stacked[j * len(models) + g])
+            write_back(g, model)
         model.eval()
         stats.append({"train_loss": train_loss[g], "test_loss": test_loss[g], "test_steps": list(test_steps),
                       "seconds": seconds / len(models), "group_seconds": seconds, "group_size": len(models)})
@@ -285,4 +294,5 @@ def drop_failed(weights, optim, alive, finite, failures, names, step, interleave
                         value[mine] = 0
 
 
-__all__ = ["GROUPABLE_KINDS", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key"]
+__all__ = ["GROUPABLE_KINDS", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
+           "group_stats"]

@@ -26,7 +26,7 @@ import torch
 from torch import nn
 from torch.func import functional_call, stack_module_state, vmap
 
-from .grouped import GroupRows, WeightStack, drop_failed, group_key
+from .grouped import GroupRows, WeightStack, drop_failed, group_key, group_stats
 from .integrators.integrate import rollout
 from .modes import model_axis
 from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, learning_rate, training_steps
@@ -152,21 +152,10 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
                 with torch.no_grad():
                     test_loss.append(losses(test_rows, tx, ty))
                 test_steps.append(step)
-    seconds = time.perf_counter() - start
-    train_loss = torch.stack(train_loss).T.tolist()
-    test_loss = torch.stack(test_loss).T.tolist() if test_loss else [[] for _ in models]
-    stats = []
-    for g, model in enumerate(models):
-        if g in failures:
-            stats.append(None)
-            continue
-        with torch.no_grad():
-            for name, param in model.named_parameters():
-                param.copy_(params[name][g])
-        model.eval()
-        stats.append({"train_loss": train_loss[g], "test_loss": test_loss[g], "test_steps": list(test_steps),
-                      "seconds": seconds / len(models), "group_seconds": seconds, "group_size": len(models)})
-    return stats, failures
+    def write_back(g: int, model: nn.Module) -> None:
+        for name, param in model.named_parameters():
+            param.copy_(params[name][g])
+    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps, time.perf_counter() - start)
 
 
 # the rollout methods vmap can run: explicit fixed steps. The implicit ones (midpoint, discrete gradient)
