@@ -96,7 +96,7 @@ class MechanicalHNN(StateCheckedModel):
         """Warn where canonical data ``x``, ``dxdt`` ``(rows, 2n)`` need an M^-1 near or below ``eps``, the
         floor of its eigenvalues: their size, rms(dq/dt) / rms(p), is what M^-1 must reach, and below
         10 eps the model cannot (docs/stress.md: q in 10^-3 units left the spring's error at 300)."""
-        x, dxdt = torch.as_tensor(x), torch.as_tensor(dxdt)
+        x, dxdt = torch.as_tensor(x, device="cpu"), torch.as_tensor(dxdt, device="cpu")     # a check on the data
         p_rms = x[:, self.n:].double().pow(2).mean().sqrt()
         size = float(dxdt[:, :self.n].double().pow(2).mean().sqrt() / p_rms) if p_rms > 0 else float("inf")
         if size < 10 * self.eps:
