@@ -2,7 +2,7 @@
 its figures, for every task in this checkout.
 
     python analysis/reproduce.py                      # full settings, results/
-    python analysis/reproduce.py --quick              # smoke run (150 steps), results-quick/
+    python analysis/reproduce.py --quick              # smoke run (100 steps), results-quick/
     python analysis/reproduce.py --jobs 2             # two training processes, one thread each
     python analysis/reproduce.py --jobs 2 --backend ray   # each run a Ray task (docs/sweeps.md: clusters)
     python analysis/reproduce.py --jobs 2 --update-docs   # docs/results.md, README headline, docs/figures/
@@ -34,7 +34,7 @@ from hnn_analysis.provenance import provenance
 from hnn_analysis.commands import portable_command
 from hnn_analysis.paper.tables import MODELS, headline_markdown, tables_markdown
 
-QUICK_STEPS = 150        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
+QUICK_STEPS = 100        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
 QUICK_TRIALS = 5         # --quick: trials of each energy protocol (theirs: 15; a multiple of its 5 splits)
 HERE = Path(__file__).resolve().parent
 
