@@ -67,8 +67,11 @@ def balance_weights(dxdt, balance: str = "auto", derivative_loss: str = "l2") ->
 
 
 def weighted(loss, weights):
-    """``loss`` ``(x, y) -> (rows, dim)`` with each column times ``weights`` ``(dim,)``."""
+    """``loss`` ``(x, y) -> (rows, dim)`` with each column times ``weights`` ``(dim,)`` (made a tensor
+    once: give it in the loss's dtype and device, and a step moves nothing)."""
+    weights = torch.as_tensor(weights)
+
     def balanced(xb, yb):
         per_element = loss(xb, yb)
-        return per_element * torch.as_tensor(weights, dtype=per_element.dtype, device=per_element.device)
+        return per_element * weights.to(per_element)
     return balanced

@@ -18,7 +18,7 @@ from .balance import balance_weights
 from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
-from .training import DERIVATIVE_LOSSES
+from .training import fit_loss
 from .io import check_save_dir
 from .kinds import model_from_args
 from .objectives import DerivativeObjective
@@ -99,9 +99,8 @@ def _stacked_options(objective, model, args: dict, datasets: list[dict]) -> dict
                  input_noise=options.get("input_noise", 0.0))
     if "loss" in options:
         return {**extra, "loss_of": lambda m: options["loss"]}
-    fit = DERIVATIVE_LOSSES[options.get("derivative_loss", "l2")]
-    predict = options.get("predict")
-    return {**extra, "loss_of": lambda m: fit(predict or m.time_derivative)}
+    return {**extra, "loss_of": lambda m: fit_loss(m, options.get("predict"), options.get("derivative_loss", "l2"),
+                                                   options.get("loss_weights"))}
 
 
 def _alone(config, dataset):

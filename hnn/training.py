@@ -126,6 +126,17 @@ def l1_loss(predict: Callable) -> Callable:
 DERIVATIVE_LOSSES = {"l2": l2_loss, "l1": l1_loss}
 
 
+def fit_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:
+    """The loss ``hnn.train`` minimizes in a fit of dx/dt: ``DERIVATIVE_LOSSES[derivative_loss]`` of
+    ``predict`` (default ``model.time_derivative``), each component times ``loss_weights`` ``(dim,)``
+    (``hnn.balance``; None: all 1), the weights put once on the model's dtype and device."""
+    loss = DERIVATIVE_LOSSES[derivative_loss](predict or model.time_derivative)
+    if loss_weights is None:
+        return loss
+    param = next(model.parameters())
+    return weighted(loss, torch.as_tensor(loss_weights, dtype=param.dtype, device=param.device))
+
+
 def minibatch(x: torch.Tensor, y: torch.Tensor, batch_size: int | None, gen: torch.Generator):
     """The whole set when ``batch_size`` is None or covers it, else a random minibatch without replacement."""
     if batch_size is None or batch_size >= len(x):
@@ -233,9 +244,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     if loss is None:        # a fit of dx/dt itself: its arrays are states and their derivatives
         _warn_off_scale("x", x)
         _warn_off_scale("dxdt", dxdt)
-        loss = DERIVATIVE_LOSSES[derivative_loss](predict or model.time_derivative)
-        if loss_weights is not None:
-            loss = weighted(loss, loss_weights)
+        loss = fit_loss(model, predict, derivative_loss, loss_weights)
     if test_every is None:
         test_every = print_every
     if test_every < 1 or print_every < 1:

@@ -32,7 +32,7 @@ import torch
 
 import hnn
 from hnn import grouped, stacked
-from hnn.training import DERIVATIVE_LOSSES
+from hnn.training import fit_loss
 from hnn_analysis import commands
 from hnn_analysis.provenance import machine, provenance
 
@@ -96,8 +96,7 @@ def group_seconds(k, data, steps, device) -> float:
 
 
 def stacked_seconds(k, data, steps, device) -> float:
-    loss_of = lambda model: DERIVATIVE_LOSSES["l2"](model.time_derivative)      # noqa: E731
-    return _fit_seconds(lambda *a, **kw: stacked.fit_stacked(*a, loss_of=loss_of, **kw), k, data, steps, device)
+    return _fit_seconds(lambda *a, **kw: stacked.fit_stacked(*a, loss_of=fit_loss, **kw), k, data, steps, device)
 
 
 def lone_seconds(k, data, steps, device) -> float:

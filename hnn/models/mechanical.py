@@ -91,6 +91,11 @@ class MechanicalHNN(StateCheckedModel):
         rows, cols = torch.tril_indices(self.n, self.n)
         self.register_buffer("_rows", rows, persistent=False)
         self.register_buffer("_cols", cols, persistent=False)
+        # the same placement as a 0/1 matrix (entries @ place), for vmap over models (hnn.modes.model_axis),
+        # which has no fast rule for the index_put below
+        place = torch.zeros(len(rows), self.n * self.n)
+        place[torch.arange(len(rows)), rows * self.n + cols] = 1
+        self.register_buffer("_place", place, persistent=False)
 
     def check_data_scale(self, x, dxdt) -> None:
         """Warn where canonical data ``x``, ``dxdt`` ``(rows, 2n)`` need an M^-1 near or below ``eps``, the
@@ -110,10 +115,8 @@ class MechanicalHNN(StateCheckedModel):
         out = self.net(embed_angles(q, self.periodic))
         entries = out[:, 1:]
         entries = torch.where(self._rows == self._cols, nn.functional.softplus(entries), entries)
-        if in_model_axis():     # vmap has no fast rule for this index_put: place the entries by a 0/1 matrix
-            place = torch.zeros(len(self._rows), self.n * self.n, dtype=entries.dtype, device=entries.device)
-            place[torch.arange(len(self._rows), device=entries.device), self._rows * self.n + self._cols] = 1
-            return out[:, 0], (entries @ place).reshape(len(q), self.n, self.n)
+        if in_model_axis():
+            return out[:, 0], (entries @ self._place).reshape(len(q), self.n, self.n)
         L = entries.new_zeros(len(q), self.n, self.n)
         L[:, self._rows, self._cols] = entries
         return out[:, 0], L
