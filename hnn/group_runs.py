@@ -22,7 +22,7 @@ from .training import fit_loss
 from .io import check_save_dir
 from .kinds import model_from_args
 from .objectives import DerivativeObjective
-from .runs import finish_run, run_dir, run_experiment, training_subset
+from .runs import finish_run, run_dir, run_experiment, saved_args, training_subset
 from .tasks import task_config
 
 
@@ -57,8 +57,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
     models, data, tests, saved = [], [], [], []
     for config, dataset in zip(configs, datasets):
-        args = {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,      # as run_experiment
-                "dataset_cache_key": dataset.get("cache_key")}
+        args = saved_args(config, dataset)
         torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
         np.random.seed(config.seed)
         models.append(model_from_args(args, config.device))

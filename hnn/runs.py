@@ -85,9 +85,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     missing = [key for key in objective.arrays if key not in dataset]
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
-    # the threads it ran on, as torch has them: a train.py sets config.threads; a sweep or a caller its own
-    saved = {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,
-             "dataset_cache_key": dataset.get("cache_key")}
+    saved = saved_args(config, dataset)
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
     model = model_from_args(saved, config.device)
@@ -104,6 +102,14 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
     config.finish(directory, dataset)
     return directory
+
+
+def saved_args(config, dataset: dict) -> dict:
+    """What a run's args.json holds: the config's fields and model facts, the kind, the threads it trains
+    on (as torch has them: a train.py sets ``config.threads``, a sweep or a caller its own) and the
+    cached dataset it reads (a lone run and a group's member alike)."""
+    return {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,
+            "dataset_cache_key": dataset.get("cache_key")}
 
 
 def training_subset(x, y, fraction: float, seed: int):
