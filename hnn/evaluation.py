@@ -27,6 +27,7 @@ from .integrators.integrate import rollout
 from .interface import declared, gradient_of
 from .metrics import energy_mse
 from .integrators.solvers import get_solver
+from .stacked import group_field, group_options
 
 
 # A protocol's integrator is data: fields ``method`` (a name in ``hnn.SOLVERS``), ``options`` (its
@@ -132,33 +133,39 @@ def _energy(system, protocol: EnergyProtocol, x: torch.Tensor) -> np.ndarray:
     raise ValueError(f"unknown energy {protocol.energy!r}; use 'q2+p2' or 'hamiltonian'")
 
 
-def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int, protocol) -> torch.Tensor:
+def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int, protocol,
+                    group: int = 1, **extra) -> torch.Tensor:
     """Trajectories of per-trial length ``durations`` in one batched call.
 
     Trial i integrates dx/ds = T_i f(x) on s in [0, 1], which is x(T_i s): one shared grid
     for trials whose time spans differ. Equal spans share one ``(1, 1)`` scale, which any method
     can use; unequal ones (the paper's spring rescale) tie a scale to each row, so they need a
-    method that passes every row to every call of ``f`` (not dopri5, which drops finished rows).
+    method that passes every row to every call of ``f`` (dopri5 and dop853 are asked to keep
+    their finished rows: ``drop_finished=False``).
+    ``group``: ``x0`` holds that many models' blocks of trials (``_group_rollout``), each block scaled alike.
     """
     same = bool(np.all(durations == durations[0]))
-    scale = torch.as_tensor(durations[:1] if same else durations, dtype=x0.dtype, device=x0.device)[:, None]
+    scale = torch.as_tensor(durations[:1] if same else np.tile(durations, group), dtype=x0.dtype,
+                            device=x0.device)[:, None]
+    if not same:
+        extra = {**group_options(protocol.method), **extra}
 
     def scaled(x: torch.Tensor) -> torch.Tensor:
         if len(scale) not in (1, len(x)):
             raise ValueError(f"protocol {protocol.name!r} scales each trial's time differently, but "
                              f"{protocol.method} passed {len(x)} of the {len(scale)} rows to f: use a method "
-                             "that keeps every row together (solve_ivp or a fixed-step one)")
+                             "that keeps every row together (solve_ivp, dopri5, dop853 or a fixed-step one)")
         return scale * f(x)
-    return _protocol_rollout(scaled, x0, np.linspace(0.0, 1.0, num_points), protocol)
+    return _protocol_rollout(scaled, x0, np.linspace(0.0, 1.0, num_points), protocol, **extra)
 
 
-def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol) -> torch.Tensor:
+def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol, **extra) -> torch.Tensor:
     """``rollout`` by the protocol's integrator and tolerances, without the float32-tolerance warning."""
     with warnings.catch_warnings():
         # the protocols ask float32 models for tight tolerances, as the original did: what that
         # costs in accuracy is a property of the protocol, not news at every evaluation
         warnings.filterwarnings("ignore", message=".*tighter than torch.float32", category=UserWarning)
-        return rollout(f, x0, t_eval, **protocol.rollout_options())
+        return rollout(f, x0, t_eval, **protocol.rollout_options(), **extra)
 
 
 def _model_rollout(model, run, x0: torch.Tensor, observed: str) -> torch.Tensor:
@@ -171,6 +178,28 @@ def _model_rollout(model, run, x0: torch.Tensor, observed: str) -> torch.Tensor:
         return model.observed_from(traj.reshape(-1, traj.shape[-1]), observed).reshape(traj.shape)
 
 
+def _group_rollout(models: list, run, x0: torch.Tensor, observed: str, protocol) -> list[torch.Tensor]:
+    """``_model_rollout`` of each model of a group (one kind and shape): where the protocol's method is
+    ``row_wise``, every model's trials in one integration (``hnn.stacked.group_field``: each row its
+    own steps, so each path is its model's own up to the batched products' rounding); otherwise one
+    model after another. ``run(field, start, group=G, **options)`` integrates ``(G * trials, dim)`` rows."""
+    if not get_solver(protocol.method).row_wise:
+        return [_model_rollout(m, run, x0, observed) for m in models]
+    param = next(models[0].parameters())
+    starts = [declared(m).state_from(x0.to(dtype=param.dtype, device=param.device), observed) for m in models]
+    traj = run(group_field(models), torch.cat(starts), group=len(models), **group_options(protocol.method))
+    traj = traj.reshape(len(models), len(x0), *traj.shape[1:])
+    with torch.no_grad():
+        return [m.observed_from(t.reshape(-1, t.shape[-1]), observed).reshape(t.shape) for m, t in zip(models, traj)]
+
+
+def _scored(system, protocol: EnergyProtocol, e_true: np.ndarray, traj: torch.Tensor) -> dict:
+    """A model's path ``(trials, T, dim)`` scored against the truth's energies: ``traj``, ``energy``, ``mse``, ``mse_se``."""
+    e_model = _energy(system, protocol, traj)
+    mse, se = energy_mse(e_true, e_model, protocol.splits)
+    return {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model, "mse": mse, "mse_se": se}
+
+
 def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dict | None = None,
                     observed: str = "canonical") -> dict:
     """Run ``protocol`` on the true ``system`` (a task's data module) and each model.
@@ -181,6 +210,9 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
         models: ``{label: model}`` (``hnn.Model``); each model's field is integrated in the
             model's own dtype, as the original did (float32), and in its own state: the starts are
             mapped from ``observed`` coordinates into it and its path back (``hnn.Model.state_from``).
+            A label may name a group, a list of models of one kind and shape (a setting's seeds):
+            their paths share one integration where the protocol's method is ``row_wise`` (each
+            row its own steps: ``hnn.stacked.group_field``) and the truth is integrated once for all.
         dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).
         observed: the coordinates of the system's states (``dataset["state"]``; ``'canonical'``).
 
@@ -202,13 +234,14 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     e_true = _energy(system, protocol, truth)
     out = {"protocol": asdict(protocol), "x0": x0.numpy(), "truth": truth.numpy(), "energy_truth": e_true,
            "t_truth": t0 + truth_spans[:, None] * np.linspace(0, 1, protocol.num_points)}
+
+    def run(f, x, group=1, **extra):
+        return _rollout_scaled(f, x, model_spans, protocol.num_points, protocol, group, **extra)
     for label, model in models.items():
-        traj = _model_rollout(model, lambda f, x: _rollout_scaled(f, x, model_spans, protocol.num_points, protocol),
-                              x0, observed)
-        e_model = _energy(system, protocol, traj)
-        mse, se = energy_mse(e_true, e_model, protocol.splits)
-        out[label] = {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model, "mse": mse,
-                      "mse_se": se}
+        if isinstance(model, (list, tuple)):
+            out[label] = [_scored(system, protocol, e_true, t) for t in _group_rollout(model, run, x0, observed, protocol)]
+        else:
+            out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
     return out
 
 
@@ -223,12 +256,20 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     e_true = _energy(system, protocol, measured)
     out = {"protocol": asdict(protocol), "x0": measured[:1].numpy(), "truth": measured[None].numpy(),
            "energy_truth": e_true[None], "t_truth": t[None]}
-    for label, model in models.items():
-        traj = _model_rollout(model, lambda f, x: _protocol_rollout(f, x, t, protocol), measured[:1], observed)[0]
-        e_model = _energy(system, protocol, traj)
+
+    def run(f, x, group=1, **extra):
+        return _protocol_rollout(f, x, t, protocol, **extra)
+
+    def scored(traj: torch.Tensor) -> dict:          # one trial, (1, T, dim)
+        e_model = _energy(system, protocol, traj[0])
         mse, se = energy_mse(e_true, e_model, protocol.splits)
-        out[label] = {"traj": traj.to(dtype=torch.float64, device="cpu").numpy()[None], "energy": e_model[None],
-                      "mse": mse, "mse_se": se}
+        return {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model[None], "mse": mse,
+                "mse_se": se}
+    for label, model in models.items():
+        if isinstance(model, (list, tuple)):
+            out[label] = [scored(p) for p in _group_rollout(model, run, measured[:1], observed, protocol)]
+        else:
+            out[label] = scored(_model_rollout(model, run, measured[:1], observed))
     return out
 
 

@@ -28,6 +28,7 @@ from torch.func import functional_call, stack_module_state, vmap
 
 from .grouped import GroupRows, WeightStack, drop_failed, group_key, group_stats
 from .integrators.integrate import rollout
+from .integrators.solvers import get_solver
 from .modes import model_axis
 from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, learning_rate, training_steps
 
@@ -93,16 +94,10 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
     if len(data) != len(models) or len(seeds) != len(models) or (tests is not None and len(tests) != len(models)):
         raise ValueError(f"{len(models)} models need as many data pairs, seeds and test pairs; got {len(data)}, "
                          f"{len(seeds)} and {None if tests is None else len(tests)}")
-    shapes = [{k: v.shape for k, v in m.state_dict().items()} for m in models]
-    if any(type(m) is not type(models[0]) or s != shapes[0] for m, s in zip(models, shapes)):
-        raise ValueError("a stacked group's models must be of one class with parameters of the same shapes")
-    params, _ = stack_module_state(models)
     # buffers hold a model's structure (index maps, Hamilton's matrix), the same in every model: shared,
     # not stacked (an index buffer batched under vmap would index per model)
-    buffers = dict(models[0].named_buffers())
-    for m in models[1:]:
-        if any(not torch.equal(b, buffers[k]) for k, b in m.named_buffers()):
-            raise ValueError("a stacked group's models must share their buffers (structure, not weights)")
+    buffers = _check_group(models)
+    params, _ = stack_module_state(models)
     names = names or [f"model {g}" for g in range(len(models))]
     first = next(iter(params.values()))
     kw = dict(dtype=first.dtype, device=first.device)
@@ -172,6 +167,57 @@ class _Rollout(nn.Module):
         return rollout(self.model, x0, self.t_eval, method=self.method, **self.options)
 
 
+class _Field(nn.Module):
+    """``model.time_derivative`` as a module's forward, so that ``functional_call`` swaps the model's weights."""
+
+    def __init__(self, model: nn.Module):
+        super().__init__()
+        self.model = model
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.model.time_derivative(x)
+
+
+def _check_group(models: list[nn.Module]) -> dict:
+    """The buffers a group's models share; ValueError for models of other classes, shapes or buffers."""
+    if not models:
+        raise ValueError("a group needs at least one model")
+    shapes = [{k: v.shape for k, v in m.state_dict().items()} for m in models]
+    if any(type(m) is not type(models[0]) or s != shapes[0] for m, s in zip(models, shapes)):
+        raise ValueError("a group's models must be of one class with parameters of the same shapes")
+    buffers = dict(models[0].named_buffers())
+    if any(not torch.equal(b, buffers[k]) for m in models[1:] for k, b in m.named_buffers()):
+        raise ValueError("a group's models must share their buffers (structure, not weights)")
+    return buffers
+
+
+def group_field(models: list[nn.Module]) -> Callable[[torch.Tensor], torch.Tensor]:
+    """The field of a group as one function of ``(G * batch, dim)`` rows: block g of ``batch`` rows is
+    stepped by ``models[g]``, all G in one vmap over the stacked weights (a snapshot: later changes to
+    the models' weights are not seen). For a rollout whose method is ``row_wise``
+    (``hnn.integrators.solvers.Solver``), so that every row reaches every call in its place."""
+    buffers = _check_group(models)
+    params = {k: v.detach() for k, v in stack_module_state(models)[0].items()}
+    wrapper = _Field(models[0])
+    state_buffers = {f"model.{k}": v for k, v in buffers.items()}
+
+    def one(p: dict, x: torch.Tensor) -> torch.Tensor:
+        return functional_call(wrapper, {**{f"model.{k}": v for k, v in p.items()}, **state_buffers}, (x,))
+
+    def field(x: torch.Tensor) -> torch.Tensor:
+        if len(x) % len(models):
+            raise ValueError(f"a group of {len(models)} models steps G * batch rows, got {len(x)} rows: pass every "
+                             "row to every call (a row_wise method; dopri5 and dop853 with drop_finished=False)")
+        with model_axis():
+            return vmap(one)(params, x.reshape(len(models), -1, x.shape[-1])).reshape(x.shape)
+    return field
+
+
+def group_options(method: str) -> dict:
+    """The options a ``row_wise`` method needs to step a ``group_field``: every row to every call."""
+    return {"drop_finished": False} if "drop_finished" in get_solver(method).accepts() else {}
+
+
 def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: str = "rk4",
                     **options) -> torch.Tensor:
     """Every model of a group rolled out from its own starts: ``x0`` ``(G, batch, dim)`` (or ``(batch, dim)``,
@@ -179,17 +225,23 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
 
     A method of ``VMAP_METHODS`` integrates the whole group in one program (vmap over the stacked
     weights; ``hnn.rollout``'s checks of blown-up rows are skipped there, so a row that blows up shows
-    as non-finite values); any other method rolls the models out one after another (its steps branch
-    on values). No autograd graph."""
+    as non-finite values). The per-row adaptive methods (dopri5, dop853) integrate the group's rows in
+    one call of ``hnn.rollout`` on its ``group_field``, each row with its own steps, so each model's path
+    is its own. Any other method rolls the models out one after another (solve_ivp's step is shared
+    by the batch, the implicit methods' iterations too). No autograd graph."""
     x0 = torch.as_tensor(x0)
     x0 = x0.expand(len(models), *x0.shape) if x0.dim() == 2 else x0
     if x0.dim() != 3 or len(x0) != len(models):
         raise ValueError(f"x0 must be (G, batch, dim) with G = {len(models)} models, or (batch, dim); got "
                          f"{tuple(x0.shape)}")
     if method not in VMAP_METHODS:
-        return torch.stack([rollout(m, x, t_eval, method=method, **options) for m, x in zip(models, x0)])
+        if not get_solver(method).row_wise:
+            return torch.stack([rollout(m, x, t_eval, method=method, **options) for m, x in zip(models, x0)])
+        paths = rollout(group_field(models), x0.reshape(-1, x0.shape[-1]), t_eval, method=method,
+                        **options, **group_options(method))
+        return paths.reshape(*x0.shape[:2], *paths.shape[1:])
+    buffers = _check_group(models)
     params, _ = stack_module_state(models)
-    buffers = dict(models[0].named_buffers())
     wrapper = _Rollout(models[0], t_eval, method, options)
 
     def one(p: dict, x: torch.Tensor) -> torch.Tensor:
@@ -200,4 +252,4 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
         return vmap(one)(params, x0)
 
 
-__all__ = ["VMAP_METHODS", "fit_stacked", "rollout_stacked", "stack_key"]
+__all__ = ["VMAP_METHODS", "fit_stacked", "group_field", "group_options", "rollout_stacked", "stack_key"]

@@ -1,5 +1,7 @@
 """Groups of every kind the studies train (``hnn.stacked``: torch.func's vmap over a model axis) give
 their members' lone runs, and a member that fails is named and dropped while the others go on."""
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -71,7 +73,8 @@ def test_groups_keep_what_differs_between_models_apart():
 
 
 @pytest.mark.parametrize("kind, method", [("hnn", "rk4"), ("separable", "leapfrog"), ("mechanical", "yoshida4"),
-                                          ("hnn", "midpoint"), ("baseline", "dopri5")])
+                                          ("hnn", "midpoint"), ("baseline", "dopri5"), ("hnn", "dopri5"),
+                                          ("mechanical", "dop853"), ("dissipative", "solve_ivp")])
 def test_a_group_rolls_out_as_each_of_its_models(kind, method):
     args = {**hnn.tasks.task_config("spring", {"hidden_dim": 16, "model": kind}).to_dict(), "kind": kind}
     models = []
@@ -79,13 +82,21 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
         torch.manual_seed(seed)
         models.append(hnn.kinds.model_from_args(args).double())
     x0 = torch.randn(3, 4, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
-    t_eval, options = np.linspace(0.0, 1.0, 5), ({} if method == "dopri5" else {"dt": 0.05})
-    together = hnn.stacked.rollout_stacked(models, x0, t_eval, method=method, **options)
+    adaptive = hnn.SOLVERS[method].adaptive
+    t_eval, options = np.linspace(0.0, 1.0, 5), ({"rtol": 1e-9} if adaptive else {"dt": 0.05})
+    stats = {}
+    together = hnn.stacked.rollout_stacked(models, x0, t_eval, method=method, stats=stats, **options)
     assert together.shape == (3, 4, 5, 2)
+    calls = []
     for g, model in enumerate(models):
-        alone = hnn.rollout(model, x0[g], t_eval, method=method, **options)
-        # float64: the batched products sum in other orders than one model's, a few ulps a step
+        calls.append({})
+        alone = hnn.rollout(model, x0[g], t_eval, method=method, stats=calls[-1], **options)
+        # float64: the batched products sum in other orders than one model's, a few ulps a step (the
+        # per-row adaptive steps see the same few ulps in their error norms, far from a step's accept line)
         torch.testing.assert_close(together[g], alone, rtol=1e-10, atol=1e-12)
+    if hnn.SOLVERS[method].row_wise and method not in hnn.stacked.VMAP_METHODS:
+        # one integration of the group's rows: as many batched field calls as its hardest model, not their sum
+        assert stats["nfev"] <= max(c["nfev"] for c in calls) + 2 < sum(c["nfev"] for c in calls)
 
 
 def test_a_sweep_groups_every_kind_on_a_gpu_and_the_closed_form_kinds_on_the_cpu():
@@ -103,3 +114,42 @@ def test_a_sweep_groups_every_kind_on_a_gpu_and_the_closed_form_kinds_on_the_cpu
     assert sizes(sweep.plan_units(jobs("cuda", "hnn", width=200))) == [3]           # any width on a GPU
     assert sizes(sweep.plan_units(jobs("cpu", "hnn", width=200))) == [1, 1, 1]      # compute-bound on a CPU
     assert sizes(sweep.plan_units(jobs("cuda", "mechanical"), group="off")) == [1, 1, 1]
+
+
+@pytest.mark.parametrize("method", ["solve_ivp", "dopri5", "rk4"])
+def test_a_group_is_scored_by_an_energy_protocol_as_each_of_its_models(method):
+    spring = hnn.load_task("spring")
+    args = {**hnn.tasks.task_config("spring", {"hidden_dim": 16, "model": "mechanical"}).to_dict(), "kind": "mechanical"}
+    models = []
+    for seed in range(3):
+        torch.manual_seed(seed)
+        models.append(hnn.kinds.model_from_args(args).double())
+    # the paper's protocol: per-trial time scales, so dopri5 must keep every row of the group in every call
+    protocol = dataclasses.replace(hnn.tasks.get_protocol("spring", "paper"), num_trials=5, method=method,
+                                   **({"rtol": 1e-9} if method != "rk4" else {}))
+    together = hnn.evaluate_energy(spring, {"group": models}, protocol)
+    alone = [hnn.evaluate_energy(spring, {"model": m}, protocol)["model"] for m in models]
+    assert len(together["group"]) == 3
+    for mine, own in zip(together["group"], alone):
+        if method == "solve_ivp":        # its step is shared by the batch: each model is integrated alone
+            np.testing.assert_array_equal(mine["traj"], own["traj"])
+        else:   # one integration of the group's rows; float64 products summed in other orders, a few ulps a step
+            np.testing.assert_allclose(mine["traj"], own["traj"], rtol=1e-9, atol=1e-11)
+        assert mine["mse"] == pytest.approx(own["mse"], rel=1e-7)
+
+
+def test_a_group_is_scored_on_a_measured_test_segment():
+    real = hnn.load_task("real")
+    data = {"test_x": np.stack([np.cos(np.linspace(0, 3, 40)), -np.sin(np.linspace(0, 3, 40))], 1),
+            "test_t": np.linspace(0, 3, 40)}
+    args = {**hnn.tasks.task_config("spring", {"hidden_dim": 16}).to_dict(), "kind": "hnn"}
+    models = []
+    for seed in range(2):
+        torch.manual_seed(seed)
+        models.append(hnn.kinds.model_from_args(args).double())
+    protocol = dataclasses.replace(hnn.tasks.get_protocol("real", "paper"), method="dopri5", rtol=1e-9)
+    together = hnn.evaluate_energy(real, {"group": models}, protocol, data)["group"]
+    for mine, model in zip(together, models):
+        own = hnn.evaluate_energy(real, {"model": model}, protocol, data)["model"]
+        assert mine["traj"].shape == own["traj"].shape == (1, 40, 2)
+        np.testing.assert_allclose(mine["traj"], own["traj"], rtol=1e-9, atol=1e-11)

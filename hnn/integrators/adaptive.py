@@ -134,7 +134,7 @@ def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
 
 def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
                    max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
-                   stats: dict | None = None) -> torch.Tensor:
+                   stats: dict | None = None, drop_finished: bool = True) -> torch.Tensor:
     """RK45 (Dormand-Prince) with one adaptive step size per trajectory.
 
     Each row is controlled by its own error norm, exactly the norm of one scipy ``solve_ivp``
@@ -143,37 +143,41 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3
     from the method's 4th-order dense output, as in scipy. All rows advance in lockstep
     iterations; once a quarter of them have finished, the finished ones are dropped, so ``f``
     sees only rows still running: it must treat rows independently (true of dynamics and of
-    models), and a ``f`` that keeps per-trajectory state must carry each row's identity in the
-    state itself. The stepping runs in numpy on the states' dtype (on a few states an operation
+    models). ``drop_finished=False`` passes every row to every call of ``f`` instead (a finished row
+    is held with a zero step), for a ``f`` that ties a row to its position: a per-trajectory time
+    scale, a group's stacked field (``hnn.stacked.group_field``); each row's path is the same either
+    way. The stepping runs in numpy on the states' dtype (on a few states an operation
     costs several times less there than in torch: docs/speed.md, "Why the fast paths"), ``f`` on tensors sharing the arrays' memory.
     """
-    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
+    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
 
 
 def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = 1e-3, atol: float = 1e-6,
                    max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
-                   stats: dict | None = None) -> torch.Tensor:
+                   stats: dict | None = None, drop_finished: bool = True) -> torch.Tensor:
     """Dormand-Prince 8(5,3) (Hairer's DOP853, ``hnn.integrators.dop853``) with one step size per trajectory.
 
-    As ``dopri5_rollout`` in all else (rows controlled alone, finished rows dropped, ``f`` must
+    As ``dopri5_rollout`` in all else (rows controlled alone, finished rows dropped unless
+    ``drop_finished=False``, ``f`` must
     treat rows independently), with the method's 7th-order dense output at ``t_eval``: 12 field
     calls a step, 3 more on the rows that have an output time inside it. Order 8: at tight
     tolerances it takes several times fewer steps than dopri5 for the same error.
     """
-    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats)
+    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
 
 
 def per_row_rollout(scheme, name: str, f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float, atol: float,
-                    max_norm: float | None, max_iterations: int, stats: dict | None) -> torch.Tensor:
+                    max_norm: float | None, max_iterations: int, stats: dict | None,
+                    drop_finished: bool = True) -> torch.Tensor:
     """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.integrators.dop853.DOP853``, built for the dtype)
     with one step size per row: the driver of ``dopri5_rollout`` and ``dop853_rollout``."""
     with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
         return _per_row(scheme(x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,
-                        max_norm, max_iterations, stats)
+                        max_norm, max_iterations, stats, drop_finished)
 
 
 def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations,
-             stats) -> torch.Tensor:
+             stats, drop_finished) -> torch.Tensor:
     batch, dim = x0.shape
     num_t = len(t)
     direction = 1.0 if t[-1] > t[0] else -1.0
@@ -217,7 +221,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         live = int(np.count_nonzero(~done))
         if live == 0:
             break
-        if live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
+        if drop_finished and live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
             err_old = err_old[keep]

@@ -51,6 +51,9 @@ class Solver:
             of a model that declares ``conservative``), not only dx/dt: a plain field is refused.
         options: the keyword options ``rollout`` passes it; any other is a ValueError naming these
             (None: the keywords ``run`` takes).
+        row_wise: each row's path depends on its own state alone, and every row reaches every call
+            of ``f`` (the per-row adaptive methods given ``drop_finished=False``): the rows of many
+            models can share one integration, each path as its model's own (``hnn.stacked``).
     """
     name: str
     order: int
@@ -62,6 +65,7 @@ class Solver:
     energy_preserving: bool = False
     needs_hamiltonian: bool = False
     options: tuple[str, ...] | None = None
+    row_wise: bool = False
 
     def accepts(self) -> tuple[str, ...]:
         """The keyword options this method takes (``options``, or ``run``'s keywords past ``f, x0, t``)."""
@@ -91,14 +95,16 @@ ITERATION_OPTIONS = ("tol", "max_iter")
 
 def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic: bool = False,
                       needs_separable: bool = False, energy_preserving: bool = False,
-                      needs_hamiltonian: bool = False, options: tuple[str, ...] | None = None) -> Solver:
+                      needs_hamiltonian: bool = False, options: tuple[str, ...] | None = None,
+                      row_wise: bool = False) -> Solver:
     """A ``Solver`` running ``stepper`` by ``hnn.integrators.fixed_step.fixed_step_rollout``; its options
     (default): ``dt``, ``max_norm``, ``stats``, and an ``ImplicitStepper``'s ``tol``, ``max_iter``."""
     run = functools.partial(fixed_step_rollout, method=name, stepper=stepper)
     if options is None:
         options = FIXED_STEP_OPTIONS + (ITERATION_OPTIONS if issubclass(stepper, ImplicitStepper) else ())
     return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run,
-                  energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian, options=options)
+                  energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian, options=options,
+                  row_wise=row_wise)
 
 
 def _scipy_label(options: dict) -> str:
@@ -109,10 +115,11 @@ SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
     # order 5 is RK45's, solve_ivp's default; scipy_method='DOP853' is order 8
     Solver("solve_ivp", 5, symplectic=False, needs_separable=False, adaptive=True, run=scipy_rollout,
            label=_scipy_label),
-    Solver("dopri5", 5, symplectic=False, needs_separable=False, adaptive=True, run=dopri5_rollout),
-    Solver("dop853", 8, symplectic=False, needs_separable=False, adaptive=True, run=dop853_rollout),
-    fixed_step_solver("rk4", RK4, order=4),
-    fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True),
+    # one step size per row (solve_ivp's is shared by the batch, the implicit methods' iterations too)
+    Solver("dopri5", 5, symplectic=False, needs_separable=False, adaptive=True, run=dopri5_rollout, row_wise=True),
+    Solver("dop853", 8, symplectic=False, needs_separable=False, adaptive=True, run=dop853_rollout, row_wise=True),
+    fixed_step_solver("rk4", RK4, order=4, row_wise=True),
+    fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True, row_wise=True),
     fixed_step_solver("midpoint", Midpoint, order=2, symplectic=True),
     # with its default base='leapfrog'; base='midpoint' makes it symplectic for any H
     fixed_step_solver("yoshida4", Yoshida4, order=4, symplectic=True, needs_separable=True,
