@@ -12,6 +12,7 @@ their arrays to the model's device.
 The tests marked ``cuda`` run the same on a GPU and are skipped where torch sees none.
 """
 import contextlib
+import dataclasses
 import tempfile
 from pathlib import Path
 
@@ -117,6 +118,20 @@ def test_the_energy_protocol_runs_making_nothing_on_the_default_device(tmp_path)
     assert np.isfinite(result["hnn"]["mse"])
 
 
+def test_a_group_is_scored_by_a_protocol_making_nothing_on_the_default_device():
+    models = [_drawn("mechanical", seed, "cpu") for seed in (0, 1)]
+    protocol = dataclasses.replace(hnn.PROTOCOLS["spring"]["paper"], method="dopri5", rtol=1e-6, num_trials=5)
+    with strict_device():
+        result = hnn.evaluate_energy(hnn.load_task("spring"), {"group": models}, protocol)
+    assert all(np.isfinite(r["mse"]) for r in result["group"])
+
+
+def _drawn(kind: str, seed: int, device: str) -> torch.nn.Module:
+    torch.manual_seed(seed)
+    return hnn.kinds.model_from_args({**_config("spring", {"model": kind}, "cpu", ".").to_dict(), "kind": kind},
+                                     device=device)
+
+
 def test_a_group_trains_making_nothing_on_the_default_device(tmp_path):
     # the 2-body task's minibatches and input noise: every random draw of a group's step
     configs = [_config("2body", {"batch_size": 8, "input_noise": 0.01, "seed": s}, "cpu", tmp_path) for s in (0, 1)]
@@ -186,6 +201,18 @@ def test_a_group_on_cuda_equals_its_lone_runs(tmp_path):
         a, b = hnn.load_run(folder)[0], hnn.load_run(lone)[0]
         for x, y in zip(a.state_dict().values(), b.state_dict().values()):
             torch.testing.assert_close(x, y, rtol=1e-4, atol=1e-6)     # float32 sums in other orders
+
+
+@CUDA
+@pytest.mark.cuda
+def test_a_group_on_cuda_is_scored_as_its_models_on_the_cpu():
+    protocol = dataclasses.replace(hnn.PROTOCOLS["spring"]["paper"], method="dopri5", rtol=1e-6, num_trials=5)
+    spring = hnn.load_task("spring")
+    gpu = hnn.evaluate_energy(spring, {"g": [_drawn("mechanical", s, "cuda") for s in (0, 1)]}, protocol)["g"]
+    cpu = [hnn.evaluate_energy(spring, {"m": _drawn("mechanical", s, "cpu")}, protocol)["m"] for s in (0, 1)]
+    for a, b in zip(gpu, cpu):
+        # float32 fields on two devices (other kernels, other sums) under per-row steps at rtol 1e-6
+        np.testing.assert_allclose(a["traj"], b["traj"], rtol=1e-3, atol=1e-4)
 
 
 def test_the_pixel_autoencoder_trains_and_reloads_making_nothing_on_the_default_device(tmp_path):
