@@ -75,7 +75,7 @@ class RunConfig:
                                     "sampling in metrics.json, never what is trained", parse=cli.int_at_least(1),
                                display_only=True)
     name: str = setting("run", "run name, the prefix of the run folder")
-    model: str = setting("hnn", "model kind (hnn.kind_docs describes each)")
+    model: str = setting("hnn", "model kind (a row of hnn.MODEL_KINDS describes each)")
     use_rk4: bool = setting(False, "fit the RK4 average slope of the learned field over one data time step dt, "
                                    "(x(t+dt) - x(t))/dt of one RK4 step, to the true dx/dt (the original crashed on "
                                    "this flag); default: fit dx/dt itself")

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from . import names
 from .balance import weighted
 from .errors import DivergenceError
 
@@ -122,8 +123,8 @@ def l1_loss(predict: Callable) -> Callable:
     return lambda xb, yb: (yb - predict(xb)).abs()
 
 
-# --derivative_loss: the per-element error of a fit of dx/dt
-DERIVATIVE_LOSSES = {"l2": l2_loss, "l1": l1_loss}
+# --derivative_loss: the per-element error of a fit of dx/dt, each name of hnn.names' list the function <name>_loss
+DERIVATIVE_LOSSES = {name: globals()[f"{name}_loss"] for name in names.DERIVATIVE_LOSSES}
 
 
 def fit_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:
