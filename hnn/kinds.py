@@ -22,48 +22,12 @@ from __future__ import annotations
 import functools
 import importlib
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 from . import names
 from .kind_docs import KindDoc
-
-
-@dataclass(frozen=True)
-class ModelSpec:
-    """What a kind's builder reads of a run, declared (a run's ``args.json`` holds these among the
-    rest of its config; ``from_args`` picks them out).
-
-    kind: a key of ``MODEL_KINDS``; input_dim: the state's width 2n (pixels: the frame's pixels; the
-    constrained kinds read theirs from the graph);
-    hidden_dim, nonlinearity: the MLPs'; field_type: what the paper's HNN learns (solenoidal,
-    conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
-    are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
-    (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
-    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder.
-    """
-    kind: str
-    input_dim: int | None = None
-    hidden_dim: int = 200
-    nonlinearity: str = "tanh"
-    field_type: str = "solenoidal"
-    latent_dim: int = 2
-    ae_nonlinearity: str = "relu"
-    periodic: bool = False
-    constraints: dict | None = None
-    dtype: str = "float32"
-    init: str = "orthogonal"
-
-    @classmethod
-    def from_args(cls, args: dict) -> ModelSpec:
-        """The spec of a run's (saved) args: its declared fields, the defaults for any it lacks."""
-        if "kind" not in args:
-            raise ValueError(f"a run's args need its model's kind to build it; got keys {sorted(args)}")
-        values = {f.name: args[f.name] for f in fields(cls) if f.name in args}
-        # the measured task's --periodic names the angle columns: a model reads all of its q as angles or none
-        if "periodic" in values:
-            values["periodic"] = bool(values["periodic"])
-        return cls(**values)
+from .specs import ModelSpec
 
 
 @functools.cache
@@ -338,13 +302,18 @@ def objective_for(kind: str):
 
 def model_from_args(args: dict, device="cpu"):
     """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded
-    (float32 unless its ``dtype`` says otherwise): its ``ModelSpec`` built by the kind's row, on ``device``.
+    (float32 unless its ``dtype`` says otherwise): ``model_from_spec`` of its ``ModelSpec``."""
+    return model_from_spec(ModelSpec.from_args(args), device)
+
+
+def model_from_spec(spec: ModelSpec, device="cpu"):
+    """The untrained model of ``spec`` (``hnn.specs.run_specs(config).model``), built by its kind's row,
+    initialized by ``spec.init`` and put on ``spec.dtype`` and ``device``.
 
     The weights are drawn on the CPU whatever torch's default device, then moved: one seed gives the
     same initial model on every device (a GPU's generator draws other numbers)."""
     import torch
     from .models.mlp import initialize
-    spec = ModelSpec.from_args(args)
     if spec.dtype not in DTYPES:
         raise ValueError(f"dtype={spec.dtype!r}: choose one of {', '.join(DTYPES)}")
     with torch.device("cpu"):
