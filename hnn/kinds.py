@@ -300,6 +300,9 @@ def objective_for(kind: str):
     return get_kind(kind).make_objective()
 
 
+DTYPES = names.DTYPES       # a run's dtype: the name of a torch dtype
+
+
 def model_from_args(args: dict, device="cpu"):
     """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded
     (float32 unless its ``dtype`` says otherwise): ``model_from_spec`` of its ``ModelSpec``."""
@@ -319,9 +322,6 @@ def model_from_spec(spec: ModelSpec, device="cpu"):
     with torch.device("cpu"):
         model = initialize(get_kind(spec.kind).build(spec), spec.init)
     return model.to(dtype=getattr(torch, spec.dtype), device=device)
-
-
-DTYPES = ("float32", "float64")     # a run's dtype: the name of a torch dtype
 
 
 def described() -> list[tuple[str, KindDoc | None]]:

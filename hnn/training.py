@@ -85,8 +85,10 @@ def is_test_step(step: int, test_every: int, total_steps: int) -> bool:
     return step % test_every == 0 or step == total_steps
 
 
-OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
-SCHEDULES = ("constant", "cosine")
+# --optimizer: each name of hnn.names' list the torch.optim class of that name, case aside (adamw: AdamW)
+OPTIMIZERS = {name: next(getattr(torch.optim, attr) for attr in dir(torch.optim) if attr.lower() == name)
+              for name in names.OPTIMIZERS}
+SCHEDULES = names.SCHEDULES         # learning_rate's branches
 
 
 def adam_optimizer(model, learn_rate: float, weight_decay: float, kind: str = "adam") -> torch.optim.Optimizer:

@@ -60,6 +60,10 @@ def test_every_module_keys_its_options_from_the_one_list():
     assert models.hamiltonian.FIELD_ROWS["solenoidal"] == (1,)       # H = F2: Hamilton's equations
     for init in hnn.names.INITS:
         models.initialize(models.MLP(2, 4, 2), init)
+    assert hnn.training.OPTIMIZERS == {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
+    for schedule in hnn.names.SCHEDULES:
+        assert hnn.training.learning_rate(1.0, 0, 10, schedule) == 1.0
+    assert all(isinstance(getattr(torch, name), torch.dtype) for name in hnn.names.DTYPES)
 
 
 def test_the_kinds_table_loads_without_torch():
