@@ -6,7 +6,7 @@
 An objective gives ``hnn.train`` its options for a model and a dataset, and measures the final
 train and test numbers. Which objective trains which model kind is declared by the kinds'
 registry (``hnn.MODEL_KINDS``, ``hnn/kinds.py``); a new kind of objective is an ``Objective``
-subclass and one row of ``hnn.OBJECTIVES`` there.
+subclass named for it and its name in ``hnn.names.OBJECTIVES`` (``hnn.OBJECTIVES`` finds the class).
 
 A dataset says in which coordinates its states are (``dataset["state"]``, a key of
 ``hnn.interface.COORDINATES``; ``'canonical'`` if absent) and each model declares what it reads
