@@ -30,13 +30,22 @@ from .kind_docs import KindDoc
 from .specs import ModelSpec
 
 
+def _check_ref(ref: str) -> None:
+    """A ValueError unless ``ref`` reads ``"module:name"`` (checked when a row is written, torch-free)."""
+    module, _, name = ref.partition(":")
+    if not module or not name.isidentifier():
+        raise ValueError(f"{ref!r} is not 'module:name' (e.g. '.models.hamiltonian:HNN' or 'my_package.toy:Toy')")
+
+
 @functools.cache
 def _imported(ref: str) -> Any:
     """The object ``"module:name"`` names (a module starting with ``.`` is read from ``hnn``)."""
     module, _, name = ref.partition(":")
-    if not module or not name:
-        raise ValueError(f"{ref!r} is not 'module:name' (e.g. '.models.hamiltonian:HNN' or 'my_package.toy:Toy')")
-    return getattr(importlib.import_module(module, __package__), name)
+    found = getattr(importlib.import_module(module, __package__), name, None)
+    if found is None:
+        raise ImportError(f"{ref!r}: module {module} has no {name}; a row of hnn.MODEL_KINDS names its class "
+                          "'module:Class'")
+    return found
 
 
 def _resolved(ref) -> Any:
@@ -72,6 +81,9 @@ class ModelKind:
     doc: KindDoc | None = None
 
     def __post_init__(self):
+        for ref in (self.source, self.objective):
+            if isinstance(ref, str):
+                _check_ref(ref)
         if not isinstance(self.source, str):
             _checked_model(self.source)
         if self.doc is not None and not isinstance(self.doc, KindDoc):

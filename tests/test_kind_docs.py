@@ -5,6 +5,7 @@ import dataclasses
 import subprocess
 import sys
 
+import pytest
 import torch
 
 import hnn
@@ -72,3 +73,15 @@ def test_the_kinds_table_loads_without_torch():
             "print(len(MODEL_KINDS), all(r.doc for r in MODEL_KINDS.values()), 'torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == [str(len(hnn.MODEL_KINDS)), "True", "False"]
+
+
+def test_a_row_naming_its_class_wrongly_says_so():
+    with pytest.raises(ValueError, match="is not 'module:name'"):
+        hnn.kinds.ModelKind("hnn.models.hamiltonian.HNN")
+    with pytest.raises(ImportError, match="has no Nope"):
+        hnn.kinds.ModelKind(".models.hamiltonian:Nope").reads("canonical")
+    with pytest.raises(TypeError, match="must be an hnn.Model subclass"):
+        hnn.kinds.ModelKind(".models.mlp:MLP").reads("canonical")        # a network, not a model
+    row = hnn.kinds.ModelKind(".models.structured:SeparableHNN")      # the default builder and objective
+    model = row.build(hnn.kinds.ModelSpec("x", input_dim=2, hidden_dim=4))
+    assert isinstance(model, hnn.SeparableHNN) and isinstance(row.make_objective(), hnn.DerivativeObjective)
