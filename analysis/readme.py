@@ -18,7 +18,7 @@ Every generated section is written only this way, never by hand, by the command 
 A page's stamp names the commit that made it; ``check`` (and ``reproduce.py`` before it writes)
 warns about every section stamped before the last change to ``hnn/`` or ``experiment-*/`` (a
 commit that says ``Numbers-unchanged: <why>`` in its message does not count), and
-about a model-kind section that differs from what ``hnn.kind_docs`` and ``hnn.MODEL_KINDS`` make.
+about a model-kind section that differs from what the rows of ``hnn.MODEL_KINDS`` make.
 """
 import argparse
 import json
@@ -86,13 +86,13 @@ def _page(name: str) -> str:
 
 def kinds_text(name: str) -> str:
     """Section ``kinds`` (the README's line per kind) or ``kinds-python`` (docs/python.md's paragraph
-    per kind): every kind of ``hnn.MODEL_KINDS``, in its order, as ``hnn.kind_docs`` describes it."""
-    kinds = list(hnn.MODEL_KINDS)
-    missing = [kind for kind in kinds if kind not in hnn.kind_docs.KIND_DOCS]
+    per kind): every kind of ``hnn.MODEL_KINDS``, in its order, as its row's ``doc`` describes it."""
+    described = hnn.kinds.described()
+    missing = [kind for kind, doc in described if doc is None]
     if missing:
-        raise ValueError(f"model kind(s) {', '.join(missing)} registered but not described: add an entry to "
-                         "KIND_DOCS in hnn/kind_docs.py")
-    return hnn.kind_docs.readme_lines(kinds) if name == "kinds" else hnn.kind_docs.python_paragraphs(kinds)
+        raise ValueError(f"model kind(s) {', '.join(missing)} registered but not described: give its row of "
+                         "hnn.MODEL_KINDS (hnn/kinds.py) a doc=KindDoc(...)")
+    return hnn.kind_docs.readme_lines(described) if name == "kinds" else hnn.kind_docs.python_paragraphs(described)
 
 
 def declared_out_of_date(root: Path | None = None) -> list[str]:
@@ -102,7 +102,7 @@ def declared_out_of_date(root: Path | None = None) -> list[str]:
         kinds_text("kinds")
     except ValueError as err:
         return [str(err)]
-    return [f"{DECLARED[name]} ({name}) is not what hnn.kind_docs and hnn.MODEL_KINDS make; refresh it: "
+    return [f"{DECLARED[name]} ({name}) is not what the rows of hnn.MODEL_KINDS make; refresh it: "
             "python analysis/readme.py kinds"
             for name, text in texts.items() if text is not None and text.strip() != kinds_text(name).strip()]
 

@@ -274,7 +274,7 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                     row["singular"] = 0
                 except SingularLagrangianError as err:
                     row["singular"] = len(err.states)
-                options = objective.train_options(model, saved, data)
+                options = objective.train_options(model, hnn.specs.run_specs(saved).objective, data)
                 first = torch.as_tensor(data[objective.arrays[0]][:200], dtype=torch.float32)
                 try:
                     with torch.no_grad():

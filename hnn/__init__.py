@@ -31,7 +31,7 @@ _LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config",
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has
 # the folder's layer), may not import each other
 _LAYERS = {
-    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics"),
+    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",

@@ -32,6 +32,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from . import kind_docs
+from .kinds import MODEL_KINDS, described
 from .io import check_save_dir
 
 USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it
@@ -191,10 +192,9 @@ def field_meta(cls: type, name: str) -> dict:
 
 
 def registered_kinds() -> list[str]:
-    """Every model kind: those ``hnn.kind_docs`` describes (known without torch), then any other
-    that ``hnn.MODEL_KINDS`` holds once its module is loaded (a kind registered at run time)."""
-    loaded = sys.modules.get(f"{__package__}.kinds")
-    return list(dict.fromkeys([*kind_docs.KIND_DOCS, *(loaded.MODEL_KINDS if loaded else ())]))
+    """Every model kind ``hnn.MODEL_KINDS`` holds (a torch-free table: known before torch loads), in its
+    order, a kind registered at run time among them."""
+    return list(MODEL_KINDS)
 
 
 def model_choices(cls=None) -> list[str]:
@@ -231,8 +231,8 @@ def make_parser(cls, description: str | None = None) -> Parser:
             # no argparse default, so that --baseline can tell an explicit --model from none
             kinds = model_choices(cls)
             prefix = getattr(cls, "KIND_PREFIX", "")
-            p.add_argument("--model", choices=kinds, default=argparse.SUPPRESS,
-                           help=f"{kind_docs.model_help(kinds, prefix)} (default: {f.default})")
+            kind_help = kind_docs.model_help(kinds, dict(described()), prefix)
+            p.add_argument("--model", choices=kinds, default=argparse.SUPPRESS, help=f"{kind_help} (default: {f.default})")
             p.add_argument("--baseline", action="store_true",
                            help="train the baseline (an MLP predicting dx/dt directly): the original's flag, the "
                                 "same as --model baseline")

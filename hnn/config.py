@@ -23,7 +23,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .names import BALANCES, DERIVATIVE_LOSSES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES
+from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES, OPTIMIZERS,
+                    SCHEDULES)
 
 
 _ANY = object()      # a setting's identity_value when the identity holds the field's own value
@@ -53,9 +54,9 @@ class RunConfig:
     weight_decay: float = setting(1e-4, "Adam weight decay (hard-coded per task in the original)",
                                   parse=cli.nonnegative_float)
     optimizer: str = setting("adam", "adam (weight decay added to the gradient, the paper's) or adamw (decoupled "
-                                     "weight decay, CHNN's)", choices=("adam", "adamw"))
+                                     "weight decay, CHNN's)", choices=OPTIMIZERS)
     schedule: str = setting("constant", "learning rate over the run: constant (the paper's) or cosine (annealed "
-                                        "to 0 at the last step, CHNN's)", choices=("constant", "cosine"))
+                                        "to 0 at the last step, CHNN's)", choices=SCHEDULES)
     clip_grad: float = setting(0.0, "clip each step's gradient to this global norm (0: never); for runs whose "
                                     "loss spikes, such as rollouts through long snippets", parse=cli.nonnegative_float)
     batch_size: int | None = setting(None, "minibatch size; none/0/full = full batch", parse=cli.optional_int)
@@ -75,7 +76,7 @@ class RunConfig:
                                     "sampling in metrics.json, never what is trained", parse=cli.int_at_least(1),
                                display_only=True)
     name: str = setting("run", "run name, the prefix of the run folder")
-    model: str = setting("hnn", "model kind (hnn.kind_docs describes each)")
+    model: str = setting("hnn", "model kind (a row of hnn.MODEL_KINDS describes each)")
     use_rk4: bool = setting(False, "fit the RK4 average slope of the learned field over one data time step dt, "
                                    "(x(t+dt) - x(t))/dt of one RK4 step, to the true dx/dt (the original crashed on "
                                    "this flag); default: fit dx/dt itself")
@@ -106,7 +107,7 @@ class RunConfig:
                               "many times over on a shared one (docs/speed.md#threads); args.json records the count "
                               "the run used, which is not part of its identity", parse=cli.int_at_least(1),
                            display_only=True)
-    dtype: str = setting("float32", "dtype of the model and the data", choices=("float32", "float64"))
+    dtype: str = setting("float32", "dtype of the model and the data", choices=DTYPES)
     debug: bool = setting(False, "on an input error (a missing data file, say) or Ctrl-C, show the full traceback "
                                  "instead of one line", display_only=True)
     force: bool = setting(False, "retrain and replace a complete run of the same settings in save_dir, which "

@@ -20,9 +20,10 @@ from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
 from .training import fit_loss
 from .io import check_save_dir
-from .kinds import model_from_args
+from .kinds import model_from_spec
 from .objectives import DerivativeObjective
 from .runs import finish_run, run_dir, run_experiment, saved_args, training_subset
+from .specs import RunSpecs, run_specs
 from .tasks import task_config
 
 
@@ -56,24 +57,26 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         # --balance auto resolved to a balanced loss on these data, which a group's program does not weigh
         return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
     models, data, tests, saved = [], [], [], []
-    for config, dataset in zip(configs, datasets):
+    specs = [run_specs(config) for config in configs]
+    for config, dataset, spec in zip(configs, datasets, specs):
         args = saved_args(config, dataset)
         torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
         np.random.seed(config.seed)
-        models.append(model_from_args(args, config.device))
+        models.append(model_from_spec(spec.model, config.device))
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         data.append(training_subset(x, y, config.train_fraction, config.seed))
         tests.append((test_x, test_y))
         saved.append(args)
-    first = configs[0]
-    shared = dict(seeds=[c.seed for c in configs], total_steps=first.total_steps, learn_rate=first.learn_rate,
-                  weight_decay=first.weight_decay, batch_size=first.batch_size, print_every=first.print_every,
+    first = specs[0]            # the group's keys make these equal across its configs, but the seeds
+    shared = dict(seeds=[spec.training.seed for spec in specs], total_steps=first.training.total_steps,
+                  learn_rate=first.training.learn_rate, weight_decay=first.training.weight_decay,
+                  batch_size=first.training.batch_size, print_every=first.training.print_every,
                   names=[run_dir(c).name for c in configs])
     if next(iter(keys))[0] == "closed_form":
-        stats, failures = fit_group(models, data, tests, input_noise=getattr(first, "input_noise", 0.0), **shared)
+        stats, failures = fit_group(models, data, tests, input_noise=first.objective.input_noise, **shared)
     else:
         stats, failures = fit_stacked(models, data, tests, **shared, **_stacked_options(objective, models[0],
-                                                                                          saved[0], datasets))
+                                                                                          first, datasets))
     out = []
     for g, config in enumerate(configs):
         if g in failures:
@@ -87,18 +90,18 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     return out
 
 
-def _stacked_options(objective, model, args: dict, datasets: list[dict]) -> dict:
+def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) -> dict:
     """``fit_stacked``'s loss and options from ``objective.train_options``, as ``hnn.train`` reads them.
     The loss is built once for the group: every dataset must give it the same time step and coordinates."""
     for key in ("dt", "state"):
         if len({str(d.get(key)) for d in datasets}) > 1:
             raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
-    options = objective.train_options(model, args, datasets[0])
-    extra = dict(optimizer=args["optimizer"], schedule=args["schedule"], clip_grad=args["clip_grad"],
-                 input_noise=options.get("input_noise", 0.0))
+    options = objective.train_options(model, specs.objective, datasets[0])
+    extra = dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
+                 clip_grad=specs.training.clip_grad, input_noise=options.get("input_noise", 0.0))
     if "loss" in options:
         return {**extra, "loss_of": lambda m: options["loss"]}
-    return {**extra, "loss_of": lambda m: fit_loss(m, options.get("predict"), options.get("derivative_loss", "l2"),
+    return {**extra, "loss_of": lambda m: fit_loss(m, options.get("predict"), specs.objective.derivative_loss,
                                                    options.get("loss_weights"))}
 
 

@@ -33,6 +33,7 @@ import torch
 from .models.hamiltonian import FIELD_ROWS, HNN
 from .models.mlp import MLP
 from .objectives import DerivativeObjective
+from .specs import run_specs
 from .models.structured import SeparableHNN
 from .models.tanh_mlp import closed_form_input_gradient, fast_tanh
 from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, training_steps
@@ -62,7 +63,7 @@ def group_key(config) -> tuple | None:
             != ("adam", "constant", 0.0, "l2")
             or type(config.make_objective()) is not DerivativeObjective):
         return None
-    return ((type(config).__module__, type(config).__qualname__, config.kind, getattr(config, "input_noise", 0.0))
+    return ((type(config).__module__, type(config).__qualname__, config.kind, run_specs(config).objective.input_noise)
             + tuple(getattr(config, name) for name in _SHARED_FIELDS))
 
 

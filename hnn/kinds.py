@@ -1,92 +1,106 @@
-"""The registry of model kinds and objectives: one row a kind, one row an objective.
+"""The registry of model kinds and objectives: one row a kind, everything about it in that row.
 
 A run's config names its kind (``RunConfig.kind``, saved in ``args.json`` as ``"kind"``) and its
 objective (``RunConfig.objective``); ``model_from_args`` reads a run's args into a ``ModelSpec``
 (the declared fields a builder may read) and builds the kind's untrained model from it (its init
 draws from torch's global generator, seeded by the run), which also rebuilds a saved run's model.
 What a kind *is* (its coordinates, whether it conserves an H, separable, dissipative) is declared
-once, by its model class (``hnn.Model``); the row names that class, so ``--model``,
-``hnn.load_run``, both studies and the peers table read the same declaration. A new kind is one
-model module and one row here:
+once, by its model class (``hnn.Model``); the row names that class, and carries the kind's prose
+(``KindDoc``: ``--model``'s help, the README's list and docs/python.md's paragraphs), its builder,
+objective and colour, so ``--model``, ``hnn.load_run``, both studies, the peers table and
+``python analysis/readme.py kinds`` read the same row. A new kind is one model module and one row:
 
-    MODEL_KINDS["toy"] = ModelKind(ToyModel, lambda spec: ToyModel(spec.input_dim))     # and its prose in hnn/kind_docs.py
+    MODEL_KINDS["toy"] = ModelKind("my_package.toy:ToyModel", lambda cls, spec: cls(spec.input_dim),
+                                   doc=KindDoc(line=..., assumes=..., coordinates=..., integrator=..., when=...))
+
+Torch-free on purpose: ``train.py --help`` lists the kinds and their prose before torch loads. A row
+names its model class as ``"module:Class"`` (imported on first use: a relative module is read from
+``hnn``) or gives the class itself; the class, the builder's model and the objective load on first build.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, fields
+import functools
+import importlib
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any
 
-import torch
-from torch import nn
-
-from .models.constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
-from .dgnet import DiscreteGradientObjective
-from .interface import Model
-from .models.lagrangian import LagrangianNN
-from .models.mechanical import MechanicalHNN, SecondOrderNODE
-from .models.mlp import initialize
-from .models.hamiltonian import Baseline, HNN, build_model
-from .models.pixel import PixelBaseline, PixelHNN
-from .objectives import DerivativeObjective, PixelObjective
-from .models.structured import DissipativeHNN, SeparableHNN
-from .trajectory import TrajectoryObjective
-
-DTYPES = {"float32": torch.float32, "float64": torch.float64}
+from . import names
+from .kind_docs import KindDoc
+from .specs import ModelSpec
 
 
-@dataclass(frozen=True)
-class ModelSpec:
-    """What a kind's builder reads of a run, declared (a run's ``args.json`` holds these among the
-    rest of its config; ``from_args`` picks them out).
+def _check_ref(ref: str) -> None:
+    """A ValueError unless ``ref`` reads ``"module:name"`` (checked when a row is written, torch-free)."""
+    module, _, name = ref.partition(":")
+    if not module or not name.isidentifier():
+        raise ValueError(f"{ref!r} is not 'module:name' (e.g. '.models.hamiltonian:HNN' or 'my_package.toy:Toy')")
 
-    kind: a key of ``MODEL_KINDS``; input_dim: the state's width 2n (pixels: the frame's pixels; the
-    constrained kinds read theirs from the graph);
-    hidden_dim, nonlinearity: the MLPs'; field_type: what the paper's HNN learns (solenoidal,
-    conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
-    are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
-    (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
-    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder.
-    """
-    kind: str
-    input_dim: int | None = None
-    hidden_dim: int = 200
-    nonlinearity: str = "tanh"
-    field_type: str = "solenoidal"
-    latent_dim: int = 2
-    ae_nonlinearity: str = "relu"
-    periodic: bool = False
-    constraints: dict | None = None
-    dtype: str = "float32"
-    init: str = "orthogonal"
 
-    @classmethod
-    def from_args(cls, args: dict) -> ModelSpec:
-        """The spec of a run's (saved) args: its declared fields, the defaults for any it lacks."""
-        if "kind" not in args:
-            raise ValueError(f"a run's args need its model's kind to build it; got keys {sorted(args)}")
-        values = {f.name: args[f.name] for f in fields(cls) if f.name in args}
-        # the measured task's --periodic names the angle columns: a model reads all of its q as angles or none
-        if "periodic" in values:
-            values["periodic"] = bool(values["periodic"])
-        return cls(**values)
+@functools.cache
+def _imported(ref: str) -> Any:
+    """The object ``"module:name"`` names (a module starting with ``.`` is read from ``hnn``)."""
+    module, _, name = ref.partition(":")
+    found = getattr(importlib.import_module(module, __package__), name, None)
+    if found is None:
+        raise ImportError(f"{ref!r}: module {module} has no {name}; a row of hnn.MODEL_KINDS names its class "
+                          "'module:Class'")
+    return found
+
+
+def _resolved(ref) -> Any:
+    return _imported(ref) if isinstance(ref, str) else ref
+
+
+def _checked_model(cls) -> type:
+    from .interface import Model      # a class is given or imported: torch is loaded already
+    if not (isinstance(cls, type) and issubclass(cls, Model)):
+        raise TypeError(f"ModelKind.model must be an hnn.Model subclass, got {cls!r}")
+    return cls
+
+
+def _plain(cls, spec: ModelSpec):
+    """The default builder: ``cls(input_dim, hidden_dim, nonlinearity)`` (the structured kinds)."""
+    return cls(spec.input_dim, spec.hidden_dim, spec.nonlinearity)
 
 
 @dataclass(frozen=True)
 class ModelKind:
-    """A model kind: its ``model`` class (whose declarations the studies read), ``build(spec)``
-    (its untrained model from a run's ``ModelSpec``; also rebuilds it on load), the ``objective`` class
-    that trains it by default, its plot ``color`` and ``studied``: whether the studies (scene, measured,
-    peers) train it by default (False for a kind whose rollouts are not yet affordable there). Its prose for readers (``--help``, the README,
-    docs/python.md) is ``hnn.kind_docs.KIND_DOCS[kind]``, torch-free so ``--help`` answers at once."""
-    model: type
-    build: Callable[[ModelSpec], nn.Module]
-    objective: type = DerivativeObjective
+    """A model kind: ``source``, its model class or ``"module:Class"`` (``model``: the class, whose
+    declarations the studies read); ``builder(cls, spec)``, its untrained model from the class and a
+    run's ``ModelSpec`` (also rebuilds it on load; default ``cls(input_dim, hidden_dim, nonlinearity)``);
+    ``objective``, the class (or ``"module:Class"``) that trains it by default; its plot ``color``;
+    ``studied``: whether the studies (scene, measured, peers) train it by default (False for a kind
+    whose rollouts are not yet affordable there); ``doc``, its prose for readers (``--help``, the
+    README, docs/python.md). Only ``model``, ``build`` and ``make_objective`` import anything."""
+    source: type | str
+    builder: Callable[[type, ModelSpec], Any] | None = None
+    objective: type | str = ".objectives:DerivativeObjective"
     color: str = "tab:gray"
     studied: bool = True
+    doc: KindDoc | None = None
 
     def __post_init__(self):
-        if not (isinstance(self.model, type) and issubclass(self.model, Model)):
-            raise TypeError(f"ModelKind.model must be an hnn.Model subclass, got {self.model!r}")
+        for ref in (self.source, self.objective):
+            if isinstance(ref, str):
+                _check_ref(ref)
+        if not isinstance(self.source, str):
+            _checked_model(self.source)
+        if self.doc is not None and not isinstance(self.doc, KindDoc):
+            raise TypeError(f"ModelKind.doc must be an hnn.kind_docs.KindDoc, got {self.doc!r}")
+
+    @property
+    def model(self) -> type:
+        """Its model class (an ``hnn.Model`` subclass), imported on first use."""
+        return _checked_model(_resolved(self.source))
+
+    def build(self, spec: ModelSpec):
+        """The untrained model of ``spec`` (torch's default dtype; ``model_from_args`` inits and moves it)."""
+        return (self.builder or _plain)(self.model, spec)
+
+    def make_objective(self):
+        """A new objective of the class that trains this kind by default."""
+        return _resolved(self.objective)()
 
     @property
     def coordinates(self) -> str:
@@ -110,63 +124,173 @@ class ModelKind:
 
     def reads(self, observed: str) -> bool:
         """Whether its model can be fit to states in ``observed`` coordinates (as they are, or mapped)."""
-        return observed == self.model.coordinates or observed in self.model.takes or observed in self.model.maps
+        model = self.model
+        return observed == model.coordinates or observed in model.takes or observed in model.maps
 
 
-def _mlp(spec: ModelSpec, baseline: bool) -> HNN:
-    return build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity, baseline, spec.field_type)
+def _hnn(cls, spec: ModelSpec):
+    from .models.hamiltonian import build_model
+    return build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity, False, spec.field_type)
 
 
-def _pixel(cls) -> Callable[[ModelSpec], PixelHNN]:
-    def build(spec: ModelSpec) -> PixelHNN:
-        return cls(spec.input_dim, spec.latent_dim, spec.hidden_dim, spec.nonlinearity,
-                   field_type=spec.field_type, autoencoder_nonlinearity=spec.ae_nonlinearity)
-    return build
+def _baseline(cls, spec: ModelSpec):
+    from .models.hamiltonian import build_model
+    return build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity, True, spec.field_type)
 
 
-def _structured(cls) -> Callable[[ModelSpec], nn.Module]:
-    def build(spec: ModelSpec) -> nn.Module:
-        return cls(spec.input_dim, spec.hidden_dim, spec.nonlinearity)
-    return build
+def _pixel(cls, spec: ModelSpec):
+    return cls(spec.input_dim, spec.latent_dim, spec.hidden_dim, spec.nonlinearity,
+               field_type=spec.field_type, autoencoder_nonlinearity=spec.ae_nonlinearity)
 
 
-def _second_order(cls) -> Callable[[ModelSpec], nn.Module]:
-    def build(spec: ModelSpec) -> nn.Module:
-        return cls(spec.input_dim, spec.hidden_dim, spec.nonlinearity, periodic=spec.periodic)
-    return build
+def _second_order(cls, spec: ModelSpec):
+    return cls(spec.input_dim, spec.hidden_dim, spec.nonlinearity, periodic=spec.periodic)
 
 
-def _constrained(cls) -> Callable[[ModelSpec], nn.Module]:
-    def build(spec: ModelSpec) -> nn.Module:
-        if spec.constraints is None:
-            raise ValueError(f"the {spec.kind} kind needs the task's constraint graph (ModelSpec.constraints, "
-                             "from its config's model_facts()); this task declares none: train it on the chain task "
-                             "(experiment-chain) or give the task's Config a model_facts() with 'constraints'")
-        return cls(ConstraintGraph.from_dict(spec.constraints), spec.hidden_dim, spec.nonlinearity)
-    return build
+def _constrained(cls, spec: ModelSpec):
+    from .models.constrained import ConstraintGraph
+    if spec.constraints is None:
+        raise ValueError(f"the {spec.kind} kind needs the task's constraint graph (ModelSpec.constraints, "
+                         "from its config's model_facts()); this task declares none: train it on the chain task "
+                         "(experiment-chain) or give the task's Config a model_facts() with 'constraints'")
+    return cls(ConstraintGraph.from_dict(spec.constraints), spec.hidden_dim, spec.nonlinearity)
 
 
-# the one place a kind is named; a run's config says which (RunConfig.kind), its args.json too
+_PIXEL_OBJECTIVE = ".objectives:PixelObjective"
+
+# the one place a kind is named and described; a run's config says which (RunConfig.kind), its args.json too
 MODEL_KINDS: dict[str, ModelKind] = {
-    "hnn": ModelKind(HNN, lambda spec: _mlp(spec, False), color="tab:blue"),
-    "baseline": ModelKind(Baseline, lambda spec: _mlp(spec, True), color="tab:red"),
-    "separable": ModelKind(SeparableHNN, _structured(SeparableHNN), color="tab:green"),
-    "dissipative": ModelKind(DissipativeHNN, _structured(DissipativeHNN), color="tab:purple"),
-    "mechanical": ModelKind(MechanicalHNN, _second_order(MechanicalHNN), color="tab:olive"),
-    "second_order": ModelKind(SecondOrderNODE, _second_order(SecondOrderNODE), color="tab:orange"),
-    "constrained": ModelKind(ConstrainedHNN, _constrained(ConstrainedHNN), color="tab:cyan"),
-    "constrained_lagrangian": ModelKind(ConstrainedLNN, _constrained(ConstrainedLNN), color="tab:pink"),
+    "hnn": ModelKind(".models.hamiltonian:HNN", _hnn, color="tab:blue", doc=KindDoc(
+        line="the paper's HNN: one MLP learns H(q, p), and dx/dt is its symplectic gradient",
+        assumes="a conserved energy H(q, p) and nothing about its form",
+        coordinates="canonical x = [q, p]. On measured [q, qdot] it takes qdot as p, which is right when "
+                    "p is a constant multiple of qdot (one body of constant mass: the real pendulum) and wrong "
+                    "when the mass depends on q (a pendulum chain): use `mechanical` there",
+        integrator="`midpoint` for long rollouts (symplectic for any H: the learned energy stays bounded); "
+                   "`dop853`, `dopri5` or `rk4` for short accurate paths",
+        when="a closed system without friction, in canonical coordinates; the paper's tasks")),
+    "baseline": ModelKind(".models.hamiltonian:Baseline", _baseline, color="tab:red", doc=KindDoc(
+        line="an MLP that predicts dx/dt directly (the paper's baseline; also `--baseline`)",
+        assumes="nothing: any smooth field x -> dx/dt",
+        coordinates="any state; it reads no structure into the columns",
+        integrator="`rk4`, `dopri5` or `dop853` (it has no structure to keep)",
+        when="a reference to measure a structured kind against, or a system with forcing where no energy "
+             "exists; its energy drifts on long rollouts")),
+    "separable": ModelKind(".models.structured:SeparableHNN", color="tab:green", doc=KindDoc(
+        line="H = T(p) + V(q), two MLPs; explicit leapfrog is exactly symplectic for it",
+        assumes="a conserved energy whose kinetic part does not depend on q (particles of constant mass "
+                "in Cartesian coordinates)",
+        coordinates="canonical x = [q, p]",
+        integrator="`leapfrog` or `yoshida4`: explicit, symplectic for the learned H, one dT/dp and one dV/dq "
+                   "a step",
+        when="long rollouts of particle systems (springs, orbits); not for systems whose mass depends on q")),
+    "dissipative": ModelKind(".models.structured:DissipativeHNN", color="tab:purple", doc=KindDoc(
+        line="dx/dt = J grad H + grad D (the D-HNN): a conserved H and a dissipative potential D learned together",
+        assumes="energy lost (or gained) along a gradient field; J grad H + grad D can represent any smooth "
+                "planar field (Helmholtz), so it constrains the fit no more than the baseline does",
+        coordinates="canonical x = [q, p]",
+        integrator="`rk4`, `dopri5` or `dop853`: its flow is not symplectic on purpose",
+        when="friction you can see in the data and accurate dx/dt targets (central differences, as the "
+             "D-HNN paper's `--split dhnn`); on the real pendulum's forward differences it fits the noise as "
+             "the baseline does and rolls out as badly (docs/scenes.md)")),
+    "mechanical": ModelKind(".models.mechanical:MechanicalHNN", _second_order, color="tab:olive", doc=KindDoc(
+        line="H = 1/2 p^T M^-1(q) p + V(q) with a learned positive definite mass matrix",
+        assumes="a conserved energy, kinetic energy quadratic in the momenta (any mechanical system: "
+                "pendulums, chains, springs)",
+        coordinates="canonical [q, p]; on measured [q, qdot] (a dataset whose `state` is `velocity`, as the "
+                    "chain task's) it maps qdot to p = M(q) qdot itself, so it is the HNN for observed "
+                    "velocities. `periodic=True` when q are angles",
+        integrator="`midpoint` (symplectic for any H), `dopri5` or `rk4`; not `leapfrog` or `yoshida4` (its H is "
+                   "not separable)",
+        when="mechanical systems, above all measured positions and velocities (the README's model guide "
+             "picks it for the spring, pendulum and real pendulum)")),
+    "second_order": ModelKind(".models.mechanical:SecondOrderNODE", _second_order, color="tab:orange", doc=KindDoc(
+        line="dq/dt = v, dv/dt = f(q, v): the baseline with second-order structure and no energy",
+        assumes="the state is positions and their velocities; nothing about energy",
+        coordinates="observed [q, qdot] only (the objectives refuse it on canonical [q, p])",
+        integrator="`rk4` or `dopri5`",
+        when="a structured baseline for mechanical systems with friction or forcing, beside `mechanical`")),
+    "constrained": ModelKind(".models.constrained:ConstrainedHNN", _constrained, color="tab:cyan", doc=KindDoc(
+        line="CHNN (Finzi et al. 2020): point masses in Cartesian [x, p], a learned potential V(x) and one mass "
+             "per body, the task's rigid links and tethers enforced by projection",
+        assumes="bodies of constant mass joined by known rigid constraints (a chain, a linkage), a conserved "
+                "energy 1/2 sum |p_i|^2 / m_i + V(x)",
+        coordinates="Cartesian positions of the bodies and their momenta; it maps observed [x, xdot] through its "
+                    "masses. The task gives the constraint graph (the chain task converts its angles)",
+        integrator="`dopri5` or `rk4` (the projection keeps the constraints; its H is not separable)",
+        when="linkages and chains whose constraints you know: it models what the scene is, and beats the "
+             "generalized-coordinate kinds on chains (docs/peers.md)")),
+    "constrained_lagrangian": ModelKind(".models.constrained:ConstrainedLNN", _constrained, color="tab:pink",
+                                        doc=KindDoc(
+        line="CLNN (Finzi et al. 2020): the constrained kind in Lagrangian form, Cartesian [x, xdot], the "
+             "constraint forces solved for",
+        assumes="as `constrained`: bodies of constant mass, known rigid constraints, a potential V(x)",
+        coordinates="Cartesian positions of the bodies and their velocities, as observed",
+        integrator="`dopri5` or `rk4`",
+        when="as `constrained`, when you would rather not map velocities to momenta; the same cost per step "
+             "or less")),
     # not in the scene studies: a barely trained black-box L's flow is stiff (one dopri5 rollout of it took
     # minutes in the measured study); the peers' tables train it with the LNN's own activation and give its
     # rollouts an iteration budget (analysis/chains/peers.py)
-    "lagrangian": ModelKind(LagrangianNN, _second_order(LagrangianNN), color="tab:brown", studied=False),
-    "pixel-hnn": ModelKind(PixelHNN, _pixel(PixelHNN), PixelObjective, color="tab:blue"),
-    "pixel-baseline": ModelKind(PixelBaseline, _pixel(PixelBaseline), PixelObjective, color="tab:red"),
+    "lagrangian": ModelKind(".models.lagrangian:LagrangianNN", _second_order, color="tab:brown", studied=False,
+                            doc=KindDoc(
+        line="LNN (Cranmer et al. 2020): a black-box L(q, qdot) MLP; qddot from the Euler-Lagrange equations",
+        assumes="a conserved energy E = qdot . dL/dqdot - L and a Lagrangian whose Hessian in qdot is invertible "
+                "(a singular one is an error naming the state)",
+        coordinates="observed [q, qdot] only",
+        integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
+        when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "
+             "field call solves an n x n system per state, so it is the costliest kind per step")),
+    "pixel-hnn": ModelKind(".models.pixel:PixelHNN", _pixel, _PIXEL_OBJECTIVE, color="tab:blue", doc=KindDoc(
+        line="the pixel task's HNN: an autoencoder of frames and an HNN on its 2-D latent "
+             "(`experiment-pixels/train.py --model hnn`)",
+        assumes="the frames come from a system with a conserved energy in a 2-D latent",
+        coordinates="a learned latent [q, p]; the inputs are pairs of frames",
+        integrator="in the latent: `midpoint` for long rollouts, `rk4` for short ones",
+        when="a system seen only as pictures")),
+    "pixel-baseline": ModelKind(".models.pixel:PixelBaseline", _pixel, _PIXEL_OBJECTIVE, color="tab:red", doc=KindDoc(
+        line="the pixel task's baseline: the same autoencoder, an MLP predicting the latent's derivative "
+             "(`experiment-pixels/train.py --model baseline`)",
+        assumes="nothing about the latent's dynamics",
+        coordinates="a learned 2-D latent",
+        integrator="`rk4` in the latent",
+        when="the reference for `pixel-hnn`")),
 }
 
-# objective name -> class: RunConfig.objective's choices
-OBJECTIVES = {"derivative": DerivativeObjective, "trajectory": TrajectoryObjective,
-              "discrete_gradient": DiscreteGradientObjective}
+
+class _Objectives(Mapping):
+    """``RunConfig.objective``'s choices, name -> class: the names are ``hnn.names.OBJECTIVES``; the class
+    of ``a_b`` is ``ABObjective`` of the first of ``_OBJECTIVE_MODULES`` that has it, imported on first read."""
+
+    def __getitem__(self, name: str) -> type:
+        if name not in names.OBJECTIVES:
+            raise KeyError(name)
+        return _objective_class(name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(names.OBJECTIVES)
+
+    def __len__(self) -> int:
+        return len(names.OBJECTIVES)
+
+    def __repr__(self) -> str:
+        return f"OBJECTIVES({', '.join(names.OBJECTIVES)})"
+
+
+_OBJECTIVE_MODULES = (".objectives", ".trajectory", ".dgnet")     # where the objective classes live
+
+
+@functools.cache
+def _objective_class(name: str) -> type:
+    wanted = "".join(part.capitalize() for part in name.split("_")) + "Objective"
+    for module in _OBJECTIVE_MODULES:
+        found = getattr(importlib.import_module(module, __package__), wanted, None)
+        if found is not None:
+            return found
+    raise ImportError(f"hnn.names.OBJECTIVES lists {name!r}, but no {wanted} is in {', '.join(_OBJECTIVE_MODULES)}")
+
+
+OBJECTIVES: Mapping[str, type] = _Objectives()
 
 
 def get_kind(kind: str) -> ModelKind:
@@ -185,16 +309,33 @@ def get_objective(name: str, **options):
 
 def objective_for(kind: str):
     """An objective that trains models of ``kind`` by default (its arrays are the defaults)."""
-    return get_kind(kind).objective()
+    return get_kind(kind).make_objective()
 
 
-def model_from_args(args: dict, device: torch.device | str = "cpu") -> nn.Module:
+DTYPES = names.DTYPES       # a run's dtype: the name of a torch dtype
+
+
+def model_from_args(args: dict, device="cpu"):
     """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded
-    (float32 unless its ``dtype`` says otherwise): its ``ModelSpec`` built by the kind's row, on ``device``.
+    (float32 unless its ``dtype`` says otherwise): ``model_from_spec`` of its ``ModelSpec``."""
+    return model_from_spec(ModelSpec.from_args(args), device)
+
+
+def model_from_spec(spec: ModelSpec, device="cpu"):
+    """The untrained model of ``spec`` (``hnn.specs.run_specs(config).model``), built by its kind's row,
+    initialized by ``spec.init`` and put on ``spec.dtype`` and ``device``.
 
     The weights are drawn on the CPU whatever torch's default device, then moved: one seed gives the
     same initial model on every device (a GPU's generator draws other numbers)."""
-    spec = ModelSpec.from_args(args)
+    import torch
+    from .models.mlp import initialize
+    if spec.dtype not in DTYPES:
+        raise ValueError(f"dtype={spec.dtype!r}: choose one of {', '.join(DTYPES)}")
     with torch.device("cpu"):
         model = initialize(get_kind(spec.kind).build(spec), spec.init)
-    return model.to(dtype=DTYPES[spec.dtype], device=device)
+    return model.to(dtype=getattr(torch, spec.dtype), device=device)
+
+
+def described() -> list[tuple[str, KindDoc | None]]:
+    """``(kind, its prose or None)`` of every registered kind, in the registry's order (the pages' lists)."""
+    return [(kind, row.doc) for kind, row in MODEL_KINDS.items()]

@@ -6,7 +6,7 @@
 An objective gives ``hnn.train`` its options for a model and a dataset, and measures the final
 train and test numbers. Which objective trains which model kind is declared by the kinds'
 registry (``hnn.MODEL_KINDS``, ``hnn/kinds.py``); a new kind of objective is an ``Objective``
-subclass and one row of ``hnn.OBJECTIVES`` there.
+subclass named for it and its name in ``hnn.names.OBJECTIVES`` (``hnn.OBJECTIVES`` finds the class).
 
 A dataset says in which coordinates its states are (``dataset["state"]``, a key of
 ``hnn.interface.COORDINATES``; ``'canonical'`` if absent) and each model declares what it reads
@@ -22,6 +22,7 @@ from .balance import balance_weights
 from .integrators.fixed_step import rk4_step
 from .interface import declared
 from .metrics import derivative_mse, mean_and_se
+from .specs import ObjectiveSpec
 
 
 class Objective:
@@ -37,8 +38,9 @@ class Objective:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
         return dataset
 
-    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
-        """Keyword arguments for ``hnn.train`` beyond the shared flags (``predict``, ``loss``, ...)."""
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
+        """Keyword arguments for ``hnn.train`` beyond a run's ``TrainingSpec`` (``predict``, ``loss``, ...),
+        from what the run's ``ObjectiveSpec`` asks (``hnn.specs.run_specs(config).objective``)."""
         return {}
 
     def row_loss(self, model: nn.Module):
@@ -85,7 +87,7 @@ class PathObjective(Objective):
     def loss_for(self, model: nn.Module):
         raise NotImplementedError
 
-    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
         self.observed = observed_coordinates(dataset)
         declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
         self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
@@ -104,23 +106,22 @@ class DerivativeObjective(Objective):
 
     field = None    # what final_loss measures: model.time_derivative unless train_options maps states
 
-    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
         observed = observed_coordinates(dataset)
-        balance, targets = args.get("balance", "off"), dataset.get(self.arrays[1])
-        options = {"input_noise": args.get("input_noise", 0.0), "predict": None,
-                   "derivative_loss": args.get("derivative_loss", "l2"),
+        targets = dataset.get(self.arrays[1])
+        options = {"input_noise": spec.input_noise, "predict": None, "derivative_loss": spec.derivative_loss,
                    # --balance reads the training targets' sizes; a caller that passes none trains unweighted
-                   "loss_weights": None if balance == "off" or targets is None
-                   else balance_weights(targets, balance, args.get("derivative_loss", "l2"))}
+                   "loss_weights": None if spec.balance == "off" or targets is None
+                   else balance_weights(targets, spec.balance, spec.derivative_loss)}
         if declared(model).relation(observed) == "mapped":
             # a model of its own coordinates fit to d/dt of the observed states through its own map
-            if args.get("use_rk4"):
+            if spec.use_rk4:
                 raise ValueError(f"--use_rk4 steps the model's own state; on observed {observed!r} states drop it")
             self.field = options["predict"] = model.observed_time_derivative
             return options
         if targets is not None and hasattr(model, "check_data_scale"):     # a model that knows what scale it can learn
             model.check_data_scale(dataset[self.arrays[0]], targets)
-        if args.get("use_rk4"):
+        if spec.use_rk4:
             if "dt" not in dataset:
                 raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")
             dt = float(dataset["dt"])
@@ -167,12 +168,11 @@ class PixelObjective(Objective):
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
-    def train_options(self, model: nn.Module, args: dict, dataset: dict) -> dict:
-        noise = torch.Generator().manual_seed(args["seed"] + 2)
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
+        noise = torch.Generator().manual_seed(spec.seed + 2)
 
         def loss(x, x_next):
-            return pixel_loss(model, x, x_next, input_noise=args["input_noise"], use_rk4=args["use_rk4"],
-                              generator=noise)
+            return pixel_loss(model, x, x_next, input_noise=spec.input_noise, use_rk4=spec.use_rk4, generator=noise)
         return {"loss": loss}
 
     def row_loss(self, model: nn.Module):

@@ -21,8 +21,9 @@ import torch
 
 from . import cli
 from .io import atomic_folder, check_save_dir, write_json
-from .kinds import model_from_args
+from .kinds import model_from_args, model_from_spec
 from .objectives import Objective
+from .specs import run_specs
 from .training import train
 
 
@@ -85,19 +86,16 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     missing = [key for key in objective.arrays if key not in dataset]
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
-    saved = saved_args(config, dataset)
+    saved, specs = saved_args(config, dataset), run_specs(config)
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
-    model = model_from_args(saved, config.device)
+    model = model_from_spec(specs.model, config.device)
     x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = objective.train_options(model, saved, dataset)
+    options = objective.train_options(model, specs.objective, dataset)
     if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
-    stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
-                  weight_decay=config.weight_decay, batch_size=config.batch_size, seed=config.seed,
-                  print_every=config.print_every, verbose=config.verbose, optimizer=config.optimizer,
-                  schedule=config.schedule, clip_grad=config.clip_grad, **options)
+    stats = train(model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
     config.finish(directory, dataset)

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from . import names
 from .balance import weighted
 from .errors import DivergenceError
 
@@ -84,8 +85,10 @@ def is_test_step(step: int, test_every: int, total_steps: int) -> bool:
     return step % test_every == 0 or step == total_steps
 
 
-OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
-SCHEDULES = ("constant", "cosine")
+# --optimizer: each name of hnn.names' list the torch.optim class of that name, case aside (adamw: AdamW)
+OPTIMIZERS = {name: next(getattr(torch.optim, attr) for attr in dir(torch.optim) if attr.lower() == name)
+              for name in names.OPTIMIZERS}
+SCHEDULES = names.SCHEDULES         # learning_rate's branches
 
 
 def adam_optimizer(model, learn_rate: float, weight_decay: float, kind: str = "adam") -> torch.optim.Optimizer:
@@ -122,8 +125,8 @@ def l1_loss(predict: Callable) -> Callable:
     return lambda xb, yb: (yb - predict(xb)).abs()
 
 
-# --derivative_loss: the per-element error of a fit of dx/dt
-DERIVATIVE_LOSSES = {"l2": l2_loss, "l1": l1_loss}
+# --derivative_loss: the per-element error of a fit of dx/dt, each name of hnn.names' list the function <name>_loss
+DERIVATIVE_LOSSES = {name: globals()[f"{name}_loss"] for name in names.DERIVATIVE_LOSSES}
 
 
 def fit_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:

@@ -1,7 +1,12 @@
-"""Every model kind is introduced: ``hnn.kind_docs`` describes each kind of ``hnn.MODEL_KINDS``,
-the README and docs/python.md show them as ``analysis/readme.py kinds`` writes them, ``--model``'s
-help lists them, and the names the flags offer before torch loads are the modules' own."""
+"""Every model kind is introduced: each row of ``hnn.MODEL_KINDS`` carries its prose, the README and
+docs/python.md show them as ``analysis/readme.py kinds`` writes them, ``--model``'s help lists them,
+and the names the flags offer before torch loads are the modules' own."""
 import dataclasses
+import subprocess
+import sys
+
+import pytest
+import torch
 
 import hnn
 from hnn import models
@@ -9,8 +14,8 @@ from hnn_analysis import readme
 
 
 def test_every_registered_kind_is_described_and_on_both_pages():
-    assert set(hnn.kind_docs.KIND_DOCS) == set(hnn.MODEL_KINDS)
-    for kind, doc in hnn.kind_docs.KIND_DOCS.items():
+    for kind, doc in hnn.kinds.described():
+        assert isinstance(doc, hnn.kind_docs.KindDoc), kind
         assert all(getattr(doc, f.name).strip() for f in dataclasses.fields(doc)), kind
     assert readme.declared_out_of_date() == []
     root = hnn.tasks.repo_root()
@@ -21,8 +26,10 @@ def test_every_registered_kind_is_described_and_on_both_pages():
 
 def test_a_kind_left_out_of_a_page_is_found(monkeypatch):
     monkeypatch.setitem(hnn.MODEL_KINDS, "extra", hnn.MODEL_KINDS["hnn"])
+    assert len(readme.declared_out_of_date()) == 2          # both pages lack it
+    monkeypatch.setitem(hnn.MODEL_KINDS, "extra", dataclasses.replace(hnn.MODEL_KINDS["hnn"], doc=None))
     [line] = readme.declared_out_of_date()
-    assert "extra" in line and "hnn/kind_docs.py" in line
+    assert "extra" in line and "hnn/kinds.py" in line and "KindDoc" in line
 
 
 def test_model_help_lists_every_kind_a_task_takes():
@@ -30,15 +37,51 @@ def test_model_help_lists_every_kind_a_task_takes():
         Config = hnn.load_task(task, "train").Config
         text = "".join(hnn.cli.make_parser(Config).format_help().split())    # argparse wraps lines at hyphens
         for kind in hnn.cli.model_choices(Config):
-            line = "".join(hnn.kind_docs.KIND_DOCS[Config.KIND_PREFIX + kind].line.split())
+            line = "".join(hnn.MODEL_KINDS[Config.KIND_PREFIX + kind].doc.line.split())
             assert f"{kind}({line})" in text, (task, kind)
     spring = hnn.load_task("spring", "train").Config
     assert set(hnn.cli.model_choices(spring)) == {kind for kind in hnn.MODEL_KINDS if "-" not in kind}
 
 
-def test_the_names_known_before_torch_are_the_modules_own():
-    assert hnn.names.NONLINEARITIES == models.NONLINEARITIES
-    assert hnn.names.INITS == models.INITS
-    assert hnn.names.FIELD_TYPES == models.FIELD_TYPES
-    assert hnn.names.OBJECTIVES == tuple(hnn.kinds.OBJECTIVES)
-    assert hnn.names.DERIVATIVE_LOSSES == tuple(hnn.training.DERIVATIVE_LOSSES)
+def test_every_module_keys_its_options_from_the_one_list():
+    """Each option's names are hnn.names' list; each implementing table holds every name, and each name
+    reaches a working implementation (an activation of the right shape, an objective class, a loss)."""
+    assert (models.NONLINEARITIES, models.INITS, models.FIELD_TYPES) == (
+        hnn.names.NONLINEARITIES, hnn.names.INITS, hnn.names.FIELD_TYPES)
+    x = torch.linspace(-2, 2, 9)
+    for name in hnn.names.NONLINEARITIES:
+        y = models.get_nonlinearity(name)(x)
+        assert y.shape == x.shape and torch.isfinite(y).all() and not torch.equal(y, x), name
+    torch.testing.assert_close(models.get_nonlinearity("swish")(x), x * torch.sigmoid(x))
+    assert models.get_nonlinearity("tanh") is models.tanh_mlp.fast_tanh      # the closed form's own
+    assert tuple(hnn.kinds.OBJECTIVES) == hnn.names.OBJECTIVES
+    assert all(issubclass(hnn.OBJECTIVES[name], hnn.Objective) for name in hnn.names.OBJECTIVES)
+    assert tuple(hnn.training.DERIVATIVE_LOSSES) == hnn.names.DERIVATIVE_LOSSES
+    assert tuple(models.hamiltonian.FIELD_ROWS) == hnn.names.FIELD_TYPES
+    assert models.hamiltonian.FIELD_ROWS["solenoidal"] == (1,)       # H = F2: Hamilton's equations
+    for init in hnn.names.INITS:
+        models.initialize(models.MLP(2, 4, 2), init)
+    assert hnn.training.OPTIMIZERS == {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
+    for schedule in hnn.names.SCHEDULES:
+        assert hnn.training.learning_rate(1.0, 0, 10, schedule) == 1.0
+    assert all(isinstance(getattr(torch, name), torch.dtype) for name in hnn.names.DTYPES)
+
+
+def test_the_kinds_table_loads_without_torch():
+    """--help reads every kind's row and prose before torch loads: the class is imported on first build."""
+    code = ("import sys; from hnn.kinds import MODEL_KINDS; import hnn.cli; "
+            "print(len(MODEL_KINDS), all(r.doc for r in MODEL_KINDS.values()), 'torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == [str(len(hnn.MODEL_KINDS)), "True", "False"]
+
+
+def test_a_row_naming_its_class_wrongly_says_so():
+    with pytest.raises(ValueError, match="is not 'module:name'"):
+        hnn.kinds.ModelKind("hnn.models.hamiltonian.HNN")
+    with pytest.raises(ImportError, match="has no Nope"):
+        hnn.kinds.ModelKind(".models.hamiltonian:Nope").reads("canonical")
+    with pytest.raises(TypeError, match="must be an hnn.Model subclass"):
+        hnn.kinds.ModelKind(".models.mlp:MLP").reads("canonical")        # a network, not a model
+    row = hnn.kinds.ModelKind(".models.structured:SeparableHNN")      # the default builder and objective
+    model = row.build(hnn.kinds.ModelSpec("x", input_dim=2, hidden_dim=4))
+    assert isinstance(model, hnn.SeparableHNN) and isinstance(row.make_objective(), hnn.DerivativeObjective)

@@ -93,7 +93,8 @@ def test_a_mechanical_fit_whose_m_inverse_lies_under_its_floor_warns_naming_the_
         data = stress._in_units(stress._spring(64, 0, 1.0), *stress.CELLS[cell][:3])
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            hnn.DerivativeObjective().train_options(model, {}, {"x": data["x"], "dxdt": data["dxdt"]})
+            hnn.DerivativeObjective().train_options(model, hnn.specs.ObjectiveSpec(),
+                                                    {"x": data["x"], "dxdt": data["dxdt"]})
         floor = [w for w in caught if "eigenvalue floor" in str(w.message)]
         assert bool(floor) == warns, cell
         assert not warns or "Scale your states" in str(floor[0].message)

@@ -1,11 +1,12 @@
 """Everything reads the registries: a solver registered with hnn.register_solver, and a toy model
-kind (one module, here the class ``_Scaled``, plus one row of hnn.MODEL_KINDS) reach ``--model``,
-a run and ``hnn.load_run``, both studies' outputs and the peers table, with no list anywhere touched
-(a new solver or kind is one place)."""
+kind (one module, here the class ``_Scaled``, plus one row of hnn.MODEL_KINDS carrying its prose) reach
+``--model`` and its help, a run and ``hnn.load_run``, both studies' outputs, the peers table and the
+pages' lists of kinds, with no list anywhere touched (a new solver or kind is one place)."""
 import pytest
 import torch
 
 import hnn
+from hnn_analysis import readme
 from hnn_analysis.chains import peers
 from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
 from hnn_analysis.integrator_study import speed_accuracy
@@ -36,11 +37,18 @@ class _Scaled(hnn.Model):
         return self.scale * self.inner.time_derivative(x)
 
 
+_SCALED_DOC = hnn.kind_docs.KindDoc(line="the HNN's field times one learned scalar (a toy)", assumes="what the HNN does",
+                                    coordinates="canonical x = [q, p]", integrator="`midpoint`", when="never: a test")
+
+
 @pytest.fixture
 def toys(monkeypatch):
     """'toy-euler' in hnn.SOLVERS and the row 'scaled' in hnn.MODEL_KINDS, for one test."""
-    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.kinds.ModelKind(_Scaled, lambda spec: _Scaled(
-        hnn.build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity)), color="tab:olive"))
+    # the class named as "module:Class", imported on first build, as a kind of another package would be
+    monkeypatch.setitem(hnn.MODEL_KINDS, "scaled", hnn.kinds.ModelKind(
+        f"{_Scaled.__module__}:_Scaled", lambda cls, spec: cls(hnn.build_model(spec.input_dim, spec.hidden_dim,
+                                                                               spec.nonlinearity)),
+        color="tab:olive", doc=_SCALED_DOC))
     hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("toy-euler", _Euler, order=1))
     yield
     del hnn.SOLVERS["toy-euler"]
@@ -106,7 +114,12 @@ def test_a_new_rollout_metric_is_one_entry_and_the_scene_study_reports_it(toys, 
 
 def test_a_new_kind_reaches_the_flags_a_run_load_run_and_the_peers_table(toys, tmp_path):
     trainer = hnn.load_task("spring", "train")
-    assert "scaled" in hnn.cli.make_parser(trainer.Config).format_help()          # a --model choice
+    help_text = " ".join(hnn.cli.make_parser(trainer.Config).format_help().split())
+    assert f"scaled ({_SCALED_DOC.line})" in help_text          # a --model choice, with its row's line
+    # the pages' lists: the README's line and docs/python.md's paragraph, from the row; both pages lack it
+    assert f"- `scaled`: {_SCALED_DOC.line}." in readme.kinds_text("kinds")
+    assert "**`scaled`**: the HNN's field" in readme.kinds_text("kinds-python")
+    assert len(readme.declared_out_of_date()) == 2
     run = trainer.main(["--model", "scaled", "--total_steps", "3", "--hidden_dim", "8", "--save_dir", str(tmp_path)])
     model, saved, metrics = hnn.load_run(run)
     assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0

@@ -37,7 +37,7 @@ def _stepper(kind: str, bobs: int, width: int, batch: int, save_dir: str):
     saved = {**config.to_dict(), "kind": config.kind}
     torch.manual_seed(0)
     model = hnn.kinds.model_from_args(saved)
-    loss = objective.train_options(model, saved, dataset)["loss"]
+    loss = objective.train_options(model, hnn.specs.run_specs(saved).objective, dataset)["loss"]
     snippets = torch.as_tensor(dataset[objective.arrays[0]][:batch], dtype=torch.float32)
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-5, weight_decay=config.weight_decay)
 

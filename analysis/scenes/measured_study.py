@@ -67,7 +67,8 @@ def _kinds(columns: dict) -> list[str]:
             run = hnn.tasks.task_config(TASK, {**columns, "model": kind, "hidden_dim": 4})
             objective = run.make_objective()
             saved = {**run.to_dict(), "kind": run.kind}
-            objective.train_options(hnn.kinds.model_from_args(saved), saved, objective.prepare(dataset))
+            objective.train_options(hnn.kinds.model_from_args(saved), hnn.specs.run_specs(saved).objective,
+                                    objective.prepare(dataset))
         except (ValueError, KeyError) as err:      # refused by its checks, or it needs what the file lacks
             print(f"  {kind}: does not fit these coordinates ({err})", flush=True)
             continue

@@ -58,7 +58,7 @@ def training_cost(task: str, args: dict) -> dict:
     x, y = training_subset(x, y, config.train_fraction, config.seed)
     options = dict(learn_rate=config.learn_rate, weight_decay=config.weight_decay, batch_size=config.batch_size,
                    seed=config.seed, print_every=10 ** 9, progress=False,
-                   **objective.train_options(model, saved, dataset))
+                   **objective.train_options(model, hnn.specs.run_specs(saved).objective, dataset))
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     start = copy.deepcopy(model.state_dict())

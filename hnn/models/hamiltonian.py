@@ -11,11 +11,12 @@ import torch
 from torch import nn
 
 from ..interface import ANY_STATE, UNIT_MASS, Model
+from ..names import FIELD_TYPES
 from . import tanh_mlp
 from .mlp import MLP, PIECEWISE_LINEAR, input_gradient
 
-FIELD_TYPES = ("solenoidal", "conservative", "both")
-FIELD_ROWS = {"solenoidal": (1,), "conservative": (0,), "both": (0, 1)}   # the outputs (F1, F2) each field reads
+# the outputs (F1, F2) each field type reads, in hnn.names.FIELD_TYPES' order (solenoidal, conservative, both)
+FIELD_ROWS = dict(zip(FIELD_TYPES, ((1,), (0,), (0, 1)), strict=True))
 
 
 def permutation_tensor(n: int, device: torch.device | str | None = None) -> torch.Tensor:

@@ -6,23 +6,32 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
+from ..names import INITS, NONLINEARITIES
 from ..interface import gradient_of
 from ..modes import in_model_axis
 
-_NONLINEARITIES = {
-    "tanh": tanh_mlp.fast_tanh,
-    "relu": torch.relu,
-    "sigmoid": torch.sigmoid,
-    "softplus": nn.functional.softplus,
-    "selu": nn.functional.selu,
-    "elu": nn.functional.elu,
-    "swish": lambda x: x * torch.sigmoid(x),
-}
-NONLINEARITIES = tuple(_NONLINEARITIES)   # the names get_nonlinearity knows, for --nonlinearity choices
-# how an MLP's weights start (``initialize``), for --init choices: the paper's orthogonal weights with
-# torch's default biases; DGNet's zero biases (Matsubara et al. 2020, dgnet/ode.py); the LNN's scaled normal
-# weights and zero biases (Cranmer et al. 2020, lnn.py custom_init)
-INITS = ("orthogonal", "zero_bias", "lnn", "lnn_convex")
+
+def _swish(x: torch.Tensor) -> torch.Tensor:
+    return x * torch.sigmoid(x)
+
+
+_tanh = tanh_mlp.fast_tanh      # the closed-form kernels' own tanh (MLP._closed_form_applies looks for it)
+
+
+def _activation(name: str):
+    """The function of activation ``name`` of ``hnn.names.NONLINEARITIES``: this module's ``_<name>``,
+    else torch's function of that name, else ``torch.nn.functional``'s (relu: ``torch.relu``; elu: ``F.elu``)."""
+    found = globals().get(f"_{name}") or getattr(torch, name, None) or getattr(nn.functional, name, None)
+    if found is None:
+        raise ImportError(f"hnn.names.NONLINEARITIES lists {name!r}, which neither hnn.models.mlp (_{name}) nor "
+                          "torch defines")
+    return found
+
+
+# the names get_nonlinearity knows (--nonlinearity's choices) and how an MLP's weights start
+# (``initialize``, --init's choices): hnn.names' lists
+_NONLINEARITIES = {name: _activation(name) for name in NONLINEARITIES}
+
 # Piecewise-linear activations: their second derivative is zero almost everywhere, so the
 # symplectic gradient of an HNN built on them is piecewise constant in x and the training
 # signal through d(dH/dx)/dtheta is poor.
