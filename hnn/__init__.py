@@ -9,7 +9,7 @@ the training loop, the paper's metrics, and saved runs.
 ``hnn`` itself gives the 35 names of ``__all__``; the rest is reached through its room or module
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
-at once: the light modules (``cli``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
+at once: the light modules (``cli``, ``command``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
 and ``RunConfig`` load on use, and the first use of any other name loads the whole package.
 
 The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every import against it):
@@ -25,7 +25,7 @@ nothing of each other.
 import importlib
 from typing import TYPE_CHECKING
 
-_LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
+_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
 
 # layer -> its modules; a module may import from its own layer and the ones before it, except that
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has
@@ -36,7 +36,7 @@ _LAYERS = {
     "models": ("models",),
     "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
                  "evaluation", "datasets"),
-    "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
+    "runs": ("config", "cli", "command", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
              "stopping", "sweep"),
 }
 

@@ -179,7 +179,7 @@ def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch)
 
 def _error(argv, capsys, main=None) -> str:
     with pytest.raises(SystemExit) as exit_:
-        (main or (lambda a: hnn.cli.run_main(train.main, a)))(argv)
+        (main or (lambda a: hnn.command.run_main(train.main, a)))(argv)
     assert exit_.value.code == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert len(lines) == 1, lines
