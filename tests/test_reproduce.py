@@ -8,8 +8,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis.paper import figures, registry, reproduce, tables
-from hnn_analysis import commands, readme
+from hnn_analysis.paper import registry, reproduce, tables
+from hnn_analysis import commands, plotting, readme
 from hnn import sweep
 
 TINY = 20          # training steps of the end-to-end runs
@@ -195,14 +195,14 @@ def test_quick_figures_say_quick_in_their_titles(tmp_path):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots()
     fig.suptitle("spring: fields")
-    figures.set_stamp("QUICK smoke run")
+    plotting.set_stamp("QUICK smoke run")
     try:
-        figures.save_figure(fig, tmp_path / "a.png")
+        plotting.save_figure(fig, tmp_path / "a.png")
     finally:
-        figures.set_stamp("")
+        plotting.set_stamp("")
     assert fig._suptitle.get_text() == "QUICK smoke run\nspring: fields" and (tmp_path / "a.png").stat().st_size > 0
     fig, ax = plt.subplots()
-    figures.save_figure(fig, tmp_path / "b.png")
+    plotting.save_figure(fig, tmp_path / "b.png")
     assert fig._suptitle is None                          # no stamp outside quick runs
 
 

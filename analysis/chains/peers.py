@@ -32,7 +32,7 @@ from hnn_analysis import commands
 from hnn import sweep
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
-from hnn_analysis.scenes.scene_measure import training_cost
+from hnn_analysis.training_cost import training_cost
 
 BOBS = (1, 2, 3, 5)
 # --quick: a smoke run of every stage within its budget (commands.QUICK_BUDGETS); its LNN trains the
@@ -236,7 +236,7 @@ def _loaded(runs: dict, row: str, kinds, seed: int, load: bool = True) -> dict:
 
 
 def _seconds(runs: dict, row: str, kinds, seed: int) -> dict:
-    """Each kind's training cost on one quiet thread (``scene_measure.training_cost``: its steps at the
+    """Each kind's training cost on one quiet thread (``hnn_analysis.training_cost``: its steps at the
     rate of short timed bursts of the same config), not the run's wall time, which counts whatever else
     the machine did meanwhile (kept as ``wall``)."""
     found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
@@ -270,7 +270,8 @@ def curves_figure(found: dict, path: Path) -> Path:
     """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each kind (log axis)."""
     from matplotlib.ticker import NullFormatter
 
-    from hnn_analysis.paper.figures import plt, save_figure
+    from hnn_analysis.plotting import save_figure     # first: it sets the Agg backend
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, len(found), figsize=(3.3 * len(found), 3.0), squeeze=False)
     for ax, (row, by_kind) in zip(axes[0], found.items()):
         for kind, curve in by_kind.items():

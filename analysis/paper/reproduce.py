@@ -27,8 +27,8 @@ from pathlib import Path
 
 import hnn
 from hnn.io import atomic_write, write_json
-from hnn_analysis.paper import figures, registry
-from hnn_analysis import commands, readme
+from hnn_analysis.paper import registry
+from hnn_analysis import commands, plotting, readme
 from hnn import sweep
 from hnn_analysis.provenance import provenance
 from hnn_analysis.commands import portable_command
@@ -299,12 +299,12 @@ def main(argv=None) -> dict:
     runs.update(trained)
     results["seconds"].update(seconds)
     tic = time.perf_counter()
-    figures.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
+    plotting.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
     try:
         evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models,
                       QUICK_TRIALS if args.quick else None)
     finally:
-        figures.set_stamp("")
+        plotting.set_stamp("")
     results["seconds"]["evaluation"] = time.perf_counter() - tic
     results["seconds"]["total"] = time.perf_counter() - start
     write_outputs(results, out, args.update_docs, not args.no_figures)

@@ -10,7 +10,7 @@ sweep (``scene_common.train``: reused runs, ``--jobs`` processes, grouped traini
 measured on the held-out tail of every trial (``measured_metrics``): the prediction error at
 ``--horizon`` seconds beside the naive extrapolation's, the valid prediction time, the energy
 drift with ``--energy``, the derivative loss (on the scaled states, so dimensionless) and the
-training (``scene_measure.training_cost``, one thread) and rollout seconds. The card picks the
+training (``hnn_analysis.training_cost``, one thread) and rollout seconds. The card picks the
 smallest model (parameters, then training seconds) within ``CARD_FACTOR`` of the best median
 prediction error (ties: fewer training rows). Writes ``<out>/scene.json`` and ``<out>/scene.md``; ``--update-docs`` files the
 card under the data file's name in docs/measured-scenes.json and rewrites the README's rows of
@@ -31,7 +31,8 @@ from hnn_analysis import commands, readme
 from hnn import sweep
 from hnn_analysis.paper import reproduce
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_measure
+from hnn_analysis.scenes import measured_metrics as mm, scene_common
+from hnn_analysis.training_cost import training_cost
 
 TASK = "measured"
 WIDTHS, FRACTIONS = (32, 200), (0.5, 1.0)
@@ -243,7 +244,7 @@ def run(args, argv: list[str], parser) -> dict:
             if not isinstance(directory, Path):
                 continue
             model = mm.Model(data, directory, json.loads((directory / "scale.json").read_text()), rec.state)
-            cost = scene_measure.training_cost(TASK, model.args)
+            cost = training_cost(TASK, model.args)
             measured.append({"kind": kind, "hidden_dim": row["cell"][0], "train_fraction": row["cell"][1],
                              "params": model.params, "test_loss": model.metrics["test_loss"],
                              "train_seconds": cost["seconds"], "run": _in_checkout(directory),

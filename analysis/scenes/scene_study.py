@@ -27,7 +27,7 @@ has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3bo
 Training goes through each task's ``train.py`` (as ``reproduce.py``, whose runs in ``<out>/runs``
 are reused when the args match), in one sweep; the measuring is shared out over ``--jobs``
 processes (``scene_measure``). Training seconds are each model's controlled cost
-(``scene_measure.training_cost``), not the runs' recorded wall times. Writes ``<out>/scene_study.json`` (every number), 
+(``hnn_analysis.training_cost``), not the runs' recorded wall times. Writes ``<out>/scene_study.json`` (every number), 
 ``<out>/scene_study.md`` and ``<out>/figures/scenes-pareto.png``.
 """
 from __future__ import annotations
