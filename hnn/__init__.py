@@ -16,11 +16,14 @@ The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every i
 a module imports its own layer and those below, never one above, and the two middle rooms know
 nothing of each other.
 
-- base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics;
+- base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics, the
+  dataset cache, the GIF writer, the orbits' close-encounter thresholds;
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
-- training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets;
-- runs: config, cli, run folders, task discovery, the tasks' shared systems.
+- training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets, the
+  gravity of n bodies (``nbody``, the orbit tasks' shared system);
+- runs: config, cli, a ``train.py``'s command, run folders, task discovery;
+- sweeps: many runs at once: the sweep, where it trains (``backends``) and its flags, group runs, stopping.
 """
 import importlib
 from typing import TYPE_CHECKING
@@ -31,13 +34,13 @@ _LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orb
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has
 # the folder's layer), may not import each other
 _LAYERS = {
-    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics"),
+    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "cache", "gifs", "encounters"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
-                 "evaluation", "datasets"),
-    "runs": ("config", "cli", "command", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
-             "stopping", "sweep"),
+                 "evaluation", "datasets", "nbody"),
+    "runs": ("config", "cli", "command", "runs", "tasks", "orbit_config"),
+    "sweeps": ("stopping", "group_runs", "backends", "sweep", "sweep_flags"),
 }
 
 # the public face: module -> the names it gives ``hnn``, in the order they load (everything else is

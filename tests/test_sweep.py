@@ -20,11 +20,11 @@ import torch
 
 import hnn
 from hnn_analysis import readme
-from hnn import sweep
+from hnn import backends, sweep
 from hnn_analysis.paper import reproduce
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
-                               reason=f"Ray is not installed: {sweep.RAY_INSTALL}")
+                               reason=f"Ray is not installed: {backends.RAY_INSTALL}")
 LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
 
 
@@ -179,7 +179,7 @@ class _Pipe:
 def test_every_run_says_runs_done_of_runs_to_do_and_the_time_so_far_as_it_ends(tmp_path, monkeypatch):
     pipe = _Pipe()
     monkeypatch.setattr(sys, "stdout", pipe)
-    monkeypatch.setattr(sweep, "HEARTBEAT", -1.0)        # no terminal: a line on every step of a lone run
+    monkeypatch.setattr(backends, "HEARTBEAT", -1.0)        # no terminal: a line on every step of a lone run
     jobs = [_job("spring", "hnn", tmp_path, 3), _job("pend", "hnn", tmp_path, 3)]
     runs, _ = sweep.train_jobs(jobs, 1, tmp_path / "logs", group="off")
     done = [line.strip() for line in pipe.text.splitlines() if " trained " in line]
@@ -208,7 +208,7 @@ def test_train_jobs_checks_its_arguments(tmp_path):
         sweep.train_jobs([], 0, tmp_path)
 
 
-def test_only_the_sweep_imports_ray():
+def test_only_the_sweeps_backends_import_ray():
     root = hnn.tasks.repo_root()
     sources = [p for folder in ["hnn", "analysis", *[d.name for d in root.glob("experiment-*")]]
                for p in (root / folder).rglob("*.py")]
@@ -216,7 +216,7 @@ def test_only_the_sweep_imports_ray():
                        if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
     # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
     # each inside a function that names the extra when it is missing; nothing else may.
-    assert importing == ["analysis/benchmarks/ray_overhead.py", "hnn/sweep.py"]
+    assert importing == ["analysis/benchmarks/ray_overhead.py", "hnn/backends.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():

@@ -93,7 +93,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn import sweep, sweep_flags
 from hnn.dgnet import pairs_from_paths
 from hnn.trajectory import TrajectoryObjective
 from hnn_analysis import commands
@@ -326,7 +326,7 @@ def main(argv=None) -> dict:
                        jobs="worker processes, one torch thread each",
                        out="folder for runs, json, table (default results-dgnet, or results-quick/dgnet with --quick)",
                        update_docs="write each task's table into its section of docs/dgnet.md (the other tasks' stay)")
-    sweep.add_device_flag(parser)
+    sweep_flags.add_device_flag(parser)
     args = parser.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     if args.update_docs and args.quick:

@@ -29,7 +29,7 @@ import torch
 import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands
-from hnn import sweep
+from hnn import sweep, sweep_flags
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 from hnn_analysis.training_cost import training_cost
@@ -442,7 +442,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=hnn.cli.int_at_least(1), default=None,
                    help="seeds seed .. seed + seeds - 1 of every run, the tables' means over them with their range "
                         f"(default: {FULL_SEEDS} for the full table, 1 with --quick)")
-    sweep.add_backend_flags(p)
+    sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
 
@@ -454,7 +454,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     args = parser.parse_args(argv)
     if args.update_docs and (args.quick or settings is not None):
         parser.error("--update-docs writes full-settings results into docs/peers.md; drop --quick")
-    sweep.check_backend(parser, args)
+    sweep_flags.check_backend(parser, args)
     full = settings is None and not args.quick
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"

@@ -29,7 +29,7 @@ import hnn
 from hnn.io import atomic_write, write_json
 from hnn_analysis.paper import registry
 from hnn_analysis import commands, plotting, readme
-from hnn import sweep
+from hnn import sweep, sweep_flags
 from hnn_analysis.provenance import provenance
 from hnn_analysis.commands import portable_command
 from hnn_analysis.paper.tables import MODELS, headline_markdown, tables_markdown
@@ -104,7 +104,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="training processes: 1 trains here, one run after another; N > 1 runs N worker "
                         "processes with cores // N threads each, longest runs first (with --backend ray: "
                         "Ray tasks of cores // N threads); evaluation stays here")
-    sweep.add_backend_flags(p)
+    sweep_flags.add_backend_flags(p)
     p.add_argument("--models", nargs="+", default=[], metavar="KIND",
                    choices=[k for k in hnn.cli.model_choices() if k not in MODELS],
                    help="extra model kinds trained and evaluated beside the paper's baseline and HNN, in a table "
@@ -129,7 +129,7 @@ def _check(parser: argparse.ArgumentParser, args) -> None:
     for task in args.tasks or []:
         if task not in hnn.available_tasks():
             parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.available_tasks())}")
-    sweep.check_backend(parser, args)
+    sweep_flags.check_backend(parser, args)
 
 
 

@@ -45,7 +45,7 @@ from hnn_analysis.paper import reproduce
 from hnn_analysis.scenes import measured_study, scene_common, scene_measure, scene_metrics as sm, scene_report
 from hnn_analysis import commands
 from hnn_analysis.scenes.scene_common import CARD_FACTOR, Scene, scene_settings, scenes, task_kinds, train
-from hnn import sweep
+from hnn import sweep, sweep_flags
 from hnn_analysis.provenance import provenance
 
 WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
@@ -168,7 +168,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=3, help="seeds of the per-kind rows and the chosen cells (quick: 1)")
     p.add_argument("--jobs", type=int, default=1,
                    help="training processes, as reproduce.py --jobs; then as many measuring processes (local backend)")
-    sweep.add_backend_flags(p)
+    sweep_flags.add_backend_flags(p)
     p.add_argument("--update-docs", dest="update_docs", action="store_true",
                    help="write docs/scenes.md and the README's model guide (full settings only); with --data, "
                         "the README's row of that file")
@@ -184,7 +184,7 @@ def main(argv=None) -> dict:
         parser.error(f"--jobs {args.jobs} / --seeds {args.seeds}: both must be at least 1")
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
-    sweep.check_backend(parser, args)
+    sweep_flags.check_backend(parser, args)
     if args.data:
         return measured_study.run(args, argv, parser)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
