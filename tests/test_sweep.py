@@ -21,7 +21,7 @@ import torch
 import hnn
 from hnn_analysis import readme
 from hnn import backends, sweep
-from hnn_analysis.paper import reproduce
+from hnn_analysis.paper import reproduce, study
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
                                reason=f"Ray is not installed: {backends.RAY_INSTALL}")
@@ -29,7 +29,7 @@ LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
 
 
 def _job(task: str, kind: str, runs_dir: Path, steps: int, **fields) -> sweep.Job:
-    """A job as reproduce.plan makes it (the scene study too)."""
+    """A job as study.plan makes it (the scene study too)."""
     config = hnn.tasks.task_config(task, {"model": kind, "save_dir": str(runs_dir), "total_steps": steps, **fields})
     return sweep.Job(f"{task}/{kind}/seed0", task, config)
 
@@ -84,8 +84,8 @@ def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):
         raise AssertionError("a sweep job parsed argv")
 
     monkeypatch.setattr(hnn.cli, "make_parser", refuse)
-    rows = reproduce.table_rows(["spring"], quick=True)
-    jobs = reproduce.plan(rows, [0], tmp_path / "runs", 3)
+    rows = study.table_rows(["spring"], quick=True)
+    jobs = study.plan(rows, [0], tmp_path / "runs", 3)
     runs, todo = sweep.reuse(jobs)
     assert runs == {} and len(todo) == 2
     trained, _ = sweep.train_jobs(todo, 1, tmp_path / "logs")

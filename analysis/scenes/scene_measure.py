@@ -27,7 +27,7 @@ import torch
 
 import hnn
 from hnn import sweep
-from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_common, scene_metrics as sm
 from hnn_analysis.training_cost import training_cost
 
@@ -48,7 +48,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
         return {key: scene.measure(kind, directory, protocols) | {"train_cost": _cost(scene.task, directory)}
                 for key, (kind, directory) in runs.items()}
     tic = time.perf_counter()
-    trained, rows = reproduce.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
+    trained, rows = study.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
     energy = registry.evaluate(trained, scene.trials) if protocols else {}
     shared = (time.perf_counter() - tic) / len(runs)
     out = {}
