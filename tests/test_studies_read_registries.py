@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis.chains import peers
+from hnn_analysis.chains import peer_plan, peers
 from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
 from hnn_analysis.integrator_study import speed_accuracy
 
@@ -111,7 +111,7 @@ def test_a_new_kind_reaches_the_flags_a_run_load_run_and_the_peers_table(toys, t
     model, saved, metrics = hnn.load_run(run)
     assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
     # the peers table: the chain's observed [q, qdot] are read by the toy (as the HNN reads them)
-    assert "scaled" in peers.kinds()
+    assert "scaled" in peer_plan.kinds()
     tiny = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
             "test_starts": 2, "lnn_starts": 0, "lnn_fields": {}, "kinds": ("hnn", "scaled")}
     results = peers.main(["--out", str(tmp_path / "peers")], settings=tiny)
