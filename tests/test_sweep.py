@@ -216,7 +216,7 @@ def test_only_the_sweeps_backends_import_ray():
                        if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
     # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
     # each inside a function that names the extra when it is missing; nothing else may.
-    assert importing == ["analysis/benchmarks/ray_overhead.py", "hnn/backends.py"]
+    assert importing == ["analysis/benchmarks/ray_overhead.py", "analysis/benchmarks/ray_runs.py", "hnn/backends.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():
@@ -385,14 +385,14 @@ def test_grouped_sweeps_save_the_runs_of_lone_ones(backend, n_jobs, tmp_path):
 
 
 def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times():
-    from hnn_analysis.benchmarks import ray_overhead
-    assert ray_overhead.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
+    from hnn_analysis.benchmarks import ray_runs
+    assert ray_runs.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
     a = {"meta": {"commit": "x"}, "seconds": {"total": 1.0},
          "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5, "ok": True, "train_seconds": 3.0}}}}
     b = {"meta": {"commit": "y"}, "seconds": {"total": 9.0},
          "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5 * (1 + 1e-12), "ok": True}},
                    "pend": {"hnn": {"loss": 2.0}}}}
-    got = ray_overhead.compare(a, b)
+    got = ray_runs.compare(a, b)
     # times, provenance and booleans are not results; NaN on both sides counts as equal
     assert (got["numbers"], got["equal"], got["only_one_side"]) == (3, 2, 1)
     assert got["worst_relative_difference"] == pytest.approx(1e-12, rel=1e-3)
