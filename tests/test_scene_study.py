@@ -8,7 +8,7 @@ import torch
 
 import hnn
 from hnn_analysis.paper import reproduce, study
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_stages, scene_study, scene_common
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_stages, scene_study, scene_tables, scene_common
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -141,9 +141,9 @@ def test_scene_card_falls_back_to_the_model_nearest_both_bests():
     card = scene_stages.scene_card(cells)
     assert (card["kind"], card["width"]) == ("hnn", 200)
     assert card["within"] == pytest.approx(3.0)
-    assert "none within 2x of both bests; nearest: hnn, width 200" in scene_report.card_name(card)
+    assert "none within 2x of both bests; nearest: hnn, width 200" in scene_tables.card_name(card)
     normal = scene_stages.scene_card({("hnn", 32, 1.0): _cell(1200, 1e-4, 0.1)})
-    assert normal["within"] == 1.0 and scene_report.card_name(normal) == "hnn, width 32, 1 of the data"
+    assert normal["within"] == 1.0 and scene_tables.card_name(normal) == "hnn, width 32, 1 of the data"
 
 
 def test_dhnn_split_uses_central_differences_on_their_rows():

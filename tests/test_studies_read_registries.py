@@ -7,7 +7,7 @@ import torch
 
 import hnn
 from hnn_analysis.chains import peer_plan, peers
-from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
+from hnn_analysis.scenes import scene_metrics, scene_tables, scene_common
 from hnn_analysis.integrator_study import speed_measure
 
 
@@ -83,7 +83,7 @@ def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solve
 
 
 def test_the_scene_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path):
-    assert "scaled" in scene_common.kinds() and scene_report.color("scaled") == "tab:olive"
+    assert "scaled" in scene_common.kinds() and scene_tables.color("scaled") == "tab:olive"
     _untrained_run("spring", "scaled", tmp_path)
     run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
     scene = scene_common.Scene("spring", quick=True)
