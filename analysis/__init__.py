@@ -15,4 +15,35 @@ Rooms by purpose, each importing only the others' public names:
 ``reproduce.py`` and ``scene_study.py`` at this level are the README's entry points
 (``python analysis/reproduce.py --quick``); every command also runs by its own path. The name
 ``hnn_analysis`` comes from the install (``pip install -e .``): the commands import it like any package.
+
+The rooms and which may import which (``_ROOMS``, ``_MAY_IMPORT``; ``tests/test_layers.py`` reads every
+import of every module against them, inside functions too): a room imports its own modules, those of
+the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
+
+- shared: what every command uses (``commands``, ``provenance``, ``readme``, ``plotting``,
+  ``training_cost``); it imports no room;
+- ``paper``, ``benchmarks``, ``integrator_study``, ``chains``: each on the shared modules alone;
+- ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
+- entry: the commands at this level (the README's entry points, ``arm``, ``stress``), on any room.
 """
+
+# room -> its units: a folder, or a module at this level by its name ("__init__": this file)
+_ROOMS = {
+    "shared": ("__init__", "commands", "provenance", "readme", "plotting", "training_cost"),
+    "paper": ("paper",),
+    "benchmarks": ("benchmarks",),
+    "integrator_study": ("integrator_study",),
+    "chains": ("chains",),
+    "scenes": ("scenes",),
+    "entry": ("reproduce", "scene_study", "peers", "arm", "stress"),
+}
+# room -> the rooms it may import besides its own
+_MAY_IMPORT = {
+    "shared": (),
+    "paper": ("shared",),
+    "benchmarks": ("shared",),
+    "integrator_study": ("shared",),
+    "chains": ("shared",),
+    "scenes": ("shared", "paper", "integrator_study"),
+    "entry": ("shared", "paper", "scenes", "chains"),
+}

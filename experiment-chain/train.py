@@ -79,8 +79,8 @@ class Config(hnn.RunConfig):
 
 def main(argv=None):
     """Train one model, or reuse the complete run of these settings (--force retrains); returns its run folder."""
-    return hnn.cli.train(Config, argv)
+    return hnn.command.train(Config, argv)
 
 
 if __name__ == "__main__":
-    hnn.cli.run_main(main)
+    hnn.command.run_main(main)

@@ -95,8 +95,8 @@ def _notes(config: Config) -> None:
 def main(argv=None):
     """Train one model, or reuse the complete run of these settings (--force retrains); returns its run
     folder (checkpoint, args.json, metrics.json, scale.json)."""
-    return hnn.cli.train(Config, argv, before=_notes)
+    return hnn.command.train(Config, argv, before=_notes)
 
 
 if __name__ == "__main__":
-    hnn.cli.run_main(main)
+    hnn.command.run_main(main)

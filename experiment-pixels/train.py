@@ -73,8 +73,8 @@ class Config(hnn.RunConfig):
 
 def main(argv=None):
     """Train one model, then measure its energy MSE; returns its run folder."""
-    return hnn.cli.train(Config, argv)
+    return hnn.command.train(Config, argv)
 
 
 if __name__ == "__main__":
-    hnn.cli.run_main(main)
+    hnn.command.run_main(main)

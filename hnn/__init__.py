@@ -9,35 +9,39 @@ the training loop, the paper's metrics, and saved runs.
 ``hnn`` itself gives the 35 names of ``__all__``; the rest is reached through its room or module
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
-at once: the light modules (``cli``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
+at once: the light modules (``cli``, ``command``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
 and ``RunConfig`` load on use, and the first use of any other name loads the whole package.
 
 The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every import against it):
 a module imports its own layer and those below, never one above, and the two middle rooms know
 nothing of each other.
 
-- base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics;
+- base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics, the
+  dataset cache, the GIF writer, the orbits' close-encounter thresholds;
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
-- training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets;
-- runs: config, cli, run folders, task discovery, the tasks' shared systems.
+- training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets, the
+  gravity of n bodies (``nbody``, the orbit tasks' shared system);
+- runs: config, cli, a ``train.py``'s command, run folders, task discovery;
+- sweeps: many runs at once: the sweep, where it trains (``backends``) and its flags, group runs, stopping.
 """
 import importlib
 from typing import TYPE_CHECKING
 
-_LIGHT = ("cli", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
+_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
 
 # layer -> its modules; a module may import from its own layer and the ones before it, except that
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has
 # the folder's layer), may not import each other
 _LAYERS = {
-    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs"),
+    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache", "gifs",
+             "encounters"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
-                 "evaluation", "datasets"),
-    "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
-             "stopping", "sweep"),
+                 "evaluation", "datasets", "nbody"),
+    "runs": ("config", "cli", "command", "runs", "tasks", "orbit_config"),
+    "sweeps": ("stopping", "group_runs", "backends", "sweep", "sweep_flags"),
 }
 
 # the public face: module -> the names it gives ``hnn``, in the order they load (everything else is

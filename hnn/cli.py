@@ -7,17 +7,10 @@ naming the value and the fix (exit code 2, as argparse); a misspelled flag gets 
 real one ("did you mean --total_steps?"), and no flag is taken for an abbreviation of another. So
 does a ``--save_dir`` that is a file or cannot be written, before anything trains.
 
-``train(Config, argv)`` is a ``train.py``'s whole command: it parses, reuses the complete run of the
-same settings (``--force`` retrains and replaces it) or trains one, and prints one line saying
-where the run is and what happened to it. ``run_main`` runs it: the package's input errors raised
-while running (a missing data file, say) become one ``error:`` line, and Ctrl-C one line saying
-what was kept. Nothing here imports torch: ``--help`` and flag errors answer before it loads.
+A ``train.py``'s whole command (parse, reuse or train, say where) is ``hnn.command``'s. Nothing here
+imports torch: ``--help`` and flag errors answer before it loads.
 
-    def main(argv=None):
-        return hnn.cli.train(Config, argv)
-
-    if __name__ == "__main__":
-        hnn.cli.run_main(main)
+    config = hnn.cli.parse(Config, argv)
 """
 from __future__ import annotations
 
@@ -35,15 +28,10 @@ from . import kind_docs
 from .kinds import MODEL_KINDS, described
 from .io import check_save_dir
 
-USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it
-INTERRUPTED = 130   # the shell's code for a command ended by Ctrl-C (128 + SIGINT)
-# Exceptions that mean "the input is wrong", not "the code is": values the parser cannot check
-# (the package raises ValueError naming the value and the fix), missing data files, and a
-# --save_dir that cannot be written. Anything else keeps its traceback.
-INPUT_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, PermissionError)
+USAGE_ERROR = 2     # argparse's exit code for bad usage; input errors while running share it (hnn.command)
 
 
-def _one_line(text) -> str:
+def one_line(text) -> str:
     """``text`` with every run of whitespace (newlines included) collapsed to one space."""
     return " ".join(str(text).split())
 
@@ -60,7 +48,7 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.print_usage(sys.stderr)
-        self.exit(USAGE_ERROR, f"error: {_one_line(message)}{self._suggestion(message)}\n")
+        self.exit(USAGE_ERROR, f"error: {one_line(message)}{self._suggestion(message)}\n")
 
     def _suggestion(self, message: str) -> str:
         """"; did you mean --x?" for each unknown flag of an "unrecognized arguments" ``message``
@@ -245,10 +233,10 @@ def make_parser(cls, description: str | None = None) -> Parser:
 def parse(cls, argv: Sequence[str] | None = None):
     """The config of class ``cls`` that the command line ``argv`` (default ``sys.argv[1:]``) asks
     for; a bad flag or value exits with one ``error:`` line (code 2). Creates ``--save_dir``."""
-    return _parse(cls, argv)[0]
+    return parse_created(cls, argv)[0]
 
 
-def _parse(cls, argv: Sequence[str] | None) -> tuple:
+def parse_created(cls, argv: Sequence[str] | None) -> tuple:
     """``(config, the folders this parse created for save_dir, deepest first: none if it existed)``."""
     parser = make_parser(cls)
     values = vars(parser.parse_args(argv))
@@ -285,75 +273,3 @@ def check(config) -> None:
                 _flag_type(cls, f, meta)(str(value))
             except argparse.ArgumentTypeError as err:
                 raise ValueError(f"{f.name}={value!r}: {err}") from None
-
-
-# ----------------------------------------------------------------------------------------------
-# running a train.py as a command
-
-
-def train(cls, argv: Sequence[str] | None = None, before: Callable | None = None) -> Path:
-    """A ``train.py``'s command: the run of config class ``cls`` that ``argv`` asks for; returns its folder.
-
-    A complete run of the same settings (``RunConfig.identity``) in ``--save_dir`` is reused, not
-    retrained; ``--force`` retrains it and replaces its folder. Prints one line: where the run
-    is and what happened to it (trained, reused, replaced; a ``--save_dir`` created on the way).
-    Torch loads after the flags and the config's own input checks pass; the run trains on
-    ``config.threads`` torch threads (the caller's count is restored after). ``before(config)``, if given,
-    runs after them (a task's notes on its input). A ``--save_dir`` created here and left empty by an
-    error or Ctrl-C is removed again.
-    """
-    config, created = _parse(cls, argv)
-    try:
-        config.check_inputs()
-        if before is not None:
-            before(config)
-        from .runs import find_run, run_experiment      # the heavy imports, once the input is known good
-        found = find_run(config)
-        if found is not None and not config.force:
-            print(f"reused the complete run at {found}: it was trained with these settings already, so nothing "
-                  "trained (--force retrains it and replaces the folder)")
-            return found
-        import torch
-        threads = torch.get_num_threads()
-        torch.set_num_threads(config.threads)       # the run's own count (docs/speed.md#threads), the caller's after
-        try:
-            folder = run_experiment(config)
-        finally:
-            torch.set_num_threads(threads)
-    except BaseException:
-        for new in created:         # deepest first; rmdir refuses a folder that holds anything
-            try:
-                new.rmdir()
-            except OSError:
-                break
-        raise
-    notes = [f"created {created[0]}, which did not exist"] if created else []
-    if found is not None:
-        notes.append("replaced the complete run of the same settings that was there (--force)")
-    print(f"saved the run to {folder}" + (f" ({'; '.join(notes)})" if notes else ""))
-    return folder
-
-
-def run_main(main: Callable[[list[str]], Path], argv: Sequence[str] | None = None) -> Path:
-    """Run a ``train.py``'s ``main(argv)`` as a command (``argv`` defaults to ``sys.argv[1:]``);
-    returns what it returns (the run folder; ``main`` says where it went).
-
-    An input error raised while running (one of ``INPUT_ERRORS``) becomes one ``error: <message>``
-    line on stderr and exit code 2; Ctrl-C one line saying what was kept, and exit code 130. With
-    ``--debug`` both propagate with their traceback.
-    """
-    argv = sys.argv[1:] if argv is None else list(argv)
-    debug = "--debug" in argv
-    try:
-        return main(argv)
-    except INPUT_ERRORS as err:
-        if debug:
-            raise
-        print(f"error: {_one_line(err) or type(err).__name__}", file=sys.stderr)
-        sys.exit(USAGE_ERROR)
-    except KeyboardInterrupt:
-        if debug:
-            raise
-        print("interrupted: the run in progress was discarded (a run folder is written whole or not at all); "
-              "every run saved before stays", file=sys.stderr)
-        sys.exit(INTERRUPTED)

@@ -133,7 +133,7 @@ class RunConfig:
         raise NotImplementedError(f"{type(self).__name__} must implement dataset()")
 
     def check_inputs(self) -> None:
-        """Raise one of ``hnn.cli.INPUT_ERRORS`` naming the fix when this run's input is missing
+        """Raise one of ``hnn.command.INPUT_ERRORS`` naming the fix when this run's input is missing
         (a data file, say), before torch loads; nothing to check by default."""
 
     def make_objective(self):

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from .errors import DivergenceError
-from .orbit_config import MIN_SEPARATION, TASK_MIN_SEPARATION  # noqa: F401  (the tasks read both here)
+from .encounters import MIN_SEPARATION, TASK_MIN_SEPARATION  # noqa: F401  (the tasks read both here)
 from .integrators.integrate import rollout
 from .cache import get_cached_dataset
 

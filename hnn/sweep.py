@@ -10,7 +10,8 @@ a saved run that does not load is reported by name and trained again. Each datas
 here, before the map (the cached ones are then read by every worker). A run that fails is
 reported by name with its error and the others go on; ``exit_if_failed`` ends the command with
 code 1 and the list. A task that cannot run here at all (missing data or optional packages) is
-skipped with its reason once. Ray is optional and imported only for ``backend="ray"``.
+skipped with its reason once. Where the units train is ``hnn.backends``'s (Ray is optional and
+imported only for ``backend="ray"``); a command's flags that choose it are ``hnn.sweep_flags``'s.
 
 A SIGINT (Ctrl-C) or SIGTERM (``kill``, a job scheduler) to the sweep's own process cancels the
 runs not started, stops the workers (a run in progress leaves no folder: it is written whole or
@@ -26,11 +27,7 @@ group``), on a GPU all of them (``DEVICE_GROUP_MAX``).
 from __future__ import annotations
 
 import contextlib
-import concurrent.futures
 import json
-import multiprocessing
-import os
-import socket
 import sys
 import time
 import traceback
@@ -40,12 +37,14 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
-from . import cli, group_runs, runs, tasks, training
+from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
+from .group_runs import unit_key
+from .runs import find_run, load_run
+from .tasks import task_spec
 from .config import RunConfig
 from .errors import DivergenceError
-from .stopping import cores, in_worker, interruptible, stop_pool, worker_start
+from .stopping import cores, interruptible
 
-BACKENDS = ("local", "ray")
 GROUP_MODES = ("auto", "all", "off")
 # Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
 # 1 thread, two runs): 2.3-2.6x at width 16 with G 4 and 3.1-3.4x with G 16; 1.3x at width 64
@@ -57,7 +56,6 @@ GROUP_MAX_WIDTH = 64
 # on an accelerator a paper-sized step is launch-bound, and a group of K models costs about one model's
 # step up to K ~ 1000 (docs/gpu.md): groups of any width, up to this many models
 DEVICE_GROUP_MAX = 1024
-RAY_INSTALL = 'pip install -e ".[ray]"'
 # what a dataset raises when its task cannot run here: missing data or optional packages
 _CANNOT_RUN = (FileNotFoundError, ImportError)
 
@@ -119,10 +117,10 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
     reported by name and left to train again (its folder is replaced)."""
     found, todo = {}, []
     for job in jobs:
-        folder = runs.find_run(job.config)
+        folder = find_run(job.config)
         try:
             if folder is not None:
-                runs.load_run(folder)
+                load_run(folder)
                 found[job.key] = folder
                 print(f"  {job.key} reused {folder}", flush=True)
                 continue
@@ -144,7 +142,7 @@ def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
     units, groups = [], {}
     for job in jobs:
         on_cpu = job.config.device == "cpu"
-        key = group_runs.unit_key(job.config) if group != "off" else None
+        key = unit_key(job.config) if group != "off" else None
         if key is not None and group == "auto" and on_cpu and key[0] != "closed_form":
             key = None
         if key is None or (on_cpu and job.config.hidden_dim > GROUP_MAX_WIDTH):
@@ -160,13 +158,7 @@ def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
 
 def _unit_cost(unit: list[Job]) -> float:
     """Longest first: a group costs about its longest member's time (the models step together)."""
-    return tasks.task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
-
-
-def _group_outcomes(unit: list[Job], outcomes: list[dict]):
-    """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
-    for job, outcome in zip(unit, outcomes):
-        yield job, Path(outcome["folder"]) if "folder" in outcome else RuntimeError(outcome["error"])
+    return task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
 
 
 def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
@@ -182,21 +174,10 @@ def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
             data[key] = job.config.dataset()
         except _CANNOT_RUN as err:
             skipped[job.task] = err
-            _say(bar, f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
+            say(bar, f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
             continue
         seconds[key] = time.perf_counter() - tic
     return data, seconds, skipped
-
-
-def _say(bar, line: str) -> None:
-    """Print ``line`` above the bar, flushed: tqdm's ``write`` does not flush, and a command's output
-    piped to a file or a pager (no terminal: no bar either) would hold every line until it ends."""
-    bar.write(line)
-    sys.stdout.flush()
-
-
-# seconds between the lines that say how far a long run is, where no bar is drawn (no terminal)
-HEARTBEAT = 30.0
 
 
 def _failure(job: Job, err: BaseException, log_dir: Path, bar, tag: str = "") -> RunFailed:
@@ -205,125 +186,8 @@ def _failure(job: Job, err: BaseException, log_dir: Path, bar, tag: str = "") ->
     log.parent.mkdir(parents=True, exist_ok=True)
     log.write_text("".join(traceback.format_exception(err)))
     failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log, diverged=isinstance(err, DivergenceError))
-    _say(bar, f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
+    say(bar, f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
     return failed
-
-
-def _in_process(units: list[list[Job]], data: dict, bar, progress: Progress):
-    """Yield ``(job, folder or exception)`` for each run trained here, one unit after another, on
-    the datasets built; the bar moves with every step of a lone run, after a group (without a
-    terminal, a lone run says its step every ``HEARTBEAT`` seconds, with ``progress``'s tag)."""
-    for unit in units:
-        if len(unit) > 1:
-            try:
-                outcomes = group_runs.train_group([job.config for job in unit],
-                                                   [data[job.config.dataset_key()] for job in unit])
-            except Exception as err:        # the whole group failed: each of its runs is reported
-                outcomes = [err] * len(unit)
-            for job, outcome in zip(unit, outcomes):
-                bar.update(job.steps)
-                yield job, outcome
-            continue
-        job, done, said = unit[0], [0], [time.perf_counter()]
-
-        def advance(step: int, total: int, done=done, said=said, job=job) -> None:
-            bar.update(step - done[0])
-            done[0] = step
-            if bar.disable and time.perf_counter() - said[0] > HEARTBEAT:      # no bar: a line now and then
-                said[0] = time.perf_counter()
-                _say(bar, f"  {progress.tag()} {job.key}: step {step} of {total}")
-        try:
-            with training.report_progress(advance):
-                outcome = runs.run_experiment(job.config, data[job.config.dataset_key()])
-        except Exception as err:        # one bad run must not end the sweep (KeyboardInterrupt still does)
-            outcome = err
-        bar.update(job.steps - done[0])
-        yield job, outcome
-
-
-def _submit(unit: list[Job]) -> tuple:
-    """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
-    if len(unit) == 1:
-        return tasks.run_task, unit[0].task, unit[0].fields()
-    return group_runs.run_group_task, unit[0].task, [job.fields() for job in unit]
-
-
-def _unit_results(unit: list[Job], result):
-    """``(job, folder or exception)`` of each job of a finished unit (``result``: its worker's return)."""
-    if isinstance(result, BaseException):
-        for job in unit:
-            yield job, result
-    elif len(unit) == 1:
-        yield unit[0], Path(result)
-    else:
-        yield from _group_outcomes(unit, result)
-
-
-def _in_pool(units: list[list[Job]], n_jobs: int, threads: int):
-    """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads
-    finish them; on an interrupt (or any exception) the runs not started are cancelled and the
-    workers stopped, not waited for."""
-    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
-    pool = concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context, initializer=worker_start,
-                                                  initargs=(os.getpid(),))
-    try:
-        futures = {pool.submit(in_worker, *_submit(unit), threads): unit for unit in units}
-        for future in concurrent.futures.as_completed(futures):
-            error = future.exception()
-            yield from _unit_results(futures[future], error if error is not None else future.result())
-    except BaseException:
-        stop_pool(pool)
-        raise
-    pool.shutdown()
-
-
-def _on_ray(units: list[list[Job]], threads: int, address: str | None):
-    """Yield ``(job, folder or exception)`` as Ray tasks of ``threads`` CPUs each finish them; a run
-    whose node dies is retried once elsewhere, then reported."""
-    ray = _import_ray()
-    started = not ray.is_initialized()
-    if started:
-        if address is not None:
-            _probe(address)
-        ray.init(address=address, num_cpus=None if address else cores(), include_dashboard=False,
-                 log_to_driver=False, logging_level="ERROR")
-    try:
-        biggest = max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node["Alive"]), default=0)
-        if biggest < threads:      # Ray would queue such a task forever
-            raise ValueError(f"each run asks Ray for {threads} CPUs ({cores()} cores here // --jobs), but the "
-                             f"largest Ray node has {biggest:g}; raise --jobs so each run takes fewer threads")
-        # the workers import this checkout's hnn, at the same path on every node (docs/sweeps.md)
-        root = str(Path(__file__).resolve().parent.parent)
-        env = {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
-               "HNN_REPO": str(tasks.repo_root()), "OMP_NUM_THREADS": str(threads)}
-        options = dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
-        remotes = {}
-        refs = {}
-        for unit in units:
-            function, *arguments = _submit(unit)
-            gpus = 1 if unit[0].config.device.startswith("cuda") else 0     # a group is one program: one GPU
-            remote = remotes.setdefault((function, gpus), ray.remote(function).options(**options, num_gpus=gpus))
-            refs[remote.remote(*arguments, threads)] = unit
-        while refs:
-            [ref], _ = ray.wait(list(refs), num_returns=1)
-            unit = refs.pop(ref)
-            try:
-                result = ray.get(ref)
-            except ray.exceptions.RayError as err:
-                # the run's own exception when it raised (its remote traceback as a note, for the
-                # log); Ray's when the worker or its node died
-                cause = getattr(err, "cause", None)
-                if isinstance(cause, Exception):
-                    cause.add_note(str(err))
-                result = cause if isinstance(cause, Exception) else err
-            for job, folder in _unit_results(unit, result):
-                if isinstance(folder, Path) and not (folder / runs.COMPLETE).is_file():
-                    folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
-                                          "here: put --out on storage that every node sees at the same path")
-                yield job, folder
-    finally:
-        if started:
-            ray.shutdown()
 
 
 def _metrics(folder: Path) -> dict:
@@ -331,71 +195,6 @@ def _metrics(folder: Path) -> dict:
         return json.loads((Path(folder) / "metrics.json").read_text())
     except (OSError, ValueError):
         return {}
-
-
-def _import_ray():
-    """The ``ray`` module, or an ImportError that says what to install."""
-    try:
-        import ray
-    except ImportError as err:
-        raise ImportError(f"--backend ray needs Ray, which is not installed here: {RAY_INSTALL}") from err
-    return ray
-
-
-def _probe(address: str, timeout: float = 5.0) -> None:
-    """Raise ConnectionError naming the fix when nothing answers at a ``host:port`` (or
-    ``ray://host:port``) address: Ray itself would retry for minutes. Other forms (``auto``) are
-    left to Ray."""
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not port.isdigit() or not host:
-        return
-    try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
-    except OSError as err:
-        raise ConnectionError(f"--ray-address {address}: nothing answers there ({err.strerror or err}); start Ray "
-                              "on the head node with `ray start --head` and pass the address it prints") from err
-
-
-def add_device_flag(parser) -> None:
-    """Add ``--device`` (every run's torch device) to an analysis command's ``parser``."""
-    parser.add_argument("--device", type=cli.device, default=None,
-                        help="torch device every run trains on (cpu, cuda, cuda:1); default: each run's own, the "
-                             "cpu. Not part of a run's identity: a run saved on one device is reused on another")
-
-
-def add_backend_flags(parser) -> None:
-    """Add ``--backend {local,ray}``, ``--ray-address ADDR``, ``--group`` and ``--device`` to a sweep's
-    ``parser``; check them with ``check_backend`` and pass them to ``train_jobs``."""
-    add_device_flag(parser)
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="where the runs train: local = in this process (--jobs 1) or in --jobs N worker "
-                             "processes here; ray = one Ray task per run with cores // --jobs threads, as many at "
-                             f"once as Ray has CPUs (needs {RAY_INSTALL}); see docs/sweeps.md")
-    parser.add_argument("--ray-address", dest="ray_address", default=None, metavar="ADDR",
-                        help="with --backend ray: the Ray cluster to join (its head's address, e.g. 10.0.0.1:6379, "
-                             "or auto); default: start a local Ray with this machine's cores. --out must be on "
-                             "storage every node sees at the same path")
-
-
-    parser.add_argument("--group", choices=GROUP_MODES, default="auto",
-                        help="auto: train the runs that can share one program (one task, kind and width, seeds "
-                             "and data fractions apart) as batched groups, each run still saved as its own folder: "
-                             f"on the CPU the paper's tanh-MLP kinds up to width {GROUP_MAX_WIDTH}, on a GPU every "
-                             "kind; all: every kind on every device; off: every run alone")
-
-
-def check_backend(parser, args) -> None:
-    """Bad backend flags exit with one ``error:`` line (``parser.error``, code 2) naming the fix,
-    among them ``--backend ray`` without Ray installed."""
-    if args.ray_address is not None and args.backend != "ray":
-        parser.error(f"--ray-address {args.ray_address}: only used with --backend ray; add --backend ray or drop it")
-    if args.backend == "ray":
-        try:
-            _import_ray()
-            if args.ray_address is not None:
-                _probe(args.ray_address)
-        except (ImportError, ConnectionError) as err:
-            parser.error(str(err))
 
 
 @contextlib.contextmanager
@@ -449,10 +248,10 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         # one line per run, with the runs done of those to do and the time so far: the bar above is
         # drawn only on a terminal, and a long run (thousands of steps) leaves it still for minutes
         progress = Progress(len(todo))
-        results = (_in_process(units, data, bar, progress) if in_process else _in_pool(units, n_jobs, threads)
-                   if backend == "local" else _on_ray(units, threads, ray_address))
+        results = (train_here(units, data, bar, progress) if in_process else train_in_pool(units, n_jobs, threads)
+                   if backend == "local" else train_on_ray(units, threads, ray_address))
         if todo:
-            _say(bar, f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
+            say(bar, f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
                       f"{len(units)} unit{'s' if len(units) != 1 else ''} of work")
         for job, outcome in results:
             tag = progress.advance() + " "
@@ -465,7 +264,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                 built = data_seconds.pop(job.config.dataset_key(), 0.0)
                 per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),
                                     "train": metrics.get("train_seconds")}
-                _say(bar, f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)")
+                say(bar, f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)")
             if not in_process:
                 bar.update(job.steps)
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,

@@ -114,14 +114,14 @@ def _raises(err):
 
 def test_run_main_turns_an_input_error_into_one_line(capsys):
     with pytest.raises(SystemExit) as info:
-        hnn.cli.run_main(_raises(ValueError("bad value 7\n  for --thing; pass 8")), [])
+        hnn.command.run_main(_raises(ValueError("bad value 7\n  for --thing; pass 8")), [])
     assert info.value.code == 2
     assert capsys.readouterr().err == "error: bad value 7 for --thing; pass 8\n"
 
 
 def test_run_main_debug_reraises():
     with pytest.raises(FileNotFoundError, match="nowhere"):
-        hnn.cli.run_main(_raises(FileNotFoundError("nowhere")), ["--seed", "1", "--debug"])
+        hnn.command.run_main(_raises(FileNotFoundError("nowhere")), ["--seed", "1", "--debug"])
 
 
 def test_no_flag_is_an_abbreviation_and_a_misspelling_gets_the_nearest_flag(capsys):
@@ -140,12 +140,12 @@ def test_no_flag_is_an_abbreviation_and_a_misspelling_gets_the_nearest_flag(caps
 
 def test_ctrl_c_is_one_line_and_exit_130(capsys):
     with pytest.raises(SystemExit) as info:
-        hnn.cli.run_main(_raises(KeyboardInterrupt()), [])
+        hnn.command.run_main(_raises(KeyboardInterrupt()), [])
     assert info.value.code == 130
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("interrupted:") and "discarded" in err and "stays" in err
     with pytest.raises(KeyboardInterrupt):
-        hnn.cli.run_main(_raises(KeyboardInterrupt()), ["--debug"])
+        hnn.command.run_main(_raises(KeyboardInterrupt()), ["--debug"])
 
 
 def test_a_misspelled_choice_gets_the_nearest_one(capsys):
@@ -169,28 +169,28 @@ def test_a_run_stopped_before_saving_leaves_no_save_dir_it_created(tmp_path, mon
     (tmp_path / "kept").mkdir()
     for save_dir in (tmp_path / "new" / "deeper", tmp_path / "kept" / "new", tmp_path / "kept"):
         with pytest.raises(type(stop)):
-            hnn.cli.train(Config, ["--total_steps", "2", "--save_dir", str(save_dir)])
+            hnn.command.train(Config, ["--total_steps", "2", "--save_dir", str(save_dir)])
         # the folders it created are removed again; the one that was there stays
         assert [p.name for p in tmp_path.iterdir()] == ["kept"] and not any((tmp_path / "kept").iterdir())
 
 
 def test_run_main_leaves_bugs_alone():
     with pytest.raises(ZeroDivisionError):
-        hnn.cli.run_main(_raises(ZeroDivisionError("a bug, not bad input")), [])
+        hnn.command.run_main(_raises(ZeroDivisionError("a bug, not bad input")), [])
 
 
 def test_a_rerun_reuses_the_complete_run_and_force_replaces_it(tmp_path, capsys):
     Config = hnn.load_task("spring", "train").Config
     save_dir = tmp_path / "new" / "deeper"
     argv = ["--total_steps", "2", "--hidden_dim", "8", "--save_dir", str(save_dir)]
-    run = hnn.cli.train(Config, argv)
+    run = hnn.command.train(Config, argv)
     assert capsys.readouterr().out.splitlines()[-1] == f"saved the run to {run} (created {save_dir}, which did not exist)"
     stamp = (run / "model.tar").stat().st_mtime_ns
     # display-only flags (print_every, verbose) are not a new run: the same folder, reused, nothing trained
-    assert hnn.cli.train(Config, argv + ["--print_every", "7"]) == run
+    assert hnn.command.train(Config, argv + ["--print_every", "7"]) == run
     assert capsys.readouterr().out.splitlines()[-1].startswith(f"reused the complete run at {run}: ")
     assert (run / "model.tar").stat().st_mtime_ns == stamp
-    assert hnn.cli.train(Config, argv + ["--force"]) == run
+    assert hnn.command.train(Config, argv + ["--force"]) == run
     line = capsys.readouterr().out.splitlines()[-1]
     assert line == f"saved the run to {run} (replaced the complete run of the same settings that was there (--force))"
     assert hnn.load_run(run)[1]["total_steps"] == 2
@@ -203,13 +203,13 @@ def test_the_thread_count_is_the_runs_own_recorded_and_outside_its_identity(tmp_
     assert Config(threads=2).key() == Config().key()
     caller = torch.get_num_threads()
     argv = ["--total_steps", "2", "--hidden_dim", "8", "--save_dir", str(tmp_path)]
-    run = hnn.cli.train(Config, argv + ["--threads", "2"])
+    run = hnn.command.train(Config, argv + ["--threads", "2"])
     assert torch.get_num_threads() == caller                  # the caller's count is back
     args, metrics = hnn.load_run(run)[1:3]
     assert args["threads"] == 2 and metrics["torch_threads"] == 2
-    assert hnn.cli.train(Config, argv) == run                 # another count: the same run, reused
+    assert hnn.command.train(Config, argv) == run                 # another count: the same run, reused
     assert capsys.readouterr().out.splitlines()[-1].startswith("reused")
-    hnn.cli.train(Config, argv + ["--force"])                 # the default: one thread, recorded
+    hnn.command.train(Config, argv + ["--force"])                 # the default: one thread, recorded
     assert hnn.load_run(run)[1]["threads"] == 1 == hnn.load_run(run)[2]["torch_threads"]
     # from Python a run keeps the caller's count, and records it
     torch.set_num_threads(2)

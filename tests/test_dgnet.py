@@ -49,8 +49,8 @@ def test_pairs_are_every_consecutive_pair_of_each_path():
 
 
 def test_the_real_pendulums_pairs_never_span_a_gap_in_its_measurements():
-    from hnn_analysis.chains import dgnet
-    data = dgnet.dataset("real", 0)
+    from hnn_analysis.chains import dgnet_protocol
+    data = dgnet_protocol.dataset("real", 0)
     t, dt = data["t"], data["dt"]
     gaps = int((~np.isclose(np.diff(t), dt)).sum())
     assert gaps == 11            # 8 gaps of 1/3 s, 2 of 1/2 s, and the 18.5 s test block (the shipped file)
@@ -94,16 +94,16 @@ def test_it_runs_from_the_flags_and_refuses_a_kind_without_h(tmp_path):
 
 
 def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
-    from hnn_analysis.chains import dgnet
+    from hnn_analysis.chains import dgnet, dgnet_protocol
 
     results = dgnet.main(["--steps", "2", "--seeds", "1", "--tasks", "spring", "real", "--out", str(tmp_path)])
     text = (tmp_path / "dgnet.md").read_text()
     for task in ("spring", "real"):
         assert f"### {task}" in text
-        assert set(results["rows"][task]) == set(dgnet.rows_for(task))
+        assert set(results["rows"][task]) == set(dgnet_protocol.rows_for(task))
         for label, runs in results["rows"][task].items():
             energies = runs[0]["energy"]
-            assert set(energies) == set(dgnet.ROWS[label][3]) and all(np.isfinite(v) for v in energies.values())
+            assert set(energies) == set(dgnet_protocol.ROWS[label][3]) and all(np.isfinite(v) for v in energies.values())
     # the real pendulum has no true dx/dt: the paper's objective row is not run there
     assert "HNN, paper's objective" not in results["rows"]["real"]
     assert "| DGNet (discrete gradient / discrete gradient) | 1.38e-03 | 5.04e-04 | published, mean of 15 |" in text
@@ -115,19 +115,19 @@ def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
     assert not hnn.kinds.model_from_args(saved).differentiable_model.linear1.bias.any()
     # --update-docs writes one section per task it ran (each with its stamp), so the others stay
     from hnn_analysis import readme
-    section = dgnet.task_table(results, "real")
+    section = dgnet_protocol.task_table(results, "real")
     assert section.startswith("### real") and "--tasks spring real" in section and "### spring" not in section
-    for task in dgnet.TASKS:
+    for task in dgnet_protocol.TASKS:
         assert readme.PAGES[f"dgnet-{task}"] == "docs/dgnet.md" and readme.section_text(f"dgnet-{task}") is not None
     # the data: every consecutive pair of the 25 training paths of 100 states, at their dt = 20/99
-    data = dgnet.dataset("spring", 0)
+    data = dgnet_protocol.dataset("spring", 0)
     assert data["pairs"].shape == (25 * 99, 4) and data["dt"] == pytest.approx(20 / 99)
     np.testing.assert_array_equal(data["pairs"][0], np.concatenate([data["x"][0], data["x"][1]]))
 
 
 def test_the_2body_data_is_their_recipe_cut_into_consecutive_pairs():
-    from hnn_analysis.chains import dgnet
-    data = dgnet.dataset("2body", 0)
+    from hnn_analysis.chains import dgnet_protocol
+    data = dgnet_protocol.dataset("2body", 0)
     # 1000 orbits of 500 states on [0, 25]: the first 200 orbits test, 800 train; width 8, no noise
     assert data["x"].shape == data["dxdt"].shape == (800 * 500, 8)
     assert data["test_x"].shape == data["test_dxdt"].shape == (200 * 500, 8)
@@ -144,42 +144,42 @@ def test_the_2body_data_is_their_recipe_cut_into_consecutive_pairs():
     np.testing.assert_allclose(data["test_dxdt"][:500], system.dynamics(torch.as_tensor(data["test_x"][:500],
                                                                                          dtype=torch.float64)),
                                rtol=1e-5, atol=1e-6)
-    assert dgnet.SETTINGS["2body"] == {"steps": 10000, "batch_size": 200, "weight_decay": 0.0}
+    assert dgnet_protocol.SETTINGS["2body"] == {"steps": 10000, "batch_size": 200, "weight_decay": 0.0}
 
 
 def test_the_2body_table_puts_every_published_row_beside_ours(tmp_path, monkeypatch):
-    from hnn_analysis.chains import dgnet
-    monkeypatch.setitem(dgnet.TWO_BODY, "num_trials", 10)       # 8 training orbits: seconds, not minutes
+    from hnn_analysis.chains import dgnet, dgnet_protocol
+    monkeypatch.setitem(dgnet_protocol.TWO_BODY, "num_trials", 10)       # 8 training orbits: seconds, not minutes
     results = dgnet.main(["--steps", "2", "--seeds", "1", "--tasks", "2body", "--out", str(tmp_path)])
     text = (tmp_path / "dgnet.md").read_text()
     assert "### 2body" in text and "2 steps a run (theirs: 10000) of minibatches of 200" in text
-    for name, (d, e) in dgnet.PUBLISHED["2body"].items():
+    for name, (d, e) in dgnet_protocol.PUBLISHED["2body"].items():
         assert f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 |" in text
-    assert set(results["rows"]["2body"]) == set(dgnet.rows_for("2body")) and len(dgnet.rows_for("2body")) == 5
+    assert set(results["rows"]["2body"]) == set(dgnet_protocol.rows_for("2body")) and len(dgnet_protocol.rows_for("2body")) == 5
     for label, runs in results["rows"]["2body"].items():
         assert np.isfinite(runs[0]["derivative"])
-        assert set(runs[0]["energy"]) == set(dgnet.ROWS[label][3])
+        assert set(runs[0]["energy"]) == set(dgnet_protocol.ROWS[label][3])
         assert all(np.isfinite(v) for v in runs[0]["energy"].values())
-        for predict in dgnet.ROWS[label][3]:
-            assert f"| ours: {label} ({dgnet.ROWS[label][2]} / {predict}) |" in text
+        for predict in dgnet_protocol.ROWS[label][3]:
+            assert f"| ours: {label} ({dgnet_protocol.ROWS[label][2]} / {predict}) |" in text
         _, saved, _ = hnn.load_run(runs[0]["run"])
         assert (saved["batch_size"], saved["total_steps"], saved["weight_decay"]) == (200, 2, 0.0)
 
 
 def test_quick_runs_every_row_of_every_task_on_one_seed_and_few_steps_and_says_so(tmp_path, monkeypatch, capsys):
-    from hnn_analysis.chains import dgnet
+    from hnn_analysis.chains import dgnet, dgnet_protocol
     asked = []
 
     def fake_job(args):      # what a run would be asked, without training it
         task, label, seed, steps, out, init, quick, device = args
         assert device == "cpu"
         asked.append((task, label, seed, steps, quick))
-        return args[:3], {"run": "", "derivative": 1.0, "energy": {p: 1.0 for p in dgnet.ROWS[label][3]}}
+        return args[:3], {"run": "", "derivative": 1.0, "energy": {p: 1.0 for p in dgnet_protocol.ROWS[label][3]}}
 
-    monkeypatch.setattr(dgnet, "_job", fake_job)
+    monkeypatch.setattr(dgnet, "measure_job", fake_job)
     results = dgnet.main(["--quick", "--out", str(tmp_path)])
-    assert sorted(asked) == sorted((task, label, 0, dgnet.QUICK["steps"], True) for task in dgnet.TASKS
-                                   for label in dgnet.rows_for(task))
+    assert sorted(asked) == sorted((task, label, 0, dgnet_protocol.QUICK["steps"], True) for task in dgnet_protocol.TASKS
+                                   for label in dgnet_protocol.rows_for(task))
     out = capsys.readouterr().out
     assert "--quick: every stage on small settings, within a budget of 120 s" in out
     assert "  - 1 seed of their 15 trials" in out and "100 steps a run of their 2000 (spring)" in out
@@ -196,10 +196,10 @@ def test_quick_runs_every_row_of_every_task_on_one_seed_and_few_steps_and_says_s
 
 
 def test_quick_data_are_their_recipe_on_fewer_paths_and_orbits():
-    from hnn_analysis.chains import dgnet
-    quick, full = dgnet.dataset("spring", 0, **dgnet.QUICK_DATA), dgnet.dataset("spring", 0)
+    from hnn_analysis.chains import dgnet_protocol
+    quick, full = dgnet_protocol.dataset("spring", 0, **dgnet_protocol.QUICK_DATA), dgnet_protocol.dataset("spring", 0)
     # half the paths train, as theirs: 5 of 10 paths of 100 states, every consecutive pair
     assert quick["pairs"].shape == (5 * 99, 4) and full["pairs"].shape == (25 * 99, 4)
     assert quick["dt"] == full["dt"]
-    orbits = dgnet.dataset("2body", 0, orbits=10)
+    orbits = dgnet_protocol.dataset("2body", 0, orbits=10)
     assert len(orbits["pairs"]) == 8 * 499         # 80% of the orbits train, each 500 states

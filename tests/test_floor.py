@@ -5,7 +5,7 @@ import torch
 
 import hnn
 from hnn.training import adam_optimizer, l2_loss, optimizer_step
-from hnn_analysis.benchmarks import benchmark, floor, floor_job
+from hnn_analysis.benchmarks import benchmark_report, floor, floor_job
 
 
 def _baseline_step(rows=10, hidden=8):
@@ -66,13 +66,13 @@ def test_the_group_table_is_rewritten_alone_and_the_other_jobs_leave_it(tmp_path
     page = tmp_path / "docs" / "speed.md"
     page.write_text("intro\n<!-- benchmark:begin -->\nold main\n<!-- benchmark:end -->\nafter\n")
     monkeypatch.setattr(hnn.tasks, "repo_root", lambda: tmp_path)
-    first = benchmark._benchmark_section(None, "stamp A\n\ngroup table A")
+    first = benchmark_report.benchmark_section(None, "stamp A\n\ngroup table A")
     assert first.startswith("old main") and first.endswith("stamp A\n\ngroup table A")
     page.write_text(f"intro\n<!-- benchmark:begin -->\n{first}\n<!-- benchmark:end -->\nafter\n")
-    again = benchmark._benchmark_section("new main", None)          # a run without the group job
-    assert again == f"new main\n\n{benchmark.GROUP_MARK}\n\nstamp A\n\ngroup table A"
+    again = benchmark_report.benchmark_section("new main", None)          # a run without the group job
+    assert again == f"new main\n\n{benchmark_report.GROUP_MARK}\n\nstamp A\n\ngroup table A"
     page.write_text(f"intro\n<!-- benchmark:begin -->\n{again}\n<!-- benchmark:end -->\nafter\n")
-    assert benchmark._benchmark_section(None, "stamp B\n\ngroup table B").count("group table") == 1
+    assert benchmark_report.benchmark_section(None, "stamp B\n\ngroup table B").count("group table") == 1
 
 
 def test_others_load_is_the_machines_busy_seconds_less_this_processs_per_wall_second():

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import hnn
-from hnn_analysis.paper import reproduce
+from hnn_analysis.paper import study
 from hnn_analysis.scenes import measured_metrics as mm, measured_study, scene_study
 
 REPO = Path(__file__).resolve().parent.parent
@@ -152,7 +152,7 @@ def test_a_damped_oscillator_in_a_csv_round_trips_to_the_dissipative_kind(tmp_pa
 
 def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch):
     path = _write_csv(tmp_path / "damped.csv", _damped(trials=2, n=100))
-    monkeypatch.setattr(reproduce, "QUICK_STEPS", 40)
+    monkeypatch.setattr(study, "QUICK_STEPS", 40)
     monkeypatch.setattr(measured_study, "QUICK_WIDTHS", (8,))
     out = tmp_path / "card"
     scene_study.main(["--data", str(path), "--time", "time", "--q", "x", "--v", "v", "--trial", "run", "--quick",
@@ -179,7 +179,7 @@ def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch)
 
 def _error(argv, capsys, main=None) -> str:
     with pytest.raises(SystemExit) as exit_:
-        (main or (lambda a: hnn.cli.run_main(train.main, a)))(argv)
+        (main or (lambda a: hnn.command.run_main(train.main, a)))(argv)
     assert exit_.value.code == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert len(lines) == 1, lines

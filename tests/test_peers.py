@@ -5,7 +5,7 @@ import re
 import pytest
 
 import hnn
-from hnn_analysis.chains import peers
+from hnn_analysis.chains import peer_plan, peer_table, peers
 
 TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
         "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}, "max_iterations": 3000}
@@ -15,12 +15,12 @@ def test_tiny_peers_table(tmp_path, monkeypatch):
     # from the LNN's own init (the table's CHNN rows start from lnn_convex), a fresh black-box L on one bob has
     # d2L/dqdot2 = 0 somewhere along its first snippets: the run fails in training, deterministically, and the
     # table says so in its cell (the command does not fail for it)
-    monkeypatch.setattr(peers, "CHNN_KIND_FIELDS", {})
+    monkeypatch.setattr(peer_plan, "CHNN_KIND_FIELDS", {})
     results = peers.main(["--out", str(tmp_path)], settings=TINY)
     row = results["rows"]["chain1"]
     assert re.fullmatch(r"SingularLagrangianError at (the test batch after )?training step [0-2] of 2: LagrangianNN: "
                         r"d2L/dqdot2 is singular at \d+ states", row["lagrangian"]["diverged"]), row["lagrangian"]
-    for kind in set(peers.kinds()) - {"lagrangian"}:
+    for kind in set(peer_plan.kinds()) - {"lagrangian"}:
         entry = row[kind]
         assert "blew_up" in entry or (entry["n"] == 3 and 0 < entry["median"] <= 1), (kind, entry)
         cost = row["seconds"][kind]            # steps at a rate timed alone on one thread, and the wall time
@@ -43,7 +43,7 @@ def test_tiny_peers_table(tmp_path, monkeypatch):
 def test_the_lnn_chnn_row_trains_from_its_convex_init(tmp_path):
     """The table's CHNN rows start the LNN from lnn_convex (issue 48): the same tiny table's LNN cell is
     a number, where from the LNN's own init it failed in training (test_tiny_peers_table)."""
-    assert peers.CHNN_KIND_FIELDS["lagrangian"]["init"] == "lnn_convex"
+    assert peer_plan.CHNN_KIND_FIELDS["lagrangian"]["init"] == "lnn_convex"
     entry = peers.main(["--out", str(tmp_path)], settings=TINY)["rows"]["chain1"]["lagrangian"]
     assert "diverged" not in entry and entry["n"] == 3 and 0 < entry["median"] <= 1, entry
 
@@ -58,16 +58,16 @@ def test_the_card_names_the_cheapest_kind_within_2x_of_the_best():
     rows = {"chain2": {"a": {"mean": 1e-3}, "b": {"mean": 1.9e-3}, "c": {"mean": 2.1e-3}, "d": {"blew_up": "t = 1"},
                        "seconds": {"a": {"seconds": 900}, "b": {"seconds": 100}, "c": {"seconds": 10},
                                    "d": {"seconds": 1}}}}
-    lines = peers.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})
+    lines = peer_table.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})
     # b is within 2x of a and cheaper; c is cheaper still but 2.1x off; d blew up
     assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b | one seed: not tested |"
 
 
 def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
-    kinds = peers.kinds()
+    kinds = peer_plan.kinds()
     # the LNN, the peers' own method, though the scene studies leave it out; with its own activation
     assert "lagrangian" in kinds and not hnn.MODEL_KINDS["lagrangian"].studied
-    jobs = peers.plan({**TINY, "kinds": kinds, "lnn_starts": 1}, tmp_path)
+    jobs = peer_plan.plan({**TINY, "kinds": kinds, "lnn_starts": 1}, tmp_path)
     lnn = [job for job in jobs if "/lagrangian/" in job.key]
     assert len(lnn) == 2 and all(job.config.nonlinearity == "softplus" for job in lnn)
     assert all(job.config.nonlinearity == "tanh" for job in jobs if "/hnn/" in job.key)
@@ -94,21 +94,21 @@ def test_the_card_names_the_kinds_the_seeds_cannot_separate_from_the_best():
         return {"mean": sum(seeds) / len(seeds), "seeds": list(seeds), "low": min(seeds), "high": max(seeds)}
     rows = {"chain2": {"a": entry(1.0e-3, 1.4e-3), "b": entry(1.3e-3, 1.9e-3), "c": entry(1.6e-3, 2.0e-3),
                        "seconds": {"a": {"seconds": 900}, "b": {"seconds": 100}, "c": {"seconds": 10}}}}
-    line = peers.card({"meta": {"kinds": ["a", "b", "c"]}, "rows": rows})[-1]
+    line = peer_table.card({"meta": {"kinds": ["a", "b", "c"]}, "rows": rows})[-1]
     # b's range overlaps a's (1.3e-3 <= 1.4e-3): the seeds cannot tell them apart; c's does not
     assert line.startswith("| 2 | a 1.20e-03 |") and line.endswith("| a, b, c | b |")
 
 
 def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path):
-    kinds = peers.kinds()
-    quick = {job.key: job.config for job in peers.plan({**peers.QUICK, "kinds": kinds}, tmp_path)}
-    full = {job.key: job.config for job in peers.plan({**peers.FULL, "kinds": kinds}, tmp_path)}
+    kinds = peer_plan.kinds()
+    quick = {job.key: job.config for job in peer_plan.plan({**peer_plan.QUICK, "kinds": kinds}, tmp_path)}
+    full = {job.key: job.config for job in peer_plan.plan({**peer_plan.FULL, "kinds": kinds}, tmp_path)}
     # the full table trains the LNN its own 60000 steps on its L1 loss; quick trains it the protocol's 100
-    assert full["lnn/lagrangian/seed0"].total_steps == peers.LNN_KIND_FIELDS["lagrangian"]["total_steps"] == 60000
-    assert quick["lnn/lagrangian/seed0"].total_steps == peers.QUICK["lnn_fields"]["total_steps"] == 100
+    assert full["lnn/lagrangian/seed0"].total_steps == peer_plan.LNN_KIND_FIELDS["lagrangian"]["total_steps"] == 60000
+    assert quick["lnn/lagrangian/seed0"].total_steps == peer_plan.QUICK["lnn_fields"]["total_steps"] == 100
     assert quick["lnn/lagrangian/seed0"].derivative_loss == full["lnn/lagrangian/seed0"].derivative_loss == "l1"
     assert max(config.total_steps for config in quick.values()) == 100
-    cuts = peers.quick_cuts()
+    cuts = peer_plan.quick_cuts()
     assert "LNN protocol: its lagrangian kind 100 steps of its own 60000" in cuts
     assert "N = 1, 2 of 1, 2, 3, 5 bobs" in cuts and "CHNN protocol: 100 training steps of 8000" in cuts
     assert "1 seed of 5 (--seeds sets it)" in cuts

@@ -8,8 +8,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis.paper import figures, registry, reproduce, tables
-from hnn_analysis import commands, readme
+from hnn_analysis.paper import registry, reproduce, study, tables
+from hnn_analysis import commands, plotting, readme
 from hnn import sweep
 
 TINY = 20          # training steps of the end-to-end runs
@@ -195,25 +195,25 @@ def test_quick_figures_say_quick_in_their_titles(tmp_path):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots()
     fig.suptitle("spring: fields")
-    figures.set_stamp("QUICK smoke run")
+    plotting.set_stamp("QUICK smoke run")
     try:
-        figures.save_figure(fig, tmp_path / "a.png")
+        plotting.save_figure(fig, tmp_path / "a.png")
     finally:
-        figures.set_stamp("")
+        plotting.set_stamp("")
     assert fig._suptitle.get_text() == "QUICK smoke run\nspring: fields" and (tmp_path / "a.png").stat().st_size > 0
     fig, ax = plt.subplots()
-    figures.save_figure(fig, tmp_path / "b.png")
+    plotting.save_figure(fig, tmp_path / "b.png")
     assert fig._suptitle is None                          # no stamp outside quick runs
 
 
 def test_quick_measures_each_energy_protocol_on_fewer_trials_and_says_each_cut(tmp_path):
-    cuts = reproduce.quick_cuts(["spring", "pixels"], reproduce.QUICK_STEPS)
-    assert cuts == [f"{reproduce.QUICK_STEPS} training steps a model of the tasks' own 2000 (spring), 10000 (pixels)",
+    cuts = study.quick_cuts(["spring", "pixels"], study.QUICK_STEPS)
+    assert cuts == [f"{study.QUICK_STEPS} training steps a model of the tasks' own 2000 (spring), 10000 (pixels)",
                     "pixels: trials 20 of 200", "energy MSE: 5 trials of each protocol's 15"]
-    assert reproduce.quick_cuts(["pixels"], None) == ["pixels: trials 20 of 200"]     # its own evaluate: kept
+    assert study.quick_cuts(["pixels"], None) == ["pixels: trials 20 of 200"]     # its own evaluate: kept
     config = hnn.tasks.task_config("spring", {"total_steps": TINY, "save_dir": str(tmp_path)})
-    trained, _ = reproduce.load_runs("spring", {"hnn": hnn.run_experiment(config)})
-    full, quick = registry.evaluate(trained), registry.evaluate(trained, reproduce.QUICK_TRIALS)
+    trained, _ = study.load_runs("spring", {"hnn": hnn.run_experiment(config)})
+    full, quick = registry.evaluate(trained), registry.evaluate(trained, study.QUICK_TRIALS)
     for name, result in quick.items():
         truth, all_truth = np.asarray(result["energy_truth"]), np.asarray(full[name]["energy_truth"])
         assert len(truth) == 5 and len(all_truth) == 15
@@ -231,7 +231,7 @@ def test_the_recorded_command_names_no_folder_of_this_machine(tmp_path):
 
 
 @pytest.mark.parametrize("argv, match", [
-    (["--jobs", "0"], "--jobs 0: must be at least 1"),
+    (["--jobs", "0"], "--jobs: must be an integer >= 1, got '0'"),
     (["--tasks", "nosuch"], "--tasks nosuch: no such task here"),
     (["--quick", "--update-docs"], "drop --quick"),
 ])
@@ -324,12 +324,12 @@ def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results)
 
 
 def test_a_task_with_min_seeds_trains_more_seeds_only_across_seeds():
-    rows = {r["row"]: r for r in reproduce.table_rows(["spring", "pixels"], quick=True, seeds=[0, 1, 2])}
+    rows = {r["row"]: r for r in study.table_rows(["spring", "pixels"], quick=True, seeds=[0, 1, 2])}
     assert rows["spring"]["seeds"] == [0, 1, 2]
     assert rows["pixels"]["seeds"] == list(range(hnn.task_spec("pixels").min_seeds)) == [0, 1, 2, 3, 4]
-    one = {r["row"]: r for r in reproduce.table_rows(["pixels"], quick=True, seeds=[7])}
+    one = {r["row"]: r for r in study.table_rows(["pixels"], quick=True, seeds=[7])}
     assert one["pixels"]["seeds"] == [7]                         # one seed stays one seed
-    jobs = reproduce.plan(list(rows.values()), [0, 1, 2], Path("runs"), 3)
+    jobs = study.plan(list(rows.values()), [0, 1, 2], Path("runs"), 3)
     assert sorted({j.config.seed for j in jobs if j.task == "pixels"}) == [0, 1, 2, 3, 4]
 
 

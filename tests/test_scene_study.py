@@ -7,8 +7,8 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis.paper import reproduce
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_study, scene_common
+from hnn_analysis.paper import reproduce, study
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_stages, scene_study, scene_tables, scene_common
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -125,10 +125,10 @@ def test_scene_card_picks_the_smallest_model_within_2x_of_both_bests():
              ("hnn", 16, 1.0): _cell(352, 1.5e-4, 0.5),         # small, but 5x the best rollout error
              ("separable", 32, 0.5): _cell(2300, 1.9e-4, 0.17),  # within 2x of both: the card
              ("baseline", 16, 1.0): _cell(352, 1e-1, 0.09)}      # best rollout, far worse energy
-    card = scene_study.scene_card(cells)
+    card = scene_stages.scene_card(cells)
     assert (card["kind"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
     assert card["best_energy"] == 1e-4 and card["best_rollout"] == 0.09
-    assert scene_study.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["kind"] == "hnn"
+    assert scene_stages.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["kind"] == "hnn"
 
 
 def test_scene_card_falls_back_to_the_model_nearest_both_bests():
@@ -138,12 +138,12 @@ def test_scene_card_falls_back_to_the_model_nearest_both_bests():
              ("separable", 16, 1.0): _cell(600, 1e-3, 0.09),        # best rollout, 100x the best energy
              ("hnn", 200, 1.0): _cell(41200, 3e-5, 0.18),           # 3x and 2x: the nearest
              ("hnn", 32, 1.0): _cell(1200, 4e-5, 0.3)}              # smaller, but 4x and 3.3x
-    card = scene_study.scene_card(cells)
+    card = scene_stages.scene_card(cells)
     assert (card["kind"], card["width"]) == ("hnn", 200)
     assert card["within"] == pytest.approx(3.0)
-    assert "none within 2x of both bests; nearest: hnn, width 200" in scene_report.card_name(card)
-    normal = scene_study.scene_card({("hnn", 32, 1.0): _cell(1200, 1e-4, 0.1)})
-    assert normal["within"] == 1.0 and scene_report.card_name(normal) == "hnn, width 32, 1 of the data"
+    assert "none within 2x of both bests; nearest: hnn, width 200" in scene_tables.card_name(card)
+    normal = scene_stages.scene_card({("hnn", 32, 1.0): _cell(1200, 1e-4, 0.1)})
+    assert normal["within"] == 1.0 and scene_tables.card_name(normal) == "hnn, width 32, 1 of the data"
 
 
 def test_dhnn_split_uses_central_differences_on_their_rows():
@@ -188,20 +188,20 @@ def test_dhnn_protocol_scores_the_true_field_of_a_frictionless_pendulum_as_it_sh
 
 
 def test_reproduce_models_flag_adds_kinds_only_where_a_task_has_them(tmp_path):
-    jobs = reproduce.plan(reproduce.table_rows(["spring", "pixels"], quick=True), [0], tmp_path, None, ("separable",))
+    jobs = study.plan(study.table_rows(["spring", "pixels"], quick=True), [0], tmp_path, None, ("separable",))
     assert [(job.key, job.config.kind) for job in jobs] == [
         ("spring/baseline/seed0", "baseline"), ("spring/hnn/seed0", "hnn"), ("spring/separable/seed0", "separable"),
         ("pixels/baseline/seed0", "pixel-baseline"), ("pixels/hnn/seed0", "pixel-hnn")]
-    assert reproduce.row_models("spring", ("dissipative",)) == ["baseline", "hnn", "dissipative"]
-    assert reproduce.row_models("pixels", ("separable", "dissipative")) == ["baseline", "hnn"]
+    assert study.row_models("spring", ("dissipative",)) == ["baseline", "hnn", "dissipative"]
+    assert study.row_models("pixels", ("separable", "dissipative")) == ["baseline", "hnn"]
     with pytest.raises(SystemExit):
         reproduce._parser().parse_args(["--models", "bogus"])
 
 
 @pytest.mark.slow
 def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
-    monkeypatch.setattr(scene_study, "QUICK_WIDTHS", (8, 200))
-    monkeypatch.setattr(scene_study, "QUICK_FRACTIONS", (0.5, 1.0))
+    monkeypatch.setattr(scene_stages, "QUICK_WIDTHS", (8, 200))
+    monkeypatch.setattr(scene_stages, "QUICK_FRACTIONS", (0.5, 1.0))
     monkeypatch.setattr(scene_study, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
@@ -247,13 +247,13 @@ def test_every_scene_has_kinds_and_the_pixel_scene_measures_its_own_pair():
 
 
 def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_path):
-    rows = scene_study.plan_rows(["spring", "real"], quick=True)
-    grid = [row for row in rows if row["cell"] != scene_study.DEFAULT_CELL]
+    rows = scene_stages.plan_rows(["spring", "real"], quick=True)
+    grid = [row for row in rows if row["cell"] != scene_stages.DEFAULT_CELL]
     # the grid scenes only (spring), at one narrow cell: the grid stage runs, on little
     assert [(row["task"], row["cell"]) for row in grid] == [("spring", (16, 0.25))]
-    jobs = reproduce.plan(rows, [0], tmp_path, scene_study.QUICK_STEPS)
-    assert {job.config.total_steps for job in jobs} == {scene_study.QUICK_STEPS} and scene_study.QUICK_STEPS == 60
-    cuts = scene_study.quick_cuts(["spring", "pixels"], seeds=3)
+    jobs = study.plan(rows, [0], tmp_path, scene_stages.QUICK_STEPS)
+    assert {job.config.total_steps for job in jobs} == {scene_stages.QUICK_STEPS} and scene_stages.QUICK_STEPS == 60
+    cuts = scene_stages.quick_cuts(["spring", "pixels"], seeds=3)
     assert cuts[0] == "60 training steps a model of the tasks' own 2000 (spring), 10000 (pixels)"
     assert "pixels: trials 20 of 200" in cuts and "energy MSE: 5 trials of each protocol's 15" in cuts
     assert "1 seed of 3, so no more seeds at the cell a card picks" in cuts
@@ -262,9 +262,9 @@ def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_pat
     assert "energy drift: 3 periods of 1000 (spring), at most 0.5 s a setting of 15" in cuts
     # the speed study runs for the quick kinds only; every kind is still measured
     runs = {f"spring@200x1/{kind}/seed0": tmp_path for kind in scene_common.task_kinds("spring")}
-    units = scene_study.measure_units(["spring"], runs, [0], [], scene_study.QUICK_SPEED_KINDS)
+    units = scene_stages.measure_units(["spring"], runs, [0], [], scene_stages.QUICK_SPEED_KINDS)
     assert {key[2]: unit[4] for key, unit in units.items()} == {kind: 0 if kind == "hnn" else None
                                                                  for kind in scene_common.task_kinds("spring")}
     # a quick scene's energy protocols run 5 trials of their 15
-    assert scene_common.Scene("real", quick=True).trials == reproduce.QUICK_TRIALS == 5
+    assert scene_common.Scene("real", quick=True).trials == study.QUICK_TRIALS == 5
     assert scene_common.Scene("real", quick=False).trials is None

@@ -7,9 +7,9 @@ import torch
 
 import hnn
 from hnn_analysis import readme
-from hnn_analysis.chains import peers
-from hnn_analysis.scenes import scene_metrics, scene_report, scene_common
-from hnn_analysis.integrator_study import speed_accuracy
+from hnn_analysis.chains import peer_plan, peers
+from hnn_analysis.scenes import scene_metrics, scene_tables, scene_common
+from hnn_analysis.integrator_study import speed_measure
 
 
 class _Euler(hnn.integrators.fixed_step.Stepper):
@@ -63,7 +63,7 @@ def test_both_studies_try_every_registered_solver_that_applies(toys):
                                                                                        energy)}
             expected = set(hnn.SOLVERS) - ({"leapfrog"} if not separable else set()) - (set() if energy else reads_h)
             assert methods == expected, (separable, energy)
-        labels = {label for label, _ in speed_accuracy._settings("model", True, (0.1, 0.05), separable)}
+        labels = {label for label, _ in speed_measure._settings("model", True, (0.1, 0.05), separable)}
         assert "toy-euler" in labels and ("leapfrog" in labels) == separable
 
 
@@ -78,20 +78,20 @@ def _untrained_run(task: str, kind: str, runs) -> None:
 
 def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path, monkeypatch):
     # a small grid, to keep the test quick: two start states, one tolerance, two steps
-    spring = speed_accuracy.study_settings("spring")
-    monkeypatch.setattr(speed_accuracy, "study_settings", lambda task: {**spring, "batch": 2, "dts": (0.1, 0.05)})
-    monkeypatch.setattr(speed_accuracy, "QUICK_RTOLS", (1e-6,))
+    spring = speed_measure.study_settings("spring")
+    monkeypatch.setattr(speed_measure, "study_settings", lambda task: {**spring, "batch": 2, "dts": (0.1, 0.05)})
+    monkeypatch.setattr(speed_measure, "QUICK_RTOLS", (1e-6,))
     for kind in ("hnn", "baseline", "scaled"):
         _untrained_run("spring", kind, tmp_path)
     notes = []
-    rows = speed_accuracy.measure_task("spring", tmp_path, quick=True, repeats=1, notes=notes)
+    rows = speed_measure.measure_task("spring", tmp_path, quick=True, repeats=1, notes=notes)
     measured = {(row["model"], row["method"]) for row in rows if row["status"] == "ok"}
     assert {("scaled", "toy-euler"), ("true", "toy-euler"), ("hnn", "toy-euler"), ("scaled", "midpoint")} <= measured
     assert not notes
 
 
 def test_the_scene_study_measures_a_registered_kind_with_a_registered_solver(toys, tmp_path):
-    assert "scaled" in scene_common.kinds() and scene_report.color("scaled") == "tab:olive"
+    assert "scaled" in scene_common.kinds() and scene_tables.color("scaled") == "tab:olive"
     _untrained_run("spring", "scaled", tmp_path)
     run = hnn.runs.find_run(hnn.tasks.task_config("spring", {"model": "scaled", "save_dir": str(tmp_path)}))
     scene = scene_common.Scene("spring", quick=True)
@@ -124,7 +124,7 @@ def test_a_new_kind_reaches_the_flags_a_run_load_run_and_the_peers_table(toys, t
     model, saved, metrics = hnn.load_run(run)
     assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0
     # the peers table: the chain's observed [q, qdot] are read by the toy (as the HNN reads them)
-    assert "scaled" in peers.kinds()
+    assert "scaled" in peer_plan.kinds()
     tiny = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
             "test_starts": 2, "lnn_starts": 0, "lnn_fields": {}, "kinds": ("hnn", "scaled")}
     results = peers.main(["--out", str(tmp_path / "peers")], settings=tiny)

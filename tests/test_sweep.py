@@ -20,16 +20,16 @@ import torch
 
 import hnn
 from hnn_analysis import readme
-from hnn import sweep
-from hnn_analysis.paper import reproduce
+from hnn import backends, sweep
+from hnn_analysis.paper import reproduce, study
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
-                               reason=f"Ray is not installed: {sweep.RAY_INSTALL}")
+                               reason=f"Ray is not installed: {backends.RAY_INSTALL}")
 LOSSES = ("train_loss", "train_loss_se", "test_loss", "test_loss_se")
 
 
 def _job(task: str, kind: str, runs_dir: Path, steps: int, **fields) -> sweep.Job:
-    """A job as reproduce.plan makes it (the scene study too)."""
+    """A job as study.plan makes it (the scene study too)."""
     config = hnn.tasks.task_config(task, {"model": kind, "save_dir": str(runs_dir), "total_steps": steps, **fields})
     return sweep.Job(f"{task}/{kind}/seed0", task, config)
 
@@ -84,8 +84,8 @@ def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):
         raise AssertionError("a sweep job parsed argv")
 
     monkeypatch.setattr(hnn.cli, "make_parser", refuse)
-    rows = reproduce.table_rows(["spring"], quick=True)
-    jobs = reproduce.plan(rows, [0], tmp_path / "runs", 3)
+    rows = study.table_rows(["spring"], quick=True)
+    jobs = study.plan(rows, [0], tmp_path / "runs", 3)
     runs, todo = sweep.reuse(jobs)
     assert runs == {} and len(todo) == 2
     trained, _ = sweep.train_jobs(todo, 1, tmp_path / "logs")
@@ -179,7 +179,7 @@ class _Pipe:
 def test_every_run_says_runs_done_of_runs_to_do_and_the_time_so_far_as_it_ends(tmp_path, monkeypatch):
     pipe = _Pipe()
     monkeypatch.setattr(sys, "stdout", pipe)
-    monkeypatch.setattr(sweep, "HEARTBEAT", -1.0)        # no terminal: a line on every step of a lone run
+    monkeypatch.setattr(backends, "HEARTBEAT", -1.0)        # no terminal: a line on every step of a lone run
     jobs = [_job("spring", "hnn", tmp_path, 3), _job("pend", "hnn", tmp_path, 3)]
     runs, _ = sweep.train_jobs(jobs, 1, tmp_path / "logs", group="off")
     done = [line.strip() for line in pipe.text.splitlines() if " trained " in line]
@@ -208,7 +208,7 @@ def test_train_jobs_checks_its_arguments(tmp_path):
         sweep.train_jobs([], 0, tmp_path)
 
 
-def test_only_the_sweep_imports_ray():
+def test_only_the_sweeps_backends_import_ray():
     root = hnn.tasks.repo_root()
     sources = [p for folder in ["hnn", "analysis", *[d.name for d in root.glob("experiment-*")]]
                for p in (root / folder).rglob("*.py")]
@@ -216,7 +216,7 @@ def test_only_the_sweep_imports_ray():
                        if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
     # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
     # each inside a function that names the extra when it is missing; nothing else may.
-    assert importing == ["analysis/benchmarks/ray_overhead.py", "hnn/sweep.py"]
+    assert importing == ["analysis/benchmarks/ray_overhead.py", "analysis/benchmarks/ray_runs.py", "hnn/backends.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():
@@ -385,14 +385,14 @@ def test_grouped_sweeps_save_the_runs_of_lone_ones(backend, n_jobs, tmp_path):
 
 
 def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times():
-    from hnn_analysis.benchmarks import ray_overhead
-    assert ray_overhead.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
+    from hnn_analysis.benchmarks import ray_runs
+    assert ray_runs.order(3) == ["local", "ray", "ray", "local", "local", "ray"]
     a = {"meta": {"commit": "x"}, "seconds": {"total": 1.0},
          "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5, "ok": True, "train_seconds": 3.0}}}}
     b = {"meta": {"commit": "y"}, "seconds": {"total": 9.0},
          "tasks": {"spring": {"hnn": {"energy": [1.0, float("nan")], "loss": 0.5 * (1 + 1e-12), "ok": True}},
                    "pend": {"hnn": {"loss": 2.0}}}}
-    got = ray_overhead.compare(a, b)
+    got = ray_runs.compare(a, b)
     # times, provenance and booleans are not results; NaN on both sides counts as equal
     assert (got["numbers"], got["equal"], got["only_one_side"]) == (3, 2, 1)
     assert got["worst_relative_difference"] == pytest.approx(1e-12, rel=1e-3)

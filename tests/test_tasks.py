@@ -1,5 +1,5 @@
 """A task is one folder: the package finds it, reads its task.py, and reproduce.py runs it; the
-package and the analysis name no task and import each other without cycles."""
+package and the analysis name no task (tests/test_layers.py holds their imports free of circles)."""
 import ast
 import json
 import textwrap
@@ -156,77 +156,3 @@ def test_the_package_names_no_task():
     for name, path in modules.items():
         named = [s for s in _code_strings(path) if s in names or s.removeprefix("experiment-") in names]
         assert not named, f"{name} names the tasks {named}: a task describes itself in its task.py"
-
-
-def _import_time_nodes(tree: ast.AST):
-    """The nodes that run when the module is imported: all but the bodies of functions."""
-    for node in ast.iter_child_nodes(tree):
-        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
-            yield node
-            yield from _import_time_nodes(node)
-
-
-def _imports(name: str, path: Path, modules: dict) -> set[str]:
-    """The modules of ``modules`` that module ``name`` (at ``path``) imports when it is imported: relative
-    (``from . import x``, ``from ..x import y``) and absolute, at module level or in a class or an ``if``."""
-    here = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-    found = set()
-    for node in _import_time_nodes(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom):
-            base = here.rsplit(".", node.level - 1)[0] if node.level > 1 else here if node.level else ""
-            base = ".".join(filter(None, (base, node.module)))
-            for alias in node.names:
-                found.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base)
-        elif isinstance(node, ast.Import):
-            found |= {alias.name for alias in node.names}
-    return found & set(modules)
-
-
-def _assert_acyclic(graph: dict[str, set[str]]) -> None:
-    done, stack = set(), []
-
-    def visit(name):
-        if name in stack:
-            cycle = stack[stack.index(name):] + [name]
-            raise AssertionError(f"import cycle: {' -> '.join(cycle)}")
-        if name in done:
-            return
-        stack.append(name)
-        for other in sorted(graph[name]):
-            visit(other)
-        stack.pop()
-        done.add(name)
-
-    for name in sorted(graph):
-        visit(name)
-
-
-ROOTS = {"hnn": "hnn", "analysis": "hnn_analysis"}
-
-
-@pytest.mark.parametrize("folders", [["hnn"], ["analysis"], ["hnn", "analysis"]], ids="+".join)
-def test_no_import_cycles(folders):
-    modules = {name: path for folder in folders for name, path in _modules(folder, ROOTS[folder]).items()}
-    # every module, subpackages too
-    assert len(modules) == sum(len(list((REPO / folder).rglob("*.py"))) for folder in folders)
-    graph = {name: _imports(name, path, modules) - {name} for name, path in modules.items()}
-    assert any(graph.values())
-    _assert_acyclic(graph)
-
-
-def test_the_import_graph_sees_relative_imports_in_subpackages_and_finds_a_cycle(tmp_path, monkeypatch):
-    pkg = tmp_path / "toy" / "sub"
-    pkg.mkdir(parents=True)
-    (tmp_path / "toy" / "__init__.py").write_text("")
-    (pkg / "__init__.py").write_text("from .a import A\n")
-    (pkg / "a.py").write_text("from ..b import B\nA = 1\n")
-    (tmp_path / "toy" / "b.py").write_text("if True:\n    from toy.sub import a\nB = 2\n")
-    monkeypatch.setitem(globals(), "REPO", tmp_path)
-    monkeypatch.setitem(ROOTS, "toy", "toy")
-    modules = _modules("toy", "toy")
-    assert set(modules) == {"toy", "toy.sub", "toy.sub.a", "toy.b"}
-    assert _imports("toy.sub", modules["toy.sub"], modules) == {"toy.sub.a"}
-    assert _imports("toy.sub.a", modules["toy.sub.a"], modules) == {"toy.b"}
-    assert _imports("toy.b", modules["toy.b"], modules) == {"toy.sub.a"}
-    with pytest.raises(AssertionError, match="import cycle: toy.b -> toy.sub.a -> toy.b"):
-        test_no_import_cycles(["toy"])

@@ -1,7 +1,7 @@
 """``python analysis/chains/measure_runs.py RUN ...``: CHNN's rollout error of saved chain runs beside the published numbers.
 
 For runs trained outside ``analysis/peers.py`` (other step budgets): each run folder's model is
-rolled out on CHNN's test starts of its chain (``peers.measure_chnn``) and its mean (median)
+rolled out on CHNN's test starts of its chain (``peer_measure.measure_chnn``) and its mean (median)
 geometric-mean relative error printed beside the published CHNN and CLNN; writes ``measured.json``
 under ``--out``.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis.chains.peers import measure_chnn
+from hnn_analysis.chains.peer_measure import measure_chnn
 
 
 def main(argv=None) -> dict:

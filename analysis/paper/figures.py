@@ -24,12 +24,11 @@ import torch  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn.io import atomic_write  # noqa: E402
+from hnn_analysis.plotting import save_figure  # noqa: E402
 
 # the truth in black, each model kind in the colour it registered (hnn.kinds.ModelKind.color)
 COLORS = {"truth": "black", **{kind: spec.color for kind, spec in hnn.MODEL_KINDS.items()}}
 NAMES = {"truth": "Ground truth", "baseline": "Baseline NN", "hnn": "Hamiltonian NN"}
-DPI = 150
 
 
 def phase_settings(task: str, figure: str) -> dict:
@@ -77,27 +76,6 @@ def _time_path(ax, traj: np.ndarray, t: np.ndarray, cmap="viridis"):
     lines.set_array((t[:-1] + t[1:]) / 2)
     ax.add_collection(lines)
     return lines
-
-
-# prefixed to every figure's title while set (reproduce.py --quick sets "QUICK ..."), so a smoke
-# run's pictures are never mistaken for the paper's settings
-STAMP = {"text": ""}
-
-
-def set_stamp(text: str) -> None:
-    """Prefix ``text`` to the title of every figure saved from now on ('' to stop)."""
-    STAMP["text"] = text
-
-
-def save_figure(fig, path) -> Path:
-    """Write ``fig`` as a PNG at ``path`` atomically (its title stamped while ``set_stamp`` is on), then close it."""
-    path = Path(path)
-    if STAMP["text"]:
-        old = fig._suptitle.get_text() if fig._suptitle is not None else ""
-        fig.suptitle(f"{STAMP['text']}\n{old}" if old else STAMP["text"])
-    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI, bbox_inches="tight"))
-    plt.close(fig)
-    return path
 
 
 def field_figure(task: str, system, models: dict, dataset: dict, path, settings: dict | None = None) -> Path:

@@ -19,7 +19,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn_analysis.paper.figures import COLORS, NAMES, save_figure
+from hnn_analysis.paper.figures import COLORS, NAMES
+from hnn_analysis.plotting import save_figure  # noqa: E402
 
 # flow for t_flow, climb the gradient of the learned H for t_bump, flow again for t_flow
 BUMP = {"t_flow": 6.0, "t_bump": 0.1, "points": 300}

@@ -19,7 +19,8 @@ import imageio.v2 as imageio  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hnn_analysis.paper.figures import COLORS, NAMES, STAMP, save_figure
+from hnn_analysis.paper.figures import COLORS, NAMES
+from hnn_analysis.plotting import STAMP, save_figure  # noqa: E402
 from hnn.io import atomic_write  # noqa: E402
 
 BODY_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")

@@ -25,7 +25,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import hnn  # noqa: E402
-from hnn_analysis.paper.figures import COLORS, NAMES, save_figure
+from hnn_analysis.paper.figures import COLORS, NAMES
+from hnn_analysis.plotting import save_figure  # noqa: E402
 
 SIDE = 28
 

@@ -15,7 +15,7 @@ import torch
 
 import hnn
 from hnn import sweep
-from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_metrics as sm
 from hnn_analysis.integrator_study import settings
 
@@ -47,7 +47,7 @@ def kinds() -> tuple[str, ...]:
 
 def task_kinds(task: str) -> list[str]:
     """The model kinds of ``task``: the kinds its ``--model`` takes that can fit its states."""
-    return [kind for kind in reproduce.row_models(task, kinds()) if _fits(task, kind)]
+    return [kind for kind in study.row_models(task, kinds()) if _fits(task, kind)]
 
 
 @functools.cache
@@ -70,7 +70,7 @@ def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
     for rows, seeds, steps, models in batches:
         models = kinds() if models is None else models
         # plan() always takes the paper's pair: keep only the kinds asked for
-        jobs += [job for job in reproduce.plan(rows, seeds, out / "runs", steps, models)
+        jobs += [job for job in study.plan(rows, seeds, out / "runs", steps, models)
                  if job.config.model in models and fits(job.task, job.config.model)]
     runs, jobs = sweep.reuse(jobs)
     print(f"scene study: {len(runs)} runs reused, {len(jobs)} to train", flush=True)
@@ -81,7 +81,7 @@ def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
 
 
 def saved_numbers(row: dict, model, directory: Path) -> dict:
-    """What a measured model's entry takes from its saved run: ``row`` is its ``reproduce.load_runs`` row."""
+    """What a measured model's entry takes from its saved run: ``row`` is its ``study.load_runs`` row."""
     return {"test_loss": row["test_loss"], "train_loss": row["train_loss"], "train_seconds": row["train_seconds"],
             "params": sum(p.numel() for p in model.parameters()), "run": Path(directory).name}
 
@@ -112,8 +112,8 @@ class Scene:
 
     @property
     def trials(self) -> int | None:
-        """The trials of each energy protocol: ``reproduce.QUICK_TRIALS`` in a quick study, else the protocol's."""
-        return reproduce.QUICK_TRIALS if self.quick else None
+        """The trials of each energy protocol: ``study.QUICK_TRIALS`` in a quick study, else the protocol's."""
+        return study.QUICK_TRIALS if self.quick else None
 
     def state(self) -> dict | None:
         """What another process needs to rebuild this scene without integrating its truth again."""
@@ -124,7 +124,7 @@ class Scene:
     def measure(self, kind: str, directory: Path, protocols: bool = True) -> dict:
         """Losses, energy MSE (every protocol, if ``protocols``), rollout error and valid time of one
         run of model kind ``kind``."""
-        trained, row = reproduce.load_runs(self.task, {kind: directory})
+        trained, row = study.load_runs(self.task, {kind: directory})
         model = trained.models[kind]
         out = saved_numbers(row[kind], model, directory)
         tic = time.perf_counter()

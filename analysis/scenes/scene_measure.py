@@ -12,72 +12,24 @@ evaluates them in one ``hnn.evaluate_energy`` call per protocol (the truth is in
 model rolled out as alone, so the numbers equal one model's call). The rollout error stays one
 rollout per model, because its wall time is the model's rollout cost in the Pareto plot.
 
-``training_cost``: what one run's training costs under control, the steps per second of that
-model alone on one thread over a short burst (in the study's own process, beside at most its
-other worker), times the run's steps; the recorded wall time of a run says more about what else
-the machine did while it trained.
+A model's training seconds are its ``hnn_analysis.training_cost`` (measured in the study's own process,
+beside at most its other worker); the recorded wall time of a run says more about what else the
+machine did while it trained.
 """
 from __future__ import annotations
-
-import copy
 
 import concurrent.futures
 import multiprocessing
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 import hnn
 from hnn import sweep
-from hnn.runs import training_subset
-from hnn_analysis.paper import registry, reproduce
+from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_common, scene_metrics as sm
-
-BURST_SECONDS = 0.15     # the timed bursts of a training-cost measurement last about this long
-BURSTS = 3               # ... in this many bursts (the fastest counts)
-BURST_STEPS = (5, 400)   # ... of at least / at most this many steps each
-_DATASETS: dict = {}     # this process's datasets of training-cost measurements, by dataset key
-
-
-def training_cost(task: str, args: dict) -> dict:
-    """``{"steps_per_s", "steps", "seconds"}``: one thread's training steps per second of the run
-    with saved ``args`` (a fresh model of its config on its data, after a few warm-up steps; the
-    fastest of ``BURSTS`` bursts), and ``seconds`` = its ``total_steps + 1`` steps at that rate."""
-    config = hnn.tasks.task_config(task, args)
-    objective = config.make_objective()
-    data_key = config.dataset_key()
-    if data_key not in _DATASETS:
-        _DATASETS[data_key] = config.dataset()
-    dataset = objective.prepare(_DATASETS[data_key])
-    saved = {**config.to_dict(), "kind": config.kind}
-    torch.manual_seed(config.seed)
-    model = hnn.kinds.model_from_args(saved, config.device)
-    x, y = (dataset[key] for key in objective.arrays[:2])
-    x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = dict(learn_rate=config.learn_rate, weight_decay=config.weight_decay, batch_size=config.batch_size,
-                   seed=config.seed, print_every=10 ** 9, progress=False,
-                   **objective.train_options(model, hnn.specs.run_specs(saved).objective, dataset))
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    start = copy.deepcopy(model.state_dict())
-
-    def burst(steps: int) -> float:
-        # every burst from the same start: a fresh Adam's first steps are full-size, and bursts chained
-        # from one model drove a chain model's weights to divergence
-        model.load_state_dict(start)
-        return hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"]
-
-    try:
-        per_step = burst(3) / 3                                           # one-time setup, a first rate
-        steps = int(np.clip(BURST_SECONDS / BURSTS / max(per_step, 1e-6), *BURST_STEPS))
-        # the fastest of a few bursts: what the model's steps cost when nothing else interferes
-        rate = max(steps / burst(steps) for _ in range(BURSTS))
-    finally:
-        torch.set_num_threads(threads)
-    return {"steps_per_s": rate, "steps": config.total_steps + 1, "seconds": (config.total_steps + 1) / rate}
-
+from hnn_analysis.training_cost import training_cost
 
 def cost_seconds(measured: dict) -> float | None:
     """A measured model's training seconds: its ``training_cost`` where the study measured one,
@@ -96,7 +48,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
         return {key: scene.measure(kind, directory, protocols) | {"train_cost": _cost(scene.task, directory)}
                 for key, (kind, directory) in runs.items()}
     tic = time.perf_counter()
-    trained, rows = reproduce.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
+    trained, rows = study.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
     energy = registry.evaluate(trained, scene.trials) if protocols else {}
     shared = (time.perf_counter() - tic) / len(runs)
     out = {}

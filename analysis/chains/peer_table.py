@@ -1,0 +1,122 @@
+"""The peers' table as markdown (docs/peers.md's generated section): every protocol row's kinds beside
+the published numbers, and the card of which kind to use on a chain.
+"""
+from __future__ import annotations
+
+import hnn
+from hnn_analysis.provenance import machine
+
+def _cell(entry: dict | None) -> str:
+    if entry is None:
+        return "not trained"
+    if "blew_up" in entry:
+        return f"blew up: {entry['blew_up']}"
+    if "diverged" in entry:
+        return f"failed in training: {entry['diverged']}"
+    if len(entry.get("seeds", ())) > 1:         # the mean over seeds, their range and how many
+        failed = f"; {len(entry['failed'])} more failed" if entry.get("failed") else ""
+        return f"{entry['mean']:.2e} ({entry['low']:.1e}..{entry['high']:.1e}, {len(entry['seeds'])} seeds{failed})"
+    return f"{entry['mean']:.2e} ({entry['median']:.2e})"
+
+
+def _seeds_sentence(seeds) -> str:
+    if len(seeds) == 1:
+        return f"One seed ({seeds[0]}) a kind: each cell is that run's mean (median) over the test starts."
+    return (f"{len(seeds)} seeds ({seeds[0]}..{seeds[-1]}) a kind: each cell is the mean over the seeds of each "
+            "seed's mean over the test starts, with the seeds' range.")
+
+
+def markdown(results: dict) -> str:
+    """The generated section of docs/peers.md: the peers' numbers beside ours, same metric."""
+    published = hnn.load_task("chain", "protocols").CHNN_PUBLISHED
+    meta = results["meta"]
+    names = meta["kinds"]
+    lines = []
+    if meta["quick"]:
+        lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
+                  "pipeline and say nothing about the kinds; the full table comes from `python analysis/peers.py "
+                  "--jobs 2 --update-docs`." + (" Cut: " + "; ".join(meta["quick_cuts"]) + "."
+                                                if meta.get("quick_cuts") else ""), ""]
+    walls = [s["wall"] for row in results["rows"].values() for s in row["seconds"].values() if s.get("wall")]
+    reused = meta.get("reused", 0)
+    if not meta["seconds"]["training"]:
+        trained = f"every run reused (their recorded training wall times sum to {sum(walls):.0f} s)"
+    elif reused:        # a rerun after an interruption: say what this sitting trained, and what the table holds
+        trained = (f"training {meta['seconds']['training']:.0f} s for {meta['trained']} runs, {reused} reused from an "
+                   f"earlier sitting (every run's recorded training wall time: {sum(walls):.0f} s in all)")
+    else:
+        trained = f"training {meta['seconds']['training']:.0f} s"
+    lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}); "
+              f"{trained}, measuring {meta['seconds']['measuring']:.0f} s. Training seconds in the tables: each "
+              "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "
+              "quiet core; its recorded wall time is in peers.json). "
+              f"Each CHNN-protocol kind trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
+              "epochs of 800 snippets (theirs: 2000), by "
+              f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
+              "cosine). " + _seeds_sentence(meta.get("seeds", [0])) +
+              " Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
+              "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
+              "mean (median) over the test starts", "",
+              "| N | published HNN (mechanical) | published CHNN | published CLNN | published NeuralODE | published floor | "
+              + " | ".join(f"ours: {kind}" for kind in names) + " | our floor | our training s (one thread) |",
+              "| --- " * (7 + len(names)) + "| --- |"]
+    for name, row in results["rows"].items():
+        if not name.startswith("chain"):
+            continue
+        n = int(name[len("chain"):])
+        peer = published.get(n, {})
+        seconds = ", ".join(f"{kind} {s['seconds']:.0f}" for kind, s in row["seconds"].items())
+        lines.append(f"| {n} | " + " | ".join(
+            f"{peer[k][0]:.2e} ({peer[k][1]:.2e})" if k in peer else "" for k in ("HNN", "CHNN", "CLNN", "NeuralODE", "floor"))
+            + " | " + " | ".join(_cell(row.get(kind)) for kind in names)
+            + f" | {_cell(row['floor'])} | {seconds} |")
+    lines += card(results)
+    lnn = results["rows"].get("lnn")
+    if lnn is not None:
+        lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
+        horizon = meta.get("lnn_horizon") or hnn.load_task("chain", "protocols").LNN["t_end"]
+        lines += ["", f"### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = {horizon:g} s, "
+                  "mean (median) over the starts (ours: dopri5 at rtol 1e-8)", "",
+                  "| kind | energy error | training steps | training s (one thread) |", "| --- | --- | ---: | ---: |"]
+        lines += [f"| published {k} | {v:.2g} | | |" for k, v in lnn_published.items()]
+        lines += [f"| ours: {kind} | {_cell(lnn.get(kind))} | "
+                  + (f"{lnn['seconds'][kind]['steps'] - 1} | {lnn['seconds'][kind]['seconds']:.0f} |"
+                     if kind in lnn["seconds"] else " | |") for kind in names]
+    return "\n".join(lines) + "\n"
+
+
+def inseparable(row: dict, best: str, kinds) -> list[str]:
+    """The kinds of ``kinds`` whose seeds' range of mean errors overlaps ``best``'s (``over_seeds``): the
+    seeds cannot tell them from the best. Empty with one seed, where nothing is separated by seeds."""
+    if len(row[best].get("seeds", ())) < 2:
+        return []
+    return [kind for kind in kinds if kind != best and len(row[kind].get("seeds", ())) > 1
+            and row[kind]["low"] <= row[best]["high"]]
+
+
+def card(results: dict) -> list[str]:
+    """The chain card's lines: at each N the best kind on the mean (over seeds where there are several), the
+    kind that is enough, the one of least training seconds (one thread) whose mean is within 2x of the best,
+    and the kinds the seeds cannot separate from the best (their ranges overlap)."""
+    lines = ["", "### Which kind a chain requires (the card)", "",
+             "The best of our kinds on the mean error at each N (the mean over seeds), and the one that is enough: "
+             "of the kinds within 2x of the best, the one that trains in the fewest seconds (one thread). With "
+             "several seeds, the last column names the kinds whose seeds' range of errors overlaps the best's: "
+             "the seeds cannot say which of them is better (with one seed it says nothing).", "",
+             "| N | best | enough (within 2x, fewest training s) | all within 2x | seeds cannot separate from the best |",
+             "| --- | --- | --- | --- | --- |"]
+    for name, row in results["rows"].items():
+        if not name.startswith("chain"):
+            continue
+        means = {kind: row[kind]["mean"] for kind in results["meta"]["kinds"] if "mean" in row.get(kind, {})}
+        if not means:
+            continue
+        best = min(means, key=means.get)
+        near = [kind for kind in means if means[kind] <= 2 * means[best]]
+        seconds = {kind: row["seconds"].get(kind, {}).get("seconds", float("inf")) for kind in near}
+        enough = min(near, key=seconds.get)
+        tied = inseparable(row, best, means) if len(row[best].get("seeds", ())) > 1 else None
+        lines.append(f"| {name[len('chain'):]} | {best} {means[best]:.2e} | {enough} {means[enough]:.2e}, "
+                     f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} | "
+                     f"{'one seed: not tested' if tied is None else ', '.join(tied) or 'none'} |")
+    return lines

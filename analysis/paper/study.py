@@ -1,0 +1,175 @@
+"""The paper's study as a library: the rows of its tables as runs, each row's kinds and the sweep's
+jobs, the trained runs loaded and evaluated (energy MSE under every protocol, the figures), and what
+``--quick`` cuts. ``analysis/reproduce.py`` is its command; the scene study and the measured study
+train and read their runs through it too.
+
+    rows = study.table_rows(tasks, quick=False, seeds=[0])
+    found, jobs = sweep.reuse(study.plan(rows, [0], out / "runs", steps=None))
+    ...
+    study.evaluate_rows(rows, [0], runs, results, out / "figures")
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import hnn
+from hnn import sweep
+from hnn_analysis.paper import registry
+from hnn_analysis.paper.tables import MODELS
+
+QUICK_STEPS = 100        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
+QUICK_TRIALS = 5         # --quick: trials of each energy protocol (theirs: 15; a multiple of its 5 splits)
+
+
+def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
+    """``(the trained models with the first run's saved args, {label: its row of losses})`` of
+    ``runs`` (``{label: run folder}``), each read by the task's ``TaskSpec.load`` or ``hnn.load_run``."""
+    load = hnn.task_spec(task).load or hnn.load_run
+    models, row, first_args = {}, {}, None
+    for label, directory in runs.items():
+        models[label], args, metrics = load(directory)
+        first_args = first_args or args
+        row[label] = {"train_loss": [metrics["train_loss"], metrics["train_loss_se"]],
+                      "test_loss": [metrics["test_loss"], metrics["test_loss_se"]],
+                      "train_seconds": metrics.get("train_seconds"), "data_seconds": metrics.get("data_seconds"),
+                      "total_steps": args["total_steps"]}
+    return registry.Trained(task, hnn.load_task(task), models, first_args), row
+
+
+def evaluate_task(task: str, runs: dict, fig_dir: Path | None, num_trials: int | None = None) -> dict:
+    """Losses from the saved metrics, energy MSE under every protocol, and the figures (as the
+    task's ``task.py`` says, through ``hnn_analysis.paper.registry``). ``runs`` is ``{label: run
+    folder}``; the row's ``"seconds"`` holds the time of the evaluation and of the figures.
+    ``num_trials``: the trials of each energy protocol, when not its own (``--quick``: ``QUICK_TRIALS``).
+    """
+    tic = time.perf_counter()
+    trained, row = load_runs(task, runs)
+    energy = registry.evaluate(trained, num_trials)
+    # the figures show the paper's pair; the extra kinds are numbers in their own table
+    pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
+                            trained.args)
+    for name, result in energy.items():
+        for kind in trained.models:
+            row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
+        row.setdefault("protocols", {})[name] = result.get("description", name)
+    t_eval = time.perf_counter() - tic
+    if fig_dir is not None:
+        numbers = registry.draw_figures(pair, energy, fig_dir)
+        if numbers:
+            row["figure_numbers"] = numbers
+    row["seconds"] = {"evaluate": t_eval, "figures": time.perf_counter() - tic - t_eval if fig_dir else 0.0}
+    return row
+
+
+def table_rows(tasks: list[str], quick: bool, seeds: list[int] | None = None) -> list[dict]:
+    """The rows of the tables: each task in the paper's setting, then its variants (``TaskSpec.variants``).
+
+    A row is ``{"row": name, "task": task, "fields": its runs' config fields, "note": why or None,
+    "seeds": its seeds}``: ``seeds``, extended to the task's ``TaskSpec.min_seeds`` when there are two
+    or more (None: the caller's seeds).
+    """
+    rows = []
+    for task in tasks:
+        spec = hnn.task_spec(task)
+        fields = {**spec.settings, **(spec.quick if quick else {})}
+        own = seeds
+        if seeds is not None and 2 <= len(seeds) < spec.min_seeds:
+            own = list(range(seeds[0], seeds[0] + spec.min_seeds))
+        rows.append({"row": task, "task": task, "fields": fields, "note": None, "seeds": own})
+        for suffix, (changes, why) in spec.variants.items():
+            name = f"{task}-{suffix}"
+            rows.append({"row": name, "task": task, "fields": {**fields, **changes, "name": name}, "note": why,
+                         "seeds": own})
+    return rows
+
+
+def row_models(task: str, models=MODELS) -> list[str]:
+    """The kinds of ``models`` that ``task``'s ``--model`` takes (its config's), the paper's pair first."""
+    takes = hnn.cli.model_choices(hnn.load_task(task, "train").Config)
+    return [kind for kind in dict.fromkeys(MODELS + tuple(models)) if kind in takes]
+
+
+def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
+         models=MODELS) -> list[sweep.Job]:
+    """The run of every row and seed, for the paper's two models and the extra ``models`` kinds
+    the row's task has; ``steps`` overrides the tasks' ``total_steps``."""
+    jobs = []
+    for spec in rows:
+        for seed in spec.get("seeds") or seeds:
+            for kind in row_models(spec["task"], models):
+                fields = {**spec["fields"], "model": kind, "seed": seed, "save_dir": str(runs_dir)}
+                if steps is not None:
+                    fields["total_steps"] = steps
+                jobs.append(sweep.Job(f"{spec['row']}/{kind}/seed{seed}", spec["task"],
+                                      hnn.tasks.task_config(spec["task"], fields)))
+    return jobs
+
+
+def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
+    """One row's seconds: dataset, training per model (summed over seeds), evaluation, figures."""
+    stage = {"data": None, "train": {}, "evaluate": 0.0, "figures": 0.0}
+    for seed, by_kind in keys.items():
+        for kind, key in by_kind.items():
+            timing = run_seconds.get(key)
+            if timing:
+                stage["data"] = (stage["data"] or 0.0) + (timing["data"] or 0.0)
+                stage["train"][kind] = stage["train"].get(kind, 0.0) + (timing["train"] or 0.0)
+        for part in ("evaluate", "figures"):
+            stage[part] += per_seed[str(seed)]["seconds"][part]
+    return stage
+
+
+def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict, fig_dir: Path | None,
+                  models=MODELS, num_trials: int | None = None) -> None:
+    """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
+    each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
+    progress = sweep.Progress(len(rows))
+    print(f"  {progress.tag()} evaluating {len(rows)} rows" + (" and drawing their figures" if fig_dir else ""),
+          flush=True)
+    for spec in rows:
+        progress.advance()
+        name, task = spec["row"], spec["task"]
+        if task in results.get("skipped", {}):
+            continue
+        own = spec.get("seeds") or seeds
+        keys = {seed: {kind: f"{name}/{kind}/seed{seed}" for kind in row_models(task, models)} for seed in own}
+        failed = [runs[k] for by_kind in keys.values() for k in by_kind.values() if isinstance(runs[k], Exception)]
+        if failed:
+            results.setdefault("skipped", {})[task] = str(failed[0])
+            print(f"  {progress.tag()} {task:11s} SKIPPED (the reason is above)", flush=True)
+            continue
+        per_seed = {}
+        for seed in own:
+            figs = fig_dir if fig_dir is not None and seed == own[0] and spec["note"] is None else None
+            per_seed[str(seed)] = evaluate_task(task, {kind: runs[k] for kind, k in keys[seed].items()}, figs,
+                                                num_trials)
+        row = dict(per_seed[str(own[0])], task=task, note=spec["note"])
+        if len(per_seed) > 1:
+            row["per_seed"] = per_seed
+        stage = _stage_seconds(keys, per_seed, results["seconds"]["runs"])
+        row.pop("seconds", None)
+        results["tasks"][name] = row
+        results["seconds"]["tasks"][name] = stage
+        print(f"  {progress.tag()} {name:11s} evaluated ({stage['evaluate']:.1f} s)"
+              + (f", figures ({stage['figures']:.1f} s)" if fig_dir is not None and spec["note"] is None else ""),
+              flush=True)
+
+
+def quick_cuts(tasks: list[str], steps: int | None) -> list[str]:
+    """What ``--quick`` cuts from the tasks' own settings, one phrase each, as ``main`` prints them."""
+    cuts = []
+    if steps is not None:
+        own = {task: hnn.tasks.task_config(task, hnn.task_spec(task).settings).total_steps for task in tasks}
+        cuts.append(f"{steps} training steps a model of the tasks' own "
+                    + ", ".join(f"{n} ({task})" for task, n in own.items()))
+    for task in tasks:
+        spec = hnn.task_spec(task)
+        config = hnn.tasks.task_config(task, spec.settings)
+        cuts += [f"{task}: {key} {value} of {getattr(config, key)}" for key, value in spec.quick.items()]
+    # the tasks measured by hnn.evaluate_energy (a task with its own evaluate keeps its protocols)
+    own = [hnn.task_spec(task).protocols.values() for task in tasks if hnn.task_spec(task).evaluate is None]
+    trials = {protocol.num_trials for protocols in own for protocol in protocols if protocol.x0 != "test_segment"}
+    if trials:
+        cuts.append(f"energy MSE: {QUICK_TRIALS} trials of each protocol's {', '.join(map(str, sorted(trials)))}")
+    return cuts

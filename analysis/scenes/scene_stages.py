@@ -1,0 +1,253 @@
+"""The scene study's stages as a library: what it trains (each scene's kinds at the default cell, the
+grid of width x training fraction, the D-HNN split), what it measures (``measure_units``, shared out by
+``scene_measure``), the scene cards (``scene_card``), and ``run``, which does them in that order.
+``analysis/scene_study.py`` is its command; ``scene_report`` writes what ``run`` returns.
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import torch
+
+import hnn
+from hnn_analysis.paper import study
+from hnn_analysis.provenance import provenance
+from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
+from hnn_analysis.scenes.scene_common import CARD_FACTOR, Scene, scene_settings, task_kinds, train
+
+WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
+# --quick: a grid of one narrow cell beside the default one, fewer steps than reproduce.py --quick, and
+# the speed study of the paper's HNN alone (each cut is printed: quick_cuts)
+QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
+QUICK_STEPS = 60
+QUICK_SPEED_KINDS = ("hnn",)
+DEFAULT_CELL = (200, 1.0)
+
+
+DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
+               "name": "real-dhnn"}
+DHNN_MODELS = ("baseline", "hnn", "dissipative")
+
+
+# ----------------------------------------------------------------------------------------------
+# what to train
+
+
+def _cell_fields(width: int, fraction: float, task: str) -> dict:
+    if (width, fraction) == DEFAULT_CELL:
+        return {}       # the defaults: reproduce.py's own runs
+    return {"hidden_dim": width, "train_fraction": fraction, "name": f"{task}-w{width}-f{fraction:g}"}
+
+
+def _row(task: str, cell: tuple, quick: bool, extra=None, name: str | None = None) -> dict:
+    width, fraction = cell
+    spec = hnn.task_spec(task)
+    fields = {**spec.settings, **(spec.quick if quick else {}), **_cell_fields(width, fraction, task), **(extra or {})}
+    return {"row": name or f"{task}@{width}x{fraction:g}", "task": task, "fields": fields, "note": None, "cell": cell}
+
+
+def plan_rows(scenes, quick: bool) -> list[dict]:
+    """Every (task, cell) row of the study: the default cell of every scene, the grid of the grid scenes."""
+    widths, fractions = (QUICK_WIDTHS, QUICK_FRACTIONS) if quick else (WIDTHS, FRACTIONS)
+    rows = [_row(task, DEFAULT_CELL, quick) for task in scenes]
+    for task in scenes:
+        if scene_settings(task).get("grid"):
+            rows += [_row(task, (w, f), quick) for w in widths for f in fractions if (w, f) != DEFAULT_CELL]
+    return rows
+
+
+def quick_cuts(studied: list[str], seeds: int) -> list[str]:
+    """What ``--quick`` cuts from the full study of the scenes ``studied`` (``seeds``: the full
+    study's ``--seeds``), one phrase each, as ``main`` prints them."""
+    quick, full = scene_common.QUICK, scene_common.FULL
+    drift = [task for task in studied if scene_settings(task).get("drift")]
+    cuts = study.quick_cuts(studied, QUICK_STEPS)
+    cuts += [f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
+             f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
+             f"1 seed of {seeds}, so no more seeds at the cell a card picks",
+             f"rollout metrics: {quick['starts']} starts of {full['starts']}, over {quick['horizon']} training "
+             f"lengths of {full['horizon']}, {quick['points']} points per length of {full['points']}",
+             f"speed at accuracy: the {', '.join(QUICK_SPEED_KINDS)} kind only of every kind, the "
+             f"{sm.QUICK_DTS} coarsest of every other step size, tolerances "
+             f"{', '.join(f'{r:g}' for r in sm.QUICK_RTOLS)} of {', '.join(f'{r:g}' for r in sm.RTOLS)}, each "
+             f"setting timed {quick['timings']} time(s) of {full['timings']}"]
+    if drift:
+        cuts.append(f"energy drift: {quick['drift_periods']} periods of " + ", ".join(
+            f"{scene_settings(task)['periods']} ({task})" for task in drift)
+            + f", at most {quick['drift_budget']:g} s a setting of {full['drift_budget']:g}")
+    return cuts
+
+
+# ----------------------------------------------------------------------------------------------
+# scene cards
+
+
+def _key_metric(m: dict) -> tuple[float | None, float | None]:
+    """(energy MSE of the scene's main protocol, rollout error) of one measured model."""
+    energy = m.get("energy_mse_corrected") or m.get("energy_mse_paper")
+    return (energy[0] if energy else None), (m["rollout"]["error"] if "rollout" in m else None)
+
+
+def scene_card(cells: dict) -> dict | None:
+    """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) within
+    ``CARD_FACTOR`` of the scene's best energy MSE and best rollout error. ``cells`` is ``{(kind,
+    width, fraction): measured}``. Where no model is within ``CARD_FACTOR`` of both (the two bests
+    come from different models), the model nearest both: the smallest larger of its two ratios.
+    ``within`` is the pick's larger ratio to the bests (at most ``CARD_FACTOR`` unless it fell back)."""
+    scored = {k: _key_metric(m) for k, m in cells.items()}
+    best_e = min((e for e, _ in scored.values() if e is not None), default=None)
+    best_r = min((r for _, r in scored.values() if r is not None), default=None)
+
+    def within(key) -> float:
+        e, r = scored[key]
+        ratios = [(value / best if best > 0 else 1.0) if value is not None else math.inf
+                  for value, best in ((e, best_e), (r, best_r)) if best is not None]
+        return max(ratios, default=1.0)
+
+    if not scored:
+        return None
+    ok = [k for k in scored if within(k) <= CARD_FACTOR]
+    def size(key) -> tuple:
+        return cells[key]["params"], scene_measure.cost_seconds(cells[key]) or 0.0
+
+    pick = min(ok, key=size) if ok else min(scored, key=lambda k: (within(k), *size(k)))
+    if not math.isfinite(within(pick)):
+        return None
+    return {"kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
+            "params": cells[pick]["params"], "train_seconds": scene_measure.cost_seconds(cells[pick]),
+            "energy": scored[pick][0], "rollout": scored[pick][1], "within": within(pick)}
+
+
+def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -> tuple[dict, dict]:
+    """The whole study of the scenes ``studied`` as ``args`` (the command's flags) ask: train, measure,
+    pick the cards; ``(results, {run key: run folder or failure})``. ``argv`` is recorded as the
+    command (folders as ``DIR``), ``cuts`` as what ``--quick`` cut."""
+    steps = QUICK_STEPS if args.quick else None
+    seeds = [0] if args.quick else list(range(args.seeds))
+    start = time.perf_counter()
+    results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
+        "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "quick_cuts": cuts, "seeds": seeds,
+        "jobs": args.jobs, "backend": args.backend,
+        "starts": (scene_common.QUICK if args.quick else scene_common.FULL)["starts"],
+        "horizon": (scene_common.QUICK if args.quick else scene_common.FULL)["horizon"]},
+        "scenes": {}, "seconds": {}}
+
+    # 1. train: every scene's kinds at the default cell (all seeds), the grid (seed 0), the D-HNN split
+    rows = plan_rows(studied, args.quick)
+    default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
+    grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
+    dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
+    tic = time.perf_counter()
+    one_seed = {task for task in studied if scene_settings(task).get("one_seed")}
+    runs, _ = train([([r for r in default_rows if r["task"] not in one_seed], seeds, steps, None),
+                     ([r for r in default_rows if r["task"] in one_seed], seeds[:1], steps, None),
+                     (grid_rows, [0], steps, None),
+                     # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
+                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args)
+    results["seconds"]["training"] = time.perf_counter() - tic
+
+    # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
+    # states, which a second thread does not speed up; --jobs processes share the units
+    tic = time.perf_counter()
+    units = measure_units(studied, runs, seeds, grid_rows, QUICK_SPEED_KINDS if args.quick else None)
+    measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    cells_by_scene = {}
+    for task in studied:
+        entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "speed": {}}
+        cells = {}
+        for kind in task_kinds(task):
+            result = measured.get(("kind", task, kind))
+            if result is None:
+                continue
+            per_seed = result["per_seed"]
+            entry["kinds"][kind] = {"per_seed": per_seed, **_across(per_seed)}
+            cells[(kind, *DEFAULT_CELL)] = per_seed[min(per_seed)]
+            if "speed" in result:
+                entry["speed"][kind] = result["speed"]
+        for kind in task_kinds(task):
+            for key, m in measured.get(("cells", task, kind), {}).items():
+                entry["grid"][key] = m
+                width, fraction = key.split("@")[1].split("x")
+                cells[(kind, int(width), float(fraction))] = m
+        cells_by_scene[task] = cells
+        results["scenes"][task] = entry
+    if dhnn_rows:
+        results["dhnn"] = _dhnn(runs, dhnn_rows[0])
+    results["seconds"]["measure"] = time.perf_counter() - tic
+
+    # 3. the cards; more seeds at a chosen grid cell
+    tic = time.perf_counter()
+    for task, cells in cells_by_scene.items():
+        card = scene_card(cells)
+        results["scenes"][task]["card"] = card
+        if card and scene_settings(task).get("grid") and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
+            row = _row(task, (card["width"], card["fraction"]), args.quick)
+            more, _ = train([([row], seeds, steps, (card["kind"],))], out, args)
+            runs.update(more)
+            keys = {s: f"{row['row']}/{card['kind']}/seed{s}" for s in seeds}
+            found = {s: (card["kind"], more[k]) for s, k in keys.items() if isinstance(more.get(k), Path)}
+            scene = Scene(task, args.quick, states.get(task))
+            card["seeds"] = _across(scene_measure.measure_models(scene, found))
+    results["seconds"]["cards"] = time.perf_counter() - tic
+    torch.set_num_threads(threads)
+    results["seconds"]["total"] = time.perf_counter() - start
+
+    return results, runs
+
+
+def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], speed_kinds=None) -> dict:
+    """``{key: scene_measure unit}``: per scene, each kind at the default cell (its seeds, and the
+    speed study of the first seed where the scene has a truth to roll out, for the ``speed_kinds``
+    only when given), then each kind's grid."""
+    units = {}
+    for task in scenes:
+        for kind in task_kinds(task):
+            per_seed = {seed: str(run) for seed in seeds
+                        if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{kind}/seed{seed}"),
+                                      Path)}
+            if per_seed:
+                speed = (seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task)
+                         and (speed_kinds is None or kind in speed_kinds) else None)
+                units[("kind", task, kind)] = ("kind", task, kind, per_seed, speed)
+    for task in scenes:
+        for kind in task_kinds(task):
+            cells = {}
+            for row in (r for r in grid_rows if r["task"] == task):
+                run = runs.get(f"{row['row']}/{kind}/seed0")
+                if isinstance(run, Path):
+                    cells[f"{kind}@{row['cell'][0]}x{row['cell'][1]:g}"] = (kind, str(run))
+            if cells:
+                units[("cells", task, kind)] = ("cells", task, cells)
+    return units
+
+
+def _across(per_seed: dict) -> dict:
+    """Mean ± standard error across seeds of the main numbers of one kind."""
+    out = {}
+    for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
+        values = [m[key][0] for m in per_seed.values() if m.get(key)]
+        if values:
+            out[key + "_seeds"] = list(hnn.metrics.mean_and_se(values))
+    for key in ("error", "valid_time"):
+        values = [m["rollout"][key] for m in per_seed.values() if m.get("rollout", {}).get(key) is not None]
+        if values:
+            out[key + "_seeds"] = list(hnn.metrics.mean_and_se(values))
+    return out
+
+
+def _dhnn(runs: dict, row: dict) -> dict:
+    """The D-HNN protocol's numbers of our models trained on their split (seed 0)."""
+    models, dataset = {}, None
+    for kind in DHNN_MODELS:
+        run = runs.get(f"{row['row']}/{kind}/seed0")
+        if isinstance(run, Path):
+            models[kind], saved, metrics = hnn.load_run(run)
+            dataset = dataset or hnn.tasks.run_dataset("real", saved)
+    if not models:
+        return {}
+    return {"ours": sm.dhnn_protocol(hnn.load_task("real"), models, dataset), "paper": sm.DHNN_PAPER,
+            "config": DHNN_FIELDS}

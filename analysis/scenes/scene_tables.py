@@ -1,0 +1,212 @@
+"""The scene study's tables, built from its results dict (``scene_study.json``), never typed: every
+kind per scene, the speed at equal accuracy, the grids, the scene cards, the D-HNN comparison
+(``markdown``: ``scene_study.md`` and docs/scenes.md) and the README's model guide (``guide``).
+"""
+from __future__ import annotations
+
+import hnn
+from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
+
+
+def color(kind: str) -> str:
+    """A model kind's plot colour, as its registration declares it (``hnn.kinds.ModelKind.color``)."""
+    spec = hnn.MODEL_KINDS.get(kind)
+    return spec.color if spec else "k"
+
+
+def _g(x, digits: int = 3) -> str:
+    return "n/a" if x is None else f"{x:.{digits}g}"
+
+
+def _pm(pair) -> str:
+    if not pair:
+        return "n/a"
+    return f"{pair[0]:.3g}" + (f" ± {pair[1]:.2g}" if pair[1] else "")
+
+
+def _main_metric(m: dict, key: str):
+    return (m.get(key) or [None])[0]
+
+
+def kind_table(results: dict) -> list[str]:
+    seeds = results["meta"]["seeds"]
+    many = len(seeds) > 1
+    lines = [f"**Per scene and kind** (width 200, all the data; seed {seeds[0]}"
+             + (f", and mean ± standard error over seeds {seeds}" if many else "") + "). Rollout error: the "
+             "geometric mean over time of |x̂ − x| / (|x̂| + |x|) against the true system, averaged over "
+             f"{results['meta'].get('starts', 8)} starts, over {results['meta'].get('horizon', 10)}x the training trajectories' length (pixels: decoded frames against rendered "
+             "ones over the corrected protocol's 200 frames, 2x, no valid time: a decoded frame is never within 0.1; "
+             "real: the measured test segment, 18 s, from its first state; there is no truth beyond it). Valid time: median first time that error exceeds 0.1 (= horizon: never); the truth "
+             "column is when the true system itself, started 1e-4 away, leaves 0.1.", "",
+             "| scene | model | params | test loss | energy MSE (paper protocol) | energy MSE (corrected) | "
+             "rollout error | valid time / horizon | truth diverges after | train s |",
+             "| --- | --- | ---: | --- | --- | --- | --- | --- | --- | ---: |"]
+    for task, entry in results["scenes"].items():
+        div = entry.get("divergence")
+        for kind, measured in entry["kinds"].items():
+            m = measured["per_seed"][str(seeds[0])] if str(seeds[0]) in measured["per_seed"] else \
+                measured["per_seed"][seeds[0]]
+            ro = m.get("rollout")
+            cells = []
+            for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
+                s = measured.get(key + "_seeds")
+                cells.append(_g(_main_metric(m, key)) + (f" ({_pm(s)})" if many and s else ""))
+            err = measured.get("error_seeds")
+            cells.append("n/a" if not ro else _g(ro["error"]) + (f" ({_pm(err)})" if many and err else ""))
+            cells.append("n/a" if not ro or ro["valid_time"] is None else f"{ro['valid_time']:.3g} / {ro['horizon']:.3g}")
+            cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
+            lines.append(f"| {task} | {kind} | {m['params']} | " + " | ".join(cells)
+                         + f" | {_g(scene_measure.cost_seconds(m))} |")
+    return lines
+
+
+def speed_table(results: dict) -> list[str]:
+    starts = min(4, results["meta"].get("starts", 4))       # the speed study's starts: the first 4 of the scene's
+    lines = ["**Speed at equal accuracy** (seed 0, width 200): the fastest `hnn.rollout` setting whose max relative "
+             f"error over {starts} starts and the training trajectories' length stays within {sm.TARGET:g} of DOP853 "
+             "rtol 1e-12 on the same field (float64), its median wall time, the fastest symplectic one and the "
+             "fastest energy-preserving one (the discrete gradient, for a model that carries its H). "
+             "Drift: max |E(t) − E(0)| / |E(0)| of the learned H (HNN, separable) or the true H (baseline) over "
+             "the long run at that setting, on 2 starts; a run stops after "
+             f"{scene_common.QUICK['drift_budget'] if results['meta']['quick'] else scene_common.DRIFT_BUDGET:g} s "
+             "and says how far it got.", "",
+             "| scene | model | fastest setting | s | drift (long run) | fastest symplectic | s | drift (long run) "
+             "| fastest energy-preserving | s | drift (long run) |",
+             "| --- | --- | --- | ---: | --- | --- | ---: | --- | --- | ---: | --- |"]
+    for task, entry in results["scenes"].items():
+        for kind, sp in entry.get("speed", {}).items():
+            cells = []
+            for key in scene_common.PICKS:
+                pick = sp.get(key)
+                if pick is None:
+                    # a study saved before the energy-preserving pick existed has no such key
+                    cells += ["none reached it" if key in sp else "not measured", "", ""]
+                    continue
+                d = pick.get("drift")
+                drift = "" if d is None else (f"{d['drift']:.2g} over {d['periods_done']} {_unit(task)}"
+                                              + (" (blew up)" if d["blew_up"] else ""))
+                cells += [pick["setting"], f"{pick['seconds']:.3g}", drift]
+            lines.append(f"| {task} | {kind} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _unit(task: str) -> str:
+    return (hnn.task_spec(task).scene_study or {}).get("unit", "periods")
+
+
+def grid_tables(results: dict) -> list[str]:
+    lines = []
+    for task, entry in results["scenes"].items():
+        if not entry["grid"]:
+            continue
+        cells = dict(entry["grid"])
+        for kind, measured in entry["kinds"].items():
+            first = next(iter(measured["per_seed"].values()))
+            cells[f"{kind}@200x1"] = first
+        lines += ["", f"<details><summary>{task}: width x training fraction, every kind (seed 0)</summary>", "",
+                  "| model | width | fraction | params | test loss | energy MSE | rollout error | train s | "
+                  "rollout s |", "| --- | ---: | ---: | ---: | --- | --- | --- | ---: | ---: |"]
+        for key in sorted(cells, key=_cell_order):
+            m = cells[key]
+            kind, cell = key.split("@")
+            width, fraction = cell.split("x")
+            energy = m.get("energy_mse_corrected") or m.get("energy_mse_paper")
+            ro = m.get("rollout") or {}
+            lines.append(f"| {kind} | {width} | {fraction} | {m['params']} | {_g(m['test_loss'][0])} | "
+                         f"{_g(energy[0] if energy else None)} | {_g(ro.get('error'))} | "
+                         f"{_g(scene_measure.cost_seconds(m))} | {_g(ro.get('seconds'))} |")
+        lines += ["", "</details>"]
+    return lines
+
+
+def _cell_order(key: str):
+    kind, cell = key.split("@")
+    width, fraction = cell.split("x")
+    kinds = list(hnn.MODEL_KINDS)
+    order = kinds.index(kind) if kind in kinds else len(kinds)
+    return order, int(width), float(fraction)
+
+
+def card_name(card: dict) -> str:
+    """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
+    name = f"{card['kind']}, width {card['width']}, {card['fraction']:g} of the data"
+    within = card.get("within", 1.0)
+    if within > scene_common.CARD_FACTOR:
+        return f"none within {scene_common.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
+    return name
+
+
+def card_table(results: dict) -> list[str]:
+    lines = ["**Scene cards**: the smallest model (fewest parameters, then the cheapest to train) whose energy "
+             "MSE (corrected protocol, else the paper's) and rollout error both come within 2x of the best of its "
+             "scene, over every kind and (spring, pend, 2body) every width and training fraction (where none does, "
+             "the model nearest both bests: the smallest larger ratio, which the row gives). Train s, here and "
+             "below: the run's steps at the steps per second of that model alone on one thread, timed by this study "
+             "over a short burst (not the run's recorded wall time, which depends on what else the machine did).", "",
+             "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds |",
+             "| --- | --- | ---: | --- | --- | ---: | --- |"]
+    for task, entry in results["scenes"].items():
+        card = entry.get("card")
+        if not card:
+            lines.append(f"| {task} | no model measured on both | | | | | |")
+            continue
+        seeds = card.get("seeds", {})
+        over = ", ".join(f"{k.replace('_seeds', '')} {_pm(v)}" for k, v in seeds.items()
+                         if k in ("error_seeds", "energy_mse_corrected_seeds", "energy_mse_paper_seeds"))
+        lines.append(f"| {task} | {card_name(card)} | {card['params']} | {_g(card['energy'])} ({_g(card['best_energy'])}) | "
+                     f"{_g(card['rollout'])} ({_g(card['best_rollout'])}) | {_g(card['train_seconds'])} | {over} |")
+    return lines
+
+
+def dhnn_table(results: dict) -> list[str]:
+    d = results.get("dhnn")
+    if not d:
+        return []
+    lines = ["**The real pendulum, the D-HNN paper's protocol** (Sosanya & Greydanus 2022): their split (first 444 "
+             "of 555 rows train, 111 test) and central-difference targets, their energy 2.4 (1 − cos q) + p², "
+             "the rollout from the first test state with solve_ivp's defaults (RK45, rtol 1e-3). Ours: our "
+             f"architectures (width 200) trained with `{' '.join(f'--{k} {v}' for k, v in d['config'].items() if k != 'name')}` (their rate, steps, batch "
+             "and decay; their own MLP was a 256-unit residual net fed a zero time input, seed 42), seed 0, "
+             "± over rows / points. Theirs: as their notebook prints it (one seed; the test ± is the spread of "
+             "the last three logged test losses).", "",
+             "| model | test vector-field MSE, ours | theirs | energy MSE, ours | theirs | state MSE along the rollout, "
+             "ours |", "| --- | --- | --- | --- | --- | --- |"]
+    for kind, ours in d["ours"].items():
+        theirs = d["paper"].get(kind, {})
+        lines.append(f"| {kind} | {_pm(ours['test_mse'])} | {_pm(theirs.get('test_mse'))} | "
+                     f"{_pm(ours['energy_mse'])} | {_pm(theirs.get('energy_mse'))} | {_pm(ours['state_mse'])} |")
+    return lines
+
+
+def markdown(results: dict) -> str:
+    meta, sec = results["meta"], results["seconds"]
+    lines = []
+    if meta["quick"]:
+        cut = meta.get("quick_cuts")
+        lines += ["**QUICK smoke run: not the study's settings.**" + (f" Cut: {'; '.join(cut)}." if cut else ""), ""]
+    lines += [f"Generated by `{meta['command']}` on {meta['date']} (commit {meta['commit']}, torch {meta['torch']}, "
+              f"{meta['cores']} cores, {meta['cpu']}, --jobs {meta['jobs']}). Wall time: training "
+              f"{sec.get('training', 0):.0f} s, measuring {sec.get('measure', 0):.0f} s, the chosen cells' seeds "
+              f"{sec.get('cards', 0):.0f} s, total {sec.get('total', 0):.0f} s (runs that reproduce.py or an "
+              "earlier study saved with the same args are reused, not retrained).", ""]
+    for part in (card_table, kind_table, speed_table, dhnn_table):
+        block = part(results)
+        if block:
+            lines += block + [""]
+    lines += ["**Capacity and data** (each scene's grid; energy MSE of the corrected protocol, else the paper's; "
+              f"rollout s: the dopri5 rtol {sm.EVAL_ROLLOUT['rtol']:g} rollout of the rollout-error metric)"] + grid_tables(results)
+    return "\n".join(lines) + "\n"
+
+
+def guide(results: dict) -> str:
+    """The README's model guide: each scene's card in one line, and where the rest is."""
+    lines = ["| scene | a model that is enough (within 2x of the best energy MSE and rollout error) | "
+             "its energy MSE / rollout error | train s |", "| --- | --- | --- | ---: |"]
+    for task, entry in results["scenes"].items():
+        card = entry.get("card")
+        if card:
+            lines.append(f"| {task} | {card_name(card)} | {_g(card['energy'])} / {_g(card['rollout'])} | {_g(card['train_seconds'])} |")
+    meta = results["meta"]
+    lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every kind, the grids, "
+              "the speed at equal accuracy and the D-HNN comparison: [docs/scenes.md](docs/scenes.md)."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,184 @@
+"""Where a sweep's units of work train: in this process, in worker processes here, or as Ray tasks
+(on this machine or a cluster). ``hnn.sweep.train_jobs`` chooses one and reads what it yields: each
+``(job, run folder or exception)`` as its unit finishes; a unit is a list of ``hnn.sweep.Job`` (one
+run alone, or a group that trains as one program, ``hnn.group_runs``).
+
+A worker whose parent process is gone stops by itself, and on an interrupt the runs not started are
+cancelled and the workers stopped (``hnn.stopping``). Ray is optional and imported only here, by
+``import_ray``, which says what to install.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing
+import os
+import socket
+import sys
+import time
+from pathlib import Path
+
+from .group_runs import run_group_task, train_group
+from .runs import COMPLETE, run_experiment
+from .tasks import repo_root, run_task
+from .training import report_progress
+from .stopping import cores, in_worker, stop_pool, worker_start
+
+BACKENDS = ("local", "ray")
+RAY_INSTALL = 'pip install -e ".[ray]"'
+
+
+def say(bar, line: str) -> None:
+    """Print ``line`` above the bar, flushed: tqdm's ``write`` does not flush, and a command's output
+    piped to a file or a pager (no terminal: no bar either) would hold every line until it ends."""
+    bar.write(line)
+    sys.stdout.flush()
+
+
+# seconds between the lines that say how far a long run is, where no bar is drawn (no terminal)
+HEARTBEAT = 30.0
+
+
+def _group_outcomes(unit: list, outcomes: list[dict]):
+    """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
+    for job, outcome in zip(unit, outcomes):
+        yield job, Path(outcome["folder"]) if "folder" in outcome else RuntimeError(outcome["error"])
+
+
+def train_here(units: list[list], data: dict, bar, progress):
+    """Yield ``(job, folder or exception)`` for each run trained here, one unit after another, on
+    the datasets built; the bar moves with every step of a lone run, after a group (without a
+    terminal, a lone run says its step every ``HEARTBEAT`` seconds, with ``progress``'s tag)."""
+    for unit in units:
+        if len(unit) > 1:
+            try:
+                outcomes = train_group([job.config for job in unit],
+                                                   [data[job.config.dataset_key()] for job in unit])
+            except Exception as err:        # the whole group failed: each of its runs is reported
+                outcomes = [err] * len(unit)
+            for job, outcome in zip(unit, outcomes):
+                bar.update(job.steps)
+                yield job, outcome
+            continue
+        job, done, said = unit[0], [0], [time.perf_counter()]
+
+        def advance(step: int, total: int, done=done, said=said, job=job) -> None:
+            bar.update(step - done[0])
+            done[0] = step
+            if bar.disable and time.perf_counter() - said[0] > HEARTBEAT:      # no bar: a line now and then
+                said[0] = time.perf_counter()
+                say(bar, f"  {progress.tag()} {job.key}: step {step} of {total}")
+        try:
+            with report_progress(advance):
+                outcome = run_experiment(job.config, data[job.config.dataset_key()])
+        except Exception as err:        # one bad run must not end the sweep (KeyboardInterrupt still does)
+            outcome = err
+        bar.update(job.steps - done[0])
+        yield job, outcome
+
+
+def _submit(unit: list) -> tuple:
+    """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
+    if len(unit) == 1:
+        return run_task, unit[0].task, unit[0].fields()
+    return run_group_task, unit[0].task, [job.fields() for job in unit]
+
+
+def _unit_results(unit: list, result):
+    """``(job, folder or exception)`` of each job of a finished unit (``result``: its worker's return)."""
+    if isinstance(result, BaseException):
+        for job in unit:
+            yield job, result
+    elif len(unit) == 1:
+        yield unit[0], Path(result)
+    else:
+        yield from _group_outcomes(unit, result)
+
+
+def train_in_pool(units: list[list], n_jobs: int, threads: int):
+    """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads
+    finish them; on an interrupt (or any exception) the runs not started are cancelled and the
+    workers stopped, not waited for."""
+    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
+    pool = concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context, initializer=worker_start,
+                                                  initargs=(os.getpid(),))
+    try:
+        futures = {pool.submit(in_worker, *_submit(unit), threads): unit for unit in units}
+        for future in concurrent.futures.as_completed(futures):
+            error = future.exception()
+            yield from _unit_results(futures[future], error if error is not None else future.result())
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
+
+
+def train_on_ray(units: list[list], threads: int, address: str | None):
+    """Yield ``(job, folder or exception)`` as Ray tasks of ``threads`` CPUs each finish them; a run
+    whose node dies is retried once elsewhere, then reported."""
+    ray = import_ray()
+    started = not ray.is_initialized()
+    if started:
+        if address is not None:
+            probe(address)
+        ray.init(address=address, num_cpus=None if address else cores(), include_dashboard=False,
+                 log_to_driver=False, logging_level="ERROR")
+    try:
+        biggest = max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node["Alive"]), default=0)
+        if biggest < threads:      # Ray would queue such a task forever
+            raise ValueError(f"each run asks Ray for {threads} CPUs ({cores()} cores here // --jobs), but the "
+                             f"largest Ray node has {biggest:g}; raise --jobs so each run takes fewer threads")
+        # the workers import this checkout's hnn, at the same path on every node (docs/sweeps.md)
+        root = str(Path(__file__).resolve().parent.parent)
+        env = {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
+               "HNN_REPO": str(repo_root()), "OMP_NUM_THREADS": str(threads)}
+        options = dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
+        remotes = {}
+        refs = {}
+        for unit in units:
+            function, *arguments = _submit(unit)
+            gpus = 1 if unit[0].config.device.startswith("cuda") else 0     # a group is one program: one GPU
+            remote = remotes.setdefault((function, gpus), ray.remote(function).options(**options, num_gpus=gpus))
+            refs[remote.remote(*arguments, threads)] = unit
+        while refs:
+            [ref], _ = ray.wait(list(refs), num_returns=1)
+            unit = refs.pop(ref)
+            try:
+                result = ray.get(ref)
+            except ray.exceptions.RayError as err:
+                # the run's own exception when it raised (its remote traceback as a note, for the
+                # log); Ray's when the worker or its node died
+                cause = getattr(err, "cause", None)
+                if isinstance(cause, Exception):
+                    cause.add_note(str(err))
+                result = cause if isinstance(cause, Exception) else err
+            for job, folder in _unit_results(unit, result):
+                if isinstance(folder, Path) and not (folder / COMPLETE).is_file():
+                    folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
+                                          "here: put --out on storage that every node sees at the same path")
+                yield job, folder
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def import_ray():
+    """The ``ray`` module, or an ImportError that says what to install."""
+    try:
+        import ray
+    except ImportError as err:
+        raise ImportError(f"--backend ray needs Ray, which is not installed here: {RAY_INSTALL}") from err
+    return ray
+
+
+def probe(address: str, timeout: float = 5.0) -> None:
+    """Raise ConnectionError naming the fix when nothing answers at a ``host:port`` (or
+    ``ray://host:port``) address: Ray itself would retry for minutes. Other forms (``auto``) are
+    left to Ray."""
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise ConnectionError(f"--ray-address {address}: nothing answers there ({err.strerror or err}); start Ray "
+                              "on the head node with `ray start --head` and pass the address it prints") from err
