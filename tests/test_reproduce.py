@@ -338,3 +338,26 @@ def test_quick_tables_carry_no_marks_against_the_paper_and_say_why(results):
     table_rows = [line for line in quick.splitlines() if line.startswith("| ") and "---" not in line]
     assert table_rows and not any(mark in line for line in table_rows for mark in tables.MARKS.values())
     assert tables.QUICK_NOTE in quick and "astronomical" in quick and tables.LEGEND not in quick
+
+
+@pytest.mark.parametrize("task", ["spring", "real"])
+def test_a_tasks_seeds_scored_as_groups_equal_each_seed_scored_alone(task):
+    # random small models of each kind at two seeds: the grouping, not the training, is under test
+    args = hnn.tasks.task_config(task, {"hidden_dim": 16}).to_dict()
+    seeds = []
+    for seed in (0, 1):
+        models = {}
+        for kind in ("baseline", "hnn"):
+            torch.manual_seed(seed)
+            models[kind] = hnn.kinds.model_from_args({**args, "model": kind, "kind": kind})
+        seeds.append(registry.Trained(task, hnn.load_task(task), models, {**args, "seed": seed}))
+    together = registry.evaluate_seeds(seeds, num_trials=5)
+    for trained, energy in zip(seeds, together):
+        alone = registry.evaluate(trained, num_trials=5)
+        assert energy.keys() == alone.keys()
+        for name, result in alone.items():
+            assert energy[name]["description"] == result["description"]
+            np.testing.assert_array_equal(energy[name]["truth"], result["truth"])
+            for kind in ("baseline", "hnn"):   # the paper's protocols are solve_ivp's: each model integrated alone
+                np.testing.assert_array_equal(energy[name][kind]["traj"], result[kind]["traj"])
+                assert energy[name][kind]["mse"] == result[kind]["mse"]

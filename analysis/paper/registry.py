@@ -68,6 +68,35 @@ def evaluate(trained: Trained, num_trials: int | None = None) -> dict:
     return energy_protocols(trained, num_trials)
 
 
+def evaluate_seeds(seeds: list[Trained], num_trials: int | None = None) -> list[dict]:
+    """``evaluate`` of each of a task's seeds (the same kinds in each), with each protocol's models
+    scored as groups: one ``hnn.evaluate_energy`` call per protocol holds every seed's model of a kind
+    (the truth integrated once; a ``row_wise`` method steps a group's trials in one integration). A
+    task with its own ``evaluate``, and a protocol on the measured test segment (its truth is the
+    data a seed's args rebuild), go seed by seed. Each seed's result equals its ``evaluate``'s."""
+    spec = seeds[0].spec
+    if spec.evaluate is not None or len(seeds) == 1:
+        return [evaluate(trained, num_trials) for trained in seeds]
+    out = [{} for _ in seeds]
+    kinds = list(seeds[0].models)
+    for protocol in spec.protocols.values():
+        if protocol.x0 == "test_segment":
+            for trained, energy in zip(seeds, out):
+                dataset = trained.dataset
+                energy[protocol.name] = hnn.evaluate_energy(trained.system, trained.models, protocol, dataset,
+                                                            observed=dataset.get("state", "canonical"))
+        else:
+            if num_trials is not None:
+                protocol = dataclasses.replace(protocol, num_trials=num_trials)
+            group = hnn.evaluate_energy(seeds[0].system, {k: [t.models[k] for t in seeds] for k in kinds}, protocol)
+            shared = {key: value for key, value in group.items() if key not in kinds}
+            for i, energy in enumerate(out):
+                energy[protocol.name] = {**shared, **{k: group[k][i] for k in kinds}}
+        for energy in out:
+            energy[protocol.name]["description"] = protocol.describe()
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # the figures
 

@@ -37,29 +37,36 @@ def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
     return registry.Trained(task, hnn.load_task(task), models, first_args), row
 
 
-def evaluate_task(task: str, runs: dict, fig_dir: Path | None, num_trials: int | None = None) -> dict:
-    """Losses from the saved metrics, energy MSE under every protocol, and the figures (as the
-    task's ``task.py`` says, through ``hnn_analysis.paper.registry``). ``runs`` is ``{label: run
-    folder}``; the row's ``"seconds"`` holds the time of the evaluation and of the figures.
-    ``num_trials``: the trials of each energy protocol, when not its own (``--quick``: ``QUICK_TRIALS``).
-    """
+def evaluate_seeds(task: str, runs: list[dict], fig_dir: Path | None, num_trials: int | None = None) -> list[dict]:
+    """Each seed's row: losses from the saved metrics of its ``runs`` (``{label: run folder}``, the same
+    labels in each seed), energy MSE under every protocol with the seeds' models scored as groups
+    (``registry.evaluate_seeds``: the truth integrated once), and the figures from the first seed (as
+    the task's ``task.py`` says, through ``hnn_analysis.paper.registry``). A row's ``"seconds"``: the
+    group's evaluation time shared equally, and the figures'. ``num_trials``: the trials of each energy
+    protocol, when not its own (``--quick``: ``QUICK_TRIALS``)."""
     tic = time.perf_counter()
-    trained, row = load_runs(task, runs)
-    energy = registry.evaluate(trained, num_trials)
-    # the figures show the paper's pair; the extra kinds are numbers in their own table
-    pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
-                            trained.args)
-    for name, result in energy.items():
-        for kind in trained.models:
-            row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
-        row.setdefault("protocols", {})[name] = result.get("description", name)
-    t_eval = time.perf_counter() - tic
+    loaded = [load_runs(task, by_label) for by_label in runs]
+    energies = registry.evaluate_seeds([trained for trained, _ in loaded], num_trials)
+    t_eval = (time.perf_counter() - tic) / len(runs)
+    out = []
+    for (trained, row), energy in zip(loaded, energies):
+        for name, result in energy.items():
+            for kind in trained.models:
+                row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
+            row.setdefault("protocols", {})[name] = result.get("description", name)
+        row["seconds"] = {"evaluate": t_eval, "figures": 0.0}
+        out.append(row)
     if fig_dir is not None:
+        trained, energy = loaded[0][0], energies[0]
+        tic = time.perf_counter()
+        # the figures show the paper's pair; the extra kinds are numbers in their own table
+        pair = registry.Trained(task, trained.system, {k: m for k, m in trained.models.items() if k in MODELS},
+                                trained.args)
         numbers = registry.draw_figures(pair, energy, fig_dir)
         if numbers:
-            row["figure_numbers"] = numbers
-    row["seconds"] = {"evaluate": t_eval, "figures": time.perf_counter() - tic - t_eval if fig_dir else 0.0}
-    return row
+            out[0]["figure_numbers"] = numbers
+        out[0]["seconds"]["figures"] = time.perf_counter() - tic
+    return out
 
 
 def table_rows(tasks: list[str], quick: bool, seeds: list[int] | None = None) -> list[dict]:
@@ -139,11 +146,10 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
             results.setdefault("skipped", {})[task] = str(failed[0])
             print(f"  {progress.tag()} {task:11s} SKIPPED (the reason is above)", flush=True)
             continue
-        per_seed = {}
-        for seed in own:
-            figs = fig_dir if fig_dir is not None and seed == own[0] and spec["note"] is None else None
-            per_seed[str(seed)] = evaluate_task(task, {kind: runs[k] for kind, k in keys[seed].items()}, figs,
-                                                num_trials)
+        figs = fig_dir if spec["note"] is None else None
+        rows_by_seed = evaluate_seeds(task, [{kind: runs[k] for kind, k in keys[seed].items()} for seed in own], figs,
+                                      num_trials)
+        per_seed = {str(seed): row for seed, row in zip(own, rows_by_seed)}
         row = dict(per_seed[str(own[0])], task=task, note=spec["note"])
         if len(per_seed) > 1:
             row["per_seed"] = per_seed
