@@ -9,8 +9,8 @@ Rooms by purpose, each importing only the others' public names:
   and every command's ``--quick`` against its budget (``quick_budgets``).
 - ``integrator_study``: speed at equal accuracy of every solver (``speed_accuracy``), the energy drift.
 - ``chains``: the peers' tables on pendulum chains and DGNet's protocol (``peers``, ``dgnet``).
-- ``provenance`` (commit, versions, machine for every JSON written) and ``readme`` (the generated
-  blocks of README.md and docs/). Training many runs is the library's ``hnn.sweep``.
+- ``provenance`` (commit, versions, machine for every JSON written) and ``pages`` (the generated
+  blocks of README.md and docs/, and the seeds behind their verdicts; ``readme`` is its command). Training many runs is the library's ``hnn.sweep``.
 
 ``reproduce.py`` and ``scene_study.py`` at this level are the README's entry points
 (``python analysis/reproduce.py --quick``); every command also runs by its own path. The name
@@ -20,22 +20,22 @@ The rooms and which may import which (``_ROOMS``, ``_MAY_IMPORT``; ``tests/test_
 import of every module against them, inside functions too): a room imports its own modules, those of
 the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 
-- shared: what every command uses (``commands``, ``provenance``, ``readme``, ``plotting``,
+- shared: what every command uses (``commands``, ``provenance``, ``pages``, ``plotting``,
   ``training_cost``); it imports no room;
 - ``paper``, ``benchmarks``, ``integrator_study``, ``chains``: each on the shared modules alone;
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
-- entry: the commands at this level (the README's entry points, ``arm``, ``stress``), on any room.
+- entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``), on any room.
 """
 
 # room -> its units: a folder, or a module at this level by its name ("__init__": this file)
 _ROOMS = {
-    "shared": ("__init__", "commands", "provenance", "readme", "plotting", "training_cost"),
+    "shared": ("__init__", "commands", "provenance", "pages", "plotting", "training_cost"),
     "paper": ("paper",),
     "benchmarks": ("benchmarks",),
     "integrator_study": ("integrator_study",),
     "chains": ("chains",),
     "scenes": ("scenes",),
-    "entry": ("reproduce", "scene_study", "peers", "arm", "stress"),
+    "entry": ("reproduce", "scene_study", "peers", "arm", "stress", "readme"),
 }
 # room -> the rooms it may import besides its own
 _MAY_IMPORT = {

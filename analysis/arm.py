@@ -26,7 +26,7 @@ import torch
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 
@@ -113,7 +113,9 @@ def main(argv=None) -> dict:
               "rollout_rtol": RTOL, "results": results}
     write_json(out / "arm.json", json.loads(json.dumps(report)))
     if args.update_docs:
-        print(f"updated the {args.section} section of {readme.update_section(args.section, body)}")
+        n = len(args.seeds)
+        seeds = pages.Seeds(n, None if n >= pages.MIN_SEEDS else f"this run had --seeds {' '.join(map(str, args.seeds))}")
+        print(f"updated the {args.section} section of {pages.update_section(args.section, body, seeds)}")
     return report
 
 

@@ -8,7 +8,7 @@
 ``add_flags`` adds only the flags it is given a help text for (each command says what its flag
 does); ``publish`` writes ``<out>/<stem>.json`` (every number) and ``<out>/<stem>.md`` (the table
 built from it) atomically, prints the table, and writes each generated section of README.md or
-docs/ it is given (``readme.update_section``).
+docs/ it is given (``pages.update_section``).
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import hnn
 from hnn.cli import int_at_least
 from hnn.io import atomic_write, write_json
 
-from hnn_analysis import readme
+from hnn_analysis import pages
 
 # each command's ``--quick`` budget in seconds, from nothing (a fresh output folder, no dataset cached,
 # installs aside) on a quiet 2-core box: a reader's first run of it, which they watch end to end.
@@ -60,16 +60,18 @@ def add_flags(parser, *, quick: str | None = None, out: str | None = None, out_d
         parser.add_argument("--update-docs", dest="update_docs", action="store_true", help=update_docs)
 
 
-def publish(out: Path, stem: str, results: dict, text: str, sections: dict | None = None) -> list[Path]:
+def publish(out: Path, stem: str, results: dict, text: str, sections: dict | None = None,
+            seeds: pages.Seeds | None = None) -> list[Path]:
     """Write ``out/stem.json`` and ``out/stem.md``, print ``text``, then each ``{section: text}`` of
-    ``sections`` into its page; returns the files written."""
+    ``sections`` into its page (a section that draws verdicts with the ``seeds`` they rest on); returns
+    the files written."""
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / f"{stem}.json", results)
     atomic_write(out / f"{stem}.md", lambda tmp: Path(tmp).write_text(text))
     print("\n" + text)
     written = [out / f"{stem}.json", out / f"{stem}.md"]
     for name, section in (sections or {}).items():
-        page = readme.update_section(name, section)
+        page = pages.update_section(name, section, seeds if name in pages.VERDICTS else None)
         print(f"updated the {name} section of {page}")
         written.append(page)
     return written

@@ -44,7 +44,7 @@ import torch
 
 import hnn
 from hnn.balance import balance_weights
-from hnn_analysis import commands, readme
+from hnn_analysis import commands, pages
 from hnn_analysis.provenance import machine, provenance
 
 arm_data = hnn.load_task("arm")
@@ -329,7 +329,7 @@ def _report(path: Path, update_docs: bool) -> dict:
         name, body = "stress", text(results, results["meta"])
     print(body)
     if update_docs:
-        print(f"updated the {name} section of {readme.update_section(name, body)}")
+        print(f"updated the {name} section of {pages.update_section(name, body)}")
     return results
 
 

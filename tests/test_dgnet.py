@@ -114,11 +114,11 @@ def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
     torch.manual_seed(0)
     assert not hnn.kinds.model_from_args(saved).differentiable_model.linear1.bias.any()
     # --update-docs writes one section per task it ran (each with its stamp), so the others stay
-    from hnn_analysis import readme
+    from hnn_analysis import pages
     section = dgnet_protocol.task_table(results, "real")
     assert section.startswith("### real") and "--tasks spring real" in section and "### spring" not in section
     for task in dgnet_protocol.TASKS:
-        assert readme.PAGES[f"dgnet-{task}"] == "docs/dgnet.md" and readme.section_text(f"dgnet-{task}") is not None
+        assert pages.PAGES[f"dgnet-{task}"] == "docs/dgnet.md" and pages.section_text(f"dgnet-{task}") is not None
     # the data: every consecutive pair of the 25 training paths of 100 states, at their dt = 20/99
     data = dgnet_protocol.dataset("spring", 0)
     assert data["pairs"].shape == (25 * 99, 4) and data["dt"] == pytest.approx(20 / 99)

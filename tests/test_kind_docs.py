@@ -10,14 +10,14 @@ import torch
 
 import hnn
 from hnn import models
-from hnn_analysis import readme
+from hnn_analysis import pages
 
 
 def test_every_registered_kind_is_described_and_on_both_pages():
     for kind, doc in hnn.kinds.described():
         assert isinstance(doc, hnn.kind_docs.KindDoc), kind
         assert all(getattr(doc, f.name).strip() for f in dataclasses.fields(doc)), kind
-    assert readme.declared_out_of_date() == []
+    assert pages.declared_out_of_date() == []
     root = hnn.tasks.repo_root()
     readme_page, python_page = (root / "README.md").read_text(), (root / "docs" / "python.md").read_text()
     for kind in hnn.MODEL_KINDS:
@@ -26,9 +26,9 @@ def test_every_registered_kind_is_described_and_on_both_pages():
 
 def test_a_kind_left_out_of_a_page_is_found(monkeypatch):
     monkeypatch.setitem(hnn.MODEL_KINDS, "extra", hnn.MODEL_KINDS["hnn"])
-    assert len(readme.declared_out_of_date()) == 2          # both pages lack it
+    assert len(pages.declared_out_of_date()) == 2          # both pages lack it
     monkeypatch.setitem(hnn.MODEL_KINDS, "extra", dataclasses.replace(hnn.MODEL_KINDS["hnn"], doc=None))
-    [line] = readme.declared_out_of_date()
+    [line] = pages.declared_out_of_date()
     assert "extra" in line and "hnn/kinds.py" in line and "KindDoc" in line
 
 

@@ -9,7 +9,7 @@ import torch
 
 import hnn
 from hnn_analysis.paper import registry, reproduce, study, tables
-from hnn_analysis import commands, plotting, readme
+from hnn_analysis import commands, pages, plotting, readme
 from hnn import sweep
 
 TINY = 20          # training steps of the end-to-end runs
@@ -148,7 +148,7 @@ def test_quick_end_to_end_and_jobs(tmp_path):
 
 def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monkeypatch):
     results["meta"]["cores"] = 2
-    text = readme.timing_text(results)
+    text = pages.timing_text(results)
     assert text.startswith("`python analysis/reproduce.py --quick` on 2026-01-01")
     assert "| spring | 0.5 | 1.0 | 2.0 | 3.0 | 4.0 |" in text and "total 10.5 s" in text
     (tmp_path / "docs").mkdir()
@@ -162,7 +162,7 @@ def test_readme_timing_section_comes_from_saved_results(results, tmp_path, monke
     assert "old" not in content and "| spring | 0.5 |" in content and content.endswith("<!-- full-run:end -->\nb\n")
     results["seconds"]["tasks"] = {}
     with pytest.raises(ValueError, match="no stage times"):
-        readme.timing_text(results)
+        pages.timing_text(results)
 
 
 def test_variant_rows_train_under_their_own_name_and_keep_the_papers_numbers(tmp_path, monkeypatch, capsys):
@@ -269,35 +269,35 @@ def test_staleness_check_flags_a_page_stamped_before_a_code_change(tmp_path, mon
     (tmp_path / "README.md").write_text(readme_text)
     _git(tmp_path, "commit", "-qam", "the page, stamped with the code that made it")
     monkeypatch.setenv("HNN_REPO", str(tmp_path))
-    assert readme.stale(["headline"]) == []                      # a docs-only commit after the stamp is fine
+    assert pages.stale(["headline"]) == []                      # a docs-only commit after the stamp is fine
     (tmp_path / "hnn" / "x.py").write_text("a = 2\n")
     _git(tmp_path, "commit", "-qam", "a code change")
-    [line] = readme.stale(["headline"])
-    assert f"stamped {made}, older than the last change" in line and readme.REFRESH["headline"] in line
+    [line] = pages.stale(["headline"])
+    assert f"stamped {made}, older than the last change" in line and pages.REFRESH["headline"] in line
     with pytest.raises(SystemExit) as exit_code:
         readme.main(["check"])
     assert exit_code.value.code == 1 and made in capsys.readouterr().out
     (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
-    assert readme.stale(["headline"]) == []
+    assert pages.stale(["headline"]) == []
     (tmp_path / "experiment-x" / "data.py").write_text("a = 2\n")     # a task's code counts too
     _git(tmp_path, "commit", "-qam", "a task change")
-    assert len(readme.stale(["headline"])) == 1
+    assert len(pages.stale(["headline"])) == 1
     (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
     (tmp_path / "hnn" / "x.py").write_text("a = 3\n")
-    _git(tmp_path, "commit", "-qam", f"a message changes\n\n{readme.UNCHANGED} only what is printed")
-    assert readme.stale(["headline"]) == []                      # a commit that says it moves no number
+    _git(tmp_path, "commit", "-qam", f"a message changes\n\n{pages.UNCHANGED} only what is printed")
+    assert pages.stale(["headline"]) == []                      # a commit that says it moves no number
     # a branch of such commits merged: the merge's own message says nothing, its commits do
     _git(tmp_path, "checkout", "-qb", "side")
     (tmp_path / "hnn" / "x.py").write_text("a = 4\n")
-    _git(tmp_path, "commit", "-qam", f"a rename\n\n{readme.UNCHANGED} names only")
+    _git(tmp_path, "commit", "-qam", f"a rename\n\n{pages.UNCHANGED} names only")
     _git(tmp_path, "checkout", "-q", "-")
     (tmp_path / "hnn" / "y.py").write_text("b = 1\n")                  # main changes hnn/ meanwhile too
     _git(tmp_path, "add", ".")
-    _git(tmp_path, "commit", "-qm", f"a speed-up\n\n{readme.UNCHANGED} bit-identical")
+    _git(tmp_path, "commit", "-qm", f"a speed-up\n\n{pages.UNCHANGED} bit-identical")
     (tmp_path / "README.md").write_text(readme_text.replace(made, _head(tmp_path)))
     _git(tmp_path, "commit", "-qam", "docs")
     _git(tmp_path, "merge", "-q", "--no-ff", "--no-edit", "side")
-    assert readme.stale(["headline"]) == []
+    assert pages.stale(["headline"]) == []
 
 
 def test_headline_is_the_mean_across_seeds_with_the_seed_spread_as_band(results):

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.chains import peer_plan, peers
 from hnn_analysis.scenes import scene_metrics, scene_tables, scene_common
 from hnn_analysis.integrator_study import speed_measure
@@ -117,9 +117,9 @@ def test_a_new_kind_reaches_the_flags_a_run_load_run_and_the_peers_table(toys, t
     help_text = " ".join(hnn.cli.make_parser(trainer.Config).format_help().split())
     assert f"scaled ({_SCALED_DOC.line})" in help_text          # a --model choice, with its row's line
     # the pages' lists: the README's line and docs/python.md's paragraph, from the row; both pages lack it
-    assert f"- `scaled`: {_SCALED_DOC.line}." in readme.kinds_text("kinds")
-    assert "**`scaled`**: the HNN's field" in readme.kinds_text("kinds-python")
-    assert len(readme.declared_out_of_date()) == 2
+    assert f"- `scaled`: {_SCALED_DOC.line}." in pages.kinds_text("kinds")
+    assert "**`scaled`**: the HNN's field" in pages.kinds_text("kinds-python")
+    assert len(pages.declared_out_of_date()) == 2
     run = trainer.main(["--model", "scaled", "--total_steps", "3", "--hidden_dim", "8", "--save_dir", str(tmp_path)])
     model, saved, metrics = hnn.load_run(run)
     assert saved["kind"] == "scaled" and isinstance(model, _Scaled) and metrics["train_loss"] > 0

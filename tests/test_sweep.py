@@ -19,7 +19,7 @@ import pytest
 import torch
 
 import hnn
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn import backends, sweep
 from hnn_analysis.paper import reproduce, study
 
@@ -222,9 +222,9 @@ def test_only_the_sweeps_backends_import_ray():
 def test_the_stage_table_says_what_ran_the_runs():
     results = {"seconds": {"tasks": {"spring": {"data": 0.1, "train": {"hnn": 1.0}, "evaluate": 1.0, "figures": 0.0}},
                            "training": 2.0, "evaluation": 1.0, "total": 3.0, "jobs": 2, "threads_per_job": 1}}
-    assert "2 worker processes of 1 threads" in "\n".join(readme.stage_table(results))
+    assert "2 worker processes of 1 threads" in "\n".join(pages.stage_table(results))
     results["seconds"]["backend"] = "ray"
-    assert "Ray tasks of 1 thread each" in "\n".join(readme.stage_table(results))
+    assert "Ray tasks of 1 thread each" in "\n".join(pages.stage_table(results))
 
 
 @needs_ray

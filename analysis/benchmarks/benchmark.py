@@ -17,7 +17,7 @@ import datetime
 import sys
 
 from hnn.io import write_json
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.benchmarks import benchmark_jobs, floor_job
 from hnn_analysis.benchmarks.benchmark_jobs import JOBS
 from hnn_analysis.benchmarks.benchmark_report import benchmark_section, ceiling, jobs_table
@@ -90,7 +90,7 @@ def main(argv=None) -> int:
         head = (f"{stamp}, {env['torch_threads']} threads for the comparisons, {args.repeats} interleaved "
                 f"rounds.{shared}")
         body = "\n\n".join(t for t in (floor_table, table, rollout_table) if t)
-        readme.update_section("benchmark", benchmark_section(head + "\n\n" + body if body else None,
+        pages.update_section("benchmark", benchmark_section(head + "\n\n" + body if body else None,
                                                               f"{stamp}.{shared}\n\n{group_table}" if group else None))
         print("updated docs/speed.md")
     if failed:

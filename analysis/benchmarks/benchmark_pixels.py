@@ -29,7 +29,7 @@ import hnn
 from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
 from hnn.io import write_json
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.provenance import machine, provenance
 
 FULL_STEPS = 10001
@@ -101,7 +101,7 @@ def main(argv=None) -> dict:
     write_json(out, result)
     print(f"wrote {out}")
     if args.update_docs:
-        readme.update_section("benchmark-pixels", text)
+        pages.update_section("benchmark-pixels", text)
         print("updated docs/speed.md")
     return result
 

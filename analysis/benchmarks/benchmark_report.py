@@ -6,7 +6,7 @@ from __future__ import annotations
 import torch
 
 import hnn
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.benchmarks.benchmark_jobs import LABELS
 
 
@@ -39,7 +39,7 @@ GROUP_MARK = "<!-- the group job's part: `--jobs group --update-docs` rewrites i
 def benchmark_section(main: str | None, group: str | None) -> str:
     """The generated section of docs/speed.md: ``main`` (the other jobs' tables under their stamp),
     then ``GROUP_MARK`` and ``group`` (the group table under its own); None keeps that part as it is."""
-    page = hnn.tasks.repo_root() / readme.PAGES["benchmark"]
+    page = hnn.tasks.repo_root() / pages.PAGES["benchmark"]
     begin, end = "<!-- benchmark:begin -->", "<!-- benchmark:end -->"
     content = page.read_text() if page.exists() else ""
     current = content.split(begin, 1)[1].split(end, 1)[0].strip() if begin in content and end in content else ""

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis import commands, readme
+from hnn_analysis import commands, pages
 from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance
 
 # the shipped two-mass measurements of docs/measured.md: the --data study's smoke run
@@ -131,7 +131,7 @@ def main(argv=None) -> dict:
     text = section(result)
     print("\n" + text + f"\n\nwrote {out / 'quick_budgets.json'}")
     if args.update_docs:
-        print(f"updated {readme.update_section('quick-budgets', text)}")
+        print(f"updated {pages.update_section('quick-budgets', text)}")
     failed = [row["command"] for row in runs if row["returncode"] != 0]
     if failed:      # a time of a command that failed means nothing: say so with the exit code
         print(f"{', '.join(failed)} failed: see the logs above", file=sys.stderr)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.benchmarks.ray_runs import BACKENDS, compare, order, ray_fixed_cost, run_once
 from hnn_analysis.provenance import machine, provenance
 
@@ -105,7 +105,7 @@ def main(argv=None) -> int:
     text = section(result)
     print("\n" + text + f"\n\nwrote {out}")
     if args.update_docs:
-        print(f"updated {readme.update_section(f'ray-{mode}', text)}")
+        print(f"updated {pages.update_section(f'ray-{mode}', text)}")
     return 0
 
 

@@ -28,7 +28,7 @@ import torch
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis import readme
+from hnn_analysis import pages
 from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance
 
 
@@ -98,7 +98,7 @@ def main(argv=None) -> dict:
     write_json(args.out, result)
     print(f"wrote {args.out}")
     if args.update_docs:
-        print(f"updated {readme.update_section('threads', table)}")
+        print(f"updated {pages.update_section('threads', table)}")
     return result
 
 

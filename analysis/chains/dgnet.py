@@ -20,7 +20,7 @@ from pathlib import Path
 
 import hnn
 from hnn import sweep, sweep_flags
-from hnn_analysis import commands
+from hnn_analysis import commands, pages
 from hnn_analysis.chains.dgnet_protocol import (QUICK, QUICK_DATA, SETTINGS, TASKS, TRIALS, PUBLISHED, measure_job,
                                                 quick_cuts, rows_for, table, task_table)
 from hnn_analysis.commands import portable_command
@@ -85,7 +85,9 @@ def main(argv=None) -> dict:
                "settings": {task: SETTINGS[task] for task in args.tasks}, "rows": rows}
     text = table(results)
     sections = {f"dgnet-{task}": task_table(results, task) for task in args.tasks} if args.update_docs else {}
-    commands.publish(args.out, "dgnet", results, text, sections)
+    seeds = pages.Seeds(args.seeds, None if args.seeds >= pages.MIN_SEEDS
+                                 else f"this run had --seeds {args.seeds} of their 15 trials")
+    commands.publish(args.out, "dgnet", results, text, sections, seeds)
     return results
 
 

@@ -23,7 +23,7 @@ import time
 
 import hnn
 from hnn.io import atomic_write
-from hnn_analysis import commands
+from hnn_analysis import commands, pages
 from hnn import sweep, sweep_flags
 from hnn_analysis.chains.peer_measure import curves, curves_figure, measure, over_seeds
 from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts
@@ -88,7 +88,9 @@ def main(argv=None, settings: dict | None = None) -> dict:
                         "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
                "rows": rows, "by_seed": by_seed if len(seeds) > 1 else None, "curves": found}
     text = markdown(results)
-    commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {})
+    seeds = pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS
+                                 else f"this run had --seeds {len(seeds)} (the table's default is {FULL_SEEDS})")
+    commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {}, seeds)
     # a model that failed in training is a result of its config (its table cell says how), not a broken run
     sweep.exit_if_failed({key: outcome for key, outcome in runs.items()
                           if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})

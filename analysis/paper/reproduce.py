@@ -28,7 +28,7 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write, write_json
 from hnn_analysis.paper import study
-from hnn_analysis import commands, plotting, readme
+from hnn_analysis import commands, pages, plotting
 from hnn import sweep, sweep_flags
 from hnn_analysis.provenance import provenance
 from hnn_analysis.commands import portable_command
@@ -97,7 +97,10 @@ def write_outputs(results: dict, out: Path, update_docs: bool, figures_drawn: bo
     print(f"{'QUICK smoke run: ' if results['meta']['quick'] else ''}total {results['seconds']['total']:.1f} s; "
           f"wrote {out / 'results.json'}, {out / 'tables.md'}" + (f", {out / 'figures'}/" if figures_drawn else ""))
     if update_docs:
-        for path in readme.update_results(tables, headline_markdown(results), out / "figures" if figures_drawn else None):
+        fewest = min(len(row.get("per_seed") or [0]) for row in results["tasks"].values())
+        seeds = pages.Seeds(fewest, None if fewest >= pages.MIN_SEEDS else f"this run had --seeds {fewest}")
+        for path in pages.update_results(tables, headline_markdown(results), out / "figures" if figures_drawn else None,
+                                         seeds):
             print(f"updated {path}")
 
 
@@ -114,7 +117,7 @@ def main(argv=None) -> dict:
     cuts = study.quick_cuts(tasks, steps) if args.quick else []
     if cuts:
         commands.say_quick("reproduce", cuts)
-    readme.warn_stale(("headline", "results"))
+    pages.warn_stale(("headline", "results"))
     seeds = list(range(args.seed, args.seed + args.seeds))
     results = {"meta": {**_meta(args, argv, seeds, mode, steps), "quick_cuts": cuts}, "tasks": {},
                "seconds": {"tasks": {}}}

@@ -10,7 +10,7 @@ import numpy as np
 
 import hnn
 from hnn.tasks import PAPER
-from hnn_analysis.readme import stage_table
+from hnn_analysis.pages import stage_table
 
 MODELS = ("baseline", "hnn")            # the paper's pair, each task's table rows
 METRICS = (("train_loss", "Train loss"), ("test_loss", "Test loss"))

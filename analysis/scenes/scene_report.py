@@ -10,15 +10,20 @@ from pathlib import Path
 
 import hnn
 from hnn.io import atomic_write
-from hnn_analysis import commands
+from hnn_analysis import commands, pages
 from hnn_analysis.scenes.scene_figure import pareto_figure
 from hnn_analysis.scenes.scene_tables import guide, markdown
 
 
 def write(results: dict, out: Path, update_docs: bool) -> None:
     text = markdown(results)
+    n = len(results["meta"]["seeds"])
+    # a card chooses from the width x fraction grid, which trains one seed a cell (the cost that grid x seeds
+    # would multiply); the chosen cell and the per-kind rows are retrained at the study's seeds
+    seeds = pages.Seeds(1, f"each card chooses from the width x fraction grid, trained at seed 0; the chosen "
+                                    f"cell and the per-kind rows carry {n} seed{'s' if n > 1 else ''} (their ± columns)")
     commands.publish(out, "scene_study", results, text,
-                     {"scenes": text, "model-guide": guide(results)} if update_docs else {})
+                     {"scenes": text, "model-guide": guide(results)} if update_docs else {}, seeds)
     figure = out / "figures" / "scenes-pareto.png"
     pareto_figure(results, figure)
     print(f"wrote {out / 'scene_study.json'}, {out / 'scene_study.md'}, {figure}")
