@@ -23,7 +23,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "peers": "docs/peers.md", "stress": "docs/stress.md", "lnn-start": "docs/stress.md",
          "arm-balance": "docs/stress.md", "arm-balance-long": "docs/stress.md", "ray-quick": "docs/sweeps.md",
          "ray-full": "docs/sweeps.md",
-         "many-models": "docs/speed.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
+         "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
@@ -49,6 +49,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update
               for task in ("spring", "pend", "real", "2body")},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "many-models": "python analysis/benchmarks/benchmark_many.py --update-docs",
+           "thread-spread": "python analysis/paper/thread_spread.py --update-docs",
            "many-models-gpu": "python analysis/benchmarks/benchmark_many.py --devices cuda --update-docs (on a GPU)",
            "gpu-check": "python analysis/benchmarks/gpu_check.py --update-docs (on a GPU)",
            "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs"}

@@ -361,3 +361,15 @@ def test_a_tasks_seeds_scored_as_groups_equal_each_seed_scored_alone(task):
             for kind in ("baseline", "hnn"):   # the paper's protocols are solve_ivp's: each model integrated alone
                 np.testing.assert_array_equal(energy[name][kind]["traj"], result[kind]["traj"])
                 assert energy[name][kind]["mse"] == result[kind]["mse"]
+
+
+def test_thread_spread_sets_the_thread_gap_beside_the_seed_spread():
+    from hnn_analysis.paper import thread_spread
+    numbers = {"spring": {"hnn": {"energy_mse_paper": {"1": [1e-3, 2e-3, 4e-3], "2": [1.5e-3, 2e-3, 4e-3]}},
+                          "baseline": {"test_loss": {"1": [1.0, 1.1, 1.2], "2": [3.0, 1.1, 1.2]}}}}
+    meta = {"command": "python analysis/paper/thread_spread.py", "commit": "abcdef1", "seconds": 1.0, "cores": 2,
+            "cpu": "x"}
+    text = thread_spread.markdown({"meta": meta, "tasks": ["spring"], "seeds": [0, 1, 2], "numbers": numbers})
+    assert "| spring | hnn | energy_mse_paper | 0.001, 0.002, 0.004 | 0.0015, 0.002, 0.004 | 1.5x | 4x |" in text
+    assert "| spring | baseline | test_loss | 1, 1.1, 1.2 | 3, 1.1, 1.2 | 3x | 1.2x |" in text
+    assert "In 1 of 2 rows the thread gap is within the seed spread" in text and "spring baseline test_loss" in text
