@@ -34,7 +34,7 @@ _LAYERS = {
     "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
+    "training": ("balance", "objectives", "units", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
                  "evaluation", "datasets"),
     "runs": ("config", "cli", "runs", "tasks", "cache", "gifs", "orbit_config", "nbody", "group_runs",
              "stopping", "sweep"),

@@ -30,6 +30,7 @@ from .models.pixel import PixelBaseline, PixelHNN
 from .objectives import DerivativeObjective, PixelObjective
 from .models.structured import DissipativeHNN, SeparableHNN
 from .trajectory import TrajectoryObjective
+from .units import wrap_saved
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
@@ -196,5 +197,5 @@ def model_from_args(args: dict, device: torch.device | str = "cpu") -> nn.Module
     same initial model on every device (a GPU's generator draws other numbers)."""
     spec = ModelSpec.from_args(args)
     with torch.device("cpu"):
-        model = initialize(get_kind(spec.kind).build(spec), spec.init)
+        model = wrap_saved(initialize(get_kind(spec.kind).build(spec), spec.init), args)   # in user units (hnn.units)
     return model.to(dtype=DTYPES[spec.dtype], device=device)

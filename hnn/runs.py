@@ -21,9 +21,10 @@ import torch
 
 from . import cli
 from .io import atomic_folder, check_save_dir, write_json
-from .kinds import model_from_args
+from .kinds import get_kind, model_from_args
 from .objectives import Objective
 from .training import train
+from .units import canonical_fit, run_scales
 
 
 def run_label(config) -> str:
@@ -86,18 +87,26 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
     saved = saved_args(config, dataset)
+    scales = run_scales(saved, dataset, objective, get_kind(config.kind).coordinates)
+    if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
+        saved["unit_scales"] = scales.to_dict()
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
-    model = model_from_args(saved, config.device)
-    x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+    model = model_from_args(saved, config.device)       # a Rescaled model where saved has unit_scales
+    fit_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
+    x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = objective.train_options(model, saved, dataset)
+    options = objective.train_options(fit_model, saved, fitted)
     if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
-    stats = train(model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
+    stats = train(fit_model, x, y, test_x, test_y, total_steps=config.total_steps, learn_rate=config.learn_rate,
                   weight_decay=config.weight_decay, batch_size=config.batch_size, seed=config.seed,
                   print_every=config.print_every, verbose=config.verbose, optimizer=config.optimizer,
                   schedule=config.schedule, clip_grad=config.clip_grad, **options)
+    if scales is not None:      # the final numbers: the saved model's, in the user's units
+        objective.train_options(model, saved, dataset)
+        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+        x, y = training_subset(x, y, config.train_fraction, config.seed)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
     config.finish(directory, dataset)
