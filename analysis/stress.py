@@ -17,6 +17,9 @@ over components of |f_j - f_true_j| / |f_true_j| on held-out states. Rows (``CEL
   Hamilton's equations hold with the same H; p' = s p with H' = s H, a mass unit; t' = s t with
   H' = H / s); **float64** training; **mass** ratio 10^3 (the spring's m / k, the arm's forearm
   against its upper arm);
+- **units, --units on**: the nominal and each unit change again with ``hnn.units``' rescaling: scales
+  s_q, s_p, s_t fit from the cell's training data (s_q = 1 for the arm's angles), the network trained
+  in q / s_q, p / s_p, t / s_t and its field read back in the cell's units;
 - **horizon** (spring): the nominal model rolled out by RK4 at dt = 0.1 for ``HORIZON`` steps, the
   true energy's largest relative change along it against the same over 1000 steps;
 - **dt** (spring): RK4 at omega dt = 2.5 and 3.0 (its stability limit is 2.83) over 100 steps,
@@ -24,7 +27,8 @@ over components of |f_j - f_true_j| / |f_true_j| on held-out states. Rows (``CEL
 
 A cell **works** if its number is within 2x of the kind's nominal, **degrades** (its number and the
 factor) otherwise, **stops** when training or the rollout raised (its error's first words); a
-training that warned (data far from unit scale, ``hnn.training.UNIT_SCALE``) is marked ``(warned)``.
+training that warned (data far from unit scale, ``hnn.training.UNIT_SCALE``) or a rollout that warned (dt past
+RK4's stability limit on the model's fastest mode: ``hnn.integrators.stability``) is marked ``(warned)``.
 The LNN (``lagrangian``) and the Cartesian kinds are not in the grid: the LNN's start is its own
 part (``lnn_start``), the Cartesian kinds need a constraint graph these scenes do not have.
 """
@@ -47,6 +51,7 @@ import torch
 
 import hnn
 from hnn.balance import balance_weights
+from hnn.integrators.stability import StepSizeWarning
 from hnn_analysis import commands, readme
 from hnn_analysis.provenance import machine, provenance
 
@@ -150,16 +155,24 @@ def energy_change(model, kind: str, steps: int, dt: float, seed: int = 0) -> dic
     """Largest relative change of the spring's true energy along the model's RK4 rollout from 4 starts."""
     x0 = torch.randn(4, 2, generator=torch.Generator().manual_seed(seed + 7), dtype=torch.float64)
     param = next(model.parameters())
-    try:
-        path = hnn.rollout(model.time_derivative, x0.to(param.dtype), dt * np.arange(steps + 1), method="rk4")
-    except hnn.DivergenceError as err:
-        return {"stop": f"DivergenceError: {str(err)[:240]}"}
-    E = _spring_energy(path.double())
-    return {"error": float(((E - E[:, :1]).abs() / E[:, :1]).max())}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", StepSizeWarning)
+        try:
+            path = hnn.rollout(model.time_derivative, x0.to(param.dtype), dt * np.arange(steps + 1), method="rk4")
+            E = _spring_energy(path.double())
+            row = {"error": float(((E - E[:, :1]).abs() / E[:, :1]).max())}
+        except hnn.DivergenceError as err:
+            row = {"stop": f"DivergenceError: {str(err)[:240]}"}
+    if any(issubclass(w.category, StepSizeWarning) for w in caught):
+        row["warned"] = ["dt past RK4's stability limit"]
+    return row
 
 
 def _outcome(row: dict, nominal: dict | None) -> str:
-    warned = f" (warned: {', '.join(row['warned'])} off unit scale)" if row.get("warned") else ""
+    off_scale = [w for w in row.get("warned", ()) if not w.startswith("dt")]
+    said = ([f"{', '.join(off_scale)} off unit scale"] if off_scale else []) + [w for w in row.get("warned", ())
+                                                                               if w.startswith("dt")]
+    warned = f" (warned: {'; '.join(said)})" if said else ""
     if "stop" in row:
         return f"stops: {row['stop']}{warned}"
     if nominal is None or "error" not in nominal:

@@ -110,3 +110,12 @@ def test_with_units_on_every_unit_cell_is_the_nominal_fit(kind):
         row = stress.fit(kind, "spring", cell, TINY)[1]
         assert row["error"] == pytest.approx(nominal["error"], rel=1e-4), cell
         assert not row["warned"]
+
+
+def test_a_rollout_past_rk4s_limit_is_a_cell_marked_warned():
+    """The exact spring at omega dt = 3.0 past RK4's limit (2.83): hnn.rollout warns before it starts, and the
+    cell says so beside its outcome; at 0.1 no mark."""
+    past = stress.energy_change(_TrueSpring(), "exact", 100, 3.0)
+    assert past["warned"] == ["dt past RK4's stability limit"]
+    assert "(warned: dt past RK4's stability limit)" in stress._outcome(past, {"error": 1e-6})
+    assert "warned" not in stress.energy_change(_TrueSpring(), "exact", 100, 0.1)
