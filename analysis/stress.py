@@ -131,7 +131,8 @@ def fit(kind: str, scene: str, cell: str, budget: dict, seed: int = 0) -> tuple[
         try:
             if rescaled:        # --units on: train in the data's canonical units, answer in the cell's
                 coordinates = "velocity" if kind in VELOCITY else "canonical"
-                scales = hnn.units.fit_scales(x, y, coordinates, data["train"]["periodic"])
+                # a kind that reads q as angles (cos q, sin q) keeps the radian: s_q = 1
+                scales = hnn.units.fit_scales(x, y, coordinates, getattr(model, "periodic", False))
                 x, y = (torch.as_tensor(a, dtype=dtype) for a in scales.to_canonical(x, y, coordinates))
                 inner, model = model, hnn.units.Rescaled(model, scales).to(dtype)
                 row["scales"] = scales.to_dict()
@@ -216,7 +217,9 @@ def _call(task: tuple):
 
 def _describe(task: tuple) -> str:
     function, arguments = task
-    return " ".join(map(str, arguments[:3])) if function is _fit_row else f"{arguments[0]} rollouts"
+    if function is _fit_row:
+        return " ".join(map(str, arguments[:3]))
+    return f"{arguments[0]} rollouts" if function is _rollout_rows else "precision"
 
 
 def run(quick: bool, seed: int = 0, jobs: int = 1) -> dict:

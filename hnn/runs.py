@@ -21,10 +21,10 @@ import torch
 
 from . import cli
 from .io import atomic_folder, check_save_dir, write_json
-from .kinds import get_kind, model_from_args
+from .kinds import model_from_args
 from .objectives import Objective
 from .training import train
-from .units import canonical_fit, run_scales
+from .units import canonical_fit, run_scales, wrap_saved
 
 
 def run_label(config) -> str:
@@ -87,12 +87,13 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
     saved = saved_args(config, dataset)
-    scales = run_scales(saved, dataset, objective, get_kind(config.kind).coordinates)
-    if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
-        saved["unit_scales"] = scales.to_dict()
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
-    model = model_from_args(saved, config.device)       # a Rescaled model where saved has unit_scales
+    model = model_from_args(saved, config.device)
+    scales = run_scales(saved, dataset, objective, model)
+    if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
+        saved["unit_scales"] = scales.to_dict()
+        model = wrap_saved(model, saved)
     fit_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
     x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)

@@ -155,10 +155,19 @@ class Rescaled(Model):
         self.input_dim = inner.input_dim
         for name in ("coordinates", "takes", "maps", "conservative", "separable", "dissipative"):
             setattr(self, name, getattr(inner, name))
-        # own state's columns; an observed state's (where inner maps [q, qdot] into [q, p])
-        self.register_buffer("_own", scales.state(inner.coordinates, inner.input_dim), persistent=False)
-        self.register_buffer("_seen", scales.state("velocity", inner.input_dim), persistent=False)
+        # own state's columns; an observed state's (where inner maps [q, qdot] into [q, p]); on inner's dtype and device
+        like = next(inner.parameters(), torch.empty(0, dtype=torch.float64))
+        self.register_buffer("_own", scales.state(inner.coordinates, inner.input_dim).to(like), persistent=False)
+        self.register_buffer("_seen", scales.state("velocity", inner.input_dim).to(like), persistent=False)
         self.n = inner.input_dim // 2
+
+    def _apply(self, fn, *args, **kwargs):
+        """``.to``, ``.double()``, ...: the scale columns made again from the exact float scales in the new
+        dtype and device (cast from float32 they would carry its rounding into float64)."""
+        out = super()._apply(fn, *args, **kwargs)
+        self._own = self.scales.state(self.inner.coordinates, self.input_dim).to(self._own)
+        self._seen = self.scales.state("velocity", self.input_dim).to(self._seen)
+        return out
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """dx/dt ``(batch, dim)`` at user-unit states ``x`` ``(batch, dim)``, in user units."""
@@ -211,23 +220,24 @@ def _arrays(dataset: dict, arrays) -> tuple:
     return tuple(dataset[key] for key in arrays)
 
 
-def run_scales(args: dict, dataset: dict, objective, kind_coordinates: str) -> UnitScales | None:
-    """The scales a run of ``args`` (its ``units``, ``periodic``) trains in on ``dataset``, or None
-    (``units='off'``, or ``'auto'`` on data near unit scale); a ValueError naming the fix for an objective
-    or a kind it does not support."""
+def run_scales(args: dict, dataset: dict, objective, model: Model) -> UnitScales | None:
+    """The scales a run of ``args`` (its ``units``) trains its (untrained) ``model`` in on ``dataset``, or
+    None (``units='off'``, or ``'auto'`` on data near unit scale); a ValueError naming the fix for an
+    objective or a kind it does not support. A model that reads its q as angles (``model.periodic``)
+    keeps s_q = 1."""
     mode = args.get("units", "off")
     if mode not in UNITS:
         raise ValueError(f"units={mode!r}: choose one of {', '.join(UNITS)}")
     if mode == "off":
         return None
-    if kind_coordinates in _REFUSED:
+    if model.coordinates in _REFUSED:
         raise ValueError(f"--units {mode}: the {args.get('kind')} kind cannot be rescaled, "
-                         f"{_REFUSED[kind_coordinates]}; use --units off")
+                         f"{_REFUSED[model.coordinates]}; use --units off")
     if not isinstance(objective, DerivativeObjective):
         raise ValueError(f"--units {mode} rescales a fit of dx/dt (--objective derivative); the "
                          f"{type(objective).__name__} steps paths in the data's own time: use --units off")
     x, dxdt = _arrays(dataset, objective.arrays[:2])
-    periodic = bool(args.get("periodic", False))
+    periodic = bool(getattr(model, "periodic", False))
     if mode == "auto" and not far_from_unit(x, dxdt, periodic):
         return None
     return fit_scales(x, dxdt, observed_coordinates(dataset), periodic)

@@ -2,6 +2,7 @@
 closed form, its scales' invariance, and a fit that is the same network when the user's units change."""
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -227,7 +228,8 @@ def test_units_refuses_what_it_cannot_rescale(tmp_path):
         hnn.run_experiment(_spring(tmp_path, units="on", objective="trajectory", total_steps=1))
     for kind, coordinates in (("constrained", "cartesian_canonical"), ("pixel-hnn", "latent")):
         with pytest.raises(ValueError, match=f"the {kind} kind cannot be rescaled.*use --units off"):
-            hnn.units.run_scales({"units": "on", "kind": kind}, {}, hnn.DerivativeObjective(), coordinates)
+            hnn.units.run_scales({"units": "on", "kind": kind}, {}, hnn.DerivativeObjective(),
+                                 SimpleNamespace(coordinates=coordinates))
     with pytest.raises(ValueError, match="has no scale"):
         fit_scales(np.c_[np.ones(5), np.zeros(5)], np.ones((5, 2)))
 
@@ -259,3 +261,14 @@ def test_on_observed_velocities_a_change_of_units_gives_the_same_fit(model, tmp_
         fields.append(f * a_t / np.array([a_q, a_q / a_t]))
     for f in fields[1:]:
         assert np.abs(f - fields[0]).max() / np.abs(fields[0]).max() < 1e-4
+
+
+def test_a_model_that_reads_angles_keeps_the_radian():
+    """The mechanical kind with periodic=True reads cos q, sin q: its run's s_q is 1 (a change of the unit of
+    angles cannot be undone by scaling q); the paper's HNN reads q itself, and its s_q is q's RMS."""
+    x, dxdt = _oscillator()
+    data = {"x": x.numpy() / 300, "dxdt": dxdt.numpy() / 300}
+    objective = hnn.DerivativeObjective()
+    angles = hnn.units.run_scales({"units": "on"}, data, objective, hnn.MechanicalHNN(2, 8, periodic=True))
+    plain = hnn.units.run_scales({"units": "on"}, data, objective, hnn.build_model(2, 8))
+    assert angles.q == 1.0 and plain.q == pytest.approx(float(np.sqrt((data["x"][:, 0] ** 2).mean())), rel=1e-12)
