@@ -243,11 +243,13 @@ def _observed(dataset: dict, a_q: float, a_t: float) -> dict:
     return out
 
 
-@pytest.mark.parametrize("model", ["mechanical", "second_order"])
+@pytest.mark.parametrize("model", ["mechanical", "second_order", "lagrangian"])
 def test_on_observed_velocities_a_change_of_units_gives_the_same_fit(model, tmp_path):
     """Observed [q, qdot] (the mechanical kind maps them into [q, M qdot] through its learned mass; the
-    second-order kind reads them): q or t in units 10^3 gives the same field, as on canonical states.
-    The same 1e-4 tolerance: measured up to 4.2e-7, seeds 1 and 2 differ by 0.033 to 0.14 at this budget."""
+    second-order kind and the LNN read them): q or t in units 10^3 gives the same field, as on canonical
+    states. The same 1e-4 tolerance: measured up to 4.2e-7 (mechanical, second_order; seeds 1 and 2 differ
+    by 0.033 to 0.14 at this budget) and 1.3e-5 for the LNN, whose solve of d2L/dqdot2 amplifies the
+    rounding (its seeds differ by 14x and more: at 100 steps it has not learned the spring yet)."""
     base = _spring(tmp_path).dataset()
     fields = []
     for a_q, a_t in ((1, 1), (1e3, 1), (1, 1e3), (1e-3, 1e3)):
