@@ -148,7 +148,7 @@ class Rescaled(Model):
     are mapped too, as are the observed coordinates of a model that ``maps`` them. ``inner``'s
     weights are its state dict's (``inner.``-prefixed)."""
 
-    def __init__(self, inner: Model, scales: UnitScales, observed: str | None = None):
+    def __init__(self, inner: Model, scales: UnitScales):
         super().__init__()
         check_supported(inner)
         self.inner, self.scales = inner, scales
@@ -159,7 +159,6 @@ class Rescaled(Model):
         like = next(inner.parameters(), torch.empty(0, dtype=torch.float64))
         self.register_buffer("_own", scales.state(inner.coordinates, inner.input_dim).to(like), persistent=False)
         self.register_buffer("_seen", scales.state("velocity", inner.input_dim).to(like), persistent=False)
-        self.n = inner.input_dim // 2
 
     def _apply(self, fn, *args, **kwargs):
         """``.to``, ``.double()``, ...: the scale columns made again from the exact float scales in the new
