@@ -17,6 +17,9 @@ over components of |f_j - f_true_j| / |f_true_j| on held-out states. Rows (``CEL
   Hamilton's equations hold with the same H; p' = s p with H' = s H, a mass unit; t' = s t with
   H' = H / s); **float64** training; **mass** ratio 10^3 (the spring's m / k, the arm's forearm
   against its upper arm);
+- **units, --units on**: the nominal and each unit change again with ``hnn.units``' rescaling: scales
+  s_q, s_p, s_t fit from the cell's training data (s_q = 1 for the arm's angles), the network trained
+  in q / s_q, p / s_p, t / s_t and its field read back in the cell's units;
 - **horizon** (spring): the nominal model rolled out by RK4 at dt = 0.1 for ``HORIZON`` steps, the
   true energy's largest relative change along it against the same over 1000 steps;
 - **dt** (spring): RK4 at omega dt = 2.5 and 3.0 (its stability limit is 2.83) over 100 steps,
@@ -24,16 +27,20 @@ over components of |f_j - f_true_j| / |f_true_j| on held-out states. Rows (``CEL
 
 A cell **works** if its number is within 2x of the kind's nominal, **degrades** (its number and the
 factor) otherwise, **stops** when training or the rollout raised (its error's first words); a
-training that warned (data far from unit scale, ``hnn.training.UNIT_SCALE``) is marked ``(warned)``.
+training that warned (data far from unit scale, ``hnn.training.UNIT_SCALE``) or a rollout that warned (dt past
+RK4's stability limit on the model's fastest mode: ``hnn.integrators.stability``) is marked ``(warned)``.
 The LNN (``lagrangian``) and the Cartesian kinds are not in the grid: the LNN's start is its own
 part (``lnn_start``), the Cartesian kinds need a constraint graph these scenes do not have.
 """
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
 import math
+import multiprocessing
 import os
+import resource
 import sys
 import time
 import warnings
@@ -44,6 +51,7 @@ import torch
 
 import hnn
 from hnn.balance import balance_weights
+from hnn.integrators.stability import StepSizeWarning
 from hnn_analysis import commands, pages
 from hnn_analysis.provenance import machine, provenance
 
@@ -61,7 +69,12 @@ HORIZON, QUICK_HORIZON = 100_000, 1_000
 CELLS = {"nominal": (1, 1, 1, False, 1), "q x1e-3": (1e-3, 1e3, 1, False, 1), "q x1e3": (1e3, 1e-3, 1, False, 1),
          "p x1e-3": (1, 1e-3, 1, False, 1), "p x1e3": (1, 1e3, 1, False, 1), "t x1e-3": (1, 1, 1e-3, False, 1),
          "t x1e3": (1, 1, 1e3, False, 1), "float64": (1, 1, 1, True, 1), "mass ratio 1e3": (1, 1, 1, False, 1e3)}
-QUICK_CELLS = ("nominal", "p x1e3", "t x1e-3", "mass ratio 1e3")
+# the same scenes trained with the rescaling of ``--units on`` (hnn.units): the cell's data, its scales
+# fit from them, the network trained in those units and its field read back in the cell's
+UNITS_ON = ", --units on"
+RESCALED = {f"{cell}{UNITS_ON}": cell for cell in ("nominal", "q x1e-3", "q x1e3", "p x1e-3", "p x1e3", "t x1e-3",
+                                                   "t x1e3")}
+QUICK_CELLS = ("nominal", "p x1e3", f"p x1e3{UNITS_ON}", "t x1e-3", "mass ratio 1e3")
 
 
 def _spring(rows: int, seed: int, mass_ratio: float) -> dict:
@@ -99,8 +112,10 @@ def field_error(pred: torch.Tensor, true: torch.Tensor) -> float:
 
 
 def fit(kind: str, scene: str, cell: str, budget: dict, seed: int = 0) -> tuple[object, dict]:
-    """``(model, row)``: ``kind`` trained on ``scene`` under ``cell``; the row has its error or its stop."""
-    cq, cp, ct, wide, ratio = CELLS[cell]
+    """``(model, row)``: ``kind`` trained on ``scene`` under ``cell`` (a key of ``CELLS`` or ``RESCALED``);
+    the row has its error or its stop."""
+    rescaled = cell in RESCALED
+    cq, cp, ct, wide, ratio = CELLS[RESCALED.get(cell, cell)]
     data = {split: _in_units(SCENES[scene](budget["rows"], seed + offset, ratio), cq, cp, ct)
             for split, offset in (("train", 0), ("test", 1))}
     x_key, y_key = ("z", "dzdt") if kind in VELOCITY else ("x", "dxdt")
@@ -114,8 +129,15 @@ def fit(kind: str, scene: str, cell: str, budget: dict, seed: int = 0) -> tuple[
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            hnn.train(model, x, y, total_steps=budget["steps"], learn_rate=budget["learn_rate"], seed=seed,
-                      progress=False, loss_weights=balance_weights(y, "auto"))
+            if rescaled:        # --units on: train in the data's canonical units, answer in the cell's
+                coordinates = "velocity" if kind in VELOCITY else "canonical"
+                # a kind that reads q as angles (cos q, sin q) keeps the radian: s_q = 1
+                scales = hnn.units.fit_scales(x, y, coordinates, getattr(model, "periodic", False))
+                x, y = (torch.as_tensor(a, dtype=dtype) for a in scales.to_canonical(x, y, coordinates))
+                inner, model = model, hnn.units.Rescaled(model, scales).to(dtype)
+                row["scales"] = scales.to_dict()
+            hnn.train(inner if rescaled else model, x, y, total_steps=budget["steps"], learn_rate=budget["learn_rate"],
+                      seed=seed, progress=False, loss_weights=balance_weights(y, "auto"))
             with torch.no_grad():
                 pred = model.time_derivative(data["test"][x_key].to(dtype)).double()
             row["error"] = field_error(pred, data["test"][y_key])
@@ -134,16 +156,24 @@ def energy_change(model, kind: str, steps: int, dt: float, seed: int = 0) -> dic
     """Largest relative change of the spring's true energy along the model's RK4 rollout from 4 starts."""
     x0 = torch.randn(4, 2, generator=torch.Generator().manual_seed(seed + 7), dtype=torch.float64)
     param = next(model.parameters())
-    try:
-        path = hnn.rollout(model.time_derivative, x0.to(param.dtype), dt * np.arange(steps + 1), method="rk4")
-    except hnn.DivergenceError as err:
-        return {"stop": f"DivergenceError: {str(err)[:240]}"}
-    E = _spring_energy(path.double())
-    return {"error": float(((E - E[:, :1]).abs() / E[:, :1]).max())}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", StepSizeWarning)
+        try:
+            path = hnn.rollout(model.time_derivative, x0.to(param.dtype), dt * np.arange(steps + 1), method="rk4")
+            E = _spring_energy(path.double())
+            row = {"error": float(((E - E[:, :1]).abs() / E[:, :1]).max())}
+        except hnn.DivergenceError as err:
+            row = {"stop": f"DivergenceError: {str(err)[:240]}"}
+    if any(issubclass(w.category, StepSizeWarning) for w in caught):
+        row["warned"] = ["dt past RK4's stability limit"]
+    return row
 
 
 def _outcome(row: dict, nominal: dict | None) -> str:
-    warned = f" (warned: {', '.join(row['warned'])} off unit scale)" if row.get("warned") else ""
+    off_scale = [w for w in row.get("warned", ()) if not w.startswith("dt")]
+    said = ([f"{', '.join(off_scale)} off unit scale"] if off_scale else []) + [w for w in row.get("warned", ())
+                                                                               if w.startswith("dt")]
+    warned = f" (warned: {'; '.join(said)})" if said else ""
     if "stop" in row:
         return f"stops: {row['stop']}{warned}"
     if nominal is None or "error" not in nominal:
@@ -153,34 +183,71 @@ def _outcome(row: dict, nominal: dict | None) -> str:
     return f"{word} {row['error']:.3g} ({factor:.2g}x){warned}"
 
 
-def run(quick: bool, seed: int = 0) -> dict:
+def _fit_row(kind: str, scene: str, cell: str, budget: dict, seed: int) -> dict:
+    """One grid cell's row, its seconds included (a worker's task)."""
+    tic = time.perf_counter()
+    row = fit(kind, scene, cell, budget, seed)[1]
+    return {**row, "seconds": time.perf_counter() - tic}
+
+
+def _rollout_rows(kind: str, budget: dict, horizon: int, seed: int) -> list[dict]:
+    """The spring's nominal ``kind`` (trained again: a fit is deterministic at one thread) rolled out
+    over ``horizon`` and 1000 steps and at omega dt 0.1, 2.5, 3.0 (a worker's task)."""
+    model = fit(kind, "spring", "nominal", budget, seed)[0]
+    short = energy_change(model, kind, 1000, 0.1, seed)
+    rows = [{"kind": kind, "cell": "horizon 1,000 steps (nominal)", **short},
+            {"kind": kind, "cell": f"horizon {horizon:,} steps", "nominal": short,
+             **energy_change(model, kind, horizon, 0.1, seed)}]
+    base = energy_change(model, kind, 100, 0.1, seed)
+    rows.append({"kind": kind, "cell": "omega dt 0.1 (nominal)", **base})
+    for wdt in (2.5, 3.0):
+        rows.append({"kind": kind, "cell": f"omega dt {wdt}", "nominal": base, **energy_change(model, kind, 100, wdt, seed)})
+    return rows
+
+
+def _worker_start() -> None:
+    torch.set_num_threads(1)
+    warnings.simplefilter("ignore")     # a fit records its own warnings; the rest would repeat per task
+
+
+def _call(task: tuple):
+    function, arguments = task
+    return function(*arguments)
+
+
+def _describe(task: tuple) -> str:
+    function, arguments = task
+    if function is _fit_row:
+        return " ".join(map(str, arguments[:3]))
+    return f"{arguments[0]} rollouts" if function is _rollout_rows else "precision"
+
+
+def run(quick: bool, seed: int = 0, jobs: int = 1) -> dict:
+    """The grid, the rollouts and (unless ``quick``) the precision part, here (``jobs`` 1) or in ``jobs``
+    worker processes, the longest tasks first (the mechanical kind's 10^5-step rollout alone is a third
+    of the default's CPU time). Each task seeds its own fit, so the numbers do not depend on ``jobs``."""
     budget, horizon = (QUICK, QUICK_HORIZON) if quick else (BUDGET, HORIZON)
     kinds = ("hnn", "mechanical") if quick else KINDS
-    cells = QUICK_CELLS if quick else tuple(CELLS)
-    rows, models = [], {}
-    for scene in SCENES:
-        for kind in kinds:
-            for cell in cells:
-                tic = time.perf_counter()
-                model, row = fit(kind, scene, cell, budget, seed)
-                row["seconds"] = time.perf_counter() - tic
-                rows.append(row)
-                if cell == "nominal" and scene == "spring":
-                    models[kind] = model
-                print(f"{scene} {kind} {cell}: {row.get('error', row.get('stop'))}", flush=True)
-    rollouts = []
-    for kind, model in models.items():
-        short = energy_change(model, kind, 1000, 0.1, seed)
-        rollouts.append({"kind": kind, "cell": "horizon 1,000 steps (nominal)", **short})
-        rollouts.append({"kind": kind, "cell": f"horizon {horizon:,} steps", "nominal": short,
-                         **energy_change(model, kind, horizon, 0.1, seed)})
-        base = energy_change(model, kind, 100, 0.1, seed)
-        rollouts.append({"kind": kind, "cell": "omega dt 0.1 (nominal)", **base})
-        for wdt in (2.5, 3.0):
-            rollouts.append({"kind": kind, "cell": f"omega dt {wdt}", "nominal": base,
-                             **energy_change(model, kind, 100, wdt, seed)})
-    return {"rows": rows, "rollouts": rollouts, "budget": budget, "horizon": horizon, "seed": seed,
-            "precision": [] if quick else precision(budget)}
+    cells = QUICK_CELLS if quick else tuple(CELLS) + tuple(RESCALED)
+    fits = [(_fit_row, (kind, scene, cell, budget, seed)) for scene in SCENES for kind in kinds for cell in cells]
+    rollouts = [(_rollout_rows, (kind, budget, horizon, seed)) for kind in sorted(kinds, key=lambda k: k != "mechanical")]
+    tasks = rollouts + ([] if quick else [(precision, (budget,))]) + fits
+    results = [None] * len(tasks)
+    progress = hnn.sweep.Progress(len(tasks))
+    if jobs <= 1:
+        for i, task in enumerate(tasks):
+            results[i] = _call(task)
+            print(f"{progress.advance()} {_describe(task)}", flush=True)
+    else:
+        context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
+        with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context, initializer=_worker_start) as pool:
+            running = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
+            for future in concurrent.futures.as_completed(running):
+                results[running[future]] = future.result()
+                print(f"{progress.advance()} {_describe(tasks[running[future]])}", flush=True)
+    rolled = sorted((row for rows in results[:len(rollouts)] for row in rows), key=lambda row: kinds.index(row["kind"]))
+    return {"rows": results[-len(fits):], "rollouts": rolled,
+            "budget": budget, "horizon": horizon, "seed": seed, "precision": [] if quick else results[len(rollouts)]}
 
 
 def precision(budget: dict) -> list[dict]:
@@ -214,7 +281,8 @@ def precision_text(rows: list[dict]) -> list[str]:
 
 def text(results: dict, meta: dict) -> str:
     b = results["budget"]
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread), "
+    jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
+    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), "
              f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU (load average {meta['load']:.1f} at "
              f"its end, the box shared): seed {results['seed']}, {b['steps']} Adam steps at rate {b['learn_rate']}, "
              f"{b['hidden']} hidden units, {b['rows']} training and {b['rows']} test states, the default --balance auto. "
@@ -296,7 +364,8 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
 
 
 def lnn_start_text(rows: list[dict], meta: dict, steps: int) -> str:
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread), "
+    jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
+    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), "
              f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU: CHNN's chains, the LNN as the peers' "
              "table trains it (softplus, 256 units), seeds 0 to "
              f"{max(r['seed'] for r in rows)}; each seed's own draw of the init.", "",
@@ -333,6 +402,12 @@ def _report(path: Path, update_docs: bool) -> dict:
     return results
 
 
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its finished workers."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     commands.add_flags(parser, quick="two kinds, four cells, 150 steps, a 1000-step horizon, no precision part "
@@ -340,6 +415,9 @@ def main(argv=None) -> dict:
                        out="folder for stress.json and stress.md", out_default=Path("results/stress"),
                        update_docs="write the stress section of docs/stress.md")
     parser.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of the data and the inits")
+    parser.add_argument("--jobs", type=hnn.cli.int_at_least(1), default=2,
+                        help="worker processes of the grid, one torch thread each (default 2: the default grid's "
+                             "CPU time over two cores; the numbers do not depend on it)")
     parser.add_argument("--lnn-start", dest="lnn_start", action="store_true",
                         help="instead of the grid: the LNN's start on CHNN's chains at N = 1, 3, 5 (lnn-start section)")
     parser.add_argument("--lnn-seeds", dest="lnn_seeds", type=hnn.cli.int_at_least(1), default=5,
@@ -355,13 +433,14 @@ def main(argv=None) -> dict:
     torch.set_num_threads(1)
     meta = {**provenance(), "command": commands.portable_command(sys.argv[1:] if argv is None else list(argv),
                                                                  "analysis/stress.py")}
-    tic, cpu = time.perf_counter(), time.process_time()
+    tic, cpu = time.perf_counter(), _cpu_seconds()
     if args.lnn_start:
         results = {"lnn_start": lnn_start(seeds=args.lnn_seeds, steps=args.lnn_steps, save_dir=args.out / "chain")}
     else:
-        results = run(args.quick, args.seed)
-    meta["seconds"], meta["cpu_seconds"] = time.perf_counter() - tic, time.process_time() - cpu
+        results = run(args.quick, args.seed, args.jobs)
+    meta["seconds"], meta["cpu_seconds"] = time.perf_counter() - tic, _cpu_seconds() - cpu
     meta["load"] = os.getloadavg()[0]
+    meta["jobs"] = 1 if args.lnn_start else args.jobs
     results["meta"] = meta
     if args.lnn_start:
         body = lnn_start_text(results["lnn_start"], meta, args.lnn_steps)

@@ -38,7 +38,7 @@ _LAYERS = {
              "encounters"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("balance", "objectives", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
+    "training": ("balance", "objectives", "units", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
                  "evaluation", "datasets", "nbody"),
     "runs": ("config", "cli", "command", "runs", "tasks", "orbit_config"),
     "sweeps": ("stopping", "group_runs", "backends", "sweep", "sweep_flags"),

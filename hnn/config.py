@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 from . import cli
 from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES, OPTIMIZERS,
-                    SCHEDULES)
+                    SCHEDULES, UNITS)
 
 
 _ANY = object()      # a setting's identity_value when the identity holds the field's own value
@@ -94,6 +94,10 @@ class RunConfig:
                                    "targets, so no unit decides what is learned (--objective derivative): rms (always), "
                                    "off (the paper's plain loss) or auto (rms where the largest component's RMS exceeds "
                                    "the smallest's over 10x: hnn.balance)", choices=BALANCES, identity_at_default=False)
+    units: str = setting("off", "train in the canonical units of the data (q / s_q, p / s_p, t / s_t, the RMS sizes of the "
+                                "training data, so Hamilton's equations keep their form) and save a model that answers in "
+                                "the data's units: off (the data's units), on, or auto (where the RMS of q, p or a rate "
+                                "lies outside [0.1, 10]: hnn.units)", choices=UNITS, identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)

@@ -317,8 +317,13 @@ DTYPES = names.DTYPES       # a run's dtype: the name of a torch dtype
 
 def model_from_args(args: dict, device="cpu"):
     """The untrained model that a run with these (saved) args trains, of the ``kind`` it recorded
-    (float32 unless its ``dtype`` says otherwise): ``model_from_spec`` of its ``ModelSpec``."""
-    return model_from_spec(ModelSpec.from_args(args), device)
+    (float32 unless its ``dtype`` says otherwise): ``model_from_spec`` of its ``ModelSpec``, answering in
+    the user's units where the args record a run's ``unit_scales`` (``--units``: ``hnn.units.Rescaled``)."""
+    model = model_from_spec(ModelSpec.from_args(args), device)
+    if args.get("unit_scales") is None:
+        return model
+    from .units import wrap_saved       # its scale buffers follow the inner model's dtype and device
+    return wrap_saved(model, args)
 
 
 def model_from_spec(spec: ModelSpec, device="cpu"):

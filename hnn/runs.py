@@ -25,6 +25,7 @@ from .kinds import model_from_args, model_from_spec
 from .objectives import Objective
 from .specs import run_specs
 from .training import train
+from .units import canonical_fit, run_scales, wrap_saved
 
 
 def run_label(config) -> str:
@@ -90,12 +91,21 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
     model = model_from_spec(specs.model, config.device)
-    x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+    scales = run_scales(saved, dataset, objective, model)
+    if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
+        saved["unit_scales"] = scales.to_dict()
+        model = wrap_saved(model, saved)
+    fit_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
+    x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = objective.train_options(model, specs.objective, dataset)
+    options = objective.train_options(fit_model, specs.objective, fitted)
     if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
-    stats = train(model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options)
+    stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options)
+    if scales is not None:      # the final numbers: the saved model's, in the user's units
+        objective.train_options(model, specs.objective, dataset)
+        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
+        x, y = training_subset(x, y, config.train_fraction, config.seed)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
     config.finish(directory, dataset)

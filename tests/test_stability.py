@@ -5,6 +5,7 @@ import torch
 from scipy.integrate import solve_ivp
 
 import hnn
+from hnn.integrators.stability import StepSizeWarning
 
 
 def test_untrained_hnn_long_rollout_stays_finite_and_conserves_its_own_hamiltonian():
@@ -84,7 +85,8 @@ def test_step_size_past_rk4_stability_limit_is_reported(spring):
     x0 = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
     fine = hnn.rollout(spring.dynamics, x0, np.linspace(0, 200, 2001), method="rk4", dt=0.01)
     assert (spring.hamiltonian(fine[0]) - 1).abs().max() < 1e-6
-    with pytest.raises(hnn.DivergenceError, match="rk4"):
+    # warned before it starts (hnn.integrators.stability), and stopped once the state leaves max_norm
+    with pytest.raises(hnn.DivergenceError, match="rk4"), pytest.warns(StepSizeWarning, match="Use dt below 1.41"):
         hnn.rollout(spring.dynamics, x0, np.linspace(0, 2000, 1251), method="rk4", dt=1.6)
 
 

@@ -98,3 +98,25 @@ def test_a_mechanical_fit_whose_m_inverse_lies_under_its_floor_warns_naming_the_
         floor = [w for w in caught if "eigenvalue floor" in str(w.message)]
         assert bool(floor) == warns, cell
         assert not warns or "Scale your states" in str(floor[0].message)
+
+
+@pytest.mark.parametrize("kind", ["hnn", "mechanical", "second_order"])
+def test_with_units_on_every_unit_cell_is_the_nominal_fit(kind):
+    """With the rescaling of --units on, each change of units by 10^-3 or 10^3 gives the rescaled nominal's
+    field error: the network sees the same canonical numbers. Tolerance 1e-4 relative: the unit conversions'
+    float32 rounding, carried through the fit (measured up to 3e-7 on the spring's runs, tests/test_units.py),
+    far below a seed's spread."""
+    nominal = stress.fit(kind, "spring", "nominal" + stress.UNITS_ON, TINY)[1]
+    for cell in stress.RESCALED:
+        row = stress.fit(kind, "spring", cell, TINY)[1]
+        assert row["error"] == pytest.approx(nominal["error"], rel=1e-4), cell
+        assert not row["warned"]
+
+
+def test_a_rollout_past_rk4s_limit_is_a_cell_marked_warned():
+    """The exact spring at omega dt = 3.0 past RK4's limit (2.83): hnn.rollout warns before it starts, and the
+    cell says so beside its outcome; at 0.1 no mark."""
+    past = stress.energy_change(_TrueSpring(), "exact", 100, 3.0)
+    assert past["warned"] == ["dt past RK4's stability limit"]
+    assert "(warned: dt past RK4's stability limit)" in stress._outcome(past, {"error": 1e-6})
+    assert "warned" not in stress.energy_change(_TrueSpring(), "exact", 100, 0.1)

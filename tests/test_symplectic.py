@@ -11,6 +11,7 @@ import torch
 import hnn
 import hnn.integrators.fixed_step
 import hnn.integrators.solvers
+from hnn.integrators.stability import StepSizeWarning
 
 SPRING_OMEGA = 2.0          # the repo's spring: H = q^2 + p^2, dq/dt = 2p, dp/dt = -2q
 PEND_SEPARATRIX_H = 6.0     # the repo's pendulum: H = 3(1 - cos q) + p^2; H = 6 at the upright rest
@@ -302,11 +303,15 @@ def test_steps_past_the_stability_limit_are_reported_not_returned_as_nan(spring,
     x0 = torch.tensor([[1.0, 0.0], [0.0, 0.0], [0.5, 0.5]], dtype=torch.float64)
     t = np.linspace(0, 1000 * unstable_dt, 101)
     with torch.no_grad():
-        fine = hnn.rollout(spring.dynamics, x0, np.linspace(0, 1000 * stable_dt, 101), method=method, dt=stable_dt)
+        with warnings.catch_warnings():         # inside the limit: no StepSizeWarning (hnn.integrators.stability)
+            warnings.simplefilter("error", StepSizeWarning)
+            fine = hnn.rollout(spring.dynamics, x0, np.linspace(0, 1000 * stable_dt, 101), method=method,
+                               dt=stable_dt)
         # near the limit the invariant ellipse is long: leapfrog's modified energy allows
         # excursions of a / (1 - a) = 9.3 at omega dt = 1.9 (a = (omega dt / 2)^2); bounded is the point
         assert spring.hamiltonian(fine).max() < 20
-        with pytest.raises(hnn.DivergenceError, match="diverged") as info:
+        # past it: warned before the rollout starts, stopped once the state leaves max_norm
+        with pytest.raises(hnn.DivergenceError, match="diverged") as info, pytest.warns(StepSizeWarning, match=method):
             hnn.rollout(spring.dynamics, x0, t, method=method, dt=unstable_dt)
     assert info.value.trajectories == [0, 2]            # the resting row 1 never moves
     assert all(0 < s <= t[-1] for s in info.value.times)

@@ -16,6 +16,7 @@ from .fixed_step import Field
 from ..interface import EnergyField, Model
 from ..modes import frozen_weights, in_model_axis
 from .solvers import Solver, get_solver
+from .stability import warn_if_unstable
 
 
 def _as_t_eval(t_eval) -> np.ndarray:
@@ -136,7 +137,10 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             ``hnn.ConvergenceError`` (a subclass) when the midpoint iteration does not converge.
 
     Warns (``UserWarning``) when ``rtol`` (adaptive methods: solve_ivp, dopri5) is below 100 eps
-    of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour.
+    of ``x0``'s dtype or the midpoint ``tol`` below its eps: tolerances the dtype cannot honour; and
+    (``hnn.integrators.stability.StepSizeWarning``) when a fixed-step rollout of 100 steps or more
+    (not ``differentiable``) steps past its method's stability limit on the field's fastest mode at
+    the starts (``hnn.integrators.stability``), naming dt, the estimate and the fix.
     """
     solver = get_solver(method)
     solver.check_options(options)
@@ -163,6 +167,8 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             with torch.enable_grad():
                 return solver.run(f, x0, t, **options)
         with torch.no_grad(), frozen_weights():     # the weights cannot change: fields may run as kernels
+            if not in_model_axis():         # a step past the method's stability limit: one warning, not silence
+                warn_if_unstable(method, f, x0, t, options)
             return solver.run(f, x0, t, **options)
     finally:
         if one_thread:
