@@ -8,6 +8,7 @@ Rooms by purpose, each importing only the others' public names:
   arithmetic floor (``benchmark``, ``floor``, ``benchmark_orbits``, ``benchmark_pixels``, ``ray_overhead``),
   and every command's ``--quick`` against its budget (``quick_budgets``).
 - ``integrator_study``: speed at equal accuracy of every solver (``speed_accuracy``), the energy drift.
+- ``extremes``: the stress study's grid, tables and the LNN's start (``stress.py`` is its command).
 - ``chains``: the peers' tables on pendulum chains and DGNet's protocol (``peers``, ``dgnet``).
 - ``provenance`` (commit, versions, machine for every JSON written) and ``pages`` (the generated
   blocks of README.md and docs/, and the seeds behind their verdicts; ``readme`` is its command). Training many runs is the library's ``hnn.sweep``.
@@ -22,7 +23,7 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 
 - shared: what every command uses (``commands``, ``provenance``, ``pages``, ``plotting``,
   ``training_cost``); it imports no room;
-- ``paper``, ``benchmarks``, ``integrator_study``, ``chains``: each on the shared modules alone;
+- ``paper``, ``benchmarks``, ``integrator_study``, ``chains``, ``extremes``: each on the shared modules alone;
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
 - entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``), on any room.
 """
@@ -31,6 +32,7 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 _ROOMS = {
     "shared": ("__init__", "commands", "provenance", "pages", "plotting", "training_cost"),
     "paper": ("paper",),
+    "extremes": ("extremes",),
     "benchmarks": ("benchmarks",),
     "integrator_study": ("integrator_study",),
     "chains": ("chains",),
@@ -44,6 +46,7 @@ _MAY_IMPORT = {
     "benchmarks": ("shared",),
     "integrator_study": ("shared",),
     "chains": ("shared",),
+    "extremes": ("shared",),
     "scenes": ("shared", "paper", "integrator_study"),
-    "entry": ("shared", "paper", "scenes", "chains"),
+    "entry": ("shared", "paper", "scenes", "chains", "extremes"),
 }

@@ -8,16 +8,18 @@ import torch
 
 import hnn
 from hnn_analysis import stress
+from hnn_analysis.extremes import stress_grid as grid
+from hnn_analysis.extremes.stress_report import text as stress_text
 
 TINY = {"steps": 5, "hidden": 8, "rows": 32, "learn_rate": 1e-3}
 
 
-@pytest.mark.parametrize("cell", [c for c in stress.CELLS if c != "float64"])
+@pytest.mark.parametrize("cell", [c for c in grid.CELLS if c != "float64"])
 def test_each_unit_change_keeps_hamiltons_equations(cell):
     """In units where q, p, t read cq, cp, ct times theirs, the spring's data are Hamilton's equations of
     H' = H cq cp / ct (dq'/dt' = (cq / ct) dH/dp = (cq cp / ct) dH/dp'), checked by autograd."""
-    cq, cp, ct, _, ratio = stress.CELLS[cell]
-    data = stress._in_units(stress._spring(64, 0, ratio), cq, cp, ct)
+    cq, cp, ct, _, ratio = grid.CELLS[cell]
+    data = grid._in_units(grid._spring(64, 0, ratio), cq, cp, ct)
     x = data["x"].clone().requires_grad_(True)
     q, p = x[:, 0] / cq, x[:, 1] / cp
     H = (0.5 * p ** 2 / ratio + 0.5 * q ** 2) * cq * cp / ct
@@ -31,16 +33,16 @@ def test_the_field_error_is_the_same_in_any_units():
     true = torch.randn(50, 4, dtype=torch.float64)
     pred = true + 0.1 * torch.randn(50, 4, dtype=torch.float64)
     units = torch.tensor([1e-3, 1e3, 1.0, 1e3], dtype=torch.float64)
-    assert stress.field_error(pred * units, true * units) == pytest.approx(stress.field_error(pred, true), rel=1e-12)
+    assert grid.field_error(pred * units, true * units) == pytest.approx(grid.field_error(pred, true), rel=1e-12)
 
 
 def test_a_tiny_grid_gives_every_cell_one_outcome(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(stress, "QUICK", TINY)
-    monkeypatch.setattr(stress, "QUICK_HORIZON", 50)
-    results = stress.run(quick=True)
+    monkeypatch.setattr(grid, "QUICK", TINY)
+    monkeypatch.setattr(grid, "QUICK_HORIZON", 50)
+    results = grid.run(quick=True)
     meta = {"command": "python analysis/stress.py --quick", "commit": "0000000", "seconds": 1, "cpu_seconds": 1,
             "load": 0.0, "cores": 2, "cpu": "AVX2"}
-    text = stress.text(results, meta)
+    text = stress_text(results, meta)
     cells = [line.split(" | ")[1:] for line in text.splitlines()
              if line.startswith("| ") and "nominal" not in line and "---" not in line and "cell" not in line]
     assert cells and all(c.strip(" |").split(" ")[0] in ("works", "degrades", "stops:") for row in cells for c in row)
@@ -56,9 +58,9 @@ def test_a_training_whose_loss_overflows_is_a_cell_that_stops_naming_the_fix(mon
     """q and p in units 10^20 times the spring's: float32 squares of the errors overflow, the loss is
     no longer finite at step 0, and the cell stops with the training's error (its fixes named: a
     lower rate, clipping, float64), warned about the data's scale before."""
-    monkeypatch.setitem(stress.CELLS, "x1e20", (1e20, 1e20, 1, False, 1))
-    _, row = stress.fit("hnn", "spring", "x1e20", {**TINY, "learn_rate": 1e-3})
-    outcome = stress._outcome(row, {"error": 0.1})
+    monkeypatch.setitem(grid.CELLS, "x1e20", (1e20, 1e20, 1, False, 1))
+    _, row = grid.fit("hnn", "spring", "x1e20", {**TINY, "learn_rate": 1e-3})
+    outcome = grid.outcome(row, {"error": 0.1})
     assert outcome.startswith("stops: DivergenceError: the training loss is") and "float64" in outcome
     assert "warned: dxdt, x off unit scale" in outcome
 
@@ -78,10 +80,10 @@ def test_a_rollout_past_rk4s_stability_limit_stops_naming_the_divergence():
     """RK4 on the exact spring at omega dt = 3.0, past its limit of 2.83: each step multiplies the state
     by |R(3i)| = 1.5, the rollout passes max_norm within 100 steps and raises, naming the rows, instead
     of returning a path that cannot be trusted. At 2.5, inside the limit, it runs (and loses energy)."""
-    row = stress.energy_change(_TrueSpring(), "hnn", 100, 3.0)
+    row = grid.energy_change(_TrueSpring(), "hnn", 100, 3.0)
     assert row["stop"].startswith("DivergenceError: rk4") and "Reduce the step size" in row["stop"]
-    assert 0.5 < stress.energy_change(_TrueSpring(), "hnn", 100, 2.5)["error"] <= 1.0
-    assert stress.energy_change(_TrueSpring(), "hnn", 100, 0.1)["error"] < 1e-4
+    assert 0.5 < grid.energy_change(_TrueSpring(), "hnn", 100, 2.5)["error"] <= 1.0
+    assert grid.energy_change(_TrueSpring(), "hnn", 100, 0.1)["error"] < 1e-4
 
 
 def test_a_mechanical_fit_whose_m_inverse_lies_under_its_floor_warns_naming_the_fix():
@@ -90,7 +92,7 @@ def test_a_mechanical_fit_whose_m_inverse_lies_under_its_floor_warns_naming_the_
     training; at the scene's own units it says nothing."""
     model = hnn.kinds.model_from_args({"kind": "mechanical", "input_dim": 2, "hidden_dim": 8})
     for cell, warns in (("q x1e-3", True), ("nominal", False)):
-        data = stress._in_units(stress._spring(64, 0, 1.0), *stress.CELLS[cell][:3])
+        data = grid._in_units(grid._spring(64, 0, 1.0), *grid.CELLS[cell][:3])
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             hnn.DerivativeObjective().train_options(model, hnn.specs.ObjectiveSpec(),
@@ -106,9 +108,9 @@ def test_with_units_on_every_unit_cell_is_the_nominal_fit(kind):
     field error: the network sees the same canonical numbers. Tolerance 1e-4 relative: the unit conversions'
     float32 rounding, carried through the fit (measured up to 3e-7 on the spring's runs, tests/test_units.py),
     far below a seed's spread."""
-    nominal = stress.fit(kind, "spring", "nominal" + stress.UNITS_ON, TINY)[1]
-    for cell in stress.RESCALED:
-        row = stress.fit(kind, "spring", cell, TINY)[1]
+    nominal = grid.fit(kind, "spring", "nominal" + grid.UNITS_ON, TINY)[1]
+    for cell in grid.RESCALED:
+        row = grid.fit(kind, "spring", cell, TINY)[1]
         assert row["error"] == pytest.approx(nominal["error"], rel=1e-4), cell
         assert not row["warned"]
 
@@ -116,7 +118,7 @@ def test_with_units_on_every_unit_cell_is_the_nominal_fit(kind):
 def test_a_rollout_past_rk4s_limit_is_a_cell_marked_warned():
     """The exact spring at omega dt = 3.0 past RK4's limit (2.83): hnn.rollout warns before it starts, and the
     cell says so beside its outcome; at 0.1 no mark."""
-    past = stress.energy_change(_TrueSpring(), "exact", 100, 3.0)
+    past = grid.energy_change(_TrueSpring(), "exact", 100, 3.0)
     assert past["warned"] == ["dt past RK4's stability limit"]
-    assert "(warned: dt past RK4's stability limit)" in stress._outcome(past, {"error": 1e-6})
-    assert "warned" not in stress.energy_change(_TrueSpring(), "exact", 100, 0.1)
+    assert "(warned: dt past RK4's stability limit)" in grid.outcome(past, {"error": 1e-6})
+    assert "warned" not in grid.energy_change(_TrueSpring(), "exact", 100, 0.1)

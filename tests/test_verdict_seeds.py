@@ -16,7 +16,6 @@ UNRECORDED = {
     "scenes": "a grid at three\nseeds triples the study's training, not yet run",
     "model-guide": "a card chooses from a grid trained at seed 0",
     "measured-guide": "each kind trains once (seed 0) on the data",
-    "stress": "seed 0, 600 Adam steps",
     "lnn-start": "seeds 0 to 4",
     "arm-balance": "over seeds 0, 1, 2",
     "arm-balance-long": "over seeds 0, 1, 2",
@@ -26,7 +25,7 @@ UNRECORDED = {
     "dgnet-2body": "3 seed(s) of their 15 trials",
 }
 # of those, the ones that rest on fewer than 3 seeds: their words above must say why
-FEWER = {"peers", "scenes", "model-guide", "measured-guide", "stress"}
+FEWER = {"peers", "scenes", "model-guide", "measured-guide"}
 
 
 def _page(name: str) -> str:
