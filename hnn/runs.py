@@ -91,7 +91,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
     model = model_from_spec(specs.model, config.device)
-    scales = run_scales(saved, dataset, objective, model)
+    scales = run_scales(specs.objective.units, specs.model.kind, dataset, objective, model)
     if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
         saved["unit_scales"] = scales.to_dict()
         model = wrap_saved(model, saved)

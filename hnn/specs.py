@@ -94,13 +94,15 @@ class ObjectiveSpec:
     """What an objective reads of a run (``Objective.train_options``): ``seed`` (the pixel objective's
     noise generator starts at seed + 2), ``input_noise`` (std of the Gaussian noise on each training
     batch's inputs, or on the pixel latent), ``use_rk4`` (fit the RK4 average slope over the data's dt),
-    ``derivative_loss`` (``hnn.names.DERIVATIVE_LOSSES``) and ``balance`` (``hnn.names.BALANCES``; a run
-    saved before the field existed trained unbalanced: ``'off'``)."""
+    ``derivative_loss`` (``hnn.names.DERIVATIVE_LOSSES``), ``balance`` (``hnn.names.BALANCES``; a run
+    saved before the field existed trained unbalanced: ``'off'``) and ``units`` (``hnn.names.UNITS``: the
+    coordinates the fit runs in, ``hnn.units``; ``'off'`` before the field existed)."""
     seed: int = 0
     input_noise: float = 0.0
     use_rk4: bool = False
     derivative_loss: str = "l2"
     balance: str = "off"
+    units: str = "off"
 
     @classmethod
     def from_args(cls, args: Mapping) -> ObjectiveSpec:

@@ -219,18 +219,17 @@ def _arrays(dataset: dict, arrays) -> tuple:
     return tuple(dataset[key] for key in arrays)
 
 
-def run_scales(args: dict, dataset: dict, objective, model: Model) -> UnitScales | None:
-    """The scales a run of ``args`` (its ``units``) trains its (untrained) ``model`` in on ``dataset``, or
+def run_scales(mode: str, kind: str, dataset: dict, objective, model: Model) -> UnitScales | None:
+    """The scales a run with ``--units mode`` trains its (untrained) ``model`` of ``kind`` in on ``dataset``, or
     None (``units='off'``, or ``'auto'`` on data near unit scale); a ValueError naming the fix for an
     objective or a kind it does not support. A model that reads its q as angles (``model.periodic``)
     keeps s_q = 1."""
-    mode = args.get("units", "off")
     if mode not in UNITS:
         raise ValueError(f"units={mode!r}: choose one of {', '.join(UNITS)}")
     if mode == "off":
         return None
     if model.coordinates in _REFUSED:
-        raise ValueError(f"--units {mode}: the {args.get('kind')} kind cannot be rescaled, "
+        raise ValueError(f"--units {mode}: the {kind} kind cannot be rescaled, "
                          f"{_REFUSED[model.coordinates]}; use --units off")
     if not isinstance(objective, DerivativeObjective):
         raise ValueError(f"--units {mode} rescales a fit of dx/dt (--objective derivative); the "

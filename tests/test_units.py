@@ -228,7 +228,7 @@ def test_units_refuses_what_it_cannot_rescale(tmp_path):
         hnn.run_experiment(_spring(tmp_path, units="on", objective="trajectory", total_steps=1))
     for kind, coordinates in (("constrained", "cartesian_canonical"), ("pixel-hnn", "latent")):
         with pytest.raises(ValueError, match=f"the {kind} kind cannot be rescaled.*use --units off"):
-            hnn.units.run_scales({"units": "on", "kind": kind}, {}, hnn.DerivativeObjective(),
+            hnn.units.run_scales("on", kind, {}, hnn.DerivativeObjective(),
                                  SimpleNamespace(coordinates=coordinates))
     with pytest.raises(ValueError, match="has no scale"):
         fit_scales(np.c_[np.ones(5), np.zeros(5)], np.ones((5, 2)))
@@ -271,6 +271,6 @@ def test_a_model_that_reads_angles_keeps_the_radian():
     x, dxdt = _oscillator()
     data = {"x": x.numpy() / 300, "dxdt": dxdt.numpy() / 300}
     objective = hnn.DerivativeObjective()
-    angles = hnn.units.run_scales({"units": "on"}, data, objective, hnn.MechanicalHNN(2, 8, periodic=True))
-    plain = hnn.units.run_scales({"units": "on"}, data, objective, hnn.build_model(2, 8))
+    angles = hnn.units.run_scales("on", "mechanical", data, objective, hnn.MechanicalHNN(2, 8, periodic=True))
+    plain = hnn.units.run_scales("on", "hnn", data, objective, hnn.build_model(2, 8))
     assert angles.q == 1.0 and plain.q == pytest.approx(float(np.sqrt((data["x"][:, 0] ** 2).mean())), rel=1e-12)
