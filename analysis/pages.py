@@ -26,8 +26,8 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
 # section name -> the command that regenerates it (the staleness check's fix)
-REFRESH = {"headline": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
-           "results": "python analysis/reproduce.py --seeds 3 --jobs 2 --update-docs",
+REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update-docs",
+           "results": "python analysis/reproduce.py --seeds 5 --jobs 2 --update-docs",
            "full-run": "python analysis/readme.py timing results/results.json (after a full reproduce.py)",
            "benchmark": "python analysis/benchmarks/benchmark.py --update-docs --repeats 3",
            "benchmark-pixels": "python analysis/benchmarks/benchmark_pixels.py --update-docs",
