@@ -103,7 +103,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
         saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
     stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options)
     if scales is not None:      # the final numbers: the saved model's, in the user's units
-        objective.train_options(model, specs.objective, dataset)
+        objective.train_options(model, specs.objective, dataset)     # points final_loss at it (options unused)
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         x, y = training_subset(x, y, config.train_fraction, config.seed)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
