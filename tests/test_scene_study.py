@@ -120,30 +120,71 @@ def _cell(params, energy, rollout, seconds=1.0):
             "rollout": {"error": rollout}}
 
 
+def _one(params, energy, rollout, seconds=1.0):
+    """A cell measured at seed 0 alone."""
+    return {0: _cell(params, energy, rollout, seconds)}
+
+
 def test_scene_card_picks_the_smallest_model_within_2x_of_both_bests():
-    cells = {("hnn", 200, 1.0): _cell(41200, 1e-4, 0.10),
-             ("hnn", 16, 1.0): _cell(352, 1.5e-4, 0.5),         # small, but 5x the best rollout error
-             ("separable", 32, 0.5): _cell(2300, 1.9e-4, 0.17),  # within 2x of both: the card
-             ("baseline", 16, 1.0): _cell(352, 1e-1, 0.09)}      # best rollout, far worse energy
+    cells = {("hnn", 200, 1.0): _one(41200, 1e-4, 0.10),
+             ("hnn", 16, 1.0): _one(352, 1.5e-4, 0.5),         # small, but 5x the best rollout error
+             ("separable", 32, 0.5): _one(2300, 1.9e-4, 0.17),  # within 2x of both: the card
+             ("baseline", 16, 1.0): _one(352, 1e-1, 0.09)}      # best rollout, far worse energy
     card = scene_stages.scene_card(cells)
     assert (card["kind"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
     assert card["best_energy"] == 1e-4 and card["best_rollout"] == 0.09
-    assert scene_stages.scene_card({("hnn", 200, 1.0): _cell(1, 1.0, 1.0)})["kind"] == "hnn"
+    # one seed: the card tests nothing about seeds, and says so
+    assert card["unsettled"] is None and scene_tables.unsettled(card) == "one seed: not tested"
+    assert scene_stages.scene_card({("hnn", 200, 1.0): _one(1, 1.0, 1.0)})["kind"] == "hnn"
 
 
 def test_scene_card_falls_back_to_the_model_nearest_both_bests():
     # the best energy and the best rollout come from two models, each far off on the other error:
     # nothing is within 2x of both, and the card names the smallest larger ratio (here 3x, not 10x)
-    cells = {("mechanical", 16, 0.5): _cell(500, 1e-5, 0.9),        # best energy, 10x the best rollout
-             ("separable", 16, 1.0): _cell(600, 1e-3, 0.09),        # best rollout, 100x the best energy
-             ("hnn", 200, 1.0): _cell(41200, 3e-5, 0.18),           # 3x and 2x: the nearest
-             ("hnn", 32, 1.0): _cell(1200, 4e-5, 0.3)}              # smaller, but 4x and 3.3x
+    cells = {("mechanical", 16, 0.5): _one(500, 1e-5, 0.9),        # best energy, 10x the best rollout
+             ("separable", 16, 1.0): _one(600, 1e-3, 0.09),        # best rollout, 100x the best energy
+             ("hnn", 200, 1.0): _one(41200, 3e-5, 0.18),           # 3x and 2x: the nearest
+             ("hnn", 32, 1.0): _one(1200, 4e-5, 0.3)}              # smaller, but 4x and 3.3x
     card = scene_stages.scene_card(cells)
     assert (card["kind"], card["width"]) == ("hnn", 200)
     assert card["within"] == pytest.approx(3.0)
     assert "none within 2x of both bests; nearest: hnn, width 200" in scene_tables.card_name(card)
-    normal = scene_stages.scene_card({("hnn", 32, 1.0): _cell(1200, 1e-4, 0.1)})
+    normal = scene_stages.scene_card({("hnn", 32, 1.0): _one(1200, 1e-4, 0.1)})
     assert normal["within"] == 1.0 and scene_tables.card_name(normal) == "hnn, width 32, 1 of the data"
+
+
+def test_scene_card_chooses_on_seed_means_and_names_what_the_seeds_cannot_separate():
+    seeds = lambda params, energies, rollouts: {s: _cell(params, e, r) for s, (e, r) in  # noqa: E731
+                                                enumerate(zip(energies, rollouts))}
+    cells = {("hnn", 200, 1.0): seeds(41200, [1e-4, 1e-4, 1e-4], [0.10, 0.10, 0.10]),     # the best means
+             # seed 0 alone would make this tiny model the card (1.5x, 1.2x); its mean is 5x the best energy
+             ("hnn", 16, 1.0): seeds(352, [1.5e-4, 6e-4, 8.5e-4], [0.12, 0.12, 0.12]),
+             ("separable", 32, 0.5): seeds(2300, [1.2e-4, 1.5e-4, 2.7e-4], [0.15, 0.15, 0.15]),  # mean 1.8x
+             ("baseline", 16, 0.25): seeds(300, [5e-3, 6e-3, 7e-3], [0.11, 0.11, 0.11])}  # every seed far off
+    card = scene_stages.scene_card(cells)
+    assert (card["kind"], card["width"], card["fraction"]) == ("separable", 32, 0.5)
+    assert card["energy"] == pytest.approx(1.8e-4) and card["n_seeds"] == 3
+    # the tiny HNN's seed 0 is within 2x of both bests: the seeds cannot separate it from the pick;
+    # the baseline, smaller still, has no seed near the best energy
+    assert card["unsettled"] == ["hnn, width 16, 1 of the data"]
+    assert card["pick_straddles"] is True            # the pick's third seed is 2.7x the best energy
+    assert scene_tables.unsettled(card) == "hnn, width 16, 1 of the data; some of the pick's own seeds are over 2x"
+    # on seed 0 alone the card would have named the tiny HNN
+    first = scene_stages.scene_card({k: {0: v[0]} for k, v in cells.items()})
+    assert (first["kind"], first["width"]) == ("hnn", 16)
+
+
+def test_kinds_the_seeds_cannot_separate_overlap_the_best_kinds_range():
+    per_kind = {"hnn": {s: _cell(1, e, 0.1) for s, e in enumerate([1e-4, 2e-4, 3e-4])},
+                "separable": {s: _cell(1, e, 0.2) for s, e in enumerate([2.5e-4, 4e-4, 5e-4])},    # overlaps
+                "baseline": {s: _cell(1, e, 0.05) for s, e in enumerate([1e-2, 2e-2, 3e-2])}}      # apart
+    tie = scene_stages.inseparable(per_kind)
+    assert tie["energy"] == {"best": "hnn", "tied": ["separable"]}
+    assert tie["rollout"] == {"best": "baseline", "tied": []}
+    assert scene_stages.inseparable({k: {0: v[0]} for k, v in per_kind.items()}) == {}    # one seed: untested
+    lines = scene_tables.inseparable_lines({"scenes": {"spring": {"inseparable": tie}}})
+    assert lines[-1] == ("- spring: energy: best hnn, the seeds cannot separate separable; "
+                         "rollout: best baseline, the seeds cannot separate no other kind")
 
 
 def test_dhnn_split_uses_central_differences_on_their_rows():
@@ -256,15 +297,20 @@ def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_pat
     cuts = scene_stages.quick_cuts(["spring", "pixels"], seeds=3)
     assert cuts[0] == "60 training steps a model of the tasks' own 2000 (spring), 10000 (pixels)"
     assert "pixels: trials 20 of 200" in cuts and "energy MSE: 5 trials of each protocol's 15" in cuts
-    assert "1 seed of 3, so no more seeds at the cell a card picks" in cuts
+    assert "1 seed of 3, the grid's as the default cell's, so the cards test nothing on seeds" in cuts
     assert "grid: widths 16 x fractions 0.25 of 16, 32, 64, 128, 200 x 0.1, 0.25, 0.5, 1.0" in cuts
     assert any(cut.startswith("speed at accuracy: the hnn kind only") for cut in cuts)
     assert "energy drift: 3 periods of 1000 (spring), at most 0.5 s a setting of 15" in cuts
     # the speed study runs for the quick kinds only; every kind is still measured
     runs = {f"spring@200x1/{kind}/seed0": tmp_path for kind in scene_common.task_kinds("spring")}
-    units = scene_stages.measure_units(["spring"], runs, [0], [], scene_stages.QUICK_SPEED_KINDS)
+    units = scene_stages.measure_units(["spring"], runs, [0], [], [0], scene_stages.QUICK_SPEED_KINDS)
     assert {key[2]: unit[4] for key, unit in units.items()} == {kind: 0 if kind == "hnn" else None
                                                                  for kind in scene_common.task_kinds("spring")}
+    # the grid is measured at each of its seeds, a run apiece; a seed that failed to train is left out
+    runs.update({f"spring@16x0.25/hnn/seed{seed}": tmp_path / str(seed) for seed in (0, 2)})
+    units = scene_stages.measure_units(["spring"], runs, [0], grid, [0, 1, 2])
+    assert units[("cells", "spring", "hnn")][2] == {f"hnn@16x0.25/seed{seed}": ("hnn", str(tmp_path / str(seed)))
+                                                      for seed in (0, 2)}
     # a quick scene's energy protocols run 5 trials of their 15
     assert scene_common.Scene("real", quick=True).trials == study.QUICK_TRIALS == 5
     assert scene_common.Scene("real", quick=False).trials is None

@@ -103,11 +103,11 @@ def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict,
 
 
 def _describe(unit: tuple) -> str:
-    """A unit in a progress line: ``'spring  hnn'`` or ``'spring  hnn at 3 grid cells'``."""
+    """A unit in a progress line: ``'spring  hnn'`` or ``'spring  hnn at 3 grid runs (cells x seeds)'``."""
     if unit[0] == "kind":
         return f"{unit[1]:7s} {unit[2]}" + (f" ({len(unit[3])} seeds)" if len(unit[3]) > 1 else "")
     kind = next(iter(unit[2].values()))[0] if unit[2] else ""
-    return f"{unit[1]:7s} {kind} at {len(unit[2])} grid cell{'s' if len(unit[2]) != 1 else ''}"
+    return f"{unit[1]:7s} {kind} at {len(unit[2])} grid run{'s' if len(unit[2]) != 1 else ''} (cells x seeds)"
 
 
 def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:

@@ -17,11 +17,13 @@ from hnn_analysis.scenes.scene_tables import guide, markdown
 
 def write(results: dict, out: Path, update_docs: bool) -> None:
     text = markdown(results)
-    n = len(results["meta"]["seeds"])
-    # a card chooses from the width x fraction grid, which trains one seed a cell (the cost that grid x seeds
-    # would multiply); the chosen cell and the per-kind rows are retrained at the study's seeds
-    seeds = pages.Seeds(1, f"each card chooses from the width x fraction grid, trained at seed 0; the chosen "
-                                    f"cell and the per-kind rows carry {n} seed{'s' if n > 1 else ''} (their ± columns)")
+    meta = results["meta"]
+    n = len(meta["seeds"])
+    grid = len(meta.get("grid_seeds", [0]))     # a study saved before --grid-seeds trained its grid at seed 0
+    fewest = min(n, grid)
+    seeds = pages.Seeds(fewest, None if fewest >= pages.MIN_SEEDS else
+                        f"the per-kind rows carry {n} seed{'s' if n > 1 else ''} and each card chooses from a width x "
+                        f"fraction grid trained at {grid} seed{'s' if grid > 1 else ''} (--seeds, --grid-seeds)")
     commands.publish(out, "scene_study", results, text,
                      {"scenes": text, "model-guide": guide(results)} if update_docs else {}, seeds)
     figure = out / "figures" / "scenes-pareto.png"

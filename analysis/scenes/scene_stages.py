@@ -24,6 +24,7 @@ QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
 QUICK_STEPS = 60
 QUICK_SPEED_KINDS = ("hnn",)
 DEFAULT_CELL = (200, 1.0)
+SEEDS = 3                  # the full study's --seeds: of the per-kind rows and (unless --grid-seeds) the grid
 
 
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
@@ -58,15 +59,16 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     return rows
 
 
-def quick_cuts(studied: list[str], seeds: int) -> list[str]:
+def quick_cuts(studied: list[str], seeds: int, quick_seeds: int = 1) -> list[str]:
     """What ``--quick`` cuts from the full study of the scenes ``studied`` (``seeds``: the full
-    study's ``--seeds``), one phrase each, as ``main`` prints them."""
+    study's ``--seeds``; ``quick_seeds``: the quick run's), one phrase each, as ``main`` prints them."""
     quick, full = scene_common.QUICK, scene_common.FULL
     drift = [task for task in studied if scene_settings(task).get("drift")]
     cuts = study.quick_cuts(studied, QUICK_STEPS)
     cuts += [f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
              f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
-             f"1 seed of {seeds}, so no more seeds at the cell a card picks",
+             *([f"1 seed of {seeds}, the grid's as the default cell's, so the cards test nothing on seeds"]
+               if quick_seeds == 1 else [f"{quick_seeds} seeds of {seeds}"] if quick_seeds < seeds else []),
              f"rollout metrics: {quick['starts']} starts of {full['starts']}, over {quick['horizon']} training "
              f"lengths of {full['horizon']}, {quick['points']} points per length of {full['points']}",
              f"speed at accuracy: the {', '.join(QUICK_SPEED_KINDS)} kind only of every kind, the "
@@ -90,34 +92,78 @@ def _key_metric(m: dict) -> tuple[float | None, float | None]:
     return (energy[0] if energy else None), (m["rollout"]["error"] if "rollout" in m else None)
 
 
-def scene_card(cells: dict) -> dict | None:
-    """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) within
-    ``CARD_FACTOR`` of the scene's best energy MSE and best rollout error. ``cells`` is ``{(kind,
-    width, fraction): measured}``. Where no model is within ``CARD_FACTOR`` of both (the two bests
-    come from different models), the model nearest both: the smallest larger of its two ratios.
-    ``within`` is the pick's larger ratio to the bests (at most ``CARD_FACTOR`` unless it fell back)."""
-    scored = {k: _key_metric(m) for k, m in cells.items()}
-    best_e = min((e for e, _ in scored.values() if e is not None), default=None)
-    best_r = min((r for _, r in scored.values() if r is not None), default=None)
+def _spread(values: list) -> tuple[float, float, float] | None:
+    """(mean, min, max) of the seeds' values that were measured, or None."""
+    values = [v for v in values if v is not None]
+    return (sum(values) / len(values), min(values), max(values)) if values else None
 
-    def within(key) -> float:
-        e, r = scored[key]
-        ratios = [(value / best if best > 0 else 1.0) if value is not None else math.inf
-                  for value, best in ((e, best_e), (r, best_r)) if best is not None]
+
+def scene_card(cells: dict) -> dict | None:
+    """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) whose
+    mean over seeds comes within ``CARD_FACTOR`` of the scene's best mean energy MSE and best mean
+    rollout error. ``cells`` is ``{(kind, width, fraction): {seed: measured}}``. Where no model is
+    within ``CARD_FACTOR`` of both (the two bests come from different models), the model nearest
+    both: the smallest larger of its two ratios. ``within`` is the pick's larger ratio to the bests
+    (at most ``CARD_FACTOR`` unless it fell back).
+
+    With several seeds the card also says what they cannot settle: ``unsettled`` names the smaller
+    models (cells) that some seeds put within ``CARD_FACTOR`` of both bests though their mean is
+    not (the seeds cannot separate them from the pick), and ``pick_straddles`` whether some of the
+    pick's own seeds fall outside it; both are None with one seed, where nothing is tested."""
+    spread = {}
+    for key, per_seed in cells.items():
+        pairs = [_key_metric(m) for m in per_seed.values()]
+        spread[key] = (_spread([e for e, _ in pairs]), _spread([r for _, r in pairs]))
+    spread = {k: v for k, v in spread.items() if v != (None, None)}
+    if not spread:
+        return None
+    best_e = min((e[0] for e, _ in spread.values() if e is not None), default=None)
+    best_r = min((r[0] for _, r in spread.values() if r is not None), default=None)
+
+    def ratio(key, at: int) -> float:
+        """The larger ratio to the bests, of the seeds' mean (at 0), lowest (1) or highest (2)."""
+        ratios = [(value[at] / best if best > 0 else 1.0) if value is not None else math.inf
+                  for value, best in zip(spread[key], (best_e, best_r)) if best is not None]
         return max(ratios, default=1.0)
 
-    if not scored:
-        return None
-    ok = [k for k in scored if within(k) <= CARD_FACTOR]
-    def size(key) -> tuple:
-        return cells[key]["params"], scene_measure.cost_seconds(cells[key]) or 0.0
+    ok = [k for k in spread if ratio(k, 0) <= CARD_FACTOR]
 
-    pick = min(ok, key=size) if ok else min(scored, key=lambda k: (within(k), *size(k)))
-    if not math.isfinite(within(pick)):
+    def size(key) -> tuple:
+        m = next(iter(cells[key].values()))
+        return m["params"], scene_measure.cost_seconds(m) or 0.0
+
+    pick = min(ok, key=size) if ok else min(spread, key=lambda k: (ratio(k, 0), *size(k)))
+    if not math.isfinite(ratio(pick, 0)):
         return None
+    seeds = len(cells[pick])
+    several = seeds > 1
+    unsettled = ([f"{k[0]}, width {k[1]}, {k[2]:g} of the data" for k in sorted(spread, key=size)
+                  if size(k) < size(pick) and k not in ok and len(cells[k]) > 1 and ratio(k, 1) <= CARD_FACTOR]
+                 if several and pick in ok else None)
+    m = next(iter(cells[pick].values()))
     return {"kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
-            "params": cells[pick]["params"], "train_seconds": scene_measure.cost_seconds(cells[pick]),
-            "energy": scored[pick][0], "rollout": scored[pick][1], "within": within(pick)}
+            "params": m["params"], "train_seconds": scene_measure.cost_seconds(m), "n_seeds": seeds,
+            "energy": spread[pick][0][0] if spread[pick][0] else None,
+            "rollout": spread[pick][1][0] if spread[pick][1] else None, "within": ratio(pick, 0),
+            "unsettled": unsettled, "pick_straddles": (ratio(pick, 2) > CARD_FACTOR) if several and pick in ok else None}
+
+
+def inseparable(per_kind: dict) -> dict:
+    """``{"energy" | "rollout": {"best": kind, "tied": [kinds]}}`` of one scene's kinds at the default
+    cell (``{kind: {seed: measured}}``): the best kind on the seeds' mean and the kinds whose seeds'
+    range overlaps the best's, which the seeds cannot separate from it. Empty where the best has one seed."""
+    out = {}
+    for at, name in ((0, "energy"), (1, "rollout")):
+        spread = {kind: s for kind, per_seed in per_kind.items()
+                  if (s := _spread([_key_metric(m)[at] for m in per_seed.values()])) is not None}
+        if not spread:
+            continue
+        best = min(spread, key=lambda k: spread[k][0])
+        if len(per_kind[best]) < 2:
+            continue
+        out[name] = {"best": best, "tied": [k for k in sorted(spread, key=lambda k: spread[k][0])
+                                            if k != best and len(per_kind[k]) > 1 and spread[k][1] <= spread[best][2]]}
+    return out
 
 
 def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -> tuple[dict, dict]:
@@ -125,16 +171,17 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     pick the cards; ``(results, {run key: run folder or failure})``. ``argv`` is recorded as the
     command (folders as ``DIR``), ``cuts`` as what ``--quick`` cut."""
     steps = QUICK_STEPS if args.quick else None
-    seeds = [0] if args.quick else list(range(args.seeds))
+    seeds = list(range(args.seeds))
+    grid_seeds = list(range(args.grid_seeds or args.seeds))
     start = time.perf_counter()
     results = {"meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
         "DIR" if Path(a).is_absolute() else a for a in argv), "quick": args.quick, "quick_cuts": cuts, "seeds": seeds,
-        "jobs": args.jobs, "backend": args.backend,
+        "grid_seeds": grid_seeds, "jobs": args.jobs, "backend": args.backend,
         "starts": (scene_common.QUICK if args.quick else scene_common.FULL)["starts"],
         "horizon": (scene_common.QUICK if args.quick else scene_common.FULL)["horizon"]},
         "scenes": {}, "seconds": {}}
 
-    # 1. train: every scene's kinds at the default cell (all seeds), the grid (seed 0), the D-HNN split
+    # 1. train: every scene's kinds at the default cell (all seeds), the grid (its seeds), the D-HNN split
     rows = plan_rows(studied, args.quick)
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
@@ -143,7 +190,7 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     one_seed = {task for task in studied if scene_settings(task).get("one_seed")}
     runs, _ = train([([r for r in default_rows if r["task"] not in one_seed], seeds, steps, None),
                      ([r for r in default_rows if r["task"] in one_seed], seeds[:1], steps, None),
-                     (grid_rows, [0], steps, None),
+                     (grid_rows, grid_seeds, steps, None),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
                      (dhnn_rows, [0], steps, DHNN_MODELS)], out, args)
     results["seconds"]["training"] = time.perf_counter() - tic
@@ -151,13 +198,14 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
     # states, which a second thread does not speed up; --jobs processes share the units
     tic = time.perf_counter()
-    units = measure_units(studied, runs, seeds, grid_rows, QUICK_SPEED_KINDS if args.quick else None)
+    units = measure_units(studied, runs, seeds, grid_rows, grid_seeds, QUICK_SPEED_KINDS if args.quick else None)
     measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cells_by_scene = {}
     for task in studied:
-        entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "speed": {}}
+        entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "grid_seeds": {},
+                 "speed": {}}
         cells = {}
         for kind in task_kinds(task):
             result = measured.get(("kind", task, kind))
@@ -165,26 +213,34 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
                 continue
             per_seed = result["per_seed"]
             entry["kinds"][kind] = {"per_seed": per_seed, **_across(per_seed)}
-            cells[(kind, *DEFAULT_CELL)] = per_seed[min(per_seed)]
+            cells[(kind, *DEFAULT_CELL)] = per_seed
             if "speed" in result:
                 entry["speed"][kind] = result["speed"]
+        entry["inseparable"] = inseparable({kind: cells[(kind, *DEFAULT_CELL)] for kind in entry["kinds"]})
         for kind in task_kinds(task):
+            grid = {}
             for key, m in measured.get(("cells", task, kind), {}).items():
-                entry["grid"][key] = m
-                width, fraction = key.split("@")[1].split("x")
-                cells[(kind, int(width), float(fraction))] = m
+                cell, seed = key.rsplit("/seed", 1)
+                grid.setdefault(cell, {})[int(seed)] = m
+            for cell, per_seed in grid.items():
+                # the grid tables show the first seed's numbers; the card reads every seed's
+                entry["grid"][cell] = per_seed[min(per_seed)]
+                if len(per_seed) > 1:
+                    entry["grid_seeds"][cell] = _across(per_seed)
+                width, fraction = cell.split("@")[1].split("x")
+                cells[(kind, int(width), float(fraction))] = per_seed
         cells_by_scene[task] = cells
         results["scenes"][task] = entry
     if dhnn_rows:
         results["dhnn"] = _dhnn(runs, dhnn_rows[0])
     results["seconds"]["measure"] = time.perf_counter() - tic
 
-    # 3. the cards; more seeds at a chosen grid cell
+    # 3. the cards; more seeds at a chosen grid cell the grid trained at fewer than the study's seeds
     tic = time.perf_counter()
     for task, cells in cells_by_scene.items():
         card = scene_card(cells)
         results["scenes"][task]["card"] = card
-        if card and scene_settings(task).get("grid") and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > 1:
+        if card and (card["width"], card["fraction"]) != DEFAULT_CELL and len(seeds) > card["n_seeds"]:
             row = _row(task, (card["width"], card["fraction"]), args.quick)
             more, _ = train([([row], seeds, steps, (card["kind"],))], out, args)
             runs.update(more)
@@ -192,6 +248,8 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
             found = {s: (card["kind"], more[k]) for s, k in keys.items() if isinstance(more.get(k), Path)}
             scene = Scene(task, args.quick, states.get(task))
             card["seeds"] = _across(scene_measure.measure_models(scene, found))
+        elif card and card["n_seeds"] > 1:
+            card["seeds"] = _across(cells[(card["kind"], card["width"], card["fraction"])])
     results["seconds"]["cards"] = time.perf_counter() - tic
     torch.set_num_threads(threads)
     results["seconds"]["total"] = time.perf_counter() - start
@@ -199,10 +257,11 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     return results, runs
 
 
-def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], speed_kinds=None) -> dict:
+def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], grid_seeds: list[int],
+                  speed_kinds=None) -> dict:
     """``{key: scene_measure unit}``: per scene, each kind at the default cell (its seeds, and the
     speed study of the first seed where the scene has a truth to roll out, for the ``speed_kinds``
-    only when given), then each kind's grid."""
+    only when given), then each kind's grid at ``grid_seeds`` (cells keyed ``kind@WxF/seedS``)."""
     units = {}
     for task in scenes:
         for kind in task_kinds(task):
@@ -217,9 +276,10 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], s
         for kind in task_kinds(task):
             cells = {}
             for row in (r for r in grid_rows if r["task"] == task):
-                run = runs.get(f"{row['row']}/{kind}/seed0")
-                if isinstance(run, Path):
-                    cells[f"{kind}@{row['cell'][0]}x{row['cell'][1]:g}"] = (kind, str(run))
+                for seed in grid_seeds:
+                    run = runs.get(f"{row['row']}/{kind}/seed{seed}")
+                    if isinstance(run, Path):
+                        cells[f"{kind}@{row['cell'][0]}x{row['cell'][1]:g}/seed{seed}"] = (kind, str(run))
             if cells:
                 units[("cells", task, kind)] = ("cells", task, cells)
     return units

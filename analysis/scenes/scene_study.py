@@ -17,10 +17,11 @@ has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3bo
    reaches error 1e-4 against DOP853 rtol 1e-12 of the same field, and the learned H's drift over
    1000 periods (spring, pend) or 100 orbits (2body) at it and at the fastest symplectic one.
 3. *Capacity and data* (spring, pend, 2body): hidden width x training fraction for every kind at
-   seed 0, then ``--seeds`` seeds at the cell each scene card picks.
-4. *Scene cards*: the smallest model (fewest parameters, then cheapest to train) within 2x of
-   the best energy MSE and the best rollout error of its scene; Pareto plots of error against
-   training and rollout seconds.
+   ``--grid-seeds`` seeds (default: ``--seeds``; with ``--group`` a cell's seeds train as one group).
+4. *Scene cards*: the smallest model (fewest parameters, then cheapest to train) whose mean over
+   seeds is within 2x of the best mean energy MSE and the best mean rollout error of its scene,
+   with the smaller models the seeds cannot separate from it, and per scene the kinds whose seeds
+   overlap the best kind's; Pareto plots of error against training and rollout seconds.
 5. *The real pendulum, the D-HNN paper's way*: their split and central differences, their energy
    2.4 (1 - cos q) + p^2, beside their published numbers.
 
@@ -50,13 +51,17 @@ def _parser() -> argparse.ArgumentParser:
                    help="scenes to study (default: every task that declares scene_study)")
     quick = scene_stages.QUICK_STEPS, scene_stages.QUICK_WIDTHS, scene_stages.QUICK_FRACTIONS
     commands.add_flags(p, quick=f"smoke run: {quick[0]} steps per model (with --data: {study.QUICK_STEPS}, one width), "
-                                f"widths {quick[1]} x fractions {quick[2]}, one seed, short drift runs (the run prints "
+                                f"widths {quick[1]} x fractions {quick[2]}, one seed unless --seeds, short drift runs (the run prints "
                                 f"every cut); output in results-quick/; {commands.budget_words('scene_study')}; with "
                                 f"--data: {commands.budget_words('scene_study --data')}",
                        out="output folder (default results/ or results-quick/)",
-                       seeds="seeds of the per-kind rows and the chosen cells (quick: 1)", seeds_default=3,
+                       seeds=f"seeds of the per-kind rows and the grid's cells (default {scene_stages.SEEDS}; --quick: 1)",
+                       seeds_default=None,
                        jobs="training processes, as reproduce.py --jobs; then as many measuring processes (local "
                             "backend)")
+    p.add_argument("--grid-seeds", type=hnn.cli.int_at_least(1), default=None,
+                   help="seeds of every width x fraction cell, the cards' candidates (default: --seeds; 1 trains "
+                        "the grid at seed 0 alone, a third of the cost, and the page says the cards rest on one seed)")
     sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write docs/scenes.md and the README's model guide (full settings only); with "
                                       "--data, the README's row of that file")
@@ -75,7 +80,9 @@ def main(argv=None) -> dict:
         return measured_study.run(args, argv, parser)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     studied = args.scenes or scenes()
-    cuts = scene_stages.quick_cuts(studied, args.seeds) if args.quick else []
+    given = args.seeds
+    args.seeds = args.seeds or (1 if args.quick else scene_stages.SEEDS)
+    cuts = scene_stages.quick_cuts(studied, scene_stages.SEEDS, given or 1) if args.quick else []
     if cuts:
         commands.say_quick("scene_study", cuts)
     results, runs = scene_stages.run(args, argv, out, studied, cuts)
