@@ -174,7 +174,8 @@ def test_quick_runs_every_row_of_every_task_on_one_seed_and_few_steps_and_says_s
         task, label, seed, steps, out, init, quick, device = args
         assert device == "cpu"
         asked.append((task, label, seed, steps, quick))
-        return args[:3], {"run": "", "derivative": 1.0, "energy": {p: 1.0 for p in dgnet_protocol.ROWS[label][3]}}
+        return (*args[:3], init), {"run": "", "derivative": 1.0,
+                                   "energy": {p: 1.0 for p in dgnet_protocol.ROWS[label][3]}}
 
     monkeypatch.setattr(dgnet, "measure_job", fake_job)
     results = dgnet.main(["--quick", "--out", str(tmp_path)])
@@ -193,6 +194,43 @@ def test_quick_runs_every_row_of_every_task_on_one_seed_and_few_steps_and_says_s
     assert {seed for _, _, seed, _, _ in asked} == {0, 1} and "seed of their" not in capsys.readouterr().out
     with pytest.raises(SystemExit):
         dgnet.main(["--quick", "--update-docs"])
+
+
+def test_compare_init_trains_the_rows_asked_from_both_inits_and_tells_them_apart_on_seeds(tmp_path, monkeypatch):
+    from hnn_analysis.chains import dgnet, dgnet_init, dgnet_protocol
+    asked = []
+
+    def fake_job(args):      # DGNet's energies: 10x lower from zero biases; the HNN's: the same from both
+        task, label, seed, steps, out, init, quick, device = args
+        asked.append((label, seed, init))
+        scale = 0.1 if (label == "DGNet" and init == "zero_bias") else 1.0
+        return (*args[:3], init), {"run": "", "derivative": 1.0, "energy": {
+            p: scale * (1.0 + 0.1 * seed) for p in dgnet_protocol.ROWS[label][3]}}
+
+    monkeypatch.setattr(dgnet, "measure_job", fake_job)
+    results = dgnet.main(["--quick", "--tasks", "spring", "--seeds", "4", "--rows", "DGNet", "HNN", "--compare-init",
+                          "--out", str(tmp_path)])
+    assert sorted(asked) == sorted((label, seed, init) for label in ("HNN", "DGNet") for seed in range(4)
+                                   for init in dgnet_init.INITS)
+    text = (tmp_path / "dgnet.md").read_text()
+    # 4 seeds against 4, every zero-bias seed below every default-bias one: the exact two-sided p is 2/70
+    assert "| DGNet (discrete gradient / discrete gradient) |" in text and "| 0.029 | zero biases lower |" in text
+    assert "| HNN (RK4 step / ada. DP) |" in text and "the seeds cannot separate them" in text
+    assert set(results["init_rows"]["spring"]) == {"DGNet", "HNN"}
+    # a task's table with rows missing is never written to the page
+    with pytest.raises(SystemExit):
+        dgnet.main(["--tasks", "spring", "--rows", "DGNet", "--update-docs"])
+    with pytest.raises(SystemExit):
+        dgnet.main(["--tasks", "real", "--compare-init", "--update-docs"])
+
+
+def test_the_init_verdict_needs_three_seeds_a_side_and_a_separating_rank_test():
+    from hnn_analysis.chains import dgnet_init
+    assert dgnet_init.compare([1.0, 2.0], [3.0, 4.0]) == (None, "too few seeds to test")
+    p, verdict = dgnet_init.compare([5.0, 6.0, 7.0, 8.0, 9.0], [1.0, 2.0, 3.0, 4.0, 4.5])
+    assert verdict == "default biases lower" and p == pytest.approx(2 / 252)      # exact: 2 of C(10, 5) orders
+    p, verdict = dgnet_init.compare([1.0, 3.0, 5.0], [2.0, 4.0, 6.0])
+    assert verdict == "the seeds cannot separate them" and p > dgnet_init.P_SEPARATE
 
 
 def test_quick_data_are_their_recipe_on_fewer_paths_and_orbits():

@@ -7,6 +7,8 @@ here the same way (docs/dgnet.md).
     python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their steps (SETTINGS)
     python analysis/chains/dgnet.py --tasks pend --seeds 3 --jobs 2 --update-docs  # docs/dgnet.md, pend's section
     python analysis/chains/dgnet.py --tasks 2body --seeds 3 --jobs 2 --update-docs # 2body's (cost below)
+    python analysis/chains/dgnet.py --tasks spring --seeds 15 --rows DGNet HNN --compare-init --jobs 2 --update-docs
+                                     # their init against the original HNN's (dgnet_init), section dgnet-init-spring
 
 The protocol, theirs and ours (where it differs), and the 2-body's cost: ``dgnet_protocol``'s docstring.
 """
@@ -21,8 +23,9 @@ from pathlib import Path
 import hnn
 from hnn import sweep, sweep_flags
 from hnn_analysis import commands, pages
-from hnn_analysis.chains.dgnet_protocol import (QUICK, QUICK_DATA, SETTINGS, TASKS, TRIALS, PUBLISHED, measure_job,
-                                                quick_cuts, rows_for, table, task_table)
+from hnn_analysis.chains import dgnet_init
+from hnn_analysis.chains.dgnet_protocol import (QUICK, QUICK_DATA, ROWS, SETTINGS, TASKS, TRIALS, PUBLISHED,
+                                                measure_job, quick_cuts, rows_for, table, task_table)
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import provenance
 
@@ -33,6 +36,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--init", choices=hnn.names.INITS, default="zero_bias",
                         help="how every row's MLPs start: zero_bias (theirs: orthogonal weights, zero biases) or "
                              "orthogonal (the original HNN's: torch's default biases)")
+    parser.add_argument("--rows", nargs="+", choices=list(ROWS), default=None,
+                        help="train these rows only (default: every row of each task); --update-docs then writes "
+                             "the init comparison alone, never a task's table with rows missing")
+    parser.add_argument("--compare-init", action="store_true",
+                        help="train the rows from both inits (zero_bias, theirs; orthogonal, the original HNN's) and "
+                             "compare them over the seeds (section dgnet-init-<task>, for spring and pend)")
     parser.add_argument("--steps", type=int, default=None,
                         help="optimizer steps per run (default: theirs, 2000; 2body 10000)")
     commands.add_flags(parser, quick=f"a smoke run of every task and row: {QUICK['seeds']} seed, {QUICK['steps']} steps a "
@@ -48,6 +57,11 @@ def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/dgnet.md; drop --quick")
+    if args.update_docs and args.rows and not args.compare_init:
+        parser.error("--update-docs with --rows would write a task's table with rows missing; add --compare-init "
+                     "(its own section) or drop --rows")
+    if args.compare_init and args.update_docs and set(args.tasks) - {"spring", "pend"}:
+        parser.error(f"docs/dgnet.md compares inits on the ring tasks (spring, pend), not {args.tasks}")
     cut = quick_cuts(args.tasks, args.seeds, args.steps) if args.quick else []
     if args.quick:
         args.seeds, args.steps = args.seeds or QUICK["seeds"], args.steps or QUICK["steps"]
@@ -58,15 +72,19 @@ def main(argv=None) -> dict:
     if args.steps is not None and args.steps < 1:
         sys.exit(f"error: --steps must be positive, got {args.steps}")
     steps = {task: SETTINGS[task]["steps"] if args.steps is None else args.steps for task in args.tasks}
-    work = [(task, label, seed, steps[task], args.out, args.init, args.quick, args.device or "cpu")
-            for seed in range(args.seeds)
-            for task in args.tasks for label in rows_for(task)]
+    labels = {task: [label for label in rows_for(task) if args.rows is None or label in args.rows]
+              for task in args.tasks}
+    inits = dgnet_init.INITS if args.compare_init else (args.init,)
+    work = [(task, label, seed, steps[task], args.out, init, args.quick, args.device or "cpu")
+            for seed in range(args.seeds) for init in inits
+            for task in args.tasks for label in labels[task]]
     done, progress = {}, sweep.Progress(len(work))
     print(f"{progress.tag()} training and measuring {len(work)} runs", flush=True)
 
     def record(i: int, key: tuple, result: dict) -> None:
         done[key] = result
-        print(f"{progress.advance()} {key[0]} {key[1]} seed {key[2]}: derivative {result['derivative']:.3g}, "
+        init = f" ({key[3]})" if args.compare_init else ""
+        print(f"{progress.advance()} {key[0]} {key[1]} seed {key[2]}{init}: derivative {result['derivative']:.3g}, "
               f"energy {', '.join(f'{k} {v:.3g}' for k, v in result['energy'].items())}", flush=True)
 
     if args.jobs == 1:
@@ -76,15 +94,22 @@ def main(argv=None) -> dict:
         with ProcessPoolExecutor(args.jobs) as pool:
             for i, (key, result) in enumerate(pool.map(measure_job, work), 1):
                 record(i, key, result)
-    rows = {task: {label: [done[(task, label, seed)] for seed in range(args.seeds)] for label in rows_for(task)}
+    rows = {task: {label: [done[(task, label, seed, inits[0])] for seed in range(args.seeds)] for label in labels[task]}
             for task in args.tasks}
     meta["seconds"] = time.perf_counter() - tic
     results = {"meta": {**meta, "quick": args.quick, "quick_cuts": cut}, "steps": steps, "seeds": args.seeds,
                "tasks": args.tasks, "init": args.init,
                "published": PUBLISHED,
                "settings": {task: SETTINGS[task] for task in args.tasks}, "rows": rows}
-    text = table(results)
-    sections = {f"dgnet-{task}": task_table(results, task) for task in args.tasks} if args.update_docs else {}
+    if args.compare_init:
+        results["init_rows"] = {task: {label: {init: [done[(task, label, seed, init)] for seed in range(args.seeds)]
+                                               for init in inits} for label in labels[task]} for task in args.tasks}
+        text = "\n\n".join(dgnet_init.init_table(results, task) for task in args.tasks) + "\n"
+        sections = {f"dgnet-init-{task}": dgnet_init.init_table(results, task) for task in args.tasks}
+    else:
+        text = table(results)
+        sections = {f"dgnet-{task}": task_table(results, task) for task in args.tasks}
+    sections = sections if args.update_docs else {}
     seeds = pages.Seeds(args.seeds, None if args.seeds >= pages.MIN_SEEDS
                                  else f"this run had --seeds {args.seeds} of their 15 trials")
     commands.publish(args.out, "dgnet", results, text, sections, seeds)

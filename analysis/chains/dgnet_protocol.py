@@ -238,8 +238,9 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str =
 
 
 def measure_job(args: tuple) -> tuple:
+    """``((task, label, seed, init), measure(*args))`` on one thread (a worker's task)."""
     torch.set_num_threads(1)
-    return args[:3], measure(*args)
+    return (*args[:3], args[5]), measure(*args)
 
 
 def rows_for(task: str) -> list[str]:
