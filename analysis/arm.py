@@ -25,6 +25,7 @@ from pathlib import Path
 import torch
 
 import hnn
+from hnn import sweep
 from hnn.io import write_json
 from hnn_analysis import pages
 from hnn_analysis.commands import portable_command
@@ -85,7 +86,8 @@ def main(argv=None) -> dict:
     data = hnn.load_task("arm")
     arm = data.Arm((args.mass, args.mass))
     out = Path(args.out)
-    results = {}
+    results, progress = {}, sweep.Progress(len(args.balance) * len(args.models) * len(args.seeds))
+    print(f"{progress.tag()} training and measuring {progress.total} runs", flush=True)
     for balance in args.balance:
         for model in args.models:
             rows = []
@@ -95,7 +97,7 @@ def main(argv=None) -> dict:
                                                        "save_dir": str(out / "runs")})
                 folder = hnn.runs.find_run(config) or hnn.run_experiment(config)
                 rows.append({"seed": seed, **measure(folder, arm)})
-                print(f"{model} ({balance}) seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
+                print(f"{progress.advance()} {model} ({balance}) seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
                                                                        if isinstance(v, float)), flush=True)
             results[f"{model} ({balance})"] = rows
     lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread a run): "

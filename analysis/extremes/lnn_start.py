@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn import sweep
 from hnn_analysis.provenance import machine
 
 
@@ -18,7 +19,8 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
     acceleration at them, whether the first batch's loss (200 RK4 snippets) is computed and, with
     ``steps``, whether that many training steps run."""
     from hnn.models.lagrangian import SingularLagrangianError
-    out = []
+    out, progress = [], sweep.Progress(len(bobs) * len(inits) * seeds)
+    print(f"{progress.tag()} {progress.total} fresh LNNs to start", flush=True)
     for n in bobs:
         for init in inits:
             for seed in range(seeds):
@@ -55,7 +57,7 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                     except hnn.DivergenceError as err:
                         row["train_stop"] = f"{type(err).__name__}: {str(err)[:120]}"
                 out.append(row)
-                print(row, flush=True)
+                print(progress.advance(), row, flush=True)
     return out
 
 

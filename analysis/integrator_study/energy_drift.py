@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn import sweep
 from hnn_analysis import commands
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
@@ -89,13 +90,14 @@ def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     meta = {**provenance(), "command": portable_command(argv, "analysis/integrator_study/energy_drift.py")}
     torch.set_num_threads(1)
-    rows = {}
+    rows, progress = {}, sweep.Progress(sum(len(methods) for methods in METHODS.values()))
+    print(f"{progress.tag()} {len(METHODS)} models to train, {progress.total} drift runs", flush=True)
     for kind, methods in METHODS.items():
         model = trained(kind, args.train_steps, args.out)
         rows[kind] = {}
         for method in methods:
             rows[kind][method] = drift(model, method, args.steps, args.dt)
-            print(f"{kind} {method}: largest drift {rows[kind][method]['max']:.2e}", flush=True)
+            print(f"{progress.advance()} {kind} {method}: largest drift {rows[kind][method]['max']:.2e}", flush=True)
     results = {"meta": meta, "steps": args.steps, "dt": args.dt, "train_steps": args.train_steps, "rows": rows}
     text = table(results)
     commands.publish(args.out, "energy_drift", results, text, {"energy-drift": text} if args.update_docs else {})
