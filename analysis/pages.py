@@ -45,7 +45,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
                           "--update-docs",
            "arm-balance-long": "python analysis/arm.py --steps 4000 --mass 10 --models mechanical hnn --out "
                                "results/arm-m10-4k --update-docs --section arm-balance-long",
-           **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --seeds 3 --jobs 2 --update-docs"
+           **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --jobs 2 --update-docs (their 15 trials)"
               for task in ("spring", "pend", "real", "2body")},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "many-models": "python analysis/benchmarks/benchmark_many.py --update-docs",

@@ -5,8 +5,8 @@ here the same way (docs/dgnet.md).
     python analysis/chains/dgnet.py --quick                                       # a smoke run (QUICK)
     python analysis/chains/dgnet.py --steps 300 --seeds 2 --out results-dgnet    # a small budget
     python analysis/chains/dgnet.py --tasks spring pend --seeds 3 --jobs 2        # their steps (SETTINGS)
-    python analysis/chains/dgnet.py --tasks pend --seeds 3 --jobs 2 --update-docs  # docs/dgnet.md, pend's section
-    python analysis/chains/dgnet.py --tasks 2body --seeds 3 --jobs 2 --update-docs # 2body's (cost below)
+    python analysis/chains/dgnet.py --tasks pend --jobs 2 --update-docs   # their 15 trials: docs/dgnet.md, pend's
+    python analysis/chains/dgnet.py --tasks 2body --jobs 2 --update-docs  # 2body's section (cost below)
     python analysis/chains/dgnet.py --tasks spring --seeds 15 --rows DGNet HNN --compare-init --jobs 2 --update-docs
                                      # their init against the original HNN's (dgnet_init), section dgnet-init-spring
 

@@ -107,9 +107,9 @@ def scene_card(cells: dict) -> dict | None:
     (at most ``CARD_FACTOR`` unless it fell back).
 
     With several seeds the card also says what they cannot settle: ``unsettled`` names the smaller
-    models (cells) that some seeds put within ``CARD_FACTOR`` of both bests though their mean is
-    not (the seeds cannot separate them from the pick), and ``pick_straddles`` whether some of the
-    pick's own seeds fall outside it; both are None with one seed, where nothing is tested."""
+    models (cells) whose mean is not within ``CARD_FACTOR`` of both bests but whose lowest seed on
+    each error is (the seeds cannot separate them from the pick), and ``pick_straddles`` whether the
+    pick's highest seed on either error is over it; both are None with one seed, where nothing is tested."""
     spread = {}
     for key, per_seed in cells.items():
         pairs = [_key_metric(m) for m in per_seed.values()]

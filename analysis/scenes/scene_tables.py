@@ -153,9 +153,9 @@ def card_table(results: dict) -> list[str]:
              "within 2x of the best mean of its scene, over every kind and (spring, pend, 2body) every width and "
              f"training fraction, the grid trained at seed{'s' if len(grid) > 1 else ''} {', '.join(map(str, grid))} "
              "(where none does, the model nearest both bests: the smallest larger ratio, which the row gives). "
-             "*Seeds cannot separate*: the smaller models that some of their seeds put within 2x of both bests "
-             "though their mean is not, and whether some of the pick's own seeds fall outside 2x; with one seed "
-             "the card tests neither. Train s, here and "
+             "*Seeds cannot separate*: the smaller models whose mean is not within 2x of both bests but whose "
+             "lowest seed on each error is, and whether the pick's highest seed on either error is over 2x; with one "
+             "seed the card tests neither. Train s, here and "
              "below: the run's steps at the steps per second of that model alone on one thread, timed by this study "
              "over a short burst (not the run's recorded wall time, which depends on what else the machine did).", "",
              "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds | "
