@@ -14,6 +14,8 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write
 
+# the tasks whose DGNet init comparison (analysis/chains/dgnet_init.py) docs/dgnet.md shows
+DGNET_INIT_TASKS = ("spring",)
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md", "threads": "docs/speed.md",
@@ -24,7 +26,8 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "arm-balance": "docs/stress.md", "arm-balance-long": "docs/stress.md", "ray-quick": "docs/sweeps.md",
          "ray-full": "docs/sweeps.md",
          "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
-         **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")}}
+         **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")},
+         **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 5 --jobs 2 --update-docs",
@@ -47,6 +50,8 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
                                "results/arm-m10-4k --update-docs --section arm-balance-long",
            **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --jobs 2 --update-docs (their 15 trials)"
               for task in ("spring", "pend", "real", "2body")},
+           **{f"dgnet-init-{task}": f"python analysis/chains/dgnet.py --tasks {task} --rows DGNet HNN --compare-init "
+                                    "--jobs 2 --update-docs (their 15 trials)" for task in DGNET_INIT_TASKS},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "many-models": "python analysis/benchmarks/benchmark_many.py --update-docs",
            "thread-spread": "python analysis/paper/thread_spread.py --update-docs",
@@ -58,7 +63,8 @@ DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 # the sections that draw verdicts (a table's marks or ranking, a card's choice): each records the seeds
 # they rest on in docs/seeds.json when written, and one resting on fewer than MIN_SEEDS says why
 VERDICTS = ("headline", "results", "scenes", "model-guide", "measured-guide", "peers", "stress", "lnn-start",
-            "arm-balance", "arm-balance-long", *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")))
+            "arm-balance", "arm-balance-long", *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
+            *(f"dgnet-init-{task}" for task in DGNET_INIT_TASKS))
 MIN_SEEDS = 3
 SEEDS_FILE = "docs/seeds.json"
 

@@ -41,7 +41,7 @@ def main(argv=None) -> dict:
                              "the init comparison alone, never a task's table with rows missing")
     parser.add_argument("--compare-init", action="store_true",
                         help="train the rows from both inits (zero_bias, theirs; orthogonal, the original HNN's) and "
-                             "compare them over the seeds (section dgnet-init-<task>, for spring and pend)")
+                             "compare them over the seeds (section dgnet-init-<task> of dgnet_init.TASKS)")
     parser.add_argument("--steps", type=int, default=None,
                         help="optimizer steps per run (default: theirs, 2000; 2body 10000)")
     commands.add_flags(parser, quick=f"a smoke run of every task and row: {QUICK['seeds']} seed, {QUICK['steps']} steps a "
@@ -60,8 +60,9 @@ def main(argv=None) -> dict:
     if args.update_docs and args.rows and not args.compare_init:
         parser.error("--update-docs with --rows would write a task's table with rows missing; add --compare-init "
                      "(its own section) or drop --rows")
-    if args.compare_init and args.update_docs and set(args.tasks) - {"spring", "pend"}:
-        parser.error(f"docs/dgnet.md compares inits on the ring tasks (spring, pend), not {args.tasks}")
+    if args.compare_init and args.update_docs and set(args.tasks) - set(dgnet_init.TASKS):
+        parser.error(f"docs/dgnet.md has an init comparison for {', '.join(dgnet_init.TASKS)} only, not for every "
+                     f"task of {args.tasks}: add the task to pages.DGNET_INIT_TASKS and its markers to the page")
     cut = quick_cuts(args.tasks, args.seeds, args.steps) if args.quick else []
     if args.quick:
         args.seeds, args.steps = args.seeds or QUICK["seeds"], args.steps or QUICK["steps"]

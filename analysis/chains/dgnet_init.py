@@ -14,10 +14,12 @@ import statistics
 
 from scipy.stats import mannwhitneyu
 
+from hnn_analysis import pages
 from hnn_analysis.chains.dgnet_protocol import INIT_WORDS, ROWS, SETTINGS
 from hnn_analysis.provenance import machine
 
 INITS = ("zero_bias", "orthogonal")          # theirs, then the original HNN's
+TASKS = pages.DGNET_INIT_TASKS               # the tasks whose comparison docs/dgnet.md shows (section dgnet-init-<task>)
 P_SEPARATE = 0.05                            # the rank test's two-sided p under which the seeds separate the inits
 
 
