@@ -212,7 +212,7 @@ def test_compare_init_trains_the_rows_asked_from_both_inits_and_tells_them_apart
                           "--out", str(tmp_path)])
     assert sorted(asked) == sorted((label, seed, init) for label in ("HNN", "DGNet") for seed in range(4)
                                    for init in dgnet_init.INITS)
-    text = (tmp_path / "dgnet.md").read_text()
+    text = (tmp_path / "dgnet-init.md").read_text()      # beside the tables' dgnet.md, not over it
     # 4 seeds against 4, every zero-bias seed below every default-bias one: the exact two-sided p is 2/70
     assert "| DGNet (discrete gradient / discrete gradient) |" in text and "| 0.029 | zero biases lower |" in text
     assert "| HNN (RK4 step / ada. DP) |" in text and "the seeds cannot separate them" in text

@@ -99,7 +99,7 @@ def main(argv=None) -> dict:
             for task in args.tasks}
     meta["seconds"] = time.perf_counter() - tic
     results = {"meta": {**meta, "quick": args.quick, "quick_cuts": cut}, "steps": steps, "seeds": args.seeds,
-               "tasks": args.tasks, "init": args.init,
+               "tasks": args.tasks, "init": list(inits) if args.compare_init else args.init,
                "published": PUBLISHED,
                "settings": {task: SETTINGS[task] for task in args.tasks}, "rows": rows}
     if args.compare_init:
@@ -113,7 +113,7 @@ def main(argv=None) -> dict:
     sections = sections if args.update_docs else {}
     seeds = pages.Seeds(args.seeds, None if args.seeds >= pages.MIN_SEEDS
                                  else f"this run had --seeds {args.seeds} of their 15 trials")
-    commands.publish(args.out, "dgnet", results, text, sections, seeds)
+    commands.publish(args.out, "dgnet-init" if args.compare_init else "dgnet", results, text, sections, seeds)
     return results
 
 
