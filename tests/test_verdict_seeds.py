@@ -13,7 +13,7 @@ from hnn_analysis import pages
 # this test then fails until the section's entry here is removed.
 UNRECORDED = {
     "peers": "is about 12 hours of training on 2 cores and has not been run",
-    "scenes": "a grid at three\nseeds triples the study's training, not yet run",
+    "scenes": "each chose from the width x\nfraction grid trained at seed 0 alone",
     "model-guide": "a card chooses from a grid trained at seed 0",
     "measured-guide": "each kind trains once (seed 0) on the data",
     "lnn-start": "seeds 0 to 4",
