@@ -241,3 +241,18 @@ def test_quick_data_are_their_recipe_on_fewer_paths_and_orbits():
     assert quick["dt"] == full["dt"]
     orbits = dgnet_protocol.dataset("2body", 0, orbits=10)
     assert len(orbits["pairs"]) == 8 * 499         # 80% of the orbits train, each 500 states
+
+
+def test_the_table_counts_our_seeds_below_their_published_mean_of_the_same_row():
+    from hnn_analysis.chains import dgnet_protocol
+    theirs = dgnet_protocol.published_energy("spring", "DGNet", "discrete gradient")
+    assert theirs == dgnet_protocol.PUBLISHED["spring"]["DGNet (discrete gradient / discrete gradient)"][1]
+    assert dgnet_protocol.published_energy("spring", "HNN, paper's objective", "ada. DP") is None   # no row of theirs
+    runs = [{"derivative": 0.04, "energy": {p: e for p in ("discrete gradient", "ada. DP", "leapfrog")}}
+            for e in (0.5 * theirs, 0.9 * theirs, 2.0 * theirs)]
+    results = {"seeds": 3, "steps": {"spring": 2000}, "meta": {"command": "cmd", "seconds": 1.0, "cores": 2},
+               "tasks": ["spring"], "init": "zero_bias",
+               "rows": {"spring": {label: runs for label in dgnet_protocol.rows_for("spring")}}}
+    text = dgnet_protocol.task_table(results, "spring")
+    assert "| ours, mean of 3 seeds, 2000 steps | 2 of 3 |" in text
+    assert text.splitlines()[-1].endswith("| ours, mean of 3 seeds, 2000 steps |  |")    # the paper's objective
