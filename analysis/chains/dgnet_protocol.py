@@ -260,7 +260,7 @@ def task_table(results: dict, task: str) -> str:
              f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: {SETTINGS[task]['steps']}) of "
              f"{'the full batch' if batch is None else f'minibatches of {batch}'}, every MLP started with "
              f"{INIT_WORDS[results.get('init', 'orthogonal')]}. Energy: mean over the seeds, "
-             "with their spread; *below theirs*: how many of our seeds score below their published mean of the "
+             "with their median and range; *below theirs*: how many of our seeds score below their published mean of the "
              "same row.", "", "| model (train / predict) | derivative | energy | source | below theirs |",
              "| --- | --- | --- | --- | --- |"]
     lines += [f"| {name} | {d:.2e} | {e:.2e} | published, mean of 15 | |" for name, (d, e) in PUBLISHED[task].items()]
@@ -269,7 +269,8 @@ def task_table(results: dict, task: str) -> str:
         d = statistics.mean(r["derivative"] for r in runs)
         for predict in ROWS[label][3]:
             energies = [r["energy"][predict] for r in runs]
-            spread = f" (min {min(energies):.2e}, max {max(energies):.2e})" if n > 1 else ""
+            spread = (f" (median {statistics.median(energies):.2e}, min {min(energies):.2e}, max {max(energies):.2e})"
+                      if n > 1 else "")
             theirs = published_energy(task, label, predict)
             below = "" if theirs is None else f"{sum(e < theirs for e in energies)} of {n}"
             lines.append(f"| ours: {label} ({ROWS[label][2]} / {predict}) | {d:.2e} | "
