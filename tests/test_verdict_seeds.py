@@ -19,7 +19,6 @@ UNRECORDED = {
     "lnn-start": "seeds 0 to 4",
     "arm-balance": "over seeds 0, 1, 2",
     "arm-balance-long": "over seeds 0, 1, 2",
-    "dgnet-spring": "5 seed(s) of their 15 trials",
     "dgnet-pend": "5 seed(s) of their 15 trials",
     "dgnet-real": "3 seed(s) of their 15 trials",
     "dgnet-2body": "3 seed(s) of their 15 trials",
