@@ -15,7 +15,7 @@ import statistics
 from scipy.stats import mannwhitneyu
 
 from hnn_analysis import pages
-from hnn_analysis.chains.dgnet_protocol import INIT_WORDS, ROWS, SETTINGS
+from hnn_analysis.chains.dgnet_protocol import INIT_WORDS, ROWS, SETTINGS, spread_words
 from hnn_analysis.provenance import machine
 
 INITS = ("zero_bias", "orthogonal")          # theirs, then the original HNN's
@@ -36,7 +36,7 @@ def compare(a: list[float], b: list[float]) -> tuple[float | None, str]:
 
 
 def _cell(values: list[float]) -> str:
-    return f"{statistics.mean(values):.2e} (median {statistics.median(values):.2e}; {min(values):.2e} to {max(values):.2e})"
+    return f"{statistics.mean(values):.2e} ({spread_words(values)})"
 
 
 def init_table(results: dict, task: str) -> str:
@@ -47,7 +47,7 @@ def init_table(results: dict, task: str) -> str:
              f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread a "
              f"run), {meta['seconds']:.0f} s: {n} seeds a row and init, {results['steps'][task]} steps a run "
              f"(theirs: {SETTINGS[task]['steps']}). Zero biases: {INIT_WORDS['zero_bias']}; default biases: "
-             f"{INIT_WORDS['orthogonal']}. Energy MSE over the seeds: mean (median; min to max); p: two-sided "
+             f"{INIT_WORDS['orthogonal']}. Energy MSE over the seeds: mean (median, min, max); p: two-sided "
              f"Mann-Whitney U of the two inits' seeds, which the seeds separate under p = {P_SEPARATE:g}.", "",
              "| row (train / predict) | zero biases | default biases | p | verdict |", "| --- | --- | --- | ---: | --- |"]
     for label, by_init in rows.items():

@@ -269,13 +269,17 @@ def task_table(results: dict, task: str) -> str:
         d = statistics.mean(r["derivative"] for r in runs)
         for predict in ROWS[label][3]:
             energies = [r["energy"][predict] for r in runs]
-            spread = (f" (median {statistics.median(energies):.2e}, min {min(energies):.2e}, max {max(energies):.2e})"
-                      if n > 1 else "")
+            spread = f" ({spread_words(energies)})" if n > 1 else ""
             theirs = published_energy(task, label, predict)
             below = "" if theirs is None else f"{sum(e < theirs for e in energies)} of {n}"
             lines.append(f"| ours: {label} ({ROWS[label][2]} / {predict}) | {d:.2e} | "
                          f"{statistics.mean(energies):.2e}{spread} | ours, mean of {n} seeds, {steps} steps | {below} |")
     return "\n".join(lines)
+
+
+def spread_words(values: list[float]) -> str:
+    """The seeds' median and range in a table cell's words: ``median 1.32e-03, min 4.52e-04, max 4.51e-03``."""
+    return f"median {statistics.median(values):.2e}, min {min(values):.2e}, max {max(values):.2e}"
 
 
 def published_energy(task: str, label: str, predict: str) -> float | None:
