@@ -152,7 +152,7 @@ def test_the_scene_study_prints_the_hint_before_anything_else(tmp_path):
 def test_the_card_carries_the_notes_its_naive_row_sits_in_its_table_and_its_stamp_says_file(tmp_path, energy):
     row = {"kind": "hnn", "hidden_dim": 32, "train_fraction": 1.0, "params": 1000, "test_loss": 0.1,
            "prediction_error": {"median": 1.0, "mean": 2.0}, "valid_time": {"median": 3.0}, "train_seconds": 1.0,
-           "rollout_seconds": 0.1, **({"energy_drift": {"model": 0.1, "measured": 0.2}} if energy else {})}
+           "rollout_seconds": 0.1, "run": "runs/r", **({"energy_drift": {"model": 0.1, "measured": 0.2}} if energy else {})}
     meta = {"quick": False, "command": "python analysis/scene_study.py", "date": "d", "commit": "c", "torch": "t",
             "cores": 2, "jobs": 1, "horizon": 0.5, "units": "units of o", "notes": ["a hint about 'o'"]}
     text = measured_study.markdown({"scene": "s", "meta": meta, "rows": [row], "naive": {"median": 4.0, "mean": 5.0,

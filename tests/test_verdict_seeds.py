@@ -15,7 +15,7 @@ UNRECORDED = {
     "peers": "is about 12 hours of training on 2 cores and has not been run",
     "scenes": "each chose from the width x\nfraction grid trained at seed 0 alone",
     "model-guide": "a card chooses from a grid trained at seed 0",
-    "measured-guide": "each kind trains once (seed 0) on the data",
+    "measured-guide": "prediction error) | its median prediction error, the naive",
     "lnn-start": "seeds 0 to 4",
     "arm-balance": "over seeds 0, 1, 2",
     "arm-balance-long": "over seeds 0, 1, 2",

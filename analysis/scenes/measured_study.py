@@ -77,12 +77,14 @@ def _kinds(columns: dict) -> list[str]:
     return kinds
 
 
-def quick_cuts(columns: dict) -> list[str]:
-    """What ``--quick`` cuts from the study of a file, one phrase each, as ``run`` prints them."""
+def quick_cuts(columns: dict, seeds: int = 1) -> list[str]:
+    """What ``--quick`` cuts from the study of a file at ``seeds`` seeds, one phrase each, as ``run`` prints them."""
     steps = hnn.tasks.task_config(TASK, columns).total_steps
     return [f"{study.QUICK_STEPS} training steps a model of {steps}",
             f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
-            f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}"]
+            f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
+            *([f"{seeds} seed{'s' if seeds > 1 else ''} a model of {scene_common.SEEDS}"]
+              if seeds < scene_common.SEEDS else [])]
 
 
 def _rows(columns: dict, quick: bool) -> list[dict]:
@@ -104,40 +106,107 @@ def velocity_mismatch(columns: dict) -> list[float] | None:
     return [float(v) for v in np.sqrt((gap ** 2).mean(0)) / np.sqrt((d["x"][:, n:] ** 2).mean(0))]
 
 
+def models(rows: list[dict]) -> dict[tuple, dict]:
+    """The measured rows (one a model and seed) by model, ``(kind, width, fraction)``: its seeds, their
+    median prediction errors' ``(mean, min, max)`` as ``error``, and the means over seeds of the rest."""
+    by = {}
+    for r in rows:
+        if r.get("prediction_error"):
+            by.setdefault((r["kind"], r["hidden_dim"], r["train_fraction"]), []).append(r)
+    out = {}
+    for key, per_seed in by.items():
+        def mean(get, per_seed=per_seed) -> float | None:
+            spread = scene_common.seed_spread([get(r) for r in per_seed])
+            return spread[0] if spread else None
+        drift = per_seed[0].get("energy_drift")
+        out[key] = {"kind": key[0], "hidden_dim": key[1], "train_fraction": key[2], "params": per_seed[0]["params"],
+                    "seeds": sorted(r.get("seed", 0) for r in per_seed),
+                    "error": scene_common.seed_spread([r["prediction_error"]["median"] for r in per_seed]),
+                    "error_mean": mean(lambda r: r["prediction_error"]["mean"]),
+                    "valid_time": mean(lambda r: r["valid_time"]["median"]),
+                    "test_loss": mean(lambda r: r["test_loss"]), "train_seconds": mean(lambda r: r["train_seconds"]),
+                    "rollout_seconds": mean(lambda r: r["rollout_seconds"]),
+                    "energy_drift": ({"model": mean(lambda r: r["energy_drift"]["model"]),
+                                      "measured": drift["measured"]} if drift else None),
+                    "runs": [r["run"] for r in sorted(per_seed, key=lambda r: r.get("seed", 0))]}
+    return out
+
+
+def _range(m: dict) -> str:
+    mean, low, high = m["error"]
+    return f"{mean:.4g}" + (f" ({low:.3g}-{high:.3g})" if len(m["seeds"]) > 1 else "")
+
+
+def _separate(a: dict, b: dict) -> bool:
+    """Whether the seeds separate two models: one seed each says nothing, so it counts as separated
+    (the card then says one seed); with seeds, their ranges of median error do not overlap."""
+    if len(a["seeds"]) < 2 or len(b["seeds"]) < 2:
+        return True
+    return a["error"][2] < b["error"][1] or b["error"][2] < a["error"][1]
+
+
 def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
-    """The chosen row (smallest within ``CARD_FACTOR`` of the best median) and the card's sentences."""
-    measured = [r for r in rows if r.get("prediction_error")]
-    if not measured:
+    """The chosen model (smallest whose mean over seeds is within ``CARD_FACTOR`` of the best mean median
+    error) and the card's sentences, which say what the seeds cannot separate."""
+    table = models(rows)
+    if not table:
         return None, ["no model was measured"]
-    best = min(r["prediction_error"]["median"] for r in measured)
-    ok = [r for r in measured if r["prediction_error"]["median"] <= scene_common.CARD_FACTOR * best]
-    # fewest parameters, then the fewest training rows (both exact), then the fastest to train (a timing)
-    chosen = min(ok, key=lambda r: (r["params"], r["train_fraction"], r["train_seconds"] or 0.0))
-    err = chosen["prediction_error"]["median"]
+    best = min(m["error"][0] for m in table.values())
+    ok = [k for k, m in table.items() if m["error"][0] <= scene_common.CARD_FACTOR * best]
+
+    def size(key) -> tuple:
+        # fewest parameters, then the fewest training rows (both exact), then the fastest to train (a timing)
+        return table[key]["params"], key[2], table[key]["train_seconds"] or 0.0
+
+    pick = min(ok, key=size)
+    m = table[pick]
+    n, err = len(m["seeds"]), m["error"][0]
     ratio = err / naive["median"] if naive["median"] > 0 else float("inf")
-    said = [f"{chosen['kind']} (width {chosen['hidden_dim']}, {chosen['train_fraction']:g} of the training rows, "
-            f"{chosen['params']} parameters, {chosen['train_seconds']:.3g} s to train on one thread) is enough: its "
-            f"median prediction error {err:.4g} is within {scene_common.CARD_FACTOR:g}x of the best ({best:.4g}) "
-            f"and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
+    seeds = f"mean over {n} seeds" if n > 1 else "one seed"
+    said = [f"{m['kind']} (width {m['hidden_dim']}, {m['train_fraction']:g} of the training rows, "
+            f"{m['params']} parameters, {m['train_seconds']:.3g} s to train on one thread) is enough: its "
+            f"median prediction error ({seeds}) {_range(m)} is within {scene_common.CARD_FACTOR:g}x of the best "
+            f"({best:.4g}) and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
             + ("." if ratio <= 0.5 else "; that is NOT under half the naive one: no kind predicts this scene well.")]
+    if n > 1:
+        limit = scene_common.CARD_FACTOR * best
+        smaller = [f"{k[0]} (width {k[1]}, {k[2]:g})" for k in sorted(table, key=size)
+                   if size(k) < size(pick) and k not in ok and len(table[k]["seeds"]) > 1 and table[k]["error"][1] <= limit]
+        if smaller:
+            said.append(f"The seeds cannot separate from it the smaller {', '.join(smaller)}: their means are over "
+                        f"{scene_common.CARD_FACTOR:g}x of the best, their lowest seeds within it.")
+        if m["error"][2] > limit:
+            said.append(f"Its highest seed ({m['error'][2]:.3g}) is over {scene_common.CARD_FACTOR:g}x of the best: "
+                        "the seeds do not settle that it is enough.")
+    else:
+        said.append("One seed: whether seeds separate these models was not tested (--seeds 3 tests it).")
 
     def best_of(kinds) -> dict | None:
-        pool = [r for r in measured if r["kind"] in kinds]
-        return min(pool, key=lambda r: r["prediction_error"]["median"]) if pool else None
+        pool = [m for m in table.values() if m["kind"] in kinds]
+        return min(pool, key=lambda m: m["error"][0]) if pool else None
+
+    def compare(a: dict, b: dict, verdict: str, tie: str) -> str:
+        numbers = f"best {a['kind']} {_range(a)} against best {b['kind']} {_range(b)}."
+        return f"{verdict}: {numbers}" if _separate(a, b) else f"{tie} cannot be told apart on these seeds: {numbers}"
 
     conserving = best_of([k for k in hnn.MODEL_KINDS if hnn.MODEL_KINDS[k].conservative])
     others = best_of([k for k in hnn.MODEL_KINDS if not hnn.MODEL_KINDS[k].conservative])
     if conserving and others:
-        a, b = conserving["prediction_error"]["median"], others["prediction_error"]["median"]
+        a, b = conserving["error"][0], others["error"][0]
         verdict = "helped" if a * NEAR < b else "hurt" if b * NEAR < a else "neither helped nor hurt (within 25%)"
-        said.append(f"The energy-conserving kinds {verdict}: best {conserving['kind']} {a:.4g} against best "
-                    f"{others['kind']} {b:.4g}.")
+        said.append(compare(conserving, others, f"The energy-conserving kinds {verdict}",
+                            "The energy-conserving kinds and the others"))
     baseline, structured = best_of(["baseline"]), best_of([k for k in hnn.MODEL_KINDS if k != "baseline"])
     if baseline and structured:
-        a, b = baseline["prediction_error"]["median"], structured["prediction_error"]["median"]
+        a, b = baseline["error"][0], structured["error"][0]
         word = "better than" if a * NEAR < b else "as good as" if a <= NEAR * b else "worse than"
-        said.append(f"The plain baseline is {word} the structured kinds "
-                    f"here ({a:.4g} against {structured['kind']} {b:.4g}).")
+        said.append(compare(baseline, structured, f"The plain baseline is {word} the structured kinds here",
+                            "The plain baseline and the structured kinds"))
+    chosen = {key: m[key] for key in ("kind", "hidden_dim", "train_fraction", "params", "train_seconds",
+                                      "rollout_seconds", "valid_time", "energy_drift", "seeds")}
+    chosen.update({"n_seeds": n, "test_loss": m["test_loss"], "run": m["runs"][0], "runs": m["runs"],
+                   "prediction_error": {"median": err, "min": m["error"][1], "max": m["error"][2],
+                                        "mean": m["error_mean"]}})
     return chosen, said
 
 
@@ -155,9 +224,11 @@ def markdown(result: dict) -> str:
               *result["card"], "",
               f"Prediction error: from each of {naive['starts']} held-out samples with a measured sample "
               f"{meta['horizon']:.4g} s later, the norm of the position error there ({meta['units']}; angles wrapped), "
-              f"median / mean over starts. Naive: q(t) + h v(t): {naive['median']:.4g} / {naive['mean']:.4g}. Valid "
+              f"median / mean over starts; each model's row gives its seeds' mean of the median, their range, and their "
+              f"mean of the mean. Naive: q(t) + h v(t): {naive['median']:.4g} / {naive['mean']:.4g}. Valid "
               f"time: median first time the error exceeds {mm.VALID_FRACTION:g} of the tail's RMS spread (s). Test "
-              "loss: the derivative MSE on the scaled states (dimensionless). Train s: one thread, controlled.", ""]
+              "loss: the derivative MSE on the scaled states (dimensionless). Valid time, test loss, energy drift, "
+              "train s (one thread, controlled) and rollout s: means over the seeds.", ""]
     if meta.get("assumes"):
         lines += [f"Note: {meta['assumes']}.", ""]
     lines += [line for note in meta.get("notes") or [] for line in (f"Note: {note}.", "")]
@@ -167,18 +238,19 @@ def markdown(result: dict) -> str:
                       columns_of(meta["columns"]["q"]), meta["velocity_mismatch"])) + " (kinds that take dq/dt = v "
                   "exactly, second_order and mechanical, and hnn reading v as p, inherit this gap; the baseline learns "
                   "dq/dt freely).", ""]
-    energy = any("energy_drift" in r for r in result["rows"])
-    lines += ["| model | width | fraction | params | prediction error median / mean | valid time s | test loss | "
-              + ("energy drift (measured) | " if energy else "") + "train s | rollout s |",
-              "| --- | ---: | ---: | ---: | --- | ---: | --- | " + ("--- | " if energy else "") + "---: | ---: |"]
-    for r in sorted(result["rows"], key=lambda r: r["prediction_error"]["median"]):
-        pe, drift = r["prediction_error"], r.get("energy_drift")
-        lines.append(f"| {r['kind']} | {r['hidden_dim']} | {r['train_fraction']:g} | {r['params']} | "
-                     f"{pe['median']:.4g} / {pe['mean']:.4g} | {r['valid_time']['median']:.3g} | {r['test_loss']:.3g} | "
-                     + (f"{drift['model']:.3g} ({drift['measured']:.3g}) | " if drift else "")
-                     + f"{r['train_seconds']:.3g} | {r['rollout_seconds']:.3g} |")
+    table = models(result["rows"])
+    energy = any(m["energy_drift"] for m in table.values())
+    lines += ["| model | width | fraction | params | seeds | prediction error median: mean over seeds (range) / mean | "
+              "valid time s | test loss | " + ("energy drift (measured) | " if energy else "") + "train s | rollout s |",
+              "| --- | ---: | ---: | ---: | ---: | --- | ---: | --- | " + ("--- | " if energy else "") + "---: | ---: |"]
+    for m in sorted(table.values(), key=lambda m: m["error"][0]):
+        drift = m["energy_drift"]
+        lines.append(f"| {m['kind']} | {m['hidden_dim']} | {m['train_fraction']:g} | {m['params']} | {len(m['seeds'])} | "
+                     f"{_range(m)} / {m['error_mean']:.4g} | {m['valid_time']:.3g} | {m['test_loss']:.3g} | "
+                     + (f"{drift['model']:.3g} ({drift['measured']:.3g}) | " if drift else "| " if energy else "")
+                     + f"{m['train_seconds']:.3g} | {m['rollout_seconds']:.3g} |")
     # the naive extrapolation as the table's last row: its error, and an empty cell for every other column
-    lines.append(f"| naive q + h v | | | | {naive['median']:.4g} / {naive['mean']:.4g} | | | "
+    lines.append(f"| naive q + h v | | | | | {naive['median']:.4g} / {naive['mean']:.4g} | | | "
                  + ("| " if energy else "") + "| |")
     return "\n".join(lines) + "\n"
 
@@ -186,16 +258,29 @@ def markdown(result: dict) -> str:
 def guide(registry: dict) -> str:
     """The README's rows of measured scenes, from the filed cards (each card's command is in
     docs/measured-scenes.json, and the shipped scenes' commands in docs/measured.md)."""
-    lines = ["| measured scene | a model that is enough (within 2x of the best prediction error) | its median prediction "
-             "error, the naive extrapolation's | horizon | train s | made |",
-             "| --- | --- | --- | ---: | ---: | --- |"]
+    lines = ["| measured scene | a model that is enough (within 2x of the best prediction error, on seed means) | its "
+             "median prediction error, mean over seeds (range); the naive extrapolation's | seeds | horizon | train s "
+             "| made |",
+             "| --- | --- | --- | ---: | ---: | ---: | --- |"]
     for name, entry in sorted(registry.items()):
         c = entry["chosen"]
+        pe, n = c["prediction_error"], c.get("n_seeds", 1)
+        spread = f" ({pe['min']:.3g}-{pe['max']:.3g})" if n > 1 else ""
         lines.append(f"| {name} | {c['kind']}, width {c['hidden_dim']}, {c['train_fraction']:g} of the data | "
-                     f"{c['prediction_error']['median']:.3g}, naive {entry['naive']['median']:.3g} "
-                     f"({entry['units']}) | {entry['horizon']:.3g} s | {c['train_seconds']:.3g} | "
-                     f"({entry['date']}, commit {entry['commit']}) |")
+                     f"{pe['median']:.3g}{spread}; naive {entry['naive']['median']:.3g} ({entry['units']}) | {n} | "
+                     f"{entry['horizon']:.3g} s | {c['train_seconds']:.3g} | ({entry['date']}, commit {entry['commit']}) |")
     return "\n".join(lines) + "\n\nEach row's command: [docs/measured-scenes.json](docs/measured-scenes.json).\n"
+
+
+def guide_seeds(registry: dict) -> pages.Seeds:
+    """The fewest seeds any filed card rests on, and, where that is under ``pages.MIN_SEEDS``, which cards."""
+    counts = {name: entry["chosen"].get("n_seeds", 1) for name, entry in registry.items()}
+    fewest = min(counts.values(), default=pages.MIN_SEEDS)
+    if fewest >= pages.MIN_SEEDS:
+        return pages.Seeds(fewest)
+    few = ", ".join(name for name, n in sorted(counts.items()) if n < pages.MIN_SEEDS)
+    return pages.Seeds(fewest, f"the card of {few} was filed from fewer seeds: rerun its command "
+                               "(docs/measured-scenes.json) to file it at --seeds 3")
 
 
 def _update_docs(result: dict) -> None:
@@ -206,8 +291,7 @@ def _update_docs(result: dict) -> None:
                                  "horizon": meta["horizon"], "command": meta["command"], "date": meta["date"],
                                  "commit": meta["commit"]}
     write_json(path, registry)
-    seeds = pages.Seeds(1, "the measured study trains each kind once (seed 0) on the user's data; it takes no --seeds yet")
-    print(f"updated {path}\nupdated {pages.update_section('measured-guide', guide(registry), seeds)}")
+    print(f"updated {path}\nupdated {pages.update_section('measured-guide', guide(registry), guide_seeds(registry))}")
 
 
 def run(args, argv: list[str], parser) -> dict:
@@ -230,33 +314,33 @@ def run(args, argv: list[str], parser) -> dict:
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / f"scene-{scene}"
     steps = study.QUICK_STEPS if args.quick else None
     rows = _rows(columns, args.quick)
-    cuts = quick_cuts(columns) if args.quick else []
+    cuts = quick_cuts(columns, args.seeds) if args.quick else []
     if cuts:
         commands.say_quick("scene_study --data", cuts)
     tic = time.perf_counter()
-    runs, _ = scene_common.train([(rows, [0], steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
+    seeds = list(range(args.seeds))
+    runs, _ = scene_common.train([(rows, seeds, steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
     training = time.perf_counter() - tic
     tic = time.perf_counter()
-    measured, progress = [], sweep.Progress(sum(isinstance(runs.get(f"{row['row']}/{kind}/seed0"), Path)
-                                                for row in rows for kind in kinds))
+    keys = [(row, kind, seed) for row in rows for kind in kinds for seed in seeds
+            if isinstance(runs.get(f"{row['row']}/{kind}/seed{seed}"), Path)]
+    measured, progress = [], sweep.Progress(len(keys))
     print(f"  {progress.tag()} measuring {progress.total} models on the held-out tails", flush=True)
-    for row in rows:
-        for kind in kinds:
-            directory = runs.get(f"{row['row']}/{kind}/seed0")
-            if not isinstance(directory, Path):
-                continue
-            model = mm.Model(data, directory, json.loads((directory / "scale.json").read_text()), rec.state)
-            cost = training_cost(TASK, model.args)
-            measured.append({"kind": kind, "hidden_dim": row["cell"][0], "train_fraction": row["cell"][1],
-                             "params": model.params, "test_loss": model.metrics["test_loss"],
-                             "train_seconds": cost["seconds"], "run": _in_checkout(directory),
-                             **mm.measure(model, held, energy)})
-            print(f"  {progress.advance()} {kind:12s} width {row['cell'][0]:3d} fraction {row['cell'][1]:g}: prediction error "
-                  f"{measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})", flush=True)
+    for row, kind, seed in keys:
+        directory = runs[f"{row['row']}/{kind}/seed{seed}"]
+        model = mm.Model(data, directory, json.loads((directory / "scale.json").read_text()), rec.state)
+        cost = training_cost(TASK, model.args)
+        measured.append({"kind": kind, "hidden_dim": row["cell"][0], "train_fraction": row["cell"][1], "seed": seed,
+                         "params": model.params, "test_loss": model.metrics["test_loss"],
+                         "train_seconds": cost["seconds"], "run": _in_checkout(directory),
+                         **mm.measure(model, held, energy)})
+        print(f"  {progress.advance()} {kind:12s} width {row['cell'][0]:3d} fraction {row['cell'][1]:g} seed {seed}: "
+              f"prediction error {measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})",
+              flush=True)
     chosen, card = _card(measured, held.naive)
     units = "units of " + ", ".join(rec.q_names)
     result = {"scene": scene, "meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(
-        _portable(a) for a in argv), "quick": args.quick, "quick_cuts": cuts, "jobs": args.jobs,
+        _portable(a) for a in argv), "quick": args.quick, "quick_cuts": cuts, "jobs": args.jobs, "seeds": seeds,
         "horizon": held.horizon, "units": units, "state": rec.state, "columns": columns, "data_sha256": rec.sha256,
         "notes": rec.notes,
         "assumes": data.ASSUMES if rec.state == "velocity" else None, "velocity_mismatch": velocity_mismatch(columns)},

@@ -21,12 +21,19 @@ from hnn_analysis.integrator_study import settings
 
 HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
 STARTS = 8                 # start states of the rollout metrics
+SEEDS = 3                  # the full study's --seeds: the per-kind rows, the grid (unless --grid-seeds), --data's models
 CARD_FACTOR = 2.0          # a scene card's model is within this factor of the best on both errors
 DRIFT_BUDGET = 15.0        # seconds of one long drift run before it stops and says how far it got
 # --quick (a smoke run within its budget, commands.QUICK_BUDGETS): what each measurement does instead
 QUICK = {"starts": 2, "horizon": HORIZON // 2, "points": 50, "drift_periods": 3, "drift_budget": 0.5, "timings": 1}
 FULL = {"starts": STARTS, "horizon": HORIZON, "points": 100, "drift_periods": None, "drift_budget": DRIFT_BUDGET,
         "timings": 3}
+
+
+def seed_spread(values: list) -> tuple[float, float, float] | None:
+    """(mean, min, max) of the seeds' values that were measured (None skipped), or None if none was."""
+    values = [v for v in values if v is not None]
+    return (sum(values) / len(values), min(values), max(values)) if values else None
 
 
 def scenes() -> list[str]:

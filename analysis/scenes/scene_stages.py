@@ -24,7 +24,6 @@ QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
 QUICK_STEPS = 60
 QUICK_SPEED_KINDS = ("hnn",)
 DEFAULT_CELL = (200, 1.0)
-SEEDS = 3                  # the full study's --seeds: of the per-kind rows and (unless --grid-seeds) the grid
 
 
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
@@ -92,12 +91,6 @@ def _key_metric(m: dict) -> tuple[float | None, float | None]:
     return (energy[0] if energy else None), (m["rollout"]["error"] if "rollout" in m else None)
 
 
-def _spread(values: list) -> tuple[float, float, float] | None:
-    """(mean, min, max) of the seeds' values that were measured, or None."""
-    values = [v for v in values if v is not None]
-    return (sum(values) / len(values), min(values), max(values)) if values else None
-
-
 def scene_card(cells: dict) -> dict | None:
     """The smallest model (parameters, then training cost: ``scene_measure.cost_seconds``) whose
     mean over seeds comes within ``CARD_FACTOR`` of the scene's best mean energy MSE and best mean
@@ -113,7 +106,7 @@ def scene_card(cells: dict) -> dict | None:
     spread = {}
     for key, per_seed in cells.items():
         pairs = [_key_metric(m) for m in per_seed.values()]
-        spread[key] = (_spread([e for e, _ in pairs]), _spread([r for _, r in pairs]))
+        spread[key] = (scene_common.seed_spread([e for e, _ in pairs]), scene_common.seed_spread([r for _, r in pairs]))
     spread = {k: v for k, v in spread.items() if v != (None, None)}
     if not spread:
         return None
@@ -155,7 +148,7 @@ def inseparable(per_kind: dict) -> dict:
     out = {}
     for at, name in ((0, "energy"), (1, "rollout")):
         spread = {kind: s for kind, per_seed in per_kind.items()
-                  if (s := _spread([_key_metric(m)[at] for m in per_seed.values()])) is not None}
+                  if (s := scene_common.seed_spread([_key_metric(m)[at] for m in per_seed.values()])) is not None}
         if not spread:
             continue
         best = min(spread, key=lambda k: spread[k][0])

@@ -40,7 +40,7 @@ import hnn
 from hnn_analysis.paper import study
 from hnn_analysis.scenes import measured_study, scene_report, scene_stages
 from hnn_analysis import commands
-from hnn_analysis.scenes.scene_common import scenes
+from hnn_analysis.scenes.scene_common import SEEDS, scenes
 from hnn import sweep, sweep_flags
 
 
@@ -55,7 +55,8 @@ def _parser() -> argparse.ArgumentParser:
                                 f"every cut); output in results-quick/; {commands.budget_words('scene_study')}; with "
                                 f"--data: {commands.budget_words('scene_study --data')}",
                        out="output folder (default results/ or results-quick/)",
-                       seeds=f"seeds of the per-kind rows and the grid's cells (default {scene_stages.SEEDS}; --quick: 1)",
+                       seeds=f"seeds of the per-kind rows and the grid's cells, or with --data of every model (default {SEEDS}; "
+                            "--quick: 1)",
                        seeds_default=None,
                        jobs="training processes, as reproduce.py --jobs; then as many measuring processes (local "
                             "backend)")
@@ -76,13 +77,13 @@ def main(argv=None) -> dict:
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
     sweep_flags.check_backend(parser, args)
+    given = args.seeds
+    args.seeds = args.seeds or (1 if args.quick else SEEDS)
     if args.data:
         return measured_study.run(args, argv, parser)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     studied = args.scenes or scenes()
-    given = args.seeds
-    args.seeds = args.seeds or (1 if args.quick else scene_stages.SEEDS)
-    cuts = scene_stages.quick_cuts(studied, scene_stages.SEEDS, given or 1) if args.quick else []
+    cuts = scene_stages.quick_cuts(studied, SEEDS, given or 1) if args.quick else []
     if cuts:
         commands.say_quick("scene_study", cuts)
     results, runs = scene_stages.run(args, argv, out, studied, cuts)
