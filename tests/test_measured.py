@@ -200,6 +200,7 @@ def test_the_card_chooses_on_seed_means_and_says_what_the_seeds_cannot_separate(
     assert (chosen["kind"], chosen["n_seeds"]) == ("separable", 3)
     assert chosen["prediction_error"]["median"] == pytest.approx(1.7)
     assert chosen["runs"] == ["separable-32-0", "separable-32-1", "separable-32-2"]
+    assert chosen["unsettled"] == ["hnn, width 8, 1 of the data"] and chosen["pick_straddles"] is True
     text = " ".join(said)
     assert "cannot separate from it the smaller hnn (width 8, 1)" in text
     assert "highest seed (2.5) is over 2x" in text
@@ -208,6 +209,7 @@ def test_the_card_chooses_on_seed_means_and_says_what_the_seeds_cannot_separate(
     # one seed each: nothing is said to be inseparable, and the card says the seeds were not tested
     first, said = measured_study._card([r for r in rows if r["seed"] == 0], naive)
     assert first["kind"] == "hnn" and "One seed" in " ".join(said) and "cannot" not in " ".join(said)
+    assert first["unsettled"] is None and first["pick_straddles"] is None
 
 
 def test_the_card_says_two_kinds_cannot_be_told_apart_when_their_seeds_overlap():
@@ -224,10 +226,11 @@ def test_the_readme_guide_records_the_fewest_seeds_and_names_the_cards_below_thr
     entry = {"naive": {"median": 3.0}, "units": "units of x", "horizon": 0.5, "date": "d", "commit": "abcdef1"}
     registry = {"a": {**entry, "chosen": {**card, "n_seeds": 3}}, "b": {**entry, "chosen": card}}
     seeds = measured_study.guide_seeds(registry)
-    assert seeds.count == 1 and "the card of b was" in seeds.why
+    assert seeds.count == 1 and seeds.why.startswith("b filed from fewer seeds")
     assert measured_study.guide_seeds({"a": registry["a"]}).count == 3
     lines = measured_study.guide(registry).splitlines()
     assert "| 1 (0.5-1.5); naive 3 (units of x) | 3 |" in lines[2] and "| 1; naive 3 (units of x) | 1 |" in lines[3]
+    assert "| one seed: not tested |" in lines[3]
 
 
 # ----------------------------------------------------------------------------------------------

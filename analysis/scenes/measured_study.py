@@ -31,7 +31,7 @@ from hnn_analysis import commands, pages
 from hnn import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes import measured_metrics as mm, scene_common
+from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_tables
 from hnn_analysis.training_cost import training_cost
 
 TASK = "measured"
@@ -168,13 +168,13 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
             f"median prediction error ({seeds}) {_range(m)} is within {scene_common.CARD_FACTOR:g}x of the best "
             f"({best:.4g}) and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
             + ("." if ratio <= 0.5 else "; that is NOT under half the naive one: no kind predicts this scene well.")]
+    limit = scene_common.CARD_FACTOR * best
+    smaller = [k for k in sorted(table, key=size)
+               if size(k) < size(pick) and k not in ok and len(table[k]["seeds"]) > 1 and table[k]["error"][1] <= limit]
     if n > 1:
-        limit = scene_common.CARD_FACTOR * best
-        smaller = [f"{k[0]} (width {k[1]}, {k[2]:g})" for k in sorted(table, key=size)
-                   if size(k) < size(pick) and k not in ok and len(table[k]["seeds"]) > 1 and table[k]["error"][1] <= limit]
         if smaller:
-            said.append(f"The seeds cannot separate from it the smaller {', '.join(smaller)}: their means are over "
-                        f"{scene_common.CARD_FACTOR:g}x of the best, their lowest seeds within it.")
+            said.append(f"The seeds cannot separate from it the smaller {', '.join(f'{k[0]} (width {k[1]}, {k[2]:g})' for k in smaller)}: "
+                        f"their means are over {scene_common.CARD_FACTOR:g}x of the best, their lowest seeds within it.")
         if m["error"][2] > limit:
             said.append(f"Its highest seed ({m['error'][2]:.3g}) is over {scene_common.CARD_FACTOR:g}x of the best: "
                         "the seeds do not settle that it is enough.")
@@ -205,6 +205,9 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
     chosen = {key: m[key] for key in ("kind", "hidden_dim", "train_fraction", "params", "train_seconds",
                                       "rollout_seconds", "valid_time", "energy_drift", "seeds")}
     chosen.update({"n_seeds": n, "test_loss": m["test_loss"], "run": m["runs"][0], "runs": m["runs"],
+                   # as scene_stages.scene_card words them: None where one seed tests nothing
+                   "unsettled": [f"{k[0]}, width {k[1]}, {k[2]:g} of the data" for k in smaller] if n > 1 else None,
+                   "pick_straddles": m["error"][2] > limit if n > 1 else None,
                    "prediction_error": {"median": err, "min": m["error"][1], "max": m["error"][2],
                                         "mean": m["error_mean"]}})
     return chosen, said
@@ -259,15 +262,16 @@ def guide(registry: dict) -> str:
     """The README's rows of measured scenes, from the filed cards (each card's command is in
     docs/measured-scenes.json, and the shipped scenes' commands in docs/measured.md)."""
     lines = ["| measured scene | a model that is enough (within 2x of the best prediction error, on seed means) | its "
-             "median prediction error, mean over seeds (range); the naive extrapolation's | seeds | horizon | train s "
-             "| made |",
-             "| --- | --- | --- | ---: | ---: | ---: | --- |"]
+             "median prediction error, mean over seeds (range); the naive extrapolation's | seeds | seeds cannot "
+             "separate | horizon | train s | made |",
+             "| --- | --- | --- | ---: | --- | ---: | ---: | --- |"]
     for name, entry in sorted(registry.items()):
         c = entry["chosen"]
         pe, n = c["prediction_error"], c.get("n_seeds", 1)
         spread = f" ({pe['min']:.3g}-{pe['max']:.3g})" if n > 1 else ""
         lines.append(f"| {name} | {c['kind']}, width {c['hidden_dim']}, {c['train_fraction']:g} of the data | "
                      f"{pe['median']:.3g}{spread}; naive {entry['naive']['median']:.3g} ({entry['units']}) | {n} | "
+                     f"{scene_tables.unsettled(c)} | "
                      f"{entry['horizon']:.3g} s | {c['train_seconds']:.3g} | ({entry['date']}, commit {entry['commit']}) |")
     return "\n".join(lines) + "\n\nEach row's command: [docs/measured-scenes.json](docs/measured-scenes.json).\n"
 
@@ -279,7 +283,7 @@ def guide_seeds(registry: dict) -> pages.Seeds:
     if fewest >= pages.MIN_SEEDS:
         return pages.Seeds(fewest)
     few = ", ".join(name for name, n in sorted(counts.items()) if n < pages.MIN_SEEDS)
-    return pages.Seeds(fewest, f"the card of {few} was filed from fewer seeds: rerun its command "
+    return pages.Seeds(fewest, f"{few} filed from fewer seeds: rerun the command of each "
                                "(docs/measured-scenes.json) to file it at --seeds 3")
 
 
