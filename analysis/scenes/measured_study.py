@@ -261,9 +261,8 @@ def markdown(result: dict) -> str:
 def guide(registry: dict) -> str:
     """The README's rows of measured scenes, from the filed cards (each card's command is in
     docs/measured-scenes.json, and the shipped scenes' commands in docs/measured.md)."""
-    lines = ["| measured scene | a model that is enough (within 2x of the best prediction error, on seed means) | its "
-             "median prediction error, mean over seeds (range); the naive extrapolation's | seeds | seeds cannot "
-             "separate | horizon | train s | made |",
+    lines = ["| measured scene | a model that is enough (its seeds' mean within 2x of the best) | median prediction "
+             "error: seeds' mean (range); naive | seeds | seeds cannot separate | horizon | train s | made |",
              "| --- | --- | --- | ---: | --- | ---: | ---: | --- |"]
     for name, entry in sorted(registry.items()):
         c = entry["chosen"]
