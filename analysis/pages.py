@@ -15,7 +15,7 @@ import hnn
 from hnn.io import atomic_write
 
 # the tasks whose DGNet init comparison (analysis/chains/dgnet_init.py) docs/dgnet.md shows
-DGNET_INIT_TASKS = ("spring",)
+DGNET_INIT_TASKS = ("spring", "pend")
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md", "threads": "docs/speed.md",
