@@ -17,7 +17,6 @@ UNRECORDED = {
     "model-guide": "a card chooses from a grid trained at seed 0",
     "arm-balance": "over seeds 0, 1, 2",
     "arm-balance-long": "over seeds 0, 1, 2",
-    "dgnet-pend": "5 seed(s) of their 15 trials",
     "dgnet-real": "3 seed(s) of their 15 trials",
     "dgnet-2body": "3 seed(s) of their 15 trials",
 }
