@@ -142,7 +142,7 @@ def _separate(a: dict, b: dict) -> bool:
     (the card then says one seed); with seeds, their ranges of median error do not overlap."""
     if len(a["seeds"]) < 2 or len(b["seeds"]) < 2:
         return True
-    return a["error"][2] < b["error"][1] or b["error"][2] < a["error"][1]
+    return not scene_common.seeds_overlap(a["error"], b["error"])
 
 
 def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:

@@ -36,6 +36,12 @@ def seed_spread(values: list) -> tuple[float, float, float] | None:
     return (sum(values) / len(values), min(values), max(values)) if values else None
 
 
+def seeds_overlap(a: tuple[float, float, float], b: tuple[float, float, float]) -> bool:
+    """Whether two models' seeds, each as ``seed_spread``'s (mean, min, max), overlap in range: then
+    the seeds cannot separate them."""
+    return a[1] <= b[2] and b[1] <= a[2]
+
+
 def scenes() -> list[str]:
     """The study's scenes: the tasks of this checkout whose ``TaskSpec`` declares ``scene_study``."""
     return [task for task in hnn.available_tasks() if hnn.task_spec(task).scene_study is not None]

@@ -155,7 +155,8 @@ def inseparable(per_kind: dict) -> dict:
         if len(per_kind[best]) < 2:
             continue
         out[name] = {"best": best, "tied": [k for k in sorted(spread, key=lambda k: spread[k][0])
-                                            if k != best and len(per_kind[k]) > 1 and spread[k][1] <= spread[best][2]]}
+                                            if k != best and len(per_kind[k]) > 1
+                                            and scene_common.seeds_overlap(spread[k], spread[best])]}
     return out
 
 
