@@ -109,6 +109,8 @@ def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):
     assert "| DGNet (discrete gradient / discrete gradient) | 1.38e-03 | 5.04e-04 | published, mean of 15 |" in text
     # their code starts every model's MLP with zero biases (dgnet/ode.py reset_parameters): ours too, said
     assert text.count("every MLP started with orthogonal weights and zero biases (theirs)") == 2
+    assert all(r["train_seconds"] > 0 for runs in results["rows"]["real"].values() for r in runs)
+    assert text.count("runs trained for") == 2
     model, saved, _ = hnn.load_run(results["rows"]["spring"]["DGNet"][0]["run"])
     assert saved["init"] == "zero_bias"
     torch.manual_seed(0)
@@ -256,3 +258,9 @@ def test_the_table_counts_our_seeds_below_their_published_mean_of_the_same_row()
     text = dgnet_protocol.task_table(results, "spring")
     assert "| ours, mean of 3 seeds, 2000 steps | 2 of 3 |" in text
     assert text.splitlines()[-1].endswith("| ours, mean of 3 seeds, 2000 steps |  |")    # the paper's objective
+    # a table published from saved runs still says what their training cost, summed from each run's metrics
+    assert "runs trained for" not in text                       # these records carry no training seconds
+    for label_runs in results["rows"]["spring"].values():
+        label_runs[:] = [{**r, "train_seconds": 2.0} for r in label_runs]
+    n_runs = 3 * len(results["rows"]["spring"])
+    assert f"; its {n_runs} runs trained for {2 * n_runs} s in all" in dgnet_protocol.task_table(results, "spring")

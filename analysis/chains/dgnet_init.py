@@ -15,7 +15,7 @@ import statistics
 from scipy.stats import mannwhitneyu
 
 from hnn_analysis import pages
-from hnn_analysis.chains.dgnet_protocol import INIT_WORDS, ROWS, SETTINGS, spread_words
+from hnn_analysis.chains.dgnet_protocol import INIT_WORDS, ROWS, SETTINGS, spread_words, training_words
 from hnn_analysis.provenance import machine
 
 INITS = ("zero_bias", "orthogonal")          # theirs, then the original HNN's
@@ -45,7 +45,8 @@ def init_table(results: dict, task: str) -> str:
     n = results["seeds"]
     lines = [f"### {task}: their init against the original HNN's", "",
              f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread a "
-             f"run), {meta['seconds']:.0f} s: {n} seeds a row and init, {results['steps'][task]} steps a run "
+             f"run), {meta['seconds']:.0f} s{training_words([r for by in rows.values() for rs in by.values() for r in rs])}"
+             f": {n} seeds a row and init, {results['steps'][task]} steps a run "
              f"(theirs: {SETTINGS[task]['steps']}). Zero biases: {INIT_WORDS['zero_bias']}; default biases: "
              f"{INIT_WORDS['orthogonal']}. Energy MSE over the seeds: mean (median, min, max); p: two-sided "
              f"Mann-Whitney U of the two inits' seeds, which the seeds separate under p = {P_SEPARATE:g}.", "",

@@ -229,11 +229,11 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str =
     fit = (TrajectoryObjective(dt=data["dt"], loss="l2", method="leapfrog" if kind == "separable" else "rk4",
                                steps=1) if objective == "trajectory" else None)
     run = hnn.runs.find_run(config) or hnn.run_experiment(config, data, fit)
-    model = hnn.load_run(run)[0]
+    model, _, metrics = hnn.load_run(run)
     with torch.no_grad():
         pred = model.time_derivative(torch.as_tensor(data["test_x"]))
         derivative = float((pred - torch.as_tensor(data["test_dxdt"])).pow(2).mean())
-    return {"run": str(run), "derivative": derivative,
+    return {"run": str(run), "derivative": derivative, "train_seconds": metrics["train_seconds"],
             "energy": {name: energy_mse(task, model, seed, name, data) for name in predicts}}
 
 
@@ -256,7 +256,8 @@ def task_table(results: dict, task: str) -> str:
     n, steps, meta = results["seeds"], results["steps"][task], results["meta"]
     batch = SETTINGS[task]["batch_size"]
     lines = [f"### {task}", "", f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, "
-             f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}): "
+             f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])})"
+             f"{training_words([r for runs in results['rows'][task].values() for r in runs])}: "
              f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: {SETTINGS[task]['steps']}) of "
              f"{'the full batch' if batch is None else f'minibatches of {batch}'}, every MLP started with "
              f"{INIT_WORDS[results.get('init', 'orthogonal')]}. Energy: mean over the seeds, "
@@ -275,6 +276,17 @@ def task_table(results: dict, task: str) -> str:
             lines.append(f"| ours: {label} ({ROWS[label][2]} / {predict}) | {d:.2e} | "
                          f"{statistics.mean(energies):.2e}{spread} | ours, mean of {n} seeds, {steps} steps | {below} |")
     return "\n".join(lines)
+
+
+def training_words(runs: list[dict]) -> str:
+    """``; its 75 runs trained for 2345 s in all, ...``: the runs' own training seconds summed from their
+    saved metrics, so a table published from reused runs still says what they cost; '' where a run's
+    record lacks them (a dgnet.json written before they were kept)."""
+    seconds = [r.get("train_seconds") for r in runs]
+    if not seconds or None in seconds:
+        return ""
+    return (f"; its {len(runs)} runs trained for {sum(seconds):.0f} s in all (one thread each, whenever each was "
+            "trained)")
 
 
 def spread_words(values: list[float]) -> str:
