@@ -17,7 +17,6 @@ UNRECORDED = {
     "model-guide": "a card chooses from a grid trained at seed 0",
     "arm-balance": "over seeds 0, 1, 2",
     "arm-balance-long": "over seeds 0, 1, 2",
-    "dgnet-2body": "3 seed(s) of their 15 trials",
 }
 # of those, the ones that rest on fewer than 3 seeds: their words above must say why
 FEWER = {"peers", "scenes", "model-guide"}

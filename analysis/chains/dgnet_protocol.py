@@ -71,7 +71,8 @@ machine whose load average was 4-5 from other jobs): milliseconds per step NODE 
 8.9, DGNet 8.0, HNN on the paper's objective 6.5, so 10001 steps take 65-113 s a row, about 435 s
 for the five rows of one seed, plus 7-9 s a run for its data, its final losses over all pairs and
 its energy rollouts (one full HNN run: 124 s, 115 s of them training): about 480 s a seed, 24
-core-minutes for 3 seeds (15 runs), about 12 minutes on 2 workers.
+core-minutes for 3 seeds (15 runs), about 12 minutes on 2 workers. Each task's section in docs/dgnet.md
+says what its runs' training cost at their 15 trials (the seconds summed from the runs' saved metrics).
 """
 from __future__ import annotations
 
