@@ -15,8 +15,6 @@ UNRECORDED = {
     "peers": "is about 12 hours of training on 2 cores and has not been run",
     "scenes": "each chose from the width x\nfraction grid trained at seed 0 alone",
     "model-guide": "a card chooses from a grid trained at seed 0",
-    "arm-balance": "over seeds 0, 1, 2",
-    "arm-balance-long": "over seeds 0, 1, 2",
 }
 # of those, the ones that rest on fewer than 3 seeds: their words above must say why
 FEWER = {"peers", "scenes", "model-guide"}
