@@ -43,10 +43,10 @@ def init_table(results: dict, task: str) -> str:
     """Section ``dgnet-init-<task>`` of ``results`` (``dgnet.json`` of a ``--compare-init`` run)."""
     meta, rows = results["meta"], results["init_rows"][task]
     n = results["seeds"]
+    trained = training_words([run for by_init in rows.values() for runs in by_init.values() for run in runs])
     lines = [f"### {task}: their init against the original HNN's", "",
              f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread a "
-             f"run), {meta['seconds']:.0f} s{training_words([r for by in rows.values() for rs in by.values() for r in rs])}"
-             f": {n} seeds a row and init, {results['steps'][task]} steps a run "
+             f"run), {meta['seconds']:.0f} s{trained}: {n} seeds a row and init, {results['steps'][task]} steps a run "
              f"(theirs: {SETTINGS[task]['steps']}). Zero biases: {INIT_WORDS['zero_bias']}; default biases: "
              f"{INIT_WORDS['orthogonal']}. Energy MSE over the seeds: mean (median, min, max); p: two-sided "
              f"Mann-Whitney U of the two inits' seeds, which the seeds separate under p = {P_SEPARATE:g}.", "",

@@ -256,9 +256,9 @@ def task_table(results: dict, task: str) -> str:
     (docs/dgnet.md's section ``dgnet-<task>``, so a run of some tasks leaves the others' sections)."""
     n, steps, meta = results["seeds"], results["steps"][task], results["meta"]
     batch = SETTINGS[task]["batch_size"]
+    trained = training_words([run for runs in results["rows"][task].values() for run in runs])
     lines = [f"### {task}", "", f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, "
-             f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])})"
-             f"{training_words([r for runs in results['rows'][task].values() for r in runs])}: "
+             f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}){trained}: "
              f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: {SETTINGS[task]['steps']}) of "
              f"{'the full batch' if batch is None else f'minibatches of {batch}'}, every MLP started with "
              f"{INIT_WORDS[results.get('init', 'orthogonal')]}. Energy: mean over the seeds, "
