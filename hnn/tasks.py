@@ -65,8 +65,7 @@ class TaskSpec:
             scenes. ``T`` (the training trajectories' length, scene time; absent: no rollout
             metrics), ``dts`` (the speed ladder's fixed steps), ``period``, ``periods``, ``unit``
             (the long drift run: the period, None to measure it per start, how many, their name),
-            ``grid`` (train the width x data grid), ``drift`` (run the long drift), ``one_seed``
-            (new kinds at the first seed only: a costly scene).
+            ``grid`` (train the width x data grid), ``drift`` (run the long drift).
         integrator_study: the integrator study's settings (``analysis/integrator_study/speed_accuracy.py``);
             None for a task without true dynamics to measure against. ``T`` (the horizon), ``dts``
             (fixed steps), ``batch`` (start states), ``model_time`` (the models' time units per

@@ -8,7 +8,7 @@ import torch
 
 import hnn
 from hnn_analysis.paper import reproduce, study
-from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_stages, scene_study, scene_tables, scene_common
+from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_stages, scene_study, scene_tables, scene_common
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -172,6 +172,20 @@ def test_scene_card_chooses_on_seed_means_and_names_what_the_seeds_cannot_separa
     # on seed 0 alone the card would have named the tiny HNN
     first = scene_stages.scene_card({k: {0: v[0]} for k, v in cells.items()})
     assert (first["kind"], first["width"]) == ("hnn", 16)
+
+
+def test_the_recorded_seeds_are_the_fewest_any_card_rests_on():
+    results = {"meta": {"seeds": [0, 1, 2], "grid_seeds": [0, 1, 2]},
+               "scenes": {"spring": {"card": {"n_seeds": 3}}, "real": {"card": None}}}
+    assert (scene_report.seeds_of(results).count, scene_report.seeds_of(results).why) == (3, None)
+    # a scene whose kinds trained at one seed picks its card from one seed, whatever --seeds says
+    results["scenes"]["3body"] = {"card": {"n_seeds": 1}}
+    seeds = scene_report.seeds_of(results)
+    assert seeds.count == 1 and seeds.why.endswith("the cards of 3body (1) rest on fewer seeds")
+    # a grid at seed 0 alone (--grid-seeds 1) is the fewest too, and the reason says so
+    results = {"meta": {"seeds": [0, 1, 2], "grid_seeds": [0]}, "scenes": {"spring": {"card": {"n_seeds": 1}}}}
+    assert scene_report.seeds_of(results).count == 1
+    assert "grid trained at 1 seed" in scene_report.seeds_of(results).why
 
 
 def test_kinds_the_seeds_cannot_separate_overlap_the_best_kinds_range():

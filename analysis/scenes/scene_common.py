@@ -48,7 +48,7 @@ def scenes() -> list[str]:
 
 
 def scene_settings(task: str) -> dict:
-    """``task``'s scene-study settings (``TaskSpec.scene_study``: T, dts, the drift, grid, one_seed)."""
+    """``task``'s scene-study settings (``TaskSpec.scene_study``: T, dts, the drift, grid)."""
     return dict(hnn.task_spec(task).scene_study or {})
 
 

@@ -17,15 +17,8 @@ from hnn_analysis.scenes.scene_tables import guide, markdown
 
 def write(results: dict, out: Path, update_docs: bool) -> None:
     text = markdown(results)
-    meta = results["meta"]
-    n = len(meta["seeds"])
-    grid = len(meta.get("grid_seeds", [0]))     # a study saved before --grid-seeds trained its grid at seed 0
-    fewest = min(n, grid)
-    seeds = pages.Seeds(fewest, None if fewest >= pages.MIN_SEEDS else
-                        f"the per-kind rows carry {n} seed{'s' if n > 1 else ''} and each card chooses from a width x "
-                        f"fraction grid trained at {grid} seed{'s' if grid > 1 else ''} (--seeds, --grid-seeds)")
     commands.publish(out, "scene_study", results, text,
-                     {"scenes": text, "model-guide": guide(results)} if update_docs else {}, seeds)
+                     {"scenes": text, "model-guide": guide(results)} if update_docs else {}, seeds_of(results))
     figure = out / "figures" / "scenes-pareto.png"
     pareto_figure(results, figure)
     print(f"wrote {out / 'scene_study.json'}, {out / 'scene_study.md'}, {figure}")
@@ -33,6 +26,22 @@ def write(results: dict, out: Path, update_docs: bool) -> None:
         target = hnn.tasks.repo_root() / "docs" / "figures" / figure.name
         atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
         print(f"updated {target}")
+
+
+def seeds_of(results: dict) -> pages.Seeds:
+    """The fewest seeds a verdict of the study rests on: its per-kind rows, its grid and every scene's card
+    (a card counts the seeds of the model it picked), and why where that is fewer than ``pages.MIN_SEEDS``."""
+    meta = results["meta"]
+    n = len(meta["seeds"])
+    grid = len(meta.get("grid_seeds", [0]))     # a study saved before --grid-seeds trained its grid at seed 0
+    cards = {task: entry["card"].get("n_seeds", 1) for task, entry in results["scenes"].items() if entry.get("card")}
+    fewest = min(n, grid, *cards.values())
+    if fewest >= pages.MIN_SEEDS:
+        return pages.Seeds(fewest)
+    few = ", ".join(f"{task} ({count})" for task, count in cards.items() if count < pages.MIN_SEEDS)
+    return pages.Seeds(fewest, f"the per-kind rows carry {n} seed{'s' if n > 1 else ''} and each card chooses from a "
+                       f"width x fraction grid trained at {grid} seed{'s' if grid > 1 else ''} (--seeds, --grid-seeds)"
+                       + (f"; the cards of {few} rest on fewer seeds" if few else ""))
 
 
 def main(argv=None) -> None:

@@ -181,10 +181,7 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
     dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
     tic = time.perf_counter()
-    one_seed = {task for task in studied if scene_settings(task).get("one_seed")}
-    runs, _ = train([([r for r in default_rows if r["task"] not in one_seed], seeds, steps, None),
-                     ([r for r in default_rows if r["task"] in one_seed], seeds[:1], steps, None),
-                     (grid_rows, grid_seeds, steps, None),
+    runs, _ = train([(default_rows, seeds, steps, None), (grid_rows, grid_seeds, steps, None),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
                      (dhnn_rows, [0], steps, DHNN_MODELS)], out, args)
     results["seconds"]["training"] = time.perf_counter() - tic
