@@ -13,11 +13,9 @@ from hnn_analysis import pages
 # this test then fails until the section's entry here is removed.
 UNRECORDED = {
     "peers": "is about 12 hours of training on 2 cores and has not been run",
-    "scenes": "each chose from the width x\nfraction grid trained at seed 0 alone",
-    "model-guide": "a card chooses from a grid trained at seed 0",
 }
 # of those, the ones that rest on fewer than 3 seeds: their words above must say why
-FEWER = {"peers", "scenes", "model-guide"}
+FEWER = {"peers"}
 
 
 def _page(name: str) -> str:
