@@ -23,7 +23,6 @@ TASK = hnn.TaskSpec(
     figures=("energy", "orbits"),
     cost=90,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
     variants=CLEAN_ORBITS,
-    # a 3-body run is ~10x a spring run: the scene study trains its new kinds at the first seed only
     scene_study={"T": 5.0, "dts": (0.05, 0.02, 0.01, 0.005, 0.002)},
     integrator_study={"T": 1.0, "dts": (0.05, 0.02, 0.01, 0.003, 0.0005), "batch": 4},
 )
