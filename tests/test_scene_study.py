@@ -174,6 +174,22 @@ def test_scene_card_chooses_on_seed_means_and_names_what_the_seeds_cannot_separa
     assert (first["kind"], first["width"]) == ("hnn", 16)
 
 
+def test_scene_card_orders_models_of_equal_parameters_by_their_data_not_their_timing():
+    seeds = lambda energies, seconds: {s: _cell(336, e, 0.1, seconds) for s, e in enumerate(energies)}  # noqa: E731
+    best = {("hnn", 200, 1.0): {s: _cell(41200, 1e-4, 0.1) for s in range(3)}}
+    # two cells of one width (equal parameters), both within 2x: the one on less data is the card, even
+    # where the other happened to train faster in this sitting
+    cells = {**best, ("mechanical", 16, 0.25): seeds([1.5e-4] * 3, 3.0),
+             ("mechanical", 16, 0.5): seeds([1.2e-4] * 3, 2.0)}
+    card = scene_stages.scene_card(cells)
+    assert (card["kind"], card["width"], card["fraction"]) == ("mechanical", 16, 0.25)
+    # a cell on a tenth of the data whose mean is over 2x but whose lowest seed is within it is smaller
+    # than the pick however long it took to train, so the seeds cannot separate it
+    cells[("mechanical", 16, 0.1)] = seeds([1.5e-4, 4e-4, 6e-4], 9.0)
+    card = scene_stages.scene_card(cells)
+    assert card["fraction"] == 0.25 and card["unsettled"] == ["mechanical, width 16, 0.1 of the data"]
+
+
 def test_the_recorded_seeds_are_the_fewest_any_card_rests_on():
     results = {"meta": {"seeds": [0, 1, 2], "grid_seeds": [0, 1, 2]},
                "scenes": {"spring": {"card": {"n_seeds": 3}}, "real": {"card": None}}}

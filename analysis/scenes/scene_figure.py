@@ -1,5 +1,6 @@
-"""The scene study's Pareto figure: rollout error against training seconds and against rollout
-seconds, one row per scene (``figures/scenes-pareto.png``, and docs/figures/ with ``--update-docs``).
+"""The scene study's Pareto figure: rollout error (the mean over seeds, with its standard error, where
+the cell trained at several) against training seconds and against rollout seconds (seed 0's), one row per
+scene (``figures/scenes-pareto.png``, and docs/figures/ with ``--update-docs``).
 """
 from __future__ import annotations
 
@@ -18,8 +19,8 @@ from hnn_analysis.scenes.scene_tables import color  # noqa: E402
 
 
 def pareto_figure(results: dict, path: Path) -> None:
-    """Rollout error against training seconds and against rollout seconds, one row per scene."""
-    scenes = [t for t, e in results["scenes"].items() if any("rollout" in m for m in _all_cells(e).values())]
+    """Rollout error (mean over seeds) against training seconds and against rollout seconds, one row per scene."""
+    scenes = [t for t, e in results["scenes"].items() if any("rollout" in m for m, _ in _all_cells(e).values())]
     if not scenes:
         return
     fig, axes = plt.subplots(len(scenes), 2, figsize=(9, 2.6 * len(scenes)), squeeze=False)
@@ -28,13 +29,14 @@ def pareto_figure(results: dict, path: Path) -> None:
         cells = _all_cells(results["scenes"][task])
         for ax, xkey, xlabel in ((ax_row[0], "train", "training s (one thread)"), (ax_row[1], None, "rollout s")):
             points = []
-            for key, m in cells.items():
+            for key, (m, seeds) in cells.items():
                 kind = key.split("@")[0]
                 ro = m.get("rollout")
                 x = scene_measure.cost_seconds(m) if xkey else (ro or {}).get("seconds")
                 if ro and x:
-                    points.append((x, ro["error"]))
-                    ax.scatter(x, ro["error"], s=14, color=color(kind), label=kind)
+                    y, se = seeds.get("error_seeds") or (ro["error"], 0.0)
+                    points.append((x, y))
+                    ax.errorbar(x, y, yerr=se or None, fmt="o", ms=3.5, lw=0.8, color=color(kind), label=kind)
             if not points:      # pixels: its rollout comes from the energy protocol, untimed
                 ax.axis("off")
                 ax.text(0.5, 0.5, f"{task}: no {xlabel} measured", ha="center", va="center", transform=ax.transAxes)
@@ -53,7 +55,8 @@ def pareto_figure(results: dict, path: Path) -> None:
             ax.set_ylabel(f"{task}: rollout error")
             handles, labels = ax.get_legend_handles_labels()
             legend.update(zip(labels, handles))
-    title = "Scene study: rollout error vs cost (black: Pareto front)"
+    title = (f"Scene study: rollout error vs cost (black: Pareto front); error: mean ± SE over "
+             f"{_seed_words(results)}; seconds: seed 0's")
     if results["meta"]["quick"]:
         title = "QUICK smoke run, not the study's settings. " + title
     inch = 1 / fig.get_figheight()              # one inch in figure coordinates
@@ -77,8 +80,15 @@ def _log_ticks(axis, lo: float, hi: float) -> None:
     axis.set_minor_formatter(ticker.NullFormatter())
 
 
+def _seed_words(results: dict) -> str:
+    meta = results["meta"]
+    counts = sorted({len(meta.get("seeds", [0])), len(meta.get("grid_seeds", [0]))})
+    return f"{' or '.join(map(str, counts))} seed{'s' if counts[-1] > 1 else ''}"
+
+
 def _all_cells(entry: dict) -> dict:
-    cells = dict(entry.get("grid", {}))
+    """``{"kind@WIDTHxFRACTION": (seed 0's measured, the seeds' mean ± SE, empty with one seed)}``."""
+    cells = {key: (m, (entry.get("grid_seeds") or {}).get(key, {})) for key, m in entry.get("grid", {}).items()}
     for kind, measured in entry["kinds"].items():
-        cells[f"{kind}@200x1"] = next(iter(measured["per_seed"].values()))
+        cells[f"{kind}@200x1"] = (next(iter(measured["per_seed"].values())), measured)
     return cells
