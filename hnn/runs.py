@@ -7,7 +7,10 @@ config's identity, ``RunConfig.key``) holds ``model.tar`` (state dict and args; 
 written as a whole: filled under a hidden temporary name beside it, then renamed into place, so
 a crash leaves the complete old run, the complete new one, or no folder, never a checkpoint of
 one run beside the args of another. Later files (a pixel run's ``rollout.npz`` and GIFs) are
-added to the finished folder one by one.
+added to the finished folder one by one. While a run trains, its loop's checkpoint sits beside the
+folder-to-be as ``<save_dir>/.<folder>.partial.pt`` (``partial_checkpoint``): a run killed or
+interrupted (Ctrl-C) resumes from it when started again with the same settings, and it is deleted
+when the run is saved, when training fails, and by ``--force``.
 """
 from __future__ import annotations
 
@@ -42,6 +45,12 @@ def run_dir(config) -> Path:
 
 # written last into a run folder: one without it is an interrupted save
 COMPLETE = "complete.json"
+
+
+def partial_checkpoint(config) -> Path:
+    """The training checkpoint of this config's run while it trains (``hnn.train(checkpoint=...)``)."""
+    directory = run_dir(config)
+    return directory.parent / f".{directory.name}.partial.pt"
 
 
 def _is_complete(directory: Path) -> bool:
@@ -101,13 +110,21 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     options = objective.train_options(fit_model, specs.objective, fitted)
     if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
-    stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options)
+    partial = partial_checkpoint(config)
+    if config.force:
+        partial.unlink(missing_ok=True)
+    try:
+        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options, checkpoint=partial)
+    except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
+        partial.unlink(missing_ok=True)
+        raise
     if scales is not None:      # the final numbers: the saved model's, in the user's units
         objective.train_options(model, specs.objective, dataset)     # points final_loss at it (options unused)
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         x, y = training_subset(x, y, config.train_fraction, config.seed)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
                            objective.final_loss(model, test_x, test_y), data_seconds, saved)
+    partial.unlink(missing_ok=True)
     config.finish(directory, dataset)
     return directory
 

@@ -1,6 +1,7 @@
 """The one training loop every task uses: minibatch steps of Adam or AdamW (constant or cosine rate)
 on the L2 loss of dx/dt, or on an objective's own loss of its rows (snippets, pixel pairs, state
-pairs); a test batch on a schedule, a NaN named with its step, a progress bar."""
+pairs); a test batch on a schedule, a NaN named with its step, a progress bar, and a checkpoint now
+and then from which a killed run resumes where it stopped, to the same floats."""
 from __future__ import annotations
 
 import contextlib
@@ -8,6 +9,7 @@ import math
 import sys
 import time
 import warnings
+from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
@@ -17,6 +19,7 @@ from tqdm.auto import tqdm
 from . import names
 from .balance import weighted
 from .errors import DivergenceError
+from .io import atomic_write
 
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
@@ -74,10 +77,11 @@ def flushed_denormals() -> Iterator[None]:
         torch.set_flush_denormal(was_flushing)
 
 
-def training_steps(total_steps: int, progress: bool, desc: str = "train") -> Iterable[int]:
-    """The steps 0 .. total_steps of a training loop (the paper's loops run total_steps + 1), with a
-    progress bar when ``progress``."""
-    return tqdm(range(total_steps + 1), disable=not progress, desc=desc, leave=False)
+def training_steps(total_steps: int, progress: bool, desc: str = "train", start: int = 0) -> Iterable[int]:
+    """The steps ``start`` .. total_steps of a training loop (the paper's loops run total_steps + 1),
+    with a progress bar when ``progress``."""
+    return tqdm(range(start, total_steps + 1), disable=not progress, desc=desc, leave=False,
+                initial=start, total=total_steps + 1)
 
 
 def is_test_step(step: int, test_every: int, total_steps: int) -> bool:
@@ -186,12 +190,51 @@ def _say_when(err: DivergenceError, when: str) -> None:
     err.args = (f"at {when}: {err.args[0] if err.args else err}",) + err.args[1:]
 
 
+# seconds of training between two checkpoints of a run that keeps one (``train(checkpoint=...)``): a
+# killed run loses at most this much; saving a 256-wide model and its Adam moments takes milliseconds
+CHECKPOINT_EVERY = 60.0
+_CHECKPOINT_FORMAT = 1
+
+
+def _save_checkpoint(path: Path, step: int, total_steps: int, model, optim, gens, stats: dict, seconds: float):
+    state = {"format": _CHECKPOINT_FORMAT, "step": step, "total_steps": total_steps, "seconds": seconds,
+             "model": model.state_dict(), "optim": optim.state_dict(), "gens": [g.get_state() for g in gens],
+             "stats": stats}
+    atomic_write(path, lambda tmp: torch.save(state, tmp))
+
+
+def _resume(path: Path, model, optim, gens, total_steps: int) -> tuple[int, dict, float]:
+    """Load a checkpoint into the model, optimizer and samplers: ``(the first step still to run, the stats
+    so far, the seconds trained so far)``."""
+    fix = f"delete {path} to train from the start"
+    try:
+        state = torch.load(path, map_location=next(model.parameters()).device, weights_only=True)
+    except Exception as err:
+        first_line = (str(err).splitlines() or [""])[0]
+        raise ValueError(f"the training checkpoint {path} cannot be read ({type(err).__name__}: {first_line}); "
+                         f"{fix}") from err
+    if not isinstance(state, dict) or state.get("format") != _CHECKPOINT_FORMAT:
+        raise ValueError(f"{path} is not a training checkpoint of this version of hnn; {fix}")
+    if state["total_steps"] != total_steps:
+        raise ValueError(f"the training checkpoint {path} is of a run of {state['total_steps']} steps, "
+                         f"not {total_steps}; {fix}")
+    try:
+        model.load_state_dict(state["model"])
+        optim.load_state_dict(state["optim"])
+    except (RuntimeError, ValueError, KeyError) as err:
+        raise ValueError(f"the training checkpoint {path} is of another model ({err}); {fix}") from err
+    for gen, saved in zip(gens, state["gens"]):
+        gen.set_state(saved.cpu())      # the samplers draw on the CPU whatever the model's device
+    return state["step"] + 1, state["stats"], state["seconds"]
+
+
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
           weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
           verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
-          derivative_loss: str = "l2", loss_weights=None) -> dict:
+          derivative_loss: str = "l2", loss_weights=None, checkpoint: str | Path | None = None,
+          checkpoint_every: float | None = None) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -219,6 +262,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         derivative_loss: the per-element error of the default loss (``DERIVATIVE_LOSSES``): ``'l2'``
             squared (the paper's), ``'l1'`` absolute (the LNN's); a custom ``loss`` replaces both.
         loss_weights: ``(dim,)`` weights of the default loss's components (``hnn.balance``); None: all 1.
+        checkpoint: a file where the loop saves its state (weights, optimizer, samplers, stats) every
+            ``checkpoint_every`` seconds of training (default ``CHECKPOINT_EVERY``); where the file exists, training resumes from
+            it and ends with the floats of an uninterrupted run (at the same torch threads). The
+            caller deletes it once the run is saved (``hnn.run_experiment`` keeps one per run).
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -259,13 +306,20 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     gen = torch.Generator("cpu").manual_seed(seed)
     test_gen = torch.Generator("cpu").manual_seed(seed + 1)
     stats = {"train_loss": [], "test_loss": [], "test_steps": []}
+    first, seconds_before = 0, 0.0
+    checkpoint_every = CHECKPOINT_EVERY if checkpoint_every is None else checkpoint_every
+    if checkpoint is not None:
+        checkpoint = Path(checkpoint)
+        if checkpoint.exists():
+            first, stats, seconds_before = _resume(checkpoint, model, optim, (gen, test_gen), total_steps)
+            print(f"resuming at step {first} of {total_steps} from {checkpoint}", file=sys.stderr, flush=True)
     callbacks = list(_PROGRESS_CALLBACKS)
     if progress is None:    # a report_progress caller draws its own display
         progress = not verbose and not callbacks and sys.stderr.isatty()
     model.train()
     with flushed_denormals():
-        start = time.perf_counter()
-        for step in training_steps(total_steps, progress):
+        start = saved_at = time.perf_counter()
+        for step in training_steps(total_steps, progress, start=first):
             xb, yb = minibatch(x, dxdt, batch_size, gen)
             if input_noise:
                 xb = xb + input_noise * torch.randn(xb.shape, generator=gen, device="cpu").to(xb)
@@ -295,6 +349,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             if verbose and step % print_every == 0:
                 test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
                 print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
+            if checkpoint is not None and step < total_steps and time.perf_counter() - saved_at >= checkpoint_every:
+                _save_checkpoint(checkpoint, step, total_steps, model, optim, (gen, test_gen), stats,
+                                 seconds_before + time.perf_counter() - start)
+                saved_at = time.perf_counter()
     model.eval()
-    stats["seconds"] = time.perf_counter() - start
+    stats["seconds"] = seconds_before + time.perf_counter() - start
     return stats
