@@ -58,6 +58,24 @@ def test_a_killed_run_resumes_to_the_floats_of_an_unbroken_one(tmp_path):
     assert len(stats["train_loss"]) == OPTIONS["total_steps"] + 1
 
 
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=[pytest.mark.cuda, pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA device here")])])
+def test_a_run_resumes_on_the_model_device_making_nothing_on_the_default_one(device, tmp_path):
+    # torch's default device is meta (tests/test_devices.py): a tensor the resume makes without a device fails
+    path, models = tmp_path / "run.partial.pt", [_model().to(device) for _ in range(3)]
+    data = [a.to(device) for a in _data()]
+    torch.set_default_device("meta")
+    try:
+        expected = hnn.train(models[0], *data, **OPTIONS)
+        with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(11)):
+            hnn.train(models[1], *data, **OPTIONS, checkpoint=path, checkpoint_every=0.0)
+        stats = hnn.train(models[2], *data, **OPTIONS, checkpoint=path, checkpoint_every=0.0)
+    finally:
+        torch.set_default_device(None)
+    assert stats["train_loss"] == expected["train_loss"]
+    assert all(p.device.type == device for p in models[2].parameters())
+
+
 def test_a_checkpoint_of_another_run_is_refused_with_the_fix(tmp_path):
     path = tmp_path / "run.partial.pt"
     with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(5)):
