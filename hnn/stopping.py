@@ -115,7 +115,7 @@ class interruptible:
             kept = sum(isinstance(run, Path) for run in self.runs.values())
             print(f"\ninterrupted ({signal.Signals(signum).name}): kept the {kept} finished run"
                   f"{'' if kept == 1 else 's'}; the {self.total - len(self.runs)} not finished were cancelled or "
-                  "stopped and left nothing (rerunning the same command trains only those)", file=sys.stderr,
-                  flush=True)
+                  "stopped, leaving no run folder (rerunning the same command trains only those, each run that "
+                  "was in progress from its last training checkpoint)", file=sys.stderr, flush=True)
             raise SystemExit(128 + signum)
         return False

@@ -64,7 +64,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     seeds = range(args.seed, args.seed + (args.seeds or (FULL_SEEDS if full else 1)))
     jobs = plan_seeds(settings, out, seeds)
     runs, todo = sweep.reuse(jobs)
-    print(f"peers: {len(runs)} runs reused, {len(todo)} to train", flush=True)
+    print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
     trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address,
                                         device=args.device)
     runs.update(trained)
