@@ -115,3 +115,23 @@ def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path)
     assert "LNN protocol: 2 energy starts of 40" in cuts and "CHNN protocol: 10 test starts of 100" in cuts
     assert "LNN protocol: the energy error at T = 10 s of their 100 s" in cuts
     assert "rollouts stop at 1000 dopri5 iterations (full: 100000)" in cuts
+
+
+def test_our_implementations_stand_beside_the_published_means_on_their_seeds():
+    def entry(*seeds):
+        return {"mean": sum(seeds) / len(seeds), "seeds": list(seeds), "low": min(seeds), "high": max(seeds)}
+    published = {2: {"CHNN": (5.0e-4, 1e-4), "CLNN": (2.0e-4, 1e-4), "HNN": (1.0e-2, 1e-3)}}
+    rows = {"chain2": {"constrained": entry(1.0e-4, 1.5e-4, 2.0e-4),             # every seed below: 3.3x
+                       "constrained_lagrangian": entry(1.5e-4, 2.5e-4, 3.5e-4),  # straddles, within 2x
+                       "mechanical": {"mean": 3.0e-2, "median": 2.0e-2}},         # one seed, 3x above
+              "lnn": {}}
+    lines = peer_table.against_published({"rows": rows}, published)
+    assert "| 2 | CHNN (ours: constrained) | 5.00e-04 | 1.50e-04 | 0.30 | no: 3.3x below (better) | " \
+           "below on every seed |" in lines
+    assert "| 2 | CLNN (ours: constrained_lagrangian) | 2.00e-04 | 2.50e-04 | 1.25 | yes | " \
+           "the seeds straddle it |" in lines
+    assert "| 2 | HNN (ours: mechanical) | 1.00e-02 | 3.00e-02 | 3.00 | no: 3.0x above (worse) | " \
+           "one seed: not tested |" in lines
+    assert peer_table.beside(entry(6e-4, 7e-4), 5e-4)[1] == "above on every seed"
+    # a row no kind of ours measured, or a table without the chain, adds no section
+    assert peer_table.against_published({"rows": {"lnn": {}}}, published) == []

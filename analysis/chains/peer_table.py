@@ -71,6 +71,7 @@ def markdown(results: dict) -> str:
             + " | " + " | ".join(_cell(row.get(kind)) for kind in names)
             + f" | {_cell(row['floor'])} | {seconds} |")
     lines += card(results)
+    lines += against_published(results, published)
     lnn = results["rows"].get("lnn")
     if lnn is not None:
         lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
@@ -120,3 +121,46 @@ def card(results: dict) -> list[str]:
                      f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} | "
                      f"{'one seed: not tested' if tied is None else ', '.join(tied) or 'none'} |")
     return lines
+
+
+# our kinds that implement a published method of CHNN's table (Finzi et al. 2020): the same model, our code
+SAME_METHOD = {"mechanical": "HNN", "constrained": "CHNN", "constrained_lagrangian": "CLNN"}
+
+
+def beside(ours: dict, theirs: float) -> tuple[float, str]:
+    """``(our mean / theirs, where our seeds stand)``: "below on every seed", "above on every seed", or
+    "the seeds straddle it"; with one seed, "one seed: not tested"."""
+    ratio = ours["mean"] / theirs
+    if len(ours.get("seeds", ())) < 2:
+        return ratio, "one seed: not tested"
+    if ours["high"] < theirs:
+        return ratio, "below on every seed"
+    if ours["low"] > theirs:
+        return ratio, "above on every seed"
+    return ratio, "the seeds straddle it"
+
+
+def against_published(results: dict, published: dict) -> list[str]:
+    """Each of our kinds that implements a published method (``SAME_METHOD``) beside that method's published
+    mean at each N: the ratio of our mean to theirs, whether it is within 2x, and where our seeds stand."""
+    lines = ["", "### Our implementations of the published methods against their published means", "",
+             "Their number is the paper's mean over its test starts; ours the mean over our seeds of each seed's "
+             "mean. *Seeds*: whether every seed of ours is below their mean, every one above, or they straddle it.",
+             "", "| N | method | published | ours | ours / published | within 2x | seeds |",
+             "| --- | --- | --- | --- | ---: | --- | --- |"]
+    rows = 0
+    for name, row in results["rows"].items():
+        if not name.startswith("chain"):
+            continue
+        n = int(name[len("chain"):])
+        for kind, method in SAME_METHOD.items():
+            ours, theirs = row.get(kind) or {}, published.get(n, {}).get(method)
+            if theirs is None or "mean" not in ours:
+                continue
+            ratio, where = beside(ours, theirs[0])
+            within = ("yes" if 1 / 2 <= ratio <= 2 else f"no: {1 / ratio:.1f}x below (better)" if ratio < 1
+                      else f"no: {ratio:.1f}x above (worse)")
+            lines.append(f"| {n} | {method} (ours: {kind}) | {theirs[0]:.2e} | {ours['mean']:.2e} | {ratio:.2f} | "
+                         f"{within} | {where} |")
+            rows += 1
+    return lines if rows else []
