@@ -173,7 +173,7 @@ class PixelObjective(Objective):
 
         def loss(x, x_next):
             return pixel_loss(model, x, x_next, input_noise=spec.input_noise, use_rk4=spec.use_rk4, generator=noise)
-        return {"loss": loss}
+        return {"loss": loss, "generators": (noise,)}     # a resumed run draws on where it stopped
 
     def row_loss(self, model: nn.Module):
         return lambda x, x_next: pixel_loss(model, x, x_next)

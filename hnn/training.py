@@ -223,6 +223,9 @@ def _resume(path: Path, model, optim, gens, total_steps: int) -> tuple[int, dict
         optim.load_state_dict(state["optim"])
     except (RuntimeError, ValueError, KeyError) as err:
         raise ValueError(f"the training checkpoint {path} is of another model ({err}); {fix}") from err
+    if len(state["gens"]) != len(gens):
+        raise ValueError(f"the training checkpoint {path} saved {len(state['gens'])} samplers, this run draws from "
+                         f"{len(gens)}; {fix}")
     for gen, saved in zip(gens, state["gens"]):
         gen.set_state(saved.cpu())      # the samplers draw on the CPU whatever the model's device
     return state["step"] + 1, state["stats"], state["seconds"]
@@ -234,7 +237,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
           derivative_loss: str = "l2", loss_weights=None, checkpoint: str | Path | None = None,
-          checkpoint_every: float | None = None) -> dict:
+          checkpoint_every: float | None = None, generators: tuple = ()) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -266,6 +269,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             ``checkpoint_every`` seconds of training (default ``CHECKPOINT_EVERY``); where the file exists, training resumes from
             it and ends with the floats of an uninterrupted run (at the same torch threads). The
             caller deletes it once the run is saved (``hnn.run_experiment`` keeps one per run).
+        generators: the ``torch.Generator`` objects a custom ``loss`` draws from (its noise, say), which the
+            checkpoint saves and restores with the loop's own samplers.
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -311,7 +316,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         if checkpoint.exists():
-            first, stats, seconds_before = _resume(checkpoint, model, optim, (gen, test_gen), total_steps)
+            first, stats, seconds_before = _resume(checkpoint, model, optim, (gen, test_gen, *generators),
+                                                   total_steps)
             print(f"resuming at step {first} of {total_steps} from {checkpoint}", file=sys.stderr, flush=True)
     callbacks = list(_PROGRESS_CALLBACKS)
     if progress is None:    # a report_progress caller draws its own display
@@ -350,7 +356,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
                 print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
             if checkpoint is not None and step < total_steps and time.perf_counter() - saved_at >= checkpoint_every:
-                _save_checkpoint(checkpoint, step, total_steps, model, optim, (gen, test_gen), stats,
+                _save_checkpoint(checkpoint, step, total_steps, model, optim, (gen, test_gen, *generators), stats,
                                  seconds_before + time.perf_counter() - start)
                 saved_at = time.perf_counter()
     model.eval()

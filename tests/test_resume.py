@@ -1,6 +1,7 @@
 """A training run that is killed resumes from its checkpoint and ends with the floats of a run that never
 stopped: the weights, the Adam moments, the minibatch and noise samplers and the loss history all
 carry over (``hnn.train(checkpoint=...)``, ``hnn.run_experiment``)."""
+import contextlib
 import json
 
 import pytest
@@ -56,6 +57,23 @@ def test_a_killed_run_resumes_to_the_floats_of_an_unbroken_one(tmp_path):
     for key in ("train_loss", "test_loss", "test_steps"):
         assert stats[key] == expected[key]
     assert len(stats["train_loss"]) == OPTIONS["total_steps"] + 1
+
+
+def test_the_generators_of_a_custom_loss_resume_where_they_stopped(tmp_path):
+    # a loss with noise of its own (the pixel objective's latent noise): its generator is checkpointed too
+    def run(model, path=None, stop=None):
+        noise = torch.Generator().manual_seed(7)
+
+        def loss(x, y):
+            return ((model.time_derivative(x + 0.1 * torch.randn(x.shape, generator=noise)) - y) ** 2).mean(1)
+        with (hnn.training.report_progress(_stop_at(stop)) if stop else contextlib.nullcontext()):
+            return hnn.train(model, *_data(), total_steps=30, loss=loss, checkpoint=path, checkpoint_every=0.0,
+                             generators=(noise,))
+    expected = run(_model())
+    path = tmp_path / "run.partial.pt"
+    with pytest.raises(_Kill):
+        run(_model(), path, stop=13)
+    assert run(_model(), path)["train_loss"] == expected["train_loss"]
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=[pytest.mark.cuda, pytest.mark.skipif(
