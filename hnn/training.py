@@ -266,11 +266,12 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             squared (the paper's), ``'l1'`` absolute (the LNN's); a custom ``loss`` replaces both.
         loss_weights: ``(dim,)`` weights of the default loss's components (``hnn.balance``); None: all 1.
         checkpoint: a file where the loop saves its state (weights, optimizer, samplers, stats) every
-            ``checkpoint_every`` seconds of training (default ``CHECKPOINT_EVERY``); where the file exists, training resumes from
-            it and ends with the floats of an uninterrupted run (at the same torch threads). The
-            caller deletes it once the run is saved (``hnn.run_experiment`` keeps one per run).
-        generators: the ``torch.Generator`` objects a custom ``loss`` draws from (its noise, say), which the
-            checkpoint saves and restores with the loop's own samplers.
+            ``checkpoint_every`` seconds of training (default ``CHECKPOINT_EVERY``); where the file
+            exists, training resumes from it and ends with the floats of an uninterrupted run (at the
+            same torch threads). The caller deletes it once the run is saved (``hnn.run_experiment``
+            keeps one per run).
+        generators: the ``torch.Generator`` objects a custom ``loss`` draws from (its noise, say),
+            which the checkpoint saves and restores with the loop's own samplers.
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:

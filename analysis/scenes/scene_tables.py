@@ -148,8 +148,8 @@ def card_name(card: dict) -> str:
 
 def card_table(results: dict) -> list[str]:
     grid = results["meta"].get("grid_seeds", [0])
-    lines = ["**Scene cards**: the smallest model (fewest parameters, then the least data, then the cheapest to train) whose energy "
-             "MSE (corrected protocol, else the paper's) and rollout error, each the mean over its seeds, both come "
+    lines = ["**Scene cards**: the smallest model (fewest parameters, then the least data, then the cheapest to "
+             "train) whose energy MSE (corrected protocol, else the paper's) and rollout error, each the mean over its seeds, both come "
              "within 2x of the best mean of its scene, over every kind and (spring, pend, 2body) every width and "
              f"training fraction, the grid trained at seed{'s' if len(grid) > 1 else ''} {', '.join(map(str, grid))} "
              "(where none does, the model nearest both bests: the smallest larger ratio, which the row gives). "
