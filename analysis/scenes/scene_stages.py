@@ -96,8 +96,8 @@ def scene_card(cells: dict) -> dict | None:
     ``scene_measure.cost_seconds``) whose mean over seeds comes within ``CARD_FACTOR`` of the scene's
     best mean energy MSE and best mean rollout error. ``cells`` is ``{(kind, width, fraction): {seed:
     measured}}``. Where no model is within ``CARD_FACTOR`` of both (the two bests come from different
-    models), the model nearest both: the smallest larger of its two ratios. ``within`` is the pick's larger ratio to the bests
-    (at most ``CARD_FACTOR`` unless it fell back).
+    models), the model nearest both: the smallest larger of its two ratios. ``within`` is the pick's
+    larger ratio to the bests (at most ``CARD_FACTOR`` unless it fell back).
 
     With several seeds the card also says what they cannot settle: ``unsettled`` names the smaller
     models (cells) whose mean is not within ``CARD_FACTOR`` of both bests but whose lowest seed on
