@@ -21,9 +21,10 @@ QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 6
                                                            "total_steps": 100},
          "lnn_kind_fields": {"lagrangian": {"derivative_loss": "l1"}}, "lnn_horizon": 10.0}
 # CHNN's budget: 8000 steps of batch 200, their 2000 epochs of 4 batches, on FULL_SEEDS seeds (#45: a verdict
-# on several seeds). One seed of it for every kind took about 2.4 hours of a 2-core machine (each kind's
-# one-thread rate: docs/peers.md, "What we tried"), so five are about 12 there; on a GPU a row's seeds of one
-# kind train as one group (--device cuda). The table of 4000 steps on one seed came first: at N = 2 the
+# on several seeds). One seed of it for every kind is about 7.8 hours of one thread (each kind's one-thread
+# rate, docs/peers.md; the LNN's chain rows, which train from lnn_convex, and its 60000 protocol steps
+# included), so five are about 20 hours of a 2-core machine; on a GPU a row's seeds of one kind train as
+# one group (--device cuda). The table of 4000 steps on one seed came first: at N = 2 the
 # mechanical kind's mean error went from 2.8e-2 at 1500 steps to 7.2e-3 at 4000
 FULL_SEEDS = 5
 FULL = {"bobs": BOBS, "fields": {"total_steps": 8000}, "test_starts": 100, "lnn_starts": 40,

@@ -1,6 +1,6 @@
 """The peers' published numbers on pendulum chains beside ours, on their own protocols (docs/peers.md).
 
-    python analysis/peers.py --jobs 2 --update-docs      # the whole table, 5 seeds (about 12 hours on 2 cores)
+    python analysis/peers.py --jobs 2 --update-docs      # the whole table, 5 seeds (about 20 hours on 2 cores)
     python analysis/peers.py --device cuda --update-docs # the same on a GPU, each row's seeds as one group
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
 
