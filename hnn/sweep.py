@@ -39,7 +39,7 @@ from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
 from .group_runs import unit_key
-from .runs import find_run, load_run
+from .runs import find_run, load_run, partial_checkpoint
 from .tasks import task_spec
 from .config import RunConfig
 from .errors import DivergenceError
@@ -114,7 +114,8 @@ class RunFailed(Exception):
 
 def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
     """``({key: saved run folder}, jobs left to train)``; a saved run that does not load is
-    reported by name and left to train again (its folder is replaced)."""
+    reported by name and left to train again (its folder is replaced), and a job whose run was killed
+    mid-training is named with its checkpoint."""
     found, todo = {}, []
     for job in jobs:
         folder = find_run(job.config)
@@ -126,6 +127,8 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
                 continue
         except (RuntimeError, OSError, ValueError, KeyError) as err:
             print(f"  {job.key}: {err}; training it again", flush=True)
+        if partial_checkpoint(job.config).exists():     # a run killed mid-training (hnn.runs)
+            print(f"  {job.key} has a training checkpoint: trained alone, it resumes there", flush=True)
         todo.append(job)
     return found, todo
 

@@ -9,6 +9,7 @@ import torch
 
 import hnn
 import hnn.runs
+import hnn.sweep
 import hnn.training
 
 
@@ -113,7 +114,7 @@ def _config(save_dir, **fields):
     return hnn.load_task("spring", "train").Config(save_dir=str(save_dir), total_steps=30, hidden_dim=8, **fields)
 
 
-def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch):
+def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(hnn.training, "CHECKPOINT_EVERY", 0.0)
     unbroken = hnn.run_experiment(_config(tmp_path / "a"))
 
@@ -122,6 +123,8 @@ def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_pat
     with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(17)):
         hnn.run_experiment(config)
     assert partial.exists() and hnn.runs.find_run(config) is None
+    _, todo = hnn.sweep.reuse([hnn.sweep.Job("b", "spring", config)])
+    assert [job.key for job in todo] == ["b"] and "b has a training checkpoint" in capsys.readouterr().out
     resumed = hnn.run_experiment(config)
     assert not partial.exists()
     metrics = [json.loads((run / "metrics.json").read_text()) for run in (unbroken, resumed)]
