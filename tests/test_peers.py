@@ -5,7 +5,7 @@ import re
 import pytest
 
 import hnn
-from hnn_analysis.chains import peer_plan, peer_table, peers
+from hnn_analysis.chains import peer_measure, peer_plan, peer_table, peers
 
 TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
         "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}, "max_iterations": 3000}
@@ -87,6 +87,29 @@ def test_seeds_make_each_cell_a_mean_with_its_range_and_the_card_says_what_they_
             assert cell["seeds"] == [e["mean"] for e in one] and cell["mean"] == pytest.approx(sum(cell["seeds"]) / 2)
             assert cell["low"] == min(cell["seeds"]) and cell["high"] == max(cell["seeds"])
     assert "2 seeds (0..1) a kind" in (tmp_path / "peers.md").read_text()
+    for kind, cost in results["rows"]["chain1"]["seconds"].items():    # every seed's run timed, and its wall kept
+        timed = [results["by_seed"][s]["chain1"]["seconds"][kind] for s in (0, 1)]
+        assert cost["seconds"] == pytest.approx(sum(t["seconds"] for t in timed) / 2)
+        assert cost["walls"] == [t["wall"] for t in timed] and cost["low"] <= cost["seconds"] <= cost["high"]
+    # a rerun that reuses every run counts every seed's wall time, not the first seed's
+    results["meta"]["seconds"]["training"] = 0
+    walls = sum(cost["walls"][s] for cost in results["rows"]["chain1"]["seconds"].values() for s in (0, 1))
+    assert f"their recorded training wall times sum to {walls:.0f} s" in peer_table.markdown(results)
+
+
+def test_the_card_says_which_cheaper_kinds_the_timings_cannot_separate():
+    def cost(*seconds):          # each seed's run timed alone on one thread, merged as the table merges them
+        return peer_measure.cost_over_seeds([{"k": {"seconds": s, "steps_per_s": 8000 / s, "steps": 8000,
+                                                    "wall": 2 * s}} for s in seconds])["k"]
+    assert cost(300, 100, 200) == {"seconds": 200, "low": 100, "high": 300, "steps_per_s": 40, "steps": 8000,
+                                   "walls": [600, 200, 400]}
+    rows = {"chain2": {"a": {"mean": 1e-3}, "b": {"mean": 1.5e-3}, "c": {"mean": 1.8e-3}, "d": {"mean": 1.2e-3},
+                       "seconds": {"a": cost(900, 950), "b": cost(300, 340), "c": cost(320, 380), "d": cost(400, 420)}}}
+    line = peer_table.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})[-1]
+    # b is the cheapest within 2x; c's timings (320..380 s) overlap b's (300..340 s), d's (400..420 s) do not
+    assert "| b 1.50e-03, 320 s (timings cannot tell it from c) |" in line
+    rows["chain2"]["seconds"]["c"] = cost(350, 380)
+    assert "| b 1.50e-03, 320 s |" in peer_table.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})[-1]
 
 
 def test_the_card_names_the_kinds_the_seeds_cannot_separate_from_the_best():

@@ -173,12 +173,13 @@ def over_seeds(by_seed: dict) -> dict:
     """The rows of several seeds (``{seed: measure(...)}``) as one: per kind the mean over the seeds of each
     seed's mean error, ``seeds`` (each seed's mean, in seed order), ``low``/``high`` (their range) and ``se``
     (their standard error), the median of the seeds' medians, and ``failed`` (``{seed: why}``: blew up or
-    diverged in training); a kind no seed measured keeps the first seed's failure. The chaos floor and the
-    training seconds are the first seed's (the same starts and config)."""
+    diverged in training); a kind no seed measured keeps the first seed's failure. The chaos floor is the
+    first seed's (the same starts); the training seconds are ``cost_over_seeds``."""
     first = by_seed[min(by_seed)]
     out = {}
     for row, entries in first.items():
-        merged = {"floor": entries.get("floor"), "seconds": entries.get("seconds", {})}
+        merged = {"floor": entries.get("floor"),
+                  "seconds": cost_over_seeds([rows[row].get("seconds", {}) for rows in by_seed.values()])}
         kinds = {k for rows in by_seed.values() for k in rows[row] if k not in ("floor", "seconds")}
         for kind in sorted(kinds):
             found = {seed: rows[row].get(kind) for seed, rows in sorted(by_seed.items())}
@@ -194,4 +195,19 @@ def over_seeds(by_seed: dict) -> dict:
                             "median": float(np.median([found[s]["median"] for s in means])),
                             "n": found[next(iter(means))]["n"], "failed": failed}
         out[row] = merged
+    return out
+
+
+def cost_over_seeds(costs: list[dict]) -> dict:
+    """Each kind's training cost over its seeds' runs (``costs``: each seed's ``{kind: {steps_per_s, steps,
+    seconds, wall}}``, the same config but the seed): ``seconds`` and ``steps_per_s`` the median of the seeds'
+    timings, ``low``/``high`` their range (how far one timing moves between runs), ``walls`` every run's
+    recorded wall time."""
+    out = {}
+    for kind in dict.fromkeys(kind for cost in costs for kind in cost):
+        found = [cost[kind] for cost in costs if kind in cost]
+        seconds = [entry["seconds"] for entry in found]
+        out[kind] = {"seconds": float(np.median(seconds)), "low": min(seconds), "high": max(seconds),
+                     "steps_per_s": float(np.median([entry["steps_per_s"] for entry in found])),
+                     "steps": found[0]["steps"], "walls": [entry.get("wall") for entry in found]}
     return out

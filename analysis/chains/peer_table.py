@@ -37,7 +37,8 @@ def markdown(results: dict) -> str:
                   "pipeline and say nothing about the kinds; the full table comes from `python analysis/peers.py "
                   "--jobs 2 --update-docs`." + (" Cut: " + "; ".join(meta["quick_cuts"]) + "."
                                                 if meta.get("quick_cuts") else ""), ""]
-    walls = [s["wall"] for row in results["rows"].values() for s in row["seconds"].values() if s.get("wall")]
+    walls = [wall for row in results["rows"].values() for s in row["seconds"].values()
+             for wall in s.get("walls", [s.get("wall")]) if wall]
     reused = meta.get("reused", 0)
     if not meta["seconds"]["training"]:
         trained = f"every run reused (their recorded training wall times sum to {sum(walls):.0f} s)"
@@ -49,7 +50,8 @@ def markdown(results: dict) -> str:
     lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}); "
               f"{trained}, measuring {meta['seconds']['measuring']:.0f} s. Training seconds in the tables: each "
               "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "
-              "quiet core; its recorded wall time is in peers.json). "
+              "quiet core; with several seeds, the median of the seeds' runs' timings; its recorded wall time is in "
+              "peers.json). "
               f"Each CHNN-protocol kind trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
@@ -95,13 +97,26 @@ def inseparable(row: dict, best: str, kinds) -> list[str]:
             and row[kind]["low"] <= row[best]["high"]]
 
 
+def as_cheap(costs: dict, enough: str, kinds) -> list[str]:
+    """The kinds of ``kinds`` whose range of training-cost timings (``cost_over_seeds``: one per seed's run)
+    overlaps ``enough``'s: the timings cannot say which trains faster. Empty where a kind has one timing."""
+    mine = costs.get(enough, {})
+    if "high" not in mine or mine["low"] == mine["high"]:
+        return []
+    return [kind for kind in kinds if kind != enough and "low" in costs.get(kind, {})
+            and costs[kind]["low"] <= mine["high"] and mine["low"] <= costs[kind]["high"]]
+
+
 def card(results: dict) -> list[str]:
     """The chain card's lines: at each N the best kind on the mean (over seeds where there are several), the
-    kind that is enough, the one of least training seconds (one thread) whose mean is within 2x of the best,
-    and the kinds the seeds cannot separate from the best (their ranges overlap)."""
+    kind that is enough, the one of least training seconds (one thread; the median of its seeds' timings)
+    whose mean is within 2x of the best, with those the timings cannot separate from it (``as_cheap``), and
+    the kinds the seeds cannot separate from the best (their ranges overlap)."""
     lines = ["", "### Which kind a chain requires (the card)", "",
              "The best of our kinds on the mean error at each N (the mean over seeds), and the one that is enough: "
-             "of the kinds within 2x of the best, the one that trains in the fewest seconds (one thread). With "
+             "of the kinds within 2x of the best, the one that trains in the fewest seconds (one thread; with "
+             "several seeds, the median of the seeds' timings, and the kinds whose range of timings overlaps it, "
+             "which cost the same as far as the timings can tell). With "
              "several seeds, the last column names the kinds whose seeds' range of errors overlaps the best's: "
              "the seeds cannot say which of them is better (with one seed it says nothing).", "",
              "| N | best | enough (within 2x, fewest training s) | all within 2x | seeds cannot separate from the best |",
@@ -116,9 +131,11 @@ def card(results: dict) -> list[str]:
         near = [kind for kind in means if means[kind] <= 2 * means[best]]
         seconds = {kind: row["seconds"].get(kind, {}).get("seconds", float("inf")) for kind in near}
         enough = min(near, key=seconds.get)
+        cheap = as_cheap(row["seconds"], enough, near)
         tied = inseparable(row, best, means) if len(row[best].get("seeds", ())) > 1 else None
         lines.append(f"| {name[len('chain'):]} | {best} {means[best]:.2e} | {enough} {means[enough]:.2e}, "
-                     f"{seconds[enough]:.0f} s | {', '.join(sorted(near, key=means.get))} | "
+                     f"{seconds[enough]:.0f} s" + (f" (timings cannot tell it from {', '.join(cheap)})" if cheap else "")
+                     + f" | {', '.join(sorted(near, key=means.get))} | "
                      f"{'one seed: not tested' if tied is None else ', '.join(tied) or 'none'} |")
     return lines
 
