@@ -38,6 +38,16 @@ def say(bar, line: str) -> None:
 HEARTBEAT = 30.0
 
 
+def time_left(step: int, total: int, first_step: int, first_time: float) -> str:
+    """``', about 12 min left'``: the steps still to run at this run's rate since ``first_step`` (at
+    ``first_time``, ``time.perf_counter``'s), or nothing before a rate is known."""
+    elapsed = time.perf_counter() - first_time
+    if step <= first_step or elapsed <= 0:
+        return ""
+    left = (total - step) * elapsed / (step - first_step)
+    return f", about {left / 60:.0f} min left" if left >= 90 else f", about {left:.0f} s left"
+
+
 def _group_outcomes(unit: list, outcomes: list[dict]):
     """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
     for job, outcome in zip(unit, outcomes):
@@ -59,14 +69,16 @@ def train_here(units: list[list], data: dict, bar, progress):
                 bar.update(job.steps)
                 yield job, outcome
             continue
-        job, done, said = unit[0], [0], [time.perf_counter()]
+        job, done, said, first = unit[0], [0], [time.perf_counter()], []
 
-        def advance(step: int, total: int, done=done, said=said, job=job) -> None:
+        def advance(step: int, total: int, done=done, said=said, first=first, job=job) -> None:
             bar.update(step - done[0])
             done[0] = step
+            if not first:           # a resumed run's first step here is past its start: rate from here
+                first.extend((step, time.perf_counter()))
             if bar.disable and time.perf_counter() - said[0] > HEARTBEAT:      # no bar: a line now and then
                 said[0] = time.perf_counter()
-                say(bar, f"  {progress.tag()} {job.key}: step {step} of {total}")
+                say(bar, f"  {progress.tag()} {job.key}: step {step} of {total}{time_left(step, total, *first)}")
         try:
             with report_progress(advance):
                 outcome = run_experiment(job.config, data[job.config.dataset_key()])

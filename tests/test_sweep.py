@@ -189,7 +189,18 @@ def test_every_run_says_runs_done_of_runs_to_do_and_the_time_so_far_as_it_ends(t
     # each line reached the reader when it was written, not when the sweep ended (tqdm's write does not flush)
     assert any(done[0] in snap and done[1] not in snap for snap in pipe.snapshots), pipe.snapshots
     # a lone run says its steps where no bar is drawn, with the runs done so far
-    assert re.search(r"\[0/2, \d+ s\] \S+/hnn/seed0: step 2 of 4", pipe.text), pipe.text
+    assert re.search(r"\[0/2, \d+ s\] \S+/hnn/seed0: step 2 of 4, about \d+ s left", pipe.text), pipe.text
+
+
+def test_a_long_run_says_how_long_it_has_left_at_its_own_rate(monkeypatch):
+    now = [1000.0]
+    monkeypatch.setattr(backends.time, "perf_counter", lambda: now[0])
+    # first seen at step 3000 (a resumed run: the steps before were trained in another sitting), 100 s later
+    # at step 3500: 5 steps a second, 4500 steps to go
+    now[0] += 100
+    assert backends.time_left(3500, 8000, 3000, 1000.0) == ", about 15 min left"
+    assert backends.time_left(7900, 8000, 3000, 0.0) == ", about 22 s left"        # 4900 steps in 1100 s
+    assert backends.time_left(3000, 8000, 3000, 1000.0) == ""                        # no rate yet
 
 
 def test_progress_counts_and_times():
