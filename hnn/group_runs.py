@@ -8,7 +8,9 @@ other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` 
 """
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -40,10 +42,20 @@ def unit_key(config) -> tuple | None:
     return None if key is None else ("stacked",) + key
 
 
+def group_checkpoint(configs: list) -> Path:
+    """The training checkpoint of the group of ``configs`` while it trains (``hnn.grouped.GroupCheckpoint``):
+    ``<save_dir>/.group-<hash>.partial.pt``, the hash of its runs' folder names, so the same group started
+    again finds it and another group does not."""
+    names = "\n".join(run_dir(config).name for config in configs)
+    return Path(configs[0].save_dir) / f".group-{hashlib.sha1(names.encode()).hexdigest()[:12]}.partial.pt"
+
+
 def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     """Train ``configs`` (equal ``unit_key``s) as one group and save each as its own run folder
     (as ``hnn.run_experiment`` would); per config its folder, or the ``GroupedRunFailed`` of a
-    model that failed. ``datasets``: each config's dataset (default ``config.dataset()``)."""
+    model that failed. ``datasets``: each config's dataset (default ``config.dataset()``). While it
+    trains the group keeps a checkpoint (``group_checkpoint``) that the same group resumes from after a
+    kill; it is deleted once the runs are saved, when the group fails, or with a config's ``force``."""
     keys = {unit_key(config) for config in configs}
     if None in keys or len(keys) != 1:
         raise ValueError("train_group needs configs of one group (equal hnn.group_runs.unit_key, none None); "
@@ -74,11 +86,19 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
                   learn_rate=first.training.learn_rate, weight_decay=first.training.weight_decay,
                   batch_size=first.training.batch_size, print_every=first.training.print_every,
                   names=[run_dir(c).name for c in configs])
-    if next(iter(keys))[0] == "closed_form":
-        stats, failures = fit_group(models, data, tests, input_noise=first.objective.input_noise, **shared)
-    else:
-        stats, failures = fit_stacked(models, data, tests, **shared, **_stacked_options(objective, models[0],
-                                                                                          first, datasets))
+    partial = group_checkpoint(configs)
+    if any(config.force for config in configs):
+        partial.unlink(missing_ok=True)
+    try:
+        if next(iter(keys))[0] == "closed_form":
+            stats, failures = fit_group(models, data, tests, input_noise=first.objective.input_noise,
+                                        checkpoint=partial, **shared)
+        else:
+            stats, failures = fit_stacked(models, data, tests, checkpoint=partial, **shared,
+                                          **_stacked_options(objective, models[0], first, datasets))
+    except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
+        partial.unlink(missing_ok=True)
+        raise
     out = []
     for g, config in enumerate(configs):
         if g in failures:
@@ -89,6 +109,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
                                objective.final_loss(models[g], test_x, test_y), None, saved[g])
         config.finish(directory, datasets[g])
         out.append(directory)
+    partial.unlink(missing_ok=True)
     return out
 
 
@@ -125,4 +146,4 @@ def run_group_task(task: str, values: list[Mapping], threads: int | None = None)
     return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
 
 
-__all__ = ["run_group_task", "train_group", "unit_key"]
+__all__ = ["group_checkpoint", "run_group_task", "train_group", "unit_key"]

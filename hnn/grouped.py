@@ -26,7 +26,9 @@ floor, so padding 16 to 64 would cost the wide step's products (benchmark ``grou
 """
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import torch
 
@@ -36,7 +38,8 @@ from .objectives import DerivativeObjective
 from .specs import run_specs
 from .models.structured import SeparableHNN
 from .models.tanh_mlp import closed_form_input_gradient, fast_tanh
-from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, training_steps
+from .training import (CHECKPOINT_EVERY, adam_optimizer, check_data, flushed_denormals, is_test_step, load_checkpoint,
+                       save_checkpoint, training_steps)
 
 GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
@@ -171,7 +174,8 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
               total_steps: int = 2000, learn_rate: float = 1e-3, weight_decay: float = 1e-4,
               batch_size: int | None = None, print_every: int = 200, test_every: int | None = None,
               input_noise: float = 0.0, names: list[str] | None = None, after_step=None,
-              progress: bool = False) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
+              progress: bool = False, checkpoint=None,
+              checkpoint_every: float | None = None) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
     """Train ``models`` (of one kind and width on the tanh MLP: HNNs, baselines, dissipative or
     separable HNNs) together, as ``hnn.train`` trains each alone; their weights are updated in place.
 
@@ -182,6 +186,8 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
         names: each model's name in a failure's report (default ``model <index>``).
         after_step: ``after_step(step, weights)`` after each optimizer step, with the stacked
             ``[W1, b1, W2, b2, W3]`` (a test poisons one model's slice with it).
+        checkpoint, checkpoint_every: the group's training checkpoint (``GroupCheckpoint``): saved there
+            every ``checkpoint_every`` seconds, resumed from where the file exists; the caller deletes it.
 
     Returns:
         ``(stats, failures)``: per model ``hnn.train``'s stats (``train_loss``, ``test_loss``,
@@ -219,9 +225,11 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     alive = torch.ones(len(models), dtype=torch.bool, device=weights[0].device)
     failures: dict[int, GroupedRunFailed] = {}
     train_loss, test_loss, test_steps = [], [], []
+    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every)
+    first, seconds_before = saver.resume(total_steps, alive, failures, names, (train_loss, test_loss, test_steps))
     with flushed_denormals():
         start = time.perf_counter()
-        for step in training_steps(total_steps, progress, "group"):
+        for step in training_steps(total_steps, progress, "group", start=first):
             xb, yb, gens = train_rows.draw()
             xb = train_rows.noisy(xb, gens, input_noise)
             losses = train_rows.loss(_field(weights, xb, baseline, rows), yb)
@@ -240,11 +248,14 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
                 with torch.no_grad():
                     test_loss.append(test_rows.loss(_field(weights, tx, baseline, rows), ty))
                 test_steps.append(step)
+            saver.after(step, total_steps, alive, failures, (train_loss, test_loss, test_steps),
+                        seconds_before + time.perf_counter() - start)
     def write_back(g: int, model) -> None:
         for j, net in enumerate(_nets(model)):
             for param, stacked in zip(_layers(net), weights):
                 param.copy_(stacked[j * len(models) + g])
-    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps, time.perf_counter() - start)
+    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps,
+                       seconds_before + time.perf_counter() - start)
 
 
 def group_stats(models: list, failures: dict, write_back, train_loss: list, test_loss: list, test_steps: list,
@@ -268,13 +279,72 @@ def group_stats(models: list, failures: dict, write_back, train_loss: list, test
 
 
 class WeightStack:
-    """Stacked weights as ``adam_optimizer`` asks for a model's: ``parameters()`` (here and ``hnn.stacked``)."""
+    """Stacked weights as ``adam_optimizer`` asks for a model's: ``parameters()`` (here and ``hnn.stacked``),
+    and as a checkpoint saves and loads a model's: ``state_dict()``, ``load_state_dict()``."""
 
     def __init__(self, weights):
         self._weights = weights
 
     def parameters(self):
         return iter(self._weights)
+
+    def state_dict(self) -> dict:
+        return {"weights": [w.detach() for w in self._weights]}
+
+    def load_state_dict(self, state: dict) -> None:
+        saved = state["weights"]
+        shapes, mine = [tuple(w.shape) for w in saved], [tuple(w.shape) for w in self._weights]
+        if shapes != mine:
+            raise ValueError(f"its stacked weights are of shapes {shapes}, this group's {mine}")
+        with torch.no_grad():
+            for w, value in zip(self._weights, saved):
+                w.copy_(value)
+
+
+class GroupCheckpoint:
+    """A group's training checkpoint (``fit_group`` and ``hnn.stacked.fit_stacked``, ``checkpoint=``), as
+    ``hnn.train``'s for a lone run: the stacked weights, their optimizer, every model's samplers, which
+    models failed and the losses so far, saved every ``every`` seconds of training (default
+    ``hnn.training.CHECKPOINT_EVERY``). Where the file exists the group resumes from it and ends with the
+    floats of an unbroken group (same threads). ``path`` None: no checkpoint."""
+
+    def __init__(self, path, weights: list, optim, rows: tuple, every: float | None = None):
+        self.path = None if path is None else Path(path)
+        self.stack, self.optim = WeightStack(weights), optim
+        self.gens = [gen for r in rows if r is not None for gen in r.gens]
+        self.every = CHECKPOINT_EVERY if every is None else every
+        self.saved_at = time.perf_counter()
+
+    def resume(self, total_steps: int, alive: torch.Tensor, failures: dict, names: list, losses: tuple) -> tuple:
+        """Load the checkpoint, if there is one, into the group: ``alive``, ``failures`` and the loss lists
+        ``losses = (train_loss, test_loss, test_steps)`` in place; ``(first step to run, seconds so far)``."""
+        if self.path is None or not self.path.exists():
+            return 0, 0.0
+        first, stats, seconds = load_checkpoint(self.path, self.stack, self.optim, self.gens, total_steps)
+        alive.copy_(stats["alive"])
+        failures.update({g: GroupedRunFailed(names[g], step, "loss is not finite") for g, step in stats["failed"].items()})
+        train_loss, test_loss, test_steps = losses
+        train_loss.extend(stats["train_loss"].unbind(0))
+        test_loss.extend(stats["test_loss"].unbind(0))
+        test_steps.extend(stats["test_steps"])
+        print(f"resuming a group of {len(names)} at step {first} of {total_steps} from {self.path}", file=sys.stderr,
+              flush=True)
+        self.saved_at = time.perf_counter()
+        return first, seconds
+
+    def after(self, step: int, total_steps: int, alive: torch.Tensor, failures: dict, losses: tuple,
+              seconds: float) -> None:
+        """Save after ``step`` when ``every`` seconds have passed since the last save (never after the last)."""
+        if self.path is None or step >= total_steps or time.perf_counter() - self.saved_at < self.every:
+            return
+        train_loss, test_loss, test_steps = losses
+        none = alive.new_zeros((0, len(alive)), dtype=torch.float32)      # on the group's device, not the default
+        stats = {"alive": alive.clone(), "failed": {g: f.step for g, f in failures.items()},
+                 "train_loss": torch.stack(train_loss) if train_loss else none,
+                 "test_loss": torch.stack(test_loss) if test_loss else none,
+                 "test_steps": list(test_steps)}
+        save_checkpoint(self.path, step, total_steps, self.stack, self.optim, self.gens, stats, seconds)
+        self.saved_at = time.perf_counter()
 
 
 def drop_failed(weights, optim, alive, finite, failures, names, step, interleaved: bool = True) -> None:
@@ -295,5 +365,5 @@ def drop_failed(weights, optim, alive, finite, failures, names, step, interleave
                         value[mine] = 0
 
 
-__all__ = ["GROUPABLE_KINDS", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
+__all__ = ["GROUPABLE_KINDS", "GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
            "group_stats"]

@@ -26,7 +26,7 @@ import torch
 from torch import nn
 from torch.func import functional_call, stack_module_state, vmap
 
-from .grouped import GroupRows, WeightStack, drop_failed, group_key, group_stats
+from .grouped import GroupCheckpoint, GroupRows, WeightStack, drop_failed, group_key, group_stats
 from .integrators.integrate import rollout
 from .integrators.solvers import get_solver
 from .modes import model_axis
@@ -74,7 +74,8 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
                 learn_rate: float = 1e-3, weight_decay: float = 1e-4, batch_size: int | None = None,
                 print_every: int = 200, test_every: int | None = None, input_noise: float = 0.0,
                 optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
-                names: list[str] | None = None, progress: bool = False) -> tuple[list[dict | None], dict]:
+                names: list[str] | None = None, progress: bool = False, checkpoint=None,
+                checkpoint_every: float | None = None) -> tuple[list[dict | None], dict]:
     """Train ``models`` (one class and shape, the same structure) together, as ``hnn.train`` trains each
     alone; their weights are updated in place.
 
@@ -85,6 +86,7 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
             model's slice replaces.
         seeds: each model's ``hnn.train`` seed (its minibatches and input noise).
         input_noise, optimizer, schedule, clip_grad: as ``hnn.train``'s.
+        checkpoint, checkpoint_every: as ``hnn.grouped.fit_group``'s.
 
     Returns:
         ``(stats, failures)`` as ``hnn.grouped.fit_group``'s.
@@ -123,9 +125,11 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
     optim = adam_optimizer(WeightStack(weights), learn_rate, weight_decay, optimizer)
     alive = torch.ones(len(models), dtype=torch.bool, device=first.device)
     failures, train_loss, test_loss, test_steps = {}, [], [], []
+    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every)
+    first, seconds_before = saver.resume(total_steps, alive, failures, names, (train_loss, test_loss, test_steps))
     with flushed_denormals(), model_axis():
         start = time.perf_counter()
-        for step in training_steps(total_steps, progress, "stacked"):
+        for step in training_steps(total_steps, progress, "stacked", start=first):
             xb, yb, gens = train_rows.draw()
             xb = train_rows.noisy(xb, gens, input_noise)
             if schedule != "constant":
@@ -147,10 +151,13 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
                 with torch.no_grad():
                     test_loss.append(losses(test_rows, tx, ty))
                 test_steps.append(step)
+            saver.after(step, total_steps, alive, failures, (train_loss, test_loss, test_steps),
+                        seconds_before + time.perf_counter() - start)
     def write_back(g: int, model: nn.Module) -> None:
         for name, param in model.named_parameters():
             param.copy_(params[name][g])
-    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps, time.perf_counter() - start)
+    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps,
+                       seconds_before + time.perf_counter() - start)
 
 
 # the rollout methods vmap can run: explicit fixed steps. The implicit ones (midpoint, discrete gradient)

@@ -196,15 +196,18 @@ CHECKPOINT_EVERY = 60.0
 _CHECKPOINT_FORMAT = 1
 
 
-def _save_checkpoint(path: Path, step: int, total_steps: int, model, optim, gens, stats: dict, seconds: float):
+def save_checkpoint(path: Path, step: int, total_steps: int, model, optim, gens, stats: dict, seconds: float):
+    """Write a training loop's state after ``step`` to ``path``, atomically: ``model``'s and ``optim``'s
+    ``state_dict``, the samplers ``gens`` (``torch.Generator``), the ``stats`` so far (tensors, lists and
+    numbers) and the seconds trained (``train``, ``hnn.grouped.fit_group`` and ``hnn.stacked.fit_stacked``)."""
     state = {"format": _CHECKPOINT_FORMAT, "step": step, "total_steps": total_steps, "seconds": seconds,
              "model": model.state_dict(), "optim": optim.state_dict(), "gens": [g.get_state() for g in gens],
              "stats": stats}
     atomic_write(path, lambda tmp: torch.save(state, tmp))
 
 
-def _resume(path: Path, model, optim, gens, total_steps: int) -> tuple[int, dict, float]:
-    """Load a checkpoint into the model, optimizer and samplers: ``(the first step still to run, the stats
+def load_checkpoint(path: Path, model, optim, gens, total_steps: int) -> tuple[int, dict, float]:
+    """Load a ``save_checkpoint`` into the model, optimizer and samplers: ``(the first step still to run, the stats
     so far, the seconds trained so far)``."""
     fix = f"delete {path} to train from the start"
     try:
@@ -317,7 +320,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         if checkpoint.exists():
-            first, stats, seconds_before = _resume(checkpoint, model, optim, (gen, test_gen, *generators),
+            first, stats, seconds_before = load_checkpoint(checkpoint, model, optim, (gen, test_gen, *generators),
                                                    total_steps)
             print(f"resuming at step {first} of {total_steps} from {checkpoint}", file=sys.stderr, flush=True)
     callbacks = list(_PROGRESS_CALLBACKS)
@@ -357,7 +360,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
                 print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
             if checkpoint is not None and step < total_steps and time.perf_counter() - saved_at >= checkpoint_every:
-                _save_checkpoint(checkpoint, step, total_steps, model, optim, (gen, test_gen, *generators), stats,
+                save_checkpoint(checkpoint, step, total_steps, model, optim, (gen, test_gen, *generators), stats,
                                  seconds_before + time.perf_counter() - start)
                 saved_at = time.perf_counter()
     model.eval()
