@@ -48,6 +48,19 @@ def test_the_lnn_chnn_row_trains_from_its_convex_init(tmp_path):
     assert "diverged" not in entry and entry["n"] == 3 and 0 < entry["median"] <= 1, entry
 
 
+def test_train_only_trains_and_a_later_run_measures_what_it_trained(tmp_path, capsys):
+    tiny = {**TINY, "kinds": ("baseline", "hnn")}
+    trained = peers.main(["--out", str(tmp_path), "--train-only"], settings=tiny)
+    assert set(trained["runs"]) == {"chain1/baseline/seed0", "chain1/hnn/seed0"}
+    assert "not measured (--train-only)" in capsys.readouterr().out and not (tmp_path / "peers.json").exists()
+    results = peers.main(["--out", str(tmp_path)], settings=tiny)
+    assert "peers: 2 runs reused, 0 to train" in capsys.readouterr().out
+    assert {"baseline", "hnn"} <= set(results["rows"]["chain1"]) and (tmp_path / "peers.json").exists()
+    with pytest.raises(SystemExit):
+        peers.main(["--train-only", "--update-docs"])
+    assert "drop one of them" in capsys.readouterr().err
+
+
 def test_update_docs_refuses_a_smoke_run(capsys):
     with pytest.raises(SystemExit):
         peers.main(["--quick", "--update-docs"])

@@ -3,6 +3,7 @@
     python analysis/peers.py --jobs 2 --update-docs      # the whole table, 5 seeds (about 20 hours on 2 cores)
     python analysis/peers.py --device cuda --update-docs # the same on a GPU, each row's seeds as one group
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
+    python analysis/peers.py --seed 3 --seeds 1 --train-only --out DIR   # one seed's runs, over sittings
 
 Trains our model kinds (``kinds()``: every registered one that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
@@ -42,6 +43,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=hnn.cli.int_at_least(1), default=None,
                    help="seeds seed .. seed + seeds - 1 of every run, the tables' means over them with their range "
                         f"(default: {FULL_SEEDS} for the full table, 1 with --quick)")
+    p.add_argument("--train-only", action="store_true",
+                   help="train the runs still missing and stop before measuring: a table trained over several "
+                        "sittings or machines (e.g. one seed each, --seed K --seeds 1) is measured once, by the "
+                        "same command without this flag")
     sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
@@ -54,6 +59,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
     args = parser.parse_args(argv)
     if args.update_docs and (args.quick or settings is not None):
         parser.error("--update-docs writes full-settings results into docs/peers.md; drop --quick")
+    if args.update_docs and args.train_only:
+        parser.error("--train-only stops before the table that --update-docs writes; drop one of them")
     sweep_flags.check_backend(parser, args)
     full = settings is None and not args.quick
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
@@ -68,6 +75,12 @@ def main(argv=None, settings: dict | None = None) -> dict:
     trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address,
                                         device=args.device)
     runs.update(trained)
+    if args.train_only:
+        print(f"peers: trained {len(todo)} run{'' if len(todo) == 1 else 's'} in {seconds['training']:.0f} s; "
+              "not measured (--train-only): the same command without it measures every run", flush=True)
+        sweep.exit_if_failed({key: outcome for key, outcome in runs.items()
+                              if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})
+        return {"runs": runs}
     tic = time.perf_counter()
     by_seed = {seed: measure(runs, settings, seed) for seed in seeds}
     rows = over_seeds(by_seed) if len(seeds) > 1 else by_seed[args.seed]
