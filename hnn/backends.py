@@ -88,10 +88,28 @@ def train_here(units: list[list], data: dict, bar, progress):
         yield job, outcome
 
 
+def run_reported(task: str, values, key: str, threads: int | None = None) -> str:
+    """``hnn.tasks.run_task`` in a worker process, saying every ``HEARTBEAT`` seconds how far its run is
+    (``key: step s of total, about m min left``) where its output is not a terminal (a log: a long run in
+    a worker is not silent until it ends; in a terminal the sweep's bar follows the runs)."""
+    if sys.stdout.isatty():
+        return run_task(task, values, threads)
+    first, said = [], [time.perf_counter()]
+
+    def advance(step: int, total: int) -> None:
+        if not first:
+            first.extend((step, time.perf_counter()))
+        if time.perf_counter() - said[0] > HEARTBEAT:
+            said[0] = time.perf_counter()
+            print(f"  {key}: step {step} of {total}{time_left(step, total, *first)}", flush=True)
+    with report_progress(advance):
+        return run_task(task, values, threads)
+
+
 def _submit(unit: list) -> tuple:
     """The worker call of a unit: ``(function, *arguments)`` before the thread count."""
     if len(unit) == 1:
-        return run_task, unit[0].task, unit[0].fields()
+        return run_reported, unit[0].task, unit[0].fields(), unit[0].key
     return run_group_task, unit[0].task, [job.fields() for job in unit]
 
 

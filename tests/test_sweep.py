@@ -192,6 +192,16 @@ def test_every_run_says_runs_done_of_runs_to_do_and_the_time_so_far_as_it_ends(t
     assert re.search(r"\[0/2, \d+ s\] \S+/hnn/seed0: step 2 of 4, about \d+ s left", pipe.text), pipe.text
 
 
+def test_a_run_in_a_worker_says_its_step_where_its_output_is_a_log(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(backends, "HEARTBEAT", -1.0)        # a line on every step
+    job = _job("spring", "hnn", tmp_path, 3)
+    folder = backends.run_reported(job.task, job.fields(), job.key, 1)
+    assert hnn.runs.find_run(job.config) == Path(folder)
+    lines = [line.strip() for line in capsys.readouterr().out.splitlines() if ": step " in line]
+    assert lines[0] == "spring/hnn/seed0: step 1 of 4" and re.fullmatch(r"spring/hnn/seed0: step 4 of 4, about 0 s "
+                                                                         r"left", lines[-1]), lines
+
+
 def test_a_long_run_says_how_long_it_has_left_at_its_own_rate(monkeypatch):
     now = [1000.0]
     monkeypatch.setattr(backends.time, "perf_counter", lambda: now[0])
