@@ -110,6 +110,23 @@ def test_seeds_make_each_cell_a_mean_with_its_range_and_the_card_says_what_they_
     assert f"their recorded training wall times sum to {walls:.0f} s" in peer_table.markdown(results)
 
 
+def test_seeds_measured_in_worker_processes_give_the_numbers_measured_here(tmp_path, monkeypatch):
+    # from the LNN's own init its run fails in training (test_tiny_peers_table): a cell the parent keeps
+    monkeypatch.setattr(peer_plan, "CHNN_KIND_FIELDS", {})
+    tiny = {**TINY, "kinds": ("hnn", "lagrangian")}
+    here = peers.main(["--out", str(tmp_path), "--seeds", "2"], settings=tiny)
+    pooled = peers.main(["--out", str(tmp_path), "--seeds", "2", "--jobs", "2"], settings=tiny)
+    for seed in (0, 1):
+        mine, theirs = here["by_seed"][seed]["chain1"], pooled["by_seed"][seed]["chain1"]
+        assert set(mine) == set(theirs) and set(theirs["seconds"]) == set(mine["seconds"])
+        for kind in ("hnn", "lagrangian"):
+            if "mean" in mine[kind]:           # float64 rollouts of the same models: the same to rounding
+                assert theirs[kind]["mean"] == pytest.approx(mine[kind]["mean"], rel=1e-9)
+            else:
+                assert theirs[kind] == mine[kind]
+        assert "diverged" in theirs["lagrangian"] and "mean" in theirs["hnn"]
+
+
 def test_the_card_says_which_cheaper_kinds_the_timings_cannot_separate():
     def cost(*seconds):          # each seed's run timed alone on one thread, merged as the table merges them
         return peer_measure.cost_over_seeds([{"k": {"seconds": s, "steps_per_s": 8000 / s, "steps": 8000,

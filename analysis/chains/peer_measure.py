@@ -5,7 +5,9 @@ with its time, never as a NaN.
 """
 from __future__ import annotations
 
+import concurrent.futures
 import json
+import multiprocessing
 from pathlib import Path
 
 import numpy as np
@@ -73,9 +75,10 @@ def measure_lnn(models: dict, starts: int, max_iterations: int = MAX_ITERATIONS,
     return result
 
 
-def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
+def measure(runs: dict, settings: dict, seed: int = 0, timed: bool = True) -> dict:
     """Every protocol row: ``{"chain<N>": {...}, "lnn": {...}}`` from the trained ``runs``; a kind
-    whose training diverged (``sweep.RunFailed.diverged``) is ``{"diverged": message}`` there."""
+    whose training diverged (``sweep.RunFailed.diverged``) is ``{"diverged": message}`` there.
+    ``timed``: with each kind's training cost (``_seconds``; else an empty ``seconds``)."""
     data = hnn.load_task("chain")
     rows, budget = {}, settings.get("max_iterations", MAX_ITERATIONS)
     names = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
@@ -83,21 +86,46 @@ def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
     print(f"  {progress.tag()} measuring {progress.total} models on their protocols", flush=True)
 
     def said(row: str):
-        return lambda kind: print(f"  {progress.advance()} {row}/{kind} measured", flush=True)
+        return lambda kind: print(f"  {progress.advance()} {row}/{kind}/seed{seed} measured", flush=True)
 
     for n in settings["bobs"]:
         models = _loaded(runs, f"chain{n}", settings["kinds"], seed)
         rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"], budget,
                                             said(f"chain{n}")),
                              **_diverged(runs, f"chain{n}", settings["kinds"], seed),
-                             "seconds": _seconds(runs, f"chain{n}", settings["kinds"], seed)}
+                             "seconds": _seconds(runs, f"chain{n}", settings["kinds"], seed) if timed else {}}
     if not settings["lnn_starts"]:
         return rows
     models = _loaded(runs, "lnn", settings["kinds"], seed)
     rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"], budget, said("lnn"), settings.get("lnn_horizon")),
                    **_diverged(runs, "lnn", settings["kinds"], seed),
-                   "seconds": _seconds(runs, "lnn", settings["kinds"], seed)}
+                   "seconds": _seconds(runs, "lnn", settings["kinds"], seed) if timed else {}}
     return rows
+
+
+def _one_thread() -> None:
+    torch.set_num_threads(1)
+
+
+def measure_seeds(runs: dict, settings: dict, seeds, jobs: int = 1) -> dict:
+    """``{seed: measure(runs, settings, seed)}`` of every seed: here, or (``jobs`` > 1 and several seeds)
+    the rollouts of each seed in one of ``jobs`` worker processes of one torch thread, then every run's
+    training cost timed here, after them, with nothing else running (``_seconds``)."""
+    if jobs <= 1 or len(seeds) < 2:
+        return {seed: measure(runs, settings, seed) for seed in seeds}
+
+    def saved(seed: int) -> dict:      # a worker gets the seed's run folders; the failures stay here
+        return {key: folder for key, folder in runs.items() if isinstance(folder, Path) and key.endswith(f"/seed{seed}")}
+    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
+    with concurrent.futures.ProcessPoolExecutor(min(jobs, len(seeds)), mp_context=context,
+                                                initializer=_one_thread) as pool:
+        futures = {seed: pool.submit(measure, saved(seed), settings, seed, False) for seed in seeds}
+        by_seed = {seed: future.result() for seed, future in futures.items()}
+    for seed, rows in by_seed.items():
+        for row, entries in rows.items():
+            entries.update(_diverged(runs, row, settings["kinds"], seed))
+            entries["seconds"] = _seconds(runs, row, settings["kinds"], seed)
+    return by_seed
 
 
 def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:

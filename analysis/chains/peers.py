@@ -26,7 +26,7 @@ import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
 from hnn import sweep, sweep_flags
-from hnn_analysis.chains.peer_measure import curves, curves_figure, measure, over_seeds
+from hnn_analysis.chains.peer_measure import curves, curves_figure, measure_seeds, over_seeds
 from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts
 from hnn_analysis.chains.peer_table import markdown
 from hnn_analysis.commands import portable_command
@@ -38,7 +38,7 @@ def _parser() -> argparse.ArgumentParser:
     commands.add_flags(p, quick="a smoke run of every stage: small data, 100 steps (the LNN too), N = 1, 2; "
                        + commands.budget_words("peers"),
                        out="output folder (default: results/peers, or results-quick/peers with --quick)",
-                       jobs="worker processes (1: in this process)")
+                       jobs="worker processes of the training and of the seeds' rollouts (1: in this process)")
     p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="the first seed")
     p.add_argument("--seeds", type=hnn.cli.int_at_least(1), default=None,
                    help="seeds seed .. seed + seeds - 1 of every run, the tables' means over them with their range "
@@ -82,7 +82,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
                               if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})
         return {"runs": runs}
     tic = time.perf_counter()
-    by_seed = {seed: measure(runs, settings, seed) for seed in seeds}
+    by_seed = measure_seeds(runs, settings, seeds, args.jobs)
     rows = over_seeds(by_seed) if len(seeds) > 1 else by_seed[args.seed]
     found = curves(runs, settings, args.seed)
     if found:
