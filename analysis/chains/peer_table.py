@@ -56,7 +56,8 @@ def markdown(results: dict) -> str:
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
               "cosine). " + _seeds_sentence(meta.get("seeds", [0])) +
-              " Training curves: [figures/peers-curves.png](figures/peers-curves.png).", "",
+              f" Training curves (seed {meta.get('seeds', [0])[0]}'s runs): "
+              "[figures/peers-curves.png](figures/peers-curves.png).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
               "mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published CLNN | published NeuralODE | published floor | "
