@@ -48,6 +48,24 @@ def time_left(step: int, total: int, first_step: int, first_time: float) -> str:
     return f", about {left / 60:.0f} min left" if left >= 90 else f", about {left:.0f} s left"
 
 
+class Heartbeat:
+    """How far one run is, every ``HEARTBEAT`` seconds: ``due(step, total)`` gives ``'step s of total, about
+    m min left'`` when a line is due (else None), the rate taken from the first step it saw (a resumed run
+    is not timed from its start)."""
+
+    def __init__(self):
+        self.first, self.said = None, time.perf_counter()
+
+    def due(self, step: int, total: int) -> str | None:
+        now = time.perf_counter()
+        if self.first is None:
+            self.first = (step, now)
+        if now - self.said <= HEARTBEAT:
+            return None
+        self.said = now
+        return f"step {step} of {total}{time_left(step, total, *self.first)}"
+
+
 def _group_outcomes(unit: list, outcomes: list[dict]):
     """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
     for job, outcome in zip(unit, outcomes):
@@ -69,16 +87,13 @@ def train_here(units: list[list], data: dict, bar, progress):
                 bar.update(job.steps)
                 yield job, outcome
             continue
-        job, done, said, first = unit[0], [0], [time.perf_counter()], []
+        job, done, beat = unit[0], [0], Heartbeat()
 
-        def advance(step: int, total: int, done=done, said=said, first=first, job=job) -> None:
+        def advance(step: int, total: int, done=done, beat=beat, job=job) -> None:
             bar.update(step - done[0])
             done[0] = step
-            if not first:           # a resumed run's first step here is past its start: rate from here
-                first.extend((step, time.perf_counter()))
-            if bar.disable and time.perf_counter() - said[0] > HEARTBEAT:      # no bar: a line now and then
-                said[0] = time.perf_counter()
-                say(bar, f"  {progress.tag()} {job.key}: step {step} of {total}{time_left(step, total, *first)}")
+            if bar.disable and (line := beat.due(step, total)):        # no bar: a line now and then
+                say(bar, f"  {progress.tag()} {job.key}: {line}")
         try:
             with report_progress(advance):
                 outcome = run_experiment(job.config, data[job.config.dataset_key()])
@@ -94,14 +109,11 @@ def run_reported(task: str, values, key: str, threads: int | None = None) -> str
     a worker is not silent until it ends; in a terminal the sweep's bar follows the runs)."""
     if sys.stdout.isatty():
         return run_task(task, values, threads)
-    first, said = [], [time.perf_counter()]
+    beat = Heartbeat()
 
     def advance(step: int, total: int) -> None:
-        if not first:
-            first.extend((step, time.perf_counter()))
-        if time.perf_counter() - said[0] > HEARTBEAT:
-            said[0] = time.perf_counter()
-            print(f"  {key}: step {step} of {total}{time_left(step, total, *first)}", flush=True)
+        if line := beat.due(step, total):
+            print(f"  {key}: {line}", flush=True)
     with report_progress(advance):
         return run_task(task, values, threads)
 
