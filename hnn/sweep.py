@@ -39,7 +39,8 @@ from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
 from .group_runs import unit_key
-from .runs import find_run, load_run, partial_checkpoint
+from .io import write_json
+from .runs import find_run, load_run, partial_checkpoint, run_dir
 from .tasks import task_spec
 from .config import RunConfig
 from .errors import DivergenceError
@@ -112,10 +113,33 @@ class RunFailed(Exception):
         super().__init__(f"{key}: {message}" + (f" (log: {log})" if log else ""))
 
 
-def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
+def diverged_record(config) -> Path:
+    """Where a sweep records that the run of ``config`` failed in training by its own arithmetic (an
+    ``hnn.DivergenceError``: a result of its config, which a rerun repeats): ``<save_dir>/.<folder>.diverged.json``
+    holding its message. ``reuse(jobs, diverged=True)`` reads it back instead of training the run again."""
+    directory = run_dir(config)
+    return directory.parent / f".{directory.name}.diverged.json"
+
+
+def _recorded_failure(job: Job) -> RunFailed | None:
+    """The ``RunFailed`` a sweep recorded for ``job`` (``diverged_record``), or None (none, or unreadable)."""
+    record = diverged_record(job.config)
+    try:
+        message = json.loads(record.read_text())["message"]
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        print(f"  {job.key}: its record of a failed run, {record}, cannot be read ({err}); training it again", flush=True)
+        return None
+    return RunFailed(job.key, message, diverged=True)
+
+
+def reuse(jobs: list[Job], diverged: bool = False) -> tuple[dict, list[Job]]:
     """``({key: saved run folder}, jobs left to train)``; a saved run that does not load is
     reported by name and left to train again (its folder is replaced), and a job whose run was killed
-    mid-training is named with its checkpoint."""
+    mid-training is named with its checkpoint. ``diverged``: a job whose run a sweep saw fail in training
+    (``diverged_record``) maps to that ``RunFailed`` instead of training again (a table that reports such
+    a failure as its cell; delete the record, or set the config's ``force``, to train it again)."""
     found, todo = {}, []
     for job in jobs:
         folder = find_run(job.config)
@@ -127,6 +151,12 @@ def reuse(jobs: list[Job]) -> tuple[dict, list[Job]]:
                 continue
         except (RuntimeError, OSError, ValueError, KeyError) as err:
             print(f"  {job.key}: {err}; training it again", flush=True)
+        failed = _recorded_failure(job) if diverged and not job.config.force else None
+        if failed is not None:
+            found[job.key] = failed
+            print(f"  {job.key} failed in training in an earlier sitting, reused as such "
+                  f"({failed.message.split(':')[0]}; delete {diverged_record(job.config)} to train it again)", flush=True)
+            continue
         if partial_checkpoint(job.config).exists():     # a run killed mid-training (hnn.runs)
             print(f"  {job.key} has a training checkpoint: trained alone, it resumes there", flush=True)
         todo.append(job)
@@ -190,6 +220,8 @@ def _failure(job: Job, err: BaseException, log_dir: Path, bar, tag: str = "") ->
     log.write_text("".join(traceback.format_exception(err)))
     failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log, diverged=isinstance(err, DivergenceError))
     say(bar, f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
+    if failed.diverged:         # a result of the config: recorded for a later sitting (reuse(..., diverged=True))
+        write_json(diverged_record(job.config), {"key": job.key, "message": failed.message})
     return failed
 
 
@@ -263,6 +295,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                 done[job.key] = _failure(job, outcome, log_dir, bar, tag)
             else:
                 done[job.key] = outcome
+                diverged_record(job.config).unlink(missing_ok=True)     # trained now: no failure to recall
                 metrics = _metrics(outcome)
                 built = data_seconds.pop(job.config.dataset_key(), 0.0)
                 per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),

@@ -417,3 +417,29 @@ def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times(
     # times, provenance and booleans are not results; NaN on both sides counts as equal
     assert (got["numbers"], got["equal"], got["only_one_side"]) == (3, 2, 1)
     assert got["worst_relative_difference"] == pytest.approx(1e-12, rel=1e-3)
+
+
+def test_a_run_that_failed_in_training_is_recorded_and_a_table_reuses_its_failure(tmp_path, capsys):
+    # a rate of 1e30: the loss is no longer finite after the first step, an hnn.DivergenceError (a result of the
+    # config, which a rerun repeats), recorded beside the runs
+    bad = _job("spring", "hnn", tmp_path, 3, learn_rate=1e30)
+    done, _ = sweep.train_jobs([bad], 1, tmp_path / "logs")
+    failed = done[bad.key]
+    assert isinstance(failed, sweep.RunFailed) and failed.diverged
+    record = sweep.diverged_record(bad.config)
+    assert record.parent == tmp_path and json.loads(record.read_text())["message"] == failed.message
+    # a table that reports such a failure as its cell takes it back without training; the others train it
+    found, todo = sweep.reuse([bad], diverged=True)
+    assert todo == [] and found[bad.key].diverged and found[bad.key].message == failed.message
+    assert "failed in training in an earlier sitting" in capsys.readouterr().out
+    assert sweep.reuse([bad])[1] == [bad]
+    forced = dataclasses.replace(bad, config=dataclasses.replace(bad.config, force=True))
+    assert sweep.reuse([forced], diverged=True)[1] == [forced]
+    # a run that trains after all leaves no record of a failure
+    good = _job("spring", "hnn", tmp_path, 3)
+    sweep.diverged_record(good.config).write_text(json.dumps({"message": "HypotheticalError: from before"}))
+    done, _ = sweep.train_jobs([good], 1, tmp_path / "logs")
+    assert isinstance(done[good.key], Path) and not sweep.diverged_record(good.config).exists()
+    # an unreadable record is named and the run trained again
+    record.write_text("{not json")
+    assert sweep.reuse([bad], diverged=True)[1] == [bad] and "cannot be read" in capsys.readouterr().out

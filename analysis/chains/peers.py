@@ -70,7 +70,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
         commands.say_quick("peers", cuts)
     seeds = range(args.seed, args.seed + (args.seeds or (FULL_SEEDS if full else 1)))
     jobs = plan_seeds(settings, out, seeds)
-    runs, todo = sweep.reuse(jobs)
+    runs, todo = sweep.reuse(jobs, diverged=True)     # a model that failed in training is its cell: not retrained
     print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
     trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address,
                                         device=args.device)
