@@ -190,6 +190,20 @@ def test_scene_card_orders_models_of_equal_parameters_by_their_data_not_their_ti
     assert card["fraction"] == 0.25 and card["unsettled"] == ["mechanical, width 16, 0.1 of the data"]
 
 
+def test_a_cards_timing_tie_break_and_its_seconds_are_the_median_of_its_seeds():
+    # two kinds of equal parameters on equal data, both within 2x: the cheaper to train is the card. Seed 0's
+    # timing says "a" (a burst that ran while the machine was quiet); the median of the three says "b"
+    def timed(seconds):
+        return {s: _cell(336, 1.2e-4, 0.1, t) for s, t in enumerate(seconds)}
+    cells = {("hnn", 200, 1.0): {s: _cell(41200, 1e-4, 0.1) for s in range(3)},
+             ("a", 16, 0.5): timed([1.0, 3.0, 3.2]), ("b", 16, 0.5): timed([2.0, 2.1, 1.9])}
+    card = scene_stages.scene_card(cells)
+    assert card["kind"] == "b" and card["train_seconds"] == 2.0
+    assert scene_measure.median_cost_seconds(cells[("a", 16, 0.5)]) == 3.0
+    # a cell whose seeds have no timing at all does not break the order
+    assert scene_measure.median_cost_seconds({0: {"params": 1}}) is None
+
+
 def test_the_recorded_seeds_are_the_fewest_any_card_rests_on():
     results = {"meta": {"seeds": [0, 1, 2], "grid_seeds": [0, 1, 2]},
                "scenes": {"spring": {"card": {"n_seeds": 3}}, "real": {"card": None}}}

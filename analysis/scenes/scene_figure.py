@@ -1,6 +1,6 @@
 """The scene study's Pareto figure: rollout error (the mean over seeds, with its standard error, where
-the cell trained at several) against training seconds and against rollout seconds (seed 0's), one row per
-scene (``figures/scenes-pareto.png``, and docs/figures/ with ``--update-docs``).
+the cell trained at several) against training seconds (the seeds' median) and against rollout seconds
+(seed 0's), one row per scene (``figures/scenes-pareto.png``, and docs/figures/ with ``--update-docs``).
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def pareto_figure(results: dict, path: Path) -> None:
             for key, (m, seeds) in cells.items():
                 kind = key.split("@")[0]
                 ro = m.get("rollout")
-                x = scene_measure.cost_seconds(m) if xkey else (ro or {}).get("seconds")
+                x = (seeds.get("train_seconds_median") or scene_measure.cost_seconds(m)) if xkey else (ro or {}).get("seconds")
                 if ro and x:
                     y, se = seeds.get("error_seeds") or (ro["error"], 0.0)
                     points.append((x, y))
@@ -56,7 +56,7 @@ def pareto_figure(results: dict, path: Path) -> None:
             handles, labels = ax.get_legend_handles_labels()
             legend.update(zip(labels, handles))
     title = (f"Scene study: rollout error vs cost (black: Pareto front); error: mean ± SE over "
-             f"{_seed_words(results)}; seconds: seed 0's")
+             f"{_seed_words(results)}; training s: the seeds' median; rollout s: seed 0's")
     if results["meta"]["quick"]:
         title = "QUICK smoke run, not the study's settings. " + title
     inch = 1 / fig.get_figheight()              # one inch in figure coordinates

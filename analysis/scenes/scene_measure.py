@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import multiprocessing
+import statistics
 import time
 from pathlib import Path
 
@@ -36,6 +37,13 @@ def cost_seconds(measured: dict) -> float | None:
     else the run's recorded wall time."""
     cost = measured.get("train_cost")
     return cost["seconds"] if cost else measured.get("train_seconds")
+
+
+def median_cost_seconds(per_seed: dict) -> float | None:
+    """The median of ``cost_seconds`` over a model's seeds (``{seed: measured}``), None where none has
+    one: one timing moves between sittings by more than two models of equal size differ."""
+    values = sorted(c for m in per_seed.values() if (c := cost_seconds(m)) is not None)
+    return statistics.median(values) if values else None
 
 
 def measure_models(scene, runs: dict, protocols: bool = True) -> dict:

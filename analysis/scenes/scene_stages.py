@@ -92,7 +92,7 @@ def _key_metric(m: dict) -> tuple[float | None, float | None]:
 
 
 def scene_card(cells: dict) -> dict | None:
-    """The smallest model (parameters, then data fraction, then training cost:
+    """The smallest model (parameters, then data fraction, then training cost: the median of its seeds'
     ``scene_measure.cost_seconds``) whose mean over seeds comes within ``CARD_FACTOR`` of the scene's
     best mean energy MSE and best mean rollout error. ``cells`` is ``{(kind, width, fraction): {seed:
     measured}}``. Where no model is within ``CARD_FACTOR`` of both (the two bests come from different
@@ -122,10 +122,10 @@ def scene_card(cells: dict) -> dict | None:
     ok = [k for k in spread if ratio(k, 0) <= CARD_FACTOR]
 
     def size(key) -> tuple:
-        # fewest parameters, then the least data (both exact), then the fastest to train: a timing, which
-        # moves between sittings, so it decides only between models equal on the first two
+        # fewest parameters, then the least data (both exact), then the fastest to train: the median of
+        # its seeds' timings, which move between sittings, so it decides only between models equal on both
         m = next(iter(cells[key].values()))
-        return m["params"], key[2], scene_measure.cost_seconds(m) or 0.0
+        return m["params"], key[2], scene_measure.median_cost_seconds(cells[key]) or 0.0
 
     pick = min(ok, key=size) if ok else min(spread, key=lambda k: (ratio(k, 0), *size(k)))
     if not math.isfinite(ratio(pick, 0)):
@@ -137,7 +137,7 @@ def scene_card(cells: dict) -> dict | None:
                  if several and pick in ok else None)
     m = next(iter(cells[pick].values()))
     return {"kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
-            "params": m["params"], "train_seconds": scene_measure.cost_seconds(m), "n_seeds": seeds,
+            "params": m["params"], "train_seconds": scene_measure.median_cost_seconds(cells[pick]), "n_seeds": seeds,
             "energy": spread[pick][0][0] if spread[pick][0] else None,
             "rollout": spread[pick][1][0] if spread[pick][1] else None, "within": ratio(pick, 0),
             "unsettled": unsettled, "pick_straddles": (ratio(pick, 2) > CARD_FACTOR) if several and pick in ok else None}
@@ -279,7 +279,8 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], g
 
 
 def _across(per_seed: dict) -> dict:
-    """Mean ± standard error across seeds of the main numbers of one kind."""
+    """Mean ± standard error across seeds of the main numbers of one kind, and the median of their
+    training seconds (``scene_measure.median_cost_seconds``)."""
     out = {}
     for key in ("test_loss", "energy_mse_paper", "energy_mse_corrected"):
         values = [m[key][0] for m in per_seed.values() if m.get(key)]
@@ -289,6 +290,8 @@ def _across(per_seed: dict) -> dict:
         values = [m["rollout"][key] for m in per_seed.values() if m.get("rollout", {}).get(key) is not None]
         if values:
             out[key + "_seeds"] = list(hnn.metrics.mean_and_se(values))
+    if (seconds := scene_measure.median_cost_seconds(per_seed)) is not None:
+        out["train_seconds_median"] = seconds
     return out
 
 

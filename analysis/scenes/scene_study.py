@@ -18,7 +18,7 @@ has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3bo
    1000 periods (spring, pend) or 100 orbits (2body) at it and at the fastest symplectic one.
 3. *Capacity and data* (spring, pend, 2body): hidden width x training fraction for every kind at
    ``--grid-seeds`` seeds (default: ``--seeds``; with ``--group`` a cell's seeds train as one group).
-4. *Scene cards*: the smallest model (fewest parameters, then cheapest to train) whose mean over
+4. *Scene cards*: the smallest model (fewest parameters, then least data, then cheapest to train) whose mean over
    seeds is within 2x of the best mean energy MSE and the best mean rollout error of its scene,
    with the smaller models the seeds cannot separate from it, and per scene the kinds whose seeds
    overlap the best kind's; Pareto plots of error against training and rollout seconds.
