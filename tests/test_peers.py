@@ -73,7 +73,7 @@ def test_the_card_names_the_cheapest_kind_within_2x_of_the_best():
                                    "d": {"seconds": 1}}}}
     lines = peer_table.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})
     # b is within 2x of a and cheaper; c is cheaper still but 2.1x off; d blew up
-    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b | one seed: not tested |"
+    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b | one seed: not tested | none |"
 
 
 def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
@@ -149,7 +149,23 @@ def test_the_card_names_the_kinds_the_seeds_cannot_separate_from_the_best():
                        "seconds": {"a": {"seconds": 900}, "b": {"seconds": 100}, "c": {"seconds": 10}}}}
     line = peer_table.card({"meta": {"kinds": ["a", "b", "c"]}, "rows": rows})[-1]
     # b's range overlaps a's (1.3e-3 <= 1.4e-3): the seeds cannot tell them apart; c's does not
-    assert line.startswith("| 2 | a 1.20e-03 |") and line.endswith("| a, b, c | b |")
+    assert line.startswith("| 2 | a 1.20e-03 |") and line.endswith("| a, b, c | b | none |")
+
+
+def test_a_kind_that_failed_on_some_seed_is_left_out_of_the_card_and_named():
+    def entry(*seeds, failed=None):
+        return {"mean": sum(seeds) / len(seeds), "seeds": list(seeds), "low": min(seeds), "high": max(seeds),
+                "failed": failed or {}}
+    # "a" is best on the seeds that trained and the cheapest, but two of its five seeds failed in training
+    rows = {"chain3": {"a": entry(0.9e-3, 1.0e-3, 1.1e-3, failed={0: "singular", 1: "singular"}),
+                       "b": entry(1.2e-3, 1.4e-3), "c": entry(1.5e-3, 2.0e-3),
+                       "seconds": {"a": {"seconds": 10}, "b": {"seconds": 300}, "c": {"seconds": 100}}}}
+    line = peer_table.card({"meta": {"kinds": ["a", "b", "c"]}, "rows": rows})[-1]
+    assert line.startswith("| 3 | b 1.30e-03 | c 1.75e-03, 100 s |") and line.endswith("| a (2 of 5) |")
+    # with no kind left that trained on every seed, the row chooses nothing from failures, and says so
+    rows["chain3"] = {"a": rows["chain3"]["a"], "seconds": {"a": {"seconds": 10}}}
+    assert peer_table.card({"meta": {"kinds": ["a"]}, "rows": rows})[-1] == \
+        "| 3 | every kind measured failed on some seed | | | | a (2 of 5) |"
 
 
 def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path):
@@ -186,5 +202,9 @@ def test_our_implementations_stand_beside_the_published_means_on_their_seeds():
     assert "| 2 | HNN (ours: mechanical) | 1.00e-02 | 3.00e-02 | 3.00 | no: 3.0x above (worse) | " \
            "one seed: not tested |" in lines
     assert peer_table.beside(entry(6e-4, 7e-4), 5e-4)[1] == "above on every seed"
+    # a kind some of whose seeds failed in training: its mean is over the rest, and the row says how many
+    rows["chain2"]["constrained"]["failed"] = {3: "singular"}
+    assert any(line.endswith("| below on every seed; 1 of 4 failed in training |")
+               for line in peer_table.against_published({"rows": rows}, published))
     # a row no kind of ours measured, or a table without the chain, adds no section
     assert peer_table.against_published({"rows": {"lnn": {}}}, published) == []
