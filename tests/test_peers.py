@@ -73,7 +73,7 @@ def test_the_card_names_the_cheapest_kind_within_2x_of_the_best():
                                    "d": {"seconds": 1}}}}
     lines = peer_table.card({"meta": {"kinds": ["a", "b", "c", "d"]}, "rows": rows})
     # b is within 2x of a and cheaper; c is cheaper still but 2.1x off; d blew up
-    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b | one seed: not tested | none |"
+    assert lines[-1] == "| 2 | a 1.00e-03 | b 1.90e-03, 100 s | a, b | one seed: not tested | d (every seed) |"
 
 
 def test_the_table_trains_the_kinds_whose_structure_the_chain_has(tmp_path):
@@ -165,7 +165,7 @@ def test_a_kind_that_failed_on_some_seed_is_left_out_of_the_card_and_named():
     # with no kind left that trained on every seed, the row chooses nothing from failures, and says so
     rows["chain3"] = {"a": rows["chain3"]["a"], "seconds": {"a": {"seconds": 10}}}
     assert peer_table.card({"meta": {"kinds": ["a"]}, "rows": rows})[-1] == \
-        "| 3 | every kind measured failed on some seed | | | | a (2 of 5) |"
+        "| 3 | every kind failed on some seed | | | | a (2 of 5) |"
 
 
 def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path):
@@ -204,7 +204,7 @@ def test_our_implementations_stand_beside_the_published_means_on_their_seeds():
     assert peer_table.beside(entry(6e-4, 7e-4), 5e-4)[1] == "above on every seed"
     # a kind some of whose seeds failed in training: its mean is over the rest, and the row says how many
     rows["chain2"]["constrained"]["failed"] = {3: "singular"}
-    assert any(line.endswith("| below on every seed; 1 of 4 failed in training |")
+    assert any(line.endswith("| below on every seed; 1 of 4 failed (in training, or the rollout blew up) |")
                for line in peer_table.against_published({"rows": rows}, published))
     # a row no kind of ours measured, or a table without the chain, adds no section
     assert peer_table.against_published({"rows": {"lnn": {}}}, published) == []

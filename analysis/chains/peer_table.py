@@ -112,32 +112,35 @@ def card(results: dict) -> list[str]:
     """The chain card's lines: at each N the best kind on the mean (over seeds where there are several), the
     kind that is enough, the one of least training seconds (one thread; the median of its seeds' timings)
     whose mean is within 2x of the best, with those the timings cannot separate from it (``as_cheap``), and
-    the kinds the seeds cannot separate from the best (their ranges overlap). A kind that failed in training on
-    any seed is left out of both choices, and named: its mean is over the seeds that trained, and a reader's
-    own seed may fail as those did."""
+    the kinds the seeds cannot separate from the best (their ranges overlap). A kind that failed on any seed
+    (in training, or its rollout blew up) is left out of both choices, and named: its mean is over the seeds
+    that did not, and a reader's own seed may fail as those did."""
     lines = ["", "### Which kind a chain requires (the card)", "",
              "The best of our kinds on the mean error at each N (the mean over seeds), and the one that is enough: "
              "of the kinds within 2x of the best, the one that trains in the fewest seconds (one thread; with "
              "several seeds, the median of the seeds' timings, and the kinds whose range of timings overlaps it, "
              "which cost the same as far as the timings can tell). With "
              "several seeds, the last column names the kinds whose seeds' range of errors overlaps the best's: "
-             "the seeds cannot say which of them is better (with one seed it says nothing). A kind that failed in "
-             "training on some seed is left out of the choice (its mean is over the seeds that trained; another "
-             "seed may fail as those did) and named in the last column.", "",
+             "the seeds cannot say which of them is better (with one seed it says nothing). A kind that failed on "
+             "some seed (in training, or its rollout blew up) is left out of the choice (its mean is over the seeds "
+             "that did not; another seed may fail as those did) and named in the last column.", "",
              "| N | best | enough (within 2x, fewest training s) | all within 2x | seeds cannot separate from the best "
-             "| left out: failed on some seeds |",
+             "| left out: failed (in training, or its rollout blew up) |",
              "| --- | --- | --- | --- | --- | --- |"]
     for name, row in results["rows"].items():
         if not name.startswith("chain"):
             continue
-        measured = [kind for kind in results["meta"]["kinds"] if "mean" in row.get(kind, {})]
+        kinds = results["meta"]["kinds"]
+        measured = [kind for kind in kinds if "mean" in row.get(kind, {})]
         failed = {kind: row[kind]["failed"] for kind in measured if row[kind].get("failed")}
         means = {kind: row[kind]["mean"] for kind in measured if kind not in failed}
-        left_out = ", ".join(f"{kind} ({len(why)} of {len(why) + len(row[kind]['seeds'])})"
-                             for kind, why in failed.items()) or "none"
+        left_out = ", ".join([f"{kind} ({len(why)} of {len(why) + len(row[kind]['seeds'])})"
+                              for kind, why in failed.items()]
+                             + [f"{kind} (every seed)" for kind in kinds
+                                if {"diverged", "blew_up"} & set(row.get(kind) or {})]) or "none"
         if not means:
             if failed:
-                lines.append(f"| {name[len('chain'):]} | every kind measured failed on some seed | | | | {left_out} |")
+                lines.append(f"| {name[len('chain'):]} | every kind failed on some seed | | | | {left_out} |")
             continue
         best = min(means, key=means.get)
         near = [kind for kind in means if means[kind] <= 2 * means[best]]
@@ -187,8 +190,9 @@ def against_published(results: dict, published: dict) -> list[str]:
             if theirs is None or "mean" not in ours:
                 continue
             ratio, where = beside(ours, theirs[0])
-            if ours.get("failed"):          # the mean is over the seeds that trained: say how many did not
-                where += f"; {len(ours['failed'])} of {len(ours['failed']) + len(ours['seeds'])} failed in training"
+            if ours.get("failed"):          # the mean is over the seeds that did not fail: say how many did
+                where += (f"; {len(ours['failed'])} of {len(ours['failed']) + len(ours['seeds'])} failed "
+                          "(in training, or the rollout blew up)")
             within = ("yes" if 1 / 2 <= ratio <= 2 else f"no: {1 / ratio:.1f}x below (better)" if ratio < 1
                       else f"no: {ratio:.1f}x above (worse)")
             lines.append(f"| {n} | {method} (ours: {kind}) | {theirs[0]:.2e} | {ours['mean']:.2e} | {ratio:.2f} | "
