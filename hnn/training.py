@@ -185,6 +185,16 @@ def _warn_off_scale(name: str, values: torch.Tensor) -> None:
                       "'Scale your states'", stacklevel=3)
 
 
+def _test_diverged(stats: dict, step: int, err: DivergenceError) -> None:
+    """Record a test batch that diverged after ``step``, before the last (``stats["test_diverged"]``: the
+    step and why) and say so on stderr the first time: training goes on, the test loss skips that step."""
+    message = err.args[0] if err.args else str(err)
+    if not stats.get("test_diverged"):
+        print(f"warning: {message}; training goes on (the test loss skips a step whose test batch diverged, "
+              "and a run whose last test batch diverges fails)", file=sys.stderr, flush=True)
+    stats.setdefault("test_diverged", []).append({"step": step, "why": message})
+
+
 def _say_when(err: DivergenceError, when: str) -> None:
     """Prefix ``err``'s message (its first argument) with where in the loop the model failed."""
     err.args = (f"at {when}: {err.args[0] if err.args else err}",) + err.args[1:]
@@ -278,7 +288,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
-        one train loss per step, and the test losses at ``test_steps`` (empty without test data).
+        one train loss per step, and the test losses at ``test_steps`` (empty without test data);
+        ``'test_diverged'`` (``[{'step', 'why'}]``) where a test batch before the last raised
+        ``DivergenceError``, which training goes on past (at the last step it fails the run).
     """
     if total_steps < 0 or int(total_steps) != total_steps:
         raise ValueError(f"total_steps must be a non-negative integer, got {total_steps!r}")
@@ -352,12 +364,18 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 try:
                     with torch.no_grad():
                         stats["test_loss"].append(loss(tx, ty).mean().item())
+                    stats["test_steps"].append(step)
                 except DivergenceError as err:
                     _say_when(err, f"the test batch after training step {step} of {total_steps}")
-                    raise
-                stats["test_steps"].append(step)
+                    if step == total_steps:     # the trained model fails on held-out states: the run failed
+                        raise
+                    # before the end a test batch only watches: the weights are finite (the training loss
+                    # was), and an early field may still run off on a held-out state that training fixes
+                    _test_diverged(stats, step, err)
             if verbose and step % print_every == 0:
-                test = f", test_loss {stats['test_loss'][-1]:.4e}" if has_test else ""
+                test = (f", test_loss {stats['test_loss'][-1]:.4e}" if stats["test_steps"][-1:] == [step]
+                        else ", test batch diverged" if stats.get("test_diverged", [{}])[-1].get("step") == step
+                        else "") if has_test else ""
                 print(f"step {step}, train_loss {stats['train_loss'][-1]:.4e}{test}", flush=True)
             if checkpoint is not None and step < total_steps and time.perf_counter() - saved_at >= checkpoint_every:
                 save_checkpoint(checkpoint, step, total_steps, model, optim, (gen, test_gen, *generators), stats,

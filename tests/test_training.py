@@ -156,6 +156,37 @@ def test_a_loss_that_turns_nan_stops_training_and_names_its_step(spring):
         hnn.train(model, d["x"], d["dxdt"], total_steps=10)
 
 
+def test_a_test_batch_that_diverges_before_the_end_is_recorded_and_one_at_the_end_fails_the_run(spring, capsys):
+    """A test batch only watches training: one that runs off (a held-out snippet of an early field, say)
+    is recorded with its step and training goes on; the last one is the trained model's, and fails the run."""
+    d = spring.get_dataset(seed=0, noise_std=0.0)
+
+    def diverging_at(bad_steps):
+        tests = iter(range(10 ** 6))
+
+        def loss(x, y):
+            if not torch.is_grad_enabled() and next(tests) in bad_steps:    # the n-th test batch runs off
+                raise hnn.DivergenceError("rk4 (dt=0.03): 1 trajectories diverged: #3 at t=0.12")
+            return (model.time_derivative(x) - y).pow(2).sum(1)
+        return loss
+
+    torch.manual_seed(0)
+    model = hnn.build_model(2, 16)
+    stats = hnn.train(model, d["x"], d["dxdt"], d["test_x"], d["test_dxdt"], total_steps=40, learn_rate=1e-2,
+                      print_every=10, loss=diverging_at({0, 2}), verbose=True)
+    assert stats["test_steps"] == [10, 30, 40] and len(stats["test_loss"]) == 3 and len(stats["train_loss"]) == 41
+    assert [entry["step"] for entry in stats["test_diverged"]] == [0, 20]
+    assert stats["test_diverged"][0]["why"].startswith("at the test batch after training step 0 of 40: rk4")
+    out, err = capsys.readouterr()
+    assert err.count("warning: at the test batch after training step") == 1 and "training goes on" in err
+    assert "step 0, train_loss" in out and "test batch diverged" in out
+    torch.manual_seed(0)
+    model = hnn.build_model(2, 16)
+    with pytest.raises(hnn.DivergenceError, match="^at the test batch after training step 40 of 40: rk4"):
+        hnn.train(model, d["x"], d["dxdt"], d["test_x"], d["test_dxdt"], total_steps=40, print_every=10,
+                  loss=diverging_at({4}))
+
+
 def test_data_far_from_unit_scale_warns_and_a_hamiltonian_rescaling_does_not(spring):
     """A spring in raw units (q in 1e2, p in 2.5e2, as a measured oscillator) warns; divided by
     the spreads (one degree of freedom: any pair of factors keeps Hamilton's equations) it does not."""
