@@ -190,7 +190,7 @@ def _test_diverged(stats: dict, step: int, err: DivergenceError) -> None:
     step and why) and say so on stderr the first time: training goes on, the test loss skips that step."""
     message = err.args[0] if err.args else str(err)
     if not stats.get("test_diverged"):
-        print(f"warning: {message}; training goes on (the test loss skips a step whose test batch diverged, "
+        print(f"warning: {message.rstrip('.')}; training goes on (the test loss skips a step whose test batch diverged, "
               "and a run whose last test batch diverges fails)", file=sys.stderr, flush=True)
     stats.setdefault("test_diverged", []).append({"step": step, "why": message})
 
