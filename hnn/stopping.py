@@ -16,6 +16,8 @@ import threading
 import time
 from pathlib import Path
 
+from tqdm.auto import tqdm
+
 
 class Interrupted(BaseException):
     """A SIGINT or SIGTERM to the sweep's process (``signum``): like KeyboardInterrupt, not an error of a run."""
@@ -57,6 +59,10 @@ def worker_start(parent: int) -> None:
     outright) instead of training on as an orphan."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _worker_signal)
+    # tqdm's default lock holds a multiprocessing semaphore, registered with the sweep's resource
+    # tracker; a worker stopped mid-run (os._exit) never released it, and the tracker warned of leaked
+    # semaphores as the command exited. A worker's bars need no lock across processes.
+    tqdm.set_lock(threading.RLock())
 
     def watch() -> None:
         while os.getppid() == parent:

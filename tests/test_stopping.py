@@ -80,6 +80,7 @@ def test_a_signal_to_the_sweep_stops_it_keeps_the_finished_runs_and_says_so(sign
     said = [line for line in output.splitlines() if line.startswith("interrupted")]
     assert len(said) == 1 and signal.Signals(signum).name in said[0], output
     assert "Traceback" not in output and "the sweep ran to its end" not in output
+    assert "leaked" not in output, output
     kept = _complete_runs(tmp_path)
     assert 1 <= len(kept) < RUNS and f"kept the {len(kept)} finished run" in said[0]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "a half-written folder was left"
