@@ -45,6 +45,8 @@ def time_left(step: int, total: int, first_step: int, first_time: float) -> str:
     if step <= first_step or elapsed <= 0:
         return ""
     left = (total - step) * elapsed / (step - first_step)
+    if left >= 2 * 3600:
+        return f", about {left / 3600:.1f} h left"
     return f", about {left / 60:.0f} min left" if left >= 90 else f", about {left:.0f} s left"
 
 

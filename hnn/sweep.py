@@ -37,7 +37,7 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
-from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
+from .backends import BACKENDS, say, time_left, train_here, train_in_pool, train_on_ray
 from .group_runs import unit_key
 from .io import write_json
 from .runs import find_run, load_run, partial_checkpoint, run_dir
@@ -288,8 +288,12 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         if todo:
             say(bar, f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
                       f"{len(units)} unit{'s' if len(units) != 1 else ''} of work")
+        # the time left of the whole sweep, at its steps per second so far (as the bar's on a terminal)
+        steps, steps_done, started = sum(job.steps for job in todo), 0, time.perf_counter()
         for job, outcome in results:
             tag = progress.advance() + " "
+            steps_done += job.steps
+            left = time_left(steps_done, steps, 0, started) if steps_done < steps else ""
             bar.set_postfix_str(f"{progress.done}/{progress.total} runs", refresh=False)
             if isinstance(outcome, BaseException):
                 done[job.key] = _failure(job, outcome, log_dir, bar, tag)
@@ -300,7 +304,8 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                 built = data_seconds.pop(job.config.dataset_key(), 0.0)
                 per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),
                                     "train": metrics.get("train_seconds")}
-                say(bar, f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)")
+                say(bar, f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)"
+                         + (f"; the sweep:{left[1:]}" if left else ""))
             if not in_process:
                 bar.update(job.steps)
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,

@@ -186,6 +186,8 @@ def test_every_run_says_runs_done_of_runs_to_do_and_the_time_so_far_as_it_ends(t
     assert len(done) == 2 and all(isinstance(run, Path) for run in runs.values())
     assert re.match(r"\[1/2, \d+ s\] \S+/hnn/seed0 trained ", done[0]), done
     assert re.match(r"\[2/2, \d+ s\] \S+/hnn/seed0 trained ", done[1]), done
+    # the sweep's time left at its steps per second so far, until its last run
+    assert re.search(r"\(\d+\.\d s\); the sweep: about \d+ s left$", done[0]) and "the sweep" not in done[1], done
     # each line reached the reader when it was written, not when the sweep ended (tqdm's write does not flush)
     assert any(done[0] in snap and done[1] not in snap for snap in pipe.snapshots), pipe.snapshots
     # a lone run says its steps where no bar is drawn, with the runs done so far
@@ -211,6 +213,7 @@ def test_a_long_run_says_how_long_it_has_left_at_its_own_rate(monkeypatch):
     assert backends.time_left(3500, 8000, 3000, 1000.0) == ", about 15 min left"
     assert backends.time_left(7900, 8000, 3000, 0.0) == ", about 22 s left"        # 4900 steps in 1100 s
     assert backends.time_left(3000, 8000, 3000, 1000.0) == ""                        # no rate yet
+    assert backends.time_left(100, 8000, 0, 0.0) == ", about 24.1 h left"           # a day's sweep, in hours
 
 
 def test_progress_counts_and_times():
