@@ -24,7 +24,7 @@ from .training import fit_loss
 from .io import check_save_dir
 from .kinds import model_from_spec
 from .objectives import DerivativeObjective
-from .runs import finish_run, run_dir, run_experiment, saved_args, training_subset
+from .runs import COMPLETE, finish_run, run_dir, run_experiment, saved_args, training_subset
 from .specs import RunSpecs, run_specs
 from .tasks import task_config
 
@@ -48,6 +48,23 @@ def group_checkpoint(configs: list) -> Path:
     again finds it and another group does not."""
     names = "\n".join(run_dir(config).name for config in configs)
     return Path(configs[0].save_dir) / f".group-{hashlib.sha1(names.encode()).hexdigest()[:12]}.partial.pt"
+
+
+def drop_spent_checkpoints(save_dir) -> list[Path]:
+    """Delete the group checkpoints in ``save_dir`` (``group_checkpoint``'s files) whose members' runs are all
+    saved by now: a group killed mid-way whose runs a later sweep trained in other groups or alone, which no
+    rerun forms again. A checkpoint that cannot be read, or that does not name its members, is left. Returns
+    the files deleted."""
+    dropped = []
+    for path in sorted(Path(save_dir).glob(".group-*.partial.pt")):
+        try:
+            names = torch.load(path, map_location="cpu", weights_only=True)["stats"]["names"]
+        except Exception:       # being written, corrupt or of an older hnn: not this function's to judge
+            continue
+        if names and all((path.parent / name / COMPLETE).is_file() for name in names):
+            path.unlink(missing_ok=True)
+            dropped.append(path)
+    return dropped
 
 
 def train_group(configs: list, datasets: list[dict] | None = None) -> list:
@@ -110,6 +127,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         config.finish(directory, datasets[g])
         out.append(directory)
     partial.unlink(missing_ok=True)
+    drop_spent_checkpoints(configs[0].save_dir)        # an older group of these runs, killed mid-way
     return out
 
 
@@ -146,4 +164,4 @@ def run_group_task(task: str, values: list[Mapping], threads: int | None = None)
     return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
 
 
-__all__ = ["group_checkpoint", "run_group_task", "train_group", "unit_key"]
+__all__ = ["drop_spent_checkpoints", "group_checkpoint", "run_group_task", "train_group", "unit_key"]

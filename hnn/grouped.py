@@ -225,8 +225,8 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     alive = torch.ones(len(models), dtype=torch.bool, device=weights[0].device)
     failures: dict[int, GroupedRunFailed] = {}
     train_loss, test_loss, test_steps = [], [], []
-    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every)
-    first, seconds_before = saver.resume(total_steps, alive, failures, names, (train_loss, test_loss, test_steps))
+    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every, names)
+    first, seconds_before = saver.resume(total_steps, alive, failures, (train_loss, test_loss, test_steps))
     with flushed_denormals():
         start = time.perf_counter()
         for step in training_steps(total_steps, progress, "group", start=first):
@@ -306,28 +306,31 @@ class GroupCheckpoint:
     ``hnn.train``'s for a lone run: the stacked weights, their optimizer, every model's samplers, which
     models failed and the losses so far, saved every ``every`` seconds of training (default
     ``hnn.training.CHECKPOINT_EVERY``). Where the file exists the group resumes from it and ends with the
-    floats of an unbroken group (same threads). ``path`` None: no checkpoint."""
+    floats of an unbroken group (same threads). ``path`` None: no checkpoint. ``names``: the members' run
+    folders, kept in the file (``stats["names"]``) so that one no rerun forms again can be found spent
+    (``hnn.group_runs.drop_spent_checkpoints``)."""
 
-    def __init__(self, path, weights: list, optim, rows: tuple, every: float | None = None):
-        self.path = None if path is None else Path(path)
+    def __init__(self, path, weights: list, optim, rows: tuple, every: float | None = None, names: list | None = None):
+        self.path, self.names = (None if path is None else Path(path)), list(names or [])
         self.stack, self.optim = WeightStack(weights), optim
         self.gens = [gen for r in rows if r is not None for gen in r.gens]
         self.every = CHECKPOINT_EVERY if every is None else every
         self.saved_at = time.perf_counter()
 
-    def resume(self, total_steps: int, alive: torch.Tensor, failures: dict, names: list, losses: tuple) -> tuple:
+    def resume(self, total_steps: int, alive: torch.Tensor, failures: dict, losses: tuple) -> tuple:
         """Load the checkpoint, if there is one, into the group: ``alive``, ``failures`` and the loss lists
         ``losses = (train_loss, test_loss, test_steps)`` in place; ``(first step to run, seconds so far)``."""
         if self.path is None or not self.path.exists():
             return 0, 0.0
         first, stats, seconds = load_checkpoint(self.path, self.stack, self.optim, self.gens, total_steps)
         alive.copy_(stats["alive"])
-        failures.update({g: GroupedRunFailed(names[g], step, "loss is not finite") for g, step in stats["failed"].items()})
+        failures.update({g: GroupedRunFailed(self.names[g], step, "loss is not finite")
+                         for g, step in stats["failed"].items()})
         train_loss, test_loss, test_steps = losses
         train_loss.extend(stats["train_loss"].unbind(0))
         test_loss.extend(stats["test_loss"].unbind(0))
         test_steps.extend(stats["test_steps"])
-        print(f"resuming a group of {len(names)} at step {first} of {total_steps} from {self.path}", file=sys.stderr,
+        print(f"resuming a group of {len(self.names)} at step {first} of {total_steps} from {self.path}", file=sys.stderr,
               flush=True)
         self.saved_at = time.perf_counter()
         return first, seconds
@@ -342,7 +345,7 @@ class GroupCheckpoint:
         stats = {"alive": alive.clone(), "failed": {g: f.step for g, f in failures.items()},
                  "train_loss": torch.stack(train_loss) if train_loss else none,
                  "test_loss": torch.stack(test_loss) if test_loss else none,
-                 "test_steps": list(test_steps)}
+                 "test_steps": list(test_steps), "names": self.names}
         save_checkpoint(self.path, step, total_steps, self.stack, self.optim, self.gens, stats, seconds)
         self.saved_at = time.perf_counter()
 

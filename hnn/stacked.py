@@ -125,8 +125,8 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
     optim = adam_optimizer(WeightStack(weights), learn_rate, weight_decay, optimizer)
     alive = torch.ones(len(models), dtype=torch.bool, device=first.device)
     failures, train_loss, test_loss, test_steps = {}, [], [], []
-    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every)
-    first, seconds_before = saver.resume(total_steps, alive, failures, names, (train_loss, test_loss, test_steps))
+    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every, names)
+    first, seconds_before = saver.resume(total_steps, alive, failures, (train_loss, test_loss, test_steps))
     with flushed_denormals(), model_axis():
         start = time.perf_counter()
         for step in training_steps(total_steps, progress, "stacked", start=first):

@@ -38,7 +38,7 @@ import torch
 from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, time_left, train_here, train_in_pool, train_on_ray
-from .group_runs import unit_key
+from .group_runs import drop_spent_checkpoints, unit_key
 from .io import write_json
 from .runs import find_run, load_run, partial_checkpoint, run_dir
 from .tasks import task_spec
@@ -308,6 +308,8 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                          + (f"; the sweep:{left[1:]}" if left else ""))
             if not in_process:
                 bar.update(job.steps)
+    for save_dir in dict.fromkeys(str(job.config.save_dir) for job in todo):
+        drop_spent_checkpoints(save_dir)       # groups killed in an earlier sitting whose runs trained since
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,
                "threads_per_job": threads, "group": group, "runs": per_run}
     return done, seconds

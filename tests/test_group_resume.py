@@ -139,6 +139,28 @@ def test_a_group_of_runs_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch)
             assert torch.equal(p, q)
 
 
+def test_a_killed_groups_checkpoint_is_dropped_once_its_runs_are_saved_by_other_groups(tmp_path, monkeypatch):
+    configs = [hnn.tasks.task_config("spring", {"seed": s, "hidden_dim": 16, "total_steps": 40, "batch_size": 16,
+                                                "save_dir": str(tmp_path)}) for s in (0, 1)]
+    fit = hnn.grouped.fit_group
+
+    def killed(*args, **kwargs):
+        return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(20))
+    with monkeypatch.context() as patch, pytest.raises(_Kill):
+        patch.setattr(hnn.group_runs, "fit_group", killed)
+        hnn.group_runs.train_group(configs)
+    spent = hnn.group_runs.group_checkpoint(configs)
+    unreadable = tmp_path / ".group-000000000000.partial.pt"
+    unreadable.write_bytes(b"half a file")
+    # a rerun that no longer forms that group (each run alone, as if the other had been saved meanwhile) leaves
+    # the checkpoint while one of its runs is still missing, and drops it once both are saved
+    hnn.group_runs.train_group(configs[:1])
+    assert spent.exists()
+    hnn.group_runs.train_group(configs[1:])
+    assert not spent.exists() and unreadable.exists()
+    assert hnn.group_runs.drop_spent_checkpoints(tmp_path) == []
+
+
 def test_a_checkpoint_of_another_group_is_refused_with_its_fix(tmp_path):
     models, data, tests = _members()
     path = tmp_path / "group.partial.pt"
