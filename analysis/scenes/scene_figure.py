@@ -55,15 +55,16 @@ def pareto_figure(results: dict, path: Path) -> None:
             ax.set_ylabel(f"{task}: rollout error")
             handles, labels = ax.get_legend_handles_labels()
             legend.update(zip(labels, handles))
-    title = (f"Scene study: rollout error vs cost (black: Pareto front); error: mean ± SE over "
+    # two lines: as one, the title ran past both edges of the figure
+    title = (f"Scene study: rollout error vs cost (black: Pareto front)\nerror: mean ± SE over "
              f"{_seed_words(results)}; training s: the seeds' median; rollout s: seed 0's")
     if results["meta"]["quick"]:
         title = "QUICK smoke run, not the study's settings. " + title
     inch = 1 / fig.get_figheight()              # one inch in figure coordinates
     fig.suptitle(title, fontsize=10, y=1 - 0.1 * inch, va="top")
     fig.legend(legend.values(), legend.keys(), loc="upper center", ncol=len(legend), fontsize=8,
-               bbox_to_anchor=(0.5, 1 - 0.3 * inch), frameon=False)
-    top = 1 - 0.6 * inch                         # the panels start below the title and the legend
+               bbox_to_anchor=(0.5, 1 - 0.45 * inch), frameon=False)
+    top = 1 - 0.75 * inch                        # the panels start below the title and the legend
     fig.tight_layout(rect=(0, 0, 1, top))
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format="png"))
