@@ -175,8 +175,9 @@ def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
     return out
 
 
-def curves_figure(found: dict, path: Path) -> Path:
-    """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each kind (log axis)."""
+def curves_figure(found: dict, path: Path, seed: int = 0) -> Path:
+    """docs/figures/peers-curves.png: one panel per protocol row, the held-out loss of each kind (log axis),
+    of the runs of ``seed``."""
     from matplotlib.ticker import NullFormatter
 
     from hnn_analysis.plotting import save_figure     # first: it sets the Agg backend
@@ -191,8 +192,10 @@ def curves_figure(found: dict, path: Path) -> Path:
                      fontsize=9)
         ax.set_xlabel("epochs (800 snippets)" if row.startswith("chain") else "steps (batch of states)", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0][0].set_ylabel("held-out loss (snippet MAE; LNN: dx/dt MSE, its lagrangian kind L1)", fontsize=8)
+    # three lines: as one, the label ran past the figure's top and bottom
+    axes[0][0].set_ylabel("held-out loss\n(snippet MAE; LNN: dx/dt MSE,\nits lagrangian kind L1)", fontsize=8)
     axes[0][-1].legend(fontsize=7)
+    fig.suptitle(f"Training curves of seed {seed}'s runs", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)
 

@@ -86,7 +86,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     rows = over_seeds(by_seed) if len(seeds) > 1 else by_seed[args.seed]
     found = curves(runs, settings, args.seed)
     if found:
-        figure = curves_figure(found, out / "figures" / "peers-curves.png")
+        figure = curves_figure(found, out / "figures" / "peers-curves.png", args.seed)
         if args.update_docs:
             target = hnn.tasks.repo_root() / "docs" / "figures" / "peers-curves.png"
             atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
