@@ -1,11 +1,12 @@
 """analysis/peers.py on a tiny config: every stage runs, the table holds the peers' numbers beside ours."""
 import json
 import re
+import shutil
 
 import pytest
 
 import hnn
-from hnn_analysis.chains import peer_measure, peer_plan, peer_table, peers
+from hnn_analysis.chains import peer_measure, peer_plan, peer_record, peer_table, peers
 
 TINY = {"bobs": (1,), "fields": {"n_train": 4, "n_test": 2, "hidden_dim": 8, "total_steps": 2},
         "test_starts": 3, "lnn_starts": 0, "lnn_fields": {}, "max_iterations": 3000}
@@ -48,17 +49,63 @@ def test_the_lnn_chnn_row_trains_from_its_convex_init(tmp_path):
     assert "diverged" not in entry and entry["n"] == 3 and 0 < entry["median"] <= 1, entry
 
 
-def test_train_only_trains_and_a_later_run_measures_what_it_trained(tmp_path, capsys):
+def test_train_only_trains_and_records_and_a_later_run_builds_the_table_from_the_record(tmp_path, capsys):
     tiny = {**TINY, "kinds": ("baseline", "hnn")}
     trained = peers.main(["--out", str(tmp_path), "--train-only"], settings=tiny)
     assert set(trained["runs"]) == {"chain1/baseline/seed0", "chain1/hnn/seed0"}
-    assert "not measured (--train-only)" in capsys.readouterr().out and not (tmp_path / "peers.json").exists()
+    assert "2 of 2 runs recorded" in capsys.readouterr().out and not (tmp_path / "peers.json").exists()
+    assert set(trained["record"]["runs"]) == {"chain1/baseline/seed0", "chain1/hnn/seed0"}
     results = peers.main(["--out", str(tmp_path)], settings=tiny)
-    assert "peers: 2 runs reused, 0 to train" in capsys.readouterr().out
+    assert "peers: 2 runs recorded in" in capsys.readouterr().out
     assert {"baseline", "hnn"} <= set(results["rows"]["chain1"]) and (tmp_path / "peers.json").exists()
     with pytest.raises(SystemExit):
         peers.main(["--train-only", "--update-docs"])
     assert "drop one of them" in capsys.readouterr().err
+
+
+def test_the_record_outlives_the_run_folders_and_a_stopped_sittings_runs_are_recorded(tmp_path, capsys):
+    """A table trained over sittings on machines that do not keep their files: each run's numbers are in the
+    record, so the table comes back the same with every run folder gone and nothing trained or measured."""
+    tiny = {**TINY, "kinds": ("baseline", "hnn")}
+    first = peers.main(["--out", str(tmp_path)], settings=tiny)
+    for run in (tmp_path / "runs").iterdir():
+        shutil.rmtree(run) if run.is_dir() else run.unlink()
+    capsys.readouterr()
+    again = peers.main(["--out", str(tmp_path)], settings=tiny)
+    out = capsys.readouterr().out
+    assert "0 to train" in out and "measured" not in out
+    for kind in ("baseline", "hnn"):
+        assert again["rows"]["chain1"][kind] == first["rows"]["chain1"][kind]
+        assert again["curves"]["chain1"][kind]["test_loss"] == pytest.approx(
+            first["curves"]["chain1"][kind]["test_loss"], rel=1e-3)      # kept to 4 significant digits
+    assert again["rows"]["chain1"]["floor"] == first["rows"]["chain1"]["floor"]
+    # a sitting stopped before its record: --record-only measures its saved runs into a record, trains nothing
+    other = tmp_path / "other.json"
+    peers.main(["--out", str(tmp_path / "b"), "--train-only", "--record", str(tmp_path / "b.json")], settings=tiny)
+    recorded = peers.main(["--out", str(tmp_path / "b"), "--record-only", "--record", str(other)], settings=tiny)
+    assert "0 to train" in capsys.readouterr().out
+    assert recorded["record"]["runs"] == json.loads((tmp_path / "b.json").read_text())["runs"]
+    # a changed config is another run: trained and recorded beside the old one's entry
+    changed = {**tiny, "fields": {**tiny["fields"], "total_steps": 3}}
+    peers.main(["--out", str(tmp_path), "--train-only"], settings=changed)
+    assert "0 runs reused, 2 to train" in capsys.readouterr().out
+
+
+def test_a_record_that_cannot_be_read_or_was_measured_otherwise_is_refused_with_the_fix(tmp_path, capsys):
+    tiny = {**TINY, "kinds": ("baseline",)}
+    (tmp_path / "peers-runs.json").write_text('{"measuring": ')
+    with pytest.raises(SystemExit):
+        peers.main(["--out", str(tmp_path)], settings=tiny)
+    assert "cannot be read" in capsys.readouterr().err
+    (tmp_path / "peers-runs.json").unlink()
+    peers.main(["--out", str(tmp_path), "--train-only"], settings=tiny)
+    with pytest.raises(SystemExit):
+        peers.main(["--out", str(tmp_path)], settings={**tiny, "test_starts": 4})
+    err = capsys.readouterr().err
+    assert "'test_starts': 3" in err and "'test_starts': 4" in err and "--record with another path" in err
+    with pytest.raises(SystemExit):
+        peers.main(["--record-only", "--update-docs"])
+    assert "--record-only only records" in capsys.readouterr().err
 
 
 def test_update_docs_refuses_a_smoke_run(capsys):
@@ -115,7 +162,9 @@ def test_seeds_measured_in_worker_processes_give_the_numbers_measured_here(tmp_p
     monkeypatch.setattr(peer_plan, "CHNN_KIND_FIELDS", {})
     tiny = {**TINY, "kinds": ("hnn", "lagrangian")}
     here = peers.main(["--out", str(tmp_path), "--seeds", "2"], settings=tiny)
-    pooled = peers.main(["--out", str(tmp_path), "--seeds", "2", "--jobs", "2"], settings=tiny)
+    # the same runs measured again into a second record, each seed in a worker
+    pooled = peers.main(["--out", str(tmp_path), "--seeds", "2", "--jobs", "2", "--record", str(tmp_path / "pooled.json")],
+                        settings=tiny)
     for seed in (0, 1):
         mine, theirs = here["by_seed"][seed]["chain1"], pooled["by_seed"][seed]["chain1"]
         assert set(mine) == set(theirs) and set(theirs["seconds"]) == set(mine["seconds"])
@@ -208,3 +257,18 @@ def test_our_implementations_stand_beside_the_published_means_on_their_seeds():
                for line in peer_table.against_published({"rows": rows}, published))
     # a row no kind of ours measured, or a table without the chain, adds no section
     assert peer_table.against_published({"rows": {"lnn": {}}}, published) == []
+
+
+def test_the_committed_record_holds_runs_of_the_full_tables_plan():
+    """docs/peers-runs.json keeps the full table's finished runs between sittings: a change to a kind's or a
+    protocol's config makes its recorded runs another config's, retrained by the next sitting, and this
+    test names them, so such a change is made knowingly."""
+    settings = {"kinds": peer_plan.kinds(), **peer_plan.FULL}
+    record = peer_record.load(hnn.tasks.repo_root() / peer_record.RECORD, settings)    # raises if measured otherwise
+    jobs = {job.key: job for job in peer_plan.plan_seeds(settings, hnn.tasks.repo_root() / "results" / "peers",
+                                                         range(peer_plan.FULL_SEEDS))}
+    stale = sorted(key for key, entry in record["runs"].items()
+                   if key not in jobs or entry["identity"] != jobs[key].config.key())
+    assert not stale, f"recorded runs the full table no longer trains (their configs changed): {stale}"
+    for key, entry in record["runs"].items():
+        assert set(entry["entry"]) in ({"mean", "median", "n"}, {"blew_up"}, {"diverged"}), (key, entry)

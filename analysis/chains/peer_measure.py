@@ -5,9 +5,6 @@ with its time, never as a NaN.
 """
 from __future__ import annotations
 
-import concurrent.futures
-import json
-import multiprocessing
 from pathlib import Path
 
 import numpy as np
@@ -75,10 +72,9 @@ def measure_lnn(models: dict, starts: int, max_iterations: int = MAX_ITERATIONS,
     return result
 
 
-def measure(runs: dict, settings: dict, seed: int = 0, timed: bool = True) -> dict:
+def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
     """Every protocol row: ``{"chain<N>": {...}, "lnn": {...}}`` from the trained ``runs``; a kind
-    whose training diverged (``sweep.RunFailed.diverged``) is ``{"diverged": message}`` there.
-    ``timed``: with each kind's training cost (``_seconds``; else an empty ``seconds``)."""
+    whose training diverged (``sweep.RunFailed.diverged``) is ``{"diverged": message}`` there."""
     data = hnn.load_task("chain")
     rows, budget = {}, settings.get("max_iterations", MAX_ITERATIONS)
     names = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
@@ -92,40 +88,18 @@ def measure(runs: dict, settings: dict, seed: int = 0, timed: bool = True) -> di
         models = _loaded(runs, f"chain{n}", settings["kinds"], seed)
         rows[f"chain{n}"] = {**measure_chnn(data.chnn_chain(n), models, settings["test_starts"], budget,
                                             said(f"chain{n}")),
-                             **_diverged(runs, f"chain{n}", settings["kinds"], seed),
-                             "seconds": _seconds(runs, f"chain{n}", settings["kinds"], seed) if timed else {}}
+                             **_diverged(runs, f"chain{n}", settings["kinds"], seed)}
     if not settings["lnn_starts"]:
         return rows
     models = _loaded(runs, "lnn", settings["kinds"], seed)
     rows["lnn"] = {**measure_lnn(models, settings["lnn_starts"], budget, said("lnn"), settings.get("lnn_horizon")),
-                   **_diverged(runs, "lnn", settings["kinds"], seed),
-                   "seconds": _seconds(runs, "lnn", settings["kinds"], seed) if timed else {}}
+                   **_diverged(runs, "lnn", settings["kinds"], seed)}
     return rows
 
 
-def _one_thread() -> None:
+def one_thread() -> None:
+    """A measuring worker's initializer: one torch thread (the workers share the machine's cores)."""
     torch.set_num_threads(1)
-
-
-def measure_seeds(runs: dict, settings: dict, seeds, jobs: int = 1) -> dict:
-    """``{seed: measure(runs, settings, seed)}`` of every seed: here, or (``jobs`` > 1 and several seeds)
-    the rollouts of each seed in one of ``jobs`` worker processes of one torch thread, then every run's
-    training cost timed here, after them, with nothing else running (``_seconds``)."""
-    if jobs <= 1 or len(seeds) < 2:
-        return {seed: measure(runs, settings, seed) for seed in seeds}
-
-    def saved(seed: int) -> dict:      # a worker gets the seed's run folders; the failures stay here
-        return {key: folder for key, folder in runs.items() if isinstance(folder, Path) and key.endswith(f"/seed{seed}")}
-    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
-    with concurrent.futures.ProcessPoolExecutor(min(jobs, len(seeds)), mp_context=context,
-                                                initializer=_one_thread) as pool:
-        futures = {seed: pool.submit(measure, saved(seed), settings, seed, False) for seed in seeds}
-        by_seed = {seed: future.result() for seed, future in futures.items()}
-    for seed, rows in by_seed.items():
-        for row, entries in rows.items():
-            entries.update(_diverged(runs, row, settings["kinds"], seed))
-            entries["seconds"] = _seconds(runs, row, settings["kinds"], seed)
-    return by_seed
 
 
 def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:
@@ -133,8 +107,12 @@ def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:
     failed in training, e.g. ``'SingularLagrangianError at training step 0 of 4000: LagrangianNN: d2L/dqdot2
     is singular at 1 states'`` (the states themselves are in the run's log)."""
     found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
-    return {kind: {"diverged": err.message.split(", where")[0].replace(": at ", " at ", 1)}
-            for kind, err in found.items() if isinstance(err, sweep.RunFailed) and err.diverged}
+    return {kind: diverged_entry(err) for kind, err in found.items() if isinstance(err, sweep.RunFailed) and err.diverged}
+
+
+def diverged_entry(err: sweep.RunFailed) -> dict:
+    """The table's entry of a run that failed in training: ``{"diverged": its error's type, step and first clause}``."""
+    return {"diverged": err.message.split(", where")[0].replace(": at ", " at ", 1)}
 
 
 def _loaded(runs: dict, row: str, kinds, seed: int, load: bool = True) -> dict:
@@ -144,35 +122,22 @@ def _loaded(runs: dict, row: str, kinds, seed: int, load: bool = True) -> dict:
             if isinstance(folder, Path)}
 
 
-def _seconds(runs: dict, row: str, kinds, seed: int) -> dict:
-    """Each kind's training cost on one quiet thread (``hnn_analysis.training_cost``: its steps at the
-    rate of short timed bursts of the same config), not the run's wall time, which counts whatever else
-    the machine did meanwhile (kept as ``wall``)."""
-    found = {kind: runs.get(f"{row}/{kind}/seed{seed}") for kind in kinds}
-    out = {}
-    for kind, folder in found.items():
-        if isinstance(folder, Path):
-            cost = training_cost("chain", hnn.load_run(folder)[1])
-            out[kind] = {**cost, "wall": json.loads((folder / "metrics.json").read_text()).get("train_seconds")}
-    return out
-
-
-def curves(runs: dict, settings: dict, seed: int = 0) -> dict:
-    """Each run's held-out loss against training: ``{row: {kind: {"epochs": [...], "test_loss": [...]}}}``,
-    from the saved histories (a test batch every ``print_every`` steps); x in CHNN's epochs of 800
-    snippets (4 steps of batch 200) for the chain rows, in steps for the LNN row."""
-    rows = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
-    out = {}
-    for row in rows:
-        for kind in settings["kinds"]:
-            folder = runs.get(f"{row}/{kind}/seed{seed}")
-            if not isinstance(folder, Path):
-                continue
-            history = json.loads((folder / "metrics.json").read_text())["history"]
-            per_epoch = 1.0 if row == "lnn" else 800 / 200
-            out.setdefault(row, {})[kind] = {"epochs": [step / per_epoch for step in history["test_steps"]],
-                                             "test_loss": history["test_loss"]}
-    return out
+def add_seconds(by_seed: dict, jobs: list, walls: dict) -> dict:
+    """``by_seed`` (``{seed: {row: {kind: entry}}}``) with each row's ``seconds``: per kind whose run was
+    saved (its recorded wall time in ``walls``, by run key), its training cost on one quiet thread
+    (``hnn_analysis.training_cost``: its config's steps at the rate of short timed bursts), not the run's
+    wall time, which counts whatever else the machine did meanwhile (kept as ``wall``). Timed here, in
+    this process, after every rollout: nothing else runs."""
+    for job in jobs:
+        row, kind, seed = job.key.split("/")
+        rows = by_seed.get(int(seed[len("seed"):]), {})
+        if row in rows and job.key in walls:
+            cost = training_cost("chain", job.config.to_dict())
+            rows[row].setdefault("seconds", {})[kind] = {**cost, "wall": walls[job.key]}
+    for rows in by_seed.values():
+        for entries in rows.values():
+            entries.setdefault("seconds", {})
+    return by_seed
 
 
 def curves_figure(found: dict, path: Path, seed: int = 0) -> Path:

@@ -4,6 +4,7 @@
     python analysis/peers.py --device cuda --update-docs # the same on a GPU, each row's seeds as one group
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
     python analysis/peers.py --seed 3 --seeds 1 --train-only --out DIR   # one seed's runs, over sittings
+    python analysis/peers.py --record-only --out DIR      # record a stopped sitting's finished runs
 
 Trains our model kinds (``kinds()``: every registered one that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
@@ -12,7 +13,9 @@ N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), throu
 protocol (``experiment-chain/protocols.py``): CHNN's geometric-mean relative error of the
 Cartesian rollout (dopri5 at rtol 1e-7, in float64), mean and median over the test starts, with
 the chaos floor; LNN's energy error at T = 100 s. A rollout that blows up is reported by name
-with its time, never as a NaN. Writes ``peers.json`` and ``peers.md`` under ``--out``;
+with its time, never as a NaN. Each run's numbers go into the record (``peer_record``: the full
+table's is docs/peers-runs.json, committed) as soon as it is measured, and the table is built from
+the record: a run recorded is neither trained nor measured again, even on another machine. Writes ``peers.json`` and ``peers.md`` under ``--out``;
 ``--update-docs`` puts the table into docs/peers.md (full settings only).
 """
 from __future__ import annotations
@@ -21,12 +24,14 @@ import argparse
 import shutil
 import sys
 import time
+from pathlib import Path
 
 import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
 from hnn import sweep, sweep_flags
-from hnn_analysis.chains.peer_measure import curves, curves_figure, measure_seeds, over_seeds
+from hnn_analysis.chains import peer_record
+from hnn_analysis.chains.peer_measure import add_seconds, curves_figure, over_seeds
 from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts
 from hnn_analysis.chains.peer_table import markdown
 from hnn_analysis.commands import portable_command
@@ -44,9 +49,17 @@ def _parser() -> argparse.ArgumentParser:
                    help="seeds seed .. seed + seeds - 1 of every run, the tables' means over them with their range "
                         f"(default: {FULL_SEEDS} for the full table, 1 with --quick)")
     p.add_argument("--train-only", action="store_true",
-                   help="train the runs still missing and stop before measuring: a table trained over several "
-                        "sittings or machines (e.g. one seed each, --seed K --seeds 1) is measured once, by the "
-                        "same command without this flag")
+                   help="train the runs still missing, measure each into the record (--record), and stop before "
+                        "the table: a table trained over several sittings or machines (e.g. one seed each, --seed K "
+                        "--seeds 1) is written by the same command without this flag, from the record")
+    p.add_argument("--record", type=Path, default=None,
+                   help="the record of measured runs that the table is built from: a run recorded there is neither "
+                        "trained nor measured again (default: docs/peers-runs.json for the full table, committed, "
+                        "so a table trained over sittings or machines keeps each finished run; OUT/peers-runs.json "
+                        "otherwise); a new path starts a record of your own")
+    p.add_argument("--record-only", action="store_true",
+                   help="train nothing: measure the saved runs under --out that the record lacks, add them, and "
+                        "stop (a sitting whose training was stopped keeps what it finished)")
     sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
@@ -61,6 +74,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
         parser.error("--update-docs writes full-settings results into docs/peers.md; drop --quick")
     if args.update_docs and args.train_only:
         parser.error("--train-only stops before the table that --update-docs writes; drop one of them")
+    if args.record_only and (args.train_only or args.update_docs):
+        parser.error("--record-only only records saved runs: drop --train-only and --update-docs")
     sweep_flags.check_backend(parser, args)
     full = settings is None and not args.quick
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
@@ -70,21 +85,33 @@ def main(argv=None, settings: dict | None = None) -> dict:
         commands.say_quick("peers", cuts)
     seeds = range(args.seed, args.seed + (args.seeds or (FULL_SEEDS if full else 1)))
     jobs = plan_seeds(settings, out, seeds)
-    runs, todo = sweep.reuse(jobs, diverged=True)     # a model that failed in training is its cell: not retrained
+    path = args.record or (hnn.tasks.repo_root() / peer_record.RECORD if full else out / "peers-runs.json")
+    try:
+        record = peer_record.load(path, settings)
+    except ValueError as err:
+        parser.error(str(err))
+    fresh = [job for job in jobs if peer_record.recorded(record, job) is None]
+    if len(fresh) < len(jobs):
+        print(f"peers: {len(jobs) - len(fresh)} runs recorded in {path}", flush=True)
+    # a model that failed in training is its cell: not retrained
+    runs, todo = sweep.reuse(fresh, diverged=True)
     print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
-    trained, seconds = sweep.train_jobs(todo, args.jobs, out / "logs", args.backend, args.ray_address,
-                                        device=args.device)
+    trained, seconds = ({}, {"training": 0.0}) if args.record_only else sweep.train_jobs(
+        todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device)
     runs.update(trained)
-    if args.train_only:
-        print(f"peers: trained {len(todo)} run{'' if len(todo) == 1 else 's'} in {seconds['training']:.0f} s; "
-              "not measured (--train-only): the same command without it measures every run", flush=True)
+    tic = time.perf_counter()
+    record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)
+    if args.train_only or args.record_only:
+        left = sum(peer_record.recorded(record, job) is None for job in jobs)
+        print(f"peers: trained {len(todo) if args.train_only else 0}, {len(jobs) - left} of {len(jobs)} runs "
+              f"recorded in {path}; no table (--{'train' if args.train_only else 'record'}-only): the same "
+              "command without it trains what is left and writes the table", flush=True)
         sweep.exit_if_failed({key: outcome for key, outcome in runs.items()
                               if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})
-        return {"runs": runs}
-    tic = time.perf_counter()
-    by_seed = measure_seeds(runs, settings, seeds, args.jobs)
+        return {"runs": runs, "record": record}
+    by_seed = add_seconds(peer_record.by_seed(record, jobs, settings, seeds), jobs, peer_record.walls(record, jobs))
     rows = over_seeds(by_seed) if len(seeds) > 1 else by_seed[args.seed]
-    found = curves(runs, settings, args.seed)
+    found = peer_record.curves(record, jobs, args.seed)
     if found:
         figure = curves_figure(found, out / "figures" / "peers-curves.png", args.seed)
         if args.update_docs:
