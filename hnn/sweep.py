@@ -31,6 +31,7 @@ import json
 import sys
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -242,7 +243,8 @@ def _restored_threads(count: int):
 
 
 def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "local",
-               ray_address: str | None = None, group: str = "off", device: str | None = None) -> tuple[dict, dict]:
+               ray_address: str | None = None, group: str = "off", device: str | None = None,
+               on_done: Callable[[Job, Path | BaseException], None] | None = None) -> tuple[dict, dict]:
     """Train ``jobs``; ``({key: run folder or exception}, seconds)``.
 
     ``backend="local"``: here (``n_jobs`` 1, on one thread, the caller's count restored after) or in
@@ -253,7 +255,8 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     train / wall seconds (a dataset's build here counts for the first run that uses it).
     ``group``: ``"auto"`` trains the runs that can share one program as groups (``plan_units``).
     ``device``: every run's torch device (None: each config's own); on Ray a run or group on a GPU
-    asks for one whole GPU.
+    asks for one whole GPU. ``on_done(job, outcome)``: called here as each run finishes (its folder,
+    or its ``RunFailed``), while the workers train on: a study that keeps each result as it comes.
     """
     if device is not None:
         jobs = [replace(job, config=replace(job.config, device=device)) for job in jobs]
@@ -308,6 +311,8 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                          + (f"; the sweep:{left[1:]}" if left else ""))
             if not in_process:
                 bar.update(job.steps)
+            if on_done is not None:
+                on_done(job, done[job.key])
     for save_dir in dict.fromkeys(str(job.config.save_dir) for job in todo):
         drop_spent_checkpoints(save_dir)       # groups killed in an earlier sitting whose runs trained since
     seconds = {"training": time.perf_counter() - tic, "backend": backend, "jobs": n_jobs,

@@ -45,7 +45,12 @@ def test_a_run_that_raises_is_reported_and_the_others_train(backend, n_jobs, tmp
     runs_dir = tmp_path / "runs"
     bad = _job("spring", "baseline", runs_dir, 10 ** 4, nonlinearity="sideways")     # refused inside the run
     good = [_job("spring", "hnn", runs_dir, 20), _job("pend", "hnn", runs_dir, 20)]
-    runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend)
+    finished = []      # on_done sees each run as it finishes, its folder saved or its failure
+    runs, seconds = sweep.train_jobs([bad] + good, n_jobs, tmp_path / "logs", backend=backend,
+                                     on_done=lambda job, outcome: finished.append(
+                                         (job.key, outcome, isinstance(outcome, Path) and outcome.is_dir())))
+    assert sorted(finished, key=lambda f: f[0]) == sorted(((key, run, isinstance(run, Path)) for key, run in runs.items()),
+                                                          key=lambda f: f[0])
     failed = runs["spring/baseline/seed0"]
     assert isinstance(failed, sweep.RunFailed) and "sideways" in failed.message and not failed.diverged
     assert "hnn/cli.py" in failed.log.read_text() and "sideways" in failed.log.read_text()   # where it raised

@@ -4,7 +4,8 @@ sittings or machines outlives its run folders (the full table's: ``docs/peers-ru
 A run's checkpoint is what its numbers are measured from; the record keeps those numbers, keyed by the
 run's name (``chain<N>/<kind>/seed<S>``, ``lnn/<kind>/seed<S>``) and its config's identity
 (``RunConfig.key``): its protocol's entry (``{mean, median, n}``, ``{"blew_up": why}`` or
-``{"diverged": why}``), its recorded wall time and its held-out loss curve, with each row's chaos floor
+``{"diverged": why}``), its recorded wall time, the seconds its measuring took and its held-out loss
+curve, with each row's chaos floor
 and the measuring settings. A run recorded under the same identity is neither trained nor measured
 again, even where its folder is gone; one whose config changed is recorded again. The table is built
 from the record (``by_seed``), with each kind's training cost timed at that point (``peer_measure``).
@@ -12,9 +13,13 @@ from the record (``by_seed``), with each kind's training cost timed at that poin
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import json
 import multiprocessing
+import time
 from pathlib import Path
+
+import torch
 
 from hnn import sweep
 from hnn.io import atomic_write
@@ -82,22 +87,30 @@ def _settings_for(settings: dict, keys) -> dict:
             "lnn_starts": settings["lnn_starts"] if "lnn" in rows else 0}
 
 
-def _add(record: dict, rows: dict, jobs: dict, runs: dict, seed: int) -> list[str]:
-    """Put seed ``seed``'s measured ``rows`` into ``record``; the keys it added."""
-    added = []
+def _add(record: dict, rows: dict, jobs: dict, runs: dict, seed: int, seconds: float) -> list[str]:
+    """Put seed ``seed``'s measured ``rows`` into ``record``, each run with its share of the ``seconds``
+    they took to measure; the keys it added."""
+    keys = [f"{row}/{kind}/seed{seed}" for row, entries in rows.items() for kind in entries]
+    keys = [key for key in keys if key in jobs]
+    for key in keys:
+        row, kind, _ = key.split("/")
+        folder = runs.get(key)
+        saved = isinstance(folder, Path)
+        record["runs"][key] = {"identity": jobs[key].config.key(), "entry": rows[row][kind],
+                               "wall": _wall(folder) if saved else None,
+                               "measuring": round(seconds / len(keys), 1) if saved else None,
+                               "curve": _curve(folder) if saved else None}
     for row, entries in rows.items():
         if "floor" in entries:
             record["floors"].setdefault(row, entries["floor"])
-        for kind, entry in entries.items():
-            key = f"{row}/{kind}/seed{seed}"
-            if key not in jobs:
-                continue
-            folder = runs.get(key)
-            saved = isinstance(folder, Path)
-            record["runs"][key] = {"identity": jobs[key].config.key(), "entry": entry,
-                                   "wall": _wall(folder) if saved else None, "curve": _curve(folder) if saved else None}
-            added.append(key)
-    return added
+    return keys
+
+
+def _measure(runs: dict, settings: dict, seed: int) -> tuple[dict, float]:
+    """``peer_measure.measure`` and the seconds it took."""
+    tic = time.perf_counter()
+    rows = measure(runs, settings, seed)
+    return rows, time.perf_counter() - tic
 
 
 def record_runs(runs: dict, jobs: list[sweep.Job], settings: dict, path: Path, n_jobs: int = 1) -> dict:
@@ -119,27 +132,38 @@ def record_runs(runs: dict, jobs: list[sweep.Job], settings: dict, path: Path, n
     def keys_of(seed: int) -> dict:      # the saved runs: a worker gets their folders, the failures stay here
         return {key: folder for key, folder in todo.items() if key.endswith(f"/seed{seed}") and isinstance(folder, Path)}
 
-    def done(seed: int, rows: dict) -> None:
+    def done(seed: int, rows: dict, seconds: float) -> None:
         for key, err in todo.items():
             row, kind, run_seed = key.split("/")
             if run_seed == f"seed{seed}" and isinstance(err, sweep.RunFailed):
                 rows.setdefault(row, {})[kind] = diverged_entry(err)
-        added = _add(record, rows, by_key, todo, seed)
+        added = _add(record, rows, by_key, todo, seed, seconds)
         save(path, record)
         print(f"peers: seed {seed}: {len(added)} run{'' if len(added) == 1 else 's'} recorded", flush=True)
 
     if n_jobs <= 1 or len(seeds) < 2:
         for seed in seeds:
-            done(seed, measure(keys_of(seed), _settings_for(settings, keys_of(seed)), seed))
+            done(seed, *_measure(keys_of(seed), _settings_for(settings, keys_of(seed)), seed))
         return record
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
     with concurrent.futures.ProcessPoolExecutor(min(n_jobs, len(seeds)), mp_context=context,
                                                 initializer=one_thread) as pool:
-        futures = {pool.submit(measure, keys_of(seed), _settings_for(settings, keys_of(seed)), seed): seed
+        futures = {pool.submit(_measure, keys_of(seed), _settings_for(settings, keys_of(seed)), seed): seed
                    for seed in seeds}
         for future in concurrent.futures.as_completed(futures):
-            done(futures[future], future.result())
+            done(futures[future], *future.result())
     return record
+
+
+@contextlib.contextmanager
+def one_torch_thread():
+    """One torch thread inside the block, the caller's count restored after."""
+    count = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(count)
 
 
 def by_seed(record: dict, jobs: list[sweep.Job], settings: dict, seeds) -> dict:
@@ -175,3 +199,8 @@ def curves(record: dict, jobs: list[sweep.Job], seed: int) -> dict:
 def walls(record: dict, jobs: list[sweep.Job]) -> dict:
     """``{key: recorded training wall time in s}`` of ``jobs``' recorded saved runs."""
     return {job.key: entry["wall"] for job in jobs if (entry := recorded(record, job)) is not None and entry["wall"]}
+
+
+def measuring_seconds(record: dict, jobs: list[sweep.Job]) -> float:
+    """The seconds that measuring ``jobs``' recorded runs took, in all (whatever sittings measured them)."""
+    return sum(entry.get("measuring") or 0.0 for job in jobs if (entry := recorded(record, job)) is not None)

@@ -48,7 +48,8 @@ def markdown(results: dict) -> str:
     else:
         trained = f"training {meta['seconds']['training']:.0f} s"
     lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}); "
-              f"{trained}, measuring {meta['seconds']['measuring']:.0f} s. Training seconds in the tables: each "
+              f"{trained}, measuring {meta['seconds']['measuring']:.0f} s (every run's rollouts, in the sitting that "
+              f"recorded it), timing the kinds {meta['seconds'].get('timing', 0):.0f} s. Training seconds in the tables: each "
               "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "
               "quiet core; with several seeds, the median of the seeds' runs' timings; its recorded wall time is in "
               "peers.json). "

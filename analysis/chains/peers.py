@@ -96,11 +96,16 @@ def main(argv=None, settings: dict | None = None) -> dict:
     # a model that failed in training is its cell: not retrained
     runs, todo = sweep.reuse(fresh, diverged=True)
     print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
+    record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
+
+    def keep(job: sweep.Job, outcome) -> None:      # each run into the record as it finishes: a lost sitting keeps it
+        with peer_record.one_torch_thread():        # the workers train on, one thread each
+            peer_record.record_runs({job.key: outcome}, jobs, settings, path)
     trained, seconds = ({}, {"training": 0.0}) if args.record_only else sweep.train_jobs(
-        todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device)
+        todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device, on_done=keep)
     runs.update(trained)
     tic = time.perf_counter()
-    record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)
+    record = peer_record.load(path, settings)
     if args.train_only or args.record_only:
         left = sum(peer_record.recorded(record, job) is None for job in jobs)
         print(f"peers: trained {len(todo) if args.train_only else 0}, {len(jobs) - left} of {len(jobs)} runs "
@@ -125,7 +130,10 @@ def main(argv=None, settings: dict | None = None) -> dict:
                         "steps": jobs[0].config.total_steps if jobs else None,
                         "optimizer": jobs[0].config.optimizer if jobs else None,
                         "schedule": jobs[0].config.schedule if jobs else None,
-                        "seconds": {"training": seconds["training"], "measuring": time.perf_counter() - tic}},
+                        # measuring: every run's rollouts, whichever sitting recorded it; timing: the kinds' costs here
+                        "seconds": {"training": seconds["training"],
+                                    "measuring": peer_record.measuring_seconds(record, jobs),
+                                    "timing": time.perf_counter() - tic}},
                "rows": rows, "by_seed": by_seed if len(seeds) > 1 else None, "curves": found}
     text = markdown(results)
     seeds = pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS
