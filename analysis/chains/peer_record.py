@@ -92,13 +92,14 @@ def _add(record: dict, rows: dict, jobs: dict, runs: dict, seed: int, seconds: f
     they took to measure; the keys it added."""
     keys = [f"{row}/{kind}/seed{seed}" for row, entries in rows.items() for kind in entries]
     keys = [key for key in keys if key in jobs]
+    measured = sum(isinstance(runs.get(key), Path) for key in keys)
     for key in keys:
         row, kind, _ = key.split("/")
         folder = runs.get(key)
         saved = isinstance(folder, Path)
         record["runs"][key] = {"identity": jobs[key].config.key(), "entry": rows[row][kind],
                                "wall": _wall(folder) if saved else None,
-                               "measuring": round(seconds / len(keys), 1) if saved else None,
+                               "measuring": round(seconds / measured, 1) if saved else None,
                                "curve": _curve(folder) if saved else None}
     for row, entries in rows.items():
         if "floor" in entries:
