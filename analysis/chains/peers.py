@@ -92,7 +92,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
         parser.error(str(err))
     fresh = [job for job in jobs if peer_record.recorded(record, job) is None]
     if len(fresh) < len(jobs):
-        print(f"peers: {len(jobs) - len(fresh)} runs recorded in {path}", flush=True)
+        count = len(jobs) - len(fresh)
+        print(f"peers: {count} run{'' if count == 1 else 's'} recorded in {path}", flush=True)
     # a model that failed in training is its cell: not retrained
     runs, todo = sweep.reuse(fresh, diverged=True)
     print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
