@@ -41,12 +41,10 @@ CASES = [
 SMALL = {"total_steps": 3, "hidden_dim": 8, "print_every": 1}
 TASK_SMALL = {"chain": {"n_train": 20, "n_test": 5}}
 DATA = Path(tempfile.mkdtemp(prefix="hnn-devices-"))      # one cache of datasets for the module's runs
-# the fixed-step solvers' step: 5e-3, and 5e-4 for the 3-step LNN, whose field is stiff at its test
-# starts: the implicit midpoint's fixed point (it needs dt x the field's Lipschitz constant below about 2)
-# failed there at 5e-3 on an AVX2 box at 1 and 2 threads, where AVX-512 ones converged. Not 5e-4 for all:
-# there the spring's mechanical kind's discrete gradient, a difference quotient of H in float32, did not
-# reach its tolerance on one start
-DT, STIFF_DT = 5e-3, {"lagrangian": 5e-4}
+# the fixed-step solvers' step: the 3-step LNN's field is stiff at its test starts, and the implicit
+# midpoint's fixed point (it needs dt x the field's Lipschitz constant below about 2) failed there at
+# 5e-3 on an AVX2 box at 1 and 2 threads, where AVX-512 ones converged
+DT = 5e-4
 
 
 @contextlib.contextmanager
@@ -88,7 +86,7 @@ def _train_load_roll(task: str, values: dict, device: str, save_dir, strict: boo
         paths = {}
         for method in _solvers(model):
             # a short span: a 3-step model (the LNN's, say) may blow up over longer ones, a fact of its training
-            options = {"dt": STIFF_DT.get(values["model"], DT)} if not hnn.get_solver(method).adaptive else {}
+            options = {"dt": DT} if not hnn.get_solver(method).adaptive else {}
             paths[method] = hnn.rollout(model, model_state, np.linspace(0.0, 0.02, 3), method=method, **options)
     assert args["device"] == device
     return paths

@@ -38,6 +38,45 @@ def test_a_discrete_gradient_is_exact_in_difference_and_the_gradient_on_the_diag
     torch.testing.assert_close(dg(x0, x0), _grad(model.hamiltonian, x0), rtol=1e-12, atol=1e-14)
 
 
+def _pendulum_plus(offset: float):
+    """The pendulum's H plus a constant, which moves no state: its discrete gradient is the pendulum's."""
+    pend = hnn.load_task("pend")
+    return lambda x: pend.hamiltonian(x) + offset
+
+
+@pytest.mark.parametrize("offset", [1e2, 1e4])
+def test_gonzalez_in_float32_sees_no_large_constant_in_h_at_any_step(offset):
+    gen = torch.Generator().manual_seed(0)
+    x0 = torch.tensor([[2.5, 0.0], [0.5, 1.5], [1.0, 0.3], [-0.2, -0.9]])
+    v = torch.randn(4, 2, generator=gen)
+    for scale in (1e-1, 1e-2, 1e-3, 1e-4, 1e-5):
+        x1 = x0 + scale * v
+        with torch.no_grad():
+            ours = gonzalez(_pendulum_plus(offset), x0, x1).double()
+        truth = gonzalez(_pendulum_plus(0.0), x0.double(), x1.double())       # the same float32 points, in float64
+        # a few float32 ulps of |grad H| <= 3.4 (2e-7 measured at most); the numerator as a difference of H's
+        # float32 values rounds at eps |H| / |d|: 0.07 off at c = 100 and |d| = 1e-4, 7.8 at c = 1e4
+        assert float((ours - truth).abs().max()) < 2e-6, (scale, float((ours - truth).abs().max()))
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e4])
+@pytest.mark.parametrize("dt", [0.1, 1e-3])
+def test_a_float32_rollout_converges_and_keeps_h_whatever_its_constant_and_step(offset, dt):
+    pend = hnn.load_task("pend")
+    x0 = torch.tensor([[2.5, 0.0], [0.5, 1.5], [1.0, 0.3], [-0.2, -0.9]], dtype=torch.float64)
+    t = np.linspace(0.0, 400 * dt, 401)
+    truth = hnn.rollout(EnergyField(pend.dynamics, pend.hamiltonian), x0, t, method="discrete_gradient")
+    # where H's rounding moved a step's x1 by more than tol the fixed point was noise: it did not converge
+    # at c = 100 or 1e4 at these steps; at c = 0 the difference of H's values is kept (it moves x1 by less)
+    path = hnn.rollout(EnergyField(pend.dynamics, _pendulum_plus(offset)), x0.float(), t,
+                       method="discrete_gradient").double()
+    energy = float((pend.hamiltonian(path) - pend.hamiltonian(x0)[:, None]).abs().max())
+    gap = float((path - truth).abs().max())
+    # float32 rounding over 400 steps: measured at most 2.4e-5 in energy, 4.3e-4 and 5.9e-6 off the path
+    # (dt = 0.1, 1e-3); 4x and more of margin
+    assert energy < 1e-4, energy
+    assert gap < (2e-3 if dt == 0.1 else 5e-5), gap
+
 def test_the_closed_form_is_dgnets_chain_rule_not_gonzalez():
     # two different discrete gradients of one H: both exact in difference, distinct off the diagonal
     model = _model("hnn")
