@@ -80,10 +80,13 @@ def publish(out: Path, stem: str, results: dict, text: str, sections: dict | Non
 def portable_command(argv: list[str], script: str = "analysis/reproduce.py") -> str:
     """The command ``python <script> <argv>`` as a reader can rerun it: paths inside the checkout
     made relative to it, and other absolute paths (one machine's folders) shown as ``DIR``."""
-    root, words = hnn.tasks.repo_root().resolve(), []
-    for word in argv:
-        path = Path(word)
-        if path.is_absolute():
-            word = os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
-        words.append(word)
-    return " ".join([f"python {script}"] + words)
+    return " ".join([f"python {script}"] + [portable_path(word) for word in argv])
+
+
+def portable_path(word) -> str:
+    """``word`` as a reader can use it: a path inside the checkout relative to it, another absolute
+    path (one machine's folder) as ``DIR``, anything else as it is."""
+    path, root = Path(word), hnn.tasks.repo_root().resolve()
+    if not path.is_absolute():
+        return str(word)
+    return os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"

@@ -74,3 +74,21 @@ def test_no_hand_written_test_counts_or_run_times(page):
     counts = re.findall(r"\b\d[\d,]* (?:tests|passed|skipped)\b", prose)
     times = re.findall(r"\b(?:about |took |in )\d[\d.,]* ?(?:s|seconds|minutes?|min)\b", prose)
     assert not counts and not times, (counts, times)
+
+
+# an absolute path of some machine, as a command line or prose would hold it (a flag's value, a quoted path)
+MACHINE_PATH = re.compile(r"(?:^|[\s`'\"(=])(/(?:work|home|root|tmp|Users|mnt|scratch|data|var|opt)/[\w./-]*)")
+
+
+@pytest.mark.parametrize("path", PROSE, ids=lambda p: str(p.relative_to(REPO)))
+def test_no_page_holds_a_machines_path(path):
+    # the commands write their own command lines into generated sections: a folder outside the
+    # checkout shows as DIR (hnn_analysis.commands.portable_command), never as one machine's path
+    found = MACHINE_PATH.findall(path.read_text())
+    assert not found, f"{path.name} holds a machine's path: {found[:3]}; regenerate it, or write DIR"
+
+
+def test_the_machine_path_check_catches_a_flags_value_and_leaves_urls_and_repo_paths():
+    assert MACHINE_PATH.findall("`python analysis/x.py --runs /work/speed/runs --out=/tmp/x`") == [
+        "/work/speed/runs", "/tmp/x"]
+    assert not MACHINE_PATH.findall("https://github.com/greydanus/hnn and docs/speed.md and --out DIR")

@@ -17,7 +17,7 @@ import datetime
 import sys
 
 from hnn.io import write_json
-from hnn_analysis import pages
+from hnn_analysis import commands, pages
 from hnn_analysis.benchmarks import benchmark_jobs, floor_job
 from hnn_analysis.benchmarks.benchmark_jobs import JOBS
 from hnn_analysis.benchmarks.benchmark_report import benchmark_section, ceiling, jobs_table
@@ -80,7 +80,7 @@ def main(argv=None) -> int:
                           "all_checks_passed": not failed})
     print(f"\nwrote {args.out}")
     if args.update_docs:
-        command = " ".join(["python analysis/benchmarks/benchmark.py"] + (sys.argv[1:] if argv is None else list(argv)))
+        command = commands.portable_command(sys.argv[1:] if argv is None else list(argv), "analysis/benchmarks/benchmark.py")
         busy = env["others_load"]
         shared = (f" **The machine was shared while measuring** (other processes kept {busy:.1f} of "
                   f"{env['cores']} cores busy on average): they slowed both sides of every ratio, unevenly."

@@ -29,7 +29,7 @@ import hnn
 from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
 from hnn.io import write_json
-from hnn_analysis import pages
+from hnn_analysis import commands, pages
 from hnn_analysis.provenance import machine, provenance
 
 FULL_STEPS = 10001
@@ -92,7 +92,7 @@ def main(argv=None) -> dict:
               f"full {FULL_STEPS} steps ~ {t['full_training_s_estimate']:.0f} s |" for label, t in train.items()),
             f"| dataset in memory | {arrays_mib:.0f} MiB | cache file {cache_mib:.1f} MiB |",
             f"| peak resident memory | {result['peak_rss_mib']:.0f} MiB | after the data: {peak_after_data:.0f} MiB |"]
-    command = " ".join(["python analysis/benchmarks/benchmark_pixels.py"] + (list(argv) if argv is not None else sys.argv[1:]))
+    command = commands.portable_command(list(argv) if argv is not None else sys.argv[1:], "analysis/benchmarks/benchmark_pixels.py")
     text = (f"`{command}` on {result['date']} (commit {result['commit']}, {machine(result)}), {result['threads']} "
             f"torch threads, torch {torch.__version__}, "
             f"rendering in {data_workers} processes:\n\n| stage | time / size | note |\n| --- | --- | --- |\n"

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis import pages
+from hnn_analysis import commands, pages
 from hnn_analysis.benchmarks.ray_runs import BACKENDS, compare, order, ray_fixed_cost, run_once
 from hnn_analysis.provenance import machine, provenance
 
@@ -87,8 +87,8 @@ def main(argv=None) -> int:
         sys.exit('ray_overhead.py compares against Ray, which is not installed: pip install -e ".[ray]"')
     mode = "full" if args.full else "quick"
     out = args.out or hnn.tasks.repo_root() / "results" / f"ray_overhead_{mode}.json"
-    meta = {**provenance(), "command": " ".join(["python analysis/benchmarks/ray_overhead.py"]
-                                                 + (sys.argv[1:] if argv is None else list(argv)))}
+    meta = {**provenance(), "command": commands.portable_command(sys.argv[1:] if argv is None else list(argv),
+                                                       "analysis/benchmarks/ray_overhead.py")}
     meta["date"] = datetime.date.today().isoformat()
     fixed = ray_fixed_cost()
     runs, first = [], {}

@@ -72,8 +72,9 @@ def main(argv=None) -> dict:
         print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)
         pareto_plot(task, results["tasks"][task], out / f"pareto-{task}.png")
     results["extremes"] = extremes(args.quick, runs, notes)
-    results["meta"] = {**provenance(), "command": " ".join(["python analysis/integrator_study/speed_accuracy.py"] + argv),
-                       "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start}
+    results["meta"] = {**provenance(), "command": commands.portable_command(argv, "analysis/integrator_study/speed_accuracy.py"),
+                       "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start,
+                       "out": commands.portable_path(out)}
     summary = summary_markdown(results)
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text(summary))
     commands.publish(out, "speed_accuracy", results, markdown(results),
