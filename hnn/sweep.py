@@ -41,7 +41,7 @@ from tqdm.auto import tqdm
 from .backends import BACKENDS, say, time_left, train_here, train_in_pool, train_on_ray
 from .group_runs import drop_spent_checkpoints, unit_key
 from .io import write_json
-from .runs import find_run, load_run, partial_checkpoint, run_dir
+from .runs import diverged_record, find_run, load_run, partial_checkpoint
 from .tasks import task_spec
 from .config import RunConfig
 from .errors import DivergenceError
@@ -112,14 +112,6 @@ class RunFailed(Exception):
     def __init__(self, key: str, message: str, log: Path | None = None, diverged: bool = False):
         self.key, self.message, self.log, self.diverged = key, message, log, diverged
         super().__init__(f"{key}: {message}" + (f" (log: {log})" if log else ""))
-
-
-def diverged_record(config) -> Path:
-    """Where a sweep records that the run of ``config`` failed in training by its own arithmetic (an
-    ``hnn.DivergenceError``: a result of its config, which a rerun repeats): ``<save_dir>/.<folder>.diverged.json``
-    holding its message. ``reuse(jobs, diverged=True)`` reads it back instead of training the run again."""
-    directory = run_dir(config)
-    return directory.parent / f".{directory.name}.diverged.json"
 
 
 def _recorded_failure(job: Job) -> RunFailed | None:

@@ -27,7 +27,9 @@ from types import MappingProxyType, ModuleType
 
 import torch
 
-from .runs import run_experiment
+from .errors import DivergenceError
+from .io import write_json
+from .runs import diverged_record, run_experiment
 
 _PREFIX = "experiment-"
 
@@ -199,7 +201,14 @@ def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     task; ``threads`` sets torch's thread count first); returns its folder as text."""
     if threads is not None:
         torch.set_num_threads(threads)
-    return str(run_experiment(task_config(task, values)))
+    config = task_config(task, values)
+    try:
+        return str(run_experiment(config))
+    except DivergenceError as err:
+        # recorded here, as it fails: the sweep that reads this outcome may be busy with another's (its
+        # on_done) or stopped before it does
+        write_json(diverged_record(config), {"message": f"{type(err).__name__}: {err}"})
+        raise
 
 
 def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:

@@ -427,6 +427,18 @@ def test_the_ray_overhead_runs_alternate_and_compare_every_number_but_the_times(
     assert got["worst_relative_difference"] == pytest.approx(1e-12, rel=1e-3)
 
 
+def test_a_worker_records_its_runs_divergence_as_it_fails_before_any_sweep_reads_it(tmp_path):
+    # a sweep's parent reads the outcomes one by one and calls on_done between them (the peers' table measures
+    # a run there, for up to half an hour): a run that failed meanwhile, its parent stopped before reading it,
+    # had no record and trained again in the next sitting. The worker's own call writes it as the run fails
+    bad = _job("spring", "hnn", tmp_path, 3, learn_rate=1e30)
+    with pytest.raises(hnn.DivergenceError):
+        hnn.tasks.run_task("spring", bad.fields())
+    record = hnn.runs.diverged_record(bad.config)
+    assert record.parent == tmp_path and json.loads(record.read_text())["message"].startswith("DivergenceError: ")
+    found, todo = sweep.reuse([bad], diverged=True)
+    assert todo == [] and found[bad.key].diverged
+
 def test_a_run_that_failed_in_training_is_recorded_and_a_table_reuses_its_failure(tmp_path, capsys):
     # a rate of 1e30: the loss is no longer finite after the first step, an hnn.DivergenceError (a result of the
     # config, which a rerun repeats), recorded beside the runs
