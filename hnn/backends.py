@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from .errors import DivergenceError
 from .group_runs import run_group_task, train_group
 from .runs import COMPLETE, run_experiment
 from .tasks import repo_root, run_task
@@ -71,7 +72,8 @@ class Heartbeat:
 def _group_outcomes(unit: list, outcomes: list[dict]):
     """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
     for job, outcome in zip(unit, outcomes):
-        yield job, Path(outcome["folder"]) if "folder" in outcome else RuntimeError(outcome["error"])
+        yield job, (Path(outcome["folder"]) if "folder" in outcome else DivergenceError(outcome["error"])
+                    if outcome.get("diverged") else RuntimeError(outcome["error"]))
 
 
 def train_here(units: list[list], data: dict, bar, progress):

@@ -21,10 +21,10 @@ from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
 from .training import fit_loss
-from .io import check_save_dir
+from .io import check_save_dir, write_json
 from .kinds import model_from_spec
 from .objectives import DerivativeObjective
-from .runs import COMPLETE, finish_run, run_dir, run_experiment, saved_args, training_subset
+from .runs import COMPLETE, diverged_record, finish_run, run_dir, run_experiment, saved_args, training_subset
 from .specs import RunSpecs, run_specs
 from .tasks import task_config
 
@@ -157,11 +157,28 @@ def _alone(config, dataset):
 def run_group_task(task: str, values: list[Mapping], threads: int | None = None) -> list[dict]:
     """A sweep's group in a worker process or a Ray task: the configs of ``task`` with ``values``
     trained as one group (``threads`` sets torch's thread count first). Per config
-    ``{"folder": text}`` or ``{"error": message}`` (plain data: it crosses process boundaries)."""
+    ``{"folder": text}`` or ``{"error": message, "diverged": whether the model itself failed}`` (plain data:
+    it crosses process boundaries)."""
     if threads is not None:
         torch.set_num_threads(threads)
-    outcomes = train_group([task_config(task, v) for v in values])
-    return [{"error": str(o)} if isinstance(o, Exception) else {"folder": str(o)} for o in outcomes]
+    configs = [task_config(task, v) for v in values]
+    try:
+        outcomes = train_group(configs)
+    except DivergenceError as err:
+        outcomes = [err] * len(configs)
+        _record_diverged(configs, outcomes)
+        raise
+    _record_diverged(configs, outcomes)
+    return [{"error": str(o), "diverged": isinstance(o, DivergenceError)} if isinstance(o, Exception)
+            else {"folder": str(o)} for o in outcomes]
+
+
+def _record_diverged(configs: list, outcomes: list) -> None:
+    """Each model that failed in training recorded as it fails (``hnn.runs.diverged_record``), as a lone
+    run's worker does (``hnn.tasks.run_task``): the sweep that reads these outcomes may be stopped first."""
+    for config, outcome in zip(configs, outcomes):
+        if isinstance(outcome, DivergenceError):
+            write_json(diverged_record(config), {"message": f"{type(outcome).__name__}: {outcome}"})
 
 
 __all__ = ["drop_spent_checkpoints", "group_checkpoint", "run_group_task", "train_group", "unit_key"]

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import torch
 
+from .errors import DivergenceError
 from .models.hamiltonian import FIELD_ROWS, HNN
 from .models.mlp import MLP
 from .objectives import DerivativeObjective
@@ -48,8 +49,9 @@ _SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batc
                   "print_every", "field_type", "dtype", "device")
 
 
-class GroupedRunFailed(Exception):
-    """A model of a group that failed (its loss turned NaN or infinite): its run ``name`` and ``step``."""
+class GroupedRunFailed(DivergenceError):
+    """A model of a group that failed (its loss turned NaN or infinite): its run ``name`` and ``step``. A
+    ``DivergenceError``, as a lone run's non-finite loss is: a result of its config, which a rerun repeats."""
 
     def __init__(self, name: str, step: int, message: str):
         self.name, self.step = name, step

@@ -439,6 +439,26 @@ def test_a_worker_records_its_runs_divergence_as_it_fails_before_any_sweep_reads
     found, todo = sweep.reuse([bad], diverged=True)
     assert todo == [] and found[bad.key].diverged
 
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_a_groups_model_that_fails_in_training_is_recorded_as_a_lone_runs_failure_is(n_jobs, tmp_path):
+    # a group's model whose loss is no longer finite fails as a lone run does (hnn.grouped.GroupedRunFailed
+    # is a DivergenceError): marked diverged in the sweep, recorded by the worker as it fails, reused as such
+    bad = [sweep.Job(f"spring/hnn/seed{s}", "spring", hnn.tasks.task_config(
+        "spring", {"model": "hnn", "seed": s, "save_dir": str(tmp_path / "runs"), "total_steps": 3,
+                   "hidden_dim": 16, "learn_rate": 1e30})) for s in (0, 1)]
+    assert len(sweep.plan_units(bad, "all")) == 1
+    outcomes = hnn.group_runs.run_group_task("spring", [job.fields() for job in bad])
+    assert all(o["diverged"] and "not finite" in o["error"] for o in outcomes), outcomes
+    for job in bad:
+        assert json.loads(hnn.runs.diverged_record(job.config).read_text())["message"].startswith("GroupedRunFailed: ")
+        hnn.runs.diverged_record(job.config).unlink()
+    done, _ = sweep.train_jobs(bad, n_jobs, tmp_path / "logs", group="all")
+    assert all(isinstance(done[job.key], sweep.RunFailed) and done[job.key].diverged for job in bad), done
+    found, todo = sweep.reuse(bad, diverged=True)
+    assert todo == [] and all(found[job.key].message == done[job.key].message for job in bad)
+
+
 def test_a_run_that_failed_in_training_is_recorded_and_a_table_reuses_its_failure(tmp_path, capsys):
     # a rate of 1e30: the loss is no longer finite after the first step, an hnn.DivergenceError (a result of the
     # config, which a rerun repeats), recorded beside the runs
