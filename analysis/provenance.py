@@ -14,7 +14,7 @@ import scipy
 import torch
 
 import hnn
-from hnn.stopping import cores
+from hnn.threads import cores
 
 
 def commit() -> str:

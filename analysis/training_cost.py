@@ -14,6 +14,7 @@ import torch
 
 import hnn
 from hnn.runs import training_subset
+from hnn.threads import torch_threads
 
 BURST_SECONDS = 0.15     # the timed bursts of a training-cost measurement last about this long
 BURSTS = 3               # ... in this many bursts (the fastest counts)
@@ -39,8 +40,6 @@ def training_cost(task: str, args: dict) -> dict:
     options = dict(learn_rate=config.learn_rate, weight_decay=config.weight_decay, batch_size=config.batch_size,
                    seed=config.seed, print_every=10 ** 9, progress=False,
                    **objective.train_options(model, hnn.specs.run_specs(saved).objective, dataset))
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
     start = copy.deepcopy(model.state_dict())
 
     def burst(steps: int) -> float:
@@ -49,11 +48,9 @@ def training_cost(task: str, args: dict) -> dict:
         model.load_state_dict(start)
         return hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"]
 
-    try:
+    with torch_threads(1):
         per_step = burst(3) / 3                                           # one-time setup, a first rate
         steps = int(np.clip(BURST_SECONDS / BURSTS / max(per_step, 1e-6), *BURST_STEPS))
         # the fastest of a few bursts: what the model's steps cost when nothing else interferes
         rate = max(steps / burst(steps) for _ in range(BURSTS))
-    finally:
-        torch.set_num_threads(threads)
     return {"steps_per_s": rate, "steps": config.total_steps + 1, "seconds": (config.total_steps + 1) / rate}

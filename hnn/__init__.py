@@ -17,7 +17,7 @@ a module imports its own layer and those below, never one above, and the two mid
 nothing of each other.
 
 - base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics, the
-  dataset cache, the GIF writer, the orbits' close-encounter thresholds;
+  dataset cache, the GIF writer, the orbits' close-encounter thresholds, a block's torch thread count;
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
 - training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets, the
@@ -35,7 +35,7 @@ _LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orb
 # the folder's layer), may not import each other
 _LAYERS = {
     "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache", "gifs",
-             "encounters"),
+             "encounters", "threads"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "objectives", "units", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",

@@ -22,7 +22,8 @@ from .group_runs import run_group_task, train_group
 from .runs import COMPLETE, run_experiment
 from .tasks import repo_root, run_task
 from .training import report_progress
-from .stopping import cores, in_worker, stop_pool, worker_start
+from .stopping import in_worker, stop_pool, worker_start
+from .threads import cores
 
 BACKENDS = ("local", "ray")
 RAY_INSTALL = 'pip install -e ".[ray]"'

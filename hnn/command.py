@@ -48,13 +48,9 @@ def train(cls, argv: Sequence[str] | None = None, before: Callable | None = None
             print(f"reused the complete run at {found}: it was trained with these settings already, so nothing "
                   "trained (--force retrains it and replaces the folder)")
             return found
-        import torch
-        threads = torch.get_num_threads()
-        torch.set_num_threads(config.threads)       # the run's own count (docs/speed.md#threads), the caller's after
-        try:
+        from .threads import torch_threads
+        with torch_threads(config.threads):     # the run's own count (docs/speed.md#threads), the caller's after
             folder = run_experiment(config)
-        finally:
-            torch.set_num_threads(threads)
     except BaseException:
         for new in created:         # deepest first; rmdir refuses a folder that holds anything
             try:

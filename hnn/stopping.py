@@ -30,14 +30,6 @@ class Interrupted(BaseException):
         return signal.Signals(self.signum).name
 
 
-def cores() -> int:
-    """The cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
-
-
 def _raise_interrupted(signum, frame):
     raise Interrupted(signum)
 

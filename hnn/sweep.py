@@ -26,7 +26,6 @@ group``), on a GPU all of them (``DEVICE_GROUP_MAX``).
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 import time
@@ -35,7 +34,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import torch
 from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, time_left, train_here, train_in_pool, train_on_ray
@@ -45,7 +43,8 @@ from .runs import diverged_record, find_run, load_run, partial_checkpoint
 from .tasks import task_spec
 from .config import RunConfig
 from .errors import DivergenceError
-from .stopping import cores, interruptible
+from .stopping import interruptible
+from .threads import cores, torch_threads
 
 GROUP_MODES = ("auto", "all", "off")
 # Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
@@ -225,15 +224,6 @@ def _metrics(folder: Path) -> dict:
         return {}
 
 
-@contextlib.contextmanager
-def _restored_threads(count: int):
-    """Torch's thread count back to ``count`` on the way out, however the block ends."""
-    try:
-        yield
-    finally:
-        torch.set_num_threads(count)
-
-
 def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "local",
                ray_address: str | None = None, group: str = "off", device: str | None = None,
                on_done: Callable[[Job, Path | BaseException], None] | None = None) -> tuple[dict, dict]:
@@ -264,10 +254,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     tic, done, per_run = time.perf_counter(), {}, {}
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
-    caller = torch.get_num_threads()
-    if in_process:
-        torch.set_num_threads(threads)
-    with _restored_threads(caller), interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
+    with torch_threads(threads if in_process else None), interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
                                           disable=None, dynamic_ncols=True) as bar:
         data, data_seconds, skipped = _build_datasets(jobs, bar)
         done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})

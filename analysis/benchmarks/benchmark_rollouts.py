@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis.benchmarks import floor
 
 KINDS = ("hnn", "separable", "dissipative", "baseline")
@@ -244,16 +245,12 @@ def markdown(result: dict) -> str:
 
 def job_rollout(model: torch.nn.Module, rounds: int, repeats: int) -> dict:
     """All three tables at one torch thread (restored after); ``model`` is the trained spring HNN."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         result = {"field": field_table(rounds)}
         print("rollout: field table done", flush=True)
         result["step"] = step_table(repeats)
         print("rollout: step table done", flush=True)
         result["adaptive"] = adaptive_table(model, repeats=repeats)
-    finally:
-        torch.set_num_threads(threads)
     result["table"] = markdown(result)
     result["checks"] = []
     return result

@@ -13,13 +13,11 @@ from the record (``by_seed``), with each kind's training cost timed at that poin
 from __future__ import annotations
 
 import concurrent.futures
-import contextlib
 import json
 import multiprocessing
 import time
 from pathlib import Path
 
-import torch
 
 from hnn import sweep
 from hnn.io import atomic_write
@@ -154,17 +152,6 @@ def record_runs(runs: dict, jobs: list[sweep.Job], settings: dict, path: Path, n
         for future in concurrent.futures.as_completed(futures):
             done(futures[future], *future.result())
     return record
-
-
-@contextlib.contextmanager
-def one_torch_thread():
-    """One torch thread inside the block, the caller's count restored after."""
-    count = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(count)
 
 
 def by_seed(record: dict, jobs: list[sweep.Job], settings: dict, seeds) -> dict:

@@ -30,6 +30,7 @@ import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
 from hnn import sweep, sweep_flags
+from hnn.threads import torch_threads
 from hnn_analysis.chains import peer_record
 from hnn_analysis.chains.peer_measure import add_seconds, curves_figure, over_seeds
 from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts
@@ -100,7 +101,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
 
     def keep(job: sweep.Job, outcome) -> None:      # each run into the record as it finishes: a lost sitting keeps it
-        with peer_record.one_torch_thread():        # the workers train on, one thread each
+        with torch_threads(1):        # the workers train on, one thread each
             peer_record.record_runs({job.key: outcome}, jobs, settings, path)
     trained, seconds = ({}, {"training": 0.0}) if args.record_only else sweep.train_jobs(
         todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device, on_done=keep)

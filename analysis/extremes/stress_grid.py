@@ -15,6 +15,7 @@ import torch
 import hnn
 from hnn.balance import balance_weights
 from hnn.integrators.stability import StepSizeWarning
+from hnn.threads import torch_threads
 
 arm_data = hnn.load_task("arm")
 CANONICAL = ("hnn", "baseline", "separable", "dissipative", "mechanical")
@@ -216,11 +217,8 @@ def precision(budget: dict) -> list[dict]:
     out = []
     for wide in (False, True):
         for threads in (1, 2):
-            torch.set_num_threads(threads)
-            try:
+            with torch_threads(threads):
                 for seed in PRECISION_SEEDS:
                     _, row = fit("hnn", "spring", "float64" if wide else "nominal", budget, seed)
                     out.append({"dtype": "float64" if wide else "float32", "threads": threads, "seed": seed, **row})
-            finally:
-                torch.set_num_threads(1)
     return out

@@ -20,10 +20,10 @@ import sys
 import time
 from pathlib import Path
 
-import torch
 
 import hnn
 from hnn import sweep
+from hnn.threads import torch_threads
 from hnn_analysis import commands
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import machine, provenance
@@ -44,16 +44,12 @@ def measure(tasks: list[str], seeds: list[int], out: Path) -> dict:
         jobs = study.plan(rows, seeds, out / f"threads{threads}", None)
         runs, todo = sweep.reuse(jobs)
         progress = sweep.Progress(len(todo))
-        previous = torch.get_num_threads()
         # in this process, one run at a time: hnn.sweep's in-process runs take one thread by design
-        torch.set_num_threads(threads)
-        try:
+        with torch_threads(threads):
             for job in todo:
                 runs[job.key] = hnn.run_experiment(job.config)
                 progress.advance()
                 print(f"  {progress.tag()} {job.key} trained at {threads} thread(s)", flush=True)
-        finally:
-            torch.set_num_threads(previous)
         for row in rows:
             keys = [{kind: runs[f"{row['row']}/{kind}/seed{seed}"] for kind in study.row_models(row["task"])}
                     for seed in seeds]

@@ -17,6 +17,7 @@ from ..interface import EnergyField, Model
 from ..modes import frozen_weights, in_model_axis
 from .solvers import Solver, get_solver
 from .stability import warn_if_unstable
+from ..threads import torch_threads
 
 
 def _as_t_eval(t_eval) -> np.ndarray:
@@ -158,11 +159,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     x0 = _as_batch(x0, device)
     _check_tolerance(solver, x0.dtype, options)
     t = _as_t_eval(t_eval)
-    threads = torch.get_num_threads()
-    one_thread = threads != 1 and len(x0) <= SMALL_BATCH_ROWS
-    if one_thread:
-        torch.set_num_threads(1)
-    try:
+    with torch_threads(1 if len(x0) <= SMALL_BATCH_ROWS else None):
         if differentiable:
             with torch.enable_grad():
                 return solver.run(f, x0, t, **options)
@@ -170,6 +167,3 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             if not in_model_axis():         # a step past the method's stability limit: one warning, not silence
                 warn_if_unstable(method, f, x0, t, options)
             return solver.run(f, x0, t, **options)
-    finally:
-        if one_thread:
-            torch.set_num_threads(threads)
