@@ -79,7 +79,8 @@ def measure(runs: dict, settings: dict, seed: int = 0) -> dict:
     rows, budget = {}, settings.get("max_iterations", MAX_ITERATIONS)
     names = [f"chain{n}" for n in settings["bobs"]] + (["lnn"] if settings["lnn_starts"] else [])
     progress = sweep.Progress(sum(len(_loaded(runs, row, settings["kinds"], seed, load=False)) for row in names))
-    print(f"  {progress.tag()} measuring {progress.total} models on their protocols", flush=True)
+    print(f"  {progress.tag()} measuring {progress.total} model{'' if progress.total == 1 else 's'} on their protocols",
+          flush=True)
 
     def said(row: str):
         return lambda kind: print(f"  {progress.advance()} {row}/{kind}/seed{seed} measured", flush=True)
