@@ -21,10 +21,10 @@ from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
 from .training import fit_loss
-from .io import check_save_dir, write_json
+from .io import check_save_dir
 from .kinds import model_from_spec
 from .objectives import DerivativeObjective
-from .runs import COMPLETE, diverged_record, finish_run, run_dir, run_experiment, saved_args, training_subset
+from .runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
 from .specs import RunSpecs, run_specs
 from .tasks import task_config
 
@@ -174,11 +174,11 @@ def run_group_task(task: str, values: list[Mapping], threads: int | None = None)
 
 
 def _record_diverged(configs: list, outcomes: list) -> None:
-    """Each model that failed in training recorded as it fails (``hnn.runs.diverged_record``), as a lone
+    """Each model that failed in training recorded as it fails (``hnn.runs.record_divergence``), as a lone
     run's worker does (``hnn.tasks.run_task``): the sweep that reads these outcomes may be stopped first."""
     for config, outcome in zip(configs, outcomes):
         if isinstance(outcome, DivergenceError):
-            write_json(diverged_record(config), {"message": f"{type(outcome).__name__}: {outcome}"})
+            record_divergence(config, outcome)
 
 
 __all__ = ["drop_spent_checkpoints", "group_checkpoint", "run_group_task", "train_group", "unit_key"]

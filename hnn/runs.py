@@ -57,6 +57,11 @@ def diverged_record(config) -> Path:
     return directory.parent / f".{directory.name}.diverged.json"
 
 
+def record_divergence(config, err: BaseException) -> None:
+    """Record the run of ``config`` as failed in training by ``err`` (``diverged_record``: its type and message)."""
+    write_json(diverged_record(config), {"message": f"{type(err).__name__}: {err}"})
+
+
 def partial_checkpoint(config) -> Path:
     """The training checkpoint of this config's run while it trains (``hnn.train(checkpoint=...)``)."""
     directory = run_dir(config)

@@ -38,8 +38,7 @@ from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, time_left, train_here, train_in_pool, train_on_ray
 from .group_runs import drop_spent_checkpoints, unit_key
-from .io import write_json
-from .runs import diverged_record, find_run, load_run, partial_checkpoint
+from .runs import diverged_record, find_run, load_run, partial_checkpoint, record_divergence
 from .tasks import task_spec
 from .config import RunConfig
 from .errors import DivergenceError
@@ -213,7 +212,7 @@ def _failure(job: Job, err: BaseException, log_dir: Path, bar, tag: str = "") ->
     failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log, diverged=isinstance(err, DivergenceError))
     say(bar, f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
     if failed.diverged:         # a result of the config: recorded for a later sitting (reuse(..., diverged=True))
-        write_json(diverged_record(job.config), {"key": job.key, "message": failed.message})
+        record_divergence(job.config, err)
     return failed
 
 

@@ -28,8 +28,7 @@ from types import MappingProxyType, ModuleType
 import torch
 
 from .errors import DivergenceError
-from .io import write_json
-from .runs import diverged_record, run_experiment
+from .runs import record_divergence, run_experiment
 
 _PREFIX = "experiment-"
 
@@ -207,7 +206,7 @@ def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     except DivergenceError as err:
         # recorded here, as it fails: the sweep that reads this outcome may be busy with another's (its
         # on_done) or stopped before it does
-        write_json(diverged_record(config), {"message": f"{type(err).__name__}: {err}"})
+        record_divergence(config, err)
         raise
 
 

@@ -18,7 +18,6 @@ import multiprocessing
 import time
 from pathlib import Path
 
-
 from hnn import sweep
 from hnn.io import atomic_write
 from hnn_analysis.chains.peer_measure import diverged_entry, measure, one_thread
