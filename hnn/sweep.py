@@ -27,6 +27,7 @@ group``), on a GPU all of them (``DEVICE_GROUP_MAX``).
 from __future__ import annotations
 
 import json
+import statistics
 import sys
 import time
 import traceback
@@ -62,10 +63,13 @@ _CANNOT_RUN = (FileNotFoundError, ImportError)
 
 @dataclass
 class Job:
-    """One run of a sweep: its ``key`` (``row/kind/seed<seed>``), its task and its config."""
+    """One run of a sweep: its ``key`` (``row/kind/seed<seed>``), its task and its config;
+    ``expected_seconds``, its training time where the caller knows it (an earlier run of its kind),
+    orders the sweep longest first where the task's relative cost cannot tell its kinds apart."""
     key: str
     task: str
     config: RunConfig
+    expected_seconds: float | None = None
 
     @property
     def steps(self) -> int:
@@ -180,9 +184,20 @@ def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
     return units
 
 
-def _unit_cost(unit: list[Job]) -> float:
-    """Longest first: a group costs about its longest member's time (the models step together)."""
-    return task_spec(unit[0].task).cost * max(job.steps for job in unit) * (1 if len(unit) == 1 else 2)
+def longest_first(units: list[list[Job]]) -> list[list[Job]]:
+    """``units`` longest first, so that the last to finish is a short one: a run costs its
+    ``expected_seconds``, or else its task's relative cost times its steps, put in seconds at the
+    median rate of the runs that know theirs; a group about its longest member's time, twice (the
+    models step together)."""
+    def rough(job: Job) -> float:
+        return task_spec(job.task).cost * job.steps
+    rates = [job.expected_seconds / rough(job) for unit in units for job in unit if job.expected_seconds]
+    rate = statistics.median(rates) if rates else 1.0
+
+    def cost(unit: list[Job]) -> float:
+        longest = max(job.expected_seconds or rough(job) * rate for job in unit)
+        return longest * (1 if len(unit) == 1 else 2)
+    return sorted(units, key=cost, reverse=True)
 
 
 def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
@@ -258,7 +273,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         data, data_seconds, skipped = _build_datasets(jobs, bar)
         done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
         todo = [job for job in jobs if job.task not in skipped]
-        units = sorted(plan_units(todo, group), key=_unit_cost, reverse=True)
+        units = longest_first(plan_units(todo, group))
         if not in_process:
             data.clear()        # the workers read the cached datasets themselves
         # one line per run, with the runs done of those to do and the time so far: the bar above is

@@ -41,11 +41,13 @@ def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
                                   dataset)
         (a, _, ma), (b, _, mb) = hnn.load_run(folder), hnn.load_run(lone)
         # float32: vmap's batched kernels sum in other orders than a lone model's, 1e-7 relative a step;
-        # 20 Adam steps (the LNN's large init weights most) carry it to at most 2e-5 relative (measured)
+        # 20 Adam steps (the LNN's large init weights most) carry it to at most 2e-5 relative on an AVX2 box
+        # and, on an AVX-512 one, 5e-5 of a weight tensor's largest and 1.8e-4 of the LNN's losses (its
+        # train loss at a spike of 109, step 5; measured over the 3 seeds at 1 and 2 threads)
         for name, w in a.state_dict().items():
-            torch.testing.assert_close(w, b.state_dict()[name], rtol=1e-4, atol=1e-5 * b.state_dict()[name].abs().max())
-        np.testing.assert_allclose(ma["history"]["train_loss"], mb["history"]["train_loss"], rtol=1e-4)
-        np.testing.assert_allclose(ma["test_loss"], mb["test_loss"], rtol=1e-4)
+            torch.testing.assert_close(w, b.state_dict()[name], rtol=1e-4, atol=1e-4 * b.state_dict()[name].abs().max())
+        np.testing.assert_allclose(ma["history"]["train_loss"], mb["history"]["train_loss"], rtol=1e-3)
+        np.testing.assert_allclose(ma["test_loss"], mb["test_loss"], rtol=1e-3)
 
 
 def test_a_stacked_member_that_fails_is_named_and_dropped_while_the_others_train_on(tmp_path, capsys):

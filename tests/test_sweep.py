@@ -34,6 +34,23 @@ def _job(task: str, kind: str, runs_dir: Path, steps: int, **fields) -> sweep.Jo
     return sweep.Job(f"{task}/{kind}/seed0", task, config)
 
 
+def test_the_longest_first_order_puts_runs_without_a_time_at_the_rate_of_those_with_one(tmp_path):
+    """Runs of one task and steps, whose task cost cannot tell them apart, go by their expected seconds; one
+    without them costs its task's rough cost at the median rate of the others (here 55 s); a group counts twice."""
+    jobs = [dataclasses.replace(_job("spring", kind, tmp_path, 100), expected_seconds=seconds)
+            for kind, seconds in (("baseline", 10.0), ("hnn", 100.0), ("mechanical", None))]
+    order = sweep.longest_first([[job] for job in jobs])
+    assert [unit[0].key for unit in order] == ["spring/hnn/seed0", "spring/mechanical/seed0", "spring/baseline/seed0"]
+    pair = [jobs[0], dataclasses.replace(jobs[0], key="spring/baseline/seed1")]     # a group of 10 s runs: 20 s
+    for alone, first in ((15.0, 2), (25.0, 1)):
+        order = sweep.longest_first([pair, [dataclasses.replace(jobs[1], expected_seconds=alone)]])
+        assert len(order[0]) == first, (alone, order)
+    # none knows its time: the task's relative cost times the steps decides
+    rough = [_job("spring", "hnn", tmp_path, 100), _job("spring", "baseline", tmp_path, 300)]
+    assert [unit[0].key for unit in sweep.longest_first([[job] for job in rough])] == [
+        "spring/baseline/seed0", "spring/hnn/seed0"]
+
+
 @pytest.mark.parametrize("backend, n_jobs", [
     ("local", 1),
     ("local", 2),

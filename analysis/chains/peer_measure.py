@@ -128,12 +128,18 @@ def add_seconds(by_seed: dict, jobs: list, walls: dict) -> dict:
     saved (its recorded wall time in ``walls``, by run key), its training cost on one quiet thread
     (``hnn_analysis.training_cost``: its config's steps at the rate of short timed bursts), not the run's
     wall time, which counts whatever else the machine did meanwhile (kept as ``wall``). Timed here, in
-    this process, after every rollout: nothing else runs."""
+    this process, after every rollout: nothing else runs. A kind whose timing bursts (a fresh model's
+    first steps) fail in training where its run did not is left untimed, and said so."""
     for job in jobs:
         row, kind, seed = job.key.split("/")
         rows = by_seed.get(int(seed[len("seed"):]), {})
         if row in rows and job.key in walls:
-            cost = training_cost("chain", job.config.to_dict())
+            try:
+                cost = training_cost("chain", job.config.to_dict())
+            except hnn.DivergenceError as err:      # a black-box L's first steps can meet a singular d2L/dqdot2
+                print(f"peers: {job.key} not timed: its timing burst failed in training ({type(err).__name__}: "
+                      f"{str(err).split(':')[0]}); its wall time, {walls[job.key]:.0f} s, is in the record", flush=True)
+                continue
             rows[row].setdefault("seconds", {})[kind] = {**cost, "wall": walls[job.key]}
     for rows in by_seed.values():
         for entries in rows.values():

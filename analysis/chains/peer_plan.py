@@ -4,6 +4,7 @@ fields on each protocol, the kinds it trains (``kinds``), the sweep's jobs (``pl
 """
 from __future__ import annotations
 
+import fnmatch
 from pathlib import Path
 
 import hnn
@@ -83,6 +84,17 @@ def plan(settings: dict, out: Path, seed: int = 0) -> list[sweep.Job]:
                   **settings.get("lnn_kind_fields", LNN_KIND_FIELDS).get(kind, {})}
         jobs.append(sweep.Job(f"lnn/{kind}/seed{seed}", "chain", hnn.tasks.task_config("chain", fields)))
     return jobs
+
+
+def select(jobs: list[sweep.Job], patterns: list[str] | None) -> list[sweep.Job]:
+    """The jobs whose name matches one of the shell ``patterns`` (``--only``; None: all); ValueError
+    for a pattern that names no job."""
+    for pattern in patterns or ():
+        if not any(fnmatch.fnmatchcase(job.key, pattern) for job in jobs):
+            rows = ", ".join(dict.fromkeys(job.key.split("/")[0] for job in jobs))
+            raise ValueError(f"--only {pattern!r} matches no run of this plan; its runs are named like "
+                             f"{jobs[0].key} (row/kind/seed), of rows {rows}")
+    return [job for job in jobs if patterns is None or any(fnmatch.fnmatchcase(job.key, p) for p in patterns)]
 
 
 def quick_cuts(quick: dict = QUICK, full: dict = FULL) -> list[str]:

@@ -13,13 +13,16 @@ from the record (``by_seed``), with each kind's training cost timed at that poin
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import json
 import multiprocessing
+import statistics
 import time
 from pathlib import Path
 
 from hnn import sweep
 from hnn.io import atomic_write
+from hnn.threads import torch_threads
 from hnn_analysis.chains.peer_measure import diverged_entry, measure, one_thread
 
 RECORD = Path("docs") / "peers-runs.json"
@@ -186,6 +189,43 @@ def curves(record: dict, jobs: list[sweep.Job], seed: int) -> dict:
 def walls(record: dict, jobs: list[sweep.Job]) -> dict:
     """``{key: recorded training wall time in s}`` of ``jobs``' recorded saved runs."""
     return {job.key: entry["wall"] for job in jobs if (entry := recorded(record, job)) is not None and entry["wall"]}
+
+
+def keeper(jobs: list[sweep.Job], settings: dict, path: Path):
+    """A sweep's ``on_done``: each run into the record as it finishes (a lost sitting keeps it), measured
+    on one thread while the workers train on."""
+    def keep(job: sweep.Job, outcome) -> None:
+        with torch_threads(1):
+            record_runs({job.key: outcome}, jobs, settings, path)
+    return keep
+
+
+def with_expected_seconds(record: dict, jobs: list[sweep.Job], known: list[sweep.Job]) -> list[sweep.Job]:
+    """``jobs``, each with its ``expected_seconds`` where ``known``'s recorded runs give them (``expected_seconds``)."""
+    hints = expected_seconds(record, jobs, known)
+    return [dataclasses.replace(job, expected_seconds=hints.get(job.key)) for job in jobs]
+
+
+def expected_seconds(record: dict, jobs: list[sweep.Job], known: list[sweep.Job]) -> dict:
+    """``{key: seconds}``: each of ``jobs``' expected training time, for the sweep's longest-first order
+    (every chain run is one task of the same steps to the sweep's own estimate): the median recorded
+    wall time per step of ``known``'s runs of its row and kind (other seeds), else of its kind on its
+    protocol's other rows (a step of a kind costs about the same at every N on the chain, docs/peers.md),
+    times its steps. A job with neither is left out."""
+    rates = {}
+    for job in known:
+        if (entry := recorded(record, job)) is not None and entry["wall"]:
+            row, kind, _ = job.key.split("/")
+            rates.setdefault((row, kind), []).append(entry["wall"] / job.steps)
+    out = {}
+    for job in jobs:
+        row, kind, _ = job.key.split("/")
+        same = rates.get((row, kind)) or [rate for (other, other_kind), kind_rates in rates.items()
+                                          if other_kind == kind and (other == "lnn") == (row == "lnn")
+                                          for rate in kind_rates]
+        if same:
+            out[job.key] = statistics.median(same) * job.steps
+    return out
 
 
 def measuring_seconds(record: dict, jobs: list[sweep.Job]) -> float:

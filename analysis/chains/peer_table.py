@@ -52,7 +52,7 @@ def markdown(results: dict) -> str:
               f"recorded it), timing the kinds {meta['seconds'].get('timing', 0):.0f} s. Training seconds in the tables: each "
               "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "
               "quiet core; with several seeds, the median of the seeds' runs' timings; its recorded wall time is in "
-              "peers.json). "
+              "peers.json; a run whose bursts, a fresh model's first steps, fail in training is left untimed). "
               f"Each CHNN-protocol kind trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "

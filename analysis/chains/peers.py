@@ -5,6 +5,7 @@
     python analysis/peers.py --quick                      # a smoke run: small data, few steps, N = 1, 2
     python analysis/peers.py --seed 3 --seeds 1 --train-only --out DIR   # one seed's runs, over sittings
     python analysis/peers.py --record-only --out DIR      # record a stopped sitting's finished runs
+    python analysis/peers.py --train-only --only 'chain1/*' --jobs 2     # part of it: a machine's or a sitting's share
 
 Trains our model kinds (``kinds()``: every registered one that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
@@ -30,10 +31,9 @@ import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
 from hnn import sweep, sweep_flags
-from hnn.threads import torch_threads
 from hnn_analysis.chains import peer_record
 from hnn_analysis.chains.peer_measure import add_seconds, curves_figure, over_seeds
-from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts
+from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts, select
 from hnn_analysis.chains.peer_table import markdown
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import provenance
@@ -61,6 +61,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--record-only", action="store_true",
                    help="train nothing: measure the saved runs under --out that the record lacks, add them, and "
                         "stop (a sitting whose training was stopped keeps what it finished)")
+    p.add_argument("--only", action="append", metavar="PATTERN", default=None,
+                   help="with --train-only, only the runs whose name matches (shell pattern, repeatable: 'chain1/*', "
+                        "'*/lagrangian/seed[12]'): a table split over machines, or what fits a sitting")
     sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write the table into docs/peers.md (full settings only)")
     return p
@@ -77,6 +80,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
         parser.error("--train-only stops before the table that --update-docs writes; drop one of them")
     if args.record_only and (args.train_only or args.update_docs):
         parser.error("--record-only only records saved runs: drop --train-only and --update-docs")
+    if args.only and not args.train_only:
+        parser.error("--only trains part of the table: add --train-only (the table is built from the whole record)")
     sweep_flags.check_backend(parser, args)
     full = settings is None and not args.quick
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
@@ -85,9 +90,9 @@ def main(argv=None, settings: dict | None = None) -> dict:
     if cuts:
         commands.say_quick("peers", cuts)
     seeds = range(args.seed, args.seed + (args.seeds or (FULL_SEEDS if full else 1)))
-    jobs = plan_seeds(settings, out, seeds)
     path = args.record or (hnn.tasks.repo_root() / peer_record.RECORD if full else out / "peers-runs.json")
     try:
+        jobs = select(plan_seeds(settings, out, seeds), args.only)
         record = peer_record.load(path, settings)
     except ValueError as err:
         parser.error(str(err))
@@ -99,13 +104,14 @@ def main(argv=None, settings: dict | None = None) -> dict:
     runs, todo = sweep.reuse(fresh, diverged=True)
     print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
     record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
-
-    def keep(job: sweep.Job, outcome) -> None:      # each run into the record as it finishes: a lost sitting keeps it
-        with torch_threads(1):        # the workers train on, one thread each
-            peer_record.record_runs({job.key: outcome}, jobs, settings, path)
+    # longest first by the recorded runs of each kind, at every seed of the plan
+    todo = peer_record.with_expected_seconds(record, todo, plan_seeds(settings, out, range(max(FULL_SEEDS, seeds.stop))))
     trained, seconds = ({}, {"training": 0.0}) if args.record_only else sweep.train_jobs(
-        todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device, on_done=keep)
+        todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device,
+        on_done=peer_record.keeper(jobs, settings, path))
     runs.update(trained)
+    # a model that failed in training is a result of its config (its table cell says how), not a broken run
+    broken = {key: outcome for key, outcome in runs.items() if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)}
     tic = time.perf_counter()
     record = peer_record.load(path, settings)
     if args.train_only or args.record_only:
@@ -113,8 +119,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
         print(f"peers: trained {len(todo) if args.train_only else 0}, {len(jobs) - left} of {len(jobs)} runs "
               f"recorded in {path}; no table (--{'train' if args.train_only else 'record'}-only): the same "
               "command without it trains what is left and writes the table", flush=True)
-        sweep.exit_if_failed({key: outcome for key, outcome in runs.items()
-                              if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})
+        sweep.exit_if_failed(broken)
         return {"runs": runs, "record": record}
     by_seed = add_seconds(peer_record.by_seed(record, jobs, settings, seeds), jobs, peer_record.walls(record, jobs))
     rows = over_seeds(by_seed) if len(seeds) > 1 else by_seed[args.seed]
@@ -141,7 +146,5 @@ def main(argv=None, settings: dict | None = None) -> dict:
     seeds = pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS
                                  else f"this run had --seeds {len(seeds)} (the table's default is {FULL_SEEDS})")
     commands.publish(out, "peers", results, text, {"peers": text} if args.update_docs else {}, seeds)
-    # a model that failed in training is a result of its config (its table cell says how), not a broken run
-    sweep.exit_if_failed({key: outcome for key, outcome in runs.items()
-                          if not (isinstance(outcome, sweep.RunFailed) and outcome.diverged)})
+    sweep.exit_if_failed(broken)
     return results
