@@ -254,6 +254,27 @@ def test_a_kind_that_failed_on_some_seed_is_left_out_of_the_card_and_named():
         "| 3 | every kind failed on some seed | | | | a (2 of 5) |"
 
 
+def test_a_cell_says_how_many_seeds_failed_and_how_when_all_did():
+    def measured(mean):
+        return {"mean": mean, "median": mean / 2, "n": 100}
+    singular = {"diverged": "SingularLagrangianError at training step 12 of 8000: LagrangianNN: d2L/dqdot2 is singular"}
+    by_seed = {0: {"chain3": {"a": measured(0.3), "b": singular, "c": measured(1e-3)}},
+               1: {"chain3": {"a": singular, "b": {"blew_up": "dopri5 (rtol=1e-07): 2 trajectories diverged"},
+                              "c": measured(2e-3)}},
+               2: {"chain3": {"a": singular, "b": singular, "c": singular}}}
+    row = peer_measure.over_seeds(by_seed)["chain3"]
+    # one seed measured and two failed: its number, never mistaken for a clean run
+    assert row["a"]["seeds"] == [0.3] and set(row["a"]["failed"]) == {1, 2}
+    assert peer_table._cell(row["a"]) == "3.00e-01 (1 seed; 2 more failed)"
+    assert peer_table._cell(row["c"]) == "1.50e-03 (1.0e-03..2.0e-03, 2 seeds; 1 more failed)"
+    # every seed failed: each seed's way, in seed order
+    assert peer_table._cell(row["b"]) == (
+        "failed on all 3 seeds: seed 0 failed in training: SingularLagrangianError at training step 12 of 8000; "
+        "seed 1 blew up: dopri5 (rtol=1e-07); seed 2 failed in training: SingularLagrangianError at training step "
+        "12 of 8000")
+    assert {"diverged"} <= set(row["b"]) and "mean" not in row["b"]
+
+
 def test_quick_trains_the_lnn_the_protocols_steps_and_says_what_it_cut(tmp_path):
     kinds = peer_plan.kinds()
     quick = {job.key: job.config for job in peer_plan.plan({**peer_plan.QUICK, "kinds": kinds}, tmp_path)}

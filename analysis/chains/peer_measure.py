@@ -175,8 +175,8 @@ def curves_figure(found: dict, path: Path, seed: int = 0) -> Path:
 def over_seeds(by_seed: dict) -> dict:
     """The rows of several seeds (``{seed: measure(...)}``) as one: per kind the mean over the seeds of each
     seed's mean error, ``seeds`` (each seed's mean, in seed order), ``low``/``high`` (their range) and ``se``
-    (their standard error), the median of the seeds' medians, and ``failed`` (``{seed: why}``: blew up or
-    diverged in training); a kind no seed measured keeps the first seed's failure. The chaos floor is the
+    (their standard error), the median of the seeds' medians, and ``failed`` (``{seed: why}``: "blew up: ..."
+    or "failed in training: ..."); a kind no seed measured keeps the first seed's failure, and ``failed``. The chaos floor is the
     first seed's (the same starts); the training seconds are ``cost_over_seeds``."""
     first = by_seed[min(by_seed)]
     out = {}
@@ -187,9 +187,10 @@ def over_seeds(by_seed: dict) -> dict:
         for kind in sorted(kinds):
             found = {seed: rows[row].get(kind) for seed, rows in sorted(by_seed.items())}
             means = {seed: e["mean"] for seed, e in found.items() if e and "mean" in e}
-            failed = {seed: e.get("blew_up") or e.get("diverged") for seed, e in found.items() if e and "mean" not in e}
-            if not means:
-                merged[kind] = next(e for e in found.values() if e)
+            failed = {seed: f"blew up: {e['blew_up']}" if "blew_up" in e else f"failed in training: {e['diverged']}"
+                      for seed, e in found.items() if e and "mean" not in e}
+            if not means:       # the first seed's failure, and every seed's
+                merged[kind] = {**next(e for e in found.values() if e), "failed": failed}
                 continue
             values = np.array(list(means.values()))
             merged[kind] = {"mean": float(values.mean()), "seeds": [float(v) for v in values],
