@@ -8,37 +8,16 @@ import pytest
 import hnn
 from hnn_analysis import pages
 
-# sections last written before the commands recorded their seeds, each with the words of its page that
-# give its seeds (and, under 3, why). A ratchet: the command that rewrites one records its seeds, and
-# this test then fails until the section's entry here is removed.
-UNRECORDED = {
-    "peers": "has not been published yet",
-}
-# of those, the ones that rest on fewer than 3 seeds: their words above must say why
-FEWER = {"peers"}
-
-
-def _page(name: str) -> str:
-    return (hnn.tasks.repo_root() / pages.PAGES[name]).read_text()
-
 
 @pytest.mark.parametrize("name", pages.VERDICTS)
 def test_a_verdict_rests_on_three_seeds_or_its_page_says_why(name):
     text = pages.section_text(name)
     assert text is not None, f"{pages.PAGES[name]} has no {name} section"
     entry = pages.recorded_seeds().get(name)
-    if entry is None or entry["stamp"] != pages.stamp_of(text):
-        assert name in UNRECORDED, (f"section {name!r} records no seeds for its stamp {pages.stamp_of(text)}: "
-                                    f"regenerate it ({pages.REFRESH[name]})")
-        assert UNRECORDED[name] in _page(name), f"{pages.PAGES[name]} no longer says {UNRECORDED[name]!r}"
-        return
-    assert name not in UNRECORDED, f"{name} now records its seeds: drop it from UNRECORDED"
+    assert entry is not None and entry["stamp"] == pages.stamp_of(text), (
+        f"section {name!r} records no seeds for its stamp {pages.stamp_of(text)}: regenerate it ({pages.REFRESH[name]})")
     if entry["seeds"] < pages.MIN_SEEDS:
         assert entry["why"] and entry["why"] in text, f"{name}: {entry['seeds']} seed(s) and no reason on the page"
-
-
-def test_the_unrecorded_list_names_verdict_sections_only():
-    assert set(UNRECORDED) <= set(pages.VERDICTS) and FEWER <= set(UNRECORDED)
 
 
 def test_a_verdict_section_is_written_with_its_seeds_and_records_them(tmp_path, monkeypatch):
