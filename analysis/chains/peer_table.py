@@ -36,6 +36,8 @@ def markdown(results: dict) -> str:
     published = hnn.load_task("chain", "protocols").CHNN_PUBLISHED
     meta = results["meta"]
     names = meta["kinds"]
+    seeds = meta.get("seeds", [0])
+    several = len(seeds) > 1
     lines = []
     if meta["quick"]:
         lines += ["**QUICK smoke run** (`--quick`: small data, few steps, few test starts): these numbers test the "
@@ -61,11 +63,11 @@ def markdown(results: dict) -> str:
               f"Each CHNN-protocol kind trains {meta['steps']} steps of batch 200, {meta['steps'] / 4:g} of CHNN's "
               "epochs of 800 snippets (theirs: 2000), by "
               f"{meta.get('optimizer', 'adam')} with a {meta.get('schedule', 'constant')} learning rate (theirs: AdamW, "
-              "cosine). " + _seeds_sentence(meta.get("seeds", [0])) +
-              f" Training curves (seed {meta.get('seeds', [0])[0]}'s runs): "
+              "cosine). " + _seeds_sentence(seeds) +
+              f" Training curves (seed {seeds[0]}'s runs): "
               "[figures/peers-curves.png](figures/peers-curves.png).", "",
               "### CHNN protocol (Finzi et al. 2020): geometric-mean relative error of the Cartesian rollout, "
-              + ("mean over the seeds (their range)" if len(meta.get("seeds", [0])) > 1 else
+              + ("mean over the seeds (their range)" if several else
                  "mean (median) over the test starts") + "; the floor: mean (median) over the test starts", "",
               "| N | published HNN (mechanical) | published CHNN | published CLNN | published NeuralODE | published floor | "
               + " | ".join(f"ours: {kind}" for kind in names) + " | our floor | our training s (one thread) |",
@@ -87,7 +89,7 @@ def markdown(results: dict) -> str:
         lnn_published = hnn.load_task("chain", "protocols").LNN_PUBLISHED
         horizon = meta.get("lnn_horizon") or hnn.load_task("chain", "protocols").LNN["t_end"]
         lines += ["", f"### LNN double pendulum (Cranmer et al. 2020): |E(z^_T) - E(z_T)| / 29.4 at T = {horizon:g} s, "
-                  + ("mean over the seeds (their range) of the mean" if len(meta.get("seeds", [0])) > 1 else
+                  + ("mean over the seeds (their range) of the mean" if several else
                      "mean (median)") + " over the starts (ours: dopri5 at rtol 1e-8)", "",
                   "| kind | energy error | training steps | training s (one thread) |", "| --- | --- | ---: | ---: |"]
         lines += [f"| published {k} | {v:.2g} | | |" for k, v in lnn_published.items()]
