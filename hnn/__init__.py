@@ -17,7 +17,7 @@ a module imports its own layer and those below, never one above, and the two mid
 nothing of each other.
 
 - base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics, the
-  dataset cache, the GIF writer, the orbits' close-encounter thresholds, a block's torch thread count;
+  dataset cache, the GIF writer, the orbits' close-encounter thresholds, a block's torch thread count, progress lines;
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
 - training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets, the
@@ -28,14 +28,14 @@ nothing of each other.
 import importlib
 from typing import TYPE_CHECKING
 
-_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes")
+_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes", "progress")
 
 # layer -> its modules; a module may import from its own layer and the ones before it, except that
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has
 # the folder's layer), may not import each other
 _LAYERS = {
     "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache", "gifs",
-             "encounters", "threads"),
+             "encounters", "threads", "progress"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "objectives", "units", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",

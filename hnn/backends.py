@@ -14,7 +14,6 @@ import multiprocessing
 import os
 import socket
 import sys
-import time
 from pathlib import Path
 
 from .errors import DivergenceError
@@ -24,6 +23,7 @@ from .tasks import repo_root, run_task
 from .training import report_progress
 from .stopping import in_worker, stop_pool, worker_start
 from .threads import cores
+from . import progress as progress_lines
 
 BACKENDS = ("local", "ray")
 RAY_INSTALL = 'pip install -e ".[ray]"'
@@ -37,37 +37,7 @@ def say(bar, line: str) -> None:
 
 
 # seconds between the lines that say how far a long run is, where no bar is drawn (no terminal)
-HEARTBEAT = 30.0
-
-
-def time_left(step: int, total: int, first_step: int, first_time: float) -> str:
-    """``', about 12 min left'``: the steps still to run at this run's rate since ``first_step`` (at
-    ``first_time``, ``time.perf_counter``'s), or nothing before a rate is known."""
-    elapsed = time.perf_counter() - first_time
-    if step <= first_step or elapsed <= 0:
-        return ""
-    left = (total - step) * elapsed / (step - first_step)
-    if left >= 2 * 3600:
-        return f", about {left / 3600:.1f} h left"
-    return f", about {left / 60:.0f} min left" if left >= 90 else f", about {left:.0f} s left"
-
-
-class Heartbeat:
-    """How far one run is, every ``HEARTBEAT`` seconds: ``due(step, total)`` gives ``'step s of total, about
-    m min left'`` when a line is due (else None), the rate taken from the first step it saw (a resumed run
-    is not timed from its start)."""
-
-    def __init__(self):
-        self.first, self.said = None, time.perf_counter()
-
-    def due(self, step: int, total: int) -> str | None:
-        now = time.perf_counter()
-        if self.first is None:
-            self.first = (step, now)
-        if now - self.said <= HEARTBEAT:
-            return None
-        self.said = now
-        return f"step {step} of {total}{time_left(step, total, *self.first)}"
+HEARTBEAT = progress_lines.HEARTBEAT
 
 
 def _group_outcomes(unit: list, outcomes: list[dict]):
@@ -92,7 +62,7 @@ def train_here(units: list[list], data: dict, bar, progress):
                 bar.update(job.steps)
                 yield job, outcome
             continue
-        job, done, beat = unit[0], [0], Heartbeat()
+        job, done, beat = unit[0], [0], progress_lines.Heartbeat(HEARTBEAT)
 
         def advance(step: int, total: int, done=done, beat=beat, job=job) -> None:
             bar.update(step - done[0])
@@ -114,7 +84,7 @@ def run_reported(task: str, values, key: str, threads: int | None = None) -> str
     a worker is not silent until it ends; in a terminal the sweep's bar follows the runs)."""
     if sys.stdout.isatty():
         return run_task(task, values, threads)
-    beat = Heartbeat()
+    beat = progress_lines.Heartbeat(HEARTBEAT)
 
     def advance(step: int, total: int) -> None:
         if line := beat.due(step, total):

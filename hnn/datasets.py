@@ -48,7 +48,8 @@ def trajectory_dataset(dynamics, x0: np.ndarray, t_eval: np.ndarray, noise: np.n
         trajectories x T, trajectory-major), ``dt`` (the grid step) and ``t_eval``.
     """
     x0 = torch.as_tensor(x0, dtype=torch.float64, device="cpu")      # datasets are made on the CPU
-    clean = rollout(dynamics, x0, t_eval, rtol=rtol)                  # (num, T, dim)
+    # atol 1e-6: solve_ivp's default, which the original kept (the published datasets)
+    clean = rollout(dynamics, x0, t_eval, rtol=rtol, atol=1e-6, threads=None)      # (num, T, dim)
     dxdt = dynamics(clean.reshape(-1, clean.shape[-1])).numpy()
     x = clean.reshape(-1, clean.shape[-1]).numpy() + noise.reshape(-1, noise.shape[-1])
     split = int(len(x) * (1 - test_split))

@@ -28,6 +28,8 @@ from .interface import declared, gradient_of
 from .metrics import energy_mse
 from .integrators.solvers import get_solver
 from .stacked import group_field, group_options
+from .progress import Ticker
+from .threads import torch_threads
 
 
 # A protocol's integrator is data: fields ``method`` (a name in ``hnn.SOLVERS``), ``options`` (its
@@ -165,7 +167,8 @@ def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol, **extra
         # the protocols ask float32 models for tight tolerances, as the original did: what that
         # costs in accuracy is a property of the protocol, not news at every evaluation
         warnings.filterwarnings("ignore", message=".*tighter than torch.float32", category=UserWarning)
-        return rollout(f, x0, t_eval, **protocol.rollout_options(), **extra)
+        # threads=None: evaluate_energy's own count (its batches of 15 trials run on one thread anyway)
+        return rollout(f, x0, t_eval, threads=None, **protocol.rollout_options(), **extra)
 
 
 def _model_rollout(model, run, x0: torch.Tensor, observed: str) -> torch.Tensor:
@@ -201,7 +204,7 @@ def _scored(system, protocol: EnergyProtocol, e_true: np.ndarray, traj: torch.Te
 
 
 def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dict | None = None,
-                    observed: str = "canonical") -> dict:
+                    observed: str = "canonical", threads: int | None = 1, progress: bool | None = None) -> dict:
     """Run ``protocol`` on the true ``system`` (a task's data module) and each model.
 
     Args:
@@ -215,14 +218,25 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
             row its own steps: ``hnn.stacked.group_field``) and the truth is integrated once for all.
         dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).
         observed: the coordinates of the system's states (``dataset["state"]``; ``'canonical'``).
+        threads: torch's thread count while it runs (default 1, as ``hnn.train``; the caller's count is
+            restored after; None: the caller's as it is).
+        progress: as ``hnn.train``'s: None a bar where someone watches (after 2 s) and else a line every
+            10 s, one step per path (the truth, then each model); False nothing.
 
     Returns:
         ``{'protocol': {...}, 'x0': ..., 't_truth': (trials, T), 'truth': (trials, T, dim),
         'energy_truth': (trials, T), and per label: 'traj', 'energy', 'mse', 'mse_se'}``
         (trials = 1 for a test segment).
     """
-    if protocol.x0 == "test_segment":
-        return _evaluate_segment(system, models, protocol, dataset, observed)
+    paths = 1 + sum(len(m) if isinstance(m, (list, tuple)) else 1 for m in models.values())
+    with torch_threads(threads), Ticker(paths, f"energy MSE, {protocol.name} protocol", progress, unit="path") as tick:
+        if protocol.x0 == "test_segment":
+            return _evaluate_segment(system, models, protocol, dataset, observed, tick)
+        return _evaluate_trials(system, models, protocol, observed, tick)
+
+
+def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: str, tick: Ticker) -> dict:
+    """``evaluate_energy`` of a ``'box'`` or ``'seeds'`` protocol; ``tick`` advances after each path."""
     x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64, device="cpu")
     t0, t1 = protocol.t_span
     trials = np.arange(protocol.num_trials)
@@ -234,6 +248,7 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     e_true = _energy(system, protocol, truth)
     out = {"protocol": asdict(protocol), "x0": x0.numpy(), "truth": truth.numpy(), "energy_truth": e_true,
            "t_truth": t0 + truth_spans[:, None] * np.linspace(0, 1, protocol.num_points)}
+    tick.advance()
 
     def run(f, x, group=1, **extra):
         return _rollout_scaled(f, x, model_spans, protocol.num_points, protocol, group, **extra)
@@ -242,10 +257,12 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
             out[label] = [_scored(system, protocol, e_true, t) for t in _group_rollout(model, run, x0, observed, protocol)]
         else:
             out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
+        tick.advance(len(model) if isinstance(model, (list, tuple)) else 1)
     return out
 
 
-def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: dict | None, observed: str) -> dict:
+def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: dict | None, observed: str,
+                      tick: Ticker) -> dict:
     """The real pendulum's protocol: integrate from the first measured test state over the
     measured times and compare energies step by step (± over contiguous time chunks)."""
     if dataset is None or "test_t" not in dataset:
@@ -256,6 +273,7 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     e_true = _energy(system, protocol, measured)
     out = {"protocol": asdict(protocol), "x0": measured[:1].numpy(), "truth": measured[None].numpy(),
            "energy_truth": e_true[None], "t_truth": t[None]}
+    tick.advance()
 
     def run(f, x, group=1, **extra):
         return _protocol_rollout(f, x, t, protocol, **extra)
@@ -270,6 +288,7 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
             out[label] = [scored(p) for p in _group_rollout(model, run, measured[:1], observed, protocol)]
         else:
             out[label] = scored(_model_rollout(model, run, measured[:1], observed))
+        tick.advance(len(model) if isinstance(model, (list, tuple)) else 1)
     return out
 
 

@@ -224,7 +224,7 @@ def _integrate(x0: np.ndarray, t_eval: np.ndarray, rtol: float, atol: float, thr
     shrink = math.sqrt(x0.shape[1] / (x0.shape[1] + 1))
     try:
         traj = rollout(guard, _Guard.with_ids(x0), t_eval, method="dopri5", rtol=rtol * shrink,
-                       atol=atol * shrink).numpy()[..., :-1]
+                       atol=atol * shrink, threads=None).numpy()[..., :-1]
     except DivergenceError as err:
         if n == 1:
             reasons[0], closest[0] = 2, float(guard.closest[0])

@@ -129,7 +129,9 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options, checkpoint=partial)
+        # threads=None: the count the run was given (a train.py's --threads, a sweep's share), recorded in args.json
+        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options, checkpoint=partial,
+                      threads=None)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise

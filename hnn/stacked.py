@@ -171,7 +171,7 @@ class _Rollout(nn.Module):
         self.model, self.t_eval, self.method, self.options = model, t_eval, method, options
 
     def forward(self, x0: torch.Tensor) -> torch.Tensor:
-        return rollout(self.model, x0, self.t_eval, method=self.method, **self.options)
+        return rollout(self.model, x0, self.t_eval, method=self.method, threads=None, **self.options)
 
 
 class _Field(nn.Module):
@@ -243,8 +243,8 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
                          f"{tuple(x0.shape)}")
     if method not in VMAP_METHODS:
         if not get_solver(method).row_wise:
-            return torch.stack([rollout(m, x, t_eval, method=method, **options) for m, x in zip(models, x0)])
-        paths = rollout(group_field(models), x0.reshape(-1, x0.shape[-1]), t_eval, method=method,
+            return torch.stack([rollout(m, x, t_eval, method=method, threads=None, **options) for m, x in zip(models, x0)])
+        paths = rollout(group_field(models), x0.reshape(-1, x0.shape[-1]), t_eval, method=method, threads=None,
                         **options, **group_options(method))
         return paths.reshape(*x0.shape[:2], *paths.shape[1:])
     buffers = _check_group(models)

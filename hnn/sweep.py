@@ -37,7 +37,8 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from .backends import BACKENDS, say, time_left, train_here, train_in_pool, train_on_ray
+from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
+from .progress import time_left
 from .group_runs import drop_spent_checkpoints, unit_key
 from .runs import diverged_record, find_run, load_run, partial_checkpoint, record_divergence
 from .tasks import task_spec

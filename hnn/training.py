@@ -1,7 +1,8 @@
 """The one training loop every task uses: minibatch steps of Adam or AdamW (constant or cosine rate)
 on the L2 loss of dx/dt, or on an objective's own loss of its rows (snippets, pixel pairs, state
-pairs); a test batch on a schedule, a NaN named with its step, a progress bar, and a checkpoint now
-and then from which a killed run resumes where it stopped, to the same floats."""
+pairs); a test batch on a schedule, a NaN named with its step, progress (a bar, or a line now and then:
+``hnn.progress``), one torch thread unless told, and a checkpoint now and then from which a killed run
+resumes where it stopped, to the same floats."""
 from __future__ import annotations
 
 import contextlib
@@ -20,6 +21,8 @@ from . import names
 from .balance import weighted
 from .errors import DivergenceError
 from .io import atomic_write
+from .progress import Ticker
+from .threads import torch_threads
 
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
@@ -250,7 +253,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
           derivative_loss: str = "l2", loss_weights=None, checkpoint: str | Path | None = None,
-          checkpoint_every: float | None = None, generators: tuple = ()) -> dict:
+          checkpoint_every: float | None = None, generators: tuple = (), threads: int | None = 1) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -271,8 +274,10 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             models with an objective of their own (the pixel task passes ``x``, ``x_next``; the
             trajectory objective flattened snippets). Its arrays' widths are then not checked
             against the model's ``input_dim``: the loss reads them.
-        progress: show a progress bar; default when stderr is a terminal, not ``verbose``, and no
-            ``report_progress`` callback is active (its caller shows progress its own way).
+        progress: None (default): a bar where someone watches (a terminal or a notebook; it appears
+            after 2 s, so a short fit stays silent), else a line on stderr every 10 s (``'train: step
+            400 of 2001, about 1 min left'``); nothing with ``verbose`` (its own lines) or inside
+            ``report_progress`` (its caller shows progress its own way). False: nothing; True: a bar.
         optimizer, schedule: ``adam_optimizer``'s kind and ``learning_rate``'s schedule.
         clip_grad: clip each step's gradient to this global norm (0: never).
         derivative_loss: the per-element error of the default loss (``DERIVATIVE_LOSSES``): ``'l2'``
@@ -285,6 +290,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             keeps one per run).
         generators: the ``torch.Generator`` objects a custom ``loss`` draws from (its noise, say),
             which the checkpoint saves and restores with the loop's own samplers.
+        threads: torch's thread count while it trains (default 1, as every ``train.py``: beside other
+            work a second thread slows a fit many times over, docs/speed.md#threads); the caller's count
+            is restored after, however the fit ends. None: the caller's count as it is.
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -336,12 +344,12 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                                                    total_steps)
             print(f"resuming at step {first} of {total_steps} from {checkpoint}", file=sys.stderr, flush=True)
     callbacks = list(_PROGRESS_CALLBACKS)
-    if progress is None:    # a report_progress caller draws its own display
-        progress = not verbose and not callbacks and sys.stderr.isatty()
+    if progress is None and (verbose or callbacks):     # its own lines, or a report_progress caller's display
+        progress = False
     model.train()
-    with flushed_denormals():
+    with torch_threads(threads), flushed_denormals(), Ticker(total_steps + 1, "train", progress, first) as tick:
         start = saved_at = time.perf_counter()
-        for step in training_steps(total_steps, progress, start=first):
+        for step in range(first, total_steps + 1):
             xb, yb = minibatch(x, dxdt, batch_size, gen)
             if input_noise:
                 xb = xb + input_noise * torch.randn(xb.shape, generator=gen, device="cpu").to(xb)
@@ -359,6 +367,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                                       "set --clip_grad (e.g. 1.0) or train in --dtype float64")
             for callback in callbacks:
                 callback(step + 1, total_steps + 1)
+            tick.advance()
             if has_test and is_test_step(step, test_every, total_steps):
                 tx, ty = minibatch(test_x, test_dxdt, batch_size, test_gen)
                 try:

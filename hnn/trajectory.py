@@ -60,7 +60,7 @@ def rollout_observed(model: nn.Module, z0: torch.Tensor, t_eval, observed: str, 
     (no autograd graph is kept)."""
     declared(model)
     with torch.no_grad():
-        xs = rollout(model.field, model.state_from(z0, observed), t_eval, method=method, **options)
+        xs = rollout(model.field, model.state_from(z0, observed), t_eval, method=method, threads=None, **options)
         return model.observed_from(xs.reshape(-1, xs.shape[-1]), observed).reshape(xs.shape)
 
 
@@ -80,7 +80,7 @@ def rollout_snippet(model: nn.Module, z0: torch.Tensor, points: int, dt: float, 
     method = method or default_method(model)
     check_method(method, model)
     xs = rollout(model.field, model.state_from(z0, observed), dt * np.arange(points), method=method,
-                 differentiable=True, dt=dt / substeps)
+                 differentiable=True, threads=None, dt=dt / substeps)
     return model.observed_from(xs.reshape(-1, xs.shape[-1]), observed).reshape(xs.shape)
 
 

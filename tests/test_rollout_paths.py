@@ -98,7 +98,7 @@ def test_a_differentiable_rollout_has_the_finite_difference_gradient(method):
     assert abs((up - down) / (2 * eps) - float(grad_w[idx])) < 1e-7
 
 
-def test_a_few_states_roll_out_on_one_thread_and_the_callers_setting_returns():
+def test_a_rollout_runs_on_one_thread_unless_told_and_the_callers_setting_returns():
     seen = []
 
     def f(x):
@@ -107,10 +107,17 @@ def test_a_few_states_roll_out_on_one_thread_and_the_callers_setting_returns():
     threads = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
-        hnn.rollout(f, torch.ones(64, 2), [0.0, 0.1], method="rk4")
+        hnn.rollout(f, torch.ones(500, 2), [0.0, 0.1], method="rk4")       # the default: one thread, any batch
         assert set(seen) == {1} and torch.get_num_threads() == 2
         seen.clear()
-        hnn.rollout(f, torch.ones(65, 2), [0.0, 0.1], method="rk4")
+        hnn.rollout(f, torch.ones(3, 2), [0.0, 0.1], method="rk4", threads=2)
+        assert set(seen) == {2}
+        seen.clear()
+        # None (the library's own calls): the caller's count, but one for a batch of at most 64 states
+        hnn.rollout(f, torch.ones(64, 2), [0.0, 0.1], method="rk4", threads=None)
+        assert set(seen) == {1}
+        seen.clear()
+        hnn.rollout(f, torch.ones(65, 2), [0.0, 0.1], method="rk4", threads=None)
         assert set(seen) == {2}
         with pytest.raises(ValueError):
             hnn.rollout(f, torch.ones(3, 2), [0.0, 0.0], method="rk4")

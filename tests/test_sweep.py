@@ -20,7 +20,7 @@ import torch
 
 import hnn
 from hnn_analysis import pages
-from hnn import backends, sweep
+from hnn import backends, progress, sweep
 from hnn_analysis.paper import reproduce, study
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
@@ -228,14 +228,34 @@ def test_a_run_in_a_worker_says_its_step_where_its_output_is_a_log(tmp_path, mon
 
 def test_a_long_run_says_how_long_it_has_left_at_its_own_rate(monkeypatch):
     now = [1000.0]
-    monkeypatch.setattr(backends.time, "perf_counter", lambda: now[0])
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
     # first seen at step 3000 (a resumed run: the steps before were trained in another sitting), 100 s later
     # at step 3500: 5 steps a second, 4500 steps to go
     now[0] += 100
-    assert backends.time_left(3500, 8000, 3000, 1000.0) == ", about 15 min left"
-    assert backends.time_left(7900, 8000, 3000, 0.0) == ", about 22 s left"        # 4900 steps in 1100 s
-    assert backends.time_left(3000, 8000, 3000, 1000.0) == ""                        # no rate yet
-    assert backends.time_left(100, 8000, 0, 0.0) == ", about 24.1 h left"           # a day's sweep, in hours
+    assert progress.time_left(3500, 8000, 3000, 1000.0) == ", about 15 min left"
+    assert progress.time_left(7900, 8000, 3000, 0.0) == ", about 22 s left"        # 4900 steps in 1100 s
+    assert progress.time_left(3000, 8000, 3000, 1000.0) == ""                        # no rate yet
+    assert progress.time_left(100, 8000, 0, 0.0) == ", about 24.1 h left"           # a day's sweep, in hours
+
+
+def test_the_time_left_follows_a_run_that_slows_down(monkeypatch):
+    # 10 steps a second for 10 minutes, then 2 (another job took the core): the line's estimate is the
+    # steps left at the recent rate, not at the mean since the start (which said "about 4 min left" for minutes)
+    now = [0.0]
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+    beat, step, total = progress.Heartbeat(30.0), 0, 20_000
+    beat.due(step, total)
+    lines = []
+    for rate in [10] * 20 + [2] * 10:
+        now[0] += 31
+        step += 31 * rate
+        lines.append(beat.due(step, total))
+    assert all(lines)
+    left = (total - step) / 2
+    said = float(re.search(r"about (\d+) min left", lines[-1]).group(1)) * 60
+    assert abs(said - left) <= 60, (lines[-1], left)
+    # the mean since the start would have said less than half of it
+    assert progress.time_left(step, total, 0, 0.0) != f", {progress.say_left(left)}"
 
 
 def test_progress_counts_and_times():

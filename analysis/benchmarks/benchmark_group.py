@@ -59,7 +59,7 @@ def _separate_seconds(models, data, steps: int) -> float:
     tic = time.perf_counter()
     for seed, model in enumerate(sample):
         hnn.train(model, data["x"], data["dxdt"], data["test_x"], data["test_dxdt"], total_steps=steps, seed=seed,
-                  progress=False)
+                  progress=False, threads=None)
     return (time.perf_counter() - tic) * len(models) / len(sample)
 
 

@@ -129,7 +129,7 @@ def _ours_train(d: dict, steps: int):
     torch.manual_seed(0)
     model = hnn.build_model(2, HIDDEN)
     stats = hnn.train(model, d["x"], d["dxdt"], d["test_x"], d["test_dxdt"], total_steps=steps,
-                      learn_rate=LEARN_RATE, weight_decay=WEIGHT_DECAY, progress=False)
+                      learn_rate=LEARN_RATE, weight_decay=WEIGHT_DECAY, progress=False, threads=None)
     return model, stats
 
 

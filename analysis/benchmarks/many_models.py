@@ -80,7 +80,7 @@ def lone_seconds(k, data, steps, device) -> float:
     _sync(device)
     tic = time.perf_counter()
     for seed, model in enumerate(models):
-        hnn.train(model, data["x"], data["dxdt"], total_steps=steps - 1, seed=seed, progress=False)
+        hnn.train(model, data["x"], data["dxdt"], total_steps=steps - 1, seed=seed, progress=False, threads=None)
     _sync(device)
     return (time.perf_counter() - tic) * k / len(models)
 

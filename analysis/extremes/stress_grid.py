@@ -99,7 +99,7 @@ def fit(kind: str, scene: str, cell: str, budget: dict, seed: int = 0) -> tuple[
                 inner, model = model, hnn.units.Rescaled(model, scales).to(dtype)
                 row["scales"] = scales.to_dict()
             hnn.train(inner if rescaled else model, x, y, total_steps=budget["steps"], learn_rate=budget["learn_rate"],
-                      seed=seed, progress=False, loss_weights=balance_weights(y, "auto"))
+                      seed=seed, progress=False, loss_weights=balance_weights(y, "auto"), threads=None)
             with torch.no_grad():
                 pred = model.time_derivative(data["test"][x_key].to(dtype)).double()
             row["error"] = field_error(pred, data["test"][y_key])

@@ -55,9 +55,10 @@ def _rollout(f, x0, t: np.ndarray, dtype=torch.float64):
     """``(trajectory (T, 2) float64 or None, error message or None)``; a divergence is reported, not raised."""
     try:
         with torch.no_grad(), warnings.catch_warnings():
-            # the notebooks' rtol 1e-12 on float32 models: known, and not what the figure is about
+            # the notebooks' rtol 1e-12 (atol solve_ivp's 1e-6) on float32 models: known, and not what the figure
+            # is about
             warnings.filterwarnings("ignore", message=".*tighter than torch.float32", category=UserWarning)
-            traj = hnn.rollout(f, torch.tensor([x0], dtype=dtype), t, rtol=1e-12)
+            traj = hnn.rollout(f, torch.tensor([x0], dtype=dtype), t, rtol=1e-12, atol=1e-6)
         return traj[0].to(torch.float64).numpy(), None
     except hnn.DivergenceError as err:
         return None, textwrap.fill(f"diverged: {err}", 40, max_lines=4, placeholder=" ...")

@@ -15,6 +15,7 @@ import torch
 from .fixed_step import Field
 from ..interface import EnergyField, Model
 from ..modes import frozen_weights, in_model_axis
+from .adaptive import default_tolerances
 from .solvers import Solver, get_solver
 from .stability import warn_if_unstable
 from ..threads import torch_threads
@@ -81,12 +82,13 @@ def _as_batch(x0, device: torch.device | None) -> torch.Tensor:
     return x0
 
 
-# Rollouts of at most this many states run on one torch thread: their products are too small to
-# split, and two processes each spinning two threads on two cores slow each other many times over.
+# With threads=None, rollouts of at most this many states still run on one torch thread: their products are
+# too small to split, and two processes each spinning two threads on two cores slow each other many times over.
 SMALL_BATCH_ROWS = 64
 
 
 def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: bool = False,
+            threads: int | None = 1, rtol: float | None = None, atol: float | None = None,
             **options) -> torch.Tensor:
     """Integrate ``dx/dt = f(x)`` from every state of ``x0`` and sample at ``t_eval``.
 
@@ -123,8 +125,17 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             parameters (trajectory training, one-step Jacobians); fixed-step methods only (the
             adaptive ones choose their steps outside autograd).
 
-    Batches of at most ``SMALL_BATCH_ROWS`` (64) states run on one torch thread, and the caller's
-    thread count is restored afterwards: their products are too small to share between threads.
+        rtol, atol: the tolerances of an adaptive method (solve_ivp, dopri5, dop853; a fixed-step method
+            takes none). None: 1e-7 and 1e-9 on float64 states, under which the tasks' true systems keep
+            their energy to 1e-6 (pendulum) .. 1e-4 (chaotic 3-body) relative over ten training lengths;
+            on float32 states 1.2e-5 and 1.2e-7 (100 eps, the tightest float32 honours: tighter, dop853
+            took 24x the field calls at 1e-7 on a float32 HNN). ``hnn.integrators.adaptive.default_tolerances``;
+            docs/integrators.md, "Default tolerances". (scipy's own 1e-3 / 1e-6 let the true pendulum's
+            energy drift 11%.)
+        threads: torch's thread count during the rollout (default 1, as every command: a second thread
+            slows a shared box many times over, docs/speed.md#threads); the caller's count is restored
+            after. None: the caller's count, except one for batches of at most ``SMALL_BATCH_ROWS`` (64)
+            states, whose products are too small to share between threads (the library's own calls).
 
     Returns:
         ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
@@ -144,6 +155,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     the starts (``hnn.integrators.stability``), naming dt, the estimate and the fix.
     """
     solver = get_solver(method)
+    options.update({name: value for name, value in (("rtol", rtol), ("atol", atol)) if value is not None})
     solver.check_options(options)
     device = field_device(f)
     owner = getattr(f, "__self__", None)
@@ -158,8 +170,10 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
                          "use a fixed-step method (rk4, leapfrog, midpoint, yoshida4) with differentiable=True")
     x0 = _as_batch(x0, device)
     _check_tolerance(solver, x0.dtype, options)
+    if solver.adaptive:
+        options = dict(zip(("rtol", "atol"), default_tolerances(x0.dtype))) | options
     t = _as_t_eval(t_eval)
-    with torch_threads(1 if len(x0) <= SMALL_BATCH_ROWS else None):
+    with torch_threads(threads if threads is not None else 1 if len(x0) <= SMALL_BATCH_ROWS else None):
         if differentiable:
             with torch.enable_grad():
                 return solver.run(f, x0, t, **options)
