@@ -5,11 +5,13 @@
 - ``energy_mse``: squared energy error, mean ± ``batch_means_se`` over 5 contiguous groups
   (the original's ``bootstrap_conf``: a batch-means standard error, not a bootstrap).
 
-Per trajectory (the scene study, the integrator study):
+Per trajectory (the scene cards, the integrator study):
 
-- ``relative_error``: e(t) = |pred - true| / (|pred| + |true|) along rollouts.
-- ``summarize_errors``: the geometric mean of e(t) and the valid prediction time (until e(t)
-  first exceeds ``VALID_ERROR``).
+- ``relative_error``: e(t) = |pred - true| / (|pred| + |true|) along rollouts (Finzi et al. 2020).
+- ``rollout_error``: the mean over trajectories of the geometric mean of e(t) over t > 0; ``valid_time``:
+  the median over trajectories of the time until e(t) first exceeds ``VALID_ERROR``: the two entries of
+  ``ROLLOUT_METRICS``, which ``summarize_errors`` (and ``path_errors``, of two sets of paths) reports.
+  ``hnn.evaluation.rollout_errors`` rolls a model out by the cards' protocol first.
 - ``energy_drift``: max |H(t) - H(0)|, or relative to |H(0)|.
 """
 from __future__ import annotations
@@ -20,9 +22,6 @@ import numpy as np
 import torch
 
 VALID_ERROR = 0.1          # a prediction is "valid" while its relative error stays below this
-# more numbers of a rollout's relative error: name -> metric(err (batch, times), t (times,)) -> a
-# JSON value; every study that summarizes rollouts (summarize_errors) reports each one
-ROLLOUT_METRICS: dict = {}
 
 
 def _to_numpy(a) -> np.ndarray:
@@ -83,23 +82,52 @@ def relative_error(pred: torch.Tensor, true: torch.Tensor) -> np.ndarray:
     return err.numpy()
 
 
-def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
-    """Geometric mean over t > 0 and valid prediction time of each row of ``err`` ``(batch, times)``.
+def geometric_errors(err: np.ndarray) -> np.ndarray:
+    """``(batch,)``: the geometric mean over t > 0 of each row of ``err`` ``(batch, times)`` (e(0) = 0
+    exactly, so the first time is left out; errors below 1e-16 count as 1e-16)."""
+    return np.exp(np.log(np.clip(err[:, 1:], 1e-16, None)).mean(axis=1))
 
-    Returns ``{"error": mean over trajectories of the geometric means, "error_per_trajectory",
-    "valid_time": median over trajectories, "valid_times", "horizon"}``; a trajectory that never
-    leaves ``VALID_ERROR`` counts the whole horizon (``valid_time == horizon`` means "at least").
-    Each metric of ``ROLLOUT_METRICS`` adds its entry.
-    """
-    after = np.clip(err[:, 1:], 1e-16, None)        # e(0) = 0 exactly: the log would be -inf
-    geo = np.exp(np.log(after).mean(axis=1))
-    valid = []
+
+def valid_times(err: np.ndarray, t: np.ndarray) -> list[float]:
+    """Each row's time from ``t[0]`` until its error first exceeds ``VALID_ERROR`` (the whole horizon
+    ``t[-1] - t[0]`` where it never does)."""
+    out = []
     for row in err:
         bad = np.nonzero(row > VALID_ERROR)[0]
-        valid.append(float(t[bad[0]] - t[0]) if len(bad) else float(t[-1] - t[0]))
-    out = {"error": float(geo.mean()), "error_per_trajectory": geo.tolist(),
-           "valid_time": float(statistics.median(valid)), "valid_times": valid, "horizon": float(t[-1] - t[0])}
-    return {**out, **{name: metric(err, t) for name, metric in ROLLOUT_METRICS.items()}}
+        out.append(float(t[bad[0]] - t[0]) if len(bad) else float(t[-1] - t[0]))
+    return out
+
+
+def rollout_error(err: np.ndarray, t: np.ndarray) -> float:
+    """The scene cards' rollout error: the mean over trajectories of ``geometric_errors``."""
+    return float(geometric_errors(err).mean())
+
+
+def valid_time(err: np.ndarray, t: np.ndarray) -> float:
+    """The scene cards' valid prediction time: the median over trajectories of ``valid_times``."""
+    return float(statistics.median(valid_times(err, t)))
+
+
+# the numbers of a rollout's relative error: name -> metric(err (batch, times), t (times,)) -> a JSON value;
+# every study that summarizes rollouts (summarize_errors) reports each one, and a new entry reaches them all
+ROLLOUT_METRICS: dict = {"error": rollout_error, "valid_time": valid_time}
+
+
+def summarize_errors(err: np.ndarray, t: np.ndarray) -> dict:
+    """Every ``ROLLOUT_METRICS`` entry of ``err`` ``(batch, times)`` at times ``t`` ``(times,)``, with the
+    per-trajectory numbers behind the first two and the horizon: ``{"error", "valid_time",
+    "error_per_trajectory", "valid_times", "horizon", ...}``; a trajectory that never leaves ``VALID_ERROR``
+    counts the whole horizon (``valid_time == horizon`` means "at least")."""
+    out = {"error_per_trajectory": geometric_errors(err).tolist(), "valid_times": valid_times(err, t),
+           "horizon": float(t[-1] - t[0])}
+    return {**{name: metric(err, t) for name, metric in ROLLOUT_METRICS.items()}, **out}
+
+
+def path_errors(pred: torch.Tensor, true: torch.Tensor, t) -> dict:
+    """``summarize_errors`` of paths ``pred`` against ``true``, both ``(batch, times, dim)`` at times ``t``:
+    ``["error"]`` the rollout error, ``["valid_time"]`` the valid prediction time, as the scene cards."""
+    t = np.asarray(t.detach().cpu() if torch.is_tensor(t) else t, dtype=np.float64)
+    return summarize_errors(relative_error(torch.as_tensor(pred), torch.as_tensor(true)), t)
 
 
 def energy_drift(H: torch.Tensor, H0: torch.Tensor | None = None, relative: bool = False) -> float:

@@ -1,6 +1,7 @@
-"""The paper's error bars, computed by hand."""
+"""The paper's error bars, computed by hand; the rollout error against a closed-form phase error."""
 import numpy as np
 import pytest
+import torch
 
 import hnn
 
@@ -37,8 +38,6 @@ def test_energy_mse_trials_and_single_trajectory():
 
 
 def test_derivative_mse_of_a_perfect_model_is_zero(spring):
-    import torch
-
     class Exact(torch.nn.Module):
         def __init__(self):
             super().__init__()
@@ -48,3 +47,26 @@ def test_derivative_mse_of_a_perfect_model_is_zero(spring):
             return spring.dynamics(x)
     x = torch.randn(20, 2, dtype=torch.float64)
     assert hnn.derivative_mse(Exact(), x, spring.dynamics(x)) == (0.0, 0.0)
+
+
+def test_the_rollout_error_of_a_known_phase_error_on_a_harmonic_oscillator():
+    # the oscillator x = r (cos w t, -sin w t) predicted at w (1 + d): |pred - true| / (|pred| + |true|)
+    # = |sin(w d t / 2)| exactly, whatever the radius; its geometric mean over t > 0 and the time it
+    # first exceeds 0.1, 2 asin(0.1) / (w d), are known in closed form
+    w, t = 1.5, np.linspace(0.0, 40.0, 4001)
+    radii, detune = np.array([1.0, 0.3]), np.array([0.01, 0.04])
+    true = radii[:, None, None] * np.stack([np.cos(w * t), -np.sin(w * t)], -1)[None]
+    phase = w * (1 + detune[:, None]) * t[None]
+    pred = radii[:, None, None] * np.stack([np.cos(phase), -np.sin(phase)], -1)
+    out = hnn.metrics.path_errors(torch.as_tensor(pred), torch.as_tensor(true), t)
+    e = np.abs(np.sin(w * detune[:, None] * t[None, 1:] / 2))
+    exact = np.exp(np.log(e).mean(axis=1))
+    np.testing.assert_allclose(out["error_per_trajectory"], exact, rtol=1e-10)
+    assert out["error"] == pytest.approx(exact.mean(), rel=1e-10)
+    first = 2 * np.arcsin(hnn.metrics.VALID_ERROR) / (w * detune)         # in (grid step) of the first sample over 0.1
+    assert all(f < v <= f + (t[1] - t[0]) for f, v in zip(first, out["valid_times"]))
+    assert out["valid_time"] == pytest.approx(np.median(out["valid_times"]))
+    assert hnn.metrics.ROLLOUT_METRICS["error"] is hnn.metrics.rollout_error     # the cards' two numbers
+    # a phase error that stays under 0.1 over the horizon: valid for all of it
+    assert hnn.metrics.path_errors(torch.as_tensor(pred[:1, :100]), torch.as_tensor(true[:1, :100]),
+                                   t[:100])["valid_time"] == t[99]

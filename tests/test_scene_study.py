@@ -24,7 +24,7 @@ def test_rollout_error_of_a_detuned_oscillator_is_analytic(spring):
     x0 = torch.tensor([[1.0, 0.0], [0.3, -0.4]], dtype=torch.float64)
     t = np.linspace(0.0, 30.0, 601)
     truth = _spring_truth(x0, t)
-    out = sm.rollout_errors(lambda x: (1 + eps) * spring.dynamics(x), truth, t)
+    out = hnn.evaluation.rollout_errors(lambda x: (1 + eps) * spring.dynamics(x), truth, t)
     e = np.abs(np.sin(eps * omega * t[1:] / 2))
     assert out["error"] == pytest.approx(float(np.exp(np.log(e).mean())), rel=1e-5)
     first = 2 * math.asin(hnn.metrics.VALID_ERROR) / (eps * omega)           # the first time e(t) = 0.1
@@ -35,7 +35,7 @@ def test_rollout_error_of_a_detuned_oscillator_is_analytic(spring):
 def test_a_perfect_model_is_valid_for_the_whole_horizon_and_the_spring_never_diverges(spring):
     x0 = torch.tensor([[1.0, 0.0], [0.0, 0.5]], dtype=torch.float64)
     t = np.linspace(0.0, 10.0, 201)
-    out = sm.rollout_errors(spring.dynamics, _spring_truth(x0, t), t)
+    out = hnn.evaluation.rollout_errors(spring.dynamics, _spring_truth(x0, t), t)
     assert out["error"] < 1e-6 and out["valid_time"] == 10.0
     # a linear isochronous oscillator keeps a 1e-4 perturbation at 1e-4: no divergence
     assert sm.divergence_time(spring.dynamics, x0, t)["divergence_time"] == 10.0

@@ -11,7 +11,7 @@
   measured |E(t + h) - E(t)|, medians over starts.
 
 Rollouts run on a float64 copy of the model in its scaled units (``scale.json`` of the run), by
-``scene_metrics.model_rollout`` (dopri5 rtol 1e-6); a model of canonical [q, p] on observed
+``hnn.evaluation.model_rollout`` (dopri5 rtol 1e-6, the scene cards'); a model of canonical [q, p] on observed
 [q, v] starts from its own ``state_from_observed``.
 """
 from __future__ import annotations
@@ -23,7 +23,6 @@ import numpy as np
 import torch
 
 import hnn
-from hnn_analysis.scenes import scene_metrics as sm
 
 VALID_FRACTION = 0.1       # a prediction is valid while its position error is under this fraction of the spread
 VALID_STARTS = 4           # starts per trial of the valid-time rollouts (evenly over the tail's first half)
@@ -97,7 +96,7 @@ class Model:
         x0[:, :n][:, rec.periodic] = (x0[:, :n][:, rec.periodic] + math.pi) % (2 * math.pi) - math.pi
         with torch.no_grad():
             x0 = self.model.state_from(torch.as_tensor(x0, dtype=torch.float64), self.observed)
-        traj, _ = sm.model_rollout(self.model.field, x0, np.asarray(t) / self.scale.tau)
+        traj, _ = hnn.evaluation.model_rollout(self.model.field, x0, np.asarray(t) / self.scale.tau)
         with torch.no_grad():
             traj = self.model.observed_from(traj.reshape(-1, 2 * n), self.observed).reshape(traj.shape)
         traj = traj.detach().numpy()

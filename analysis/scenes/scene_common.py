@@ -115,7 +115,7 @@ class Scene:
                 self.truth, self.divergence = torch.as_tensor(state["truth"]), state["divergence"]
                 return
             with torch.no_grad():
-                self.truth = sm.quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
+                self.truth = hnn.evaluation.quiet_rollout(self.system.dynamics, self.x0, self.t, **sm.REFERENCE)
             self.divergence = sm.divergence_time(self.system.dynamics, self.x0, self.t, truth=self.truth)
         elif task == "real":
             # no truth past the measurements: the measured test segment, from its first state
@@ -145,7 +145,7 @@ class Scene:
         for name, result in energy.items():
             out[f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
         if self.truth is not None:
-            out["rollout"] = sm.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, self.truth, self.t)
+            out["rollout"] = hnn.evaluation.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, self.truth, self.t)
         elif self.task == "pixels" and "corrected" in energy:
             # the decoded frames of the corrected protocol's trajectory against the rendered ones
             result = energy["corrected"]

@@ -29,7 +29,7 @@ import torch
 import hnn
 from hnn import sweep
 from hnn_analysis.paper import registry, study
-from hnn_analysis.scenes import scene_common, scene_metrics as sm
+from hnn_analysis.scenes import scene_common
 from hnn_analysis.training_cost import training_cost
 
 def cost_seconds(measured: dict) -> float | None:
@@ -67,7 +67,7 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
             m[f"energy_mse_{name}"] = [result[key]["mse"], result[key]["mse_se"]]
         tic = time.perf_counter()
         if scene.truth is not None:
-            m["rollout"] = sm.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, scene.truth, scene.t)
+            m["rollout"] = hnn.evaluation.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, scene.truth, scene.t)
         m["evaluate_seconds"] = shared + time.perf_counter() - tic
         m["train_cost"] = _cost(scene.task, directory)
         out[key] = m

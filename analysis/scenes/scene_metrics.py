@@ -1,8 +1,8 @@
 """The numbers of the scene study (``analysis/scene_study.py``), one function per metric.
 
-- ``rollout_errors``: the rollout relative error e(t) = |x_model(t) - x_true(t)| / (|x_model(t)| +
-  |x_true(t)|) of each trajectory (Finzi et al. 2020), its geometric mean over the output times
-  after t = 0, and the valid prediction time, the first time e(t) exceeds ``VALID_ERROR``.
+- the rollout error and valid time of each model: ``hnn.evaluation.rollout_errors`` (the relative error
+  e(t) = |x_model(t) - x_true(t)| / (|x_model(t)| + |x_true(t)|) of each trajectory, Finzi et al. 2020,
+  its geometric mean over the output times after t = 0, and the first time e(t) exceeds ``VALID_ERROR``).
 - ``divergence_time``: when the true system itself, started 1e-4 away, leaves ``VALID_ERROR``:
   no model can be valid for longer on a chaotic scene.
 - ``speed_at_accuracy``: every ``hnn.rollout`` setting of a ladder, timed and scored against a
@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 
 import numpy as np
 import torch
 
 import hnn
+from hnn.evaluation import quiet_rollout
 from hnn.metrics import energy_drift, relative_error, summarize_errors
 
 from hnn_analysis.integrator_study import settings
@@ -31,49 +31,8 @@ from hnn_analysis.integrator_study import settings
 PERTURBATION = 1e-4        # the size of the start-state perturbation of the truth's own divergence
 TARGET = 1e-4              # the accuracy a rollout setting must reach against its field's reference
 REFERENCE = {"method": "solve_ivp", "scipy_method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
-# the rollout-error metric's integrator: the errors it measures are 1e-3 and up, so rtol 1e-6
-# changes them in the third digit at most (checked against rtol 1e-9)
-# at half the cost; a healthy field needs under 5000 steps over the horizon (3-body baseline: 4800),
-# while a learned orbit that collapses shrinks the step without end: 20000 steps bound it
 # the adaptive solvers' setting in the ladder: solve_ivp with DOP853, its high-order method
 ADAPTIVE = {"solve_ivp": ({"scipy_method": "DOP853"},)}
-EVAL_ROLLOUT = {"method": "dopri5", "rtol": 1e-6, "atol": 1e-8, "max_iterations": 20_000}
-
-
-def quiet_rollout(f, x0, t, **options) -> torch.Tensor:
-    with torch.no_grad(), warnings.catch_warnings():
-        warnings.simplefilter("ignore")     # float64 states: the tolerances here are within reach
-        return hnn.rollout(f, x0, t, **options)
-
-
-def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int]:
-    """``(trajectories, how many blew up)``: ``EVAL_ROLLOUT`` of the batch, or trajectory by trajectory
-    when the batch fails; a trajectory that blows up or does not finish within its step budget
-    counts as unrelated to the truth (error ~1) over the whole horizon."""
-    try:
-        return quiet_rollout(f, x0, t, **EVAL_ROLLOUT), 0
-    except hnn.DivergenceError:
-        pass
-    rows, failed = [], 0
-    for i in range(len(x0)):
-        try:
-            rows.append(quiet_rollout(f, x0[i:i + 1], t, **EVAL_ROLLOUT)[0])
-        except hnn.DivergenceError:
-            failed += 1
-            # a finite stand-in far from any true state: e(t) ~ 1 for the whole trajectory
-            rows.append(torch.full((len(t), x0.shape[1]), 1e6, dtype=x0.dtype))
-    return torch.stack(rows), failed
-
-
-def rollout_errors(f, truth: torch.Tensor, t: np.ndarray) -> dict:
-    """``summarize_errors`` of the model field ``f`` started from ``truth[:, 0]`` against ``truth``,
-    plus ``seconds``, the wall time of that ``EVAL_ROLLOUT`` (the rollout cost of the Pareto plots)."""
-    tic = time.perf_counter()
-    pred, failed = model_rollout(f, truth[:, 0], t)
-    seconds = time.perf_counter() - tic
-    out = summarize_errors(relative_error(pred, truth), t)
-    out.update(blew_up=failed, seconds=seconds)
-    return out
 
 
 def divergence_time(dynamics, x0: torch.Tensor, t: np.ndarray, seed: int = 0,

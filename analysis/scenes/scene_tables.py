@@ -242,7 +242,7 @@ def markdown(results: dict) -> str:
         if block:
             lines += block + [""]
     lines += ["**Capacity and data** (each scene's grid; energy MSE of the corrected protocol, else the paper's; "
-              f"rollout s: the dopri5 rtol {sm.EVAL_ROLLOUT['rtol']:g} rollout of the rollout-error metric)"] + grid_tables(results)
+              f"rollout s: the dopri5 rtol {hnn.evaluation.ROLLOUT_SOLVER['rtol']:g} rollout of the rollout-error metric)"] + grid_tables(results)
     return "\n".join(lines) + "\n"
 
 
