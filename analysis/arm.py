@@ -16,7 +16,6 @@ under ``--out``. Numbers come from the saved runs, never typed by hand (docs/sce
 """
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
 import sys
@@ -67,7 +66,7 @@ def _summary(rows: list[dict], key: str) -> str:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=hnn.cli.int_at_least(1), default=3000, help="optimizer steps per run")
     parser.add_argument("--seeds", type=hnn.cli.int_at_least(0), nargs="+", default=[0, 1, 2])
     parser.add_argument("--models", nargs="+", default=["hnn", "mechanical"], help="model kinds to train")

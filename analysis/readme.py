@@ -24,11 +24,13 @@ import argparse
 import json
 from pathlib import Path
 
+import hnn
+
 from hnn_analysis.pages import DECLARED, declared_out_of_date, kinds_text, stale, timing_text, update_section
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("what", choices=["timing", "kinds", "check"],
                    help="timing: the full-run section from a results.json; kinds: the model kinds of README.md "
                         "and docs/python.md; check: list the stale pages (exit code 1 if any)")

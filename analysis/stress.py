@@ -34,7 +34,6 @@ part (``lnn_start``), the Cartesian kinds need a constraint graph these scenes d
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import resource
@@ -83,7 +82,7 @@ def _cpu_seconds() -> float:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n")[0])
     commands.add_flags(parser, quick="two kinds, four cells, 150 steps, a 1000-step horizon, no precision part "
                                      "(under a minute)",
                        out="folder for stress.json and stress.md", out_default=Path("results/stress"),

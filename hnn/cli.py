@@ -2,8 +2,8 @@
 
 Every field of the config is a flag with the field's name and default (``--input_dim``,
 ``--total_steps``, ``--verbose``, ...); ``--baseline``, the original's flag, means ``--model
-baseline``. A bad flag or value stops the parse with the usage and one ``error: ...`` line
-naming the value and the fix (exit code 2, as argparse); a misspelled flag gets the nearest
+baseline``. A bad flag or value stops the parse with one ``error: ...`` line naming the value and
+the fix (exit code 2, as argparse; the usage is ``--help``'s); a misspelled flag gets the nearest
 real one ("did you mean --total_steps?"), and no flag is taken for an abbreviation of another. So
 does a ``--save_dir`` that is a file or cannot be written, before anything trains.
 
@@ -20,7 +20,6 @@ import difflib
 import inspect
 import math
 import re
-import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -37,7 +36,8 @@ def one_line(text) -> str:
 
 
 class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose error is the usage and then one line starting ``error: ``."""
+    """An ``ArgumentParser`` whose error is one line starting ``error: `` (no usage block above it: the
+    line names the flag and the fix, and ``--help`` shows the usage). Every command's parser is one."""
 
     def __init__(self, *args, **kwargs):
         # "--total_step 30" must not silently mean --total_steps: no abbreviations
@@ -47,7 +47,6 @@ class Parser(argparse.ArgumentParser):
         self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message):
-        self.print_usage(sys.stderr)
         self.exit(USAGE_ERROR, f"error: {one_line(message)}{self._suggestion(message)}\n")
 
     def _suggestion(self, message: str) -> str:

@@ -12,9 +12,10 @@ What each job times and how: ``benchmark_jobs``'s docstring; the report: ``bench
 """
 from __future__ import annotations
 
-import argparse
 import datetime
 import sys
+
+import hnn
 
 from hnn.io import write_json
 from hnn_analysis import commands, pages
@@ -24,7 +25,7 @@ from hnn_analysis.benchmarks.benchmark_report import benchmark_section, ceiling,
 
 
 def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=None, help="interleaved rounds per job (default 5; 1 with --quick)")
     parser.add_argument("--threads", type=int, default=1,
                         help="torch threads for the data, train and eval comparisons (default 1: one thread each, "

@@ -22,11 +22,12 @@ thread count.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import torch
+
+import hnn
 
 from hnn_analysis import commands
 from hnn_analysis.benchmarks.many_models import WIDTH, measure
@@ -56,7 +57,7 @@ def table(rows: list[dict], meta: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=None,
                         help=f"group sizes K (default: {CPU_SIZES} on the CPU, {GPU_SIZES} on a GPU)")
     parser.add_argument("--steps", type=int, default=10, help="steps a timed call (default 10)")

@@ -67,7 +67,7 @@ def per_orbit(x0: np.ndarray, t_eval: np.ndarray, rtol: float, atol: float, meth
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0],
+    p = hnn.cli.Parser(description=__doc__.split("\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", default="2body", choices=("2body", "3body"))
     p.add_argument("--trials", type=int, default=None, help="orbits per generation; default: the task's dataset (1000 / 5000)")

@@ -64,7 +64,7 @@ def time_training(data: dict, baseline: bool, steps: int, seed: int = 0) -> dict
 
 
 def main(argv=None) -> dict:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--steps", type=int, default=300, help="training steps timed per model")
     p.add_argument("--workers", type=int, default=None, help="rendering processes (default: the cores)")
     p.add_argument("--seed", type=int, default=0)

@@ -15,7 +15,6 @@ Steps (each a subprocess of this interpreter, stopped at its time limit, the nex
 """
 from __future__ import annotations
 
-import argparse
 import importlib.util
 import subprocess
 import sys
@@ -23,6 +22,8 @@ import time
 from pathlib import Path
 
 import torch
+
+import hnn
 
 from hnn_analysis import commands
 from hnn_analysis.provenance import provenance
@@ -72,7 +73,7 @@ def table(results: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", default=",".join(STEPS), help="comma list of " + ",".join(STEPS))
     commands.add_flags(parser, out="folder for gpu_check.json and each step's output", out_default=Path("results-gpu"),
                        update_docs="write the steps' table into docs/gpu.md")

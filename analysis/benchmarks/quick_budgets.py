@@ -100,7 +100,7 @@ def section(result: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    p = argparse.ArgumentParser(prog="quick_budgets.py", description=__doc__,
+    p = hnn.cli.Parser(prog="quick_budgets.py", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--only", nargs="+", choices=list(COMMANDS), metavar="NAME", default=None,
                    help=f"run these only (default: all): {', '.join(repr(n) for n in COMMANDS)}")

@@ -13,7 +13,6 @@ Needs the ray extra: ``pip install -e ".[ray]"``.
 """
 from __future__ import annotations
 
-import argparse
 import datetime
 import statistics
 import sys
@@ -65,7 +64,7 @@ def section(result: dict) -> str:
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     p.add_argument("--full", action="store_true", help="paper settings (seed 0) instead of --quick")
     p.add_argument("--repeats", type=int, default=None, help="runs of each backend (default 3; 2 with --full)")
     p.add_argument("--out", type=Path, default=None,

@@ -46,7 +46,7 @@ def _time(task: str, threads: int, steps: int, seed: int, dataset: dict, save_di
 
 
 def main(argv=None) -> dict:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", default="spring,2body,chain", help="comma-separated tasks (their default sizes)")
     p.add_argument("--steps", type=hnn.cli.int_at_least(1), default=100, help="optimizer steps a run")
     p.add_argument("--repeats", type=hnn.cli.int_at_least(1), default=3, help="interleaved rounds")

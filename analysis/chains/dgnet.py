@@ -14,7 +14,6 @@ The protocol, theirs and ours (where it differs), and the 2-body's cost: ``dgnet
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -31,7 +30,7 @@ from hnn_analysis.provenance import provenance
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run")
     parser.add_argument("--init", choices=hnn.names.INITS, default="zero_bias",
                         help="how every row's MLPs start: zero_bias (theirs: orthogonal weights, zero biases) or "

@@ -16,7 +16,6 @@ table into docs/integrators.md.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -77,7 +76,7 @@ def table(results: dict) -> str:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=10_000, help="integrator steps of each rollout")
     parser.add_argument("--dt", type=float, default=0.1, help="step size (the spring's period is 2 pi)")
     parser.add_argument("--train-steps", dest="train_steps", type=int, default=2000, help="training steps of each model")

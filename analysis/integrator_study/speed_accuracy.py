@@ -41,7 +41,7 @@ from hnn_analysis.provenance import provenance
 
 
 def main(argv=None) -> dict:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks (default: every task with true dynamics)")
     p.add_argument("--runs", type=Path, default=None, help="saved runs (default <repo>/results/runs)")
     commands.add_flags(p, out="output folder (default <repo>/results/speed_accuracy)",

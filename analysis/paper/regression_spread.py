@@ -21,6 +21,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import hnn
+
 KINDS = ("baseline", "hnn")
 PROTOCOLS = ("paper", "corrected")
 
@@ -71,7 +73,7 @@ def _table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> dict:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="seeds to train")
     p.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to try")
     p.add_argument("--kernels", nargs="+", default=["default"],

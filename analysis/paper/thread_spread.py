@@ -15,7 +15,6 @@ evaluation, the same as ``reproduce.py``'s).
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -96,7 +95,7 @@ def markdown(results: dict) -> str:
 
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = hnn.cli.Parser(description=__doc__.split("\n")[0])
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=hnn.tasks.paper_tasks())
     commands.add_flags(parser, seeds="seeds 0 .. N-1 of every run", seeds_default=3,
                        out="folder for the runs, thread_spread.json and thread_spread.md",

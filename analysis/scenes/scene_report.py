@@ -46,9 +46,8 @@ def seeds_of(results: dict) -> pages.Seeds:
 
 def main(argv=None) -> None:
     """Rebuild the outputs of a finished study from its ``scene_study.json`` (no measuring)."""
-    import argparse
     import json
-    p = argparse.ArgumentParser(description=main.__doc__)
+    p = hnn.cli.Parser(description=main.__doc__)
     p.add_argument("results", type=Path, help="a scene_study.json")
     p.add_argument("--update-docs", action="store_true", help="also docs/scenes.md and the README's model guide")
     args = p.parse_args(argv)
