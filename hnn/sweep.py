@@ -131,9 +131,9 @@ def _recorded_failure(job: Job) -> RunFailed | None:
 
 
 def reuse(jobs: list[Job], diverged: bool = False) -> tuple[dict, list[Job]]:
-    """``({key: saved run folder}, jobs left to train)``; a saved run that does not load is
-    reported by name and left to train again (its folder is replaced), and a job whose run was killed
-    mid-training is named with its checkpoint. ``diverged``: a job whose run a sweep saw fail in training
+    """``({key: saved run folder}, jobs left to train)``, quietly for the runs found (``say_reused`` is the
+    caller's one line for them); a saved run that does not load is reported by name and left to train
+    again (its folder is replaced), and a job whose run was killed mid-training is named with its checkpoint. ``diverged``: a job whose run a sweep saw fail in training
     (``diverged_record``) maps to that ``RunFailed`` instead of training again (a table that reports such
     a failure as its cell; delete the record, or set the config's ``force``, to train it again)."""
     found, todo = {}, []
@@ -143,7 +143,6 @@ def reuse(jobs: list[Job], diverged: bool = False) -> tuple[dict, list[Job]]:
             if folder is not None:
                 load_run(folder)
                 found[job.key] = folder
-                print(f"  {job.key} reused {folder}", flush=True)
                 continue
         except (RuntimeError, OSError, ValueError, KeyError) as err:
             print(f"  {job.key}: {err}; training it again", flush=True)
@@ -157,6 +156,19 @@ def reuse(jobs: list[Job], diverged: bool = False) -> tuple[dict, list[Job]]:
             print(f"  {job.key} has a training checkpoint: trained alone, it resumes there", flush=True)
         todo.append(job)
     return found, todo
+
+
+# a reuse line names the runs still to train when there are at most this many
+NAMED = 8
+
+
+def say_reused(who: str, found: dict, todo: list[Job]) -> str:
+    """Print one line for a study's saved runs, however many: ``'reproduce: 64 runs reused, 2 to train:
+    spring/hnn/seed3, pend/hnn/seed3'`` (the runs to train named when there are at most ``NAMED``)."""
+    line = (f"{who}: {len(found)} run{'' if len(found) == 1 else 's'} reused, {len(todo)} to train"
+            + (": " + ", ".join(job.key for job in todo) if 0 < len(todo) <= NAMED else ""))
+    print(line, flush=True)
+    return line
 
 
 def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:

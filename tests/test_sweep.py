@@ -145,8 +145,8 @@ def test_reproduce_reports_a_failed_row_writes_the_rest_and_exits_1(tmp_path, mo
     # the rerun trains only what is missing: the spring runs are reused
     with pytest.raises(SystemExit):
         reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
-    reused = [line.split()[0] for line in capsys.readouterr().out.splitlines() if "seed0 reused " in line]
-    assert reused == ["spring/baseline/seed0", "spring/hnn/seed0"]
+    said = [line for line in capsys.readouterr().out.splitlines() if " reused" in line]
+    assert said == ["reproduce: 2 runs reused, 2 to train: spring-broken/baseline/seed0, spring-broken/hnn/seed0"]
 
 
 def test_without_ray_the_ray_backend_says_what_to_install(monkeypatch, capsys, tmp_path):

@@ -102,7 +102,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
         print(f"peers: {count} run{'' if count == 1 else 's'} recorded in {path}", flush=True)
     # a model that failed in training is its cell: not retrained
     runs, todo = sweep.reuse(fresh, diverged=True)
-    print(f"peers: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(todo)} to train", flush=True)
+    sweep.say_reused("peers", runs, todo)
     record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
     # longest first by the recorded runs of each kind, at every seed of the plan
     todo = peer_record.with_expected_seconds(record, todo, plan_seeds(settings, out, range(max(FULL_SEEDS, seeds.stop))))

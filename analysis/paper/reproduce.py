@@ -124,6 +124,7 @@ def main(argv=None) -> dict:
     start = time.perf_counter()
     rows = study.table_rows(tasks, args.quick, seeds)
     runs, jobs = sweep.reuse(study.plan(rows, seeds, out / "runs", steps, args.models))
+    sweep.say_reused("reproduce", runs, jobs)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)

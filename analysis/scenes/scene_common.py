@@ -86,7 +86,7 @@ def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
         jobs += [job for job in study.plan(rows, seeds, out / "runs", steps, models)
                  if job.config.model in models and fits(job.task, job.config.model)]
     runs, jobs = sweep.reuse(jobs)
-    print(f"scene study: {len(runs)} run{'' if len(runs) == 1 else 's'} reused, {len(jobs)} to train", flush=True)
+    sweep.say_reused("scene study", runs, jobs)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)
