@@ -57,8 +57,14 @@ def test_compare_edges():
 
 def test_tables_marks_missing_and_stages(results):
     quick = tables.tables_markdown(results)
-    results["meta"].update(quick=False, mode="full settings")     # marks are for full settings
+    results["meta"].update(quick=False, steps=500, mode="500 steps per model: not the paper's settings")
+    short = tables.tables_markdown(results)       # --steps without --quick: not the paper's settings either
+    results["meta"].update(steps=None, mode="full settings")       # marks are for the paper's settings alone
     table = tables.tables_markdown(results)
+    for unmarked in (quick, short):
+        assert not any(_cell(unmarked, title, kind)[-1] in tables.MARKS.values() for title in ("Train loss", "Test loss",
+                       "Energy MSE") for kind in ("baseline", "hnn")), unmarked
+    assert "--steps 500 trains 500 steps a model" in short and tables.LEGEND not in short
     marks = tables.MARKS
     assert _cell(table, "Train loss", "baseline").endswith(marks["within"])    # exactly at the ±
     assert _cell(table, "Train loss", "hnn").endswith(marks["better"])
