@@ -60,6 +60,10 @@ class Heldout:
             ends.append(rows[j[ok]])
         self.starts, self.ends = np.concatenate(starts), np.concatenate(ends)
         self.deltas = rec.t[self.ends] - rec.t[self.starts]
+        # the tails' RMS spread of positions about their means (pooled over the tails): the scale of the valid
+        # time's threshold, and of the card's "enough"
+        self.spread = float(np.sqrt(np.mean(np.concatenate(
+            [np.sum((rec.q[rows] - rec.q[rows].mean(axis=0)) ** 2, axis=1) for rows in self.tails]))))
         self.dq = self._tail_velocity(data, max_gap)
         naive = rec.q[self.starts] + self.deltas[:, None] * self.dq[self.starts]
         self.naive = _summary(wrapped_norm(naive - rec.q[self.ends], rec.periodic))

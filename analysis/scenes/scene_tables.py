@@ -249,7 +249,8 @@ def markdown(results: dict) -> str:
 def guide(results: dict) -> str:
     """The README's model guide: each scene's card in one line, and where the rest is."""
     lines = ["| scene | a model that is enough (its seeds' mean within 2x of the best energy MSE and rollout error) | "
-             "its energy MSE / rollout error | train s | seeds cannot separate |", "| --- | --- | --- | ---: | --- |"]
+             "its energy MSE (corrected protocol, else the paper's) / rollout error | train s | seeds cannot separate |",
+             "| --- | --- | --- | ---: | --- |"]
     for task, entry in results["scenes"].items():
         card = entry.get("card")
         if card:
