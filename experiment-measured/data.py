@@ -44,7 +44,7 @@ import numpy as np
 
 import hnn
 
-reader = hnn.load_task("measured", "reader")
+reader = hnn.tasks.load_task("measured", "reader")     # hnn.tasks: no torch before the input is checked
 
 UNIFORM = 0.05          # a snippet's steps may differ from the nominal step by this fraction of it
 MIN_ROWS = 2            # a trial's train part and its held-out part need at least this many rows each

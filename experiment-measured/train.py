@@ -61,18 +61,18 @@ class Config(hnn.RunConfig):
                                                  "test_fraction", "max_gap", "objective", "snippet_steps")
 
     def __post_init__(self):
-        q = hnn.load_task("measured", "reader").names(self.q)
+        q = hnn.tasks.load_task("measured", "reader").names(self.q)
         if q:
             self.input_dim = 2 * len(q)
-        angles = hnn.load_task("measured", "reader").names(self.periodic)
+        angles = hnn.tasks.load_task("measured", "reader").names(self.periodic)
         if self.model in PERIODIC_KINDS and angles and set(angles) != set(q):
             raise ValueError(f"--model {self.model} sees (cos q, sin q) for every position or for none, and --periodic "
                              f"names {', '.join(angles)} of {', '.join(q)}; mark all or none, or use another --model")
 
     def dataset(self) -> dict:
-        return hnn.load_task("measured").get_dataset(self.data, self.time, self.q, self.v, self.p, self.trial,
-                                                     self.periodic, self.dxdt, self.test_fraction, self.max_gap,
-                                                     self.snippet_steps if self.objective == "trajectory" else None)
+        return hnn.tasks.load_task("measured").get_dataset(
+            self.data, self.time, self.q, self.v, self.p, self.trial, self.periodic, self.dxdt, self.test_fraction,
+            self.max_gap, self.snippet_steps if self.objective == "trajectory" else None)
 
     def finish(self, directory, dataset: dict) -> None:
         """The scale beside the run: its numbers in your units are q = q' a + q0, s = s' b, t = t' tau."""
@@ -83,7 +83,7 @@ class Config(hnn.RunConfig):
 def _notes(config: Config) -> None:
     """The notes on this input, before training: how the file was read, a position that looks like an
     unwrapped angle, and what the kind assumes of velocities."""
-    data = hnn.load_task("measured")
+    data = hnn.tasks.load_task("measured")
     if config.data:
         for note in data.load(config.data, config.time, config.q, config.v, config.p, config.trial, config.periodic,
                               config.dxdt).notes:

@@ -9,8 +9,8 @@ the training loop, the paper's metrics, and saved runs.
 ``hnn`` itself gives the 35 names of ``__all__``; the rest is reached through its room or module
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
-at once: the light modules (``cli``, ``command``, ``config``, ``names``, ``kind_docs``, ``io``, ``errors``)
-and ``RunConfig`` load on use, and the first use of any other name loads the whole package.
+at once: the light modules (``_LIGHT``: ``cli``, ``command``, ``config``, ``tasks``, ``io``, ...) and
+``RunConfig`` load on use, and the first use of any other name loads the whole package.
 
 The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every import against it):
 a module imports its own layer and those below, never one above, and the two middle rooms know
@@ -28,7 +28,8 @@ nothing of each other.
 import importlib
 from typing import TYPE_CHECKING
 
-_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes", "progress")
+_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes", "progress",
+          "tasks")
 
 # layer -> its modules; a module may import from its own layer and the ones before it, except that
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has

@@ -9,6 +9,7 @@ no task names. Folder names have hyphens, so the modules are loaded by path, eac
 unique module name.
 
     hnn.available_tasks()            # e.g. ['spring', 'pend', ...]: every folder, in TaskSpec.order
+    hnn.tasks.task_names()           # the same folders by name, without loading a spec (torch-free)
     hnn.task_spec("spring").cost     # its task.py's TASK (a default TaskSpec without one)
     hnn.PROTOCOLS["spring"]["paper"] # read-only views built from the specs when read
 """
@@ -25,10 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, ModuleType
 
-import torch
-
 from .errors import DivergenceError
-from .runs import record_divergence, run_experiment
 
 _PREFIX = "experiment-"
 
@@ -101,6 +99,12 @@ def repo_root() -> Path:
 
 def _has_task(name: str) -> bool:
     return (repo_root() / f"{_PREFIX}{name}" / "data.py").is_file()
+
+
+def task_names() -> list[str]:
+    """The task folders of this checkout by name, sorted by name, without reading their specs (which loads
+    torch): what a command checks its input against before anything heavy loads."""
+    return sorted(p.parent.name[len(_PREFIX):] for p in repo_root().glob(f"{_PREFIX}*/data.py"))
 
 
 def available_tasks() -> list[str]:
@@ -198,6 +202,9 @@ def run_dataset(task: str, args: Mapping) -> dict:
 def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     """Train the run of ``task`` with config ``values`` (a sweep's job, in a worker process or a Ray
     task; ``threads`` sets torch's thread count first); returns its folder as text."""
+    import torch        # here: finding and reading tasks loads no torch (a command checks its input first)
+    from .runs import record_divergence, run_experiment
+
     if threads is not None:
         torch.set_num_threads(threads)
     config = task_config(task, values)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import hnn
+from hnn_analysis.scenes import scoring as score
 from hnn_analysis.paper import study
 from hnn_analysis.scenes import measured_metrics as mm, measured_study, scene_study
 
@@ -182,6 +183,11 @@ def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch)
     # 40 steps do not beat the naive extrapolation here: the card says so instead of calling its pick enough
     assert ("is enough" in text) == chosen["enough"] and ("NOT enough" in text) == (not chosen["enough"])
     assert "(mean over 2 seeds)" in text and "2 seeds a model of 3" in text
+    # analysis/score.py scores a run of the study as the study measured it
+    row = card["rows"][0]
+    scored = score.score_run(row["run"], energy="0.5*v**2 + 2*x**2")
+    for key in ("prediction_error", "valid_time", "energy_drift", "test_loss"):
+        assert scored[key] == row[key], key
 
 
 def _seed_row(kind, width, seed, error, params):

@@ -6,7 +6,8 @@
     real_figure(task, models, dataset, energy, path)    # real pendulum: data arrows, learned fields, energy
 
 ``system`` is a task's data module (``dynamics`` and ``hamiltonian`` on float64 ``(batch, 2)``
-tensors); ``models`` is ``{"baseline": HNN, "hnn": HNN}``. Each function writes one PNG
+tensors); ``models`` is ``{label: model}``: the paper's ``{"baseline": ..., "hnn": ...}``, or any run's
+(``analysis/score.py --plot`` draws one), a panel or a line each. Each function writes one PNG
 atomically and returns its path. States are ``x = [q, p]``; trajectories are ``(T, 2)`` arrays.
 """
 from __future__ import annotations
@@ -39,6 +40,10 @@ def phase_settings(task: str, figure: str) -> dict:
         raise ValueError(f"task {task!r} has no {figure!r} figure settings: add figure_settings="
                          f"{{'x0': ..., '{figure}': {{...}}}} to its task.py")
     return {"x0": tuple(settings["x0"]), **settings[figure]}
+
+
+def _name(label: str) -> str:
+    return NAMES.get(label, label)
 
 
 def _dtype(model) -> torch.dtype:
@@ -80,8 +85,8 @@ def _time_path(ax, traj: np.ndarray, t: np.ndarray, cmap="viridis"):
 
 
 def field_figure(task: str, system, models: dict, dataset: dict, path, settings: dict | None = None) -> Path:
-    """Four phase-plane panels: training data over the true field, then the true, baseline and HNN
-    fields (quiver on a ``gridsize x gridsize`` grid) each with its trajectory from ``x0``, coloured by time.
+    """Phase-plane panels: training data over the true field, then the true field and each model's
+    (quiver on a ``gridsize x gridsize`` grid) each with its trajectory from ``x0``, coloured by time.
 
     ``dataset["x"]`` holds the training states, ``(rows, 2)``; ``settings`` (``lim``, ``gridsize``,
     ``x0``, ``t_span``, ``num_points``) default to ``phase_settings(task, "fields")``.
@@ -95,10 +100,9 @@ def field_figure(task: str, system, models: dict, dataset: dict, path, settings:
     data_x = np.asarray(dataset["x"], dtype=np.float64).reshape(-1, 2)
 
     panels = [("Data", system.dynamics, torch.float64, None),
-              ("Ground truth", system.dynamics, torch.float64, "truth"),
-              ("Baseline NN", models["baseline"].time_derivative, _dtype(models["baseline"]), "baseline"),
-              ("Hamiltonian NN", models["hnn"].time_derivative, _dtype(models["hnn"]), "hnn")]
-    fig, axes = plt.subplots(1, 4, figsize=(16, 4.3), constrained_layout=True)
+              ("Ground truth", system.dynamics, torch.float64, "truth")]
+    panels += [(_name(label), model.time_derivative, _dtype(model), label) for label, model in models.items()]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 4.3), constrained_layout=True)
     lines = None
     for ax, (title, f, dtype, label) in zip(axes, panels):
         uv = _field(f, grid, dtype)
@@ -120,42 +124,47 @@ def field_figure(task: str, system, models: dict, dataset: dict, path, settings:
 
 
 def integration_figure(task: str, system, models: dict, path, settings: dict | None = None) -> Path:
-    """Four panels for one rollout from ``x0`` on ``t`` ``(T,)``: (a) phase-plane paths of truth,
-    baseline and HNN; (b) coordinate MSE vs time, mean over (q, p) of the squared error vs truth;
-    (c) the HNN's learned H along each path; (d) the true energy ``system.hamiltonian`` along each path.
+    """Four panels for one rollout from ``x0`` on ``t`` ``(T,)``: (a) phase-plane paths of the truth and
+    each model; (b) coordinate MSE vs time, mean over (q, p) of the squared error vs truth; (c) the
+    learned H of the first model that has one (the HNN's) along each path; (d) the true energy
+    ``system.hamiltonian`` along each path.
     ``settings`` (``x0``, ``t_span``, ``num_points``) default to ``phase_settings(task, "integration")``.
     """
     s = settings or phase_settings(task, "integration")
     t = np.linspace(*s["t_span"], s["num_points"])
     paths, errors = {}, {}
-    for label, f, dtype in [("truth", system.dynamics, torch.float64),
-                            ("baseline", models["baseline"].time_derivative, _dtype(models["baseline"])),
-                            ("hnn", models["hnn"].time_derivative, _dtype(models["hnn"]))]:
+    for label, f, dtype in [("truth", system.dynamics, torch.float64)] + [
+            (label, model.time_derivative, _dtype(model)) for label, model in models.items()]:
         paths[label], errors[label] = _rollout(f, s["x0"], t, dtype)
     drawn = {k: v for k, v in paths.items() if v is not None}
-    hnn_model = models["hnn"]
+    learned = next((label for label, model in models.items() if hnn.interface.declared(model).conservative), None)
 
     fig, axes = plt.subplots(1, 4, figsize=(17, 4), constrained_layout=True)
     for label, traj in drawn.items():
-        style = {"color": COLORS[label], "label": NAMES[label], "lw": 1.2 if label == "truth" else 1.5}
+        style = {"color": COLORS.get(label), "label": _name(label), "lw": 1.2 if label == "truth" else 1.5}
         if label == "truth":
             style.update(ls="--", zorder=3)   # on top: a good HNN path would hide it
         axes[0].plot(traj[:, 0], traj[:, 1], **style)
         if label != "truth" and "truth" in drawn:
             axes[1].plot(t, ((traj - drawn["truth"]) ** 2).mean(axis=1), **style)
         with torch.no_grad():
-            learned_h = hnn_model.hamiltonian(torch.from_numpy(traj).to(_dtype(hnn_model)))
             true_h = system.hamiltonian(torch.from_numpy(traj))
-        axes[2].plot(t, learned_h.to(torch.float64).numpy(), **style)
+            if learned is not None:
+                model = models[learned]
+                learned_h = model.hamiltonian(torch.from_numpy(traj).to(_dtype(model)))
+                axes[2].plot(t, learned_h.to(torch.float64).numpy(), **style)
         axes[3].plot(t, true_h.numpy(), **style)
-    failed = [f"{NAMES[k]} {e}" for k, e in errors.items() if e]
+    if learned is None:
+        _note(axes[2], "no model here learns an H")
+    failed = [f"{_name(k)} {e}" for k, e in errors.items() if e]
     if failed:
         _note(axes[0], "\n".join(failed))
     axes[0].plot(*s["x0"], "o", color="black", ms=4)
     axes[0].set(title="Predictions", xlabel="q", ylabel="p")
     axes[0].set_aspect("equal", adjustable="datalim")
     axes[1].set(title="MSE between coordinates", xlabel="t", ylabel="mean over (q, p) of squared error")
-    axes[2].set(title="HNN-conserved quantity", xlabel="t", ylabel="learned H (HNN's F2)")
+    who = "HNN" if learned in (None, "hnn") else _name(learned)
+    axes[2].set(title=f"{who}-conserved quantity", xlabel="t", ylabel=f"learned H ({who}'s F2)")
     axes[3].set(title="Total energy", xlabel="t", ylabel="true H")
     axes[0].legend(fontsize=8, loc="upper right")
     fig.suptitle(f"{task}: integration from x0 = {s['x0']}, t in [{t[0]:g}, {t[-1]:g}] ({len(t)} points)")
@@ -204,8 +213,8 @@ def energy_figure(task: str, result: dict, path) -> Path:
 
 def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, path) -> Path:
     """The real pendulum, which has no known true field: (a) the measured states with the
-    measured derivatives (forward differences) as arrows; (b, c) the baseline and HNN fields on a
-    grid spanning the data, over the data; (d) the energy along the measured test segment,
+    measured derivatives (forward differences) as arrows; then each model's field (the paper's: baseline,
+    HNN) on a grid spanning the data, over the data; last, the energy along the measured test segment,
     measured vs each model's rollout from its first state (``energy`` is the paper protocol's
     ``hnn.evaluate_energy`` result; the panel is left out when it is None).
     """
@@ -216,26 +225,26 @@ def real_figure(task: str, models: dict, dataset: dict, energy: dict | None, pat
     n = 12
     qq, pp = np.meshgrid(np.linspace(lo[0] - pad[0], hi[0] + pad[0], n), np.linspace(lo[1] - pad[1], hi[1] + pad[1], n))
     grid = torch.from_numpy(np.stack([qq.ravel(), pp.ravel()], axis=1))
-    panels = 4 if energy is not None else 3
+    panels = 1 + len(models) + (energy is not None)
     fig, axes = plt.subplots(1, panels, figsize=(4.3 * panels, 4.2), constrained_layout=True)
     # each arrow is the measured derivative times 0.1 s, drawn in data units
     axes[0].quiver(x[::2, 0], x[::2, 1], dxdt[::2, 0], dxdt[::2, 1], color="tab:orange", angles="xy",
                    scale_units="xy", scale=10.0, width=0.003)
     axes[0].set(title="Data: measured states, derivative x 0.1 s")
-    for ax, label in zip(axes[1:3], ("baseline", "hnn")):
-        uv = _field(models[label].time_derivative, grid, _dtype(models[label]))
+    for ax, (label, model) in zip(axes[1:], models.items()):
+        uv = _field(model.time_derivative, grid, _dtype(model))
         ax.quiver(grid[:, 0], grid[:, 1], uv[:, 0], uv[:, 1], color="0.45", pivot="mid", angles="xy", width=0.005)
         ax.scatter(x[:, 0], x[:, 1], s=3, color="tab:orange", alpha=0.5)
-        ax.set(title=NAMES[label])
-    for ax in axes[:3]:
+        ax.set(title=_name(label))
+    for ax in axes[:1 + len(models)]:
         ax.set(xlabel="q (angle)", ylabel="p (angular velocity)")
     if energy is not None:
-        t = np.asarray(energy["t_truth"])[0]
-        axes[3].plot(t, np.asarray(energy["energy_truth"])[0], color=COLORS["truth"], ls="--", label="Measured")
-        for label in ("baseline", "hnn"):
-            axes[3].plot(t, np.asarray(energy[label]["energy"])[0], color=COLORS[label], label=NAMES[label])
-        axes[3].set(title="Energy on the test segment", xlabel="t (s, from the segment's start)",
-                    ylabel="2.4 (1 - cos q) + p^2")
-        axes[3].legend(fontsize=8)
+        t, ax = np.asarray(energy["t_truth"])[0], axes[-1]
+        ax.plot(t, np.asarray(energy["energy_truth"])[0], color=COLORS["truth"], ls="--", label="Measured")
+        for label in models:
+            ax.plot(t, np.asarray(energy[label]["energy"])[0], color=COLORS.get(label), label=_name(label))
+        ax.set(title="Energy on the test segment", xlabel="t (s, from the segment's start)",
+               ylabel="2.4 (1 - cos q) + p^2")
+        ax.legend(fontsize=8)
     fig.suptitle(f"{task}: measured pendulum (Schmidt & Lipson 2009), data and learned fields")
     return save_figure(fig, path)

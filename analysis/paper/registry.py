@@ -191,13 +191,20 @@ FIGURES = {
 }
 
 
-def draw_figures(trained: Trained, energy: dict, fig_dir) -> dict:
-    """Every figure the task's ``task.py`` names, in its order; returns their numbers, merged."""
+# the figures that draw any one model (``analysis/score.py --plot``); the others need the paper's pair or an H
+RUN_FIGURES = ("energy", "fields", "integration", "real_fields", "orbits", "pixel_compare", "pixel_energy",
+               "pixel_phase_space")
+
+
+def draw_figures(trained: Trained, energy: dict, fig_dir, only=None) -> dict:
+    """Every figure the task's ``task.py`` names (those of them in ``only``, when given), in its order;
+    returns their numbers, merged."""
     unknown = [name for name in trained.spec.figures if name not in FIGURES]
     if unknown:
         raise ValueError(f"experiment-{trained.task}/task.py names unknown figures {unknown}; "
                          f"known: {sorted(FIGURES)}")
     numbers = {}
     for name in trained.spec.figures:
-        numbers.update(FIGURES[name](trained, energy, Path(fig_dir)))
+        if only is None or name in only:
+            numbers.update(FIGURES[name](trained, energy, Path(fig_dir)))
     return numbers

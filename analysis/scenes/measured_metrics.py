@@ -20,7 +20,6 @@ import math
 import time
 
 import numpy as np
-import torch
 
 import hnn
 
@@ -86,7 +85,7 @@ class Model:
     """A trained run as the metrics see it: its float64 field in scaled units and its ``Scale``."""
 
     def __init__(self, data, directory, scale: dict, state: str):
-        model, self.args, self.metrics = hnn.load_run(directory)
+        model, self.args, self.metrics = hnn.load_run(directory)        # torch loads here, past the input checks
         self.params = sum(p.numel() for p in model.parameters())
         self.model = hnn.evaluation.float64_copy(model)
         self.scale = data.Scale(tuple(scale["q0"]), scale["a"], scale["b"], scale["state"])
@@ -95,6 +94,8 @@ class Model:
     def rollout(self, rec, rows: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(positions, observed states)`` in your units ``(len(rows), len(t), n)`` / ``(..., 2n)`` from the
         measured states ``rows`` over times ``t`` (seconds from each start, from 0)."""
+        import torch
+
         n = rec.q.shape[1]
         x0 = self.scale.x(rec.q[rows], rec.s[rows])
         x0[:, :n][:, rec.periodic] = (x0[:, :n][:, rec.periodic] + math.pi) % (2 * math.pi) - math.pi

@@ -32,28 +32,13 @@ from hnn import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
 from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_tables
+from hnn_analysis.scenes.measured_inputs import TASK, Inputs, check
 from hnn_analysis.training_cost import training_cost
 
-TASK = "measured"
 WIDTHS, FRACTIONS = (32, 200), (0.5, 1.0)
 QUICK_WIDTHS, QUICK_FRACTIONS = (64,), (1.0,)
-COLUMNS = ("data", "time", "q", "v", "p", "trial", "periodic", "dxdt", "test_fraction", "max_gap")
 REGISTRY = "docs/measured-scenes.json"      # the cards --update-docs files, by data file name
 NEAR = 1.25            # "as good as": within this factor of the other's error
-
-
-def add_flags(parser) -> None:
-    """The column flags of experiment-measured/train.py, and the study's own."""
-    defaults = hnn.load_task(TASK, "train").Config
-    group = parser.add_argument_group("your own measurements (the study of one file instead of the shipped scenes)")
-    for name in COLUMNS:
-        meta = hnn.cli.field_meta(defaults, name)
-        group.add_argument(f"--{name}", type=meta.get("parse") or str, default=getattr(defaults, name),
-                           help=meta.get("help"))
-    group.add_argument("--horizon", type=hnn.cli.positive_float, default=None,
-                       help="seconds ahead of the prediction error (default: a tenth of the shortest held-out tail)")
-    group.add_argument("--energy", default=None,
-                       help="an energy of your columns as a numpy expression (e.g. '0.5*v**2 + 2*x**2'): its drift")
 
 
 def _kinds(columns: dict) -> list[str]:
@@ -315,19 +300,13 @@ def _update_docs(result: dict) -> None:
     print(f"updated {path}\nupdated {pages.update_section('measured-guide', guide(registry), guide_seeds(registry))}")
 
 
-def run(args, argv: list[str], parser) -> dict:
-    """The study of ``args.data`` (parsed by scene_study's parser); a bad input is ``parser.error``."""
+def run(args, argv: list[str], parser, inputs: Inputs | None = None) -> dict:
+    """The study of ``args.data`` (parsed by scene_study's parser); a bad input is ``parser.error``.
+    ``inputs``: the input ``measured_inputs.check`` read already (before torch loaded), if it did."""
     start = time.perf_counter()
-    data = hnn.load_task(TASK)
-    columns = {name: getattr(args, name) for name in COLUMNS}
-    columns["data"] = str(Path(args.data).expanduser().resolve()) if args.data else ""
+    inputs = inputs or check(args, parser)
+    data, columns, rec, held, energy = inputs.data, inputs.columns, inputs.rec, inputs.held, inputs.energy
     try:
-        hnn.tasks.task_config(TASK, columns)
-        rec = data.load(*(columns[k] for k in ("data", "time", "q", "v", "p", "trial", "periodic", "dxdt")))
-        for note in rec.notes:
-            print(f"note: {note}", flush=True)
-        held = mm.Heldout(data, rec, args.test_fraction, args.horizon, args.max_gap)
-        energy = mm.energy_function(args.energy, rec)
         kinds = _kinds(columns)
     except (ValueError, FileNotFoundError) as err:
         parser.error(str(err))

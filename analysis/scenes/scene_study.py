@@ -37,15 +37,17 @@ import argparse
 import sys
 
 import hnn
-from hnn_analysis.paper import study
-from hnn_analysis.scenes import measured_study, scene_report, scene_stages
 from hnn_analysis import commands
-from hnn_analysis.scenes.scene_common import SEEDS, scenes
-from hnn import sweep, sweep_flags
-
+from hnn_analysis.scenes import measured_inputs
 
 
 def _parser() -> argparse.ArgumentParser:
+    # torch loads here, with the study's modules: main reads a --data file's input before
+    from hnn import sweep_flags
+    from hnn_analysis.paper import study
+    from hnn_analysis.scenes import scene_stages
+    from hnn_analysis.scenes.scene_common import SEEDS, scenes
+
     p = hnn.cli.Parser(prog="scene_study.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", nargs="+", default=None, choices=scenes(),
                    help="scenes to study (default: every task that declares scene_study)")
@@ -66,13 +68,18 @@ def _parser() -> argparse.ArgumentParser:
     sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write docs/scenes.md and the README's model guide (full settings only); with "
                                       "--data, the README's row of that file")
-    measured_study.add_flags(p)
+    measured_inputs.add_flags(p)
     return p
 
 
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
+    inputs = measured_inputs.precheck(argv)     # a file's input errors answer before torch loads
     parser = _parser()
+    from hnn import sweep, sweep_flags
+    from hnn_analysis.scenes import measured_study, scene_report, scene_stages
+    from hnn_analysis.scenes.scene_common import SEEDS, scenes
+
     args = parser.parse_args(argv)
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
@@ -80,7 +87,7 @@ def main(argv=None) -> dict:
     given = args.seeds
     args.seeds = args.seeds or (1 if args.quick else SEEDS)
     if args.data:
-        return measured_study.run(args, argv, parser)
+        return measured_study.run(args, argv, parser, inputs)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     studied = args.scenes or scenes()
     cuts = scene_stages.quick_cuts(studied, SEEDS, given or 1) if args.quick else []
