@@ -22,7 +22,7 @@ import of every module against them, inside functions too): a room imports its o
 the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 
 - shared: what every command uses (``commands``, ``provenance``, ``pages``, ``plotting``,
-  ``training_cost``); it imports no room;
+  ``training_cost``, ``plan``: a study's estimate before it starts); it imports no room;
 - ``paper``, ``benchmarks``, ``integrator_study``, ``chains``, ``extremes``: each on the shared modules alone;
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
 - entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``, ``score``), on
@@ -31,7 +31,7 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 
 # room -> its units: a folder, or a module at this level by its name ("__init__": this file)
 _ROOMS = {
-    "shared": ("__init__", "commands", "provenance", "pages", "plotting", "training_cost"),
+    "shared": ("__init__", "commands", "provenance", "pages", "plotting", "training_cost", "plan"),
     "paper": ("paper",),
     "extremes": ("extremes",),
     "benchmarks": ("benchmarks",),

@@ -44,9 +44,9 @@ from pathlib import Path
 import torch
 
 import hnn
-from hnn_analysis import commands, pages
+from hnn_analysis import commands, pages, plan
 from hnn_analysis.extremes.lnn_start import lnn_start, lnn_start_text
-from hnn_analysis.extremes.stress_grid import run
+from hnn_analysis.extremes.stress_grid import plan_stages, run
 from hnn_analysis.extremes.stress_report import text
 from hnn_analysis.provenance import provenance
 
@@ -110,6 +110,7 @@ def main(argv=None) -> dict:
     if args.lnn_start:
         results = {"lnn_start": lnn_start(seeds=args.lnn_seeds, steps=args.lnn_steps, save_dir=args.out / "chain")}
     else:
+        plan.say("stress", plan_stages(args.quick, args.seed, args.jobs))
         results = run(args.quick, args.seed, args.jobs)
     meta["seconds"], meta["cpu_seconds"] = time.perf_counter() - tic, _cpu_seconds() - cpu
     meta["load"] = os.getloadavg()[0]

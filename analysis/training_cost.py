@@ -22,10 +22,11 @@ BURST_STEPS = (5, 400)   # ... of at least / at most this many steps each
 _DATASETS: dict = {}     # this process's datasets of training-cost measurements, by dataset key
 
 
-def training_cost(task: str, args: dict) -> dict:
+def training_cost(task: str, args: dict, bursts: int = BURSTS, burst_seconds: float = BURST_SECONDS) -> dict:
     """``{"steps_per_s", "steps", "seconds"}``: one thread's training steps per second of the run
     with saved ``args`` (a fresh model of its config on its data, after a few warm-up steps; the
-    fastest of ``BURSTS`` bursts), and ``seconds`` = its ``total_steps + 1`` steps at that rate."""
+    fastest of ``bursts`` bursts of about ``burst_seconds`` in all), and ``seconds`` = its ``total_steps + 1``
+    steps at that rate. A plan's estimate takes one short burst (``analysis/plan.py``)."""
     config = hnn.tasks.task_config(task, args)
     objective = config.make_objective()
     data_key = config.dataset_key()
@@ -50,7 +51,7 @@ def training_cost(task: str, args: dict) -> dict:
 
     with torch_threads(1):
         per_step = burst(3) / 3                                           # one-time setup, a first rate
-        steps = int(np.clip(BURST_SECONDS / BURSTS / max(per_step, 1e-6), *BURST_STEPS))
+        steps = int(np.clip(burst_seconds / bursts / max(per_step, 1e-6), *BURST_STEPS))
         # the fastest of a few bursts: what the model's steps cost when nothing else interferes
-        rate = max(steps / burst(steps) for _ in range(BURSTS))
+        rate = max(steps / burst(steps) for _ in range(bursts))
     return {"steps_per_s": rate, "steps": config.total_steps + 1, "seconds": (config.total_steps + 1) / rate}

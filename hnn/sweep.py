@@ -297,12 +297,15 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         if todo:
             say(bar, f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
                       f"{len(units)} unit{'s' if len(units) != 1 else ''} of work")
-        # the time left of the whole sweep, at its steps per second so far (as the bar's on a terminal)
-        steps, steps_done, started = sum(job.steps for job in todo), 0, time.perf_counter()
+        # the time left of the whole sweep at the pace its runs' expected seconds have run at so far (a plan's
+        # measured costs: analysis/plan.py), else its steps per second so far (as the bar's on a terminal)
+        def weight(job: Job) -> float:
+            return job.expected_seconds if all(j.expected_seconds for j in todo) else job.steps
+        total, done_weight, started = sum(weight(job) for job in todo), 0.0, time.perf_counter()
         for job, outcome in results:
             tag = progress.advance() + " "
-            steps_done += job.steps
-            left = time_left(steps_done, steps, 0, started) if steps_done < steps else ""
+            done_weight += weight(job)
+            left = time_left(done_weight, total, 0, started) if done_weight < total else ""
             bar.set_postfix_str(f"{progress.done}/{progress.total} runs", refresh=False)
             if isinstance(outcome, BaseException):
                 done[job.key] = _failure(job, outcome, log_dir, bar, tag)

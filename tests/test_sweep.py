@@ -145,7 +145,7 @@ def test_reproduce_reports_a_failed_row_writes_the_rest_and_exits_1(tmp_path, mo
     # the rerun trains only what is missing: the spring runs are reused
     with pytest.raises(SystemExit):
         reproduce.main(["--quick", "--steps", "3", "--tasks", "spring", "--no-figures", "--out", str(out)])
-    said = [line for line in capsys.readouterr().out.splitlines() if " reused" in line]
+    said = [line for line in capsys.readouterr().out.splitlines() if line.startswith("reproduce: ") and " reused" in line]
     assert said == ["reproduce: 2 runs reused, 2 to train: spring-broken/baseline/seed0, spring-broken/hnn/seed0"]
 
 

@@ -231,3 +231,16 @@ def expected_seconds(record: dict, jobs: list[sweep.Job], known: list[sweep.Job]
 def measuring_seconds(record: dict, jobs: list[sweep.Job]) -> float:
     """The seconds that measuring ``jobs``' recorded runs took, in all (whatever sittings measured them)."""
     return sum(entry.get("measuring") or 0.0 for job in jobs if (entry := recorded(record, job)) is not None)
+
+
+def expected_measuring(record: dict, jobs: list[sweep.Job], known: list[sweep.Job]) -> float | None:
+    """The seconds of measuring ``jobs``' runs (their rollouts, as each finishes): each the median recorded
+    measuring time of ``known``'s recorded runs of its kind (any row), None where no run of a kind is recorded."""
+    times = {}
+    for job in known:
+        if (entry := recorded(record, job)) is not None and entry.get("measuring"):
+            times.setdefault(job.key.split("/")[1], []).append(entry["measuring"])
+    kinds = [job.key.split("/")[1] for job in jobs]
+    if any(kind not in times for kind in kinds):
+        return None
+    return sum(statistics.median(times[kind]) for kind in kinds)

@@ -16,6 +16,7 @@ import hnn
 from hnn.balance import balance_weights
 from hnn.integrators.stability import StepSizeWarning
 from hnn.threads import torch_threads
+from hnn_analysis import plan
 
 arm_data = hnn.load_task("arm")
 CANONICAL = ("hnn", "baseline", "separable", "dissipative", "mechanical")
@@ -182,6 +183,50 @@ def _describe(task: tuple) -> str:
     if function is _fit_row:
         return " ".join(map(str, arguments[:3]))
     return f"{arguments[0]} rollouts" if function is _rollout_rows else "precision"
+
+
+# a plan's measurement of a fit: this many steps of each kind's nominal fit on each scene, and a rollout of this many
+# steps of the spring's (their cost per step times the grid's steps, horizons and precision fits)
+PLAN_STEPS, PLAN_ROLLOUT = 60, 2000
+
+
+def plan_stages(quick: bool, seed: int = 0, jobs: int = 1) -> list:
+    """The grid's stages for a plan (``analysis/plan.py``), each estimated from short fits and a rollout of
+    every kind measured now, on one thread: the fits, the rollouts (1000 steps and the horizon), the
+    precision part; the fits and rollouts shared over ``jobs`` workers."""
+    budget, horizon = (QUICK, QUICK_HORIZON) if quick else (BUDGET, HORIZON)
+    kinds = ("hnn", "mechanical") if quick else KINDS
+    cells = QUICK_CELLS if quick else tuple(CELLS) + tuple(RESCALED)
+    fit_seconds, roll_seconds = {}, {}
+
+    def timed_fit(kind, scene, steps):
+        tic = time.perf_counter()
+        model = fit(kind, scene, "nominal", {**budget, "steps": steps}, seed)[0]
+        return model, time.perf_counter() - tic
+    with torch_threads(1), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for scene in SCENES:
+            for kind in kinds:
+                # the data, the model and a first step (twice: the first call of a kind pays its one-time costs),
+                # then PLAN_STEPS more: a fit's cost is the setup and its steps at that pace
+                setup = min(timed_fit(kind, scene, 0)[1] for _ in range(2))
+                model, seconds = timed_fit(kind, scene, PLAN_STEPS)
+                fit_seconds[kind, scene] = setup + max(seconds - setup, 0.0) * budget["steps"] / PLAN_STEPS
+                if scene == "spring":
+                    tic = time.perf_counter()
+                    energy_change(model, kind, PLAN_ROLLOUT, 0.1, seed)
+                    # the task trains the model again, then rolls it out over 1000, the horizon and 4 x 100 steps
+                    roll_seconds[kind] = fit_seconds[kind, scene] + (time.perf_counter() - tic) * (
+                        1400 + horizon) / PLAN_ROLLOUT
+    fits = [fit_seconds[kind, scene] for scene in SCENES for kind in kinds for _ in cells]
+    tasks = fits + list(roll_seconds.values())
+    stages = [plan.Stage("fit", len(fits), f"cells x kinds x scenes, {budget['steps']} steps each",
+                         plan.schedule(tasks, jobs), f"{PLAN_STEPS} steps and a {PLAN_ROLLOUT}-step rollout of each "
+                         f"kind timed now, with the kinds' rollouts, on {jobs} worker{'s' if jobs > 1 else ''}")]
+    if not quick:       # one worker's task: 12 spring fits of the HNN, float32 and float64, 1 and 2 threads
+        stages.append(plan.Stage("precision", 4 * len(PRECISION_SEEDS), "fits", 4 * len(PRECISION_SEEDS)
+                                 * fit_seconds["hnn", "spring"], "the HNN's spring fit timed now"))
+    return stages
 
 
 def run(quick: bool, seed: int = 0, jobs: int = 1) -> dict:

@@ -25,7 +25,7 @@ import torch
 
 import hnn
 from hnn import sweep
-from hnn_analysis import commands
+from hnn_analysis import commands, plan
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
 
@@ -90,7 +90,8 @@ def main(argv=None) -> dict:
     meta = {**provenance(), "command": portable_command(argv, "analysis/integrator_study/energy_drift.py")}
     torch.set_num_threads(1)
     rows, progress = {}, sweep.Progress(sum(len(methods) for methods in METHODS.values()))
-    print(f"{progress.tag()} {len(METHODS)} models to train, {progress.total} drift runs", flush=True)
+    plan.say("energy_drift", [plan.Stage("train", len(METHODS), f"models of {args.train_steps} steps (a saved one is reused)"),
+                              plan.Stage("roll out", progress.total, f"drift runs of {args.steps} steps")])
     for kind, methods in METHODS.items():
         model = trained(kind, args.train_steps, args.out)
         rows[kind] = {}

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import atomic_write
-from hnn_analysis import commands
+from hnn_analysis import commands, plan
 from hnn_analysis.integrator_study.speed_measure import extremes, measure_task, study_settings
 from hnn_analysis.integrator_study.speed_report import markdown, pareto_plot, summary_markdown
 from hnn_analysis.provenance import provenance
@@ -62,14 +62,17 @@ def main(argv=None) -> dict:
     for task in hnn.available_tasks():
         if task not in measurable:
             notes.append(f"{task}: no true dynamics function in its data.py; not measured")
-    start = time.perf_counter()
-    results = {"tasks": {}, "notes": notes}
     for task in tasks:
         if task not in measurable:
             raise SystemExit(f"task {task!r} has no true dynamics to measure; choose from {measurable}")
+    plan.say("speed_accuracy", [plan.Stage("measure", len(tasks), "tasks' true and learned fields at every setting"),
+                                plan.Stage("extremes", 1, "set of extreme cases")])
+    start, ahead = time.perf_counter(), plan.Ahead(len(tasks))
+    results = {"tasks": {}, "notes": notes}
+    for done, task in enumerate(tasks, 1):
         t0 = time.perf_counter()
         results["tasks"][task] = measure_task(task, runs, args.quick, 1 if args.quick else args.repeats, notes)
-        print(f"{task}: {time.perf_counter() - t0:.1f} s", flush=True)
+        print(f"{task}: {time.perf_counter() - t0:.1f} s{ahead.tag(done)}", flush=True)
         pareto_plot(task, results["tasks"][task], out / f"pareto-{task}.png")
     results["extremes"] = extremes(args.quick, runs, notes)
     results["meta"] = {**provenance(), "command": commands.portable_command(argv, "analysis/integrator_study/speed_accuracy.py"),

@@ -28,7 +28,7 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write, write_json
 from hnn_analysis.paper import study
-from hnn_analysis import commands, pages, plotting
+from hnn_analysis import commands, pages, plan, plotting
 from hnn import sweep, sweep_flags
 from hnn_analysis.provenance import provenance
 from hnn_analysis.commands import portable_command
@@ -125,6 +125,9 @@ def main(argv=None) -> dict:
     rows = study.table_rows(tasks, args.quick, seeds)
     runs, jobs = sweep.reuse(study.plan(rows, seeds, out / "runs", steps, args.models))
     sweep.say_reused("reproduce", runs, jobs)
+    jobs = plan.timed(jobs)
+    results["meta"]["plan"] = plan.say("reproduce", [plan.training(jobs, args.jobs),
+                                                     plan.Stage("evaluate", len(rows), "rows (energy MSE, figures)")])
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)

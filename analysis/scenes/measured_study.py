@@ -27,7 +27,7 @@ import numpy as np
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis import commands, pages
+from hnn_analysis import commands, pages, plan
 from hnn import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
@@ -319,12 +319,14 @@ def run(args, argv: list[str], parser, inputs: Inputs | None = None) -> dict:
         commands.say_quick("scene_study --data", cuts)
     tic = time.perf_counter()
     seeds = list(range(args.seeds))
-    runs, _ = scene_common.train([(rows, seeds, steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds)
+    runs, _ = scene_common.train([(rows, seeds, steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds,
+                                 then=lambda models: [plan.Stage("measure", models, "models on the held-out tails")],
+                                 who=f"scene study of {Path(args.data).name} ({len(rec.t)} rows)")
     training = time.perf_counter() - tic
     tic = time.perf_counter()
     keys = [(row, kind, seed) for row in rows for kind in kinds for seed in seeds
             if isinstance(runs.get(f"{row['row']}/{kind}/seed{seed}"), Path)]
-    measured, progress = [], sweep.Progress(len(keys))
+    measured, progress, ahead = [], sweep.Progress(len(keys)), plan.Ahead(len(keys))
     print(f"  {progress.tag()} measuring {progress.total} models on the held-out tails", flush=True)
     for row, kind, seed in keys:
         directory = runs[f"{row['row']}/{kind}/seed{seed}"]
@@ -335,8 +337,8 @@ def run(args, argv: list[str], parser, inputs: Inputs | None = None) -> dict:
                          "train_seconds": cost["seconds"], "run": _in_checkout(directory),
                          **mm.measure(model, held, energy)})
         print(f"  {progress.advance()} {kind:12s} width {row['cell'][0]:3d} fraction {row['cell'][1]:g} seed {seed}: "
-              f"prediction error {measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})",
-              flush=True)
+              f"prediction error {measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})"
+              + ahead.tag(progress.done), flush=True)
     chosen, card = _card(measured, held.naive, held.spread)
     units = "units of " + ", ".join(rec.q_names)
     result = {"scene": scene, "meta": {**provenance(), "command": "python analysis/scene_study.py " + " ".join(

@@ -15,6 +15,7 @@ import torch
 
 import hnn
 from hnn import sweep
+from hnn_analysis import plan
 from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_metrics as sm
 from hnn_analysis.integrator_study import settings
@@ -72,12 +73,14 @@ def _fits(task: str, kind: str) -> bool:
     return spec.coordinates == "latent" or spec.reads("canonical")
 
 
-def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
+def train(batches, out: Path, args, fits=None, then=None, who: str = "scene study") -> tuple[dict, dict]:
     """``({row/kind/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
     ``(rows, seeds, steps, models or None for every kind)``: reuse what matches, train the rest
     in one sweep (``args.jobs`` processes, on ``args.backend``), so the pool starts once and the
     longest runs of every batch go first. ``fits(task, kind)``: which kinds fit the rows' states
-    (default: the kinds of canonical states)."""
+    (default: the kinds of canonical states). ``then``: where given, the plan is printed first (its
+    training measured, ``analysis/plan.py``), with ``then(models)`` the stages after it (``plan.Stage``s),
+    ``models`` the count of runs the study will have."""
     fits = fits or _fits
     jobs = []
     for rows, seeds, steps, models in batches:
@@ -85,8 +88,12 @@ def train(batches, out: Path, args, fits=None) -> tuple[dict, dict]:
         # plan() always takes the paper's pair: keep only the kinds asked for
         jobs += [job for job in study.plan(rows, seeds, out / "runs", steps, models)
                  if job.config.model in models and fits(job.task, job.config.model)]
+    total = len(jobs)
     runs, jobs = sweep.reuse(jobs)
-    sweep.say_reused("scene study", runs, jobs)
+    sweep.say_reused(who, runs, jobs)
+    if then is not None:
+        jobs = plan.timed(jobs)
+        plan.say(who, [plan.training(jobs, args.jobs if args.backend == "local" else 1), *then(total)])
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)

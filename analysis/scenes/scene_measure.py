@@ -28,6 +28,7 @@ import torch
 
 import hnn
 from hnn import sweep
+from hnn_analysis import plan
 from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_common
 from hnn_analysis.training_cost import training_cost
@@ -110,6 +111,18 @@ def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict,
     return result, scene.state()
 
 
+# a kind's speed study (its ladder and three drift runs of up to DRIFT_BUDGET s) against one model's measuring
+# (spring, measured: about 30 s against about 1.5 s)
+SPEED_WEIGHT = 20
+
+
+def _weight(unit: tuple) -> float:
+    """A unit's share of the measuring: its models, and ``SPEED_WEIGHT`` for a speed study."""
+    if unit[0] == "kind":
+        return len(unit[3]) + (SPEED_WEIGHT if unit[4] is not None else 0)
+    return len(unit[2])
+
+
 def _describe(unit: tuple) -> str:
     """A unit in a progress line: ``'spring  hnn'`` or ``'spring  hnn at 3 grid runs (cells x seeds)'``."""
     if unit[0] == "kind":
@@ -123,11 +136,18 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
     which the others reuse)."""
     results, states, progress = {}, {}, sweep.Progress(len(units))
+    # the time left by the units' weights: a model a model, a kind's speed study SPEED_WEIGHT models
+    weights = {key: _weight(unit) for key, unit in units.items()}
+    ahead, done = plan.Ahead(sum(weights.values())), [0.0]
+
+    def said(key) -> str:
+        done[0] += weights[key]
+        return f"  {progress.advance()} {_describe(units[key])} measured" + ahead.tag(done[0])
     print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
             results[key], states[unit[1]] = run_unit(unit, quick)
-            print(f"  {progress.advance()} {_describe(unit)} measured", flush=True)
+            print(said(key), flush=True)
         return results, states
     by_task: dict[str, list] = {}
     for key, unit in units.items():
@@ -142,7 +162,7 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
             for future in done:
                 key = running.pop(future)
                 results[key], state = future.result()
-                print(f"  {progress.advance()} {_describe(units[key])} measured", flush=True)
+                print(said(key), flush=True)
                 task = units[key][1]
                 if task not in states:
                     states[task] = state

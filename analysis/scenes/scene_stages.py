@@ -12,6 +12,7 @@ from pathlib import Path
 import torch
 
 import hnn
+from hnn_analysis import plan
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
 from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
@@ -185,7 +186,9 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     tic = time.perf_counter()
     runs, _ = train([(default_rows, seeds, steps, None), (grid_rows, grid_seeds, steps, None),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
-                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args)
+                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args,
+                    then=lambda models: [plan.Stage("measure", models, "models (losses, energy MSE, rollout error; "
+                                                    "each kind's speed at equal accuracy)")])
     results["seconds"]["training"] = time.perf_counter() - tic
 
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
