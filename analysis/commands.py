@@ -25,7 +25,10 @@ from hnn_analysis import pages
 # each command's ``--quick`` budget in seconds, from nothing (a fresh output folder, no dataset cached,
 # installs aside) on a quiet 2-core box: a reader's first run of it, which they watch end to end.
 # analysis/benchmarks/quick_budgets.py measures every one against it (docs/speed.md)
-QUICK_BUDGETS = {"reproduce": 60, "scene_study": 90, "scene_study --data": 120, "peers": 180, "dgnet": 120}
+QUICK_BUDGETS = {"reproduce": 60, "scene_study": 90, "scene_study --data": 120, "peers": 180, "dgnet": 120,
+                 # a reader's first hour beside them: the README's test command and its first check, the Python
+                 # of the README and of docs/python.md, each run as written
+                 "pytest": 900, "pytest -m quick": 90, "README's Python": 30, "docs/python.md's Duffing": 20}
 
 
 def budget_words(command: str) -> str:

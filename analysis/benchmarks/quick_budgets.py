@@ -1,4 +1,6 @@
-"""Every analysis command's ``--quick`` from nothing, timed against its budget (docs/speed.md).
+"""Every analysis command's ``--quick`` from nothing, timed against its budget (docs/speed.md), and a reader's
+first hour beside them: ``pytest``, its first check ``pytest -m quick``, and the Python of the README and of
+docs/python.md as written.
 
     python analysis/benchmarks/quick_budgets.py                        # all of them, one at a time
     python analysis/benchmarks/quick_budgets.py --only reproduce peers # some
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -37,7 +40,13 @@ COMMANDS = {"reproduce": ["analysis/reproduce.py", "--quick"],
             "scene_study": ["analysis/scene_study.py", "--quick"],
             "scene_study --data": ["analysis/scene_study.py", *MEASURED, "--quick"],
             "peers": ["analysis/peers.py", "--quick"],
-            "dgnet": ["analysis/chains/dgnet.py", "--quick"]}
+            "dgnet": ["analysis/chains/dgnet.py", "--quick"],
+            "pytest": ["-m", "pytest", "-q", "-p", "no:cacheprovider"],
+            "pytest -m quick": ["-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "quick"],
+            "README's Python": ["README.md", r"## Use it from Python\s*```python\n(.*?)```"],
+            "docs/python.md's Duffing": ["docs/python.md", r"<!-- example: custom-system -->\s*```python\n(.*?)```"]}
+# what a command's log says of its size: its tests, the rows of its file, the runs it trains
+SIZES = ((r"(\d+) passed", "{} tests"), (r"\((\d+) rows\)", "{} rows"), (r"  train (\d+) runs?:", "{} runs trained"))
 
 
 def _clone(root: Path, where: Path) -> Path:
@@ -48,15 +57,34 @@ def _clone(root: Path, where: Path) -> Path:
     return where
 
 
+def _command(name: str, root: Path, clone: Path, tmp: str) -> list[str]:
+    """The argv of ``name``: a script with its words and ``--out``, pytest in the clone, or the Python block of a
+    page (its pattern's first group) written to a file and run as written."""
+    script, *words = COMMANDS[name]
+    if script == "-m":
+        return [sys.executable, script, *words]
+    if script.endswith(".md"):
+        code = re.search(words[0], (clone / script).read_text(), re.S).group(1)
+        path = Path(tmp) / f"{Path(script).stem}.py"
+        path.write_text(code)
+        return [sys.executable, str(path)]
+    # paths into the checkout (a data file) are read from the clone, as a reader's own would be
+    words = [str(clone / w) if (root / w).is_file() else w for w in words]
+    return [sys.executable, str(root / script), *words, "--out", str(Path(tmp) / "out")]
+
+
+def _size(log: Path) -> str:
+    """The size of what a command did, as its log says it (``SIZES``), or ''."""
+    text = log.read_text(errors="replace")
+    return ", ".join(words.format(found[-1]) for pattern, words in SIZES if (found := re.findall(pattern, text)))
+
+
 def run_one(name: str, root: Path, log_dir: Path) -> dict:
     """``name``'s quick command from nothing: wall seconds, exit code, the loads around it and its log."""
-    script, *words = COMMANDS[name]
-    log = log_dir / f"{name.replace(' ', '').replace('--', '-')}.log"
+    log = log_dir / f"{re.sub(r'[^A-Za-z0-9_.-]', '', name.replace(' ', '-'))}.log"
     with tempfile.TemporaryDirectory(prefix="quick-budget-") as tmp:
         clone = _clone(root, Path(tmp) / "clone")
-        # paths into the checkout (a data file) are read from the clone, as a reader's own would be
-        words = [str(clone / w) if (root / w).is_file() else w for w in words]
-        cmd = [sys.executable, str(root / script), *words, "--out", str(Path(tmp) / "out")]
+        cmd = _command(name, root, clone, tmp)
         before = cpu_snapshot()
         time.sleep(1.0)
         others = others_load(before, cpu_snapshot())
@@ -64,10 +92,10 @@ def run_one(name: str, root: Path, log_dir: Path) -> dict:
         start = time.perf_counter()
         with open(log, "w") as out:
             done = subprocess.run(cmd, env={**os.environ, "HNN_REPO": str(clone)}, stdout=out,
-                                  stderr=subprocess.STDOUT, cwd=tmp)
+                                  stderr=subprocess.STDOUT, cwd=clone if COMMANDS[name][0] == "-m" else tmp)
         wall = time.perf_counter() - start
         load_after = os.getloadavg()
-    return {"command": name, "argv": [script, *COMMANDS[name][1:]], "budget": commands.QUICK_BUDGETS[name],
+    return {"command": name, "argv": COMMANDS[name], "budget": commands.QUICK_BUDGETS[name], "size": _size(log),
             "wall": wall, "returncode": done.returncode, "others_before": others,
             "load_before": list(load_before), "load_after": list(load_after), "log": str(log)}
 
@@ -86,10 +114,11 @@ def section(result: dict) -> str:
              "nothing (a fresh clone, a fresh output folder), one at a time. Load: the 1-minute load average "
              "just before and just after each; others: the cores other processes kept busy in the second "
              "before it started. A box with a load above its 2 cores is not the quiet box the budgets are for.",
-             "", "| command | budget (s) | wall (s) | verdict | load before | load after | others before |",
-             "| --- | ---: | ---: | --- | ---: | ---: | ---: |"]
+             "", "| command | size | budget (s) | wall (s) | verdict | load before | load after | others before |",
+             "| --- | --- | ---: | ---: | --- | ---: | ---: | ---: |"]
     for row in result["runs"]:
-        lines.append(f"| `python {' '.join(row['argv'])}` | {row['budget']} | {row['wall']:.0f} | {_verdict(row)} | "
+        shown = f"the Python of {row['argv'][0]}" if row["argv"][0].endswith(".md") else f"python {' '.join(row['argv'])}"
+        lines.append(f"| `{shown}` | {row.get('size', '')} | {row['budget']} | {row['wall']:.0f} | {_verdict(row)} | "
                      f"{row['load_before'][0]:.2f} | {row['load_after'][0]:.2f} | {row['others_before']:.2f} |")
     busy = [row["command"] for row in result["runs"] if row["others_before"] > 0.5 or row["load_before"][0] > 1.5]
     if busy:

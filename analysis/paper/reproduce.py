@@ -27,6 +27,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import atomic_write, write_json
+from hnn.threads import torch_threads
 from hnn_analysis.paper import study
 from hnn_analysis import commands, pages, plan, plotting
 from hnn import sweep, sweep_flags
@@ -135,8 +136,11 @@ def main(argv=None) -> dict:
     tic = time.perf_counter()
     plotting.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
     try:
-        study.evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models,
-                            study.QUICK_TRIALS if args.quick else None)
+        # one thread, as the training: torch's default two made the pixel task's evaluation (its latent maps,
+        # its frames) several times slower beside other work (docs/speed.md#threads); its numbers agree to 1e-8
+        with torch_threads(1):
+            study.evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models,
+                                study.QUICK_TRIALS if args.quick else None)
     finally:
         plotting.set_stamp("")
     results["seconds"]["evaluation"] = time.perf_counter() - tic
