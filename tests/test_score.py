@@ -1,5 +1,6 @@
 """analysis/score.py: a saved run scored as the scene study measures it, its figures from the run alone, and
 its input checked before torch loads."""
+import importlib
 import os
 import subprocess
 import sys
@@ -69,3 +70,18 @@ def test_input_errors_answer_in_one_line_before_torch_loads(argv, words):
     assert done.stdout.splitlines()[-2:] == ["exit 2", "False"], (done.stdout[-500:], done.stderr[-500:])
     errors = done.stderr.strip().splitlines()
     assert len(errors) == 1 and errors[0].startswith("error: ") and words in errors[0], done.stderr
+
+
+@pytest.mark.parametrize("module", ["hnn_analysis.paper.reproduce", "hnn_analysis.scenes.scene_study",
+                                    "hnn_analysis.chains.peers", "hnn_analysis.stress", "hnn_analysis.arm",
+                                    "hnn_analysis.score", "hnn_analysis.readme", "hnn_analysis.chains.dgnet",
+                                    "hnn_analysis.integrator_study.speed_accuracy",
+                                    "hnn_analysis.integrator_study.energy_drift",
+                                    "hnn_analysis.integrator_study.tolerances",
+                                    "hnn_analysis.benchmarks.quick_budgets", "hnn_analysis.benchmarks.benchmark"])
+def test_a_misspelled_flag_is_one_error_line_on_every_command(module, capsys):
+    main = importlib.import_module(module).main
+    with pytest.raises(SystemExit) as done:
+        main(["--updat-docs"])
+    err = capsys.readouterr().err.splitlines()
+    assert done.value.code == 2 and len(err) == 1 and err[0].startswith("error: "), err
