@@ -29,7 +29,7 @@ import importlib
 from typing import TYPE_CHECKING
 
 _LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes", "progress",
-          "tasks")
+          "tasks", "sweep_flags")
 
 # layer -> its modules; a module may import from its own layer and the ones before it, except that
 # the two rooms of one level, "integrators" and "models" (each a folder: every module in it has

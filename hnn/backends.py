@@ -16,6 +16,7 @@ import socket
 import sys
 from pathlib import Path
 
+from . import names
 from .errors import DivergenceError
 from .group_runs import run_group_task, train_group
 from .runs import COMPLETE, run_experiment
@@ -25,7 +26,7 @@ from .stopping import in_worker, stop_pool, worker_start
 from .threads import cores
 from . import progress as progress_lines
 
-BACKENDS = ("local", "ray")
+BACKENDS = names.BACKENDS
 RAY_INSTALL = 'pip install -e ".[ray]"'
 
 

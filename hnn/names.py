@@ -1,6 +1,6 @@
 """The one list of each option's names, known before torch loads, so that ``--help`` and a flag
 error answer at once: the activations, the inits, the field types, the objectives, the derivative
-losses, the balances, the optimizers, the rate schedules and the dtypes.
+losses, the balances, the optimizers, the rate schedules, the dtypes and a sweep's backends and group modes.
 
 Each name is spelled here only; the module that implements an option keys its table from this
 list and finds each implementation by a rule on the name (a missing one fails at import, naming it):
@@ -22,3 +22,5 @@ OPTIMIZERS = ("adam", "adamw")
 SCHEDULES = ("constant", "cosine")
 DTYPES = ("float32", "float64")
 UNITS = ("off", "auto", "on")
+BACKENDS = ("local", "ray")                 # where a sweep trains (hnn.backends)
+GROUP_MODES = ("auto", "all", "off")        # which runs a sweep trains as groups (hnn.sweep.plan_units)

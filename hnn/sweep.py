@@ -38,6 +38,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
+from . import names
 from .progress import time_left
 from .group_runs import drop_spent_checkpoints, unit_key
 from .runs import diverged_record, find_run, load_run, partial_checkpoint, record_divergence
@@ -47,7 +48,7 @@ from .errors import DivergenceError
 from .stopping import interruptible
 from .threads import cores, torch_threads
 
-GROUP_MODES = ("auto", "all", "off")
+GROUP_MODES = names.GROUP_MODES
 # Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
 # 1 thread, two runs): 2.3-2.6x at width 16 with G 4 and 3.1-3.4x with G 16; 1.3x at width 64
 # with G 4 but 0.9-1.4x with G 16; 0.6-0.7x at width 200 with G 4 and 16. A group's activations

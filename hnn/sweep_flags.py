@@ -8,9 +8,10 @@ analysis command's parser and checked there, then passed to ``hnn.sweep.train_jo
 """
 from __future__ import annotations
 
-from . import cli
-from .backends import BACKENDS, RAY_INSTALL, import_ray, probe
-from .sweep import GROUP_MAX_WIDTH, GROUP_MODES
+from . import cli, names
+
+# torch-free: a command's parser takes these flags before torch loads (its input errors answer at once);
+# check_backend imports the backends, and Ray, only when asked for it
 
 
 def add_device_flag(parser) -> None:
@@ -24,21 +25,21 @@ def add_backend_flags(parser) -> None:
     """Add ``--backend {local,ray}``, ``--ray-address ADDR``, ``--group`` and ``--device`` to a sweep's
     ``parser``; check them with ``check_backend`` and pass them to ``train_jobs``."""
     add_device_flag(parser)
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
+    parser.add_argument("--backend", choices=names.BACKENDS, default="local",
                         help="where the runs train: local = in this process (--jobs 1) or in --jobs N worker "
                              "processes here; ray = one Ray task per run with cores // --jobs threads, as many at "
-                             f"once as Ray has CPUs (needs {RAY_INSTALL}); see docs/sweeps.md")
+                             "once as Ray has CPUs (needs the ray extra); see docs/sweeps.md")
     parser.add_argument("--ray-address", dest="ray_address", default=None, metavar="ADDR",
                         help="with --backend ray: the Ray cluster to join (its head's address, e.g. 10.0.0.1:6379, "
                              "or auto); default: start a local Ray with this machine's cores. --out must be on "
                              "storage every node sees at the same path")
 
 
-    parser.add_argument("--group", choices=GROUP_MODES, default="auto",
+    parser.add_argument("--group", choices=names.GROUP_MODES, default="auto",
                         help="auto: train the runs that can share one program (one task, kind and width, seeds "
                              "and data fractions apart) as batched groups, each run still saved as its own folder: "
-                             f"on the CPU the paper's tanh-MLP kinds up to width {GROUP_MAX_WIDTH}, on a GPU every "
-                             "kind; all: every kind on every device; off: every run alone")
+                             "on the CPU the paper's tanh-MLP kinds up to a width of hnn.sweep.GROUP_MAX_WIDTH, on "
+                             "a GPU every kind; all: every kind on every device; off: every run alone")
 
 
 def check_backend(parser, args) -> None:
@@ -47,6 +48,7 @@ def check_backend(parser, args) -> None:
     if args.ray_address is not None and args.backend != "ray":
         parser.error(f"--ray-address {args.ray_address}: only used with --backend ray; add --backend ray or drop it")
     if args.backend == "ray":
+        from .backends import import_ray, probe
         try:
             import_ray()
             if args.ray_address is not None:

@@ -57,6 +57,8 @@ def test_a_runs_task_is_read_off_its_settings_and_name():
 
 @pytest.mark.parametrize("argv, words", [
     (["analysis/score.py", "no/such/run"], "does not exist"),
+    (["analysis/reproduce.py", "--quick", "--tasks", "sprin"], "no such task here"),
+    (["analysis/reproduce.py", "--quik"], "did you mean --quick"),
     (["analysis/scene_study.py", "--data", "no/such/file.csv", "--q", "x", "--v", "v"], "no/such/file.csv"),
     (["analysis/scene_study.py", "--data", "experiment-measured/systems/real_linear_h_1.txt", "--q", "xx",
       "--v", "v"], "did you mean 'x'"),

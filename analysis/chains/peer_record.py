@@ -21,9 +21,11 @@ import time
 from pathlib import Path
 
 from hnn import sweep
+from hnn_analysis import plan
 from hnn.io import atomic_write
 from hnn.threads import torch_threads
 from hnn_analysis.chains.peer_measure import diverged_entry, measure, one_thread
+from hnn_analysis.chains.peer_plan import FULL_SEEDS, plan_seeds
 
 RECORD = Path("docs") / "peers-runs.json"
 # what a run's numbers depend on beyond its config: a record measured with other settings is another table
@@ -231,6 +233,21 @@ def expected_seconds(record: dict, jobs: list[sweep.Job], known: list[sweep.Job]
 def measuring_seconds(record: dict, jobs: list[sweep.Job]) -> float:
     """The seconds that measuring ``jobs``' recorded runs took, in all (whatever sittings measured them)."""
     return sum(entry.get("measuring") or 0.0 for job in jobs if (entry := recorded(record, job)) is not None)
+
+
+def plan_sitting(record: dict, todo: list[sweep.Job], fresh: list[sweep.Job], runs: dict, settings: dict, out,
+                 seeds: range, workers: int) -> list[sweep.Job]:
+    """``todo`` timed, longest first by the recorded runs of each kind at every seed of the plan
+    (``with_expected_seconds``), the rest measured now (``analysis/plan.py``), after printing the sitting's plan:
+    training them on ``workers``, then measuring the ``fresh`` runs that did not fail (``runs``) at the record's
+    per-run costs of their kinds."""
+    known = plan_seeds(settings, out, range(max(FULL_SEEDS, seeds.stop)))
+    todo = plan.timed(with_expected_seconds(record, todo, known))
+    measured = [job for job in fresh if not isinstance(runs.get(job.key), sweep.RunFailed)]
+    plan.say("peers", [plan.training(todo, workers),
+                       plan.Stage("measure", len(measured), "runs' rollouts (each as it finishes training)",
+                                  expected_measuring(record, measured, known), "the record's median a run of its kind")])
+    return todo
 
 
 def expected_measuring(record: dict, jobs: list[sweep.Job], known: list[sweep.Job]) -> float | None:

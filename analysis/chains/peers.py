@@ -29,7 +29,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import atomic_write
-from hnn_analysis import commands, pages, plan
+from hnn_analysis import commands, pages
 from hnn import sweep, sweep_flags
 from hnn_analysis.chains import peer_record
 from hnn_analysis.chains.peer_measure import add_seconds, curves_figure, over_seeds
@@ -105,13 +105,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     sweep.say_reused("peers", runs, todo)
     record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
     # longest first by the recorded runs of each kind, at every seed of the plan
-    known = plan_seeds(settings, out, range(max(FULL_SEEDS, seeds.stop)))
-    todo = plan.timed(peer_record.with_expected_seconds(record, todo, known))      # unrecorded kinds timed now
-    fresh_runs = [job for job in fresh if job.key not in runs or isinstance(runs[job.key], Path)]
-    plan.say("peers", [plan.training(todo, args.jobs),
-                       plan.Stage("measure", len(fresh_runs), "runs' rollouts (each as it finishes training)",
-                                  peer_record.expected_measuring(record, fresh_runs, known),
-                                  "the record's median a run of its kind")])
+    todo = peer_record.plan_sitting(record, todo, fresh, runs, settings, out, seeds, args.jobs)     # timed; the plan said
     trained, seconds = ({}, {"training": 0.0}) if args.record_only else sweep.train_jobs(
         todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device,
         on_done=peer_record.keeper(jobs, settings, path))

@@ -30,13 +30,10 @@ from hnn.io import atomic_write, write_json
 from hnn.threads import torch_threads
 from hnn_analysis.paper import study
 from hnn_analysis import commands, pages, plan, plotting
-from hnn import sweep, sweep_flags
-from hnn_analysis.provenance import provenance
+from hnn import sweep_flags
 from hnn_analysis.commands import portable_command
 from hnn_analysis.paper.tables import MODELS, headline_markdown, tables_markdown
-
-
-
+# torch-free to here: main checks the flags before it imports the sweep (torch)
 def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="reproduce.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", nargs="+", default=None, help="tasks to run (default: every task of the paper present)")
@@ -70,12 +67,13 @@ def _check(parser: argparse.ArgumentParser, args) -> None:
     if args.update_docs and (args.quick or args.steps is not None):
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick / --steps")
     for task in args.tasks or []:
-        if task not in hnn.available_tasks():
-            parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.available_tasks())}")
+        if task not in hnn.tasks.task_names():
+            parser.error(f"--tasks {task}: no such task here; choose from {' '.join(hnn.tasks.task_names())}")
     sweep_flags.check_backend(parser, args)
 
 
 def _meta(args, argv: list[str], seeds: list[int], mode: str, steps: int | None) -> dict:
+    from hnn_analysis.provenance import provenance
     return {**provenance(), "command": portable_command(argv), "seed": args.seed, "seeds": seeds, "mode": mode,
             "quick": args.quick, "steps": steps, "jobs": args.jobs, "models": list(MODELS) + list(args.models),
             "available": hnn.tasks.paper_tasks()}
@@ -110,6 +108,7 @@ def main(argv=None) -> dict:
     parser = _parser()
     args = parser.parse_args(argv)
     _check(parser, args)
+    from hnn import sweep
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     tasks = args.tasks or hnn.tasks.paper_tasks()
     mode, steps = _mode(args)
@@ -127,8 +126,7 @@ def main(argv=None) -> dict:
     runs, jobs = sweep.reuse(study.plan(rows, seeds, out / "runs", steps, args.models))
     sweep.say_reused("reproduce", runs, jobs)
     jobs = plan.timed(jobs)
-    results["meta"]["plan"] = plan.say("reproduce", [plan.training(jobs, args.jobs),
-                                                     plan.Stage("evaluate", len(rows), "rows (energy MSE, figures)")])
+    results["meta"]["plan"] = plan.say("reproduce", [plan.training(jobs, args.jobs), plan.Stage("evaluate", len(rows), "rows")])
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)
@@ -136,9 +134,7 @@ def main(argv=None) -> dict:
     tic = time.perf_counter()
     plotting.set_stamp(f"QUICK smoke run ({steps} steps per model): not the paper's settings" if args.quick else "")
     try:
-        # one thread, as the training: torch's default two made the pixel task's evaluation (its latent maps,
-        # its frames) several times slower beside other work (docs/speed.md#threads); its numbers agree to 1e-8
-        with torch_threads(1):
+        with torch_threads(1):      # as the training: two made the pixel evaluation 1.7x slower on a shared box
             study.evaluate_rows(rows, seeds, runs, results, None if args.no_figures else out / "figures", args.models,
                                 study.QUICK_TRIALS if args.quick else None)
     finally:

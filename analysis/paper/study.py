@@ -13,10 +13,14 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import hnn
-from hnn import sweep
-from hnn_analysis.paper import registry
 from hnn_analysis.paper.tables import MODELS
+
+if TYPE_CHECKING:       # torch-free at import: reproduce.py checks its flags before the sweep and registry load
+    from hnn import sweep
+    from hnn_analysis.paper import registry
 
 QUICK_STEPS = 100        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
 QUICK_TRIALS = 5         # --quick: trials of each energy protocol (theirs: 15; a multiple of its 5 splits)
@@ -25,6 +29,7 @@ QUICK_TRIALS = 5         # --quick: trials of each energy protocol (theirs: 15; 
 def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
     """``(the trained models with the first run's saved args, {label: its row of losses})`` of
     ``runs`` (``{label: run folder}``), each read by the task's ``TaskSpec.load`` or ``hnn.load_run``."""
+    from hnn_analysis.paper import registry
     load = hnn.task_spec(task).load or hnn.load_run
     models, row, first_args = {}, {}, None
     for label, directory in runs.items():
@@ -44,6 +49,7 @@ def evaluate_seeds(task: str, runs: list[dict], fig_dir: Path | None, num_trials
     the task's ``task.py`` says, through ``hnn_analysis.paper.registry``). A row's ``"seconds"``: the
     group's evaluation time shared equally, and the figures'. ``num_trials``: the trials of each energy
     protocol, when not its own (``--quick``: ``QUICK_TRIALS``)."""
+    from hnn_analysis.paper import registry
     tic = time.perf_counter()
     loaded = [load_runs(task, by_label) for by_label in runs]
     energies = registry.evaluate_seeds([trained for trained, _ in loaded], num_trials)
@@ -101,6 +107,7 @@ def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
          models=MODELS) -> list[sweep.Job]:
     """The run of every row and seed, for the paper's two models and the extra ``models`` kinds
     the row's task has; ``steps`` overrides the tasks' ``total_steps``."""
+    from hnn import sweep
     jobs = []
     for spec in rows:
         for seed in spec.get("seeds") or seeds:
@@ -131,6 +138,7 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
                   models=MODELS, num_trials: int | None = None) -> None:
     """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
     each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
+    from hnn import sweep
     progress = sweep.Progress(len(rows))
     print(f"  {progress.tag()} evaluating {len(rows)} rows" + (" and drawing their figures" if fig_dir else ""),
           flush=True)
