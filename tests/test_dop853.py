@@ -75,3 +75,21 @@ def test_dop853_takes_fewer_field_calls_than_dopri5_at_tight_tolerances(spring):
         np.testing.assert_allclose(traj.numpy(), _spring_solution(x0.numpy(), t), atol=1e-8)
         calls[method] = stats["nfev"]
     assert calls["dop853"] < calls["dopri5"] / 2, calls
+
+
+def test_a_field_tied_to_row_positions_gets_every_row_in_every_call_dense_stages_too():
+    # two oscillators 30x apart in frequency take different steps, so only some rows have an output time in a
+    # step: with drop_finished=False the dense stages are evaluated on every row as well (a group's field, a
+    # per-row time scale), and each row's path is the one it takes alone
+    omega = torch.tensor([[1.0], [30.0]], dtype=torch.float64)
+    sizes = []
+
+    def f(x):
+        sizes.append(len(x))
+        return omega[:len(x)] * torch.stack([x[:, 1], -x[:, 0]], 1)
+    x0 = torch.tensor([[1.0, 0.0], [1.0, 0.0]], dtype=torch.float64)
+    t = np.linspace(0.0, 2.0, 7)
+    together = hnn.rollout(f, x0, t, method="dop853", rtol=1e-9, atol=1e-9, drop_finished=False)
+    assert set(sizes) == {2}, sorted(set(sizes))
+    exact = torch.stack([torch.cos(omega * torch.as_tensor(t)), -torch.sin(omega * torch.as_tensor(t))], -1)
+    torch.testing.assert_close(together, exact, rtol=0, atol=1e-6)

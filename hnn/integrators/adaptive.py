@@ -270,14 +270,17 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         if due.any():
             # every output time inside (tc, t_new] of an accepted row, from the dense output
             i = np.flatnonzero(due)
-            evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], np.ascontiguousarray(K[:, i]))
+            # a field that ties a row to its position (drop_finished=False) is given every row in every call,
+            # the dense stages' too (dop853's): at, the due rows' places among the rows it was given
+            given, at = (i, np.arange(len(i))) if drop_finished else (np.arange(len(y)), i)
+            evaluate, calls = scheme.dense(field, y[given], y_new[given], hx[given], np.ascontiguousarray(K[:, given]))
             nfev += calls
             j = np.arange(len(i))
             while len(j):
                 ij = i[j]
                 tn = t[nxt[ij]]
                 sigma = ((tn - tc[ij]) / h[ij]).astype(dtype)
-                out[rows[ij], nxt[ij]] = evaluate(sigma, j)
+                out[rows[ij], nxt[ij]] = evaluate(sigma, at[j])
                 nxt[ij] += 1
                 more = nxt[ij] < num_t
                 more[more] = direction * (t[nxt[ij[more]]] - t_new[ij[more]]) <= near
