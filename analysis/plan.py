@@ -4,8 +4,9 @@ per-run costs, and the total on this box.
     jobs = plan.timed(jobs)                                  # each run's training, measured now
     plan.say("reproduce", [plan.training(jobs, 2), plan.Stage("evaluate", 7, "rows")], jobs=2)
 
-A run's training estimate is its steps at the rate of that config alone on one thread over short bursts
-(``training_cost``: about half a second a config, seeds aside), set as the job's ``expected_seconds``, so the
+A run's training estimate is its steps at the rate of that config alone on one thread over a short burst
+(``training_cost``, once a config, seeds aside) and what a run costs beside its steps (``overhead``: a
+one-step run of its task, timed once), set as the job's ``expected_seconds``, so the
 sweep also starts the longest first and says its time left at the rate the estimates run at
 (``hnn.sweep.train_jobs``). The runs are shared over ``--jobs`` workers longest first (``schedule``). A stage
 whose cost is not known before it runs (a model's measurement) is counted and timed from its first units
@@ -17,9 +18,11 @@ from __future__ import annotations
 import dataclasses
 import heapq
 import os
+import tempfile
 import time
 from dataclasses import dataclass
 
+import hnn
 from hnn.progress import Rate, say_left
 
 
@@ -38,15 +41,17 @@ class Stage:
 BURSTS, BURST_SECONDS = 1, 0.05
 
 
-def timed(jobs: list, cost=None) -> list:
-    """``jobs`` (``hnn.sweep.Job``), each with its ``expected_seconds`` measured (``cost(task, args)``, default
-    one short burst of ``training_cost``), once per config whatever its seed; a job that has one keeps it."""
+def timed(jobs: list, cost=None, overhead_of=None) -> list:
+    """``jobs`` (``hnn.sweep.Job``), each with its ``expected_seconds`` measured: ``cost(task, args)["seconds"]``
+    (default one short burst of ``training_cost``), once per config whatever its seed, plus ``overhead_of(job)``
+    (default ``overhead``), once per task; a job that has one keeps it."""
+    overhead_of = overhead_of or overhead
     if cost is None:
         from hnn_analysis.training_cost import training_cost
 
         def cost(task, args):
             return training_cost(task, args, BURSTS, BURST_SECONDS)
-    measured, out = {}, []
+    measured, overheads, out = {}, {}, []
     for job in jobs:
         if job.expected_seconds is None:
             args = {**job.config.to_dict(), "seed": 0}
@@ -56,9 +61,26 @@ def timed(jobs: list, cost=None) -> list:
                     measured[key] = cost(job.task, args)["seconds"]
                 except Exception:       # a config whose first steps fail: its run fails (and says why) in the sweep
                     measured[key] = None
-            job = dataclasses.replace(job, expected_seconds=measured[key])
+            if job.task not in overheads:
+                overheads[job.task] = overhead_of(job) if measured[key] is not None else 0.0
+            seconds = None if measured[key] is None else measured[key] + overheads[job.task]
+            job = dataclasses.replace(job, expected_seconds=seconds)
         out.append(job)
     return out
+
+
+def overhead(job) -> float:
+    """A run's seconds beside its steps (its data prepared, its model built, its final losses, its folder
+    saved): a run of ``job``'s config of one step, in a folder of its own, timed (0 where it fails); for the
+    short runs of a quick study this is most of a run."""
+    from hnn.threads import torch_threads
+    with tempfile.TemporaryDirectory(prefix="plan-") as tmp, torch_threads(1):
+        tic = time.perf_counter()
+        try:
+            hnn.run_experiment(dataclasses.replace(job.config, total_steps=0, save_dir=tmp))
+        except Exception:       # its run fails (and says why) in the sweep
+            return 0.0
+        return time.perf_counter() - tic
 
 
 def schedule(seconds: list[float], workers: int) -> float:

@@ -25,10 +25,12 @@ def test_a_jobs_training_is_measured_once_per_config_whatever_its_seed(tmp_path)
     jobs = [sweep.Job(f"spring/{kind}/seed{seed}", "spring",
                       hnn.tasks.task_config("spring", {"model": kind, "seed": seed, "save_dir": str(tmp_path)}))
             for kind in ("baseline", "hnn") for seed in (0, 1, 2)]
-    timed = plan.timed(jobs, cost)
-    assert len(calls) == 2 and [j.expected_seconds for j in timed] == [1.0] * 3 + [2.5] * 3
+    timed = plan.timed(jobs, cost, overhead_of=lambda job: 0.5)       # a run's cost beside its steps, once a task
+    assert len(calls) == 2 and [j.expected_seconds for j in timed] == [1.5] * 3 + [3.0] * 3
     stage = plan.training(timed, 2)
-    assert (stage.count, stage.seconds) == (6, 5.5)        # two workers: 2.5 + 2.5 | 2.5 + 1 + 1 + 1
+    assert (stage.count, stage.seconds) == (6, 7.5)        # two workers: 3 + 3 | 3 + 1.5 + 1.5 + 1.5
+    # the default overhead: a one-step run of the task, timed, in a folder of its own
+    assert 0 < plan.overhead(jobs[0]) and not any(tmp_path.iterdir())
 
 
 def test_a_study_prints_its_plan_with_a_measured_estimate_before_it_starts(tmp_path, capsys):
