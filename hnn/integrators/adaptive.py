@@ -110,8 +110,8 @@ class _Dopri5:
         err *= err
         return stage, np.sqrt(err.mean(1)).astype(np.float64, copy=False), 6
 
-    def dense(self, field, y, y_new, hx, K):
-        Q = torch.mm(self.PT, torch.from_numpy(K.reshape(7, -1))).numpy().reshape(4, *y.shape)
+    def dense(self, field, y, y_new, hx, work: Stages):
+        Q = torch.mm(self.PT, work.flat).numpy().reshape(4, *y.shape)
 
         def evaluate(sigma, j):
             powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
@@ -219,6 +219,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     work = Stages.empty(scheme.stages, batch, dim, dtype)           # the stage derivatives, work.K
     t_end = float(t[-1])
     near = 1e-12 * max(abs(t_end), 1.0)
+    forward = direction * t                                         # the output times, ascending
 
     def scale_tol(y, y_new):
         scale = np.maximum(np.abs(y), np.abs(y_new))
@@ -265,20 +266,23 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         t_new = np.where(clipped, t_end, tc + h)
         due = accept & (direction * (t[np.minimum(nxt, num_t - 1)] - t_new) <= near)
         if due.any():
-            # every output time inside (tc, t_new] of an accepted row, from the dense output
+            # every output time inside (tc, t_new] of an accepted row, from the dense output, all at once:
+            # each due row's times from nxt on that pass the test (monotone in the index); searchsorted
+            # on the times in the direction of travel bounds them, with room for its rounding
             i = np.flatnonzero(due)
-            evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], np.ascontiguousarray(K[:, i]))
+            stages = work if len(i) == len(y) else Stages(np.ascontiguousarray(K[:, i]))
+            evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], stages)
             nfev += calls
-            j = np.arange(len(i))
-            while len(j):
-                ij = i[j]
-                tn = t[nxt[ij]]
-                sigma = ((tn - tc[ij]) / h[ij]).astype(dtype)
-                out[rows[ij], nxt[ij]] = evaluate(sigma, j)
-                nxt[ij] += 1
-                more = nxt[ij] < num_t
-                more[more] = direction * (t[nxt[ij[more]]] - t_new[ij[more]]) <= near
-                j = j[more]
+            first = nxt[i]
+            counts = np.minimum(np.searchsorted(forward, direction * t_new[i] + 2 * near, side="right"), num_t) - first
+            j = np.repeat(np.arange(len(i)), counts)                # a due row (index into i) per output
+            k = np.arange(len(j)) + np.repeat(first - (np.cumsum(counts) - counts), counts)     # its output time
+            inside = direction * (t[k] - t_new[i[j]]) <= near
+            j, k = j[inside], k[inside]
+            ij = i[j]
+            sigma = ((t[k] - tc[ij]) / h[ij]).astype(dtype)
+            out[rows[ij], k] = evaluate(sigma, j)
+            nxt[i] += np.bincount(j, minlength=len(i))
             done |= nxt >= num_t
         if accept.all():
             y, k1, tc = y_new, K[scheme.fsal].copy(), t_new

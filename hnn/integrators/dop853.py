@@ -192,11 +192,12 @@ class DOP853:
         work.K[12] = field(y_new)
         return y_new, err_norm, 12
 
-    def dense(self, field, y: np.ndarray, y_new: np.ndarray, hx: np.ndarray, K: np.ndarray):
-        """The continuous extension on ``rows`` states: ``(evaluate(sigma, j), field calls)``,
-        ``evaluate`` giving the state at ``t + sigma h`` of the rows ``j`` (indices into these rows)."""
+    def dense(self, field, y: np.ndarray, y_new: np.ndarray, hx: np.ndarray, work: Stages):
+        """The continuous extension on ``rows`` states, whose step's stages ``work`` holds (its ``K[13:16]``
+        are filled here): ``(evaluate(sigma, j), field calls)``, ``evaluate`` giving the state at
+        ``t + sigma h`` of the rows ``j`` (indices into these rows)."""
         rows, dim = y.shape
-        work = Stages(K)
+        K = work.K
         rk_stages(field, self.A_rows, (13, 14, 15), y, hx, work)
         diff = y_new - y
         bspl = hx * K[0] - diff
