@@ -115,7 +115,7 @@ def test_comparisons_give_the_ratio_at_every_shared_level():
         for error in errors:
             rows.append({"task": "spring", "model": "hnn", "batch": 64, "solver": solver, "status": "ok",
                          "error": error, "seconds": scale * error ** -0.2, "field_s": 0.5 * error ** -0.2,
-                         "calls": 100 * error ** -0.2})
+                         "calls": 100 * error ** -0.2, "rows": 6400 * error ** -0.2})
     found = comparisons(rows)
     levels = [c["level"] for c in found]
     assert levels == [lv for lv in LEVELS if 1e-9 <= lv <= 1e-5]            # only where both curves reach

@@ -46,18 +46,18 @@ def at_error(front, error: float, index: int = 1) -> float | None:
 
 
 def curves(rows: list[dict]) -> dict:
-    """``{(task, model, batch, solver): front of (error, seconds, field seconds, calls)}``."""
+    """``{(task, model, batch, solver): front of (error, seconds, field seconds, calls, rows evaluated)}``."""
     points: dict = {}
     for r in rows:
         if r["status"] == "ok":
             key = (r["task"], r["model"], r["batch"], r["solver"])
-            points.setdefault(key, []).append((r["error"], r["seconds"], r["field_s"], r["calls"]))
+            points.setdefault(key, []).append((r["error"], r["seconds"], r["field_s"], r["calls"], r["rows"]))
     return {key: pareto_front(p) for key, p in points.items()}
 
 
 def comparisons(rows: list[dict]) -> list[dict]:
     """At every level of ``LEVELS`` both curves reach: ours and each peer's seconds, their ratio (peer /
-    ours), the calls of each, and the bound (peer seconds / the seconds ours spent inside the field):
+    ours), the calls and rows evaluated of each, and the bound (peer seconds / the seconds ours spent inside the field):
     the most a solver with no work of its own, making our calls, could gain."""
     fronts = curves(rows)
     out = []
@@ -73,7 +73,8 @@ def comparisons(rows: list[dict]) -> list[dict]:
                     continue
                 out.append({"task": task, "model": model, "batch": batch, "ours": ours, "peer": peer, "level": level,
                             "ours_s": a, "peer_s": b, "ratio": b / a, "bound": b / at_error(mine, level, 2),
-                            "ours_calls": at_error(mine, level, 3), "peer_calls": at_error(theirs, level, 3)})
+                            "ours_calls": at_error(mine, level, 3), "peer_calls": at_error(theirs, level, 3),
+                            "ours_rows": at_error(mine, level, 4), "peer_rows": at_error(theirs, level, 4)})
     return out
 
 
@@ -111,11 +112,12 @@ def level_table(results: dict, task: str, model: str) -> list[str]:
     """Every error level of one field: the seconds of ours and of each peer there, the ratio and the bound."""
     comps = [c for c in comparisons(results["rows"]) if (c["task"], c["model"]) == (task, model)]
     lines = ["| states | error | ours | ours (s) | peer | peer (s) | peer / ours | calls: peer / ours | "
-             "bound: peer / our field time |", "| ---: | ---: | --- | ---: | --- | ---: | ---: | ---: | ---: |"]
+             "rows: peer / ours | bound: peer / our field time |",
+             "| ---: | ---: | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: |"]
     for c in comps:
         lines.append(f"| {c['batch']} | {c['level']:.0e} | {c['ours'].split()[1]} | {c['ours_s']:.4f} | {c['peer']} | "
                      f"{c['peer_s']:.4f} | {c['ratio']:.2f}x | {c['peer_calls'] / c['ours_calls']:.2f} | "
-                     f"{c['bound']:.2f}x |")
+                     f"{c['peer_rows'] / c['ours_rows']:.2f} | {c['bound']:.2f}x |")
     return lines
 
 
