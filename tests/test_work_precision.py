@@ -151,3 +151,4 @@ def test_the_quick_path_writes_the_work_precision_rows(tmp_path, monkeypatch):
     text = (tmp_path / "out" / "work_precision.md").read_text()
     assert "Seconds at equal error" in text and "| spring | hnn | 64 | dop853 |" in text
     assert (tmp_path / "out" / "work-precision-spring.png").stat().st_size > 10_000
+    assert (tmp_path / "out" / "work-precision.png").stat().st_size > 10_000

@@ -21,8 +21,9 @@ settings for their error), and the ratio peer / ours. ``why``: the issue's measu
 spring HNN, 64 starts uniform in [-1, 1]^2, t in [0, 30]) taken apart: the error norm, the error
 estimator and the output times, one at a time.
 
-Writes ``<out>/work_precision.json`` and ``.md``, ``<out>/work-precision-<task>.png``; ``--update-docs``
-also the ``work-precision`` section of docs/integrators.md and the figures in docs/figures/.
+Writes ``<out>/work_precision.json`` and ``.md``, ``<out>/work-precision-<task>.png`` (each model and batch)
+and ``<out>/work-precision.png`` (the HNN on every task); ``--update-docs`` also the ``work-precision``
+section of docs/integrators.md and that last figure in docs/figures/.
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ from hnn.io import atomic_write
 from hnn_analysis import commands
 from hnn_analysis.integrator_study import peer_solvers
 from hnn_analysis.integrator_study.work_precision_measure import MODELS, QUICK_RTOLS, RTOLS, TASKS, measure_task, why
-from hnn_analysis.integrator_study.work_precision_report import markdown, plot, why_table
+from hnn_analysis.integrator_study.work_precision_report import markdown, overview, plot, why_table
 from hnn_analysis.provenance import cpu_snapshot, others_load, provenance
 
 
@@ -73,15 +74,14 @@ def main(argv=None) -> dict:
                        "mode": "quick" if args.quick else "full", "seconds": time.perf_counter() - start,
                        "others_load": others_load(load_start, cpu_snapshot()), "peers": peer_solvers.versions(),
                        "repeats": 1 if args.quick else args.repeats, "out": commands.portable_path(out)}
-    figures = [plot(task, [r for r in results["rows"] if r["task"] == task], out / f"work-precision-{task}.png")
-               for task in tasks if any(r["task"] == task for r in results["rows"])]
+    for task in dict.fromkeys(r["task"] for r in results["rows"]):
+        plot(task, [r for r in results["rows"] if r["task"] == task], out / f"work-precision-{task}.png")
+    figure = overview(results["rows"], out / "work-precision.png") if results["rows"] else None
     why_text = "\n" + why_table(results["why"]) if results["why"] else ""
     text, section = markdown(results) + why_text, markdown(results, detail=False) + why_text
     commands.publish(out, "work_precision", results, text, {"work-precision": section} if args.update_docs else {})
-    if args.update_docs:
-        target = root / "docs" / "figures"
-        for figure in figures:
-            atomic_write(target / figure.name, lambda tmp, figure=figure: shutil.copyfile(figure, tmp))
+    if args.update_docs and figure is not None:         # the page shows the HNN's panels; each task's are in out
+        atomic_write(root / "docs" / "figures" / figure.name, lambda tmp: shutil.copyfile(figure, tmp))
     print(f"total {results['meta']['seconds']:.0f} s; wrote {out}")
     return results
 

@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import matplotlib.ticker
+
 from hnn_analysis.provenance import machine
 
 LEVELS = tuple(10.0 ** (-k / 2) for k in range(4, 21))      # error levels: 1e-2 .. 1e-10, half decades
@@ -178,31 +180,54 @@ def markdown(results: dict, detail: bool = True) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _panel(ax, rows: list[dict], title: str) -> None:
+    """Error against seconds on ``ax``: every solver's settings faint, its Pareto front bold; ours solid."""
+    for solver in dict.fromkeys(r["solver"] for r in rows):
+        mine = [r for r in rows if r["solver"] == solver and r["status"] == "ok" and r["error"] > 0]
+        if not mine:
+            continue
+        style = "o-" if solver in OURS else "s--"
+        line, = ax.loglog(*zip(*sorted((r["seconds"], r["error"]) for r in mine)), style, ms=3, lw=1, alpha=0.3)
+        front = pareto_front([(r["error"], r["seconds"]) for r in mine])
+        ax.loglog([p[1] for p in front], [p[0] for p in front], style, ms=4, lw=1.5, color=line.get_color(),
+                  label=solver)
+    ax.set(title=title, xlabel="seconds (float64, 1 thread)", ylabel="max error")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+
+
 def plot(task: str, rows: list[dict], path: Path) -> Path:
-    """Error against seconds, log-log, one panel per model and batch: ours solid, the peers dashed."""
-    from hnn_analysis.plotting import plt, save_figure
+    """One task: a panel per model and batch (columns and rows)."""
     models = list(dict.fromkeys(r["model"] for r in rows))
     batches = sorted({r["batch"] for r in rows}, reverse=True)
-    fig, axes = plt.subplots(len(batches), len(models), figsize=(5.5 * len(models), 4 * len(batches)), squeeze=False)
-    fronts = curves(rows)
-    for i, batch in enumerate(batches):
-        for j, model in enumerate(models):
-            ax = axes[i][j]
-            for solver in dict.fromkeys(r["solver"] for r in rows):
-                pts = sorted((r["seconds"], r["error"]) for r in rows if (r["model"], r["batch"], r["solver"]) ==
-                             (model, batch, solver) and r["status"] == "ok" and r["error"] > 0)
-                if not pts:
-                    continue
-                style = "o-" if solver in OURS else "s--"
-                line, = ax.loglog(*zip(*pts), style, ms=3, lw=1, alpha=0.35, label=None)
-                front = fronts.get((task, model, batch, solver), [])
-                ax.loglog([p[1] for p in front], [p[0] for p in front], style, ms=4, lw=1.5, color=line.get_color(),
-                          label=solver)
-            ax.set(title=f"{task} {model}: {batch} state{'s' if batch > 1 else ''}", xlabel="seconds (float64, 1 thread)",
-                   ylabel="max error")
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7)
-    fig.suptitle(f"{task}: work-precision of the adaptive solvers on learned fields (faint: every tolerance; "
-                 "bold: the Pareto front)", fontsize=9)
+    return _grid([[(f"{task} {model}: {_states(batch)}", [r for r in rows if (r["model"], r["batch"]) == (model, batch)])
+                   for model in models] for batch in batches], path,
+                 f"{task}: work-precision of the adaptive solvers on learned fields (faint: every tolerance; "
+                 "bold: the Pareto front)")
+
+
+def overview(rows: list[dict], path: Path, model: str = "hnn") -> Path:
+    """``model`` on every task: a panel per task and batch (columns and rows), the page's figure."""
+    tasks = list(dict.fromkeys(r["task"] for r in rows if r["model"] == model))
+    batches = sorted({r["batch"] for r in rows}, reverse=True)
+    return _grid([[(f"{task} {model}: {_states(batch)}", [r for r in rows if (r["task"], r["model"], r["batch"]) ==
+                                                            (task, model, batch)]) for task in tasks] for batch in batches],
+                 path, f"Work-precision on the learned {model} fields (faint: every tolerance; bold: the Pareto "
+                       "front; ours solid, the peers dashed)")
+
+
+def _states(batch: int) -> str:
+    return f"{batch} state{'s' if batch > 1 else ''}"
+
+
+def _grid(panels: list[list[tuple[str, list[dict]]]], path: Path, title: str) -> Path:
+    from hnn_analysis.plotting import plt, save_figure
+    fig, axes = plt.subplots(len(panels), len(panels[0]), figsize=(4.6 * len(panels[0]), 3.6 * len(panels)),
+                             squeeze=False)
+    for row, axes_row in zip(panels, axes):
+        for (name, rows), ax in zip(row, axes_row):
+            _panel(ax, rows, name)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)
