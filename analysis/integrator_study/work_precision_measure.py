@@ -173,7 +173,7 @@ def why(runs: Path, rtols=(1e-7, 1e-9)) -> dict | None:
             solver = tde.Dopri5Solver
             own = solver.tableau
             if estimator is not None:           # b - b_hat of the 4th-order formula given, for one run
-                b = torch.tensor(own.c_sol, dtype=torch.float64)
+                b = own.c_sol.to(torch.float64)
                 solver.tableau = own._replace(c_error=b - torch.tensor(estimator, dtype=torch.float64))
             try:
                 with torch.no_grad(), hnn.modes.frozen_weights(), torch_threads(1):
