@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 import hnn
+from hnn.cli import int_at_least
 from hnn.io import atomic_write
 from hnn_analysis import commands
 from hnn_analysis.integrator_study import peer_solvers
@@ -48,12 +49,10 @@ def main(argv=None) -> dict:
     p.add_argument("--runs", type=Path, default=None, help="saved runs (default <repo>/results/runs)")
     commands.add_flags(p, out="output folder (default <repo>/results/work_precision)",
                        quick="the spring HNN alone, 3 tolerances, one round, no why table")
-    p.add_argument("--repeats", type=int, default=3, help="timed rounds (the median is kept)")
+    p.add_argument("--repeats", type=int_at_least(1), default=3, help="timed rounds (the median is kept)")
     commands.add_flags(p, update_docs="write the work-precision section of docs/integrators.md and its figures")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(argv)
-    if args.repeats < 1:
-        p.error(f"--repeats {args.repeats}: at least one round")
     if args.update_docs and args.quick:
         p.error("--update-docs writes the full ladder into docs/integrators.md; drop --quick")
     root = hnn.tasks.repo_root()
