@@ -194,7 +194,6 @@ def _panel(ax, rows: list[dict], title: str) -> None:
     ax.set(title=title, xlabel="seconds (float64, 1 thread)", ylabel="max error")
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
 
 
 def plot(task: str, rows: list[dict], path: Path) -> Path:
@@ -223,11 +222,15 @@ def _states(batch: int) -> str:
 
 def _grid(panels: list[list[tuple[str, list[dict]]]], path: Path, title: str) -> Path:
     from hnn_analysis.plotting import plt, save_figure
-    fig, axes = plt.subplots(len(panels), len(panels[0]), figsize=(4.6 * len(panels[0]), 3.6 * len(panels)),
+    fig, axes = plt.subplots(len(panels), len(panels[0]), figsize=(3.9 * len(panels[0]), 3.1 * len(panels)),
                              squeeze=False)
     for row, axes_row in zip(panels, axes):
         for (name, rows), ax in zip(row, axes_row):
             _panel(ax, rows, name)
+    legend = {}                                  # one legend for the figure: every solver any panel drew
+    for ax in axes.flat:
+        legend.update(zip(*reversed(ax.get_legend_handles_labels())))
+    fig.legend(legend.values(), legend.keys(), loc="lower center", ncol=len(legend), fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     return save_figure(fig, path)
