@@ -150,5 +150,6 @@ def test_the_quick_path_writes_the_work_precision_rows(tmp_path, monkeypatch):
     assert saved["meta"]["peers"]["scipy"] and len(saved["rows"]) == len(rows)
     text = (tmp_path / "out" / "work_precision.md").read_text()
     assert "Seconds at equal error" in text and "| spring | hnn | 64 | dop853 |" in text
+    assert "seconds at each error level" in text and "every error level and pair" in text
     assert (tmp_path / "out" / "work-precision-spring.png").stat().st_size > 10_000
     assert (tmp_path / "out" / "work-precision.png").stat().st_size > 10_000

@@ -123,6 +123,26 @@ def level_table(results: dict, task: str, model: str) -> list[str]:
     return lines
 
 
+def seconds_table(results: dict, task: str, model: str) -> list[str]:
+    """One field at every error level one of ours reaches: each solver's seconds there (interpolated on its
+    own curve; blank where its curve does not reach) and the seconds ours spent inside the field."""
+    fronts = {key[2:]: front for key, front in curves(results["rows"]).items() if key[:2] == (task, model)}
+    solvers = list(dict.fromkeys(r["solver"] for r in results["rows"]))
+    lines = ["| states | error | " + " | ".join(f"{s} (s)" for s in solvers) + " | " +
+             " | ".join(f"{s.split()[1]} in the field (s)" for s in OURS) + " |",
+             "| ---: | ---: |" + " ---: |" * (len(solvers) + len(OURS))]
+    for batch in sorted({key[0] for key in fronts}, reverse=True):
+        for level in LEVELS:
+            mine = [at_error(fronts.get((batch, s), []), level) for s in OURS]
+            if all(m is None for m in mine):
+                continue
+            cells = [at_error(fronts.get((batch, s), []), level) for s in solvers]
+            field = [at_error(fronts.get((batch, s), []), level, 2) for s in OURS]
+            lines.append(f"| {batch} | {level:.0e} | " + " | ".join("" if c is None else f"{c:.4f}" for c in cells + field)
+                         + " |")
+    return lines
+
+
 def profile_table(results: dict, task: str, model: str, rtols=(1e-7, 1e-9)) -> list[str]:
     """Where each solver's seconds go on one field at ``rtols``: inside the field's calls, and its own."""
     lines = ["| states | rtol | solver | seconds | error | calls | rows a call | in the field (s) | own (s) | "
@@ -163,14 +183,18 @@ def header(results: dict) -> str:
 
 
 def markdown(results: dict, detail: bool = True) -> str:
-    """The whole report (``detail``: every field's level table, else the learned spring HNN's alone)."""
+    """The whole report (``detail``: every field's tables, else the learned spring HNN's seconds alone)."""
     lines = [header(results), "", f"**Seconds at equal error, peer / ours** (min-max over the error levels both "
              f"reach; in brackets, the levels where ours is at least {GOAL:g}x faster)", "", *summary_table(results)]
     fields = list(dict.fromkeys((r["task"], r["model"]) for r in results["rows"]))
     for task, model in (fields if detail else [f for f in fields if f == ("spring", "hnn")]):
-        lines += ["", f"**{task} {model}, every error level** (the bound: the peer's seconds over the seconds "
-                      "ours spent inside the field, the most a solver of no cost of its own could reach with our "
-                      "calls)", "", *level_table(results, task, model)]
+        lines += ["", f"**{task} {model}: seconds at each error level** (each solver on its own curve; the last "
+                      "columns: the seconds ours spent inside the field's calls, under which no solver making our "
+                      "calls can go)", "", *seconds_table(results, task, model)]
+    for task, model in (fields if detail else []):
+        lines += ["", f"**{task} {model}, every error level and pair** (the bound: the peer's seconds over the "
+                      "seconds ours spent inside the field, the most a solver of no cost of its own could reach "
+                      "with our calls)", "", *level_table(results, task, model)]
     for task, model in [f for f in fields if f == ("spring", "hnn")]:
         lines += ["", f"**{task} {model}: where the seconds go** (in the field: inside the field's calls; own: "
                       "the rest, the solver's own work; one call alone: the field on the same states, timed in a "
