@@ -153,3 +153,17 @@ def test_the_quick_path_writes_the_work_precision_rows(tmp_path, monkeypatch):
     assert "seconds at each error level" in text and "every error level and pair" in text
     assert (tmp_path / "out" / "work-precision-spring.png").stat().st_size > 10_000
     assert (tmp_path / "out" / "work-precision.png").stat().st_size > 10_000
+
+
+def test_a_solver_that_diverges_is_a_row_that_says_so_not_a_crash():
+    def blow_up(x):                     # dx/dt = x^2 from x = 1: infinite at t = 1
+        return x * x
+    x0 = torch.ones(2, 2, dtype=torch.float64)
+    t = np.linspace(0.0, 0.5, 5)
+    runners = {"fine": lambda f, x0, t, rtol, atol: hnn.rollout(f, x0, t, method="dopri5", rtol=rtol, atol=atol),
+               "diverges": lambda f, x0, t, rtol, atol: hnn.rollout(f, x0, t * 4, method="dopri5", rtol=rtol,
+                                                                     atol=atol)}
+    rows = work_precision_measure.measure(blow_up, x0, t, (1e-4, 1e-6), repeats=2, runners=runners)
+    status = {(r["solver"], r["rtol"]): r["status"] for r in rows}
+    assert status[("fine", 1e-4)] == "ok" and status[("diverges", 1e-6)].startswith("DivergenceError")
+    assert all(r["error"] < 1e-3 for r in rows if r["solver"] == "fine")
