@@ -51,16 +51,17 @@ def solver_settings(separable: bool, rtols, dts, adaptive_variants=ADAPTIVE_VARI
     return out
 
 
-def timed_rollout(f, x0, t, options, repeats: int, enough: float = 1.0):
+def timed_rollout(f, x0, t, options, repeats: int, enough: float = 1.0, runner=hnn.rollout):
     """(median seconds, trajectory, stats) of up to ``repeats`` identical rollouts; one taking over
-    ``enough`` seconds ends the repeats (long enough that noise does not dominate it)."""
+    ``enough`` seconds ends the repeats (long enough that noise does not dominate it). ``runner``:
+    ``hnn.rollout``, or a peer's solver of the same call (``peer_solvers.Peer.run``)."""
     seconds, traj, stats = [], None, {}
     for _ in range(repeats):
         stats = {}
         start = time.perf_counter()
         with torch.no_grad(), warnings.catch_warnings():
             warnings.simplefilter("ignore")         # tolerances are kept within the dtype (see _settings)
-            traj = hnn.rollout(f, x0, t, stats=stats, **options)
+            traj = runner(f, x0, t, stats=stats, **options)
         seconds.append(time.perf_counter() - start)
         if seconds[-1] > enough:
             break

@@ -15,6 +15,11 @@ reference of the same field (the model's own field for a model):
   model's learned H (the HNN);
 - nfev: batched evaluations of the field.
 
+Beside ours, the peers' adaptive solvers a user would otherwise call, at the same tolerances and on
+the same fields: scipy's RK45 and DOP853 (through ``hnn.rollout``'s ``solve_ivp``) and torchdiffeq's
+``dopri5`` and ``dopri8`` (``peer_solvers``; the ``bench`` extra, left out with a note where it is not
+installed; the versions are recorded). ``work_precision.py`` compares them at equal error.
+
 Settings: rtol 1e-3 .. 1e-12 for the adaptive methods (with atol = rtol; in float32 only rtol >=
 100 eps, tighter ones would only warn), dt over two decades for the fixed-step ones on the true
 systems and over the coarse decade on the models (each model call costs 5-10x a true one).
@@ -35,7 +40,8 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, plan
-from hnn_analysis.integrator_study.speed_measure import extremes, measure_task, study_settings
+from hnn_analysis.integrator_study import peer_solvers
+from hnn_analysis.integrator_study.speed_measure import STUDY_PEERS, extremes, measure_task, study_settings
 from hnn_analysis.integrator_study.speed_report import markdown, pareto_plot, summary_markdown
 from hnn_analysis.provenance import provenance
 
@@ -53,7 +59,8 @@ def main(argv=None) -> dict:
     root = hnn.tasks.repo_root()
     runs = args.runs or root / "results" / "runs"
     out = args.out or root / "results" / "speed_accuracy"
-    notes = []
+    notes = [f"{peer}: not installed (pip install -e '.[bench]'); its rows are left out"
+             for peer in STUDY_PEERS if not peer_solvers.PEERS[peer].available()]
     if not runs.is_dir():
         notes.append(f"no runs folder {runs}: learned models skipped (train them with analysis/reproduce.py)")
         runs = None
@@ -77,6 +84,7 @@ def main(argv=None) -> dict:
     results["extremes"] = extremes(args.quick, runs, notes)
     results["meta"] = {**provenance(), "command": commands.portable_command(argv, "analysis/integrator_study/speed_accuracy.py"),
                        "mode": "quick" if args.quick else "full grid", "seconds": time.perf_counter() - start,
+                       "peers": peer_solvers.versions(),
                        "out": commands.portable_path(out)}
     summary = summary_markdown(results)
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text(summary))

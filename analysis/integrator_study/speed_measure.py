@@ -12,11 +12,15 @@ import numpy as np
 import torch
 
 import hnn
+from hnn_analysis.integrator_study import peer_solvers
 from hnn_analysis.integrator_study.settings import solver_settings, start_states, timed_rollout
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 RTOLS = (1e-3, 1e-6, 1e-9, 1e-12)
 QUICK_RTOLS = (1e-3, 1e-9)
+# the peers' adaptive solvers measured beside ours at the same tolerances (scipy's RK45 and DOP853 are
+# already in the grid, as hnn.rollout's solve_ivp); left out where torchdiffeq is not installed
+STUDY_PEERS = ("torchdiffeq dopri5", "torchdiffeq dopri8")
 # per task: the horizon, the fixed steps (two decades), how many start states
 
 
@@ -99,7 +103,11 @@ def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes:
             ref = hnn.rollout(per_dtype["float64"], x0, t, scipy_method="DOP853", rtol=1e-12, atol=1e-12)
         separable = kind == "model" and hnn.MODEL_KINDS[label].separable
         carries_h = hnn.interface.carries_energy(per_dtype["float64"])
-        for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable, carries_h):
+        grid = [(method, options, hnn.rollout)
+                for method, options in _settings(kind, quick, tuple(dt * scale for dt in cfg["dts"]), separable, carries_h)]
+        grid += [(peer.name, {"rtol": rtol, "atol": rtol}, peer.run) for rtol in (QUICK_RTOLS if quick else RTOLS)
+                 for peer in peer_solvers.available(STUDY_PEERS)]
+        for method, options, runner in grid:
             for dname, dtype in DTYPES.items():
                 rtol = options.get("rtol")
                 if rtol is not None and rtol < 100 * torch.finfo(dtype).eps:
@@ -107,7 +115,7 @@ def measure_task(task: str, runs: Path | None, quick: bool, repeats: int, notes:
                 setting = f"rtol={rtol:g}" if rtol is not None else f"dt={options['dt']:g}"
                 row = {"task": task, "model": label, "method": method, "setting": setting, "dtype": dname}
                 try:
-                    sec, traj, stats = timed_rollout(per_dtype[dname], x0.to(dtype), t, options, repeats)
+                    sec, traj, stats = timed_rollout(per_dtype[dname], x0.to(dtype), t, options, repeats, runner=runner)
                 except hnn.DivergenceError as err:
                     row.update(status=type(err).__name__, message=str(err).split(".")[0])
                     rows.append(row)

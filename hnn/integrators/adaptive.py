@@ -7,11 +7,13 @@ All take a checked ``(batch, dim)`` ``x0`` and a float64 grid ``t`` from ``rollo
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 from scipy.integrate import solve_ivp
 
-from .dop853 import DOP853, rk_stages
+from .dop853 import DOP853, Stages, rk_stages, tableau_rows
 from ..errors import DivergenceError, divergence_error
 from .fixed_step import Field
 
@@ -113,21 +115,19 @@ class _Dopri5:
         A = torch.zeros((7, 7), **cpu)
         for i, a in enumerate(_DP_A):
             A[i, :len(a)] = torch.tensor(a, **cpu)
-        self.A_rows = [A[s, :s] for s in range(7)]
-        self.E = torch.tensor(_DP_E, **cpu)
+        self.A_rows = tableau_rows([A[s, :s] for s in range(7)])
+        self.E = torch.tensor(_DP_E, **cpu)[None]
         self.PT = torch.tensor(_DP_P, **cpu).T.contiguous()   # (4, 7)
 
-    def attempt(self, field, y, hx, K, flat, scale_tol):
-        rows, dim = y.shape
-        stage = rk_stages(field, self.A_rows, range(1, 7), y, hx, K, flat)     # the last: the new state (FSAL)
-        err = (self.E @ flat).numpy().reshape(rows, dim)
-        err *= hx
+    def attempt(self, field, y, hx, work: Stages, scale_tol):
+        stage = rk_stages(field, self.A_rows, range(1, 7), y, hx, work)     # the last: the new state (FSAL)
+        err = work.combine(self.E, 7) * hx
         err /= scale_tol(y, stage)
         err *= err
         return stage, np.sqrt(err.mean(1)).astype(np.float64, copy=False), 6
 
-    def dense(self, field, y, y_new, hx, K):
-        Q = (self.PT @ torch.from_numpy(K.reshape(7, -1))).numpy().reshape(4, *y.shape)
+    def dense(self, field, y, y_new, hx, work: Stages):
+        Q = torch.mm(self.PT, work.flat).numpy().reshape(4, *y.shape)
 
         def evaluate(sigma, j):
             powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
@@ -155,7 +155,9 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
 
     Each row is controlled by its own error norm, exactly the norm of one scipy ``solve_ivp``
     call on that row, so one hard trajectory no longer sets the step of the whole batch (as it
-    does in ``'solve_ivp'``, whose norm is the RMS over the batch). Outputs at ``t_eval`` come
+    does in ``'solve_ivp'``, whose norm is the RMS over the batch). The step rule is scipy's but for
+    one clause: scipy lets no step grow right after a rejection, this one does (so a row with a
+    rejected step can part from its scipy call; docs/speed.md, "Tried and not kept"). Outputs at ``t_eval`` come
     from the method's 4th-order dense output, as in scipy. All rows advance in lockstep
     iterations; once a quarter of them have finished, the finished ones are dropped, so ``f``
     sees only rows still running: it must treat rows independently (true of dynamics and of
@@ -182,13 +184,20 @@ def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
     return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
 
 
+@functools.lru_cache(maxsize=None)
+def _built(scheme, dtype: torch.dtype):
+    """``scheme(dtype)``, built once: its tables are constants (building DOP853's took a large share of
+    a short rollout on one state)."""
+    return scheme(dtype)
+
+
 def per_row_rollout(scheme, name: str, f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float, atol: float,
                     max_norm: float | None, max_iterations: int, stats: dict | None,
                     drop_finished: bool = True) -> torch.Tensor:
     """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.integrators.dop853.DOP853``, built for the dtype)
     with one step size per row: the driver of ``dopri5_rollout`` and ``dop853_rollout``."""
     with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
-        return _per_row(scheme(x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,
+        return _per_row(_built(scheme, x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,
                         max_norm, max_iterations, stats, drop_finished)
 
 
@@ -223,9 +232,10 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     bad_time = np.full(batch, np.nan)
     rows = np.arange(batch)
     eps = float(np.finfo(np.float64).eps)
-    K = np.empty((scheme.stages, batch, dim), dtype=dtype)            # the stage derivatives
+    work = Stages.empty(scheme.stages, batch, dim, dtype)           # the stage derivatives, work.K
     t_end = float(t[-1])
     near = 1e-12 * max(abs(t_end), 1.0)
+    forward = direction * t                                         # the output times, ascending
 
     def scale_tol(y, y_new):
         scale = np.maximum(np.abs(y), np.abs(y_new))
@@ -234,57 +244,64 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         return scale
 
     for _ in range(max_iterations):
-        live = int(np.count_nonzero(~done))
+        finished = int(np.count_nonzero(done))
+        live = len(y) - finished
         if live == 0:
             break
         if drop_finished and live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
             err_old = err_old[keep]
-            K = np.empty((scheme.stages, live, dim), dtype=dtype)
+            work = Stages.empty(scheme.stages, live, dim, dtype)
+        K = work.K
         gap = np.abs(t_end - tc)
         clipped = prop >= gap                         # this step ends on the last time
         h = np.minimum(prop, gap)
-        h[done] = 0.0
+        if finished:
+            h[done] = 0.0
         h *= direction
         hx = h.astype(dtype, copy=False)[:, None]
         K[0] = k1
-        # the tableau products in torch: its small products give each row the same bits whatever
-        # the other rows (numpy's BLAS does not), so a row's trajectory does not depend on the batch
-        flat = torch.from_numpy(K.reshape(scheme.stages, -1))
-        y_new, err_norm, calls = scheme.attempt(field, y, hx, K, flat, scale_tol)
+        # the tableau products in torch (work.combine): its small products give each row the same bits
+        # whatever the other rows (numpy's BLAS does not), so a row's path does not depend on the batch
+        y_new, err_norm, calls = scheme.attempt(field, y, hx, work, scale_tol)
         nfev += calls
         # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm
         largest = np.abs(y_new).max(1)
         finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
-        running = ~done
-        blown = ~finite & running
-        too_small = running & finite & (err_norm > 1) & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
-        for mask in (blown, too_small):
-            if mask.any():
-                bad_time[rows[mask]] = tc[mask]
-                done |= mask
+        over = err_norm > 1
+        if over.any() or not finite.all():          # else no row blew up or stalled: skip the masks
+            running = ~done
+            blown = ~finite & running
+            too_small = running & finite & over & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
+            for mask in (blown, too_small):
+                if mask.any():
+                    bad_time[rows[mask]] = tc[mask]
+                    done |= mask
         accept = ~done & (err_norm <= 1)
         t_new = np.where(clipped, t_end, tc + h)
         due = accept & (direction * (t[np.minimum(nxt, num_t - 1)] - t_new) <= near)
         if due.any():
-            # every output time inside (tc, t_new] of an accepted row, from the dense output
+            # every output time inside (tc, t_new] of an accepted row, from the dense output, all at once:
+            # each due row's times from nxt on that pass the test (monotone in the index); searchsorted
+            # on the times in the direction of travel bounds them, with room for its rounding
             i = np.flatnonzero(due)
             # a field that ties a row to its position (drop_finished=False) is given every row in every call,
             # the dense stages' too (dop853's): at, the due rows' places among the rows it was given
             given, at = (i, np.arange(len(i))) if drop_finished else (np.arange(len(y)), i)
-            evaluate, calls = scheme.dense(field, y[given], y_new[given], hx[given], np.ascontiguousarray(K[:, given]))
+            stages = work if len(given) == len(y) else Stages(np.ascontiguousarray(K[:, given]))
+            evaluate, calls = scheme.dense(field, y[given], y_new[given], hx[given], stages)
             nfev += calls
-            j = np.arange(len(i))
-            while len(j):
-                ij = i[j]
-                tn = t[nxt[ij]]
-                sigma = ((tn - tc[ij]) / h[ij]).astype(dtype)
-                out[rows[ij], nxt[ij]] = evaluate(sigma, at[j])
-                nxt[ij] += 1
-                more = nxt[ij] < num_t
-                more[more] = direction * (t[nxt[ij[more]]] - t_new[ij[more]]) <= near
-                j = j[more]
+            first = nxt[i]
+            counts = np.minimum(np.searchsorted(forward, direction * t_new[i] + 2 * near, side="right"), num_t) - first
+            j = np.repeat(np.arange(len(i)), counts)                # a due row (index into i) per output
+            k = np.arange(len(j)) + np.repeat(first - (np.cumsum(counts) - counts), counts)     # its output time
+            inside = direction * (t[k] - t_new[i[j]]) <= near
+            j, k = j[inside], k[inside]
+            ij = i[j]
+            sigma = ((t[k] - tc[ij]) / h[ij]).astype(dtype)
+            out[rows[ij], k] = evaluate(sigma, at[j])
+            nxt[i] += np.bincount(j, minlength=len(i))
             done |= nxt >= num_t
         if accept.all():
             y, k1, tc = y_new, K[scheme.fsal].copy(), t_new
@@ -293,7 +310,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             k1 = np.where(accept[:, None], K[scheme.fsal], k1)
             tc = np.where(accept, t_new, tc)
         # the step-size rule: a safety factor, the scheme's PI term (beta), bounded growth and
-        # shrinking, no growth right after a rejection
+        # shrinking (a rejected row's factor is below one already: its error is above one)
         factor = np.maximum(err_norm, 1e-300) ** -(exponent - 0.75 * scheme.beta)
         factor *= scheme.safety
         if scheme.beta:
@@ -303,7 +320,6 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         reject = ~accept
         if reject.any():
             rejected += int(np.count_nonzero(reject & ~done))
-            factor[reject] = np.minimum(factor[reject], 1.0)
         prop = np.abs(h) * factor
     else:
         raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")

@@ -106,17 +106,54 @@ def _dense(coefficients: dict, length: int, dtype: torch.dtype) -> torch.Tensor:
     return row
 
 
-def rk_stages(field, A_rows, stages, y: np.ndarray, hx: np.ndarray, K: np.ndarray, flat: torch.Tensor) -> np.ndarray:
+class Stages:
+    """The stage derivatives ``K`` ``(stages, rows, dim)`` of one explicit Runge-Kutta step of every row,
+    with what the stage products run on: ``flat`` (``K``'s memory as ``(stages, rows * dim)`` in torch),
+    its leading rows and one output row, so that a stage costs one ``torch.mm`` into memory already
+    there (``a @ flat[:s]`` rebuilt the view and went through ``matmul``'s dispatch: several times
+    the product's own cost on a few states, with the same bits)."""
+
+    def __init__(self, K: np.ndarray):
+        self.K = K
+        stages, rows, dim = K.shape
+        self.flat = torch.from_numpy(K.reshape(stages, -1))
+        self._leading = {}
+        self.product = torch.empty((1, rows * dim), dtype=self.flat.dtype)
+        self.summed = self.product.numpy().reshape(rows, dim)      # the product, as the rows' states
+
+    @classmethod
+    def empty(cls, stages: int, rows: int, dim: int, dtype) -> "Stages":
+        return cls(np.empty((stages, rows, dim), dtype=dtype))
+
+    def combine(self, a: torch.Tensor, s: int) -> np.ndarray:
+        """``sum_j a[0, j] K[j]`` over the first ``s`` stages, ``(rows, dim)``, in ``summed`` (overwritten
+        by the next call): one small matrix product, whose bits for a row do not depend on the other rows
+        (numpy's BLAS sums a row differently with the number of rows; torch's small products do not)."""
+        torch.mm(a, self.leading(s), out=self.product)
+        return self.summed
+
+    def leading(self, s: int) -> torch.Tensor:
+        """``flat[:s]``, the first ``s`` stages (a view kept for the next step)."""
+        found = self._leading.get(s)
+        if found is None:
+            found = self._leading[s] = self.flat[:s]
+        return found
+
+
+def rk_stages(field, A_rows, stages, y: np.ndarray, hx: np.ndarray, work: Stages) -> np.ndarray:
     """The explicit Runge-Kutta stages ``stages`` of every row: ``K[s] = field(y + hx * sum_j A[s, j] K[j])``
-    with ``flat`` the rows of ``K`` flattened (its memory) and ``A_rows[s]`` row s of the tableau, each
-    stage one small matrix product; returns the last stage's state (an FSAL scheme's new state)."""
-    rows, dim = y.shape
+    with ``work.K`` the stage derivatives and ``A_rows[s]`` row s of the tableau as a ``(1, s)`` tensor;
+    returns the last stage's state (an FSAL scheme's new state)."""
     for s in stages:
-        stage = (A_rows[s] @ flat[:s]).numpy().reshape(rows, dim)
-        stage *= hx
+        stage = work.combine(A_rows[s], s) * hx
         stage += y
-        K[s] = field(stage)
+        work.K[s] = field(stage)
     return stage
+
+
+def tableau_rows(rows) -> list:
+    """Rows of a tableau as ``(1, s)`` tensors for ``rk_stages`` (None stays None)."""
+    return [None if row is None else row[None] for row in rows]
 
 
 class DOP853:
@@ -132,17 +169,17 @@ class DOP853:
     safety, min_factor, max_factor, beta = 0.9, 1 / 3, 6.0, 0.04
 
     def __init__(self, dtype: torch.dtype):
-        self.A_rows = [_dense(_A[s], s, dtype) if s in _A else None for s in range(STAGES)]
+        self.A_rows = tableau_rows([_dense(_A[s], s, dtype) if s in _A else None for s in range(STAGES)])
         bhh = _dense(_B, 12, dtype) - _dense(_BHH, 12, dtype)
         self.BE = torch.stack([_dense(_B, 12, dtype), _dense(_E5, 12, dtype), bhh])     # (3, 12)
         self.D = torch.stack([_dense(d, STAGES, dtype) for d in _D])                     # (4, 16)
 
-    def attempt(self, field, y: np.ndarray, hx: np.ndarray, K: np.ndarray, flat: torch.Tensor, scale_tol):
-        """One step of every row from ``y`` with steps ``hx`` ``(rows, 1)`` and ``K[0] = f(y)``:
+    def attempt(self, field, y: np.ndarray, hx: np.ndarray, work: Stages, scale_tol):
+        """One step of every row from ``y`` with steps ``hx`` ``(rows, 1)`` and ``work.K[0] = f(y)``:
         fills ``K[1:13]`` and returns ``(y_new, err_norm, field calls)``, ``K[12]`` = f(y_new)."""
         rows, dim = y.shape
-        rk_stages(field, self.A_rows, range(1, 12), y, hx, K, flat)
-        b, e5, e3 = (self.BE @ flat[:12]).numpy().reshape(3, rows, dim)
+        rk_stages(field, self.A_rows, range(1, 12), y, hx, work)
+        b, e5, e3 = torch.mm(self.BE, work.leading(12)).numpy().reshape(3, rows, dim)
         y_new = b * hx
         y_new += y
         scale = scale_tol(y, y_new)
@@ -152,18 +189,19 @@ class DOP853:
         deno = e5 + 0.01 * (e3 * e3).sum(1)
         deno[deno <= 0] = 1.0
         err_norm = (np.abs(hx[:, 0]) * e5 / np.sqrt(dim * deno)).astype(np.float64, copy=False)
-        K[12] = field(y_new)
+        work.K[12] = field(y_new)
         return y_new, err_norm, 12
 
-    def dense(self, field, y: np.ndarray, y_new: np.ndarray, hx: np.ndarray, K: np.ndarray):
-        """The continuous extension on ``rows`` states: ``(evaluate(sigma, j), field calls)``,
-        ``evaluate`` giving the state at ``t + sigma h`` of the rows ``j`` (indices into these rows)."""
+    def dense(self, field, y: np.ndarray, y_new: np.ndarray, hx: np.ndarray, work: Stages):
+        """The continuous extension on ``rows`` states, whose step's stages ``work`` holds (its ``K[13:16]``
+        are filled here): ``(evaluate(sigma, j), field calls)``, ``evaluate`` giving the state at
+        ``t + sigma h`` of the rows ``j`` (indices into these rows)."""
         rows, dim = y.shape
-        flat = torch.from_numpy(K.reshape(STAGES, -1))
-        rk_stages(field, self.A_rows, (13, 14, 15), y, hx, K, flat)
+        K = work.K
+        rk_stages(field, self.A_rows, (13, 14, 15), y, hx, work)
         diff = y_new - y
         bspl = hx * K[0] - diff
-        high = (self.D @ flat).numpy().reshape(4, rows, dim) * hx
+        high = torch.mm(self.D, work.flat).numpy().reshape(4, rows, dim) * hx
         c = (y, diff, bspl, diff - hx * K[12] - bspl, *high)
 
         def evaluate(sigma: np.ndarray, j: np.ndarray) -> np.ndarray:
