@@ -3,7 +3,8 @@
     python analysis/units_check.py [--quick]       # the RMS sizes of every published run's training data
 
 The default moved from ``--units off`` to ``--units auto``, which rescales where the RMS of q or p lies
-outside [0.1, 10] or that of dq/dt or dp/dt outside [0.01, 100] (``hnn.units.AUTO_FAR``). A published
+outside [0.1, 10] or that of dq/dt or dp/dt outside [0.01, 100] (``hnn.units.AUTO_FAR``), or where the
+columns of one part spread in size over 10x (``hnn.units.SPREAD``; angles aside). A published
 number moves only where auto rescales its run's data, so this builds the data of every run the published
 tables train and prints their sizes: each task's defaults, the paper's rows (``analysis/reproduce.py``'s
 plan), the peers' tables on the chains (``analysis/peers.py``'s plan: CHNN's protocol at N = 1, 2, 3, 5 and
@@ -20,7 +21,7 @@ import sys
 
 import hnn
 from hnn.specs import run_specs
-from hnn.units import AUTO_FAR, auto_bounds, far_from_unit, sized_arrays, sizes
+from hnn.units import AUTO_FAR, SPREAD, auto_bounds, rescale_reason, sized_arrays, sizes, spreads
 from hnn_analysis.chains import peer_plan
 from hnn_analysis.paper import study
 
@@ -65,9 +66,11 @@ def check(quick: bool = False) -> list[dict]:
         seen.add(key)
         if config.dataset_key() not in data:
             data[config.dataset_key()] = config.dataset()
-        x, dxdt = sized_arrays(objective.prepare(data[config.dataset_key()]), objective)
-        far = far_from_unit(x, dxdt, periodic)
+        prepared = objective.prepare(data[config.dataset_key()])
+        x, dxdt = sized_arrays(prepared, objective)
+        far = rescale_reason(x, dxdt, periodic, prepared.get("state", "canonical")) is not None
         rows.append({"label": label + (" (angles)" if periodic else ""), "sizes": sizes(x, dxdt, periodic),
+                     "spread": max(spreads(x, dxdt).values(), default=1.0),
                      "auto": ("rescales: its command pins --units off" if pinned else "RESCALES") if far else "as given",
                      "moves": far and not pinned})
     return rows
@@ -78,13 +81,15 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="the spring's and the pendulum's rows only (seconds)")
     args = parser.parse_args(argv)
     rows = check(args.quick)
-    print(f"--units auto leaves {auto_bounds()} (hnn.units.AUTO_FAR = {AUTO_FAR})\n")
-    print("| training data | RMS q | RMS p (or qdot) | RMS dq/dt | RMS dp/dt | --units auto |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print(f"--units auto leaves {auto_bounds()} (hnn.units.AUTO_FAR = {AUTO_FAR}) whose columns' sizes spread "
+          f"by {SPREAD:g}x at most within each part\n")
+    print("| training data | RMS q | RMS p (or qdot) | RMS dq/dt | RMS dp/dt | widest spread | --units auto |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for row in rows:
         s = row["sizes"] or {}
         cells = [f"{s[name]:.3g}" if name in s else "-" for name in ("q", "p", "dq/dt", "dp/dt")]
-        print(f"| {row['label']} | " + " | ".join(cells) + f" | {row['auto']} |")
+        spread = f"{row['spread']:.3g}x" if "spread" in row else "-"
+        print(f"| {row['label']} | " + " | ".join(cells) + f" | {spread} | {row['auto']} |")
     moved = [row["label"] for row in rows if row.get("moves")]
     print(f"\n{len(rows)} training sets; " + (f"auto rescales {len(moved)}, whose published numbers would move: "
                                              f"{', '.join(moved)}" if moved else "auto rescales none that a published "

@@ -20,7 +20,7 @@ from . import names
 from .balance import balance_weights, weighted
 from .errors import DivergenceError
 from .io import atomic_write, torch_bytes
-from .units import VELOCITY_LIKE, Rescaled, UnitScales, describe_sizes, far_from_unit, fit_scales
+from .units import VELOCITY_LIKE, Rescaled, UnitScales, fit_scales, rescale_reason
 
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
@@ -178,16 +178,17 @@ def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: to
     return batch_loss.item()
 
 
-def _warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, periodic: bool) -> None:
-    """Warn when a fit of dx/dt trains on data as given that ``units='auto'`` would rescale: the RMS of q
-    (unless angles), of p or of either half of ``dxdt``, each over all of its columns, lies outside its
-    bounds (``hnn.units.AUTO_FAR``). Adam's steps of about learn_rate and tanh's unit-wide bend suit data near unit
+def _warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, model) -> None:
+    """Warn when a fit of dx/dt trains on data as given that ``units='auto'`` would rescale
+    (``hnn.units.rescale_reason``: the RMS of q, unless angles, of p or of either half of ``dxdt``, each over
+    all of its columns, lies outside its bounds, or one part's columns spread over 10x in size). Adam's steps of about learn_rate and tanh's unit-wide bend suit data near unit
     scale: a heavy mass (p of RMS 28, dq/dt of 0.028) degraded a fit 40x."""
-    if len(x) and far_from_unit(x, dxdt, periodic):
-        warnings.warn(f"x and dxdt are far from unit scale (RMS {describe_sizes(x, dxdt, periodic)}); a network fits "
-                      "poorly there. Train hnn.units.Rescaled(model) with units='auto' (the default), or rescale q "
-                      "and p so that Hamilton's equations still hold: docs/python.md, 'Scale your states'",
-                      stacklevel=3)
+    coordinates = "velocity" if getattr(model, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
+    reason = rescale_reason(x, dxdt, bool(getattr(model, "periodic", False)), coordinates) if len(x) else None
+    if reason is not None:
+        warnings.warn(f"x and dxdt are {reason}; a network fits poorly there. Train hnn.units.Rescaled(model) with "
+                      "units='auto' (the default), or rescale q and p so that Hamilton's equations still hold: "
+                      "docs/python.md, 'Scale your states'", stacklevel=3)
 
 
 def _in_canonical_units(model, units: str, x, dxdt, test_x, test_dxdt) -> tuple:
@@ -198,20 +199,21 @@ def _in_canonical_units(model, units: str, x, dxdt, test_x, test_dxdt) -> tuple:
     plain model cannot answer back in the user's units)."""
     if units not in names.UNITS:
         raise ValueError(f"units={units!r}: choose one of {', '.join(names.UNITS)}")
-    periodic = bool(getattr(getattr(model, "inner", model), "periodic", False))
+    inner = getattr(model, "inner", model)
+    periodic = bool(getattr(inner, "periodic", False))
+    coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
     if not isinstance(model, Rescaled):
-        if units == "on" or (units == "auto" and far_from_unit(x, dxdt, periodic)):
-            raise ValueError(f"units={units!r}: x and dxdt are far from unit scale (RMS {describe_sizes(x, dxdt, periodic)}), "
-                             f"where a network fits poorly, and {type(model).__name__} answers in the units it is "
+        reason = rescale_reason(x, dxdt, periodic, coordinates)
+        if units == "on" or (units == "auto" and reason is not None):
+            raise ValueError(f"units={units!r}: x and dxdt are {reason or 'to be rescaled (units=on)'}, where a network "
+                             f"fits poorly, and {type(model).__name__} answers in the units it is "
                              "trained in: train hnn.units.Rescaled(model) instead (hnn.train fits its scales from these "
                              "data, trains the model in them and it answers in yours), or pass units='off' to train "
                              "on them as they are")
         return model, x, dxdt, test_x, test_dxdt
     if model.scales is None:
-        coordinates = "velocity" if model.inner.coordinates in VELOCITY_LIKE else "canonical"
-        rescale = units == "on" or (units == "auto" and far_from_unit(x, dxdt, periodic))
+        rescale = units == "on" or (units == "auto" and rescale_reason(x, dxdt, periodic, coordinates) is not None)
         model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if rescale else UnitScales(1.0, 1.0, 1.0))
-    coordinates = "velocity" if model.inner.coordinates in VELOCITY_LIKE else "canonical"
     pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
              for a, b in ((x, dxdt), (test_x, test_dxdt))]
     return (model.inner, *pairs[0], *pairs[1])
@@ -370,7 +372,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             if loss_weights is not None:
                 resolved["loss_weights"] = [float(w) for w in loss_weights]
         if "unit_scales" not in resolved:
-            _warn_off_scale(x, dxdt, bool(getattr(model, "periodic", False)))
+            _warn_off_scale(x, dxdt, model)
         loss = fit_loss(model, predict, derivative_loss, loss_weights)
     if test_every is None:
         test_every = print_every

@@ -175,7 +175,8 @@ def _pair_scales(n: int, rows: list[tuple[np.ndarray, float, float]]) -> tuple[n
     return solution[:n], float(solution[n]), float(solution[n + 1])
 
 
-def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False) -> UnitScales:
+def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False,
+               per_pair: bool | None = None) -> UnitScales:
     """The scales of training states ``x`` and their ``dxdt`` ``(rows, 2n)`` in ``coordinates``.
 
     One scale for all q and one for all p where it serves: s_q the RMS of every q (1 for angles), s_p that
@@ -186,7 +187,7 @@ def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False) 
     columns or either half of ``dxdt`` spread over more than SPREAD: bodies of very different mass)
     and q are not angles, one s_q_i per coordinate with s_p_i = C / s_q_i (one product for every pair:
     Hamilton's equations hold) and one s_t, chosen so that the logs of every column's RMS in the new
-    units are nearest 0 in the least-squares sense."""
+    units are nearest 0 in the least-squares sense. ``per_pair`` True or False forces either."""
     x, dxdt = _numpy(x), _numpy(dxdt)
     if x.ndim != 2 or x.shape[1] % 2 or x.shape != dxdt.shape:
         raise ValueError(f"x and dxdt must have one shape (rows, 2n), got {x.shape} and {dxdt.shape}")
@@ -195,7 +196,9 @@ def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False) 
         raise ValueError(f"--units reads states of q and p or q and qdot; these are {coordinates!r}: use --units off")
     halves = [x[:, :n], x[:, n:], dxdt[:, :n], dxdt[:, n:]]
     names = ("q", "qdot" if coordinates in VELOCITY_LIKE else "p", "dq/dt", "dp/dt")
-    if periodic or n == 1 or _one_scale_serves(halves if coordinates in CANONICAL_LIKE else halves[:2]):
+    if per_pair is None:
+        per_pair = not (periodic or n == 1 or _one_scale_serves(halves if coordinates in CANONICAL_LIKE else halves[:2]))
+    if not per_pair or periodic:
         s_q = 1.0 if periodic else _rms(x[:, :n], "q")
         if coordinates in VELOCITY_LIKE:
             s_v = _rms(x[:, n:], "qdot")
@@ -252,6 +255,38 @@ def auto_bounds() -> str:
 def describe_sizes(x, dxdt=None, periodic: bool = False) -> str:
     """``'q 0.001, p 1, dq/dt 0.001, dp/dt 1'``: the RMS sizes ``far_from_unit`` reads, for a message."""
     return ", ".join(f"{name} {value:.3g}" for name, value in sizes(x, dxdt, periodic).items())
+
+
+def spreads(x, dxdt=None) -> dict[str, float]:
+    """Per part (q, p, dq/dt, dp/dt where given) the largest over the smallest RMS of its columns; a part
+    with a column of RMS 0 is left out (it has no scale of its own to take)."""
+    x = _numpy(x)
+    n = x.shape[1] // 2
+    parts = {"q": x[:, :n], "p": x[:, n:]}
+    if dxdt is not None:
+        dxdt = _numpy(dxdt)
+        parts.update({"dq/dt": dxdt[:, :n], "dp/dt": dxdt[:, n:]})
+    out = {}
+    for name, part in parts.items():
+        rms = _column_rms(part)
+        if rms.min() > 0:
+            out[name] = float(rms.max() / rms.min())
+    return out
+
+
+def rescale_reason(x, dxdt=None, periodic: bool = False, coordinates: str = "canonical") -> str | None:
+    """Why ``--units auto`` rescales states ``x`` and their ``dxdt`` in ``coordinates``, or None where it leaves
+    them: their sizes lie outside its bounds (``far_from_unit``), or (unless angles, whose s_q stays 1) the
+    columns of one part spread in size over SPREAD, which one scale cannot serve (a scale per coordinate
+    pair can: ``fit_scales`` reads the same parts, q and qdot alone on velocity-like states)."""
+    if far_from_unit(x, dxdt, periodic):
+        return f"far from unit scale (RMS {describe_sizes(x, dxdt, periodic)}; auto leaves {auto_bounds()})"
+    read = spreads(x, None if coordinates in VELOCITY_LIKE else dxdt)
+    wide = {} if periodic else {name: s for name, s in read.items() if s > SPREAD}
+    if wide:
+        return (f"of columns whose sizes spread over {SPREAD:g}x within one part ("
+                + ", ".join(f"{name} {s:.3g}x" for name, s in wide.items()) + "), which one scale cannot serve")
+    return None
 
 
 def refusal(model) -> str | None:
@@ -415,10 +450,10 @@ def run_scales(mode: str, kind: str, dataset: dict, objective, model: Model) -> 
     x, dxdt = sized_arrays(dataset, objective)
     why = f"--units {mode}"
     if mode == "auto":
-        if x is None or not far_from_unit(x, dxdt, periodic):
+        reason = None if x is None else rescale_reason(x, dxdt, periodic, observed_coordinates(dataset))
+        if reason is None:
             return None
-        why = (f"--units auto (the default) found the training data far from unit scale (RMS {describe_sizes(x, dxdt, periodic)}"
-               f"; it leaves {auto_bounds()})")
+        why = f"--units auto (the default) found the training data {reason}"
     if refusal(model) is not None:
         raise ValueError(f"{why}, and the {kind} kind cannot be rescaled: {refusal(model)}; give the data "
                          "in units near 1, or pass --units off to train on them as they are")

@@ -1,0 +1,156 @@
+"""The LNN solved as its authors solve it (``--lnn_solve pinv``) on the peers' runs that stopped with a singular
+d2L/dqdot2 (``analysis/stress.py --lnn-pinv``): each run of the record (docs/peers-runs.json) that failed with a
+``SingularLagrangianError`` trains again, its config the peers' table's but for the solve, up to ``past`` steps
+beyond the step where it stopped (its cosine schedule still that of its 8000 steps), and this counts the
+training states whose qddot came from the pseudo-inverse, the steps that had any, and the loss around them."""
+from __future__ import annotations
+
+import dataclasses
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import hnn
+from hnn.kinds import model_from_spec
+from hnn.runs import training_subset
+from hnn.specs import run_specs
+from hnn.units import run_scales
+from hnn_analysis import pages
+from hnn_analysis.chains import peer_plan, peer_record
+from hnn_analysis.commands import run_tasks
+from hnn_analysis.provenance import machine
+
+_STOPPED = re.compile(r"SingularLagrangianError at training step (\d+) of (\d+)")
+
+
+class _Enough(Exception):
+    """Raised by the progress callback once the run has trained the steps it was given."""
+
+
+def stopped_runs(record: dict, rows=("chain",)) -> list[tuple[str, int]]:
+    """``(job key, the step it stopped at)`` of every recorded lagrangian run of ``rows`` (key prefixes) that
+    failed in training with a singular d2L/dqdot2, in the record's order."""
+    out = []
+    for key, entry in sorted(record["runs"].items()):
+        found = _STOPPED.match(str(entry["entry"].get("diverged", "")))
+        if found and "/lagrangian/" in key and key.startswith(tuple(rows)):
+            out.append((key, int(found.group(1))))
+    return out
+
+
+def _job(key: str, save_dir: Path) -> hnn.sweep.Job:
+    """The peers' table's job of ``key`` (``chain<N>/lagrangian/seed<S>``), with the pseudo-inverse solve."""
+    seed = int(key.rsplit("seed", 1)[1])
+    settings = {"kinds": ("lagrangian",), **peer_plan.FULL}
+    job = next(job for job in peer_plan.plan(settings, save_dir, seed) if job.key == key)
+    return dataclasses.replace(job, config=dataclasses.replace(job.config, lnn_solve="pinv"))
+
+
+def train_past(key: str, stopped: int, past: int, save_dir: Path) -> dict:
+    """Train the run ``key`` with the pseudo-inverse solve as ``hnn.run_experiment`` trains it (its seed's init,
+    data, minibatches and schedule; no test batch, which draws from its own generator) for ``stopped + past``
+    steps, or to its end; per step the training states solved by the pseudo-inverse. A worker's task."""
+    torch.set_num_threads(1)
+    config = _job(key, save_dir).config
+    objective = config.make_objective()
+    dataset = objective.prepare(config.dataset())
+    specs = run_specs(config)
+    torch.manual_seed(config.seed)
+    np.random.seed(config.seed)
+    model = model_from_spec(specs.model, config.device)
+    if run_scales(specs.objective.units, specs.model.kind, dataset, objective, model) is not None:
+        raise ValueError(f"{key}: --units auto rescales this run's data, which the peers' runs did not")
+    x, y = training_subset(dataset[objective.arrays[0]], dataset[objective.arrays[1]], config.train_fraction, config.seed)
+    options = objective.train_options(model, specs.objective, dataset)
+    limit = min(stopped + past, config.total_steps + 1)
+    counts, losses, last = [], [], {}
+    batch_loss = options["loss"]
+
+    def loss(xb, yb):           # the objective's loss, its training batches' mean kept (no number changes)
+        out = batch_loss(xb, yb)
+        last["value"] = float(out.detach().mean())
+        return out
+
+    def count(done: int, total: int) -> None:
+        counts.append(model.pinv_states - sum(counts))
+        losses.append(last.get("value"))
+        if done >= limit:
+            raise _Enough
+    row = {"key": key, "stopped": stopped, "limit": limit, "total_steps": config.total_steps}
+    tic = time.perf_counter()
+    with hnn.training.report_progress(count):
+        try:
+            hnn.train(model, x, y, **specs.training.train_kwargs(), **{**options, "loss": loss, "progress": False},
+                      units="off", balance="off")
+        except _Enough:
+            pass
+        except hnn.DivergenceError as err:
+            row["stop"] = f"{type(err).__name__}: {str(err)[:200]}"
+    row["seconds"] = time.perf_counter() - tic
+    row["steps"] = len(counts)
+    row["pinv_per_step"], row["loss"] = counts, losses
+    return row
+
+
+def summary(row: dict) -> dict:
+    """What a row says: the first step with a pseudo-inverse state, the steps and states that had one, and
+    whether it trained past the step where the plain solve stopped."""
+    counts = row["pinv_per_step"]
+    steps_with = [i for i, c in enumerate(counts) if c]
+    return {"first": steps_with[0] if steps_with else None, "steps_with": len(steps_with), "states": sum(counts),
+            "past": max(0, row["steps"] - 1 - row["stopped"])}
+
+
+def lnn_pinv_text(rows: list[dict], meta: dict, past: int) -> str:
+    """The section's table: one line per run."""
+    jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
+    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), "
+             f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU: each LNN run of the peers' table "
+             f"(docs/peers-runs.json) that stopped with a singular d2L/dqdot2, trained again as that table trains it "
+             f"but with --lnn_solve pinv, to {past} steps past the step where it stopped (its cosine schedule still "
+             "its 8000 steps'); the training states whose qddot came from the pseudo-inverse, per run.", "",
+             "| run | plain solve stopped at step | first step with a pinv state | steps with one | pinv states "
+             "| steps trained past the stop | seconds a step | outcome |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for row in rows:
+        s = summary(row)
+        outcome = row.get("stop", f"trained to step {row['steps'] - 1} of {row['total_steps']}")
+        lines.append(f"| {row['key']} | {row['stopped']} | {s['first'] if s['first'] is not None else '-'} | "
+                     f"{s['steps_with']} | {s['states']} | {s['past']} | {row['seconds'] / max(row['steps'], 1):.2f} | "
+                     f"{outcome} |")
+    return "\n".join(lines) + "\n"
+
+
+def load_record() -> dict:
+    """The peers' committed record (docs/peers-runs.json)."""
+    settings = {"kinds": peer_plan.kinds(), **peer_plan.FULL}
+    return peer_record.load(hnn.tasks.repo_root() / peer_record.RECORD, settings)
+
+
+def measure(keys: list[str] | None, past: int, save_dir: Path, jobs: int) -> list[dict]:
+    """``train_past`` of the stopped runs ``keys`` (None: every one), each a worker's task; ValueError naming
+    the stopped runs for a key that is not one."""
+    stopped = dict(stopped_runs(load_record()))
+    keys = keys or list(stopped)
+    unknown = [key for key in keys if key not in stopped]
+    if unknown:
+        raise ValueError(f"--lnn-runs {' '.join(unknown)}: not a run of docs/peers-runs.json that stopped with a "
+                         f"singular d2L/dqdot2; those are {', '.join(stopped)}")
+    tasks = [(train_past, (key, stopped[key], past, save_dir)) for key in keys]
+    return run_tasks(tasks, jobs, lambda task: task[1][0])
+
+
+def pinv_results_text(results: dict) -> str:
+    return lnn_pinv_text(results["lnn_pinv"], results["meta"], results["past"])
+
+
+def pinv_seeds(results: dict) -> pages.Seeds:
+    """Each row's runs are the peers' seeds that stopped: the fewest of any row."""
+    keys = [row["key"] for row in results["lnn_pinv"]]
+    fewest = min(sum(key.startswith(row + "/") for key in keys) for row in {key.split("/")[0] for key in keys})
+    return pages.Seeds(fewest, None if fewest >= pages.MIN_SEEDS else
+                       "each row holds the seeds of the peers' table that stopped with a singular d2L/dqdot2 (those "
+                       "run here: --lnn-runs), each its own run: counts, not a spread")
