@@ -1,12 +1,11 @@
 """The LNN solved as its authors solve it (``--lnn_solve pinv``) on the peers' runs that stopped with a singular
-d2L/dqdot2 (``analysis/stress.py --lnn-pinv``): each run of the record (docs/peers-runs.json) that failed with a
-``SingularLagrangianError`` trains again, its config the peers' table's but for the solve, up to ``past`` steps
+d2L/dqdot2 (``analysis/stress.py --lnn-pinv``): each run of the peers' record that failed with a
+``SingularLagrangianError`` under the plain solve (``PLAIN_STOPS``) trains again, its config the peers' table's but for the solve, up to ``past`` steps
 beyond the step where it stopped (its cosine schedule still that of its 8000 steps), and this counts the
 training states whose qddot came from the pseudo-inverse, the steps that had any, and the loss around them."""
 from __future__ import annotations
 
 import dataclasses
-import re
 import time
 from pathlib import Path
 
@@ -19,26 +18,22 @@ from hnn.runs import training_subset
 from hnn.specs import run_specs
 from hnn.units import run_scales
 from hnn_analysis import pages
-from hnn_analysis.chains import peer_plan, peer_record
+from hnn_analysis.chains import peer_plan
 from hnn_analysis.commands import run_tasks
 from hnn_analysis.provenance import machine
-
-_STOPPED = re.compile(r"SingularLagrangianError at training step (\d+) of (\d+)")
-
 
 class _Enough(Exception):
     """Raised by the progress callback once the run has trained the steps it was given."""
 
 
-def stopped_runs(record: dict, rows=("chain",)) -> list[tuple[str, int]]:
-    """``(job key, the step it stopped at)`` of every recorded lagrangian run of ``rows`` (key prefixes) that
-    failed in training with a singular d2L/dqdot2, in the record's order."""
-    out = []
-    for key, entry in sorted(record["runs"].items()):
-        found = _STOPPED.match(str(entry["entry"].get("diverged", "")))
-        if found and "/lagrangian/" in key and key.startswith(tuple(rows)):
-            out.append((key, int(found.group(1))))
-    return out
+# the LNN runs of the peers' table that stopped with a singular d2L/dqdot2 under the plain solve, and the
+# training step where each stopped: docs/peers-runs.json at commit 3d4248d (its "diverged" entries), whose
+# lagrangian entries left the record when the table chose the pseudo-inverse (their configs are no longer
+# the table's)
+PLAIN_STOPS = {"chain2/lagrangian/seed0": 1846, "chain2/lagrangian/seed2": 374, "chain2/lagrangian/seed3": 371,
+               "chain3/lagrangian/seed1": 1648, "chain3/lagrangian/seed2": 1143, "chain3/lagrangian/seed3": 1474,
+               "chain3/lagrangian/seed4": 676, "chain5/lagrangian/seed0": 1104, "chain5/lagrangian/seed1": 144,
+               "chain5/lagrangian/seed2": 183, "chain5/lagrangian/seed3": 1624, "chain5/lagrangian/seed4": 146}
 
 
 def _job(key: str, save_dir: Path) -> hnn.sweep.Job:
@@ -124,21 +119,15 @@ def lnn_pinv_text(rows: list[dict], meta: dict, past: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def load_record() -> dict:
-    """The peers' committed record (docs/peers-runs.json)."""
-    settings = {"kinds": peer_plan.kinds(), **peer_plan.FULL}
-    return peer_record.load(hnn.tasks.repo_root() / peer_record.RECORD, settings)
-
-
 def measure(keys: list[str] | None, past: int, save_dir: Path, jobs: int) -> list[dict]:
     """``train_past`` of the stopped runs ``keys`` (None: every one), each a worker's task; ValueError naming
     the stopped runs for a key that is not one."""
-    stopped = dict(stopped_runs(load_record()))
+    stopped = PLAIN_STOPS
     keys = keys or list(stopped)
     unknown = [key for key in keys if key not in stopped]
     if unknown:
-        raise ValueError(f"--lnn-runs {' '.join(unknown)}: not a run of docs/peers-runs.json that stopped with a "
-                         f"singular d2L/dqdot2; those are {', '.join(stopped)}")
+        raise ValueError(f"--lnn-runs {' '.join(unknown)}: not a run of the peers' table that stopped with a "
+                         f"singular d2L/dqdot2 under the plain solve; those are {', '.join(stopped)}")
     tasks = [(train_past, (key, stopped[key], past, save_dir)) for key in keys]
     return run_tasks(tasks, jobs, lambda task: task[1][0])
 
