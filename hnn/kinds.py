@@ -240,7 +240,8 @@ MODEL_KINDS: dict[str, ModelKind] = {
                             doc=KindDoc(
         line="LNN (Cranmer et al. 2020): a black-box L(q, qdot) MLP; qddot from the Euler-Lagrange equations",
         assumes="a conserved energy E = qdot . dL/dqdot - L and a Lagrangian whose Hessian in qdot is invertible "
-                "(a singular one is an error naming the state)",
+                "(a singular one is an error naming the state; `--lnn_solve pinv` takes the LNN authors' "
+                "pseudo-inverse there instead, as the peers' table does)",
         coordinates="observed [q, qdot] only",
         integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
         when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "

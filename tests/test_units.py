@@ -446,3 +446,11 @@ def test_the_mechanical_kind_learns_a_heavy_mass_at_hnn_trains_defaults():
         errors[kind, units] = _heavy_rollout_error(model, test[:8])
     assert minv["auto"] < 0.05 and minv["off"] > 0.5, minv
     assert errors["mechanical", "auto"] < errors["hnn", "auto"], errors
+
+
+def test_every_tasks_default_run_keeps_its_key():
+    """The defaults moved (--units auto; --lnn_solve's field added) without moving any task's default run
+    folder: each task's default key as the base commit of this change computed it (3d4248d)."""
+    keys = {"2body": "1ed19181", "3body": "d131f9e4", "arm": "b30fa4a9", "chain": "0f41cb99", "measured": "d94cfc26",
+            "pend": "e58d9133", "pixels": "46661b6d", "real": "5d5e1b2f", "spring": "cbac7a2b"}
+    assert {task: hnn.load_task(task, "train").Config().key() for task in keys} == keys
