@@ -181,8 +181,9 @@ def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: to
 def _warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, model) -> None:
     """Warn when a fit of dx/dt trains on data as given that ``units='auto'`` would rescale
     (``hnn.units.rescale_reason``: the RMS of q, unless angles, of p or of either half of ``dxdt``, each over
-    all of its columns, lies outside its bounds, or one part's columns spread over 10x in size). Adam's steps of about learn_rate and tanh's unit-wide bend suit data near unit
-    scale: a heavy mass (p of RMS 28, dq/dt of 0.028) degraded a fit 40x."""
+    all of its columns, lies outside its bounds, or one part's columns spread over 10x in size). Adam's steps
+    of about learn_rate and tanh's unit-wide bend suit data near unit scale: a heavy mass (p of RMS 28, dq/dt
+    of 0.028) degraded a fit 40x, unwarned while only the largest column was read."""
     coordinates = "velocity" if getattr(model, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
     reason = rescale_reason(x, dxdt, bool(getattr(model, "periodic", False)), coordinates) if len(x) else None
     if reason is not None:
@@ -319,9 +320,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             exceeds the smallest over 10x, else the plain loss), ``'rms'`` (always) or ``'off'`` (never).
         units: the units a fit of dx/dt (no ``loss``, no ``predict``) trains in, as a run's ``--units``
             (``hnn.units``): an ``hnn.units.Rescaled`` model without scales gets them here from ``x`` and
-            ``dxdt`` (``'auto'``: where the RMS of q, p, dq/dt or dp/dt lies outside [0.1, 10], ``'on'``:
-            always, ``'off'``: never), its inner model trains in those canonical units (the loss history
-            too) and it answers in the user's; a plain model on data ``'auto'`` would rescale is refused
+            ``dxdt`` (``'auto'``: where ``hnn.units.rescale_reason`` finds a reason, their sizes outside its
+            bounds or one part's columns spread over 10x; ``'on'``: always; ``'off'``: never), its inner model
+            trains in those canonical units (the loss history too) and it answers in the user's; a plain model on data ``'auto'`` would rescale is refused
             with the fix (wrap it in ``Rescaled``, or pass ``units='off'``). ``'off'`` trains as given,
             with a warning where the data lie far from unit scale.
         checkpoint: a file where the loop saves its state (weights, optimizer, samplers, stats) every

@@ -55,10 +55,12 @@ from .objectives import DerivativeObjective, observed_coordinates
 # [1 / AUTO_FAR["dq/dt"], AUTO_FAR["dq/dt"]]. The published runs' data lie inside (``python
 # analysis/units_check.py`` prints each: the tasks' defaults, the chains of the peers' tables, the
 # studies' scenes), so 'auto' trains each as 'off' does and no published number moves: their states lie
-# within 0.11-5.8, their rates within 0.11-35 (the 5-bob chain's accelerations), where a spring's fit at the
-# data's units stays within its seeds' spread (docs/stress.md, "Where auto starts"). At 10^-3 and 10^3
-# the stress study's cells without the rescaling degrade, with it they work. 'on' is not the default:
-# its scales are never exactly 1, so it would move every published number.
+# within 0.11-5.8, their rates within 0.11-35 (the 5-bob chain's accelerations, which [0.1, 10] for the rates
+# too would have rescaled). The bounds are set by those data, not by a size where fits stop degrading: a
+# spring fit in its own units degrades gradually, several times already at states 3x or rates 10x unit size
+# (docs/stress.md, "Where auto starts"), 20-50x past the bounds; at 10^-3 and 10^3 the stress study's cells
+# without the rescaling degrade, with it they work. 'on' rescales everything: not the default, since its
+# scales are never exactly 1 and it would move every published number.
 AUTO_FAR = {"q": 10.0, "p": 10.0, "dq/dt": 100.0, "dp/dt": 100.0}
 # the spread of one block's columns (all q, ...) past which one scale cannot serve them all (fit_scales)
 SPREAD = 10.0

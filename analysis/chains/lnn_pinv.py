@@ -16,6 +16,7 @@ import hnn
 from hnn.kinds import model_from_spec
 from hnn.runs import training_subset
 from hnn.specs import run_specs
+from hnn.training import fit_loss
 from hnn.units import run_scales
 from hnn_analysis import pages
 from hnn_analysis.chains import peer_plan
@@ -26,14 +27,15 @@ class _Enough(Exception):
     """Raised by the progress callback once the run has trained the steps it was given."""
 
 
-# the LNN runs of the peers' table that stopped with a singular d2L/dqdot2 under the plain solve, and the
-# training step where each stopped: docs/peers-runs.json at commit 3d4248d (its "diverged" entries), whose
+# the LNN runs of the peers' table that stopped with a singular d2L/dqdot2 under the plain solve (CHNN's chains
+# and the LNN protocol, of 8000 and 60000 steps), and the training step where each stopped: docs/peers-runs.json at commit 3d4248d (its "diverged" entries), whose
 # lagrangian entries left the record when the table chose the pseudo-inverse (their configs are no longer
 # the table's)
 PLAIN_STOPS = {"chain2/lagrangian/seed0": 1846, "chain2/lagrangian/seed2": 374, "chain2/lagrangian/seed3": 371,
                "chain3/lagrangian/seed1": 1648, "chain3/lagrangian/seed2": 1143, "chain3/lagrangian/seed3": 1474,
                "chain3/lagrangian/seed4": 676, "chain5/lagrangian/seed0": 1104, "chain5/lagrangian/seed1": 144,
-               "chain5/lagrangian/seed2": 183, "chain5/lagrangian/seed3": 1624, "chain5/lagrangian/seed4": 146}
+               "chain5/lagrangian/seed2": 183, "chain5/lagrangian/seed3": 1624, "chain5/lagrangian/seed4": 146,
+               "lnn/lagrangian/seed4": 20612}
 
 
 def _job(key: str, save_dir: Path) -> hnn.sweep.Job:
@@ -61,6 +63,10 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path) -> dict:
     x, y = training_subset(dataset[objective.arrays[0]], dataset[objective.arrays[1]], config.train_fraction, config.seed)
     options = objective.train_options(model, specs.objective, dataset)
     limit = min(stopped + past, config.total_steps + 1)
+    if "loss" not in options:       # a fit of dx/dt (the LNN protocol): the loss hnn.train builds from these options
+        options = {"input_noise": options.get("input_noise", 0.0),
+                   "loss": fit_loss(model, options.get("predict"), options.get("derivative_loss", "l2"),
+                                    options.get("loss_weights"))}
     counts, losses, last = [], [], {}
     batch_loss = options["loss"]
 
@@ -84,6 +90,8 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path) -> dict:
             pass
         except hnn.DivergenceError as err:
             row["stop"] = f"{type(err).__name__}: {str(err)[:200]}"
+            # the step that failed: the states its pseudo-inverse took before the failure (no callback ran)
+            row["pinv_at_stop"] = model.pinv_states - sum(counts)
     row["seconds"] = time.perf_counter() - tic
     row["steps"] = len(counts)
     row["pinv_per_step"], row["loss"] = counts, losses
@@ -91,12 +99,12 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path) -> dict:
 
 
 def summary(row: dict) -> dict:
-    """What a row says: the first step with a pseudo-inverse state, the steps and states that had one, and
-    whether it trained past the step where the plain solve stopped."""
-    counts = row["pinv_per_step"]
+    """What a row says: the first step with a pseudo-inverse state, the steps and states that had one (the
+    step that failed included), and how many steps it trained past the step where the plain solve stopped."""
+    counts = row["pinv_per_step"] + ([row["pinv_at_stop"]] if row.get("pinv_at_stop") is not None else [])
     steps_with = [i for i, c in enumerate(counts) if c]
     return {"first": steps_with[0] if steps_with else None, "steps_with": len(steps_with), "states": sum(counts),
-            "past": max(0, row["steps"] - 1 - row["stopped"])}
+            "past": max(0, row["steps"] - row["stopped"])}
 
 
 def lnn_pinv_text(rows: list[dict], meta: dict, past: int) -> str:
