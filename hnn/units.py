@@ -189,7 +189,10 @@ def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False,
     columns or either half of ``dxdt`` spread over more than SPREAD: bodies of very different mass)
     and q are not angles, one s_q_i per coordinate with s_p_i = C / s_q_i (one product for every pair:
     Hamilton's equations hold) and one s_t, chosen so that the logs of every column's RMS in the new
-    units are nearest 0 in the least-squares sense. ``per_pair`` True or False forces either."""
+    units are nearest 0 in the least-squares sense (on velocity-like states: of q, qdot and qddot, the
+    velocities' scale s_q_i / s_t). ``per_pair`` True or False forces either. A ratio of the system's own
+    time scales (a heavy body's slow swing beside a light one's fast one) is no unit: no choice of scales
+    brings every column to size 1 then (docs/stress.md, the two masses)."""
     x, dxdt = _numpy(x), _numpy(dxdt)
     if x.ndim != 2 or x.shape[1] % 2 or x.shape != dxdt.shape:
         raise ValueError(f"x and dxdt must have one shape (rows, 2n), got {x.shape} and {dxdt.shape}")
@@ -198,8 +201,10 @@ def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False,
         raise ValueError(f"--units reads states of q and p or q and qdot; these are {coordinates!r}: use --units off")
     halves = [x[:, :n], x[:, n:], dxdt[:, :n], dxdt[:, n:]]
     names = ("q", "qdot" if coordinates in VELOCITY_LIKE else "p", "dq/dt", "dp/dt")
+    # on velocity-like states dq/dt is the state's own second half: the parts are q, qdot and qddot
+    parts = halves if coordinates in CANONICAL_LIKE else [halves[0], halves[1], halves[3]]
     if per_pair is None:
-        per_pair = not (periodic or n == 1 or _one_scale_serves(halves if coordinates in CANONICAL_LIKE else halves[:2]))
+        per_pair = not (periodic or n == 1 or _one_scale_serves(parts))
     if not per_pair or periodic:
         s_q = 1.0 if periodic else _rms(x[:, :n], "q")
         if coordinates in VELOCITY_LIKE:
@@ -213,8 +218,8 @@ def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False,
         if not np.isfinite(log).all():
             raise ValueError(f"--units: a column of {name} in the training data has RMS 0 or not finite, so it has "
                              "no scale to divide by; use --units off")
-    if coordinates in VELOCITY_LIKE:      # q_i / s_q_i and qdot_i s_t / s_q_i of size 1
-        a, _, t = _pair_scales(n, [(logs[0], (1, 0, 0)), (logs[1], (1, 0, 1))])
+    if coordinates in VELOCITY_LIKE:      # q_i / s_q_i, qdot_i s_t / s_q_i and qddot_i s_t^2 / s_q_i of size 1
+        a, _, t = _pair_scales(n, [(logs[0], (1, 0, 0)), (logs[1], (1, 0, 1)), (logs[3], (1, 0, 2))])
         s_q, s_t = np.exp(a), float(np.exp(t))
         product = float(np.exp(2 * a.mean())) / s_t        # a unit mass: s_p_i = product / s_q_i
         return UnitScales(tuple(s_q), tuple(product / s_q), s_t)
@@ -280,10 +285,12 @@ def rescale_reason(x, dxdt=None, periodic: bool = False, coordinates: str = "can
     """Why ``--units auto`` rescales states ``x`` and their ``dxdt`` in ``coordinates``, or None where it leaves
     them: their sizes lie outside its bounds (``far_from_unit``), or (unless angles, whose s_q stays 1) the
     columns of one part spread in size over SPREAD, which one scale cannot serve (a scale per coordinate
-    pair can: ``fit_scales`` reads the same parts, q and qdot alone on velocity-like states)."""
+    pair can: ``fit_scales`` reads the same parts, q, qdot and qddot on velocity-like states)."""
     if far_from_unit(x, dxdt, periodic):
         return f"far from unit scale (RMS {describe_sizes(x, dxdt, periodic)}; auto leaves {auto_bounds()})"
-    read = spreads(x, None if coordinates in VELOCITY_LIKE else dxdt)
+    read = spreads(x, dxdt)
+    if coordinates in VELOCITY_LIKE:        # dq/dt is qdot itself
+        read.pop("dq/dt", None)
     wide = {} if periodic else {name: s for name, s in read.items() if s > SPREAD}
     if wide:
         return (f"of columns whose sizes spread over {SPREAD:g}x within one part ("

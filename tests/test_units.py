@@ -402,6 +402,14 @@ def test_per_coordinate_scales_keep_hamiltons_equations():
     torch.testing.assert_close(Rescaled(Known(), s).hamiltonian(x), _two_masses_hamiltonian(x, m), rtol=1e-10, atol=0)
     with pytest.raises(ValueError, match=r"one product s_q_i \* s_p_i"):
         UnitScales((1.0, 2.0), (1.0, 1.0), 1.0)
+    # observed [q, qdot]: one s_q_i a pair and one s_t for q, qdot and qddot alike (measured 7x against 400x)
+    z, dz = torch.cat([x[:, :2], x[:, 2:] / m], 1), torch.cat([dxdt[:, :2], dxdt[:, 2:] / m], 1)
+    pair, one = fit_scales(z, dz, "velocity"), fit_scales(z, dz, "velocity", per_pair=False)
+
+    def widest(scales) -> float:
+        rms = np.sqrt((np.concatenate(scales.to_canonical(z, dz, "velocity"), 1) ** 2).mean(0))
+        return float(np.exp(np.abs(np.log(rms)).max()))
+    assert isinstance(pair.q, tuple) and widest(pair) < widest(one) / 10, (widest(pair), widest(one))
 
 
 def _heavy_spring(rows: int, seed: int):
