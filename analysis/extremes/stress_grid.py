@@ -186,7 +186,7 @@ def fit(kind: str, scene: str, cell: str, budget: dict, seed: int = 0) -> tuple[
     seen = np.concatenate(scales.to_canonical(x, y, "velocity" if kind in VELOCITY else "canonical"), 1) \
         if scales is not None else np.concatenate([x.double().numpy(), y.double().numpy()], 1)
     row["widest"] = float(np.exp(np.abs(np.log(np.sqrt((seen ** 2).mean(0)))).max()))
-    row["warned"] = sorted({"x, dxdt" for w in caught if "far from unit scale" in str(w.message)})
+    row["warned"] = sorted({"x, dxdt" for w in caught if str(w.message).startswith("x and dxdt are")})
     return model, row
 
 
