@@ -38,20 +38,21 @@ PLAIN_STOPS = {"chain2/lagrangian/seed0": 1846, "chain2/lagrangian/seed2": 374, 
                "lnn/lagrangian/seed4": 20612}
 
 
-def _job(key: str, save_dir: Path) -> hnn.sweep.Job:
-    """The peers' table's job of ``key`` (``chain<N>/lagrangian/seed<S>``), with the pseudo-inverse solve."""
+def _job(key: str, save_dir: Path, solve: str = "pinv") -> hnn.sweep.Job:
+    """The peers' table's job of ``key`` (``chain<N>/lagrangian/seed<S>``), with the ``solve`` of qddot."""
     seed = int(key.rsplit("seed", 1)[1])
     settings = {"kinds": ("lagrangian",), **peer_plan.FULL}
     job = next(job for job in peer_plan.plan(settings, save_dir, seed) if job.key == key)
-    return dataclasses.replace(job, config=dataclasses.replace(job.config, lnn_solve="pinv"))
+    return dataclasses.replace(job, config=dataclasses.replace(job.config, lnn_solve=solve))
 
 
-def train_past(key: str, stopped: int, past: int, save_dir: Path) -> dict:
+def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "pinv") -> dict:
     """Train the run ``key`` with the pseudo-inverse solve as ``hnn.run_experiment`` trains it (its seed's init,
     data, minibatches and schedule; no test batch, which draws from its own generator) for ``stopped + past``
-    steps, or to its end; per step the training states solved by the pseudo-inverse. A worker's task."""
+    steps, or to its end; per step the training states solved by the pseudo-inverse. ``solve='solve'``: the
+    plain solve instead, to check that a recorded stop repeats on this machine. A worker's task."""
     torch.set_num_threads(1)
-    config = _job(key, save_dir).config
+    config = _job(key, save_dir, solve).config
     objective = config.make_objective()
     dataset = objective.prepare(config.dataset())
     specs = run_specs(config)

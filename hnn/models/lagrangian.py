@@ -11,9 +11,10 @@ equations do not determine qddot: ``time_derivative`` raises ``SingularLagrangia
 states. ``solve='pinv'`` solves as LNN's own code does (MilesCranmer/lagrangian_nns, ``lnn.py``:
 ``jnp.linalg.pinv`` of d2L/dqdot2, whose default cutoff drops singular values below 10 n eps of the
 largest): where every singular value lies above that cutoff the pseudo-inverse is the inverse, so there
-the plain solve is used (the same qddot to rounding; ``tests/test_lagrangian.py``), and at the states
-where one lies below it the pseudo-inverse's minimum-norm qddot, counted in ``pinv_states``. Training
-then goes on through states where the plain solve stops.
+the plain solve is used (the same qddot, bit for bit; ``tests/test_lagrangian.py``), and at the states
+where one lies below it the pseudo-inverse's minimum-norm qddot, counted in ``pinv_states``. Measured on
+the peers' chains (docs/stress.md, "The LNN solved as its authors solve it"): the runs the plain solve
+stopped stop at the same step with it, their RK4 snippet diverging, so the error stays the default.
 
 Its energy E(q, qdot) = qdot . dL/dqdot - L is conserved by its flow for any weights (the
 Legendre transform of L, the Hamiltonian in velocity coordinates): the kind declares
