@@ -46,7 +46,10 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "stress": "python analysis/stress.py --update-docs",
            "lnn-start": "python analysis/stress.py --lnn-start --update-docs",
            "units-scan": "python analysis/stress.py --scan --update-docs",
-           "lnn-pinv": "python analysis/stress.py --lnn-pinv --update-docs (hours: --lnn-runs picks runs)",
+           # the runs that stop early (about 20 minutes on two workers); every one that stopped takes hours
+           "lnn-pinv": "python analysis/stress.py --lnn-pinv --lnn-runs lnn/lagrangian/seed4 chain2/lagrangian/seed0 "
+                       "chain2/lagrangian/seed2 chain2/lagrangian/seed3 chain3/lagrangian/seed4 chain5/lagrangian/seed1 "
+                       "chain5/lagrangian/seed2 chain5/lagrangian/seed4 --lnn-past 200 --update-docs",
            # the arm's own units (the 10 kg arm's p of RMS 24 is what --units auto would rescale): --balance alone
            "arm-balance": "python analysis/arm.py --steps 2000 --mass 10 --balance off auto --units off --out "
                           "results/arm-m10 --update-docs",
