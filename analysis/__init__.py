@@ -25,8 +25,8 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
   ``training_cost``, ``plan``: a study's estimate before it starts); it imports no room;
 - ``paper``, ``benchmarks``, ``integrator_study``, ``chains``, ``extremes``: each on the shared modules alone;
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
-- entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``, ``score``), on
-  any room.
+- entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``, ``score``,
+  ``units_check``), on any room.
 """
 
 # room -> its units: a folder, or a module at this level by its name ("__init__": this file)
@@ -38,7 +38,7 @@ _ROOMS = {
     "integrator_study": ("integrator_study",),
     "chains": ("chains",),
     "scenes": ("scenes",),
-    "entry": ("reproduce", "scene_study", "peers", "arm", "stress", "readme", "score"),
+    "entry": ("reproduce", "scene_study", "peers", "arm", "stress", "readme", "score", "units_check"),
 }
 # room -> the rooms it may import besides its own
 _MAY_IMPORT = {

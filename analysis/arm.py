@@ -1,6 +1,6 @@
 """The two-link arm: the paper's HNN against the mechanical kind at one training budget.
 
-    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--balance off auto] [--out DIR] [--update-docs]
+    python analysis/arm.py --steps 3000 --seeds 0 1 2 [--mass 1] [--models hnn mechanical] [--balance off auto] [--units off] [--out DIR] [--update-docs]
 
 Trains each model at each seed through ``experiment-arm/train.py``'s config (one run at a time,
 reusing complete saved runs), then measures on held-out data of the same seed:
@@ -48,7 +48,7 @@ def measure(folder: Path, arm) -> dict:
     paths = hnn.rollout(model.time_derivative, x0, t, method="dopri5", rtol=RTOL, atol=RTOL)
     out["rollout_error"] = hnn.metrics.summarize_errors(
         hnn.metrics.relative_error(paths, data.trajectories(arm, x0, t)), t)["error"]
-    if isinstance(model, hnn.MechanicalHNN):        # the kind that learns M^-1(q)
+    if isinstance(getattr(model, "inner", model), hnn.MechanicalHNN):      # the kind that learns M^-1(q), rescaled or not
         with torch.no_grad():
             learned, true = model.inverse_mass(x[:, :2]), torch.linalg.inv(arm.mass_matrix(x[:, :2]))
         out["inverse_mass_error"] = float((learned - true).norm() / true.norm())
@@ -74,6 +74,9 @@ def main(argv=None) -> dict:
     parser.add_argument("--balance", choices=hnn.names.BALANCES, nargs="+", default=["auto"],
                         help="the runs' --balance, one set of runs each: the loss's weights of the components of "
                              "dx/dt (hnn.balance)")
+    parser.add_argument("--units", choices=hnn.names.UNITS, default="auto",
+                        help="the runs' --units (hnn.units): auto, the default, rescales the arm from about 10 kg links "
+                             "(p of RMS 24 at 10 kg); off trains in its own units, as the Balanced loss sections do")
     parser.add_argument("--out", default="results/arm", help="folder for the runs and arm.json")
     parser.add_argument("--update-docs", dest="update_docs", action="store_true",
                         help="write the table into its section of docs/stress.md (--section)")
@@ -92,7 +95,7 @@ def main(argv=None) -> dict:
             rows = []
             for seed in args.seeds:
                 config = hnn.tasks.task_config("arm", {"model": model, "seed": seed, "total_steps": args.steps,
-                                                       "mass": args.mass, "balance": balance,
+                                                       "mass": args.mass, "balance": balance, "units": args.units,
                                                        "save_dir": str(out / "runs")})
                 folder = hnn.runs.find_run(config) or hnn.run_experiment(config)
                 rows.append({"seed": seed, **measure(folder, arm)})
@@ -100,7 +103,7 @@ def main(argv=None) -> dict:
                                                                        if isinstance(v, float)), flush=True)
             results[f"{model} ({balance})"] = rows
     lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread a run): "
-             f"{args.steps} steps a run, links of {args.mass} kg, median (min-max) over seeds "
+             f"{args.steps} steps a run, links of {args.mass} kg, --units {args.units}, median (min-max) over seeds "
              f"{', '.join(map(str, args.seeds))}; train s is each run's own loop, on a shared box.", "",
              "| model (--balance) | field error | rollout error | M^-1 error | smallest eigenvalue / truth's | train s |",
              "| --- | --- | --- | --- | --- | --- |"]
@@ -111,6 +114,7 @@ def main(argv=None) -> dict:
     body = "\n".join(lines) + "\n"
     print("\n" + body)
     report = {"meta": meta, "steps": args.steps, "seeds": args.seeds, "mass": args.mass, "balance": args.balance,
+              "units": args.units,
               "rollout_rtol": RTOL, "results": results}
     write_json(out / "arm.json", json.loads(json.dumps(report)))
     if args.update_docs:

@@ -12,7 +12,10 @@ docs/ it is given (``pages.update_section``).
 """
 from __future__ import annotations
 
+import concurrent.futures
+import multiprocessing
 import os
+import warnings
 from pathlib import Path
 
 import hnn
@@ -93,3 +96,34 @@ def portable_path(word) -> str:
     if not path.is_absolute():
         return str(word)
     return os.path.relpath(path, root) if path.resolve().is_relative_to(root) else "DIR"
+
+
+def _worker_start() -> None:
+    import torch        # here, in the worker: a command's --help loads no torch
+    torch.set_num_threads(1)
+    warnings.simplefilter("ignore")     # a task records its own warnings; the rest would repeat per task
+
+
+def _call(task: tuple):
+    function, arguments = task
+    return function(*arguments)
+
+
+def run_tasks(tasks: list[tuple], jobs: int, describe) -> list:
+    """Each ``(function, arguments)`` of ``tasks`` called, here (``jobs`` 1) or in ``jobs`` worker processes of one
+    torch thread (spawned: no torch state copied by fork), as a measurement's independent parts; the results in
+    the order given. ``describe(task)`` names a task as it ends, after the progress count."""
+    results = [None] * len(tasks)
+    progress = hnn.sweep.Progress(len(tasks))
+    if jobs <= 1:
+        for i, task in enumerate(tasks):
+            results[i] = _call(task)
+            print(f"{progress.advance()} {describe(task)}", flush=True)
+        return results
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context, initializer=_worker_start) as pool:
+        running = {pool.submit(_call, task): i for i, task in enumerate(tasks)}
+        for future in concurrent.futures.as_completed(running):
+            results[running[future]] = future.result()
+            print(f"{progress.advance()} {describe(tasks[running[future]])}", flush=True)
+    return results

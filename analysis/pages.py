@@ -25,6 +25,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "scenes": "docs/scenes.md", "model-guide": "README.md",
          "measured-guide": "README.md",
          "peers": "docs/peers.md", "stress": "docs/stress.md", "lnn-start": "docs/stress.md",
+         "units-scan": "docs/stress.md", "lnn-pinv": "docs/stress.md",
          "arm-balance": "docs/stress.md", "arm-balance-long": "docs/stress.md", "ray-quick": "docs/sweeps.md",
          "ray-full": "docs/sweeps.md",
          "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
@@ -48,9 +49,15 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
            "stress": "python analysis/stress.py --update-docs",
            "lnn-start": "python analysis/stress.py --lnn-start --update-docs",
-           "arm-balance": "python analysis/arm.py --steps 2000 --mass 10 --balance off auto --out results/arm-m10 "
-                          "--update-docs",
-           "arm-balance-long": "python analysis/arm.py --steps 4000 --mass 10 --models mechanical hnn --out "
+           "units-scan": "python analysis/stress.py --scan --update-docs",
+           # the runs that stop early (about 20 minutes on two workers); every one that stopped takes hours
+           "lnn-pinv": "python analysis/stress.py --lnn-pinv --lnn-runs lnn/lagrangian/seed4 chain2/lagrangian/seed0 "
+                       "chain2/lagrangian/seed2 chain2/lagrangian/seed3 chain3/lagrangian/seed4 chain5/lagrangian/seed1 "
+                       "chain5/lagrangian/seed2 chain5/lagrangian/seed4 --lnn-past 200 --update-docs",
+           # the arm's own units (the 10 kg arm's p of RMS 24 is what --units auto would rescale): --balance alone
+           "arm-balance": "python analysis/arm.py --steps 2000 --mass 10 --balance off auto --units off --out "
+                          "results/arm-m10 --update-docs",
+           "arm-balance-long": "python analysis/arm.py --steps 4000 --mass 10 --models mechanical hnn --units off --out "
                                "results/arm-m10-4k --update-docs --section arm-balance-long",
            **{f"dgnet-{task}": f"python analysis/chains/dgnet.py --tasks {task} --jobs 2 --update-docs (their 15 trials)"
               for task in ("spring", "pend", "real", "2body")},
@@ -67,6 +74,7 @@ DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 # the sections that draw verdicts (a table's marks or ranking, a card's choice): each records the seeds
 # they rest on in docs/seeds.json when written, and one resting on fewer than MIN_SEEDS says why
 VERDICTS = ("headline", "results", "scenes", "model-guide", "measured-guide", "peers", "stress", "lnn-start",
+            "units-scan", "lnn-pinv",
             "arm-balance", "arm-balance-long", *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
             *(f"dgnet-init-{task}" for task in DGNET_INIT_TASKS))
 MIN_SEEDS = 3

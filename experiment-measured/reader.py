@@ -16,7 +16,8 @@ them). Any other count of cells is refused with the header line to write. ``.npz
 of the archive is a column, all 1-D and of one length.
 
 Every malformed input raises ``ValueError`` with one line: the file, the line (text) or row
-(npz), the column, the value and what to do.
+(npz), the column, the value and what to do; a value too large for the arithmetic (its square summed
+over the column overflows float64) is one too.
 """
 from __future__ import annotations
 
@@ -59,6 +60,15 @@ class Table:
             row = bad[0]
             raise ValueError(f"{self.path}: {self.where(row)}, column {name!r}: the value is {values[row]} (NaN or "
                              f"infinite; {len(bad)} such cells in that column); remove or fill those rows")
+        # the scaling sums the squares of a column (its RMS): past this size they overflow float64
+        largest = float(np.sqrt(np.finfo(np.float64).max / max(len(values), 1)))
+        huge = np.flatnonzero(np.abs(values) > largest)
+        if len(huge):
+            row = huge[0]
+            raise ValueError(f"{self.path}: {self.where(row)}, column {name!r}: the value {values[row]:g} is too large "
+                             f"for the arithmetic (the sum of the squares of the column's {len(values)} values "
+                             f"overflows float64 past {largest:.3g}; {len(huge)} such cells in that column); fix or "
+                             "drop those rows")
         return values
 
 

@@ -59,6 +59,11 @@ def balance_weights(dxdt, balance: str = "auto", derivative_loss: str = "l2") ->
     if balance == "off" or (balance == "auto" and scale_ratio(dxdt) <= AUTO_RATIO):
         return None
     size = component_rms(dxdt) ** (2 if derivative_loss == "l2" else 1)
+    if not np.isfinite(size).all():
+        wide = np.nonzero(~np.isfinite(size))[0].tolist()
+        raise ValueError(f"balance={balance!r}: the sizes of components {wide} of dx/dt overflow (their RMS, "
+                         f"{'squared ' if derivative_loss == 'l2' else ''}is not finite): the targets hold values too "
+                         "large for float64 arithmetic; find and fix them, or rescale the data")
     if not (size > 0).all():
         zero = np.nonzero(size == 0)[0].tolist()
         raise ValueError(f"balance={balance!r}: components {zero} of dx/dt are 0 in every training target, so they "

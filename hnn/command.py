@@ -18,12 +18,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from .cli import USAGE_ERROR, one_line, parse_created
+from .io import WriteError
 
 INTERRUPTED = 130   # the shell's code for a command ended by Ctrl-C (128 + SIGINT)
 # Exceptions that mean "the input is wrong", not "the code is": values the parser cannot check
-# (the package raises ValueError naming the value and the fix), missing data files, and a
-# --save_dir that cannot be written. Anything else keeps its traceback.
-INPUT_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, PermissionError)
+# (the package raises ValueError naming the value and the fix), missing data files, a --save_dir
+# that cannot be written, and a write that failed there (a full disk: hnn.io.WriteError). Anything
+# else keeps its traceback.
+INPUT_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, PermissionError, WriteError)
 
 
 def train(cls, argv: Sequence[str] | None = None, before: Callable | None = None) -> Path:

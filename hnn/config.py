@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, INITS, NONLINEARITIES, OBJECTIVES, OPTIMIZERS,
-                    SCHEDULES, UNITS)
+from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, INITS, LNN_SOLVES, NONLINEARITIES, OBJECTIVES,
+                    OPTIMIZERS, SCHEDULES, UNITS)
 
 
 _ANY = object()      # a setting's identity_value when the identity holds the field's own value
@@ -70,6 +70,10 @@ class RunConfig:
                                       "the first layer: with softplus, L convex in qdot at step 0, so its first steps "
                                       "train)", choices=INITS,
                         identity_at_default=False)
+    lnn_solve: str = setting("solve", "how the lagrangian kind solves d2L/dqdot2 qddot = ... for qddot: solve (stops with "
+                                      "an error naming the states where d2L/dqdot2 is singular) or pinv (the LNN authors' "
+                                      "pseudo-inverse there, which trains on through them); read by that kind only",
+                             choices=LNN_SOLVES, identity_at_default=False)
     total_steps: int = setting(2000, "optimizer steps; the loop runs total_steps + 1, as the original",
                                parse=cli.int_at_least(0))
     print_every: int = setting(200, "print (and test) every N steps; changes what is printed and the test loss's "
@@ -94,10 +98,13 @@ class RunConfig:
                                    "targets, so no unit decides what is learned (--objective derivative): rms (always), "
                                    "off (the paper's plain loss) or auto (rms where the largest component's RMS exceeds "
                                    "the smallest's over 10x: hnn.balance)", choices=BALANCES, identity_at_default=False)
-    units: str = setting("off", "train in the canonical units of the data (q / s_q, p / s_p, t / s_t, the RMS sizes of the "
-                                "training data, so Hamilton's equations keep their form) and save a model that answers in "
-                                "the data's units: off (the data's units), on, or auto (where the RMS of q, p or a rate "
-                                "lies outside [0.1, 10]: hnn.units)", choices=UNITS, identity_at_default=False)
+    # the default moved from off to auto, which trains every task's default data as off did (hnn.units,
+    # AUTO_FAR): identity_at_default=False keeps each saved run's key, and off now names its own
+    units: str = setting("auto", "train in the canonical units of the data (q / s_q, p / s_p, t / s_t, the RMS sizes of the "
+                                 "training data, so Hamilton's equations keep their form) and save a model that answers in "
+                                 "the data's units: auto (where the RMS of q or p lies outside [0.1, 10] or that of a "
+                                 "rate outside [0.01, 100]: hnn.units), on (always) or off (the data's units)", choices=UNITS,
+                         identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)

@@ -21,6 +21,7 @@ from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
 from .training import fit_loss
+from .units import run_scales
 from .io import check_save_dir
 from .kinds import model_from_spec
 from .objectives import DerivativeObjective
@@ -33,7 +34,7 @@ def unit_key(config) -> tuple | None:
     """Configs with equal keys train as one group: ``("closed_form", ...)`` for the paper's tanh-MLP kinds
     (``hnn.grouped.fit_group``), ``("stacked", ...)`` for any other kind (``hnn.stacked.fit_stacked``),
     None for a config that trains alone (the pixel kinds)."""
-    if run_specs(config).objective.units != "off":     # a rescaled run trains its own canonical data alone
+    if run_specs(config).objective.units == "on":     # a rescaled run trains its own canonical data alone
         return None
     key = group_key(config)
     if key is not None:
@@ -82,10 +83,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         check_save_dir(config.save_dir)
     objective = configs[0].make_objective()
     datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
-    if isinstance(objective, DerivativeObjective) and any(
-            balance_weights(d[objective.arrays[1]], c.balance, c.derivative_loss) is not None
-            for c, d in zip(configs, datasets)):
-        # --balance auto resolved to a balanced loss on these data, which a group's program does not weigh
+    if any([_trains_alone(c, d, objective) for c, d in zip(configs, datasets)]):
         return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
     models, data, tests, saved = [], [], [], []
     specs = [run_specs(config) for config in configs]
@@ -144,6 +142,17 @@ def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) ->
         return {**extra, "loss_of": lambda m: options["loss"]}
     return {**extra, "loss_of": lambda m: fit_loss(m, options.get("predict"), specs.objective.derivative_loss,
                                                    options.get("loss_weights"))}
+
+
+def _trains_alone(config, dataset: dict, objective) -> bool:
+    """Whether ``config``'s run on ``dataset`` needs what a group's program does not do: ``--balance auto``
+    resolved to a balanced loss, or ``--units auto`` to a rescaling (whose refusal, for a kind or an
+    objective it cannot rescale, is raised here as a lone run raises it)."""
+    derivative = isinstance(objective, DerivativeObjective)
+    if derivative and balance_weights(dataset[objective.arrays[1]], config.balance, config.derivative_loss) is not None:
+        return True
+    # the model's declarations (coordinates, angles) decide the rescaling; its weights are drawn again below
+    return run_scales(config.units, config.kind, dataset, objective, model_from_spec(run_specs(config).model)) is not None
 
 
 def _alone(config, dataset):

@@ -147,6 +147,10 @@ def _second_order(cls, spec: ModelSpec):
     return cls(spec.input_dim, spec.hidden_dim, spec.nonlinearity, periodic=spec.periodic)
 
 
+def _lagrangian(cls, spec: ModelSpec):
+    return cls(spec.input_dim, spec.hidden_dim, spec.nonlinearity, periodic=spec.periodic, solve=spec.lnn_solve)
+
+
 def _constrained(cls, spec: ModelSpec):
     from .models.constrained import ConstraintGraph
     if spec.constraints is None:
@@ -232,11 +236,12 @@ MODEL_KINDS: dict[str, ModelKind] = {
     # not in the scene studies: a barely trained black-box L's flow is stiff (one dopri5 rollout of it took
     # minutes in the measured study); the peers' tables train it with the LNN's own activation and give its
     # rollouts an iteration budget (analysis/chains/peers.py)
-    "lagrangian": ModelKind(".models.lagrangian:LagrangianNN", _second_order, color="tab:brown", studied=False,
+    "lagrangian": ModelKind(".models.lagrangian:LagrangianNN", _lagrangian, color="tab:brown", studied=False,
                             doc=KindDoc(
         line="LNN (Cranmer et al. 2020): a black-box L(q, qdot) MLP; qddot from the Euler-Lagrange equations",
         assumes="a conserved energy E = qdot . dL/dqdot - L and a Lagrangian whose Hessian in qdot is invertible "
-                "(a singular one is an error naming the state)",
+                "(a singular one is an error naming the state; `--lnn_solve pinv` takes the LNN authors' "
+                "pseudo-inverse there instead, as the peers' table does)",
         coordinates="observed [q, qdot] only",
         integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
         when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "

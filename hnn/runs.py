@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from . import cli
-from .io import atomic_folder, check_save_dir, write_json
+from .io import atomic_folder, check_save_dir, torch_bytes, write_json
 from .kinds import model_from_args, model_from_spec
 from .objectives import Objective
 from .specs import run_specs
@@ -129,9 +129,10 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     if config.force:
         partial.unlink(missing_ok=True)
     try:
+        # the run resolved --units and --balance above (on its whole training set, recorded in args.json);
         # threads=None: the count the run was given (a train.py's --threads, a sweep's share), recorded in args.json
-        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options, checkpoint=partial,
-                      threads=None)
+        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options,
+                      checkpoint=partial, units="off", balance="off", threads=None)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise
@@ -188,10 +189,11 @@ def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Pa
     args = {k: v for k, v in args.items()}
     # the float reduction order, hence the last bits of every number, depends on the thread count
     metrics = {**metrics, "torch_threads": torch.get_num_threads()}
-    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    # tensors, and a rescaled model's scales (its extra state, a dict of numbers)
+    state = {k: v.detach().cpu() if torch.is_tensor(v) else v for k, v in model.state_dict().items()}
 
     def fill(tmp: Path) -> None:
-        torch.save({"state_dict": state, "args": args}, tmp / "model.tar")
+        (tmp / "model.tar").write_bytes(torch_bytes({"state_dict": state, "args": args}))
         write_json(tmp / "args.json", args)
         write_json(tmp / "metrics.json", metrics)
         write_json(tmp / COMPLETE, {"files": ["model.tar", "args.json", "metrics.json"]})

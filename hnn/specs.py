@@ -37,7 +37,8 @@ class ModelSpec:
     conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
     are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
     (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
-    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder.
+    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder; lnn_solve:
+    how the lagrangian kind solves for qddot (``hnn.names.LNN_SOLVES``).
     """
     kind: str
     input_dim: int | None = None
@@ -50,6 +51,7 @@ class ModelSpec:
     constraints: dict | None = None
     dtype: str = "float32"
     init: str = "orthogonal"
+    lnn_solve: str = "solve"
 
     @classmethod
     def from_args(cls, args: Mapping) -> ModelSpec:

@@ -18,11 +18,12 @@ import torch
 from tqdm.auto import tqdm
 
 from . import names
-from .balance import weighted
+from .balance import balance_weights, weighted
 from .errors import DivergenceError
-from .io import atomic_write
+from .io import atomic_write, torch_bytes
 from .progress import Ticker
 from .threads import torch_threads
+from .units import VELOCITY_LIKE, Rescaled, UnitScales, fit_scales, rescale_reason
 
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
@@ -41,6 +42,15 @@ def check_data(name: str, a, width: int | None = None, dtype=torch.float32, devi
         raise ValueError(f"{name} has {int(bad.sum())} NaN/inf values (first in row {int(rows[0])}, "
                          f"{len(rows)} rows affected); clean or drop those rows before training")
     return t.to(dtype=dtype, device=device)
+
+
+def _checked_pair(name: str, x, dxdt, kw: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    """``check_data`` of states ``x`` and their targets (named ``name`` and ``d<name>/dt``), of one row count."""
+    target = "dxdt" if name == "x" else f"{name.split('_')[0]}_dxdt"
+    x, dxdt = check_data(name, x, **kw), check_data(target, dxdt, **kw)
+    if len(x) != len(dxdt):
+        raise ValueError(f"{name} has {len(x)} rows but {target} has {len(dxdt)}")
+    return x, dxdt
 
 
 _PROGRESS_CALLBACKS: list[Callable[[int, int], None]] = []
@@ -171,21 +181,46 @@ def optimizer_step(loss: Callable, xb: torch.Tensor, yb: torch.Tensor, optim: to
     return batch_loss.item()
 
 
-# the columns' RMS outside which a fit of dx/dt warns: Adam's steps of about learn_rate and tanh's
-# unit-wide bend suit data near unit scale; a real oscillator in raw units (x +-102, v +-255)
-# started at a loss of 1e5 and ended worse than predicting the mean. The tasks' data lie within
-# 0.4-2.6 (spring, pendulum, real pendulum).
-UNIT_SCALE = (1e-3, 100.0)
+def _warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, model) -> None:
+    """Warn when a fit of dx/dt trains on data as given that ``units='auto'`` would rescale
+    (``hnn.units.rescale_reason``: the RMS of q, unless angles, of p or of either half of ``dxdt``, each over
+    all of its columns, lies outside its bounds, or one part's columns spread over 10x in size). Adam's steps
+    of about learn_rate and tanh's unit-wide bend suit data near unit scale: a heavy mass (p of RMS 28, dq/dt
+    of 0.028) degraded a fit 40x, unwarned while only the largest column was read."""
+    coordinates = "velocity" if getattr(model, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
+    reason = rescale_reason(x, dxdt, bool(getattr(model, "periodic", False)), coordinates) if len(x) else None
+    if reason is not None:
+        warnings.warn(f"x and dxdt are {reason}; a network fits poorly there. Train hnn.units.Rescaled(model) with "
+                      "units='auto' (the default), or rescale q and p so that Hamilton's equations still hold: "
+                      "docs/python.md, 'Scale your states'", stacklevel=3)
 
 
-def _warn_off_scale(name: str, values: torch.Tensor) -> None:
-    """Warn when every column of ``values`` ``(rows, dim)`` is tiny or one is huge (RMS outside ``UNIT_SCALE``)."""
-    rms = values.detach().double().pow(2).mean(dim=0).sqrt()
-    largest = rms.max().item() if len(values) else 1.0
-    if not UNIT_SCALE[0] <= largest <= UNIT_SCALE[1]:
-        warnings.warn(f"{name} is far from unit scale (the RMS of its largest column is {largest:.3g}); an HNN fits "
-                      "poorly there. Rescale q and p so that Hamilton's equations still hold: docs/python.md, "
-                      "'Scale your states'", stacklevel=3)
+def _in_canonical_units(model, units: str, x, dxdt, test_x, test_dxdt) -> tuple:
+    """``(the model to fit, x, dxdt, test_x, test_dxdt)`` of a fit of dx/dt under ``units``: an
+    ``hnn.units.Rescaled`` model's inner and the arrays in its canonical units (its scales fit here from
+    ``x``, ``dxdt`` where it has none: by ``units``' rule, 1 where the rule leaves the data as they are);
+    any other model and the arrays themselves, or a ValueError where ``units`` would rescale them (a
+    plain model cannot answer back in the user's units)."""
+    if units not in names.UNITS:
+        raise ValueError(f"units={units!r}: choose one of {', '.join(names.UNITS)}")
+    inner = getattr(model, "inner", model)
+    periodic = bool(getattr(inner, "periodic", False))
+    coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
+    if not isinstance(model, Rescaled):
+        reason = rescale_reason(x, dxdt, periodic, coordinates)
+        if units == "on" or (units == "auto" and reason is not None):
+            raise ValueError(f"units={units!r}: x and dxdt are {reason or 'to be rescaled (units=on)'}, where a network "
+                             f"fits poorly, and {type(model).__name__} answers in the units it is "
+                             "trained in: train hnn.units.Rescaled(model) instead (hnn.train fits its scales from these "
+                             "data, trains the model in them and it answers in yours), or pass units='off' to train "
+                             "on them as they are")
+        return model, x, dxdt, test_x, test_dxdt
+    if model.scales is None:
+        rescale = units == "on" or (units == "auto" and rescale_reason(x, dxdt, periodic, coordinates) is not None)
+        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if rescale else UnitScales(1.0, 1.0, 1.0))
+    pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
+             for a, b in ((x, dxdt), (test_x, test_dxdt))]
+    return (model.inner, *pairs[0], *pairs[1])
 
 
 def _test_diverged(stats: dict, step: int, err: DivergenceError) -> None:
@@ -216,7 +251,7 @@ def save_checkpoint(path: Path, step: int, total_steps: int, model, optim, gens,
     state = {"format": _CHECKPOINT_FORMAT, "step": step, "total_steps": total_steps, "seconds": seconds,
              "model": model.state_dict(), "optim": optim.state_dict(), "gens": [g.get_state() for g in gens],
              "stats": stats}
-    atomic_write(path, lambda tmp: torch.save(state, tmp))
+    atomic_write(path, lambda tmp: Path(tmp).write_bytes(torch_bytes(state)))
 
 
 def load_checkpoint(path: Path, model, optim, gens, total_steps: int) -> tuple[int, dict, float]:
@@ -253,7 +288,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
           derivative_loss: str = "l2", loss_weights=None, checkpoint: str | Path | None = None,
-          checkpoint_every: float | None = None, generators: tuple = (), threads: int | None = 1) -> dict:
+          checkpoint_every: float | None = None, generators: tuple = (), balance: str = "auto",
+          units: str = "auto", threads: int | None = 1) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -282,7 +318,18 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         clip_grad: clip each step's gradient to this global norm (0: never).
         derivative_loss: the per-element error of the default loss (``DERIVATIVE_LOSSES``): ``'l2'``
             squared (the paper's), ``'l1'`` absolute (the LNN's); a custom ``loss`` replaces both.
-        loss_weights: ``(dim,)`` weights of the default loss's components (``hnn.balance``); None: all 1.
+        loss_weights: ``(dim,)`` weights of the default loss's components (``hnn.balance``); None: those
+            ``balance`` gives.
+        balance: where ``loss_weights`` is None, the weights of a fit of dx/dt by ``hnn.balance``'s rule, as
+            a run's ``--balance``: ``'auto'`` (each component by its RMS over ``dxdt`` where the largest
+            exceeds the smallest over 10x, else the plain loss), ``'rms'`` (always) or ``'off'`` (never).
+        units: the units a fit of dx/dt (no ``loss``, no ``predict``) trains in, as a run's ``--units``
+            (``hnn.units``): an ``hnn.units.Rescaled`` model without scales gets them here from ``x`` and
+            ``dxdt`` (``'auto'``: where ``hnn.units.rescale_reason`` finds a reason, their sizes outside its
+            bounds or one part's columns spread over 10x; ``'on'``: always; ``'off'``: never), its inner model
+            trains in those canonical units (the loss history too) and it answers in the user's; a plain model on data ``'auto'`` would rescale is refused
+            with the fix (wrap it in ``Rescaled``, or pass ``units='off'``). ``'off'`` trains as given,
+            with a warning where the data lie far from unit scale.
         checkpoint: a file where the loop saves its state (weights, optimizer, samplers, stats) every
             ``checkpoint_every`` seconds of training (default ``CHECKPOINT_EVERY``); where the file
             exists, training resumes from it and ends with the floats of an uninterrupted run (at the
@@ -298,7 +345,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
         one train loss per step, and the test losses at ``test_steps`` (empty without test data);
         ``'test_diverged'`` (``[{'step', 'why'}]``) where a test batch before the last raised
-        ``DivergenceError``, which training goes on past (at the last step it fails the run).
+        ``DivergenceError``, which training goes on past (at the last step it fails the run);
+        ``'loss_weights'`` where ``balance`` weighed the loss and ``'unit_scales'`` where ``units``
+        rescaled the fit (what each resolved to).
     """
     if total_steps < 0 or int(total_steps) != total_steps:
         raise ValueError(f"total_steps must be a non-negative integer, got {total_steps!r}")
@@ -310,19 +359,29 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     # a custom loss owns its arrays' layout (e.g. flattened trajectory snippets): rows, not widths, are checked
     width = getattr(model, "input_dim", None) if loss is None else None
     kw = dict(width=width, dtype=param.dtype, device=param.device)
-    x, dxdt = check_data("x", x, **kw), check_data("dxdt", dxdt, **kw)
-    if len(x) != len(dxdt):
-        raise ValueError(f"x has {len(x)} rows but dxdt has {len(dxdt)}")
     has_test = test_x is not None
+    given = (x, dxdt, test_x, test_dxdt)
+    x, dxdt = _checked_pair("x", x, dxdt, kw)
     if has_test:
-        test_x, test_dxdt = check_data("test_x", test_x, **kw), check_data("test_dxdt", test_dxdt, **kw)
-        if len(test_x) != len(test_dxdt):
-            raise ValueError(f"test_x has {len(test_x)} rows but test_dxdt has {len(test_dxdt)}")
+        test_x, test_dxdt = _checked_pair("test_x", test_x, test_dxdt, kw)
     if derivative_loss not in DERIVATIVE_LOSSES:
         raise ValueError(f"derivative_loss={derivative_loss!r}: choose one of {', '.join(DERIVATIVE_LOSSES)}")
-    if loss is None:        # a fit of dx/dt itself: its arrays are states and their derivatives
-        _warn_off_scale("x", x)
-        _warn_off_scale("dxdt", dxdt)
+    resolved = {}
+    if loss is None and predict is None:        # a fit of dx/dt itself, in the units of ``units``
+        fitted, *arrays = _in_canonical_units(model, units, *given)
+        if fitted is not model:     # a Rescaled model: its inner trains on the arrays in its canonical units
+            resolved["unit_scales"] = model.scales.to_dict()
+            model, param = fitted, next(fitted.parameters())
+            x, dxdt = _checked_pair("x", arrays[0], arrays[1], kw)
+            if has_test:
+                test_x, test_dxdt = _checked_pair("test_x", arrays[2], arrays[3], kw)
+    if loss is None:        # a fit of dx/dt: its arrays are states and their derivatives
+        if loss_weights is None:
+            loss_weights = balance_weights(dxdt, balance, derivative_loss)
+            if loss_weights is not None:
+                resolved["loss_weights"] = [float(w) for w in loss_weights]
+        if "unit_scales" not in resolved:
+            _warn_off_scale(x, dxdt, model)
         loss = fit_loss(model, predict, derivative_loss, loss_weights)
     if test_every is None:
         test_every = print_every
@@ -334,7 +393,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     optim = adam_optimizer(model, learn_rate, weight_decay, optimizer)
     gen = torch.Generator("cpu").manual_seed(seed)
     test_gen = torch.Generator("cpu").manual_seed(seed + 1)
-    stats = {"train_loss": [], "test_loss": [], "test_steps": []}
+    stats = {"train_loss": [], "test_loss": [], "test_steps": [], **resolved}
     first, seconds_before = 0, 0.0
     checkpoint_every = CHECKPOINT_EVERY if checkpoint_every is None else checkpoint_every
     if checkpoint is not None:

@@ -59,12 +59,11 @@ def _arm_fit(units: torch.Tensor, balance: str, steps: int = 60) -> torch.Tensor
     torch.manual_seed(0)
     model = hnn.build_model(4, 32).double()
     hnn.train(model, x, dxdt, total_steps=steps, progress=False, weight_decay=1e-4,
-              predict=lambda xb: units * model.time_derivative(xb / units),
-              loss_weights=balance_weights(dxdt, balance))
+              predict=lambda xb: units * model.time_derivative(xb / units), balance=balance)
     return torch.cat([p.detach().flatten() for p in model.parameters()])
 
 
-@pytest.mark.filterwarnings("ignore:dxdt is far from unit scale", "ignore:x is far from unit scale")
+@pytest.mark.filterwarnings("ignore:x and dxdt are far from unit scale")
 def test_a_change_of_units_by_1e3_gives_the_same_fit():
     """Momenta in g m^2/s instead of kg m^2/s (10^3) or positions in mrad (10^3, with p in 10^-3 of
     its unit: the change stays canonical): the balanced fit is the same network. Tolerance 1e-8
@@ -94,15 +93,20 @@ def test_balance_at_its_default_keeps_the_run_identity(tmp_path):
     assert len(keys | {default.key()}) == 3
 
 
-@pytest.mark.filterwarnings("ignore:dxdt is far from unit scale")
+@pytest.mark.filterwarnings("ignore:x and dxdt are far from unit scale")
 def test_a_run_records_what_auto_resolved_to(tmp_path):
-    heavy = hnn.run_experiment(_arm_config(tmp_path, model="mechanical", mass=10.0))
+    """In the arm's own units (--units off) the 10 kg arm's dp/dt is 60x its dq/dt: --balance auto weighs each
+    component by its RMS, recorded; at 1 kg (ratio 6.4) the plain loss. At the default --units auto the 10 kg
+    arm's p (RMS 24) is rescaled first, recorded too."""
+    heavy = hnn.run_experiment(_arm_config(tmp_path, model="mechanical", mass=10.0, units="off"))
     saved = json.loads((heavy / "args.json").read_text())
     assert saved["balance"] == "auto"
     np.testing.assert_allclose(np.asarray(saved["loss_weights"]) * component_rms(
         _arm_config(tmp_path, mass=10.0).dataset()["dxdt"]) ** 2, 1.0, rtol=1e-6)
     light = hnn.run_experiment(_arm_config(tmp_path, model="mechanical"))     # 1 kg: ratio 6.4, the plain loss
-    assert "loss_weights" not in json.loads((light / "args.json").read_text())
+    assert not {"loss_weights", "unit_scales"} & set(json.loads((light / "args.json").read_text()))
+    rescaled = hnn.run_experiment(_arm_config(tmp_path, model="mechanical", mass=10.0))
+    assert set(json.loads((rescaled / "args.json").read_text())["unit_scales"]) == {"q", "p", "t"}
 
 
 def test_balance_refuses_an_objective_with_its_own_loss(tmp_path):
@@ -110,12 +114,14 @@ def test_balance_refuses_an_objective_with_its_own_loss(tmp_path):
         _arm_config(tmp_path, balance="rms", objective="discrete_gradient").make_objective()
 
 
-@pytest.mark.filterwarnings("ignore:dxdt is far from unit scale")
-def test_a_group_whose_data_balance_trains_each_run_alone_with_its_weights(tmp_path):
-    """Grouped training weighs no components: where 'auto' balances, each run trains alone, as
-    ``hnn.run_experiment`` would, so its folder is the lone run's (its loss weights recorded)."""
-    configs = [_arm_config(tmp_path, model="hnn", mass=10.0, seed=s) for s in (0, 1)]
+@pytest.mark.filterwarnings("ignore:x and dxdt are far from unit scale")
+@pytest.mark.parametrize("units, recorded", [("off", "loss_weights"), ("auto", "unit_scales")])
+def test_a_group_whose_data_balance_trains_each_run_alone_with_its_weights(tmp_path, units, recorded):
+    """Grouped training weighs no components and rescales nothing: where --balance auto balances (the 10 kg
+    arm in its own units) or --units auto rescales (the same at the defaults), each run trains alone, as
+    ``hnn.run_experiment`` would, so its folder is the lone run's (what auto resolved to recorded)."""
+    configs = [_arm_config(tmp_path, model="hnn", mass=10.0, seed=s, units=units) for s in (0, 1)]
     assert hnn.grouped.group_key(configs[0]) is not None and hnn.grouped.group_key(_arm_config(tmp_path, balance="rms")) is None
     folders = hnn.group_runs.train_group(configs)
     assert [f.name for f in folders] == [hnn.runs.run_dir(c).name for c in configs]
-    assert all("loss_weights" in json.loads((f / "args.json").read_text()) for f in folders)
+    assert all(recorded in json.loads((f / "args.json").read_text()) for f in folders)

@@ -155,3 +155,52 @@ def test_the_convex_init_takes_its_first_steps_on_chnns_chains(bobs, tmp_path):
                                                  "seed": seed, "save_dir": str(tmp_path)})
         metrics = json.loads((hnn.run_experiment(config) / "metrics.json").read_text())
         assert np.isfinite(metrics["train_loss"]) and np.isfinite(metrics["test_loss"])
+
+
+class _VanishingMass(hnn.models.LagrangianNN):     # L = q^2 qdot^2 / 2 - q^2 / 2: d2L/dqdot2 = q^2, 0 at q = 0
+    def lagrangian_at(self, q, v):
+        return (q ** 2 * v ** 2).sum() / 2 - (q ** 2).sum() / 2
+
+
+def test_the_pseudo_inverse_solve_is_the_plain_one_where_d2l_dqdot2_is_invertible_and_goes_on_where_not():
+    """A known L whose kinetic term vanishes at q = 0 (d2L/dqdot2 = q^2): off q = 0 both solves give the
+    Euler-Lagrange qddot = -(qdot^2 + 1) / q in closed form; at q = 0 the plain solve stops naming the state,
+    the LNN authors' pseudo-inverse gives its minimum-norm qddot, 0 (pinv of a zero matrix), and counts it."""
+    z = torch.tensor([[0.5, 0.3], [-1.2, 2.0], [0.0, 0.7], [2.0, -1.0]], dtype=torch.float64)
+    exact = -(z[:, 1] ** 2 + 1) / z[:, 0]
+    plain, pinv = _VanishingMass(2, 4).double(), _VanishingMass(2, 4, solve="pinv").double()
+    with pytest.raises(hnn.models.SingularLagrangianError, match=r"singular at 1 states.*#2") as err:
+        plain.acceleration(z)
+    assert err.value.states == [2]
+    keep = [0, 1, 3]
+    torch.testing.assert_close(plain.acceleration(z[keep])[:, 0], exact[keep], rtol=1e-12, atol=0)
+    got = pinv.acceleration(z)[:, 0]
+    torch.testing.assert_close(got[keep], exact[keep], rtol=1e-12, atol=0)
+    assert got[2].item() == 0.0 and pinv.pinv_states == 1
+    with pytest.raises(ValueError, match="solve='lu': choose one of solve, pinv"):
+        hnn.models.LagrangianNN(2, 4, solve="lu")
+
+
+@pytest.mark.parametrize("n", [1, 2, 5])
+def test_the_two_solves_agree_where_d2l_dqdot2_is_well_conditioned(n):
+    """A network L from the convex init (d2L/dqdot2 positive definite at these states): the pseudo-inverse
+    solve's qddot, its weights' gradient and a few training steps are the plain solve's, to the float64
+    digit (the pseudo-inverse is the inverse where every singular value lies above its cutoff, and there
+    the same LU solve is taken); no state is counted."""
+    states = torch.cat([torch.rand(32, n, dtype=torch.float64) * 6, torch.randn(32, n, dtype=torch.float64)], 1)
+    models = []
+    for solve in ("solve", "pinv"):
+        torch.manual_seed(n)
+        models.append(hnn.kinds.model_from_args({"kind": "lagrangian", "input_dim": 2 * n, "hidden_dim": 32,
+                                                 "nonlinearity": "softplus", "periodic": True, "init": "lnn_convex",
+                                                 "dtype": "float64", "lnn_solve": solve}))
+    plain, pinv = models
+    assert torch.linalg.cond(_velocity_hessians(plain, states, n)).max() < 1e6
+    a, b = plain.acceleration(states), pinv.acceleration(states)
+    torch.testing.assert_close(b, a, rtol=0, atol=0)
+    g_plain, = torch.autograd.grad(a.pow(2).sum(), plain.net.linear2.weight)
+    g_pinv, = torch.autograd.grad(b.pow(2).sum(), pinv.net.linear2.weight)
+    torch.testing.assert_close(g_pinv, g_plain, rtol=0, atol=0)
+    target = plain.time_derivative(states).detach() * 0.9
+    losses = [hnn.train(m, states, target, total_steps=3, progress=False)["train_loss"] for m in models]
+    assert losses[0] == losses[1] and pinv.pinv_states == 0

@@ -274,6 +274,9 @@ def _error(argv, capsys, main=None) -> str:
     ("t,x,v\n0,1,2\n0.1,one,2\n", ["--q", "x"], r"line 3, column 'x': 'one' is not a number"),
     ("t,x,v\n0,1,2\n0.1,1,nan\n", ["--q", "x"], r"line 3, column 'v': the value is nan"),
     ("t,x,v\n0,1,2\n0.1,1,inf\n", ["--q", "x"], r"line 3, column 'v': the value is inf"),
+    # a cell the arithmetic cannot hold: its square overflows float64 in the RMS the scaling takes
+    ("t,x,v\n0,1,2\n0.1,1e300,2\n0.2,1,2\n", ["--q", "x"], r"line 3, column 'x': the value 1e\+300 is too large "
+                                                        r"for the arithmetic"),
     ("t,x,v\n0,1,2\n0.2,1,2\n0.1,1,2\n", ["--q", "x"], r"line 4: time t=0.1 does not increase"),
     ("t,x,v\n0,1,2\n0.1,1,2\n0.2,1,2\n", ["--q", "x"], r"trial 0 .* has 3 rows: too few to split"),
     ("", ["--q", "x"], r"the file is empty"),

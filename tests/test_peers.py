@@ -2,6 +2,7 @@
 import json
 import re
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -330,3 +331,23 @@ def test_the_committed_record_holds_runs_of_the_full_tables_plan():
     assert not stale, f"recorded runs the full table no longer trains (their configs changed): {stale}"
     for key, entry in record["runs"].items():
         assert set(entry["entry"]) in ({"mean", "median", "n"}, {"blew_up"}, {"diverged"}), (key, entry)
+
+
+def test_the_lnn_runs_that_stopped_are_the_tables_with_the_pseudo_inverse_config():
+    """analysis/stress.py --lnn-pinv trains again each LNN run of the peers' table that stopped with a singular
+    d2L/dqdot2 under the plain solve: 12 on the chains (chain2 seeds 0, 2, 3; chain3 seeds 1-4; chain5 every seed),
+    at steps 144 to 1846 of 8000 (those of chain5 as docs/peers.md's table quotes them), and seed 4 of the LNN
+    protocol, each the table's job with its config (now the pseudo-inverse solve, as the table trains the LNN)."""
+    from hnn_analysis.chains import lnn_pinv
+    stopped = lnn_pinv.PLAIN_STOPS
+    assert sorted(stopped) == sorted([f"chain2/lagrangian/seed{s}" for s in (0, 2, 3)]
+                                     + [f"chain3/lagrangian/seed{s}" for s in (1, 2, 3, 4)]
+                                     + [f"chain5/lagrangian/seed{s}" for s in range(5)] + ["lnn/lagrangian/seed4"])
+    assert (min(stopped.values()), max(v for k, v in stopped.items() if k.startswith("chain"))) == (144, 1846)
+    quoted = re.findall(r"seed (\d) failed in training: SingularLagrangianError at training step (\d+) of 8000",
+                        (hnn.tasks.repo_root() / "docs" / "peers.md").read_text())
+    assert {f"chain5/lagrangian/seed{s}": int(step) for s, step in quoted} == {
+        key: step for key, step in stopped.items() if key.startswith("chain5")}
+    job = lnn_pinv._job("chain5/lagrangian/seed1", Path("runs"))
+    assert job.config.lnn_solve == "pinv" and (job.config.bobs, job.config.seed, job.config.total_steps) == (5, 1, 8000)
+    assert peer_plan.KIND_FIELDS["lagrangian"]["lnn_solve"] == "pinv"

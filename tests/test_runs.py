@@ -1,6 +1,7 @@
 """Run folders are written as a whole: an interrupted save never mixes two runs."""
 import dataclasses
 import json
+import re
 import os
 import subprocess
 import sys
@@ -264,3 +265,26 @@ def test_a_run_trains_on_its_fraction(tmp_path, monkeypatch):
     full = trainer.main(argv)
     assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv)) == full
     assert hnn.runs.find_run(hnn.cli.parse(trainer.Config, argv + ["--train_fraction", "0.5"])) is None
+
+
+def test_a_full_disk_is_one_error_line_naming_the_folder_and_leaves_nothing(tmp_path, monkeypatch, capsys):
+    """A write that fails while a run saves (the disk full: every write raises ENOSPC) ends a train.py with one
+    ``error:`` line naming the folder and the cause, not torch's traceback; the folder holds no run, no
+    temporary folder and no checkpoint. torch's own writer reports a full disk as a RuntimeError, which is
+    why the run's files are serialized in memory and written as plain bytes: here both writes fail alike."""
+    import errno
+    import pathlib
+
+    def full(self, data, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(self))
+    monkeypatch.setattr(pathlib.Path, "write_bytes", full)
+    monkeypatch.setattr(pathlib.Path, "write_text", full)
+    train = hnn.load_task("spring", "train")
+    with pytest.raises(SystemExit) as info:
+        hnn.command.run_main(train.main, ["--total_steps", "2", "--hidden_dim", "8", "--save_dir", str(tmp_path)])
+    assert info.value.code == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len([line for line in lines if line.startswith("error:")]) == 1 and lines[-1].startswith("error:")
+    assert re.search(rf"error: \[Errno {errno.ENOSPC}\] cannot write in {re.escape(str(tmp_path))}: No space left on "
+                     r"device; nothing half-written was left there\. Free space", lines[-1])
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".npz")) == []

@@ -188,18 +188,24 @@ def test_a_test_batch_that_diverges_before_the_end_is_recorded_and_one_at_the_en
 
 
 def test_data_far_from_unit_scale_warns_and_a_hamiltonian_rescaling_does_not(spring):
-    """A spring in raw units (q in 1e2, p in 2.5e2, as a measured oscillator) warns; divided by
-    the spreads (one degree of freedom: any pair of factors keeps Hamilton's equations) it does not."""
+    """A spring in raw units (q in 1e2, p in 2.5e2, as a measured oscillator): at the default, units='auto',
+    a plain model is refused with the fix; with units='off' it trains with a warning naming every part's size
+    (dq/dt too, whose RMS of 0.028 under a heavy mass went unwarned while the largest column's was read);
+    divided by the spreads (one degree of freedom: any pair of factors keeps Hamilton's equations) it does not."""
     import warnings
     d = spring.get_dataset(seed=0)
     raw_x, raw_dxdt = (torch.as_tensor(d[key]) * torch.tensor([100.0, 250.0]) for key in ("x", "dxdt"))
     model = hnn.HNN(2, hnn.MLP(2, 8, 2))
-    with pytest.warns(UserWarning) as record:
+    with pytest.raises(ValueError, match=r"units='auto': x and dxdt are far from unit scale \(RMS q 45.*train "
+                                         r"hnn.units.Rescaled\(model\) instead.*or pass units='off'"):
         hnn.train(model, raw_x, raw_dxdt, total_steps=0)
-    assert [str(w.message).split(" (")[0] for w in record] == ["x is far from unit scale", "dxdt is far from unit scale"]
-    assert "Scale your states" in str(record[0].message)
-    with pytest.warns(UserWarning, match="dxdt is far from unit scale"):
-        hnn.train(model, d["x"], d["dxdt"] * 1e-4, total_steps=0)
+    with pytest.warns(UserWarning) as record:
+        hnn.train(model, raw_x, raw_dxdt, total_steps=0, units="off")
+    assert [str(w.message).split(" (")[0] for w in record] == ["x and dxdt are far from unit scale"]
+    assert "Scale your states" in str(record[0].message) and "dp/dt 224" in str(record[0].message)
+    heavy = torch.as_tensor(d["x"]) * torch.tensor([1.0, 28.0]), torch.as_tensor(d["dxdt"]) * torch.tensor([0.028, 1.0])
+    with pytest.warns(UserWarning, match=r"RMS q 0.45\d, p 12.\d, dq/dt 0.025\d, dp/dt 0.89\d"):
+        hnn.train(model, *heavy, total_steps=0, units="off")
     spread = raw_x.std(dim=0)                   # q by q's spread, p by p's; their derivatives alike
     with warnings.catch_warnings():
         warnings.simplefilter("error")

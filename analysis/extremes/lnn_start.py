@@ -9,6 +9,7 @@ import torch
 
 import hnn
 from hnn import sweep
+from hnn_analysis import pages
 from hnn_analysis.provenance import machine
 
 
@@ -83,3 +84,15 @@ def lnn_start_text(rows: list[dict], meta: dict, steps: int) -> str:
                 cells.append(f"{sum('trained_loss' in r for r in group)} of {len(group)}")
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def start_results_text(results: dict) -> str:
+    """``lnn_start_text`` of saved results (their steps: recorded, or read from their command)."""
+    command = results["meta"]["command"]
+    steps = results.get("steps", int(command.split("--lnn-steps")[1].split()[0]) if "--lnn-steps" in command else 0)
+    return lnn_start_text(results["lnn_start"], results["meta"], steps)
+
+
+def start_seeds(results: dict) -> pages.Seeds:
+    n = len({row["seed"] for row in results["lnn_start"]})
+    return pages.Seeds(n, None if n >= pages.MIN_SEEDS else f"this run had --lnn-seeds {n}")

@@ -8,7 +8,13 @@ momenta, no mass matrix, any L. The derivatives are batched autograd passes: dL/
 pass per qdot_i for the row d(dL/dqdot_i)/dz (n + 1 backward passes over the whole batch, about half
 the time of a per-state ``vmap(jacfwd(grad))``: docs/speed.md). Where d2L/dqdot2 is singular the
 equations do not determine qddot: ``time_derivative`` raises ``SingularLagrangianError`` naming the
-states (LNN's code takes a pseudo-inverse there instead, silently).
+states. ``solve='pinv'`` solves as LNN's own code does (MilesCranmer/lagrangian_nns, ``lnn.py``:
+``jnp.linalg.pinv`` of d2L/dqdot2, whose default cutoff drops singular values below 10 n eps of the
+largest): where every singular value lies above that cutoff the pseudo-inverse is the inverse, so there
+the plain solve is used (the same qddot, bit for bit; ``tests/test_lagrangian.py``), and at the states
+where one lies below it the pseudo-inverse's minimum-norm qddot, counted in ``pinv_states``. Measured on
+the peers' chains (docs/stress.md, "The LNN solved as its authors solve it"): the runs the plain solve
+stopped stop at the same step with it, their RK4 snippet diverging, so the error stays the default.
 
 Its energy E(q, qdot) = qdot . dL/dqdot - L is conserved by its flow for any weights (the
 Legendre transform of L, the Hamiltonian in velocity coordinates): the kind declares
@@ -30,6 +36,7 @@ from torch.func import vmap
 from ..errors import DivergenceError
 from ..modes import in_model_axis
 from .mechanical import check_width, embed_angles, StateCheckedModel
+from ..names import LNN_SOLVES
 from .mlp import MLP
 
 
@@ -50,15 +57,21 @@ class LagrangianNN(StateCheckedModel):
         input_dim: 2n, the width of z = [q, qdot].
         hidden_dim, nonlinearity: of the MLP (smooth activations only: the field differentiates L twice).
         periodic: q are angles (the network sees cos q, sin q; LNN's code wraps q mod 2 pi instead).
+        solve: ``'solve'`` (a ``SingularLagrangianError`` where d2L/dqdot2 is singular) or ``'pinv'`` (the
+            LNN authors' pseudo-inverse there; ``pinv_states`` counts the states it took).
     """
     coordinates = "velocity"
     takes = {"cartesian": "positions and velocities of bodies: L(x, xdot) of any state [q, qdot]"}
     conservative = True
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
+    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False,
+                 solve: str = "solve"):
         super().__init__()
+        if solve not in LNN_SOLVES:
+            raise ValueError(f"solve={solve!r}: choose one of {', '.join(LNN_SOLVES)}")
         self.n = check_width(input_dim, "LagrangianNN")
-        self.input_dim, self.periodic = input_dim, bool(periodic)
+        self.input_dim, self.periodic, self.solve = input_dim, bool(periodic), solve
+        self.pinv_states = 0        # states whose qddot came from the pseudo-inverse (solve='pinv'), every call
         self.net = MLP(3 * self.n if periodic else input_dim, hidden_dim, 1, nonlinearity)
 
     def lagrangian_at(self, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -111,6 +124,8 @@ class LagrangianNN(StateCheckedModel):
             dL, rows = dL.detach(), rows.detach()
         hess_vv, mixed = rows[:, :, n:], rows[:, :, :n]                          # mixed[b, i, j] = d2L/dqdot_i dq_j
         rhs = dL[:, :n] - (mixed @ v[..., None])[..., 0]
+        if self.solve == "pinv":
+            return self._pseudo_solve(hess_vv, rhs)
         qddot, info = torch.linalg.solve_ex(hess_vv, rhs[..., None])
         qddot = qddot[..., 0]
         if in_model_axis():         # vmap cannot branch on a value: a singular model's loss is not finite
@@ -133,3 +148,29 @@ class LagrangianNN(StateCheckedModel):
     def time_derivative(self, z: torch.Tensor, t=None) -> torch.Tensor:
         """``dz/dt = (qdot, qddot)``, ``(batch, 2n)``; a graph for training only in grad mode."""
         return torch.cat([z[:, self.n:], self.acceleration(z)], dim=1)
+
+    def _pseudo_solve(self, hess_vv: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
+        """qddot ``(batch, n)`` = pinv(d2L/dqdot2) rhs, the LNN authors' solve: the pseudo-inverse drops the
+        singular values below ``10 n eps`` of the largest (JAX's default cutoff), so where none lies below it
+        it is the inverse, and there the (cheaper, same to rounding) plain solve is taken. The states where
+        one does are counted in ``pinv_states``."""
+        rtol = 10 * self.n * torch.finfo(hess_vv.dtype).eps
+        if in_model_axis():         # vmap cannot pick states by a value: the pseudo-inverse at every state
+            return (torch.linalg.pinv(hess_vv, rtol=rtol, hermitian=True) @ rhs[..., None])[..., 0]
+        with torch.no_grad():
+            cond = torch.linalg.cond(hess_vv.detach())
+            cut = ~torch.isfinite(cond) | (cond * rtol > 1)
+        # the plain solve where the inverse exists; an identity in place of the others keeps its graph finite
+        eye = torch.eye(self.n, dtype=hess_vv.dtype, device=hess_vv.device)
+        qddot = torch.linalg.solve(torch.where(cut[:, None, None], eye, hess_vv), rhs[..., None])[..., 0]
+        if cut.any():
+            at = torch.nonzero(cut).flatten()
+            pinv = torch.linalg.pinv(hess_vv[at], rtol=rtol, hermitian=True)
+            qddot = qddot.index_put((at,), (pinv @ rhs[at][..., None])[..., 0])
+            self.pinv_states += len(at)
+        bad = ~torch.isfinite(qddot.detach()).all(1)
+        if bad.any():       # a non-finite L: no solve determines qddot
+            rows = torch.nonzero(bad).flatten().tolist()
+            raise SingularLagrangianError(f"LagrangianNN: d2L/dqdot2 or dL/dq is not finite at {len(rows)} states "
+                                          f"(#{rows[0]} first), so no solve determines qddot there", rows)
+        return qddot
