@@ -1,6 +1,6 @@
 """The one list of each option's names, known before torch loads, so that ``--help`` and a flag
 error answer at once: the activations, the inits, the field types, the objectives, the derivative
-losses, the balances, the optimizers, the rate schedules and the dtypes.
+losses, the balances, the optimizers, the rate schedules, the dtypes, the units and the fits.
 
 Each name is spelled here only; the module that implements an option keys its table from this
 list and finds each implementation by a rule on the name (a missing one fails at import, naming it):
@@ -9,8 +9,8 @@ that name; an init is a branch of ``hnn.models.initialize``; a field type picks 
 ``hnn.models.hamiltonian.FIELD_ROWS`` (in this order); an objective ``a_b`` is the class
 ``ABObjective`` (``hnn.kinds.OBJECTIVES``, imported on first use); a derivative loss ``l2`` is
 ``hnn.training.l2_loss``; an optimizer is the ``torch.optim`` class of that name (case aside); a
-schedule is a branch of ``hnn.training.learning_rate``; a dtype is torch's of that name. The model
-kinds' names, classes and prose are the rows of ``hnn.kinds.MODEL_KINDS``.
+schedule is a branch of ``hnn.training.learning_rate``; a dtype is torch's of that name; a fit is a
+row of ``hnn.fits.FITS``. The model kinds' names, classes and prose are the rows of ``hnn.kinds.MODEL_KINDS``.
 """
 NONLINEARITIES = ("tanh", "relu", "sigmoid", "softplus", "selu", "elu", "swish")
 INITS = ("orthogonal", "zero_bias", "lnn", "lnn_convex")
@@ -22,3 +22,5 @@ OPTIMIZERS = ("adam", "adamw")
 SCHEDULES = ("constant", "cosine")
 DTYPES = ("float32", "float64")
 UNITS = ("off", "auto", "on")
+# how a run finds its weights: the training loop, or one least-squares solve (the rows of hnn.fits.FITS)
+FITS = ("adam", "swim", "elm", "library", "sindy")

@@ -24,7 +24,8 @@ import torch
 
 from . import cli
 from .io import atomic_folder, check_save_dir, write_json
-from .kinds import model_from_args, model_from_spec
+from .fits import check_config, solve
+from .kinds import get_kind, model_from_args, model_from_spec
 from .objectives import Objective
 from .specs import run_specs
 from .training import train
@@ -104,6 +105,8 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     A value the config's flag would refuse raises ValueError before anything is built.
     """
     cli.check(config)
+    # a least-squares fit refuses what it cannot fit before any data is built
+    fit = check_config(config, get_kind(config.kind).coordinates)
     check_save_dir(config.save_dir)
     objective = objective or config.make_objective()
     dataset, data_seconds = _materialize(config.dataset if dataset is None else dataset)
@@ -129,7 +132,12 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options, checkpoint=partial)
+        if fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
+            stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
+                          loss_weights=options.get("loss_weights"))
+        else:
+            stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options,
+                          checkpoint=partial)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise
