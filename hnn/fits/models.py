@@ -165,8 +165,8 @@ class FittedSeparable(Model):
 
     def equation(self, digits: int = 4) -> str:
         names = column_names(self.input_dim)
-        terms = self.kinetic_features.names(names[self.n:]) + self.potential_features.names(names[:self.n]) + ["1"]
-        return "H = " + _sum(torch.cat([self.kinetic_coef, self.potential_coef, self.offset[None]]), terms, digits)
+        terms = self.potential_features.names(names[:self.n]) + self.kinetic_features.names(names[self.n:]) + ["1"]
+        return "H = " + _sum(torch.cat([self.potential_coef, self.kinetic_coef, self.offset[None]]), terms, digits)
 
 
 class FittedField(Model):
@@ -211,8 +211,10 @@ class FittedField(Model):
 
 
 def _sum(coef: torch.Tensor, names: list[str], digits: int) -> str:
-    """``'2 p - 3 sin(q)'``: the nonzero coefficients with their terms, largest first; ``'0'`` if none."""
-    pairs = sorted(((float(c), name) for c, name in zip(coef.tolist(), names) if c != 0), key=lambda cn: -abs(cn[0]))
+    """``'3 - 3 cos(q) + p^2'``: the nonzero coefficients with their terms, the constant first, then in the
+    library's order (graded monomials, then trig terms); ``'0'`` if none."""
+    pairs = [(float(c), name) for c, name in zip(coef.tolist(), names) if c != 0]
+    pairs.sort(key=lambda cn: cn[1] != "1")
     text = ""
     for i, (c, name) in enumerate(pairs):
         sign = ("-" if c < 0 else "") if i == 0 else (" - " if c < 0 else " + ")
