@@ -150,7 +150,7 @@ def test_the_features_gradients_are_their_values_derivatives():
     tanh.set(*sampling.swim(x.numpy(), 7, rng))
     library = Library(terms(4, "hamiltonian", 3, 2), 4)
     for features in (tanh, library):
-        auto = torch.autograd.functional.jacobian(lambda z: features(z).sum(0), x).permute(1, 0, 2)
+        auto = torch.autograd.functional.jacobian(lambda z, f=features: f(z).sum(0), x).permute(1, 0, 2)
         assert torch.allclose(features.jacobian(x), auto, atol=1e-12)
         coef = torch.as_tensor(rng.normal(size=features.width))
         assert torch.allclose(features.gradient(x, coef), torch.einsum("rkj,k->rj", auto, coef), atol=1e-11)

@@ -14,9 +14,10 @@ out as any run; its model is an ``hnn.Model`` of its kind (``hnn``, ``separable`
 - ``fitting``: ``solve`` (a run's fit) and ``fit_least_squares`` (``hnn.fit_least_squares``);
 - ``sindy``: pysindy (optional extra ``sindy``) wrapped as a field model.
 """
+from . import sindy
 from .fitting import fit_least_squares, solve
 from .models import FittedField, FittedHNN, FittedSeparable
 from .registry import FITS, LINEAR_KINDS, Fit, build, check, check_config, get_fit
 
 __all__ = ["FITS", "LINEAR_KINDS", "Fit", "FittedField", "FittedHNN", "FittedSeparable", "build", "check",
-           "check_config", "fit_least_squares", "get_fit", "solve"]
+           "check_config", "fit_least_squares", "get_fit", "sindy", "solve"]

@@ -47,10 +47,14 @@ class TanhFeatures(nn.Module):
         """phi ``(rows, width)`` at ``x`` ``(rows, in_dim)``."""
         return torch.tanh(torch.addmm(self.bias, x, self.weight.T))
 
+    def slopes(self, x: torch.Tensor) -> torch.Tensor:
+        """tanh' = 1 - phi^2 ``(rows, width)``: d phi_k / dx = slopes_k w_k."""
+        t = self(x)
+        return 1 - t * t
+
     def jacobian(self, x: torch.Tensor) -> torch.Tensor:
         """d phi_k / d x_j ``(rows, width, in_dim)``."""
-        t = self(x)
-        return (1 - t * t)[:, :, None] * self.weight[None]
+        return self.slopes(x)[:, :, None] * self.weight[None]
 
     def gradient(self, x: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
         """d/dx of phi(x) . coef, ``(rows, in_dim)``: (1 - phi^2) * coef times W, no ``(rows, width, in_dim)`` tensor."""

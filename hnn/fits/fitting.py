@@ -39,7 +39,10 @@ def _rows_per_state(part, x, y) -> int:
 
 def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) -> StreamingQR:
     """The QR factor of ``part``'s design over every state, built chunk by chunk (two passes: the columns'
-    norms, then the factor)."""
+    norms, then the factor); through ``_stream_factored`` where the part's design factors."""
+    factored = part.factored() if part.factored is not None else None
+    if factored is not None:
+        return _stream_factored(*factored, x, y, weights, rcond, bar)
     states = max(1, chunk_rows(part.columns, part.rhs) // _rows_per_state(part, x, y))
     chunks = [slice(i, i + states) for i in range(0, len(x), states)]
     sumsq = torch.zeros(part.columns, dtype=torch.float64)
@@ -50,6 +53,38 @@ def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) 
     for c in chunks:
         solver.add(*part.design(x[c], y[c], weights))
         bar.update(len(x[c]))
+    return solver
+
+
+def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tensor, y: torch.Tensor, weights,
+                     rcond: float, bar) -> StreamingQR:
+    """The factor of a sampled layer's gradient design without building it: there the rows of component j are
+    S diag(V[:, j]) (S ``(states, K)`` the neurons' slopes 1 - phi^2, V ``(K, m)`` their weights along each
+    component, J and signs folded in). A QR of [S | Y] (``states`` rows) gives S = Q R_s and Z = Q^T Y, and
+    then |S diag(V_j) c - y_j|^2 = |R_s diag(V_j) c - Z_j|^2 + what Q misses of y_j: the problem of
+    ``states * m`` rows becomes one of ``K * m`` rows. At width 5000 on 20k 4-d states the two QRs cost
+    half the direct one's arithmetic (docs/speed.md, "Least-squares fits")."""
+    K, m = V.shape
+    w = torch.ones(m, dtype=torch.float64) if weights is None else \
+        torch.as_tensor(weights, dtype=torch.float64)[targets]
+    Y = y[:, targets]
+    stage = StreamingQR(K, m)
+    step = max(1, chunk_rows(K, m))
+    for i in range(0, len(x), step):
+        stage.add(slopes(x[i:i + step]), Y[i:i + step])
+        bar.update(len(x[i:i + step]))
+    R = stage.factor
+    Rs, Z, tail = R[:K, :K], R[:K, K:], R[K:, K:]
+    scale = ((Rs * Rs).sum(dim=0) * (V * V * w).sum(dim=1)).sqrt()        # |A_k| over every component's rows
+    solver = StreamingQR(K, 1, scale, rcond)
+    piece = max(1, chunk_rows(K, 1) // m)
+    for start in range(0, len(Rs), piece):
+        block = Rs[start:start + piece]
+        A = torch.cat([w[j].sqrt() * block * V[:, j] for j in range(m)])
+        Yb = torch.cat([w[j].sqrt() * Z[start:start + piece, j:j + 1] for j in range(m)])
+        solver.add(A, Yb, rows=0)
+    solver.rows = len(x) * m
+    solver.outside = (w * (tail * tail).sum(dim=0)).sum().reshape(1)
     return solver
 
 

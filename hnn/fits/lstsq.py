@@ -23,7 +23,7 @@ import math
 import torch
 
 # the stacked matrix [factor; chunk] of one QR update holds at most this many bytes (the QR's own copy
-# and the new factor come on top): width 10000 updates ~17k rows at a time, under 7 GiB at the peak
+# and the new factor come on top): width 10000 updates ~17k rows at a time
 BLOCK_BYTES = 2 * 2 ** 30
 MAX_STLSQ_ITERATIONS = 25
 # the ridges generalized cross-validation chooses from (relative to unit columns; ``StreamingQR.ridge``)
@@ -40,26 +40,31 @@ def chunk_rows(columns: int, rhs: int = 1) -> int:
 class StreamingQR:
     """min_C |A C - Y|^2 + rcond^2 |diag(scale) C|^2 over rows added in chunks (``add``), for ``columns``
     unknowns and ``rhs`` right-hand sides. ``scale`` ``(columns,)``: the columns' norms (their RMS over the
-    data, or any positive size): the columns are divided by it, so ``rcond`` is relative to unit columns."""
+    data, or any positive size): the columns are divided by it, so ``rcond`` is relative to unit columns.
+    ``rcond`` 0: a plain QR of the rows (no ridge rows), whose factor another solve reads."""
 
-    def __init__(self, columns: int, rhs: int, scale: torch.Tensor, rcond: float):
-        if not rcond > 0:
-            raise ValueError(f"rcond must be > 0 (the ridge that keeps a nearly dependent design solvable), got {rcond}")
+    def __init__(self, columns: int, rhs: int, scale: torch.Tensor | None = None, rcond: float = 0.0):
+        if not rcond >= 0:
+            raise ValueError(f"rcond must be >= 0 (the ridge that keeps a nearly dependent design solvable), "
+                             f"got {rcond}")
         self.columns, self.rhs, self.rcond = columns, rhs, rcond
-        self.scale = torch.where(scale > 0, scale, torch.ones_like(scale)).to(torch.float64)
-        self.factor = torch.zeros(columns, columns + rhs, dtype=torch.float64)
-        self.factor[:, :columns] = rcond * torch.eye(columns, dtype=torch.float64)
-        self.rows = 0
+        scale = torch.ones(columns, dtype=torch.float64) if scale is None else scale.to(torch.float64)
+        self.scale = torch.where(scale > 0, scale, torch.ones_like(scale))
+        self.factor = torch.zeros(columns if rcond else 0, columns + rhs, dtype=torch.float64)
+        self.factor[:, :columns] = rcond * torch.eye(columns, dtype=torch.float64)[:len(self.factor)]
+        self.rows = 0                   # rows of the least-squares problem (generalized cross-validation's count)
+        self.outside = torch.zeros(rhs, dtype=torch.float64)     # residual a reduced problem left behind
 
-    def add(self, A: torch.Tensor, Y: torch.Tensor) -> None:
-        """Fold the rows ``A`` ``(rows, columns)``, ``Y`` ``(rows, rhs)`` into the factor."""
+    def add(self, A: torch.Tensor, Y: torch.Tensor, rows: int | None = None) -> None:
+        """Fold the rows ``A`` ``(rows, columns)``, ``Y`` ``(rows, rhs)`` into the factor (``rows``: how many rows of
+        the original problem they stand for, where they are a reduction of more)."""
         stacked = torch.empty(len(self.factor) + len(A), self.columns + self.rhs, dtype=torch.float64)
         stacked[:len(self.factor)] = self.factor
         torch.div(A, self.scale, out=stacked[len(self.factor):, :self.columns])
         stacked[len(self.factor):, self.columns:] = Y
         del A
         self.factor = torch.linalg.qr(stacked, mode="r").R[:self.columns + self.rhs]
-        self.rows += len(Y)
+        self.rows += len(Y) if rows is None else rows
 
     def _split(self):
         R = self.factor[:self.columns]
@@ -67,8 +72,8 @@ class StreamingQR:
 
     def residual(self) -> torch.Tensor:
         """The sum of squared residuals of each right-hand side that no coefficients can reach (``(rhs,)``)."""
-        tail = self.factor[self.columns:]
-        return (tail[:, self.columns:] ** 2).sum(dim=0) if len(tail) else torch.zeros(self.rhs, dtype=torch.float64)
+        tail = self.factor[self.columns:, self.columns:]
+        return (tail ** 2).sum(dim=0) + self.outside
 
     def ridge(self) -> torch.Tensor:
         """Each right-hand side's ridge (relative to unit columns) chosen by generalized cross-validation

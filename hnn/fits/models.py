@@ -41,7 +41,9 @@ class Part:
     ``design(x, y, weights)``, the rows ``(A (rows, columns), Y (rows, rhs))`` of a chunk of states ``x`` and
     their ``y`` = dx/dt (``weights`` ``(dim,)`` or None: each component's weight in the loss);
     ``assign(coef (columns, rhs))`` puts the solution in place; ``supervised``: the sampler may draw
-    this layer's neurons where ``y`` changes fastest (SWIM with function values)."""
+    this layer's neurons where ``y`` changes fastest (SWIM with function values); ``factored()``, where the
+    design is a sampled layer's gradient: ``(slopes, V, targets)``, the rows of component ``targets[j]`` being
+    ``slopes(x) * V[:, j]`` (``hnn.fits.fitting`` solves it without building the rows)."""
     features: nn.Module
     inputs: Callable
     design: Callable
@@ -50,6 +52,7 @@ class Part:
     rhs: int = 1
     supervised: bool = False
     name: str = "H"
+    factored: Callable | None = None
 
 
 def _weighted(A: torch.Tensor, Y: torch.Tensor, weights, rows_per_state: int, components) -> tuple:
@@ -91,8 +94,16 @@ class FittedHNN(Model):
         with torch.no_grad():
             self.coef.copy_(coef[:, 0])
 
+    def _factored(self):
+        if not isinstance(self.features, TanhFeatures):
+            return None
+        W = self.features.weight
+        # d/dt of component j is (J grad H)_j = sum_k c_k (1 - phi_k^2) (J w_k)_j
+        return self.features.slopes, torch.cat([W[:, self.n:], -W[:, :self.n]], dim=1), list(range(self.input_dim))
+
     def parts(self) -> list[Part]:
-        return [Part(self.features, lambda x: x, self._design, self._assign, self.features.width, supervised=True)]
+        return [Part(self.features, lambda x: x, self._design, self._assign, self.features.width, supervised=True,
+                     factored=self._factored)]
 
     def anchor(self, x0: torch.Tensor, H0) -> None:
         """Fix the constant so that H(x0) = H0 (``x0`` ``(1, 2n)``): the one value dx/dt cannot give."""
@@ -152,7 +163,13 @@ class FittedSeparable(Model):
             with torch.no_grad():
                 coef.copy_(solution[:, 0])
 
-        return Part(features, lambda x: x[:, half], design, assign, features.width, name="T" if kinetic else "V")
+        def factored():
+            if not isinstance(features, TanhFeatures):
+                return None
+            return (lambda x: features.slopes(x[:, half])), sign * features.weight, list(rows)
+
+        return Part(features, lambda x: x[:, half], design, assign, features.width, name="T" if kinetic else "V",
+                    factored=factored)
 
     def parts(self) -> list[Part]:
         return [self._part(True), self._part(False)]

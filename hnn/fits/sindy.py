@@ -1,4 +1,4 @@
-"""SINDy as a rung: pysindy (an optional extra, ``pip install 'hnn-reference[sindy]'``) fitted to dx/dt
+"""SINDy as a rung: pysindy (an optional extra, ``pip install -e ".[sindy]"``) fitted to dx/dt
 as a user would fit it first, its coefficients then carried by our own field model.
 
 pysindy fits dx/dt = Theta(x) Xi: ``PolynomialLibrary(degree)`` on every column and ``FourierLibrary
@@ -24,7 +24,7 @@ def pysindy():
     try:
         import pysindy as ps
     except ImportError as err:
-        raise ValueError("--fit sindy needs pysindy, an optional extra: pip install 'hnn-reference[sindy]' "
+        raise ValueError("--fit sindy needs pysindy, an optional extra: pip install -e '.[sindy]' "
                          f"({err})") from None
     return ps
 
