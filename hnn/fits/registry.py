@@ -23,13 +23,15 @@ class Fit:
     """A fit: ``kinds`` it applies to (None: every kind); ``features``: ``'swim'`` or ``'elm'`` (a sampled
     tanh layer of ``--hidden_dim`` neurons), ``'library'`` (terms written out, sparse by thresholding),
     or None (trained by Adam); ``package``: the optional package it imports (pip extra ``extra``);
-    ``line``: what it is, for readers."""
+    ``line``: what it is, for readers; ``marker``: its points' marker in the studies' plots (a kind's colour
+    beside it says which model)."""
     name: str
     line: str
     kinds: tuple[str, ...] | None = LINEAR_KINDS
     features: str | None = None
     package: str | None = None
     extra: str | None = None
+    marker: str = "o"
 
     @property
     def solved(self) -> bool:
@@ -40,15 +42,16 @@ class Fit:
 FITS: dict[str, Fit] = {
     "adam": Fit("adam", "the training loop: Adam on the kind's objective (hnn.train), the paper's", kinds=None),
     "swim": Fit("swim", "a hidden layer of --hidden_dim tanh neurons, each from a pair of training states "
-                        "(SWIM, Rahma, Datar & Dietrich 2024), and the last layer by least squares", features="swim"),
+                        "(SWIM, Rahma, Datar & Dietrich 2024), and the last layer by least squares", features="swim",
+                marker="s"),
     "elm": Fit("elm", "a hidden layer of --hidden_dim tanh neurons drawn at random (an extreme learning machine), "
-                      "and the last layer by least squares", features="elm"),
+                      "and the last layer by least squares", features="elm", marker="v"),
     "library": Fit("library", "H (or, for the baseline, dx/dt) as a sparse sum of terms: polynomials of q and p, "
                               "sines and cosines of q and their products with p; least squares thresholded as "
-                              "SINDy's STLSQ, so the model prints as an equation", features="library"),
+                              "SINDy's STLSQ, so the model prints as an equation", features="library", marker="^"),
     "sindy": Fit("sindy", "pysindy's SINDy: dx/dt = Theta(x) Xi over polynomials and sines and cosines of q, its "
                           "STLSQ; no H (--model baseline); rolled out and measured as our models are",
-                 kinds=("baseline",), features="library", package="pysindy", extra="sindy"),
+                 kinds=("baseline",), features="library", package="pysindy", extra="sindy", marker="D"),
 }
 if tuple(FITS) != NAMES:
     raise ImportError(f"hnn.names.FITS lists {NAMES}, hnn.fits.FITS has rows {tuple(FITS)}")
