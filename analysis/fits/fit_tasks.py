@@ -20,7 +20,7 @@ from pathlib import Path
 
 import hnn
 from hnn import sweep
-from hnn_analysis import commands
+from hnn_analysis import commands, pages
 from hnn_analysis.fits import task_fits
 from hnn_analysis.provenance import provenance
 
@@ -61,7 +61,8 @@ def main(argv=None) -> dict:
         head = text.split("\n\n**Fits beside Adam**")[0] + "\n\n"
         sections = {"fits-tasks": head + "\n".join(task_fits.accuracy_table(results)) + "\n",
                     "fits-library": head + "\n".join(task_fits.library_table(results)) + "\n"}
-    commands.publish(out, "fit_tasks", results, text, sections)
+    commands.publish(out, "fit_tasks", results, text, sections,
+                     pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS else "a --seeds run below 3"))
     sweep.exit_if_failed(runs)
     return results
 

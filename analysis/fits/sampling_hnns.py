@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 import hnn
-from hnn_analysis import commands
+from hnn_analysis import commands, pages
 from hnn_analysis.fits import sampling_protocols as sp
 from hnn_analysis.provenance import cpu_snapshot, others_load, provenance
 
@@ -87,8 +87,11 @@ def main(argv=None) -> dict:
             results["rows"] += pool.submit(_width, name, width, args.variants, seeds, args.threads).result()
     if args.adam_seeds and "double" in args.protocols:
         results["adam"] = _adam(list(range(args.adam_seeds)), args.threads, args.adam_steps)
+    others = [r["others"] for row in results["rows"] for r in row["per_seed"]]
+    results["others_median"] = statistics.median(others) if others else 0.0
     text = sp.markdown(results)
-    commands.publish(args.out, "sampling_hnns", results, text, {"fits-sampling": text} if args.update_docs else {})
+    commands.publish(args.out, "sampling_hnns", results, text, {"fits-sampling": text} if args.update_docs else {},
+                     pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS else "a --seeds run below 3"))
     return results
 
 
