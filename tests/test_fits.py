@@ -143,6 +143,22 @@ def test_cross_validation_keeps_exact_data_exact_and_stops_noisy_data_from_being
     assert auto["test_loss"][0] < 0.013 < tiny["test_loss"][0]
 
 
+@pytest.mark.parametrize("kind", ["hnn", "separable"])
+def test_a_sampled_layers_factored_solve_is_the_direct_one(kind, monkeypatch):
+    """The two QRs of the factored design (the slopes, then K rows per component) solve the problem the design
+    of every (state, component) row states: one fit of each, the factoring switched off for the second."""
+    rng = np.random.default_rng(10)
+    x, dxdt = rng.uniform(-1, 1, size=(300, 4)), rng.normal(size=(300, 4))
+    factored, _ = hnn.fit_least_squares(kind, x, dxdt, fit="swim", width=40, rcond=1e-10, progress=False,
+                                        loss_weights=[1.0, 2.0, 0.5, 1.0])
+    # the models module's test for a sampled layer fails: every part streams its (state, component) rows
+    monkeypatch.setattr(hnn.fits.models, "TanhFeatures", type("NotSampled", (), {}))
+    direct, _ = hnn.fit_least_squares(kind, x, dxdt, fit="swim", width=40, rcond=1e-10, progress=False,
+                                      loss_weights=[1.0, 2.0, 0.5, 1.0])
+    z = torch.as_tensor(x)
+    assert torch.allclose(factored.time_derivative(z), direct.time_derivative(z), rtol=1e-7, atol=1e-9)
+
+
 def test_the_features_gradients_are_their_values_derivatives():
     rng = np.random.default_rng(6)
     x = torch.as_tensor(rng.uniform(-1.5, 1.5, size=(20, 4)))
