@@ -7,8 +7,8 @@ per-seed numbers (Rahma, Datar & Dietrich 2024), and our Adam HNN on the same da
 
 Each (system, width) runs in a fresh process (its peak resident memory is the width's), every seed and
 variant one after another on ``--threads`` threads: uniform pairs (``uswim``: dx/dt alone, ``--fit swim``),
-pairs by the true H at the training points (``swim``: their headline SWIM) and, with ``--variants``,
-``elm``. Then ``--adam-seeds`` seeds of the paper's HNN trained by Adam for ``--adam-steps`` steps on the
+pairs by the true H at the training points (``swim``: their headline SWIM) and ``elm``, as many as a
+width's fits allow (``sampling_protocols.default_variants``) unless ``--variants`` says otherwise. Then ``--adam-seeds`` seeds of the paper's HNN trained by Adam for ``--adam-steps`` steps on the
 double pendulum's data. Writes ``<out>/sampling_hnns.json`` and ``.md``; the protocol and where ours
 differs: ``analysis/fits/sampling_protocols.py`` and docs/fits.md.
 """
@@ -62,11 +62,14 @@ def main(argv=None) -> dict:
                    help="the systems (default: both)")
     p.add_argument("--widths", nargs="+", type=hnn.cli.int_at_least(1), default=None,
                    help="hidden widths (default: each system's published widths: single 1000, double 5000 10000)")
-    p.add_argument("--variants", nargs="+", choices=list(sp.VARIANTS), default=["uswim", "swim"],
-                   help="; ".join(f"{k}: {v}" for k, v in sp.VARIANTS.items()))
+    p.add_argument("--variants", nargs="+", choices=list(sp.VARIANTS), default=None,
+                   help="; ".join(f"{k}: {v}" for k, v in sp.VARIANTS.items())
+                   + " (default: all three at width 1000, uswim and swim at 5000, uswim alone at 10000: a fit there "
+                     "takes minutes on 2 cores)")
     p.add_argument("--threads", type=hnn.cli.int_at_least(1), default=2, help="torch threads of every fit")
     p.add_argument("--adam-seeds", type=hnn.cli.int_at_least(0), default=5, help="seeds of the Adam HNN (0: none)")
-    p.add_argument("--adam-steps", type=hnn.cli.int_at_least(1), default=5000, help="Adam steps a seed (batch 2048)")
+    p.add_argument("--adam-steps", type=hnn.cli.int_at_least(1), default=3000,
+                   help="Adam steps a seed (batch 2048; theirs: 180000 on 64 threads)")
     commands.add_flags(p, quick="single pendulum, width 1000, one seed, no Adam: a smoke run of seconds",
                        out="output folder (default results/fits)", out_default=Path("results/fits"),
                        seeds="seeds of every fit (default 5; theirs: 10)", seeds_default=5,
@@ -84,7 +87,8 @@ def main(argv=None) -> dict:
     context = multiprocessing.get_context("spawn")     # a fresh process per width: its peak memory is that width's
     for name, width in plan:
         with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
-            results["rows"] += pool.submit(_width, name, width, args.variants, seeds, args.threads).result()
+            variants = args.variants or sp.default_variants(width)
+            results["rows"] += pool.submit(_width, name, width, variants, seeds, args.threads).result()
     if args.adam_seeds and "double" in args.protocols:
         results["adam"] = _adam(list(range(args.adam_seeds)), args.threads, args.adam_steps)
     others = [r["others"] for row in results["rows"] for r in row["per_seed"]]

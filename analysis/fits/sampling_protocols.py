@@ -72,6 +72,14 @@ PUBLISHED = {
 # neurons, float64, batch 2048, lr 1e-4, 180000 steps on 64 threads, one seed
 PUBLISHED_ADAM = {"double": {"error": 3.62e-3, "seconds": 10485.4, "width": 5000, "steps": 180000}}
 # our variants: how the pairs are drawn (theirs: U-SWIM, SWIM with the true H, ELM)
+
+
+def default_variants(width: int) -> tuple[str, ...]:
+    """The variants a width runs by default: all three up to 1000 (seconds), uniform pairs and SWIM up to 5000
+    (a minute a fit on 2 cores), uniform pairs alone beyond (dx/dt's own variant; minutes a fit)."""
+    return ("uswim", "swim", "elm") if width <= 1000 else ("uswim", "swim") if width <= 5000 else ("uswim",)
+
+
 VARIANTS = {"uswim": "uniform pairs: dx/dt alone (fit swim)", "swim": "pairs by the true H at the training "
             "points (their SWIM; needs H values a dataset of dx/dt does not have)", "elm": "random weights (fit elm)"}
 

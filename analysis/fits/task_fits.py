@@ -14,6 +14,7 @@ autoencoder, which no linear solve can find (``--fit`` refuses it).
 """
 from __future__ import annotations
 
+import math
 import statistics
 from pathlib import Path
 
@@ -39,6 +40,9 @@ NEAR = 2.0                 # "as accurate": a mean within this factor of Adam's 
 CHAIN_STARTS, CHAIN_RTOL = 25, 1e-7
 # where the chain's fits read its states: dx/dt at every state (its Adam runs fit 4-step snippets)
 FIT_FIELDS = {"chain": {"objective": "derivative"}}
+# the 3-body's library: 12 coordinates make H's quartic library 2155 terms (a solve of minutes on 960k rows);
+# its cubic one is 790 (our library and SINDy's alike: the degree of the fields)
+LIBRARY_FIELDS = {"3body": {"library_degree": 2}}
 
 
 def rungs(task: str) -> dict[str, dict]:
@@ -52,7 +56,8 @@ def rungs(task: str) -> dict[str, dict]:
             continue
         if fit.package == "pysindy" and hnn.fits.sindy.version() is None:
             continue
-        out[label] = {**fields, **(FIT_FIELDS.get(task, {}) if fit.solved else {})}
+        out[label] = {**fields, **(FIT_FIELDS.get(task, {}) if fit.solved else {}),
+                      **(LIBRARY_FIELDS.get(task, {}) if fit.features == "library" else {})}
     return out
 
 
@@ -85,8 +90,12 @@ def _chain_energy(task: str, models: dict) -> dict:
     out = {}
     for label, model in models.items():
         field = hnn.evaluation.float64_copy(model).observed_field("velocity")
-        with torch.no_grad():
-            pred = hnn.rollout(field, z0, t, method="dopri5", rtol=CHAIN_RTOL, atol=CHAIN_RTOL)
+        try:
+            with torch.no_grad():
+                pred = hnn.rollout(field, z0, t, method="dopri5", rtol=CHAIN_RTOL, atol=CHAIN_RTOL)
+        except hnn.DivergenceError as err:      # a model whose flow leaves the chain's states: its numbers are inf
+            out[label] = {"energy_mse": (math.inf, 0.0), "rollout": math.inf, "diverged": str(err).split(":")[0]}
+            continue
         e_pred = chain.energy(pred.reshape(-1, pred.shape[-1])).reshape(pred.shape[:2])
         gap = ((e_pred - e_true) ** 2).numpy()
         out[label] = {"energy_mse": hnn.metrics.energy_mse(e_true.numpy(), e_pred.numpy()),
@@ -101,7 +110,7 @@ def measure(task: str, by_seed: dict[int, dict], quick: bool) -> dict:
     seeds = sorted(by_seed)
     out: dict[str, dict] = {}
     if hnn.task_spec(task).protocols:
-        rows = study.evaluate_seeds(task, [by_seed[s] for s in seeds], None, study.QUICK_TRIALS if quick else None)
+        rows = _evaluate(task, [by_seed[s] for s in seeds], study.QUICK_TRIALS if quick else None)
     else:
         rows = []
         for seed in seeds:
@@ -119,6 +128,30 @@ def measure(task: str, by_seed: dict[int, dict], quick: bool) -> dict:
             numbers["equation"] = (metrics.get("history") or {}).get("fit", {}).get("equation")
             out.setdefault(label, {})[seed] = numbers
     return out
+
+
+def _evaluate(task: str, runs: list[dict], trials: int | None) -> list[dict]:
+    """``study.evaluate_seeds`` of every seed's runs; where a model's rollout diverges (a fit far from the
+    task's H), each rung alone, the diverged one's energy MSE inf and its reason recorded."""
+    try:
+        return study.evaluate_seeds(task, runs, None, trials)
+    except hnn.DivergenceError:
+        pass
+    rows = [{} for _ in runs]
+    for label in runs[0]:
+        try:
+            each = study.evaluate_seeds(task, [{label: r[label]} for r in runs], None, trials)
+        except hnn.DivergenceError as err:
+            each = []
+            for r in runs:
+                _, row = study.load_runs(task, {label: r[label]})
+                for name in hnn.task_spec(task).protocols:
+                    row[label][f"energy_mse_{name}"] = [math.inf, 0.0]
+                row[label]["diverged"] = str(err).split(":")[0]
+                each.append(row)
+        for row, got in zip(rows, each):
+            row[label] = got[label]
+    return rows
 
 
 def energy_key(per_seed: dict) -> str:
@@ -143,6 +176,8 @@ def seconds(per_seed: dict) -> float:
 def _g(pair) -> str:
     if pair is None:
         return "n/a"
+    if not math.isfinite(pair[0]):
+        return "diverged"
     return f"{pair[0]:.3g}" + (f" ± {pair[1]:.2g}" if pair[1] else "")
 
 

@@ -30,6 +30,7 @@ from .sampling import elm, swim
 
 RCOND = "auto"          # the ridge of the solve: chosen by generalized cross-validation (a number: that ridge)
 THRESHOLD = 0.05        # a library's smallest coefficient kept (the data's units)
+DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
 
 
 def _rows_per_state(part, x, y) -> int:
@@ -43,15 +44,25 @@ def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) 
     factored = part.factored() if part.factored is not None else None
     if factored is not None:
         return _stream_factored(*factored, x, y, weights, rcond, bar)
-    states = max(1, chunk_rows(part.columns, part.rhs) // _rows_per_state(part, x, y))
+    per_state = _rows_per_state(part, x, y)
+    states = max(1, chunk_rows(part.columns, part.rhs) // per_state)
+    # the design of a few states at a time: a library's terms build (states, terms, dim) arrays several times over
+    step = max(1, DESIGN_BYTES // (8 * part.columns * per_state))
+
+    def design(c: slice):
+        pieces = [part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
+                  for i in range(c.start, min(c.stop, len(x)), step)]
+        return torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces])
+
     chunks = [slice(i, i + states) for i in range(0, len(x), states)]
     sumsq = torch.zeros(part.columns, dtype=torch.float64)
     for c in chunks:
-        A, _ = part.design(x[c], y[c], weights)
-        sumsq += (A * A).sum(dim=0)
+        for i in range(c.start, min(c.stop, len(x)), step):
+            A, _ = part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
+            sumsq += (A * A).sum(dim=0)
     solver = StreamingQR(part.columns, part.rhs, sumsq.sqrt(), rcond)
     for c in chunks:
-        solver.add(*part.design(x[c], y[c], weights))
+        solver.add(*design(c))
         bar.update(len(x[c]))
     return solver
 

@@ -22,9 +22,9 @@ import math
 
 import torch
 
-# the stacked matrix [factor; chunk] of one QR update holds at most this many bytes (the QR's own copy
-# and the new factor come on top): width 10000 updates ~17k rows at a time
-BLOCK_BYTES = 2 * 2 ** 30
+# the stacked matrix [factor; chunk] of one QR update holds at most this many bytes (the chunk itself, the
+# QR's own copy and the new factor come on top): width 5000 updates ~22k rows at a time, width 10000 10k
+BLOCK_BYTES = 2 ** 30
 MAX_STLSQ_ITERATIONS = 25
 # the ridges generalized cross-validation chooses from (relative to unit columns; ``StreamingQR.ridge``)
 RIDGES = tuple(10.0 ** e for e in range(-13, 1))
