@@ -135,6 +135,8 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
         if fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
             stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
                           loss_weights=options.get("loss_weights"))
+            if config.verbose and "equation" in stats["fit"]:
+                print(stats["fit"]["equation"])
         else:
             stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options,
                           checkpoint=partial)
