@@ -174,7 +174,7 @@ def _card(rows: list[dict], naive: dict) -> tuple[dict | None, list[str]]:
     n, err = len(m["seeds"]), m["error"][0]
     ratio = err / naive["median"] if naive["median"] > 0 else float("inf")
     seeds = f"mean over {n} seeds" if n > 1 else "one seed"
-    said = [f"{m['kind']} (width {m['hidden_dim']}, {m['train_fraction']:g} of the training rows, "
+    said = [f"{scene_rungs.describe(m['kind'], m['hidden_dim'], m['train_fraction'])} ("
             f"{m['params']} parameters, {m['train_seconds']:.3g} s to train on one thread) is enough: its "
             f"median prediction error ({seeds}) {_range(m)} is within {scene_common.CARD_FACTOR:g}x of the best "
             f"({best:.4g}) and {ratio:.2f}x the naive extrapolation's ({naive['median']:.4g})"
@@ -238,8 +238,8 @@ def _cheapest_and_libraries(table: dict, ok: list) -> list[str]:
     are enough here and the equations they found, or that none is."""
     cheapest = min(ok, key=lambda k: (table[k]["train_seconds"] or math.inf, k[1]))
     c = table[cheapest]
-    said = [f"The cheapest to train that is enough: {c['kind']} (width {c['hidden_dim']}, {c['train_fraction']:g} of "
-            f"the training rows), {c['train_seconds']:.3g} s on one thread."]
+    said = [f"The cheapest to train that is enough: {scene_rungs.describe(c['kind'], c['hidden_dim'], c['train_fraction'])}"
+            f", {c['train_seconds']:.3g} s on one thread."]
     libraries = [k for k in sorted(ok, key=lambda k: table[k]["train_seconds"] or math.inf) if scene_rungs.is_library(k[0])]
     if libraries:
         said.append("A library is enough here: it found the equations " + "; ".join(
@@ -306,7 +306,7 @@ def guide(registry: dict) -> str:
         c = entry["chosen"]
         pe, n = c["prediction_error"], c.get("n_seeds", 1)
         spread = f" ({pe['min']:.3g}-{pe['max']:.3g})" if n > 1 else ""
-        lines.append(f"| {name} | {c['kind']}, width {c['hidden_dim']}, {c['train_fraction']:g} of the data | "
+        lines.append(f"| {name} | {scene_rungs.describe(c['kind'], c['hidden_dim'], c['train_fraction'])} | "
                      f"{pe['median']:.3g}{spread}; naive {entry['naive']['median']:.3g} ({entry['units']}) | {n} | "
                      f"{scene_tables.unsettled(c)} | "
                      f"{entry['horizon']:.3g} s | {scene_tables.cheapest_words(c)} | ({entry['date']}, commit "

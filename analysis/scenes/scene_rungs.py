@@ -40,6 +40,11 @@ def is_library(rung: str) -> bool:
     return hnn.fits.FITS[fit_of(rung)].features == "library"
 
 
+def describe(rung: str, width: int, fraction: float) -> str:
+    """``'hnn, width 32, 0.5 of the data'``; a library's rung has no width: ``'hnn+library, 1 of the data'``."""
+    return f"{rung}, " + ("" if is_library(rung) else f"width {width}, ") + f"{fraction:g} of the data"
+
+
 def marker(rung: str) -> str:
     """The rung's marker in a plot (its fit's; Adam's a circle)."""
     return hnn.fits.FITS[fit_of(rung)].marker

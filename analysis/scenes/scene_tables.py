@@ -146,7 +146,7 @@ def _cell_order(key: str):
 
 def card_name(card: dict) -> str:
     """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
-    name = f"{card['kind']}, width {card['width']}, {card['fraction']:g} of the data"
+    name = scene_rungs.describe(card["kind"], card["width"], card["fraction"])
     within = card.get("within", 1.0)
     if within > scene_common.CARD_FACTOR:
         return f"none within {scene_common.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
@@ -194,7 +194,7 @@ def cheapest_words(card: dict) -> str:
     found = card.get("cheapest")
     if not found:
         return "none within 2x" if "cheapest" in card else "not chosen"
-    return f"{found['kind']}, width {found['width']}, {found['fraction']:g} of the data ({_g(found['train_seconds'])} s)"
+    return f"{scene_rungs.describe(found['kind'], found['width'], found['fraction'])} ({_g(found['train_seconds'])} s)"
 
 
 def library_words(card: dict) -> str:
