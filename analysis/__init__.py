@@ -10,6 +10,8 @@ Rooms by purpose, each importing only the others' public names:
 - ``integrator_study``: speed at equal accuracy of every solver (``speed_accuracy``), the energy drift.
 - ``extremes``: the stress study's grid, tables and the LNN's start (``stress.py`` is its command).
 - ``chains``: the peers' tables on pendulum chains and DGNet's protocol (``peers``, ``dgnet``).
+- ``fits``: the least-squares fits measured: the Sampling-HNNs protocols and the fits beside Adam and
+  SINDy on the paper's tasks and the chains (``sampling_hnns``, ``fit_tasks``).
 - ``provenance`` (commit, versions, machine for every JSON written) and ``pages`` (the generated
   blocks of README.md and docs/, and the seeds behind their verdicts; ``readme`` is its command). Training many runs is the library's ``hnn.sweep``.
 
@@ -24,6 +26,7 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 - shared: what every command uses (``commands``, ``provenance``, ``pages``, ``plotting``,
   ``training_cost``, ``plan``: a study's estimate before it starts); it imports no room;
 - ``paper``, ``benchmarks``, ``integrator_study``, ``chains``, ``extremes``: each on the shared modules alone;
+- ``fits``: also the paper's rows of runs and figure registry (its tasks' runs and energy protocols);
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
 - entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``, ``score``,
   ``units_check``), on any room.
@@ -37,6 +40,7 @@ _ROOMS = {
     "benchmarks": ("benchmarks",),
     "integrator_study": ("integrator_study",),
     "chains": ("chains",),
+    "fits": ("fits",),
     "scenes": ("scenes",),
     "entry": ("reproduce", "scene_study", "peers", "arm", "stress", "readme", "score", "units_check"),
 }
@@ -48,6 +52,7 @@ _MAY_IMPORT = {
     "integrator_study": ("shared",),
     "chains": ("shared",),
     "extremes": ("shared",),
+    "fits": ("shared", "paper"),
     "scenes": ("shared", "paper", "integrator_study"),
     "entry": ("shared", "paper", "scenes", "chains", "extremes"),
 }

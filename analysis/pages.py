@@ -29,6 +29,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "arm-balance": "docs/stress.md", "arm-balance-long": "docs/stress.md", "ray-quick": "docs/sweeps.md",
          "ray-full": "docs/sweeps.md",
          "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
+         "fits-sampling": "docs/fits.md", "fits-tasks": "docs/fits.md", "fits-library": "docs/fits.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")},
          **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS}}
 # section name -> the command that regenerates it (the staleness check's fix)
@@ -68,14 +69,17 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "thread-spread": "python analysis/paper/thread_spread.py --update-docs",
            "many-models-gpu": "python analysis/benchmarks/benchmark_many.py --devices cuda --update-docs (on a GPU)",
            "gpu-check": "python analysis/benchmarks/gpu_check.py --update-docs (on a GPU)",
-           "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs"}
+           "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs",
+           "fits-sampling": "python analysis/fits/sampling_hnns.py --update-docs",
+           "fits-tasks": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs",
+           "fits-library": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs"}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)
 DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 # the sections that draw verdicts (a table's marks or ranking, a card's choice): each records the seeds
 # they rest on in docs/seeds.json when written, and one resting on fewer than MIN_SEEDS says why
 VERDICTS = ("headline", "results", "scenes", "model-guide", "measured-guide", "peers", "stress", "lnn-start",
-            "units-scan", "lnn-pinv",
-            "arm-balance", "arm-balance-long", *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
+            "units-scan", "lnn-pinv", "arm-balance", "arm-balance-long", "fits-sampling", "fits-tasks", "fits-library",
+            *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
             *(f"dgnet-init-{task}" for task in DGNET_INIT_TASKS))
 MIN_SEEDS = 3
 SEEDS_FILE = "docs/seeds.json"

@@ -4,9 +4,10 @@ the training loop, the paper's metrics, and saved runs.
     import hnn
     model = hnn.HNN(2, hnn.MLP(2, 200, 2))
     stats = hnn.train(model, x, dxdt)
+    model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="swim", width=1000)   # one solve, seconds
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
 
-``hnn`` itself gives the 35 names of ``__all__``; the rest is reached through its room or module
+``hnn`` itself gives the 37 names of ``__all__``; the rest is reached through its room or module
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
 at once: the light modules (``_LIGHT``: ``cli``, ``command``, ``config``, ``tasks``, ``io``, ...) and
@@ -21,7 +22,8 @@ nothing of each other.
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
 - training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets, the
-  gravity of n bodies (``nbody``, the orbit tasks' shared system);
+  gravity of n bodies (``nbody``, the orbit tasks' shared system), and the least-squares fits beside the
+  loop (``hnn.fits``, a folder: ``hnn.fit_least_squares``);
 - runs: config, cli, a ``train.py``'s command, run folders, task discovery;
 - sweeps: many runs at once: the sweep, where it trains (``backends``) and its flags, group runs, stopping.
 """
@@ -40,7 +42,7 @@ _LAYERS = {
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "objectives", "units", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
-                 "evaluation", "datasets", "nbody"),
+                 "evaluation", "datasets", "nbody", "fits"),
     "runs": ("config", "cli", "command", "runs", "tasks", "orbit_config"),
     "sweeps": ("stopping", "group_runs", "backends", "sweep", "sweep_flags"),
 }
@@ -57,6 +59,7 @@ _PUBLIC = {
     "objectives": ("DerivativeObjective", "Objective"),
     "kinds": ("MODEL_KINDS", "OBJECTIVES"),
     "training": ("train",),
+    "fits": ("FITS", "fit_least_squares"),
     "evaluation": ("EnergyProtocol", "evaluate_energy"),
     "config": ("RunConfig",),
     "runs": ("load_run", "run_experiment"),
@@ -75,6 +78,7 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .objectives import DerivativeObjective, Objective  # noqa: F401
     from .kinds import MODEL_KINDS, OBJECTIVES  # noqa: F401
     from .training import train  # noqa: F401
+    from .fits import FITS, fit_least_squares  # noqa: F401
     from .evaluation import EnergyProtocol, evaluate_energy  # noqa: F401
     from .config import RunConfig  # noqa: F401
     from .runs import load_run, run_experiment  # noqa: F401

@@ -111,6 +111,11 @@ def positive_float(text: str) -> float:
     return _finite_float(text, "> 0", lambda v: v > 0)
 
 
+def auto_or_positive_float(text: str) -> float | str:
+    """An argparse ``type``: ``auto`` (the program chooses) or a finite number > 0."""
+    return "auto" if text == "auto" else _finite_float(text, "> 0, or auto", lambda v: v > 0)
+
+
 def nonnegative_float(text: str) -> float:
     """An argparse ``type``: a finite number >= 0."""
     return _finite_float(text, ">= 0", lambda v: v >= 0)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, INITS, LNN_SOLVES, NONLINEARITIES, OBJECTIVES,
+from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, FITS, INITS, LNN_SOLVES, NONLINEARITIES, OBJECTIVES,
                     OPTIMIZERS, SCHEDULES, UNITS)
 
 
@@ -49,7 +49,8 @@ def setting(default: Any, help: str, *, parse=None, choices=None, display_only: 
 class RunConfig:
     """One training run: the original's flags with its defaults, plus the knobs it hard-coded."""
     input_dim: int = setting(2, "width of the state x = [q, p] (fixed by the task)")
-    hidden_dim: int = setting(200, "hidden units per layer of the MLP", parse=cli.int_at_least(1))
+    hidden_dim: int = setting(200, "hidden units per layer of the MLP (of the sampled layer with --fit swim or elm)",
+                              parse=cli.int_at_least(1))
     learn_rate: float = setting(1e-3, "Adam learning rate", parse=cli.positive_float)
     weight_decay: float = setting(1e-4, "Adam weight decay (hard-coded per task in the original)",
                                   parse=cli.nonnegative_float)
@@ -105,6 +106,26 @@ class RunConfig:
                                  "the data's units: auto (where the RMS of q or p lies outside [0.1, 10] or that of a "
                                  "rate outside [0.01, 100]: hnn.units), on (always) or off (the data's units)", choices=UNITS,
                          identity_at_default=False)
+    fit: str = setting("adam", "how the weights are found: adam (the training loop, the paper's) or one least-squares "
+                               "solve of dx/dt in float64 (hnn.fits; the hnn, separable and baseline kinds): swim (a "
+                               "hidden layer of --hidden_dim tanh neurons drawn from pairs of training states, Rahma, "
+                               "Datar & Dietrich 2024), elm (drawn at random), library (H as a sparse sum of "
+                               "polynomials, sines and cosines of q and products, thresholded as SINDy does: it prints "
+                               "as an equation) or sindy (pysindy's dx/dt = Theta(x) Xi, no H: --model baseline, "
+                               "optional extra)", choices=FITS, identity_at_default=False)
+    library_degree: int = setting(3, "polynomial degree of the library's fields (--fit library, sindy): H's terms go "
+                                     "to degree + 1, so that their gradients span the same fields",
+                                  parse=cli.int_at_least(1), identity_at_default=False)
+    library_frequencies: int = setting(1, "the library's sines and cosines of q at frequencies 1..N (0: none)",
+                                       parse=cli.int_at_least(0), identity_at_default=False)
+    library_threshold: float = setting(0.05, "the library fits keep a term only where its coefficient is at least "
+                                             "this large (SINDy's STLSQ threshold, in the data's units)",
+                                       parse=cli.nonnegative_float, identity_at_default=False)
+    fit_rcond: float | str = setting("auto", "ridge of the least-squares fits relative to the design's unit-norm "
+                                             "columns: auto (chosen by generalized cross-validation, so noisy data "
+                                             "are not interpolated) or a number (Sampling-HNNs' exact data: 1e-13, "
+                                             "as their numpy lstsq rcond)", parse=cli.auto_or_positive_float,
+                                     identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)

@@ -34,7 +34,10 @@ def unit_key(config) -> tuple | None:
     """Configs with equal keys train as one group: ``("closed_form", ...)`` for the paper's tanh-MLP kinds
     (``hnn.grouped.fit_group``), ``("stacked", ...)`` for any other kind (``hnn.stacked.fit_stacked``),
     None for a config that trains alone (the pixel kinds)."""
-    if run_specs(config).objective.units == "on":     # a rescaled run trains its own canonical data alone
+    specs = run_specs(config)
+    if specs.objective.units == "on":     # a rescaled run trains its own canonical data alone
+        return None
+    if specs.fit.fit != "adam":            # a least-squares fit is one solve, no loop to share
         return None
     key = group_key(config)
     if key is not None:

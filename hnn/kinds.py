@@ -333,7 +333,9 @@ def model_from_args(args: dict, device="cpu"):
 
 def model_from_spec(spec: ModelSpec, device="cpu"):
     """The untrained model of ``spec`` (``hnn.specs.run_specs(config).model``), built by its kind's row,
-    initialized by ``spec.init`` and put on ``spec.dtype`` and ``device``.
+    initialized by ``spec.init`` and put on ``spec.dtype`` and ``device``; for a least-squares fit
+    (``spec.fit`` other than ``'adam'``) the fit's own model (``hnn.fits.build``), float64 on the CPU, where
+    its solve runs whatever ``device`` says (``hnn.load_run(folder, device)`` moves it after).
 
     The weights are drawn on the CPU whatever torch's default device, then moved: one seed gives the
     same initial model on every device (a GPU's generator draws other numbers)."""
@@ -341,6 +343,10 @@ def model_from_spec(spec: ModelSpec, device="cpu"):
     from .models.mlp import initialize
     if spec.dtype not in DTYPES:
         raise ValueError(f"dtype={spec.dtype!r}: choose one of {', '.join(DTYPES)}")
+    if spec.fit != "adam":      # a least-squares fit's own model, float64 on the CPU where its QR runs (hnn.fits)
+        from .fits import build
+        with torch.device("cpu"):
+            return build(spec)
     with torch.device("cpu"):
         model = initialize(get_kind(spec.kind).build(spec), spec.init)
     return model.to(dtype=getattr(torch, spec.dtype), device=device)

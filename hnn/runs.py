@@ -23,8 +23,9 @@ import numpy as np
 import torch
 
 from . import cli
+from .fits import check_config, solve
 from .io import atomic_folder, check_save_dir, torch_bytes, write_json
-from .kinds import model_from_args, model_from_spec
+from .kinds import get_kind, model_from_args, model_from_spec
 from .objectives import Objective
 from .specs import run_specs
 from .training import train
@@ -104,6 +105,8 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     A value the config's flag would refuse raises ValueError before anything is built.
     """
     cli.check(config)
+    # a least-squares fit refuses what it cannot fit before any data is built
+    fit = check_config(config, get_kind(config.kind).coordinates)
     check_save_dir(config.save_dir)
     objective = objective or config.make_objective()
     dataset, data_seconds = _materialize(config.dataset if dataset is None else dataset)
@@ -129,10 +132,16 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        # the run resolved --units and --balance above (on its whole training set, recorded in args.json);
-        # threads=None: the count the run was given (a train.py's --threads, a sweep's share), recorded in args.json
-        stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options,
-                      checkpoint=partial, units="off", balance="off", threads=None)
+        if fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
+            stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
+                          loss_weights=options.get("loss_weights"))
+            if config.verbose and "equation" in stats["fit"]:
+                print(stats["fit"]["equation"])
+        else:
+            # the run resolved --units and --balance above (on its whole training set, recorded in args.json);
+            # threads=None: the count the run was given (a train.py's --threads, a sweep's share), in args.json
+            stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options,
+                          checkpoint=partial, units="off", balance="off", threads=None)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise

@@ -6,9 +6,9 @@ a saved run's args (``run_specs``), so that no consumer reads a settings dict by
     options = objective.train_options(model, specs.objective, dataset)
     stats = hnn.train(model, x, y, **specs.training.train_kwargs(), **options)
 
-Three frozen specs, one per consumer: ``ModelSpec`` (what a kind's builder reads), ``TrainingSpec``
-(what ``hnn.train`` reads, by its keyword names) and ``ObjectiveSpec`` (what an objective reads:
-``Objective.train_options``). A field a saved run lacks (a run saved before the field existed, or a
+Four frozen specs, one per consumer: ``ModelSpec`` (what a kind's builder reads), ``TrainingSpec``
+(what ``hnn.train`` reads, by its keyword names), ``ObjectiveSpec`` (what an objective reads:
+``Objective.train_options``) and ``FitSpec`` (what a least-squares fit reads: ``hnn.fits.solve``). A field a saved run lacks (a run saved before the field existed, or a
 task without it, such as ``input_noise`` outside the 2-body and pixel tasks) takes its default, the
 value that run trained with. Torch-free; a run's identity and its args.json are the config's
 (``hnn.RunConfig``), untouched here.
@@ -38,7 +38,10 @@ class ModelSpec:
     are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
     (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
     every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder; lnn_solve:
-    how the lagrangian kind solves for qddot (``hnn.names.LNN_SOLVES``).
+    how the lagrangian kind solves for qddot (``hnn.names.LNN_SOLVES``); fit: how
+    the weights are found (``hnn.fits.FITS``): a fit other than ``'adam'`` builds its own model
+    (``hnn.fits.build``: ``hidden_dim`` sampled neurons, or the library of ``library_degree`` and
+    ``library_frequencies``), float64 whatever ``dtype`` says.
     """
     kind: str
     input_dim: int | None = None
@@ -52,6 +55,9 @@ class ModelSpec:
     dtype: str = "float32"
     init: str = "orthogonal"
     lnn_solve: str = "solve"
+    fit: str = "adam"
+    library_degree: int = 3
+    library_frequencies: int = 1
 
     @classmethod
     def from_args(cls, args: Mapping) -> ModelSpec:
@@ -113,11 +119,32 @@ class ObjectiveSpec:
 
 
 @dataclass(frozen=True)
+class FitSpec:
+    """What a least-squares fit reads of a run (``hnn.fits.solve``'s keywords): ``fit`` (``hnn.names.FITS``; a run
+    saved before the field existed trained by ``'adam'``), ``seed`` (draws the sampled neurons), ``fit_rcond``
+    (the ridge relative to unit columns, or ``'auto'``) and ``library_threshold`` (a library's smallest coefficient kept)."""
+    fit: str = "adam"
+    seed: int = 0
+    fit_rcond: float | str = "auto"
+    library_threshold: float = 0.05
+
+    @classmethod
+    def from_args(cls, args: Mapping) -> FitSpec:
+        """The spec of a run's (saved) args: its fields, the defaults for any it lacks."""
+        return cls(**_picked(cls, args))
+
+    def solve_kwargs(self) -> dict[str, Any]:
+        """``hnn.fits.solve``'s keyword arguments."""
+        return {"fit": self.fit, "seed": self.seed, "rcond": self.fit_rcond, "threshold": self.library_threshold}
+
+
+@dataclass(frozen=True)
 class RunSpecs:
-    """A run's three typed specs: ``model``, ``training``, ``objective``."""
+    """A run's typed specs: ``model``, ``training``, ``objective``, ``fit``."""
     model: ModelSpec
     training: TrainingSpec
     objective: ObjectiveSpec
+    fit: FitSpec = FitSpec()
 
 
 def run_specs(source) -> RunSpecs:
@@ -129,4 +156,5 @@ def run_specs(source) -> RunSpecs:
         values = {**source.to_dict(), "kind": source.kind}
     else:
         raise TypeError(f"run_specs reads an hnn.RunConfig or a run's saved args (a dict), got {type(source).__name__}")
-    return RunSpecs(ModelSpec.from_args(values), TrainingSpec.from_args(values), ObjectiveSpec.from_args(values))
+    return RunSpecs(ModelSpec.from_args(values), TrainingSpec.from_args(values), ObjectiveSpec.from_args(values),
+                    FitSpec.from_args(values))

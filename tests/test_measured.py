@@ -168,9 +168,13 @@ def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch)
     mine = [r["prediction_error"]["median"] for r in card["rows"] if r["run"] in chosen["runs"]]
     assert chosen["prediction_error"]["median"] == pytest.approx(sum(mine) / 2)
     assert (chosen["prediction_error"]["min"], chosen["prediction_error"]["max"]) == (min(mine), max(mine))
-    # every studied kind that reads observed [q, v] (the constrained ones need a constraint graph)
-    assert kinds == {kind for kind, row in hnn.MODEL_KINDS.items()
-                     if row.studied and row.reads("velocity") and "-" not in kind}
+    # every studied kind that reads observed [q, v] (the constrained ones need a constraint graph), and the fits'
+    # rungs of them (scene_rungs: a sampled HNN, our library, SINDy where pysindy is installed)
+    assert {k for k in kinds if "+" not in k} == {kind for kind, row in hnn.MODEL_KINDS.items()
+                                                  if row.studied and row.reads("velocity") and "-" not in kind}
+    assert {"hnn+swim", "hnn+library"} <= kinds <= {"hnn+swim", "hnn+library", "baseline+sindy"} | {
+        k for k in kinds if "+" not in k}
+    assert "cheapest to train that is enough" in (out / "scene.md").read_text()
     assert {"baseline", "hnn", "separable", "dissipative", "mechanical", "second_order"} <= kinds
     for row in card["rows"]:
         assert {"kind", "hidden_dim", "train_fraction", "prediction_error", "run"} <= set(row)
@@ -233,6 +237,22 @@ def test_the_cards_words_come_from_its_thresholds():
     guide = measured_study.guide({"x": {"chosen": {**chosen, "n_seeds": 1}, "naive": naive, "units": "units of q",
                                         "horizon": 1.0, "date": "d", "commit": "c"}})
     assert "| x | none is enough" in guide
+
+
+def test_the_card_names_the_cheapest_model_enough_and_a_library_that_found_the_equations():
+    naive = {"median": 10.0, "mean": 10.0, "starts": 5}
+    rows = [_seed_row("hnn", 200, s, 1.0, 5000) for s in range(2)]
+    rows += [{**_seed_row("hnn+library", 200, s, 1.1, 21), "train_seconds": 0.01, "equation": "H = x^2 + v^2"}
+             for s in range(2)]
+    rows += [{**_seed_row("baseline+sindy", 200, s, 9.0, 26), "train_seconds": 0.001} for s in range(2)]
+    chosen, said = measured_study._card(rows, naive, 100.0)
+    text = " ".join(said)
+    assert chosen["kind"] == "hnn+library" and chosen["cheapest"]["kind"] == "hnn+library"   # SINDy: 9x the best
+    assert "A library is enough here: it found the equations hnn+library `H = x^2 + v^2`" in text
+    assert chosen["libraries"] == [{"kind": "hnn+library", "fraction": 1.0, "train_seconds": 0.01,
+                                    "equation": "H = x^2 + v^2"}]
+    _, said = measured_study._card([r for r in rows if r["kind"] != "hnn+library"], naive, 100.0)
+    assert "No library (hnn+library, baseline+sindy) is within 2x of the best" in " ".join(said)
 
 
 def test_the_card_says_two_kinds_cannot_be_told_apart_when_their_seeds_overlap():

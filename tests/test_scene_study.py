@@ -1,6 +1,7 @@
 """The scene study's metrics against analytic truths, its model choice, and one tiny run end to end."""
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import torch
 import hnn
 from hnn_analysis.paper import reproduce, study
 from hnn_analysis.scenes import scene_measure, scene_metrics as sm, scene_report, scene_stages, scene_study, scene_tables, scene_common
+from hnn_analysis.scenes import scene_rungs
 
 
 def _spring_truth(x0, t, omega=2.0):
@@ -204,6 +206,38 @@ def test_a_cards_timing_tie_break_and_its_seconds_are_the_median_of_its_seeds():
     assert scene_measure.median_cost_seconds({0: {"params": 1}}) is None
 
 
+def test_a_card_names_the_cheapest_model_enough_and_the_libraries_enough_with_their_equations():
+    seeds = lambda params, energy, seconds, equation=None: {  # noqa: E731
+        s: {**_cell(params, energy, 0.1, seconds), **({"equation": equation} if equation else {})} for s in range(3)}
+    cells = {("hnn", 200, 1.0): seeds(41200, 1e-4, 20.0),
+             ("hnn+swim", 16, 1.0): seeds(65, 1.5e-4, 0.002),                      # the smallest and cheapest
+             ("hnn+library", 200, 1.0): seeds(21, 1.2e-4, 0.01, "H = q^2 + p^2"),  # fewest parameters
+             ("baseline+sindy", 200, 1.0): seeds(26, 5e-3, 0.02, "dq/dt = 2 p")}  # 50x the best energy: not enough
+    card = scene_stages.scene_card(cells)
+    assert card["kind"] == "hnn+library"                                           # fewest parameters first
+    assert card["cheapest"]["kind"] == "hnn+swim" and card["cheapest"]["train_seconds"] == 0.002
+    assert [lib["kind"] for lib in card["libraries"]] == ["hnn+library"]
+    assert scene_tables.library_words(card) == "hnn+library (0.01 s): `H = q^2 + p^2`"
+    assert scene_tables.cheapest_words(card) == "hnn+swim, width 16, 1 of the data (0.002 s)"
+    # a card saved before the fits were rungs says so instead of failing
+    assert scene_tables.library_words({}) == "not measured" and scene_tables.cheapest_words({}) == "not chosen"
+
+
+def test_the_fits_rungs_keep_their_kinds_declarations():
+    assert scene_rungs.fit_rungs(("hnn", "baseline", "mechanical"), ("hnn+swim", "hnn+library")) == [
+        "hnn+swim", "hnn+library"]
+    assert scene_rungs.fit_rungs(("mechanical",)) == []           # no fit of the studied rungs applies to it
+    assert (scene_rungs.kind_of("hnn+swim"), scene_rungs.fit_of("hnn+swim"), scene_rungs.fit_of("hnn")) == (
+        "hnn", "swim", "adam")
+    assert scene_rungs.is_library("baseline+sindy") and not scene_rungs.is_library("hnn+swim")
+    assert scene_tables.color("hnn+swim") == scene_tables.color("hnn") and scene_rungs.marker("hnn") == "o"
+    assert "hnn+swim" in scene_common.task_rungs("spring") and "hnn+swim" not in scene_common.task_rungs("pixels")
+    jobs = scene_rungs.jobs([{"row": "spring@200x1", "task": "spring", "fields": {}}], [0, 1], Path("runs"),
+                            ("hnn", "hnn+library"), lambda task, rung: True)
+    assert [(job.key, job.config.model, job.config.fit) for job in jobs] == [
+        ("spring@200x1/hnn+library/seed0", "hnn", "library"), ("spring@200x1/hnn+library/seed1", "hnn", "library")]
+
+
 def test_the_recorded_seeds_are_the_fewest_any_card_rests_on():
     results = {"meta": {"seeds": [0, 1, 2], "grid_seeds": [0, 1, 2]},
                "scenes": {"spring": {"card": {"n_seeds": 3}}, "real": {"card": None}}}
@@ -290,8 +324,10 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(scene_study, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
-    assert set(entry["kinds"]) == set(scene_common.task_kinds("spring"))
-    assert len(entry["grid"]) == len(entry["kinds"]) * 3 and entry["card"] is not None
+    # every kind and the fits' rungs (scene_rungs); the grid holds the kinds and the sampled HNN at 3 cells
+    assert set(entry["kinds"]) == set(scene_common.task_rungs("spring"))
+    assert len(entry["grid"]) == (len(scene_common.task_kinds("spring")) + len(scene_rungs.GRID_RUNGS)) * 3
+    assert entry["card"] is not None and entry["card"]["cheapest"] is not None
     assert all("train_cost" in m for m in entry["grid"].values())
     assert entry["speed"]["separable"]["fastest"] is not None
     saved = json.loads((tmp_path / "scene_study.json").read_text())

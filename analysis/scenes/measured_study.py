@@ -19,6 +19,7 @@ measured scenes from that file.
 from __future__ import annotations
 
 import json
+import math
 import shlex
 import time
 from pathlib import Path
@@ -31,7 +32,7 @@ from hnn_analysis import commands, pages, plan
 from hnn import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_tables
+from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_rungs, scene_tables
 from hnn_analysis.scenes.measured_inputs import TASK, Inputs, check
 from hnn_analysis.training_cost import training_cost
 
@@ -42,7 +43,8 @@ NEAR = 1.25            # "as good as": within this factor of the other's error
 
 
 def _kinds(columns: dict) -> list[str]:
-    """The kinds that fit these coordinates: each built on the data and handed to its objective's checks."""
+    """The kinds that fit these coordinates (each built on the data and handed to its objective's checks), then
+    the fits' rungs of them (``scene_rungs``) whose fit applies."""
     config = hnn.tasks.task_config(TASK, columns)
     dataset = config.dataset()
     kinds = []
@@ -59,6 +61,14 @@ def _kinds(columns: dict) -> list[str]:
             print(f"  {kind}: does not fit these coordinates ({err})", flush=True)
             continue
         kinds.append(kind)
+    for rung in scene_rungs.fit_rungs(kinds):      # the fits' rungs of those kinds, where the fit applies too
+        run = hnn.tasks.task_config(TASK, {**columns, "model": scene_rungs.kind_of(rung), "fit": scene_rungs.fit_of(rung)})
+        try:
+            hnn.fits.check_config(run, hnn.MODEL_KINDS[run.kind].coordinates)
+        except ValueError as err:
+            print(f"  {rung}: does not fit this data ({err})", flush=True)
+            continue
+        kinds.append(rung)
     return kinds
 
 
@@ -113,7 +123,8 @@ def models(rows: list[dict]) -> dict[tuple, dict]:
                     "rollout_seconds": mean(lambda r: r["rollout_seconds"]),
                     "energy_drift": ({"model": mean(lambda r: r["energy_drift"]["model"]),
                                       "measured": drift["measured"]} if drift else None),
-                    "runs": [r["run"] for r in sorted(per_seed, key=lambda r: r.get("seed", 0))]}
+                    "runs": [r["run"] for r in sorted(per_seed, key=lambda r: r.get("seed", 0))],
+                    "equation": min(per_seed, key=lambda r: r.get("seed", 0)).get("equation")}
     return out
 
 
@@ -159,7 +170,7 @@ def _card(rows: list[dict], naive: dict, spread: float) -> tuple[dict | None, li
     short += [f"over {mm.VALID_FRACTION:g} of the spread"] if of_spread > mm.VALID_FRACTION else []
     enough = not short
     seeds = f"mean over {n} seeds" if n > 1 else "one seed"
-    model = (f"{m['kind']} (width {m['hidden_dim']}, {m['train_fraction']:g} of the training rows, "
+    model = (f"{scene_rungs.describe(m['kind'], m['hidden_dim'], m['train_fraction'])} ("
              f"{m['params']} parameters, {m['train_seconds']:.3g} s to train on one thread)")
     numbers = (f"its median prediction error ({seeds}) {_range(m)} is within {scene_common.CARD_FACTOR:g}x of the best "
                f"({best:.4g}), {ratio:.2g}x the naive extrapolation's ({naive['median']:.4g}) and {of_spread:.2g} of "
@@ -180,6 +191,8 @@ def _card(rows: list[dict], naive: dict, spread: float) -> tuple[dict | None, li
     else:
         said.append("One seed: whether seeds separate these models was not tested (--seeds 3 tests it).")
 
+    said += _cheapest_and_libraries(table, ok)
+
     def best_of(kinds) -> dict | None:
         pool = [m for m in table.values() if m["kind"] in kinds]
         return min(pool, key=lambda m: m["error"][0]) if pool else None
@@ -188,8 +201,10 @@ def _card(rows: list[dict], naive: dict, spread: float) -> tuple[dict | None, li
         numbers = f"best {a['kind']} {_range(a)} against best {b['kind']} {_range(b)}."
         return f"{verdict}: {numbers}" if _separate(a, b) else f"{tie} cannot be told apart on these seeds: {numbers}"
 
-    conserving = best_of([k for k in hnn.MODEL_KINDS if hnn.MODEL_KINDS[k].conservative])
-    others = best_of([k for k in hnn.MODEL_KINDS if not hnn.MODEL_KINDS[k].conservative])
+    # the kinds and the fits' rungs of them, by what their kind declares
+    labels = {m["kind"] for m in table.values()}
+    conserving = best_of([k for k in labels if hnn.MODEL_KINDS[scene_rungs.kind_of(k)].conservative])
+    others = best_of([k for k in labels if not hnn.MODEL_KINDS[scene_rungs.kind_of(k)].conservative])
     if conserving and others:
         a, b = conserving["error"][0], others["error"][0]
         verdict = "helped" if a * NEAR < b else "hurt" if b * NEAR < a else "neither helped nor hurt (within 25%)"
@@ -203,6 +218,11 @@ def _card(rows: list[dict], naive: dict, spread: float) -> tuple[dict | None, li
                             "The plain baseline and the structured kinds"))
     chosen = {key: m[key] for key in ("kind", "hidden_dim", "train_fraction", "params", "train_seconds",
                                       "rollout_seconds", "valid_time", "energy_drift", "seeds")}
+    cheapest = min(ok, key=lambda k: (table[k]["train_seconds"] or math.inf, k[1]))
+    chosen.update({"cheapest": {"kind": cheapest[0], "width": cheapest[1], "fraction": cheapest[2],
+                                "train_seconds": table[cheapest]["train_seconds"]},
+                   "libraries": [{"kind": k[0], "fraction": k[2], "train_seconds": table[k]["train_seconds"],
+                                  "equation": table[k]["equation"]} for k in ok if scene_rungs.is_library(k[0])]})
     chosen.update({"n_seeds": n, "test_loss": m["test_loss"], "run": m["runs"][0], "runs": m["runs"], "enough": enough,
                    "of_naive": ratio, "of_spread": of_spread,
                    # as scene_stages.scene_card words them: None where one seed tests nothing
@@ -211,6 +231,23 @@ def _card(rows: list[dict], naive: dict, spread: float) -> tuple[dict | None, li
                    "prediction_error": {"median": err, "min": m["error"][1], "max": m["error"][2],
                                         "mean": m["error_mean"]}})
     return chosen, said
+
+
+def _cheapest_and_libraries(table: dict, ok: list) -> list[str]:
+    """The card's sentences on the model enough that trains fastest, and on the libraries (ours, SINDy's): which
+    are enough here and the equations they found, or that none is."""
+    cheapest = min(ok, key=lambda k: (table[k]["train_seconds"] or math.inf, k[1]))
+    c = table[cheapest]
+    said = [f"The cheapest to train that is enough: {scene_rungs.describe(c['kind'], c['hidden_dim'], c['train_fraction'])}"
+            f", {c['train_seconds']:.3g} s on one thread."]
+    libraries = [k for k in sorted(ok, key=lambda k: table[k]["train_seconds"] or math.inf) if scene_rungs.is_library(k[0])]
+    if libraries:
+        said.append("A library is enough here: it found the equations " + "; ".join(
+            f"{k[0]} `{table[k]['equation']}`" for k in libraries) + ".")
+    elif any(scene_rungs.is_library(k[0]) for k in table):
+        said.append("No library (hnn+library, baseline+sindy) is within 2x of the best: the equations are not among "
+                    "its terms, or the data's noise hides them.")
+    return said
 
 
 def markdown(result: dict) -> str:
@@ -262,19 +299,21 @@ def guide(registry: dict) -> str:
     """The README's rows of measured scenes, from the filed cards (each card's command is in
     docs/measured-scenes.json, and the shipped scenes' commands in docs/measured.md)."""
     lines = ["| measured scene | a model that is enough (its seeds' mean within 2x of the best) | median prediction "
-             "error: seeds' mean (range); naive | seeds | seeds cannot separate | horizon | train s | made |",
-             "| --- | --- | --- | ---: | --- | ---: | ---: | --- |"]
+             "error: seeds' mean (range); naive | seeds | seeds cannot separate | horizon | cheapest to train that is "
+             "enough | made |",
+             "| --- | --- | --- | ---: | --- | ---: | --- | --- |"]
     for name, entry in sorted(registry.items()):
         c = entry["chosen"]
         pe, n = c["prediction_error"], c.get("n_seeds", 1)
         spread = f" ({pe['min']:.3g}-{pe['max']:.3g})" if n > 1 else ""
-        pick = f"{c['kind']}, width {c['hidden_dim']}, {c['train_fraction']:g} of the data"
+        pick = scene_rungs.describe(c['kind'], c['hidden_dim'], c['train_fraction'])
         if c.get("enough") is False:         # a card filed before "enough" had its thresholds reads as it was filed
             pick = f"none is enough (over {BEATS_NAIVE:g} of the naive error or {mm.VALID_FRACTION:g} of the spread); best: {pick}"
         lines.append(f"| {name} | {pick} | "
                      f"{pe['median']:.3g}{spread}; naive {entry['naive']['median']:.3g} ({entry['units']}) | {n} | "
                      f"{scene_tables.unsettled(c)} | "
-                     f"{entry['horizon']:.3g} s | {c['train_seconds']:.3g} | ({entry['date']}, commit {entry['commit']}) |")
+                     f"{entry['horizon']:.3g} s | {scene_tables.cheapest_words(c)} | ({entry['date']}, commit "
+                     f"{entry['commit']}) |")
     return "\n".join(lines) + "\n\nEach row's command: [docs/measured-scenes.json](docs/measured-scenes.json).\n"
 
 
@@ -319,7 +358,11 @@ def run(args, argv: list[str], parser, inputs: Inputs | None = None) -> dict:
         commands.say_quick("scene_study --data", cuts)
     tic = time.perf_counter()
     seeds = list(range(args.seeds))
-    runs, _ = scene_common.train([(rows, seeds, steps, tuple(kinds))], out, args, fits=lambda task, kind: kind in kinds,
+    # a rung without a width (a library's) trains at the widest cell on all the rows only
+    grid = tuple(k for k in kinds if "+" not in k or k in scene_rungs.GRID_RUNGS)
+    runs, _ = scene_common.train([(rows, seeds, steps, grid),
+                                  ([max(rows, key=lambda r: r["cell"])], seeds, steps, tuple(set(kinds) - set(grid)))],
+                                 out, args, fits=lambda task, kind: kind in kinds,
                                  then=lambda models: [plan.Stage("measure", models, "models on the held-out tails")],
                                  who=f"scene study of {Path(args.data).name} ({len(rec.t)} rows)")
     training = time.perf_counter() - tic
@@ -335,6 +378,7 @@ def run(args, argv: list[str], parser, inputs: Inputs | None = None) -> dict:
         measured.append({"kind": kind, "hidden_dim": row["cell"][0], "train_fraction": row["cell"][1], "seed": seed,
                          "params": model.params, "test_loss": model.metrics["test_loss"],
                          "train_seconds": cost["seconds"], "run": _in_checkout(directory),
+                         **({"equation": found} if (found := scene_rungs.equation(directory)) else {}),
                          **mm.measure(model, held, energy)})
         print(f"  {progress.advance()} {kind:12s} width {row['cell'][0]:3d} fraction {row['cell'][1]:g} seed {seed}: "
               f"prediction error {measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})"

@@ -1,5 +1,5 @@
 """One scene of the scene study: its settings (each task's ``TaskSpec.scene_study``), the model
-kinds that fit it, the training of its rows (one sweep), its truth (``Scene``: start states, the true
+kinds and the fits' rungs (``scene_rungs``) that fit it, the training of its rows (one sweep), its truth (``Scene``: start states, the true
 trajectories, the time over which the truth itself diverges) and the measurements of one model on
 it (losses, energy MSE, rollout error, speed at equal accuracy, drift). ``scene_study`` (the
 command), ``scene_measure`` (its worker processes) and ``measured_study`` (your own file) build
@@ -17,7 +17,7 @@ import hnn
 from hnn import sweep
 from hnn_analysis import plan
 from hnn_analysis.paper import registry, study
-from hnn_analysis.scenes import scene_metrics as sm
+from hnn_analysis.scenes import scene_metrics as sm, scene_rungs
 from hnn_analysis.integrator_study import settings
 
 HORIZON = 10               # the rollout metrics' horizon, in training-trajectory lengths
@@ -64,12 +64,24 @@ def task_kinds(task: str) -> list[str]:
     return [kind for kind in study.row_models(task, kinds()) if _fits(task, kind)]
 
 
+def task_rungs(task: str, rungs=scene_rungs.RUNGS) -> list[str]:
+    """The kinds of ``task`` and the fits' ``rungs`` over them that can fit its states (``scene_rungs``)."""
+    own = task_kinds(task)
+    return own + [rung for rung in scene_rungs.fit_rungs(own, rungs) if _fits(task, rung)]
+
+
 @functools.cache
 def _fits(task: str, kind: str) -> bool:
-    """Whether the kind's model reads the scene's states: canonical [q, p] (its declared coordinates;
-    the objectives would refuse its run otherwise), or, for a pixel model (``'latent'``), the frames
-    its own encoder maps to its latent [q, p]."""
-    spec = hnn.MODEL_KINDS[hnn.tasks.task_config(task, {"model": kind}).kind]
+    """Whether the kind's model (or a rung's, ``scene_rungs``) reads the scene's states: canonical [q, p] (its
+    declared coordinates; the objectives would refuse its run otherwise), or, for a pixel model
+    (``'latent'``), the frames its own encoder maps to its latent [q, p]; a fit must apply to the run too."""
+    config = hnn.tasks.task_config(task, {"model": scene_rungs.kind_of(kind), "fit": scene_rungs.fit_of(kind)})
+    spec = hnn.MODEL_KINDS[config.kind]
+    if config.fit != "adam":
+        try:
+            hnn.fits.check_config(config, spec.coordinates)
+        except ValueError:
+            return False
     return spec.coordinates == "latent" or spec.reads("canonical")
 
 
@@ -85,9 +97,11 @@ def train(batches, out: Path, args, fits=None, then=None, who: str = "scene stud
     jobs = []
     for rows, seeds, steps, models in batches:
         models = kinds() if models is None else models
-        # plan() always takes the paper's pair: keep only the kinds asked for
+        # plan() always takes the paper's pair: keep only the kinds asked for; a fit's rung (``hnn+swim``) is
+        # its own job (scene_rungs)
         jobs += [job for job in study.plan(rows, seeds, out / "runs", steps, models)
                  if job.config.model in models and fits(job.task, job.config.model)]
+        jobs += scene_rungs.jobs(rows, seeds, out / "runs", models, fits)
     total = len(jobs)
     runs, jobs = sweep.reuse(jobs)
     sweep.say_reused(who, runs, jobs)
@@ -103,7 +117,8 @@ def train(batches, out: Path, args, fits=None, then=None, who: str = "scene stud
 def saved_numbers(row: dict, model, directory: Path) -> dict:
     """What a measured model's entry takes from its saved run: ``row`` is its ``study.load_runs`` row."""
     return {"test_loss": row["test_loss"], "train_loss": row["train_loss"], "train_seconds": row["train_seconds"],
-            "params": sum(p.numel() for p in model.parameters()), "run": Path(directory).name}
+            "params": sum(p.numel() for p in model.parameters()), "run": Path(directory).name,
+            **({"equation": found} if (found := scene_rungs.equation(directory)) else {})}
 
 
 class Scene:
@@ -169,7 +184,7 @@ class Scene:
 
 def _energy_fn(system, model, kind: str):
     """The learned H of an H-model, else the system's own H (the drift a baseline shows)."""
-    if hnn.MODEL_KINDS[kind].conservative:
+    if hnn.MODEL_KINDS[scene_rungs.kind_of(kind)].conservative:
         return hnn.evaluation.float64_copy(model).hamiltonian
     return system.hamiltonian
 
@@ -197,11 +212,12 @@ def speed_study(scene: Scene, kind: str, model, quick: bool) -> dict:
     f = model64.field
     x0 = scene.x0[:4]
     t = np.linspace(0.0, scene.cfg["T"], 31)
-    ladder = sm.settings_ladder(scene.cfg["dts"], hnn.MODEL_KINDS[kind].separable, quick,
+    spec = hnn.MODEL_KINDS[scene_rungs.kind_of(kind)]
+    ladder = sm.settings_ladder(scene.cfg["dts"], spec.separable, quick,
                                 hnn.interface.carries_energy(f))
     mode = QUICK if quick else FULL
     result = sm.speed_at_accuracy(f, x0, t, ladder, mode["timings"])     # quick: a smoke run times once
-    if scene.cfg.get("drift") and not hnn.MODEL_KINDS[kind].dissipative:
+    if scene.cfg.get("drift") and not spec.dissipative:
         period, periods = _periods(scene), (mode["drift_periods"] or scene.cfg["periods"])
         budget = mode["drift_budget"]
         energy = _energy_fn(scene.system, model, kind)

@@ -1,6 +1,7 @@
 """The scene study's Pareto figure: rollout error (the mean over seeds, with its standard error, where
 the cell trained at several) against training seconds (the seeds' median) and against rollout seconds
-(seed 0's), one row per scene (``figures/scenes-pareto.png``, and docs/figures/ with ``--update-docs``).
+(seed 0's), one row per scene (``figures/scenes-pareto.png``, and docs/figures/ with ``--update-docs``);
+every rung, Adam's kinds and the least-squares fits (a kind's colour, its fit's marker: ``scene_rungs``).
 """
 from __future__ import annotations
 
@@ -14,8 +15,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib import ticker  # noqa: E402
 
 from hnn.io import atomic_write  # noqa: E402
-from hnn_analysis.scenes import scene_measure  # noqa: E402
+from hnn_analysis.scenes import scene_measure, scene_rungs  # noqa: E402
 from hnn_analysis.scenes.scene_tables import color  # noqa: E402
+
+
+LEGEND_COLUMNS = 5
 
 
 def pareto_figure(results: dict, path: Path) -> None:
@@ -36,7 +40,8 @@ def pareto_figure(results: dict, path: Path) -> None:
                 if ro and x:
                     y, se = seeds.get("error_seeds") or (ro["error"], 0.0)
                     points.append((x, y))
-                    ax.errorbar(x, y, yerr=se or None, fmt="o", ms=3.5, lw=0.8, color=color(kind), label=kind)
+                    ax.errorbar(x, y, yerr=se or None, fmt=scene_rungs.marker(kind), ms=3.5, lw=0.8, color=color(kind),
+                                label=kind)
             if not points:      # pixels: its rollout comes from the energy protocol, untimed
                 ax.axis("off")
                 ax.text(0.5, 0.5, f"{task}: no {xlabel} measured", ha="center", va="center", transform=ax.transAxes)
@@ -60,11 +65,15 @@ def pareto_figure(results: dict, path: Path) -> None:
              f"{_seed_words(results)}; training s: the seeds' median; rollout s: seed 0's")
     if results["meta"]["quick"]:
         title = "QUICK smoke run, not the study's settings. " + title
+    # the kinds and the fits' rungs: at most LEGEND_COLUMNS to a row, so the legend stays inside the figure;
+    # the figure grows by the legend's rows past the first
+    columns = min(len(legend), LEGEND_COLUMNS)
+    fig.set_figheight(fig.get_figheight() + 0.2 * (math.ceil(len(legend) / columns) - 1))
     inch = 1 / fig.get_figheight()              # one inch in figure coordinates
     fig.suptitle(title, fontsize=10, y=1 - 0.1 * inch, va="top")
-    fig.legend(legend.values(), legend.keys(), loc="upper center", ncol=len(legend), fontsize=8,
+    fig.legend(legend.values(), legend.keys(), loc="upper center", ncol=columns, fontsize=8,
                bbox_to_anchor=(0.5, 1 - 0.45 * inch), frameon=False)
-    top = 1 - 0.75 * inch                        # the panels start below the title and the legend
+    top = 1 - (0.55 + 0.2 * math.ceil(len(legend) / columns)) * inch    # the panels start below the title and legend
     fig.tight_layout(rect=(0, 0, 1, top))
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=80, format="png"))

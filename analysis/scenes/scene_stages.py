@@ -15,8 +15,8 @@ import hnn
 from hnn_analysis import plan
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
-from hnn_analysis.scenes.scene_common import CARD_FACTOR, Scene, scene_settings, task_kinds, train
+from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm, scene_rungs
+from hnn_analysis.scenes.scene_common import CARD_FACTOR, Scene, scene_settings, task_rungs, train
 
 WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
 # --quick: a grid of one narrow cell beside the default one, fewer steps than reproduce.py --quick, and
@@ -103,7 +103,9 @@ def scene_card(cells: dict) -> dict | None:
     With several seeds the card also says what they cannot settle: ``unsettled`` names the smaller
     models (cells) whose mean is not within ``CARD_FACTOR`` of both bests but whose lowest seed on
     each error is (the seeds cannot separate them from the pick), and ``pick_straddles`` whether the
-    pick's highest seed on either error is over it; both are None with one seed, where nothing is tested."""
+    pick's highest seed on either error is over it; both are None with one seed, where nothing is tested.
+    ``cells``' kinds may be a fit's rungs (``scene_rungs``: ``hnn+swim``); ``cheapest`` and ``libraries``
+    name the model enough that trains fastest and the libraries enough (``_cheapest_and_libraries``)."""
     spread = {}
     for key, per_seed in cells.items():
         pairs = [_key_metric(m) for m in per_seed.values()]
@@ -129,6 +131,8 @@ def scene_card(cells: dict) -> dict | None:
         return m["params"], key[2], scene_measure.median_cost_seconds(cells[key]) or 0.0
 
     pick = min(ok, key=size) if ok else min(spread, key=lambda k: (ratio(k, 0), *size(k)))
+    # ``cheapest`` and ``libraries`` (_cheapest_and_libraries): the model enough that trains fastest, and the
+    # libraries enough, with the equations they found
     if not math.isfinite(ratio(pick, 0)):
         return None
     seeds = len(cells[pick])
@@ -137,11 +141,34 @@ def scene_card(cells: dict) -> dict | None:
                   if size(k) < size(pick) and k not in ok and len(cells[k]) > 1 and ratio(k, 1) <= CARD_FACTOR]
                  if several and pick in ok else None)
     m = next(iter(cells[pick].values()))
-    return {"kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
+    return {**_cheapest_and_libraries(cells, ok, spread),
+            "kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
             "params": m["params"], "train_seconds": scene_measure.median_cost_seconds(cells[pick]), "n_seeds": seeds,
             "energy": spread[pick][0][0] if spread[pick][0] else None,
             "rollout": spread[pick][1][0] if spread[pick][1] else None, "within": ratio(pick, 0),
             "unsettled": unsettled, "pick_straddles": (ratio(pick, 2) > CARD_FACTOR) if several and pick in ok else None}
+
+
+def _cheapest_and_libraries(cells: dict, ok: list, spread: dict) -> dict:
+    """Beside a card's pick: ``cheapest``, the model enough (within ``CARD_FACTOR`` of both bests on its seeds'
+    mean) that trains in the fewest seconds (the median of its seeds' ``scene_measure.cost_seconds``), and
+    ``libraries``, the rungs among those enough whose model is a sum of written-out terms (``hnn+library``,
+    ``baseline+sindy``: they found the scene's equations), each with the equation its first seed printed."""
+    def seconds(key) -> float:
+        return scene_measure.median_cost_seconds(cells[key]) or math.inf
+
+    out = {"cheapest": None, "libraries": []}
+    if ok:
+        key = min(ok, key=lambda k: (seconds(k), k[1], -k[2]))
+        out["cheapest"] = {"kind": key[0], "width": key[1], "fraction": key[2], "train_seconds": seconds(key),
+                           "energy": spread[key][0][0] if spread[key][0] else None,
+                           "rollout": spread[key][1][0] if spread[key][1] else None}
+    for key in sorted(ok, key=seconds):
+        if scene_rungs.is_library(key[0]):
+            first = cells[key][min(cells[key])]
+            out["libraries"].append({"kind": key[0], "fraction": key[2], "train_seconds": seconds(key),
+                                     "equation": first.get("equation")})
+    return out
 
 
 def inseparable(per_kind: dict) -> dict:
@@ -184,7 +211,10 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
     dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
     tic = time.perf_counter()
-    runs, _ = train([(default_rows, seeds, steps, None), (grid_rows, grid_seeds, steps, None),
+    # the fits' rungs beside the kinds (scene_rungs): every fit at the default cell, the sampled layer's on the grid
+    rungs, grid_rungs = (scene_common.kinds() + tuple(scene_rungs.fit_rungs(scene_common.kinds(), chosen))
+                         for chosen in (scene_rungs.RUNGS, scene_rungs.GRID_RUNGS))
+    runs, _ = train([(default_rows, seeds, steps, rungs), (grid_rows, grid_seeds, steps, grid_rungs),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
                      (dhnn_rows, [0], steps, DHNN_MODELS)], out, args,
                     then=lambda models: [plan.Stage("measure", models, "models (losses, energy MSE, rollout error; "
@@ -203,7 +233,7 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
         entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "grid_seeds": {},
                  "speed": {}}
         cells = {}
-        for kind in task_kinds(task):
+        for kind in task_rungs(task):
             result = measured.get(("kind", task, kind))
             if result is None:
                 continue
@@ -213,7 +243,7 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
             if "speed" in result:
                 entry["speed"][kind] = result["speed"]
         entry["inseparable"] = inseparable({kind: cells[(kind, *DEFAULT_CELL)] for kind in entry["kinds"]})
-        for kind in task_kinds(task):
+        for kind in task_rungs(task):
             grid = {}
             for key, m in measured.get(("cells", task, kind), {}).items():
                 cell, seed = key.rsplit("/seed", 1)
@@ -260,16 +290,17 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], g
     only when given), then each kind's grid at ``grid_seeds`` (cells keyed ``kind@WxF/seedS``)."""
     units = {}
     for task in scenes:
-        for kind in task_kinds(task):
+        for kind in task_rungs(task):
             per_seed = {seed: str(run) for seed in seeds
                         if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{kind}/seed{seed}"),
                                       Path)}
             if per_seed:
+                # a fit's rung rolls out as its kind does: the speed study measures the kinds trained by Adam
                 speed = (seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task)
-                         and (speed_kinds is None or kind in speed_kinds) else None)
+                         and (speed_kinds is None or kind in speed_kinds) and "+" not in kind else None)
                 units[("kind", task, kind)] = ("kind", task, kind, per_seed, speed)
     for task in scenes:
-        for kind in task_kinds(task):
+        for kind in task_rungs(task):
             cells = {}
             for row in (r for r in grid_rows if r["task"] == task):
                 for seed in grid_seeds:

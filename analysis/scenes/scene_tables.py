@@ -5,12 +5,13 @@ kind per scene, the speed at equal accuracy, the grids, the scene cards, the D-H
 from __future__ import annotations
 
 import hnn
-from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm
+from hnn_analysis.scenes import scene_common, scene_measure, scene_metrics as sm, scene_rungs
 
 
 def color(kind: str) -> str:
-    """A model kind's plot colour, as its registration declares it (``hnn.kinds.ModelKind.color``)."""
-    spec = hnn.MODEL_KINDS.get(kind)
+    """A model kind's plot colour, as its registration declares it (``hnn.kinds.ModelKind.color``); a fit's rung
+    (``hnn+swim``) takes its kind's (its marker tells the fit: ``scene_rungs.marker``)."""
+    spec = hnn.MODEL_KINDS.get(scene_rungs.kind_of(kind))
     return spec.color if spec else "k"
 
 
@@ -145,7 +146,7 @@ def _cell_order(key: str):
 
 def card_name(card: dict) -> str:
     """A scene card's model in words; a fallback card (no model within 2x of both bests) says so."""
-    name = f"{card['kind']}, width {card['width']}, {card['fraction']:g} of the data"
+    name = scene_rungs.describe(card["kind"], card["width"], card["fraction"])
     within = card.get("within", 1.0)
     if within > scene_common.CARD_FACTOR:
         return f"none within {scene_common.CARD_FACTOR:g}x of both bests; nearest: {name} ({within:.2g}x)"
@@ -156,7 +157,8 @@ def card_table(results: dict) -> list[str]:
     grid = results["meta"].get("grid_seeds", [0])
     lines = ["**Scene cards**: the smallest model (fewest parameters, then the least data, then the cheapest to "
              "train) whose energy MSE (corrected protocol, else the paper's) and rollout error, each the mean over its seeds, both come "
-             "within 2x of the best mean of its scene, over every kind and (spring, pend, 2body) every width and "
+             "within 2x of the best mean of its scene, over every kind and fit (the rungs of docs/fits.md) and (spring, pend, "
+             "2body) every width and "
              f"training fraction, the grid trained at seed{'s' if len(grid) > 1 else ''} {', '.join(map(str, grid))} "
              "(where none does, the model nearest both bests: the smallest larger ratio, which the row gives). "
              "*Seeds cannot separate*: the smaller models whose mean is not within 2x of both bests but whose "
@@ -166,20 +168,41 @@ def card_table(results: dict) -> list[str]:
              "over a short burst (not the run's recorded wall time, which depends on what else the machine did), the "
              "median over the model's seeds.", "",
              "| scene | enough | params | energy MSE (best) | rollout error (best) | train s | over seeds | "
-             "seeds cannot separate |",
-             "| --- | --- | ---: | --- | --- | ---: | --- | --- |"]
+             "seeds cannot separate | cheapest to train that is enough | a library that is enough |",
+             "| --- | --- | ---: | --- | --- | ---: | --- | --- | --- | --- |"]
     for task, entry in results["scenes"].items():
         card = entry.get("card")
         if not card:
-            lines.append(f"| {task} | no model measured on both | | | | | | |")
+            lines.append(f"| {task} | no model measured on both | | | | | | | | |")
             continue
         seeds = card.get("seeds", {})
         over = ", ".join(f"{k.replace('_seeds', '')} {_pm(v)}" for k, v in seeds.items()
                          if k in ("error_seeds", "energy_mse_corrected_seeds", "energy_mse_paper_seeds"))
         lines.append(f"| {task} | {card_name(card)} | {card['params']} | {_g(card['energy'])} ({_g(card['best_energy'])}) | "
                      f"{_g(card['rollout'])} ({_g(card['best_rollout'])}) | {_g(card['train_seconds'])} | {over} | "
-                     f"{unsettled(card)} |")
-    return lines
+                     f"{unsettled(card)} | {cheapest_words(card)} | {library_words(card)} |")
+    return lines + ["", "*Cheapest to train that is enough*: of the models within 2x of both bests (the seeds' means), "
+                    "the one whose seeds' median training seconds is least, Adam's kinds and the least-squares fits "
+                    "(`--fit`: `+swim` a sampled layer, `+library` H as a sum of terms, `+sindy` pysindy's SINDy; "
+                    "docs/fits.md) alike. *A library that is enough*: a library fit among those, with the equation "
+                    "its first seed found (where a library is enough, it found the scene's equations to within the "
+                    "card's 2x)."]
+
+
+def cheapest_words(card: dict) -> str:
+    """The card's model enough that trains fastest, in words (a card saved before it was chosen: not chosen)."""
+    found = card.get("cheapest")
+    if not found:
+        return "none within 2x" if "cheapest" in card else "not chosen"
+    return f"{scene_rungs.describe(found['kind'], found['width'], found['fraction'])} ({_g(found['train_seconds'])} s)"
+
+
+def library_words(card: dict) -> str:
+    """The libraries enough, with their equations; 'none' where no library is (not measured on older cards)."""
+    if "libraries" not in card:
+        return "not measured"
+    return "; ".join(f"{lib['kind']} ({_g(lib['train_seconds'])} s): `{lib['equation']}`" if lib.get("equation")
+                     else lib["kind"] for lib in card["libraries"]) or "none"
 
 
 def unsettled(card: dict) -> str:
@@ -249,13 +272,14 @@ def markdown(results: dict) -> str:
 def guide(results: dict) -> str:
     """The README's model guide: each scene's card in one line, and where the rest is."""
     lines = ["| scene | a model that is enough (its seeds' mean within 2x of the best energy MSE and rollout error) | "
-             "its energy MSE (corrected protocol, else the paper's) / rollout error | train s | seeds cannot separate |",
-             "| --- | --- | --- | ---: | --- |"]
+             "its energy MSE (corrected protocol, else the paper's) / rollout error | cheapest to train that is enough | "
+             "seeds cannot separate |",
+             "| --- | --- | --- | --- | --- |"]
     for task, entry in results["scenes"].items():
         card = entry.get("card")
         if card:
             lines.append(f"| {task} | {card_name(card)} | {_g(card['energy'])} / {_g(card['rollout'])} | "
-                         f"{_g(card['train_seconds'])} | {unsettled(card)} |")
+                         f"{cheapest_words(card)} | {unsettled(card)} |")
     meta = results["meta"]
     lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every kind, the grids, "
               "the speed at equal accuracy and the D-HNN comparison: [docs/scenes.md](docs/scenes.md)."]

@@ -1,0 +1,175 @@
+"""The features a linear fit combines, each with its values and its input gradients in closed form.
+
+- ``TanhFeatures``: one hidden layer of ``width`` neurons, phi_k(x) = tanh(w_k . x + b_k), whose weights
+  are drawn from the data (``hnn.fits.sampling``: SWIM's pairs of points, or ELM's random draws) and
+  never trained; d phi_k / dx = (1 - phi_k^2) w_k.
+- ``Library``: terms written out (``terms``): monomials of the state's columns, sines and cosines of
+  the positions, and their products with monomials of the momenta; each prints as its formula, so a
+  sparse combination of them prints as an equation.
+
+Both are ``nn.Module``s whose tensors are parameters (``requires_grad=False``: drawn or fixed, never
+trained) and buffers, so a fitted model saves and reloads as any model does; shapes ``(rows, width)``
+for values and ``(rows, width, in_dim)`` for gradients, float64.
+"""
+from __future__ import annotations
+
+import itertools
+
+import torch
+from torch import nn
+
+# the trig factor of a library term: none, sin(f q_i) or cos(f q_i)
+NONE, SIN, COS = 0, 1, 2
+
+
+def _frozen(*shape) -> nn.Parameter:
+    return nn.Parameter(torch.zeros(*shape, dtype=torch.float64), requires_grad=False)
+
+
+class TanhFeatures(nn.Module):
+    """phi(x) = tanh(x W^T + b): ``width`` neurons on inputs of width ``in_dim``; ``weight`` ``(width, in_dim)``
+    and ``bias`` ``(width,)`` are set by a sampler (``hnn.fits.sampling``), zero until then."""
+
+    def __init__(self, width: int, in_dim: int):
+        super().__init__()
+        if not isinstance(width, int) or width < 1:
+            raise ValueError(f"a sampled layer needs a width >= 1 (--hidden_dim), got {width!r}")
+        self.width, self.in_dim = width, in_dim
+        self.weight, self.bias = _frozen(width, in_dim), _frozen(width)
+
+    def set(self, weight, bias) -> None:
+        """Set the sampled ``weight`` ``(width, in_dim)`` and ``bias`` ``(width,)``."""
+        with torch.no_grad():
+            self.weight.copy_(torch.as_tensor(weight, dtype=torch.float64))
+            self.bias.copy_(torch.as_tensor(bias, dtype=torch.float64))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """phi ``(rows, width)`` at ``x`` ``(rows, in_dim)``."""
+        return torch.tanh(torch.addmm(self.bias, x, self.weight.T))
+
+    def slopes(self, x: torch.Tensor) -> torch.Tensor:
+        """tanh' = 1 - phi^2 ``(rows, width)``: d phi_k / dx = slopes_k w_k."""
+        t = self(x)
+        return 1 - t * t
+
+    def jacobian(self, x: torch.Tensor) -> torch.Tensor:
+        """d phi_k / d x_j ``(rows, width, in_dim)``."""
+        return self.slopes(x)[:, :, None] * self.weight[None]
+
+    def gradient(self, x: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
+        """d/dx of phi(x) . coef, ``(rows, in_dim)``: (1 - phi^2) * coef times W, no ``(rows, width, in_dim)`` tensor."""
+        t = self(x)
+        return ((1 - t * t) * coef) @ self.weight
+
+    def names(self, columns: list[str]) -> list[str]:
+        return [f"tanh(w{k} . x + b{k})" for k in range(self.width)]
+
+
+def _monomials(dim: int, low: int, high: int, columns=None) -> list[tuple[int, ...]]:
+    """Exponent tuples of width ``dim`` of total degree ``low..high`` in the ``columns`` (default all), graded."""
+    columns = list(range(dim)) if columns is None else list(columns)
+    out = []
+    for degree in range(low, high + 1):
+        for combo in itertools.combinations_with_replacement(columns, degree):
+            powers = [0] * dim
+            for c in combo:
+                powers[c] += 1
+            out.append(tuple(powers))
+    return out
+
+
+def terms(width: int, form: str, degree: int, frequencies: int, products: bool = True) -> list[tuple]:
+    """The library's terms ``[(powers, (trig, column, frequency))]`` over inputs of ``width`` columns.
+
+    ``form``: ``'hamiltonian'`` (H's terms over x = [q, p]: monomials of degree 1 to ``degree + 1``, so that
+    their gradients span the polynomial fields of ``degree``; no constant, which no gradient sees),
+    ``'field'`` (dx/dt's terms over [q, p], SINDy's form: a constant and monomials of degree 0 to
+    ``degree``), ``'kinetic'`` (T's terms over p alone: monomials of degree 1 to ``degree + 1``) or
+    ``'potential'`` (V's terms over q alone: the same, and the trig terms). The trig terms: sin(f q_i)
+    and cos(f q_i) for f = 1..``frequencies``; with ``products`` (not in T or V), each of them times the
+    monomials of the momenta of degree 1 and 2 (the q-dependent kinetic energies of pendulums).
+    """
+    halves = form in ("kinetic", "potential")
+    if width < 1 or (not halves and width % 2):
+        raise ValueError(f"a library of {form} terms reads x = [q, p] of even width, got {width}")
+    if degree < 1 or frequencies < 0:
+        raise ValueError(f"a library needs degree >= 1 and frequencies >= 0, got {degree}, {frequencies}")
+    n, none = (width if halves else width // 2), (NONE, 0, 0)
+    if form in ("hamiltonian", "kinetic", "potential"):
+        monos = _monomials(width, 1, degree + 1)
+    elif form == "field":
+        monos = _monomials(width, 0, degree)
+    else:
+        raise ValueError(f"unknown library form {form!r}: hamiltonian, field, kinetic or potential")
+    out = [(m, none) for m in monos]
+    if form == "kinetic":
+        return out
+    trig = [(kind, i, f) for f in range(1, frequencies + 1) for i in range(n) for kind in (SIN, COS)]
+    out += [((0,) * width, t) for t in trig]
+    if products and not halves:
+        out += [(m, t) for t in trig for m in _monomials(width, 1, 2, range(n, width))]
+    return out
+
+
+class Library(nn.Module):
+    """Terms theta_k(x) = x^powers_k * trig_k(x), fixed by ``terms(...)``: ``powers`` ``(terms, in_dim)``
+    and ``trig`` ``(terms, 3)`` (kind, column, frequency), buffers."""
+
+    def __init__(self, term_list: list[tuple], in_dim: int):
+        super().__init__()
+        self.in_dim, self.width = in_dim, len(term_list)
+        self.register_buffer("powers", torch.tensor([t[0] for t in term_list], dtype=torch.int64).reshape(-1, in_dim))
+        self.register_buffer("trig", torch.tensor([t[1] for t in term_list], dtype=torch.int64).reshape(-1, 3))
+
+    def _parts(self, x: torch.Tensor, keep: torch.Tensor | None):
+        """Per term: the monomial's factors ``(rows, terms, in_dim)``, the trig factor ``(rows, terms)`` and the
+        terms' rows of ``powers`` and ``trig`` (``keep``: a subset of the terms)."""
+        powers, trig = (self.powers, self.trig) if keep is None else (self.powers[keep], self.trig[keep])
+        factors = x[:, None, :] ** powers[None].to(x.dtype)       # 0 ** 0 = 1
+        angle = x[:, trig[:, 1]] * trig[:, 2].to(x.dtype)
+        t = torch.where(trig[:, 0] == SIN, torch.sin(angle), torch.where(trig[:, 0] == COS, torch.cos(angle),
+                                                                          torch.ones_like(angle)))
+        return factors, t, powers, trig, angle
+
+    def forward(self, x: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
+        """theta ``(rows, terms)`` at ``x`` ``(rows, in_dim)`` (``keep``: only those terms)."""
+        factors, t, *_ = self._parts(x, keep)
+        return factors.prod(dim=2) * t
+
+    def jacobian(self, x: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
+        """d theta_k / d x_j ``(rows, terms, in_dim)``: the product rule over the monomial's factors and the trig factor."""
+        factors, t, powers, trig, angle = self._parts(x, keep)
+        p = powers[None].to(x.dtype)
+        # d x_j^p / d x_j = p x_j^(p-1), zero where p = 0 (x ** -1 at x = 0 would be inf * 0)
+        slope = torch.where(p > 0, p * x[:, None, :] ** (p - 1).clamp_min(0), torch.zeros_like(p))
+        jac = torch.empty_like(factors)
+        for j in range(self.in_dim):       # the product of the other columns' factors (no division by zero)
+            others = torch.cat([factors[:, :, :j], factors[:, :, j + 1:]], dim=2).prod(dim=2)
+            jac[:, :, j] = slope[:, :, j] * others
+        mono = factors.prod(dim=2)
+        jac = jac * t[:, :, None]
+        freq = trig[:, 2].to(x.dtype)
+        dtrig = torch.where(trig[:, 0] == SIN, freq * torch.cos(angle), torch.where(trig[:, 0] == COS,
+                                                                                   -freq * torch.sin(angle),
+                                                                                   torch.zeros_like(angle)))
+        # the trig factor's own derivative lands on its column
+        jac.scatter_add_(2, trig[:, 1][None, :, None].expand(len(x), -1, 1), (mono * dtrig)[:, :, None])
+        return jac
+
+    def gradient(self, x: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
+        """d/dx of theta(x) . coef ``(rows, in_dim)``, over the terms whose coefficient is not zero."""
+        keep = coef != 0
+        if not bool(keep.any()):
+            return torch.zeros_like(x)
+        return torch.einsum("rkj,k->rj", self.jacobian(x, keep), coef[keep])
+
+    def names(self, columns: list[str]) -> list[str]:
+        """Each term as a formula over the column names (``'q^2 p'``, ``'cos(q)'``, ``'sin(2 q1) p1 p2'``)."""
+        out = []
+        for powers, (kind, column, freq) in zip(self.powers.tolist(), self.trig.tolist()):
+            parts = []
+            if kind != NONE:
+                parts.append(f"{'sin' if kind == SIN else 'cos'}({'' if freq == 1 else f'{freq} '}{columns[column]})")
+            parts += [name + (f"^{e}" if e > 1 else "") for name, e in zip(columns, powers) if e]
+            out.append(" ".join(parts) or "1")
+        return out

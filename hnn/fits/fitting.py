@@ -1,0 +1,198 @@
+"""One linear solve in place of the training loop. ``fit_least_squares`` is the front door for Python
+users (``hnn.fit_least_squares``); ``solve`` fits a model that ``hnn.fits.build`` made, as a run does.
+
+    model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="swim", width=1000, seed=0)
+    model.hamiltonian(x)                          # H (rows,), dx/dt = J grad H
+    model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="library")
+    print(model.equation())                       # H = 3 - 3 cos(q) + p^2 ... as the data say
+
+For each least-squares problem of the model (``part``): draw the hidden layer from the data (``swim``,
+``elm``), then stream the design rows through a QR factor (``hnn.fits.lstsq``), chunk by chunk, and
+solve; a library is thresholded as SINDy's STLSQ; ``sindy`` hands the rows to pysindy
+(``hnn.fits.sindy``). All in float64; the seed decides the sampled neurons.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from ..metrics import derivative_mse
+from ..specs import ModelSpec
+from ..training import check_data
+from .features import TanhFeatures
+from .lstsq import RIDGES, StreamingQR, chunk_rows
+from .registry import build, get_fit
+from .sampling import elm, swim
+
+RCOND = "auto"          # the ridge of the solve: chosen by generalized cross-validation (a number: that ridge)
+THRESHOLD = 0.05        # a library's smallest coefficient kept (the data's units)
+DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
+
+
+def _rows_per_state(part, x, y) -> int:
+    A, _ = part.design(x[:1], y[:1], None)
+    return len(A)
+
+
+def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) -> StreamingQR:
+    """The QR factor of ``part``'s design over every state, built chunk by chunk (two passes: the columns'
+    norms, then the factor); through ``_stream_factored`` where the part's design factors."""
+    factored = part.factored() if part.factored is not None else None
+    if factored is not None:
+        return _stream_factored(*factored, x, y, weights, rcond, bar)
+    per_state = _rows_per_state(part, x, y)
+    states = max(1, chunk_rows(part.columns, part.rhs) // per_state)
+    # the design of a few states at a time: a library's terms build (states, terms, dim) arrays several times over
+    step = max(1, DESIGN_BYTES // (8 * part.columns * per_state))
+
+    def design(c: slice):
+        pieces = [part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
+                  for i in range(c.start, min(c.stop, len(x)), step)]
+        return torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces])
+
+    chunks = [slice(i, i + states) for i in range(0, len(x), states)]
+    sumsq = torch.zeros(part.columns, dtype=torch.float64)
+    for c in chunks:
+        for i in range(c.start, min(c.stop, len(x)), step):
+            A, _ = part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
+            sumsq += (A * A).sum(dim=0)
+    solver = StreamingQR(part.columns, part.rhs, sumsq.sqrt(), rcond)
+    for c in chunks:
+        solver.add(*design(c))
+        bar.update(len(x[c]))
+    return solver
+
+
+def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tensor, y: torch.Tensor, weights,
+                     rcond: float, bar) -> StreamingQR:
+    """The factor of a sampled layer's gradient design without building it: there the rows of component j are
+    S diag(V[:, j]) (S ``(states, K)`` the neurons' slopes 1 - phi^2, V ``(K, m)`` their weights along each
+    component, J and signs folded in). A QR of [S | Y] (``states`` rows) gives S = Q R_s and Z = Q^T Y, and
+    then |S diag(V_j) c - y_j|^2 = |R_s diag(V_j) c - Z_j|^2 + what Q misses of y_j: the problem of
+    ``states * m`` rows becomes one of ``K * m`` rows. At width 5000 on 20k 4-d states the two QRs cost
+    half the direct one's arithmetic (docs/speed.md, "Least-squares fits")."""
+    K, m = V.shape
+    w = torch.ones(m, dtype=torch.float64) if weights is None else \
+        torch.as_tensor(weights, dtype=torch.float64)[targets]
+    Y = y[:, targets]
+    stage = StreamingQR(K, m)
+    step = max(1, chunk_rows(K, m))
+    for i in range(0, len(x), step):
+        stage.add(slopes(x[i:i + step]), Y[i:i + step])
+        bar.update(len(x[i:i + step]))
+    R = stage.factor
+    Rs, Z, tail = R[:K, :K], R[:K, K:], R[K:, K:]
+    scale = ((Rs * Rs).sum(dim=0) * (V * V * w).sum(dim=1)).sqrt()        # |A_k| over every component's rows
+    solver = StreamingQR(K, 1, scale, rcond)
+    piece = max(1, chunk_rows(K, 1) // m)
+    for start in range(0, len(Rs), piece):
+        block = Rs[start:start + piece]
+        A = torch.cat([w[j].sqrt() * block * V[:, j] for j in range(m)])
+        Yb = torch.cat([w[j].sqrt() * Z[start:start + piece, j:j + 1] for j in range(m)])
+        solver.add(A, Yb, rows=0)
+    solver.rows = len(x) * m
+    solver.outside = (w * (tail * tail).sum(dim=0)).sum().reshape(1)
+    return solver
+
+
+def _draw(part, fit: str, x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator, values) -> None:
+    """Set a sampled layer's neurons from the states this part reads (SWIM supervised by ``values``,
+    the function's values, where the part takes them: H for an HNN, dx/dt for a field)."""
+    z = part.inputs(x).numpy()
+    if fit == "elm":
+        part.features.set(*elm(z, part.features.width, rng))
+        return
+    supervise = (values if values is not None else y.numpy() if part.rhs > 1 else None) if part.supervised else None
+    part.features.set(*swim(z, part.features.width, rng, supervise))
+
+
+def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", seed: int = 0, rcond=RCOND,
+          threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None, progress: bool | None = None
+          ) -> dict:
+    """Fit ``model`` (``hnn.fits.build``'s, of fit ``fit``) to ``dxdt`` at ``x`` ``(rows, dim)`` in place.
+
+    ``seed`` draws the sampled neurons; ``rcond``: the ridge relative to the design's unit-norm columns, or
+    ``'auto'``: each problem's own, chosen by generalized cross-validation (``hnn.fits.lstsq.StreamingQR.ridge``);
+    ``threshold``: a library's smallest coefficient kept; ``loss_weights`` ``(dim,)``: each component's
+    weight in the squared error (``hnn.balance``); ``values`` ``(rows,)``: H at ``x`` where known, which
+    SWIM then samples by (their supervised SWIM; without it pairs are uniform, their U-SWIM); ``anchor``
+    ``(x0 (dim,), H0)``: the one H value that fixes H's constant (default: the constant is 0).
+
+    Returns the stats ``hnn.train`` returns (one final ``train_loss`` and ``test_loss``, ``seconds``: the
+    fit's wall time) and ``"fit"``: what it did (the fit, rows, terms kept, and for a library its equation).
+    """
+    row = get_fit(fit)
+    if not row.solved:
+        raise ValueError("fit='adam' trains with hnn.train; solve() fits by least squares: swim, elm, library or sindy")
+    width = model.input_dim
+    x, dxdt = (check_data(name, a, width=width, dtype=torch.float64) for name, a in (("x", x), ("dxdt", dxdt)))
+    if len(x) != len(dxdt):
+        raise ValueError(f"x has {len(x)} rows but dxdt has {len(dxdt)}")
+    if len(x) < 2:
+        raise ValueError(f"a least-squares fit needs at least 2 states, got {len(x)}")
+    if values is not None:
+        values = np.asarray(values, dtype=np.float64).reshape(len(x), -1)
+    weights = None if loss_weights is None else torch.as_tensor(loss_weights, dtype=torch.float64)
+    if progress is None:
+        progress = sys.stderr.isatty()
+    info = {"fit": fit, "rows": len(x), "seed": seed}
+    rng = np.random.default_rng(seed)
+    tic = time.perf_counter()
+    if fit == "sindy":
+        from .sindy import fit_sindy
+        info.update(fit_sindy(model, x.numpy(), dxdt.numpy(), threshold))
+    else:
+        parts = model.parts()
+        with tqdm(total=len(x) * len(parts), desc=f"fit {fit}", disable=not progress, leave=False) as bar:
+            for part in parts:
+                if isinstance(part.features, TanhFeatures):
+                    _draw(part, fit, x, dxdt, rng, values)
+                solver = _stream(part, x, dxdt, weights, RIDGES[0] if rcond == "auto" else rcond, bar)
+                ridge = solver.ridge() if rcond == "auto" else None
+                part.assign(solver.sparse(threshold, ridge) if row.features == "library" else solver.solve(ridge))
+                if ridge is not None:
+                    info.setdefault("ridge", {})[part.name] = [float(r) for r in ridge]
+        info["rcond"] = rcond
+    if anchor is not None:
+        if not hasattr(model, "anchor"):
+            raise ValueError(f"anchor=(x0, H0) fixes an H's constant; the {type(model).__name__} has no H")
+        x0 = check_data("anchor x0", torch.as_tensor(anchor[0], dtype=torch.float64).reshape(1, -1), width=width,
+                        dtype=torch.float64)
+        model.anchor(x0, anchor[1])
+    seconds = time.perf_counter() - tic
+    if row.features == "library":
+        info["terms"] = int(sum(int((p != 0).sum()) for name, p in model.named_parameters() if "coef" in name))
+        info["equation"] = model.equation()
+    stats = {"train_loss": [derivative_mse(model, x, dxdt)[0]], "test_loss": [], "test_steps": [], "seconds": seconds,
+             "fit": info}
+    if test_x is not None:
+        stats["test_loss"] = [derivative_mse(model, check_data("test_x", test_x, width=width, dtype=torch.float64),
+                                             check_data("test_dxdt", test_dxdt, width=width, dtype=torch.float64))[0]]
+        stats["test_steps"] = [0]
+    return stats
+
+
+def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", width: int = 200,
+                      degree: int = 3, frequencies: int = 1, seed: int = 0, rcond=RCOND,
+                      threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None,
+                      progress: bool | None = None):
+    """``(model, stats)``: a model of ``dxdt`` at ``x`` ``(rows, 2n)`` found by one least-squares solve.
+
+    ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``; ``hnn.fits.FITS[fit].kinds``), built here
+    with ``width`` sampled neurons (``fit='swim'`` or ``'elm'``) or the library of polynomials to ``degree``
+    (H's to ``degree + 1``) and trig terms of q to ``frequencies`` (``'library'``, ``'sindy'``); or a model
+    ``hnn.fits.build`` made. The rest as ``solve``. The model answers through the model interface:
+    ``time_derivative``, ``hamiltonian`` (hnn, separable), ``equation()`` (a library's), and rolls out with
+    ``hnn.rollout``; float64.
+    """
+    if isinstance(model, str):
+        dim = np.shape(x)[1] if len(np.shape(x)) == 2 else None
+        model = build(ModelSpec(kind=model, input_dim=dim, hidden_dim=width, fit=fit, library_degree=degree,
+                                library_frequencies=frequencies))
+    stats = solve(model, x, dxdt, test_x, test_dxdt, fit=fit, seed=seed, rcond=rcond, threshold=threshold,
+                  loss_weights=loss_weights, values=values, anchor=anchor, progress=progress)
+    return model.eval(), stats

@@ -1,0 +1,140 @@
+"""Least squares over more rows than memory holds: a QR factor updated chunk by chunk (TSQR), in float64.
+
+    solver = StreamingQR(columns=K, rhs=1, scale=column_norms, rcond=1e-13)
+    for A, Y in chunks:                 # (rows, K), (rows, 1)
+        solver.add(A, Y)
+    coef = solver.solve()               # (K, 1): min |A c - Y|^2 + rcond^2 |diag(scale) c|^2
+    coef = solver.sparse(threshold)     # sequentially thresholded (SINDy's STLSQ) on the same factor
+
+Why a QR and not the normal equations: a sampled layer's features are nearly dependent (a width-1000
+fit of the single pendulum keeps a third of its directions above 1e-16 of the largest), and A^T A
+squares that condition. Measured on the Sampling-HNNs single pendulum (width 1000, 10k points): the
+normal equations reach a relative H error of 4e-6 at best (any ridge), the QR 6e-11, numpy's SVD
+``lstsq`` (their solver, ``rcond`` 1e-13) 1e-9 (docs/fits.md). The ridge rows rcond * I on the columns
+scaled to unit norm stand first in the factor, so the solve is a triangular one: Tikhonov
+regularization at the scale where ``lstsq``'s ``rcond`` cuts singular values.
+
+Memory: the factor ``(K + rhs)^2`` and one chunk of rows beside it (``chunk_rows``), 8 bytes a number.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+
+# the stacked matrix [factor; chunk] of one QR update holds at most this many bytes (the chunk itself, the
+# QR's own copy and the new factor come on top): width 5000 updates ~22k rows at a time, width 10000 10k
+BLOCK_BYTES = 2 ** 30
+MAX_STLSQ_ITERATIONS = 25
+# the ridges generalized cross-validation chooses from (relative to unit columns; ``StreamingQR.ridge``)
+RIDGES = tuple(10.0 ** e for e in range(-13, 1))
+
+
+def chunk_rows(columns: int, rhs: int = 1) -> int:
+    """Rows of design per QR update for ``columns`` unknowns: ``BLOCK_BYTES`` worth of [factor; chunk], at
+    least as many rows as the factor (fewer would spend the update's O(K^3) on few rows), at least 1024."""
+    width = columns + rhs
+    return max(1024, width, BLOCK_BYTES // (8 * width) - width)
+
+
+class StreamingQR:
+    """min_C |A C - Y|^2 + rcond^2 |diag(scale) C|^2 over rows added in chunks (``add``), for ``columns``
+    unknowns and ``rhs`` right-hand sides. ``scale`` ``(columns,)``: the columns' norms (their RMS over the
+    data, or any positive size): the columns are divided by it, so ``rcond`` is relative to unit columns.
+    ``rcond`` 0: a plain QR of the rows (no ridge rows), whose factor another solve reads."""
+
+    def __init__(self, columns: int, rhs: int, scale: torch.Tensor | None = None, rcond: float = 0.0):
+        if not rcond >= 0:
+            raise ValueError(f"rcond must be >= 0 (the ridge that keeps a nearly dependent design solvable), "
+                             f"got {rcond}")
+        self.columns, self.rhs, self.rcond = columns, rhs, rcond
+        scale = torch.ones(columns, dtype=torch.float64) if scale is None else scale.to(torch.float64)
+        self.scale = torch.where(scale > 0, scale, torch.ones_like(scale))
+        self.factor = torch.zeros(columns if rcond else 0, columns + rhs, dtype=torch.float64)
+        self.factor[:, :columns] = rcond * torch.eye(columns, dtype=torch.float64)[:len(self.factor)]
+        self.rows = 0                   # rows of the least-squares problem (generalized cross-validation's count)
+        self.outside = torch.zeros(rhs, dtype=torch.float64)     # residual a reduced problem left behind
+
+    def add(self, A: torch.Tensor, Y: torch.Tensor, rows: int | None = None) -> None:
+        """Fold the rows ``A`` ``(rows, columns)``, ``Y`` ``(rows, rhs)`` into the factor (``rows``: how many rows of
+        the original problem they stand for, where they are a reduction of more)."""
+        stacked = torch.empty(len(self.factor) + len(A), self.columns + self.rhs, dtype=torch.float64)
+        stacked[:len(self.factor)] = self.factor
+        torch.div(A, self.scale, out=stacked[len(self.factor):, :self.columns])
+        stacked[len(self.factor):, self.columns:] = Y
+        del A
+        self.factor = torch.linalg.qr(stacked, mode="r").R[:self.columns + self.rhs]
+        self.rows += len(Y) if rows is None else rows
+
+    def _split(self):
+        R = self.factor[:self.columns]
+        return R[:, :self.columns], R[:, self.columns:]
+
+    def residual(self) -> torch.Tensor:
+        """The sum of squared residuals of each right-hand side that no coefficients can reach (``(rhs,)``)."""
+        tail = self.factor[self.columns:, self.columns:]
+        return (tail ** 2).sum(dim=0) + self.outside
+
+    def ridge(self) -> torch.Tensor:
+        """Each right-hand side's ridge (relative to unit columns) chosen by generalized cross-validation
+        (Golub, Heath & Wahba 1979): the lam of ``RIDGES`` (at least ``rcond``) least in rss(lam) / (1 - dof(lam)
+        / rows)^2, read from the SVD of the factor (its cost: width^3). Where the data are exact it picks the
+        smallest; on noisy data one that stops the features from fitting the noise. ``(rhs,)``."""
+        lhs, z = self._split()
+        U, s, _ = torch.linalg.svd(lhs)
+        zhat, floor = U.T @ z, self.residual()
+        best = torch.full((self.rhs,), math.inf, dtype=torch.float64)
+        chosen = torch.full((self.rhs,), self.rcond, dtype=torch.float64)
+        for lam in (r for r in RIDGES if r >= self.rcond):
+            shrink = lam ** 2 / (s ** 2 + lam ** 2)
+            rss = ((shrink[:, None] * zhat) ** 2).sum(dim=0) + floor
+            dof = (1 - shrink).sum()
+            score = rss / max(1.0 - float(dof) / self.rows, 1e-12) ** 2
+            better = score < best
+            best, chosen = torch.where(better, score, best), torch.where(better, torch.tensor(lam, dtype=torch.float64),
+                                                                         chosen)
+        return chosen
+
+    def solve(self, ridge: torch.Tensor | None = None) -> torch.Tensor:
+        """The coefficients ``(columns, rhs)`` of the rows added so far: with the factor's own ridge ``rcond``, or
+        with each right-hand side's ``ridge`` ``(rhs,)`` on top (``ridge()``'s choice)."""
+        lhs, z = self._split()
+        if ridge is None or bool((ridge <= self.rcond).all()):
+            scaled = torch.linalg.solve_triangular(lhs, z, upper=True)
+        else:
+            scaled = torch.stack([self._ridged(lhs, z[:, j], float(ridge[j])) for j in range(self.rhs)], dim=1)
+        return scaled / self.scale[:, None]
+
+    def sparse(self, threshold: float, ridge: torch.Tensor | None = None) -> torch.Tensor:
+        """Sequentially thresholded least squares (SINDy's STLSQ) on the same factor: solve, zero every
+        coefficient smaller than ``threshold`` in size (in the data's units), solve again on the rest, until
+        none changes; each right-hand side keeps its own terms (and its ``ridge``, as ``solve``). ``(columns, rhs)``."""
+        if not threshold >= 0:
+            raise ValueError(f"threshold must be >= 0, got {threshold}")
+        lhs, z = self._split()
+        out = torch.zeros(self.columns, self.rhs, dtype=torch.float64)
+        for j in range(self.rhs):
+            lam = self.rcond if ridge is None else float(ridge[j])
+            keep = torch.ones(self.columns, dtype=torch.bool)
+            for _ in range(MAX_STLSQ_ITERATIONS):
+                # the ridge rows of the dropped columns only touch those columns: a subset's factor is lhs[:, keep]
+                coef = self._ridged(lhs[:, keep], z[:, j], lam) / self.scale[keep]
+                small = coef.abs() < threshold
+                if not bool(small.any()):
+                    break
+                keep[keep.clone()] = ~small
+                if not bool(keep.any()):
+                    coef = coef[:0]
+                    break
+            out[keep, j] = coef
+        return out
+
+    def _ridged(self, lhs: torch.Tensor, z: torch.Tensor, lam: float) -> torch.Tensor:
+        """min |lhs c - z|^2 + lam^2 |c|^2 in scaled units (``lhs``: columns of the factor, which holds rcond^2 of
+        the ridge already), by a QR of the stacked [lhs; (lam^2 - rcond^2)^(1/2) I]: no singular value is cut."""
+        extra = max(lam ** 2 - self.rcond ** 2, 0.0) ** 0.5
+        if extra:
+            lhs = torch.cat([lhs, extra * torch.eye(lhs.shape[1], dtype=torch.float64)])
+            z = torch.cat([z, torch.zeros(lhs.shape[1], dtype=torch.float64)])
+        Q, R = torch.linalg.qr(lhs)
+        return torch.linalg.solve_triangular(R, (Q.T @ z)[:, None], upper=True)[:, 0]

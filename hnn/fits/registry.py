@@ -1,0 +1,132 @@
+"""The fits: how a run finds its model's weights, one row each, everything about a fit in its row.
+
+``adam`` is the training loop (``hnn.train``); every other row is one linear least-squares solve in
+float64 (``hnn.fits.fitting``) over features that are drawn or written out, never trained: the fitted
+field is linear in the last weights, so fitting dx/dt is one problem. A row declares the model kinds it
+applies to, the features it combines, the package it needs, and its prose; ``check`` refuses a run the
+fit cannot serve, naming the fix; ``build`` makes the untrained model of a run's ``ModelSpec`` (it also
+rebuilds a saved run's model for ``hnn.load_run``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..names import FITS as NAMES
+from ..specs import ModelSpec
+
+# the kinds whose field is linear in the last layer's weights: H = phi . c (hnn), T + V (separable), phi C (baseline)
+LINEAR_KINDS = ("hnn", "separable", "baseline")
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A fit: ``kinds`` it applies to (None: every kind); ``features``: ``'swim'`` or ``'elm'`` (a sampled
+    tanh layer of ``--hidden_dim`` neurons), ``'library'`` (terms written out, sparse by thresholding),
+    or None (trained by Adam); ``package``: the optional package it imports (pip extra ``extra``);
+    ``line``: what it is, for readers; ``marker``: its points' marker in the studies' plots (a kind's colour
+    beside it says which model)."""
+    name: str
+    line: str
+    kinds: tuple[str, ...] | None = LINEAR_KINDS
+    features: str | None = None
+    package: str | None = None
+    extra: str | None = None
+    marker: str = "o"
+
+    @property
+    def solved(self) -> bool:
+        """One linear solve (not a training loop): the run is a fit of dx/dt, in float64."""
+        return self.name != "adam"
+
+
+FITS: dict[str, Fit] = {
+    "adam": Fit("adam", "the training loop: Adam on the kind's objective (hnn.train), the paper's", kinds=None),
+    "swim": Fit("swim", "a hidden layer of --hidden_dim tanh neurons, each from a pair of training states "
+                        "(SWIM, Rahma, Datar & Dietrich 2024), and the last layer by least squares", features="swim",
+                marker="s"),
+    "elm": Fit("elm", "a hidden layer of --hidden_dim tanh neurons drawn at random (an extreme learning machine), "
+                      "and the last layer by least squares", features="elm", marker="v"),
+    "library": Fit("library", "H (or, for the baseline, dx/dt) as a sparse sum of terms: polynomials of q and p, "
+                              "sines and cosines of q and their products with p; least squares thresholded as "
+                              "SINDy's STLSQ, so the model prints as an equation", features="library", marker="^"),
+    "sindy": Fit("sindy", "pysindy's SINDy: dx/dt = Theta(x) Xi over polynomials and sines and cosines of q, its "
+                          "STLSQ; no H (--model baseline); rolled out and measured as our models are",
+                 kinds=("baseline",), features="library", package="pysindy", extra="sindy", marker="D"),
+}
+if tuple(FITS) != NAMES:
+    raise ImportError(f"hnn.names.FITS lists {NAMES}, hnn.fits.FITS has rows {tuple(FITS)}")
+
+
+def get_fit(name: str) -> Fit:
+    """The row of fit ``name``, or a ValueError naming the fits."""
+    if name not in FITS:
+        raise ValueError(f"unknown fit {name!r}; choose one of {', '.join(FITS)}")
+    return FITS[name]
+
+
+def check(kind: str, fit: str, *, coordinates: str = "canonical", objective: str = "derivative",
+          use_rk4: bool = False, derivative_loss: str = "l2", input_noise: float = 0.0) -> Fit:
+    """The row of ``fit`` if it can fit a run of model ``kind`` with these settings, else a ValueError
+    naming the problem and the fix (torch-free: a ``train.py`` refuses before any data is built)."""
+    row = get_fit(fit)
+    if not row.solved:
+        return row
+    flag = f"--fit {fit}"
+    if coordinates == "latent":
+        raise ValueError(f"{flag}: the pixel task learns its latent [q, p] with its autoencoder, which no linear "
+                         "solve can find (the features would need coordinates the frames do not give); train it "
+                         "with --fit adam")
+    if kind not in row.kinds:
+        why = ("fits dx/dt = Theta(x) Xi with no H: pass --model baseline" if fit == "sindy" else
+               f"solves the last weights of the {', '.join(row.kinds)} kinds, whose field is linear in them; "
+               f"the {kind} kind's is not: train it with --fit adam, or pick one of those kinds")
+        raise ValueError(f"{flag} {why}")
+    if objective != "derivative" or use_rk4:
+        raise ValueError(f"{flag} fits dx/dt at each state (--objective derivative without --use_rk4): the rollout "
+                         "of a path is not linear in the weights; drop "
+                         + ("--use_rk4" if use_rk4 else f"--objective {objective}"))
+    if derivative_loss != "l2":
+        raise ValueError(f"{flag} solves the squared error (l2); --derivative_loss {derivative_loss} is the loop's: "
+                         "drop it")
+    if input_noise:
+        raise ValueError(f"{flag} fits the data as they are; --input_noise {input_noise:g} is the training loop's "
+                         "augmentation: drop it")
+    return row
+
+
+def check_config(config, coordinates: str = "canonical") -> Fit:
+    """``check`` of an ``hnn.RunConfig``'s fit, kind and objective settings; ``coordinates``: those its kind's
+    model reads (``hnn.MODEL_KINDS[config.kind].coordinates``)."""
+    return check(config.kind, getattr(config, "fit", "adam"), coordinates=coordinates, objective=config.objective,
+                 use_rk4=config.use_rk4, derivative_loss=config.derivative_loss,
+                 input_noise=getattr(config, "input_noise", 0.0))
+
+
+def build(spec: ModelSpec):
+    """The untrained fitted model of ``spec`` (its ``fit``, ``kind``, ``input_dim``, ``hidden_dim`` and the
+    library's ``library_degree`` and ``library_frequencies``): zeros until ``hnn.fits.fitting.solve`` fits it
+    (``hnn.kinds.model_from_spec`` builds it for a run, and again for ``hnn.load_run``)."""
+    from .features import Library, TanhFeatures, terms
+    from .models import FittedField, FittedHNN, FittedSeparable
+    row = check(spec.kind, spec.fit)
+    dim, n = spec.input_dim, (spec.input_dim or 0) // 2
+    if not isinstance(dim, int) or dim < 2 or (spec.kind != "baseline" and dim % 2):
+        raise ValueError(f"--fit {spec.fit} needs the state's width x = [q, p], got input_dim={dim!r}")
+
+    def library(width: int, form: str):
+        # SINDy's library as a user would write it in pysindy: polynomials and sines/cosines of q, no products
+        return Library(terms(width, form, spec.library_degree, spec.library_frequencies,
+                             products=spec.fit != "sindy"), width)
+
+    if row.features == "library":
+        if spec.kind == "hnn":
+            return FittedHNN(dim, library(dim, "hamiltonian"))
+        if spec.kind == "separable":
+            return FittedSeparable(dim, library(n, "kinetic"), library(n, "potential"))
+        return FittedField(dim, library(dim, "field"))
+    width = spec.hidden_dim
+    if spec.kind == "hnn":
+        return FittedHNN(dim, TanhFeatures(width, dim))
+    if spec.kind == "separable":
+        return FittedSeparable(dim, TanhFeatures(width, n), TanhFeatures(width, n))
+    return FittedField(dim, TanhFeatures(width, dim))
