@@ -238,7 +238,9 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
     def run(f, x, group=1, **extra):
         return _rollout_scaled(f, x, model_spans, protocol.num_points, protocol, group, **extra)
     for label, model in models.items():
-        if isinstance(model, (list, tuple)):
+        if _is_map(model):
+            out[label] = _each(model, lambda m: _map_scored(system, protocol, m, x0, observed))
+        elif isinstance(model, (list, tuple)):
             out[label] = [_scored(system, protocol, e_true, t) for t in _group_rollout(model, run, x0, observed, protocol)]
         else:
             out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
@@ -266,11 +268,49 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
         return {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model[None], "mse": mse,
                 "mse_se": se}
     for label, model in models.items():
-        if isinstance(model, (list, tuple)):
+        if _is_map(model):
+            out[label] = _each(model, lambda m: _map_scored(system, protocol, m, measured[:1], observed, t, e_true))
+        elif isinstance(model, (list, tuple)):
             out[label] = [scored(p) for p in _group_rollout(model, run, measured[:1], observed, protocol)]
         else:
             out[label] = scored(_model_rollout(model, run, measured[:1], observed))
     return out
+
+
+def _is_map(model) -> bool:
+    """Whether ``model`` (or a group's first model) is a learned map (``hnn.Model.steps``)."""
+    first = model[0] if isinstance(model, (list, tuple)) else model
+    return declared(first).steps
+
+
+def _each(model, score):
+    """``score`` of a model, or the list of each of a group's."""
+    return [score(m) for m in model] if isinstance(model, (list, tuple)) else score(model)
+
+
+def _map_scored(system, protocol: EnergyProtocol, model, x0: torch.Tensor, observed: str, t: np.ndarray | None = None,
+                e_true: np.ndarray | None = None) -> dict:
+    """A learned map scored by ``protocol`` at its own step: rolled out from ``x0`` on ``t`` (the measured
+    times, which must lie on its step) or else every step ``model.dt`` over the protocol's span, against
+    the truth integrated on the same times (``e_true``: given with ``t``). A protocol that rescales the
+    models' time (the paper's spring quirk) or whose times are off the map's step does not apply to a map:
+    its ``mse`` is None and ``why`` says so. ``times``: the times scored."""
+    if protocol.time_rescale:
+        return {"mse": None, "mse_se": None, "why": f"the protocol rescales the models' time by {protocol.time_rescale}; "
+                                                    "a map steps only by its own step"}
+    if t is None:
+        steps = int(np.floor((protocol.t_span[1] - protocol.t_span[0]) / model.dt + 1e-9))
+        t = model.dt * np.arange(steps + 1)
+        e_true = _energy(system, protocol, _protocol_rollout(system.dynamics, x0, t, protocol))
+    try:
+        traj = _model_rollout(model, lambda f, x: rollout(f, x, t), x0, observed)
+    except ValueError as err:        # measured times off the map's step
+        return {"mse": None, "mse_se": None, "why": str(err)}
+    # a measured segment's energies are one trajectory's, split into contiguous chunks for the +-
+    e_model = _energy(system, protocol, traj[0] if e_true.ndim == 1 else traj)
+    mse, se = energy_mse(e_true, e_model, protocol.splits)
+    return {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model.reshape(len(traj), -1),
+            "mse": mse, "mse_se": se, "times": t}
 
 
 def float64_copy(model: torch.nn.Module) -> torch.nn.Module:

@@ -37,7 +37,9 @@ class ModelSpec:
     conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
     are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
     (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
-    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder.
+    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder;
+    map_layers: a learned map's layers (``hnn.models.maps``); dt: the time step of the run's data (its
+    dataset's ``dt``, recorded in args.json by ``hnn.runs.saved_args``), a learned map's step.
     """
     kind: str
     input_dim: int | None = None
@@ -50,6 +52,8 @@ class ModelSpec:
     constraints: dict | None = None
     dtype: str = "float32"
     init: str = "orthogonal"
+    map_layers: int = 4
+    dt: float | None = None
 
     @classmethod
     def from_args(cls, args: Mapping) -> ModelSpec:
