@@ -269,8 +269,10 @@ MODEL_KINDS: dict[str, ModelKind] = {
                    "dt (another step is an error naming it)",
         when="the cheapest rollout of a conservative system sampled at one step: one pass of "
              "`--map_layers` shears a step where RK4 calls a learned field four times (docs/maps.md)")),
+    # the scene studies measure one map kind, g_sympnet, whose width their grid varies (an LA-SympNet has none);
+    # docs/maps.md (analysis/benchmarks/maps.py) sets the three side by side on the SympNets protocols
     "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".map_objective:MapObjective", color="silver",
-                            doc=KindDoc(
+                            studied=False, doc=KindDoc(
         line="LA-SympNet (Jin et al. 2020): a learned symplectic map of linear and activation shears, no width",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step",
         coordinates="canonical x = [q, p] only",
@@ -278,7 +280,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
         when="few degrees of freedom and few parameters (`--hidden_dim` is not read; `--map_layers` linear "
              "modules of 2 shears each)")),
     "henon": ModelKind(".models.maps:HenonNet", _width_map, ".map_objective:MapObjective", color="darkgray",
-                       doc=KindDoc(
+                       studied=False, doc=KindDoc(
         line="HenonNet (Burby et al. 2020): a learned symplectic map of Henon layers",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step; each layer is four times "
                 "(q, p) -> (p + eta, -q + grad V(p))",

@@ -46,18 +46,19 @@ def quiet_rollout(f, x0, t, **options) -> torch.Tensor:
         return hnn.rollout(f, x0, t, **options)
 
 
-def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int]:
-    """``(trajectories, how many blew up)``: ``EVAL_ROLLOUT`` of the batch, or trajectory by trajectory
-    when the batch fails; a trajectory that blows up or does not finish within its step budget
-    counts as unrelated to the truth (error ~1) over the whole horizon."""
+def model_rollout(f, x0: torch.Tensor, t: np.ndarray, options: dict = EVAL_ROLLOUT) -> tuple[torch.Tensor, int]:
+    """``(trajectories, how many blew up)``: ``hnn.rollout`` with ``options`` (default ``EVAL_ROLLOUT``;
+    a learned map takes none: it steps itself) of the batch, or trajectory by trajectory when the batch
+    fails; a trajectory that blows up or does not finish within its step budget counts as unrelated to
+    the truth (error ~1) over the whole horizon."""
     try:
-        return quiet_rollout(f, x0, t, **EVAL_ROLLOUT), 0
+        return quiet_rollout(f, x0, t, **options), 0
     except hnn.DivergenceError:
         pass
     rows, failed = [], 0
     for i in range(len(x0)):
         try:
-            rows.append(quiet_rollout(f, x0[i:i + 1], t, **EVAL_ROLLOUT)[0])
+            rows.append(quiet_rollout(f, x0[i:i + 1], t, **options)[0])
         except hnn.DivergenceError:
             failed += 1
             # a finite stand-in far from any true state: e(t) ~ 1 for the whole trajectory
@@ -65,11 +66,12 @@ def model_rollout(f, x0: torch.Tensor, t: np.ndarray) -> tuple[torch.Tensor, int
     return torch.stack(rows), failed
 
 
-def rollout_errors(f, truth: torch.Tensor, t: np.ndarray) -> dict:
-    """``summarize_errors`` of the model field ``f`` started from ``truth[:, 0]`` against ``truth``,
-    plus ``seconds``, the wall time of that ``EVAL_ROLLOUT`` (the rollout cost of the Pareto plots)."""
+def rollout_errors(f, truth: torch.Tensor, t: np.ndarray, options: dict = EVAL_ROLLOUT) -> dict:
+    """``summarize_errors`` of the model field ``f`` (or a learned map, ``options`` empty) started from
+    ``truth[:, 0]`` against ``truth``, plus ``seconds``, the wall time of that rollout (the rollout cost
+    of the Pareto plots)."""
     tic = time.perf_counter()
-    pred, failed = model_rollout(f, truth[:, 0], t)
+    pred, failed = model_rollout(f, truth[:, 0], t, options)
     seconds = time.perf_counter() - tic
     out = summarize_errors(relative_error(pred, truth), t)
     out.update(blew_up=failed, seconds=seconds)
