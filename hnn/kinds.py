@@ -258,8 +258,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
              "field call solves an n x n system per state, so it is the costliest kind per step")),
     "g_sympnet": ModelKind(".models.maps:GSympNet", _width_map, ".map_objective:MapObjective", color="tab:gray",
                            doc=KindDoc(
-        line="G-SympNet (Jin et al. 2020): a learned symplectic map x_k -> x_{k+1} at the data's step, one "
-             "forward pass a step, no integrator",
+        line="G-SympNet (Jin et al. 2020): a learned symplectic map x_k -> x_{k+1}, one pass a step, no integrator",
         assumes="the data's flow over one step is a symplectic map (a Hamiltonian system without friction), "
                 "and the data are paths at a fixed step dt; it learns gradient shears p <- p + grad V(q), "
                 "q <- q + grad T(p)",
@@ -273,7 +272,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
     # docs/maps.md (analysis/benchmarks/maps.py) sets the three side by side on the SympNets protocols
     "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".map_objective:MapObjective", color="silver",
                             studied=False, doc=KindDoc(
-        line="LA-SympNet (Jin et al. 2020): a learned symplectic map of linear and activation shears, no width",
+        line="LA-SympNet (Jin et al. 2020): a symplectic map of linear and activation shears",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step",
         coordinates="canonical x = [q, p] only",
         integrator="none: `hnn.rollout` steps the map itself at its dt",
@@ -281,7 +280,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
              "modules of 2 shears each)")),
     "henon": ModelKind(".models.maps:HenonNet", _width_map, ".map_objective:MapObjective", color="darkgray",
                        studied=False, doc=KindDoc(
-        line="HenonNet (Burby et al. 2020): a learned symplectic map of Henon layers",
+        line="HenonNet (Burby et al. 2020): a symplectic map of Henon layers",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step; each layer is four times "
                 "(q, p) -> (p + eta, -q + grad V(p))",
         coordinates="canonical x = [q, p] only",
