@@ -158,6 +158,11 @@ def section(result: dict) -> str:
         lines.append(f"| {label} | {s['params']} | {_spread(s['horizon_error'])} | {_spread(s['seconds_per_step'], 1e6)} "
                      f"| {marks} | {_spread(s['train_loss'])} | {_g(s['train_seconds'][0])} |"
                      + (f" {_spread(s.get('energy_error'))} |" if p["name"] == "pendulum" else ""))
+    failed = [f"{r['label']} at seed {r['seed']} ({r['failed_starts']} of {p['test_starts']})" for r in result["rows"]
+              if r.get("failed_starts")]
+    if failed:
+        lines += ["", "Starts whose rollout failed (the midpoint's iteration did not converge; an infinite error in the "
+                  "median, left out of the timing): " + "; ".join(failed) + "."]
     met = [label for label, g in goal.items() if g.get("cost_met") and g.get("error_met")]
     lines += ["", "Goal (issue #72): a rollout step at least 4x cheaper than HNN + RK4's at the same width, at a "
               f"horizon error within 2x. Met by: {', '.join(met) if met else 'no map'} (on the medians over {n} seeds)."]
