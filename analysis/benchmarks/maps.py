@@ -162,7 +162,7 @@ def section(result: dict) -> str:
               if r.get("failed_starts")]
     if failed:
         lines += ["", "Starts whose rollout failed (the midpoint's iteration did not converge; an infinite error in the "
-                  "median, left out of the timing): " + "; ".join(failed) + "."]
+                  "median; the timing runs every start to the end, the failed ones retired): " + "; ".join(failed) + "."]
     met = [label for label, g in goal.items() if g.get("cost_met") and g.get("error_met")]
     lines += ["", "Goal (issue #72): a rollout step at least 4x cheaper than HNN + RK4's at the same width, at a "
               f"horizon error within 2x. Met by: {', '.join(met) if met else 'no map'} (on the medians over {n} seeds)."]
