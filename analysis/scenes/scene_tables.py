@@ -36,7 +36,7 @@ def kind_table(results: dict) -> list[str]:
              "geometric mean over time of |x̂ − x| / (|x̂| + |x|) against the true system, averaged over "
              f"{results['meta'].get('starts', 8)} starts, over {results['meta'].get('horizon', 10)}x the training trajectories' "
              "length (a learned map: at every step of its data's dt over that horizon, against the truth at those "
-             "times; pixels: decoded frames against rendered "
+             "times, and its energy MSE at every step over each protocol's span; pixels: decoded frames against rendered "
              "ones over the corrected protocol's 200 frames, 2x, no valid time: a decoded frame is never within 0.1; "
              "real: the measured test segment, 18 s, from its first state; there is no truth beyond it). Valid time: median first time that error exceeds 0.1 (= horizon: never); the truth "
              "column is when the true system itself, started 1e-4 away, leaves 0.1.", "",
