@@ -121,7 +121,8 @@ def test_the_numpy_kernel_of_a_rollout_is_the_torch_step():
 
 
 def _pendulum_pairs(h: float = 0.1, steps: int = 40) -> tuple[torch.Tensor, torch.Tensor]:
-    """jpzxshi/sympnets' pendulum: H = p^2/2 - cos q from x0 = (0, 1), ``steps`` steps of ``h``."""
+    """The SympNets pendulum H = p^2/2 - cos q at its step h = 0.1 and its 40 training steps, here from q = 0,
+    p = 1 (an orbit of H = -0.5, where the protocol's starts at q = 1, p = 0: analysis/benchmarks/maps.py)."""
     def dynamics(x):
         return torch.cat([x[:, 1:], -torch.sin(x[:, :1])], 1)
     x0 = torch.tensor([[0.0, 1.0]], dtype=torch.float64)
