@@ -213,6 +213,8 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
             A label may name a group, a list of models of one kind and shape (a setting's seeds):
             their paths share one integration where the protocol's method is ``row_wise`` (each
             row its own steps: ``hnn.stacked.group_field``) and the truth is integrated once for all.
+            A learned map (``hnn.Model.steps``) is scored at its own step over the protocol's span, the
+            truth on those times; its ``mse`` is None, with ``why``, where the protocol cannot apply.
         dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).
         observed: the coordinates of the system's states (``dataset["state"]``; ``'canonical'``).
 
