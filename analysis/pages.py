@@ -16,6 +16,8 @@ from hnn.io import atomic_write
 
 # the tasks whose DGNet init comparison (analysis/chains/dgnet_init.py) docs/dgnet.md shows
 DGNET_INIT_TASKS = ("spring", "pend")
+# the SympNets protocols of the learned maps' benchmark (analysis/benchmarks/maps.py), each a section of docs/maps.md
+MAP_PROTOCOLS = ("pendulum", "three_body")
 # section name -> the page (relative to the repository) that holds it
 PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "docs/speed.md",
          "benchmark": "docs/speed.md", "benchmark-pixels": "docs/speed.md", "threads": "docs/speed.md",
@@ -31,7 +33,8 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          "fits-sampling": "docs/fits.md", "fits-tasks": "docs/fits.md", "fits-library": "docs/fits.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")},
-         **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS}}
+         **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS},
+         **{f"maps-{protocol}": "docs/maps.md" for protocol in MAP_PROTOCOLS}}
 # section name -> the command that regenerates it (the staleness check's fix)
 REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update-docs",
            "results": "python analysis/reproduce.py --seeds 5 --jobs 2 --update-docs",
@@ -72,7 +75,10 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "ray-full": "python analysis/benchmarks/ray_overhead.py --full --update-docs",
            "fits-sampling": "python analysis/fits/sampling_hnns.py --update-docs",
            "fits-tasks": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs",
-           "fits-library": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs"}
+           "fits-library": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs",
+
+           **{f"maps-{protocol}": f"python analysis/benchmarks/maps.py --protocols {protocol} --update-docs"
+              for protocol in MAP_PROTOCOLS}}
 # sections written from the code's declarations, not measured: name -> (page, the text's maker)
 DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 # the sections that draw verdicts (a table's marks or ranking, a card's choice): each records the seeds
@@ -80,7 +86,7 @@ DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 VERDICTS = ("headline", "results", "scenes", "model-guide", "measured-guide", "peers", "stress", "lnn-start",
             "units-scan", "lnn-pinv", "arm-balance", "arm-balance-long", "fits-sampling", "fits-tasks", "fits-library",
             *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
-            *(f"dgnet-init-{task}" for task in DGNET_INIT_TASKS))
+            *(f"dgnet-init-{task}" for task in DGNET_INIT_TASKS), *(f"maps-{protocol}" for protocol in MAP_PROTOCOLS))
 MIN_SEEDS = 3
 SEEDS_FILE = "docs/seeds.json"
 

@@ -41,8 +41,8 @@ _LAYERS = {
              "encounters", "threads", "progress"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("balance", "objectives", "units", "trajectory", "dgnet", "training", "grouped", "stacked", "kinds",
-                 "evaluation", "datasets", "nbody", "fits"),
+    "training": ("balance", "objectives", "units", "trajectory", "dgnet", "map_objective", "training", "grouped",
+                 "stacked", "kinds", "evaluation", "datasets", "nbody", "fits"),
     "runs": ("config", "cli", "command", "runs", "tasks", "orbit_config"),
     "sweeps": ("stopping", "group_runs", "backends", "sweep", "sweep_flags"),
 }

@@ -90,7 +90,9 @@ class RunConfig:
                                            "states, through RK4, or leapfrog for a separable model; what measured "
                                            "paths without derivatives allow) or discrete_gradient (DGNet's: "
                                            "(x_{n+1} - x_n)/dt by the discrete gradient of the learned H between "
-                                           "the two states; conservative kinds, tasks with paths)",
+                                           "the two states; conservative kinds, tasks with paths) or map (a learned "
+                                           "map's one step fit to the next observed state: the map kinds' own, "
+                                           "which derivative, the default, gives them too)",
                              choices=OBJECTIVES)
     derivative_loss: str = setting("l2", "the error of a fit of dx/dt (--objective derivative): l2, squared (the "
                                          "paper's), or l1, absolute (the LNN's)", choices=DERIVATIVE_LOSSES,
@@ -126,6 +128,8 @@ class RunConfig:
                                              "are not interpolated) or a number (Sampling-HNNs' exact data: 1e-13, "
                                              "as their numpy lstsq rcond)", parse=cli.auto_or_positive_float,
                                      identity_at_default=False)
+    map_layers: int = setting(4, "layers of a learned map (--model g_sympnet, la_sympnet, henon: hnn.models.maps)",
+                              parse=cli.int_at_least(1), identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))
     verbose: bool = setting(False, "print the loss every print_every steps", display_only=True)
@@ -185,7 +189,7 @@ class RunConfig:
         if self.balance == "rms" and not (self.objective == "derivative" and isinstance(registered, DerivativeObjective)):
             raise ValueError(f"balance='rms' weighs the components of a fit of dx/dt (objective='derivative'); "
                              f"objective={self.objective!r} of the {self.kind} model has its own loss: drop balance")
-        if self.objective == "derivative":
+        if self.objective == "derivative" or isinstance(registered, OBJECTIVES[self.objective]):
             return registered
         if not isinstance(registered, DerivativeObjective):
             raise ValueError(f"objective={self.objective!r} fits a field of the state, and the {self.kind} model "

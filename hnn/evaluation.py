@@ -219,6 +219,8 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
             A label may name a group, a list of models of one kind and shape (a setting's seeds):
             their paths share one integration where the protocol's method is ``row_wise`` (each
             row its own steps: ``hnn.stacked.group_field``) and the truth is integrated once for all.
+            A learned map (``hnn.Model.steps``) is scored at its own step over the protocol's span, the
+            truth on those times; its ``mse`` is None, with ``why``, where the protocol cannot apply.
         dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).
         observed: the coordinates of the system's states (``dataset["state"]``; ``'canonical'``).
         threads: torch's thread count while it runs (default 1, as ``hnn.train``; the caller's count is
@@ -256,7 +258,9 @@ def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: s
     def run(f, x, group=1, **extra):
         return _rollout_scaled(f, x, model_spans, protocol.num_points, protocol, group, **extra)
     for label, model in models.items():
-        if isinstance(model, (list, tuple)):
+        if _is_map(model):
+            out[label] = _each(model, lambda m: _map_scored(system, protocol, m, x0, observed))
+        elif isinstance(model, (list, tuple)):
             out[label] = [_scored(system, protocol, e_true, t) for t in _group_rollout(model, run, x0, observed, protocol)]
         else:
             out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
@@ -287,7 +291,9 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
         return {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model[None], "mse": mse,
                 "mse_se": se}
     for label, model in models.items():
-        if isinstance(model, (list, tuple)):
+        if _is_map(model):
+            out[label] = _each(model, lambda m: _map_scored(system, protocol, m, measured[:1], observed, t, e_true))
+        elif isinstance(model, (list, tuple)):
             out[label] = [scored(p) for p in _group_rollout(model, run, measured[:1], observed, protocol)]
         else:
             out[label] = scored(_model_rollout(model, run, measured[:1], observed))
@@ -311,35 +317,73 @@ def quiet_rollout(f, x0: torch.Tensor, t, **options) -> torch.Tensor:
         return rollout(f, x0, t, **{"threads": None, **options})
 
 
-def model_rollout(f, x0: torch.Tensor, t) -> tuple[torch.Tensor, int]:
-    """``(paths (batch, len(t), dim), how many blew up)`` of the field ``f`` from ``x0`` by ``ROLLOUT_SOLVER``,
+def model_rollout(f, x0: torch.Tensor, t, options: dict = ROLLOUT_SOLVER) -> tuple[torch.Tensor, int]:
+    """``(paths (batch, len(t), dim), how many blew up)`` of the field ``f`` from ``x0`` by ``hnn.rollout`` with
+    ``options`` (default ``ROLLOUT_SOLVER``; a learned map takes none: it steps itself at its ``dt``),
     the batch at once, or path by path where the batch fails: a path that blows up or does not finish within
     its step budget is ``BLOWN_UP`` everywhere (unrelated to the truth, e(t) ~ 1 over the whole horizon)."""
     try:
-        return quiet_rollout(f, x0, t, **ROLLOUT_SOLVER), 0
+        return quiet_rollout(f, x0, t, **options), 0
     except DivergenceError:
         pass
     rows, failed = [], 0
     for i in range(len(x0)):
         try:
-            rows.append(quiet_rollout(f, x0[i:i + 1], t, **ROLLOUT_SOLVER)[0])
+            rows.append(quiet_rollout(f, x0[i:i + 1], t, **options)[0])
         except DivergenceError:
             failed += 1
             rows.append(torch.full((len(t), x0.shape[1]), BLOWN_UP, dtype=x0.dtype))
     return torch.stack(rows), failed
 
 
-def rollout_errors(f, truth: torch.Tensor, t, threads: int | None = 1) -> dict:
+def rollout_errors(f, truth: torch.Tensor, t, threads: int | None = 1, options: dict = ROLLOUT_SOLVER) -> dict:
     """The scene cards' rollout numbers of a model: its field ``f`` (``model.time_derivative``; use a
     ``float64_copy``, as the cards do) rolled out by ``model_rollout`` from every ``truth[:, 0]`` and scored
     against the true paths ``truth`` ``(batch, len(t), dim)`` at times ``t`` (``hnn.metrics.path_errors``):
     ``{"error", "valid_time", ...}`` plus ``blew_up`` (paths that blew up) and ``seconds`` (the rollout's
-    wall time). On ``threads`` torch threads (the caller's count restored after)."""
+    wall time). On ``threads`` torch threads (the caller's count restored after). ``options``: as
+    ``model_rollout``'s (a learned map: ``{}``, its own steps; ``t`` then on multiples of its ``dt``)."""
     with torch_threads(threads):
         tic = time.perf_counter()
-        pred, failed = model_rollout(f, truth[:, 0], t)
+        pred, failed = model_rollout(f, truth[:, 0], t, options)
         seconds = time.perf_counter() - tic
     return {**path_errors(pred, truth, t), "blew_up": failed, "seconds": seconds}
+
+
+def _is_map(model) -> bool:
+    """Whether ``model`` (or a group's first model) is a learned map (``hnn.Model.steps``)."""
+    first = model[0] if isinstance(model, (list, tuple)) else model
+    return declared(first).steps
+
+
+def _each(model, score):
+    """``score`` of a model, or the list of each of a group's."""
+    return [score(m) for m in model] if isinstance(model, (list, tuple)) else score(model)
+
+
+def _map_scored(system, protocol: EnergyProtocol, model, x0: torch.Tensor, observed: str, t: np.ndarray | None = None,
+                e_true: np.ndarray | None = None) -> dict:
+    """A learned map scored by ``protocol`` at its own step: rolled out from ``x0`` on ``t`` (the measured
+    times, which must lie on its step) or else every step ``model.dt`` over the protocol's span, against
+    the truth integrated on the same times (``e_true``: given with ``t``). A protocol that rescales the
+    models' time (the paper's spring quirk) or whose times are off the map's step does not apply to a map:
+    its ``mse`` is None and ``why`` says so. ``times``: the times scored."""
+    if protocol.time_rescale:
+        return {"mse": None, "mse_se": None, "why": f"the protocol rescales the models' time by {protocol.time_rescale}; "
+                                                    "a map steps only by its own step"}
+    if t is None:
+        steps = int(np.floor((protocol.t_span[1] - protocol.t_span[0]) / model.dt + 1e-9))
+        t = model.dt * np.arange(steps + 1)
+        e_true = _energy(system, protocol, _protocol_rollout(system.dynamics, x0, t, protocol))
+    try:
+        traj = _model_rollout(model, lambda f, x: rollout(f, x, t), x0, observed)
+    except ValueError as err:        # measured times off the map's step
+        return {"mse": None, "mse_se": None, "why": str(err)}
+    # a measured segment's energies are one trajectory's, split into contiguous chunks for the +-
+    e_model = _energy(system, protocol, traj[0] if e_true.ndim == 1 else traj)
+    mse, se = energy_mse(e_true, e_model, protocol.splits)
+    return {"traj": traj.to(dtype=torch.float64, device="cpu").numpy(), "energy": e_model.reshape(len(traj), -1),
+            "mse": mse, "mse_se": se, "times": t}
 
 
 def float64_copy(model: torch.nn.Module) -> torch.nn.Module:

@@ -88,17 +88,16 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
     if any([_trains_alone(c, d, objective) for c, d in zip(configs, datasets)]):
         return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
-    models, data, tests, saved = [], [], [], []
-    specs = [run_specs(config) for config in configs]
+    models, data, tests = [], [], []
+    saved = [saved_args(config, dataset) for config, dataset in zip(configs, datasets)]
+    specs = [run_specs(args) for args in saved]     # the configs' and their data's time step (a map's step)
     for config, dataset, spec in zip(configs, datasets, specs):
-        args = saved_args(config, dataset)
         torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
         np.random.seed(config.seed)
         models.append(model_from_spec(spec.model, config.device))
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         data.append(training_subset(x, y, config.train_fraction, config.seed))
         tests.append((test_x, test_y))
-        saved.append(args)
     first = specs[0]            # the group's keys make these equal across its configs, but the seeds
     shared = dict(seeds=[spec.training.seed for spec in specs], total_steps=first.training.total_steps,
                   learn_rate=first.training.learn_rate, weight_decay=first.training.weight_decay,

@@ -17,6 +17,10 @@ of shape ``(batch, dim)``, and class-level declarations instead of abilities fou
 - ``separable``: that H is T(p) + V(q), with ``kinetic_gradient(p)`` and ``potential_gradient(q)``;
   its ``field`` is then a ``SplitField`` that explicit symplectic solvers evaluate half by half.
 - ``dissipative``: its flow loses energy on purpose (no energy drift is measured).
+- ``steps``: a learned map, not a field: ``step(x)`` is its state ``dt`` later (its declared step,
+  the data's, an attribute of the instance), and ``inverse(x)`` its state ``dt`` earlier; it has no
+  ``time_derivative``. Its ``field`` is then a ``StepMap``, which ``hnn.rollout`` steps on ``t_eval``
+  of multiples of ``dt`` (``hnn.models.maps``: the SympNets and HenonNets).
 
 Consumers (objectives, the integrators, the studies) read these and call ``state_from``,
 ``observed_from`` and ``observed_field`` with the coordinates a dataset declares
@@ -99,8 +103,32 @@ class SplitField(EnergyField):
         self.kinetic_gradient, self.potential_gradient = kinetic_gradient, potential_gradient
 
 
+class StepMap:
+    """What a learned map's ``field`` is (a model that declares ``steps``): ``step`` ``(batch, dim) ->
+    (batch, dim)``, the state ``dt`` later; ``inverse``, ``dt`` earlier (None: the map has none);
+    ``dt``, its step. ``hnn.rollout`` steps it on ``t_eval`` of multiples of ``dt``. Not a field:
+    calling it as dx/dt is a TypeError naming the fix."""
+
+    def __init__(self, step: Callable, dt: float, inverse: Callable):
+        self.step, self.dt, self.inverse = step, dt, inverse
+
+    def __call__(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        raise TypeError(f"a learned map has no field dx/dt to integrate: it steps x -> x(t + {self.dt:g}) itself; "
+                        "roll it out with hnn.rollout(model, x0, t_eval) on t_eval of multiples of its dt")
+
+
+def step_map_of(f) -> StepMap | None:
+    """The ``StepMap`` of ``f`` (a ``StepMap``, a model that declares ``steps`` or one of its bound
+    methods), or None for a field."""
+    owner = getattr(f, "__self__", f)
+    if isinstance(f, StepMap):
+        return f
+    return owner.field if isinstance(owner, Model) and owner.steps else None
+
+
 class Model(nn.Module):
-    """The interface of every model kind; subclasses set the declarations and ``time_derivative``."""
+    """The interface of every model kind; subclasses set the declarations and ``time_derivative``
+    (a learned map, ``steps``: ``step``, ``inverse`` and ``dt`` instead)."""
 
     coordinates: ClassVar[str] = "canonical"
     takes: ClassVar[dict[str, str]] = {}
@@ -108,6 +136,7 @@ class Model(nn.Module):
     conservative: ClassVar[bool] = False
     separable: ClassVar[bool] = False
     dissipative: ClassVar[bool] = False
+    steps: ClassVar[bool] = False
     input_dim: int
 
     def __init_subclass__(cls, **kwargs):
@@ -121,6 +150,9 @@ class Model(nn.Module):
                             "potential_gradient(q)")
         if cls.conservative and cls.hamiltonian is Model.hamiltonian:
             raise TypeError(f"{cls.__name__} declares conservative=True: give it hamiltonian(x)")
+        if cls.steps and not all(callable(getattr(cls, name, None)) for name in ("step", "inverse")):
+            raise TypeError(f"{cls.__name__} declares steps=True: give it step(x) and inverse(x), its state dt "
+                            "later and earlier")
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         """``dx/dt`` ``(batch, dim)`` at the model's own states ``x`` ``(batch, dim)``."""
@@ -145,7 +177,10 @@ class Model(nn.Module):
     @property
     def field(self) -> Callable:
         """What an integrator steps: ``time_derivative``; an ``EnergyField`` carrying H when
-        ``conservative``, a ``SplitField`` (an ``EnergyField`` too) when ``separable``."""
+        ``conservative``, a ``SplitField`` (an ``EnergyField`` too) when ``separable``; a learned map's
+        ``StepMap`` when it ``steps``."""
+        if self.steps:
+            return StepMap(self.step, self.dt, self.inverse)
         if not self.conservative:
             return self.time_derivative
         energy = {"hamiltonian": self.hamiltonian, "structure": self.structure(),

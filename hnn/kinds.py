@@ -122,6 +122,11 @@ class ModelKind:
         """Its flow loses energy on purpose (no energy drift is measured)."""
         return self.model.dissipative
 
+    @property
+    def steps(self) -> bool:
+        """A learned map: its model steps x -> x(t + dt) itself at its data's step (``hnn.models.maps``), no field."""
+        return self.model.steps
+
     def reads(self, observed: str) -> bool:
         """Whether its model can be fit to states in ``observed`` coordinates (as they are, or mapped)."""
         model = self.model
@@ -136,6 +141,16 @@ def _hnn(cls, spec: ModelSpec):
 def _baseline(cls, spec: ModelSpec):
     from .models.hamiltonian import build_model
     return build_model(spec.input_dim, spec.hidden_dim, spec.nonlinearity, True, spec.field_type)
+
+
+def _width_map(cls, spec: ModelSpec):
+    """A learned map of ``map_layers`` layers of ``hidden_dim`` terms each, at the data's step ``dt``."""
+    return cls(spec.input_dim, spec.hidden_dim, spec.map_layers, spec.nonlinearity, dt=spec.dt)
+
+
+def _la_map(cls, spec: ModelSpec):
+    """An LA-SympNet has no width: ``map_layers`` linear modules of 2 shears each (jpzxshi/sympnets' pendulum)."""
+    return cls(spec.input_dim, spec.map_layers, 2, spec.nonlinearity, dt=spec.dt)
 
 
 def _pixel(cls, spec: ModelSpec):
@@ -246,6 +261,36 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
         when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "
              "field call solves an n x n system per state, so it is the costliest kind per step")),
+    "g_sympnet": ModelKind(".models.maps:GSympNet", _width_map, ".map_objective:MapObjective", color="tab:gray",
+                           doc=KindDoc(
+        line="G-SympNet (Jin et al. 2020): a learned symplectic map x_k -> x_{k+1}, one pass a step, no integrator",
+        assumes="the data's flow over one step is a symplectic map (a Hamiltonian system without friction), "
+                "and the data are paths at a fixed step dt; it learns gradient shears p <- p + grad V(q), "
+                "q <- q + grad T(p)",
+        coordinates="canonical x = [q, p] only: a map symplectic in [q, qdot] is wrong where the mass depends on "
+                    "q, so the chain's and measured files' velocities are refused",
+        integrator="none: `hnn.rollout(model, x0, t_eval)` steps the map itself, on t_eval of multiples of its "
+                   "dt (another step is an error naming it)",
+        when="the cheapest rollout of a conservative system sampled at one step: one pass of "
+             "`--map_layers` shears a step where RK4 calls a learned field four times (docs/maps.md)")),
+    # the scene studies measure one map kind, g_sympnet, whose width their grid varies (an LA-SympNet has none);
+    # docs/maps.md (analysis/benchmarks/maps.py) sets the three side by side on the SympNets protocols
+    "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".map_objective:MapObjective", color="silver",
+                            studied=False, doc=KindDoc(
+        line="LA-SympNet (Jin et al. 2020): a symplectic map of linear and activation shears",
+        assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step",
+        coordinates="canonical x = [q, p] only",
+        integrator="none: `hnn.rollout` steps the map itself at its dt",
+        when="few degrees of freedom and few parameters (`--hidden_dim` is not read; `--map_layers` linear "
+             "modules of 2 shears each)")),
+    "henon": ModelKind(".models.maps:HenonNet", _width_map, ".map_objective:MapObjective", color="darkgray",
+                       studied=False, doc=KindDoc(
+        line="HenonNet (Burby et al. 2020): a symplectic map of Henon layers",
+        assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step; each layer is four times "
+                "(q, p) -> (p + eta, -q + grad V(p))",
+        coordinates="canonical x = [q, p] only",
+        integrator="none: `hnn.rollout` steps the map itself at its dt",
+        when="as `g_sympnet`; four potential gradients a layer, so a step costs about four G-SympNet layers")),
     "pixel-hnn": ModelKind(".models.pixel:PixelHNN", _pixel, _PIXEL_OBJECTIVE, color="tab:blue", doc=KindDoc(
         line="the pixel task's HNN: an autoencoder of frames and an HNN on its 2-D latent "
              "(`experiment-pixels/train.py --model hnn`)",
@@ -282,7 +327,7 @@ class _Objectives(Mapping):
         return f"OBJECTIVES({', '.join(names.OBJECTIVES)})"
 
 
-_OBJECTIVE_MODULES = (".objectives", ".trajectory", ".dgnet")     # where the objective classes live
+_OBJECTIVE_MODULES = (".objectives", ".trajectory", ".dgnet", ".map_objective")     # where the objective classes live
 
 
 @functools.cache

@@ -18,7 +18,7 @@ kinds' names, classes and prose are the rows of ``hnn.kinds.MODEL_KINDS``.
 NONLINEARITIES = ("tanh", "relu", "sigmoid", "softplus", "selu", "elu", "swish")
 INITS = ("orthogonal", "zero_bias", "lnn", "lnn_convex")
 FIELD_TYPES = ("solenoidal", "conservative", "both")
-OBJECTIVES = ("derivative", "trajectory", "discrete_gradient")
+OBJECTIVES = ("derivative", "trajectory", "discrete_gradient", "map")
 DERIVATIVE_LOSSES = ("l2", "l1")
 BALANCES = ("auto", "off", "rms")
 OPTIMIZERS = ("adam", "adamw")

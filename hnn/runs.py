@@ -114,7 +114,8 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     missing = [key for key in objective.arrays if key not in dataset]
     if missing:
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
-    saved, specs = saved_args(config, dataset), run_specs(config)
+    saved = saved_args(config, dataset)
+    specs = run_specs(saved)        # the config's, and the data's time step (a learned map's step)
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
     model = model_from_spec(specs.model, config.device)
@@ -158,10 +159,12 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
 
 def saved_args(config, dataset: dict) -> dict:
     """What a run's args.json holds: the config's fields and model facts, the kind, the threads it trains
-    on (as torch has them: a train.py sets ``config.threads``, a sweep or a caller its own) and the
-    cached dataset it reads (a lone run and a group's member alike)."""
+    on (as torch has them: a train.py sets ``config.threads``, a sweep or a caller its own), the
+    cached dataset it reads (a lone run and a group's member alike) and its time step ``dt`` where it
+    has one (a learned map's step: ``hnn.specs.ModelSpec.dt``)."""
     return {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,
-            "dataset_cache_key": dataset.get("cache_key")}
+            "dataset_cache_key": dataset.get("cache_key"),
+            **({"dt": float(dataset["dt"])} if dataset.get("dt") is not None else {})}
 
 
 def training_subset(x, y, fraction: float, seed: int):

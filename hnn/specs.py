@@ -41,7 +41,9 @@ class ModelSpec:
     how the lagrangian kind solves for qddot (``hnn.names.LNN_SOLVES``); fit: how
     the weights are found (``hnn.fits.FITS``): a fit other than ``'adam'`` builds its own model
     (``hnn.fits.build``: ``hidden_dim`` sampled neurons, or the library of ``library_degree`` and
-    ``library_frequencies``), float64 whatever ``dtype`` says.
+    ``library_frequencies``), float64 whatever ``dtype`` says;
+    map_layers: a learned map's layers (``hnn.models.maps``); dt: the time step of the run's data (its
+    dataset's ``dt``, recorded in args.json by ``hnn.runs.saved_args``), a learned map's step.
     """
     kind: str
     input_dim: int | None = None
@@ -58,6 +60,8 @@ class ModelSpec:
     fit: str = "adam"
     library_degree: int = 3
     library_frequencies: int = 1
+    map_layers: int = 4
+    dt: float | None = None
 
     @classmethod
     def from_args(cls, args: Mapping) -> ModelSpec:

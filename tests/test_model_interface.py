@@ -35,6 +35,14 @@ def test_every_kind_is_a_declared_model_whose_declarations_hold(kind):
                                                                         row.dissipative)
     assert row.coordinates in hnn.interface.COORDINATES
     x = torch.randn(32, _state_width(model), dtype=torch.float64, requires_grad=True)
+    if row.steps:
+        # a learned map: no field, its step and inverse instead (tests/test_maps.py checks their physics)
+        assert isinstance(model.field, hnn.interface.StepMap) and not (row.conservative or row.separable)
+        with pytest.raises(TypeError, match="no field dx/dt.*hnn.rollout"):
+            model.time_derivative(x)
+        with torch.no_grad():
+            torch.testing.assert_close(model.inverse(model.step(x)), x, rtol=1e-10, atol=1e-10)
+        return
     dxdt = model.time_derivative(x).detach()
     assert dxdt.shape == x.shape and torch.isfinite(dxdt).all()
     if row.conservative:

@@ -26,7 +26,10 @@ def test_a_saved_run_reads_back_to_the_specs_of_its_config(tmp_path):
     assert specs.objective.input_noise == 0.25 and specs.training.total_steps == 2
     assert specs.model == hnn.kinds.ModelSpec("hnn", input_dim=8, hidden_dim=8, init="orthogonal")
     _, saved, _ = hnn.load_run(trainer.main(argv))
-    assert hnn.specs.run_specs(saved) == specs            # args.json holds more keys: the specs pick theirs
+    # args.json holds more keys: the specs pick theirs, and the data's time step that only a run knows
+    assert saved["dt"] == config.dataset()["dt"]
+    assert hnn.specs.run_specs(saved) == dataclasses.replace(specs, model=dataclasses.replace(specs.model,
+                                                                                            dt=saved["dt"]))
 
 
 def test_an_old_run_without_a_field_reads_as_it_trained():

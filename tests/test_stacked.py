@@ -22,6 +22,8 @@ CASES = {
                              "nonlinearity": "softplus", "derivative_loss": "l1", "n_train": 64, "n_test": 16,
                              "batch_size": 16}),
     "discrete_gradient": ("spring", {"model": "hnn", "objective": "discrete_gradient", "nonlinearity": "softplus"}),
+    # a learned map: its step is the data's dt, recorded in each member's args; its loss steps it under vmap
+    "g_sympnet": ("pend", {"model": "g_sympnet", "map_layers": 3}),
 }
 
 

@@ -58,7 +58,8 @@ def evaluate_seeds(task: str, runs: list[dict], fig_dir: Path | None, num_trials
     for (trained, row), energy in zip(loaded, energies):
         for name, result in energy.items():
             for kind in trained.models:
-                row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
+                if result[kind]["mse"] is not None:     # None: a protocol that does not apply (a learned map's)
+                    row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
             row.setdefault("protocols", {})[name] = result.get("description", name)
         row["seconds"] = {"evaluate": t_eval, "figures": 0.0}
         out.append(row)

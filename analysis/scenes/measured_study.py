@@ -51,6 +51,10 @@ def _kinds(columns: dict) -> list[str]:
     for kind in hnn.cli.model_choices(type(config)):
         if not hnn.MODEL_KINDS[kind].studied:
             continue
+        if hnn.MODEL_KINDS[kind].steps:     # its rollouts here run at the file's own times, not a map's one step
+            print(f"  {kind}: a learned map, left out (this study rolls out at your file's times; docs/maps.md)",
+                  flush=True)
+            continue
         try:
             run = hnn.tasks.task_config(TASK, {**columns, "model": kind, "hidden_dim": 4})
             objective = run.make_objective()

@@ -127,7 +127,7 @@ class Scene:
 
     def __init__(self, task: str, quick: bool, state: dict | None = None):
         self.task, self.system, self.cfg, self.quick = task, hnn.load_task(task), scene_settings(task), quick
-        self.truth = None
+        self.truth, self._at_step = None, {}
         if "T" in self.cfg:
             mode = QUICK if quick else FULL
             horizon = mode["horizon"] * self.cfg["T"]
@@ -144,6 +144,29 @@ class Scene:
             data = hnn.load_task("real").get_dataset()
             self.truth = torch.as_tensor(data["test_x"], dtype=torch.float64)[None]
             self.t = np.asarray(data["test_t"], dtype=np.float64) - float(data["test_t"][0])
+
+    def rollout(self, model) -> dict | None:
+        """The rollout error (``hnn.evaluation.rollout_errors``) of ``model`` on this scene's truth (None without
+        one), on a float64 copy: a field by ``hnn.evaluation.ROLLOUT_SOLVER`` at the scene's times, a learned map by its own steps at
+        its ``dt`` over the same horizon (``at_step``)."""
+        if self.truth is None:
+            return None
+        model64 = hnn.evaluation.float64_copy(model)
+        if not model.steps:
+            return hnn.evaluation.rollout_errors(model64.time_derivative, self.truth, self.t, threads=None)
+        t, truth = self.at_step(model.dt)
+        return hnn.evaluation.rollout_errors(model64, truth, t, threads=None, options={})
+
+    def at_step(self, dt: float) -> tuple[np.ndarray, torch.Tensor]:
+        """``(times, truth)`` on multiples of ``dt`` over the scene's horizon: the truth integrated there
+        (``sm.REFERENCE``, once per step), or the measured segment itself, whose times lie on its step."""
+        if "T" not in self.cfg:
+            return self.t, self.truth
+        if dt not in self._at_step:
+            t = dt * np.arange(int(np.floor(self.t[-1] / dt + 1e-9)) + 1)
+            with torch.no_grad():
+                self._at_step[dt] = t, hnn.evaluation.quiet_rollout(self.system.dynamics, self.x0, t, **sm.REFERENCE)
+        return self._at_step[dt]
 
     @property
     def trials(self) -> int | None:
@@ -167,7 +190,7 @@ class Scene:
         for name, result in energy.items():
             out[f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
         if self.truth is not None:
-            out["rollout"] = hnn.evaluation.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, self.truth, self.t)
+            out["rollout"] = self.rollout(model)
         elif self.task == "pixels" and "corrected" in energy:
             # the decoded frames of the corrected protocol's trajectory against the rendered ones
             result = energy["corrected"]

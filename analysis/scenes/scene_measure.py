@@ -65,10 +65,13 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
         model = trained.models[key]
         m = scene_common.saved_numbers(rows[key], model, directory)
         for name, result in energy.items():
+            if result[key]["mse"] is None:      # a protocol that does not apply to a learned map: why, not a number
+                m.setdefault("energy_not_applicable", {})[name] = result[key]["why"]
+                continue
             m[f"energy_mse_{name}"] = [result[key]["mse"], result[key]["mse_se"]]
         tic = time.perf_counter()
         if scene.truth is not None:
-            m["rollout"] = hnn.evaluation.rollout_errors(hnn.evaluation.float64_copy(model).time_derivative, scene.truth, scene.t)
+            m["rollout"] = scene.rollout(model)
         m["evaluate_seconds"] = shared + time.perf_counter() - tic
         m["train_cost"] = _cost(scene.task, directory)
         out[key] = m

@@ -6,6 +6,7 @@ grid of width x training fraction, the D-HNN split), what it measures (``measure
 from __future__ import annotations
 
 import math
+import statistics
 import time
 from pathlib import Path
 
@@ -142,6 +143,7 @@ def scene_card(cells: dict) -> dict | None:
                  if several and pick in ok else None)
     m = next(iter(cells[pick].values()))
     return {**_cheapest_and_libraries(cells, ok, spread),
+            "cheapest_rollout": cheapest_rollout({k: cells[k] for k in ok}, {k: spread[k] for k in ok}),
             "kind": pick[0], "width": pick[1], "fraction": pick[2], "best_energy": best_e, "best_rollout": best_r,
             "params": m["params"], "train_seconds": scene_measure.median_cost_seconds(cells[pick]), "n_seeds": seeds,
             "energy": spread[pick][0][0] if spread[pick][0] else None,
@@ -169,6 +171,29 @@ def _cheapest_and_libraries(cells: dict, ok: list, spread: dict) -> dict:
             out["libraries"].append({"kind": key[0], "fraction": key[2], "train_seconds": seconds(key),
                                      "equation": first.get("equation")})
     return out
+
+
+def cheapest_rollout(cells: dict, spread: dict) -> dict | None:
+    """The model of ``cells`` (``{(kind, width, fraction): {seed: measured}}``, those whose means are within
+    ``CARD_FACTOR`` of both bests: ``spread`` their ``seed_spread``s) whose rollout is the cheapest, by the
+    median over its seeds of the rollout metric's wall time (a field: ``hnn.evaluation.ROLLOUT_SOLVER``; a learned map:
+    its own steps); ``tied``: the others whose seeds' range of seconds overlaps its own, which the seeds
+    cannot separate from it on cost. None where none was timed."""
+    timed = {key: sorted(s for m in per_seed.values() if (s := (m.get("rollout") or {}).get("seconds")) is not None)
+             for key, per_seed in cells.items()}
+    timed = {key: seconds for key, seconds in timed.items() if seconds}
+    if not timed:
+        return None
+    median = {key: statistics.median(seconds) for key, seconds in timed.items()}
+    pick = min(timed, key=lambda key: (median[key], key[1], key[2]))
+    low, high = timed[pick][0], timed[pick][-1]
+    several = len(timed[pick]) > 1
+    return {"kind": pick[0], "width": pick[1], "fraction": pick[2], "rollout_seconds": median[pick],
+            "seconds_range": [low, high], "n_seeds": len(timed[pick]),
+            "energy": spread[pick][0][0] if spread[pick][0] else None,
+            "rollout": spread[pick][1][0] if spread[pick][1] else None,
+            "tied": ([f"{k[0]}, width {k[1]}, {k[2]:g} of the data" for k in sorted(timed, key=median.get)
+                      if k != pick and len(timed[k]) > 1 and timed[k][0] <= high] if several else None)}
 
 
 def inseparable(per_kind: dict) -> dict:
@@ -295,9 +320,11 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], g
                         if isinstance(run := runs.get(f"{task}@{DEFAULT_CELL[0]}x{DEFAULT_CELL[1]:g}/{kind}/seed{seed}"),
                                       Path)}
             if per_seed:
-                # a fit's rung rolls out as its kind does: the speed study measures the kinds trained by Adam
+                # a fit's rung rolls out as its kind does: the speed study measures the kinds trained by Adam;
+                # a learned map has one step, its data's: no ladder of integrators to time
                 speed = (seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task)
-                         and (speed_kinds is None or kind in speed_kinds) and "+" not in kind else None)
+                         and (speed_kinds is None or kind in speed_kinds) and "+" not in kind
+                         and not hnn.MODEL_KINDS[kind].steps else None)
                 units[("kind", task, kind)] = ("kind", task, kind, per_seed, speed)
     for task in scenes:
         for kind in task_rungs(task):

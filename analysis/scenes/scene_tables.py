@@ -35,7 +35,9 @@ def kind_table(results: dict) -> list[str]:
     lines = [f"**Per scene and kind** (width 200, all the data; seed {seeds[0]}"
              + (f", and mean ± standard error over seeds {seeds}" if many else "") + "). Rollout error: the "
              "geometric mean over time of |x̂ − x| / (|x̂| + |x|) against the true system, averaged over "
-             f"{results['meta'].get('starts', 8)} starts, over {results['meta'].get('horizon', 10)}x the training trajectories' length (pixels: decoded frames against rendered "
+             f"{results['meta'].get('starts', 8)} starts, over {results['meta'].get('horizon', 10)}x the training trajectories' "
+             "length (a learned map: at every step of its data's dt over that horizon, against the truth at those "
+             "times, and its energy MSE at every step over each protocol's span; pixels: decoded frames against rendered "
              "ones over the corrected protocol's 200 frames, 2x, no valid time: a decoded frame is never within 0.1; "
              "real: the measured test segment, 18 s, from its first state; there is no truth beyond it). Valid time: median first time that error exceeds 0.1 (= horizon: never); the truth "
              "column is when the true system itself, started 1e-4 away, leaves 0.1.", "",
@@ -58,7 +60,21 @@ def kind_table(results: dict) -> list[str]:
             cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
             lines.append(f"| {task} | {kind} | {m['params']} | " + " | ".join(cells)
                          + f" | {_g(_train_seconds(m, measured))} |")
-    return lines + inseparable_lines(results)
+    return lines + not_applicable_lines(results) + inseparable_lines(results)
+
+
+def not_applicable_lines(results: dict) -> list[str]:
+    """The energy protocols that do not apply to a model (a learned map: one that rescales time), and why."""
+    seen = {}
+    for task, entry in results["scenes"].items():
+        for kind, measured in entry["kinds"].items():
+            for m in measured["per_seed"].values():
+                for name, why in (m.get("energy_not_applicable") or {}).items():
+                    seen.setdefault((task, name, why), []).append(kind)
+    if not seen:
+        return []
+    return ["", "Energy protocols that do not apply (n/a above):", ""] + [
+        f"- {task}, {name} protocol, {', '.join(dict.fromkeys(kinds))}: {why}" for (task, name, why), kinds in seen.items()]
 
 
 def speed_table(results: dict) -> list[str]:
@@ -205,6 +221,29 @@ def library_words(card: dict) -> str:
                      else lib["kind"] for lib in card["libraries"]) or "none"
 
 
+def rollout_card_table(results: dict) -> list[str]:
+    """Per scene, the cheapest rollout among the models its card accepts (``scene_stages.cheapest_rollout``)."""
+    rows = [(task, entry["card"]["cheapest_rollout"]) for task, entry in results["scenes"].items()
+            if (entry.get("card") or {}).get("cheapest_rollout")]
+    if not rows:
+        return []
+    lines = ["**The cheapest rollout that is enough**: of the models whose mean energy MSE and rollout error come "
+             "within 2x of their scene's best (the card's test, every kind and cell), the one whose rollout of the "
+             "rollout-error metric takes the fewest seconds, the median over its seeds (a field: dopri5 rtol "
+             f"{hnn.evaluation.ROLLOUT_SOLVER['rtol']:g} on {results['meta'].get('starts', 8)} starts in float64, one thread; a learned "
+             "map: its own steps at its data's step over the same horizon). *Seeds cannot separate*: the other "
+             "accepted models whose seeds' range of seconds overlaps the pick's.", "",
+             "| scene | cheapest rollout that is enough | rollout s: median (range) | energy MSE / rollout error "
+             "| seeds cannot separate |", "| --- | --- | --- | --- | --- |"]
+    for task, c in rows:
+        tied = ("one seed: not tested" if c["tied"] is None else ", ".join(c["tied"]) or "no other model")
+        lines.append(f"| {task} | {c['kind']}, width {c['width']}, {c['fraction']:g} of the data | "
+                     f"{_g(c['rollout_seconds'])} ({_g(c['seconds_range'][0])}-{_g(c['seconds_range'][1])}, "
+                     f"{c['n_seeds']} seed{'s' if c['n_seeds'] > 1 else ''}) | {_g(c['energy'])} / {_g(c['rollout'])} | "
+                     f"{tied} |")
+    return lines
+
+
 def unsettled(card: dict) -> str:
     """What a card's seeds cannot settle, in words (a card saved before seeds were counted: not tested)."""
     if card.get("unsettled") is None:
@@ -260,12 +299,13 @@ def markdown(results: dict) -> str:
               f"{sec.get('training', 0):.0f} s, measuring {sec.get('measure', 0):.0f} s, the chosen cells' seeds "
               f"{sec.get('cards', 0):.0f} s, total {sec.get('total', 0):.0f} s (runs that reproduce.py or an "
               "earlier study saved with the same args are reused, not retrained).", ""]
-    for part in (card_table, kind_table, speed_table, dhnn_table):
+    for part in (card_table, rollout_card_table, kind_table, speed_table, dhnn_table):
         block = part(results)
         if block:
             lines += block + [""]
     lines += ["**Capacity and data** (each scene's grid; energy MSE of the corrected protocol, else the paper's; "
-              f"rollout s: the dopri5 rtol {hnn.evaluation.ROLLOUT_SOLVER['rtol']:g} rollout of the rollout-error metric)"] + grid_tables(results)
+              f"rollout s: the dopri5 rtol {hnn.evaluation.ROLLOUT_SOLVER['rtol']:g} rollout of the rollout-error metric; a learned "
+              "map's: its own steps)"] + grid_tables(results)
     return "\n".join(lines) + "\n"
 
 

@@ -43,7 +43,7 @@ def task_of(args: dict) -> str:
     """The task a saved run's ``args`` (args.json) belong to: among the tasks whose config has every field
     they hold, the one its ``name`` starts with (``spring``, ``spring-w16-f0.25``, ``3body-clean``), else the
     only one; a ValueError where that leaves none or several."""
-    recorded = set(args) - {"threads", "kind", "dataset_cache_key", "unit_scales", "loss_weights"}
+    recorded = set(args) - {"threads", "kind", "dataset_cache_key", "unit_scales", "loss_weights", "dt"}
     tasks = [task for task in hnn.tasks.task_names() if recorded <= _task_fields(task)]
     named = [task for task in tasks if str(args.get("name", "")).split("-")[0] == task]
     if len(named) == 1 or len(tasks) == 1:

@@ -7,13 +7,15 @@ dispatches, and knows no method by name.
 """
 from __future__ import annotations
 
+import inspect
 import warnings
 
 import numpy as np
 import torch
 
 from .fixed_step import Field
-from ..interface import EnergyField, Model
+from ..interface import EnergyField, Model, step_map_of
+from .map_steps import check_request, map_rollout
 from ..modes import frozen_weights, in_model_axis
 from .adaptive import default_tolerances
 from .solvers import Solver, get_solver
@@ -137,6 +139,10 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             after. None: the caller's count, except one for batches of at most ``SMALL_BATCH_ROWS`` (64)
             states, whose products are too small to share between threads (the library's own calls).
 
+    A learned map (a model that declares ``steps``, ``hnn.models.maps``) is not integrated: it steps
+    itself by its ``dt`` on ``t_eval`` of multiples of it (``hnn.integrators.map_steps``; ``method``
+    is not read, and of the options only ``dt``, its own, ``max_norm`` and ``stats``).
+
     Returns:
         ``(batch, len(t_eval), dim)``, with ``x0`` at index 0.
 
@@ -154,8 +160,18 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     (not ``differentiable``) steps past its method's stability limit on the field's fastest mode at
     the starts (``hnn.integrators.stability``), naming dt, the estimate and the fix.
     """
-    solver = get_solver(method)
     options.update({name: value for name, value in (("rtol", rtol), ("atol", atol)) if value is not None})
+    step_map = step_map_of(f)
+    if step_map is not None:        # a learned map steps itself at its dt: no solver
+        check_request(step_map, method, _DEFAULT_METHOD, options)
+        x0, t = _as_batch(x0, field_device(step_map.step)), _as_t_eval(t_eval)
+        with torch_threads(threads if threads is not None else 1 if len(x0) <= SMALL_BATCH_ROWS else None):
+            if differentiable:
+                with torch.enable_grad():
+                    return map_rollout(step_map, x0, t, **options)
+            with torch.no_grad(), frozen_weights():     # the weights cannot change: the map may run as a kernel
+                return map_rollout(step_map, x0, t, **options)
+    solver = get_solver(method)
     solver.check_options(options)
     device = field_device(f)
     owner = getattr(f, "__self__", None)
@@ -181,3 +197,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
             if not in_model_axis():         # a step past the method's stability limit: one warning, not silence
                 warn_if_unstable(method, f, x0, t, options)
             return solver.run(f, x0, t, **options)
+
+
+# a learned map takes no method: any but the default one is refused (check_request)
+_DEFAULT_METHOD = inspect.signature(rollout).parameters["method"].default
