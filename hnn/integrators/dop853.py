@@ -118,7 +118,7 @@ class Stages:
         stages, rows, dim = K.shape
         self.flat = torch.from_numpy(K.reshape(stages, -1))
         self._leading = {}
-        self.product = torch.empty((1, rows * dim), dtype=self.flat.dtype)
+        self.product = torch.empty((1, rows * dim), dtype=self.flat.dtype, device="cpu")    # numpy shares it
         self.summed = self.product.numpy().reshape(rows, dim)      # the product, as the rows' states
 
     @classmethod
