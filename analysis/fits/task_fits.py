@@ -40,9 +40,6 @@ NEAR = 2.0                 # "as accurate": a mean within this factor of Adam's 
 CHAIN_STARTS, CHAIN_RTOL = 25, 1e-7
 # where the chain's fits read its states: dx/dt at every state (its Adam runs fit 4-step snippets)
 FIT_FIELDS = {"chain": {"objective": "derivative"}}
-# the 3-body's library: 12 coordinates make H's quartic library 2155 terms (a solve of minutes on 960k rows);
-# its cubic one is 790 (our library and SINDy's alike: the degree of the fields)
-LIBRARY_FIELDS = {"3body": {"library_degree": 2}}
 
 
 def rungs(task: str) -> dict[str, dict]:
@@ -56,8 +53,8 @@ def rungs(task: str) -> dict[str, dict]:
             continue
         if fit.package == "pysindy" and hnn.fits.sindy.version() is None:
             continue
-        out[label] = {**fields, **(FIT_FIELDS.get(task, {}) if fit.solved else {}),
-                      **(LIBRARY_FIELDS.get(task, {}) if fit.features == "library" else {})}
+        # a library's degree is its task's (experiment-3body/train.py keeps its 12 coordinates' library small)
+        out[label] = {**fields, **(FIT_FIELDS.get(task, {}) if fit.solved else {})}
     return out
 
 
