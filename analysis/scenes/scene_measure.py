@@ -141,11 +141,11 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     results, states, progress = {}, {}, sweep.Progress(len(units))
     # the time left by the units' weights: a model a model, a kind's speed study SPEED_WEIGHT models
     weights = {key: _weight(unit) for key, unit in units.items()}
-    ahead, done = plan.Ahead(sum(weights.values())), [0.0]
+    ahead, measured = plan.Ahead(sum(weights.values())), [0.0]
 
     def said(key) -> str:
-        done[0] += weights[key]
-        return f"  {progress.advance()} {_describe(units[key])} measured" + ahead.tag(done[0])
+        measured[0] += weights[key]
+        return f"  {progress.advance()} {_describe(units[key])} measured" + ahead.tag(measured[0])
     print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
@@ -161,8 +161,8 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
         running = {pool.submit(run_unit, units[keys[0]], quick): keys[0] for keys in by_task.values()}
         waiting = {task: keys[1:] for task, keys in by_task.items()}
         while running:
-            done, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
-            for future in done:
+            finished, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
+            for future in finished:
                 key = running.pop(future)
                 results[key], state = future.result()
                 print(said(key), flush=True)

@@ -20,6 +20,7 @@ from torch import nn
 
 # the trig factor of a library term: none, sin(f q_i) or cos(f q_i)
 NONE, SIN, COS = 0, 1, 2
+ROW_BYTES = 2 ** 27     # a library's (rows, terms, in_dim) arrays of a gradient, built a few rows at a time
 
 
 def _frozen(*shape) -> nn.Parameter:
@@ -136,6 +137,11 @@ class Library(nn.Module):
         factors, t, *_ = self._parts(x, keep)
         return factors.prod(dim=2) * t
 
+    def _rows_at_once(self, terms: int) -> int:
+        """Rows of ``x`` whose ``(rows, terms, in_dim)`` intermediates stay within ``ROW_BYTES`` (the 3-body's
+        790 terms on its test states built several arrays of gigabytes at once)."""
+        return max(1, ROW_BYTES // (8 * max(terms, 1) * self.in_dim))
+
     def jacobian(self, x: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
         """d theta_k / d x_j ``(rows, terms, in_dim)``: the product rule over the monomial's factors and the trig factor."""
         factors, t, powers, trig, angle = self._parts(x, keep)
@@ -161,7 +167,11 @@ class Library(nn.Module):
         keep = coef != 0
         if not bool(keep.any()):
             return torch.zeros_like(x)
-        return torch.einsum("rkj,k->rj", self.jacobian(x, keep), coef[keep])
+        kept, rows = coef[keep], self._rows_at_once(int(keep.sum()))
+        if len(x) <= rows:
+            return torch.einsum("rkj,k->rj", self.jacobian(x, keep), kept)
+        return torch.cat([torch.einsum("rkj,k->rj", self.jacobian(x[i:i + rows], keep), kept)
+                          for i in range(0, len(x), rows)])
 
     def names(self, columns: list[str]) -> list[str]:
         """Each term as a formula over the column names (``'q^2 p'``, ``'cos(q)'``, ``'sin(2 q1) p1 p2'``)."""
