@@ -240,6 +240,11 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
         return _evaluate_trials(system, models, protocol, observed, tick)
 
 
+def _diverged(err: DivergenceError) -> dict:
+    """A model's score where its rollout blew up: no energy MSE, and why (as a map's where a protocol cannot apply)."""
+    return {"mse": None, "mse_se": None, "why": f"its rollout diverged: {err}"}
+
+
 def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: str, tick: Ticker) -> dict:
     """``evaluate_energy`` of a ``'box'`` or ``'seeds'`` protocol; ``tick`` advances after each path."""
     x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64, device="cpu")
@@ -263,7 +268,10 @@ def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: s
         elif isinstance(model, (list, tuple)):
             out[label] = [_scored(system, protocol, e_true, t) for t in _group_rollout(model, run, x0, observed, protocol)]
         else:
-            out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
+            try:
+                out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
+            except DivergenceError as err:      # a model that blows up (a sparse fit's cubic terms): no energy
+                out[label] = _diverged(err)
         tick.advance(len(model) if isinstance(model, (list, tuple)) else 1)
     return out
 
@@ -296,7 +304,10 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
         elif isinstance(model, (list, tuple)):
             out[label] = [scored(p) for p in _group_rollout(model, run, measured[:1], observed, protocol)]
         else:
-            out[label] = scored(_model_rollout(model, run, measured[:1], observed))
+            try:
+                out[label] = scored(_model_rollout(model, run, measured[:1], observed))
+            except DivergenceError as err:
+                out[label] = _diverged(err)
         tick.advance(len(model) if isinstance(model, (list, tuple)) else 1)
     return out
 

@@ -164,7 +164,11 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
             finished, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
             for future in finished:
                 key = running.pop(future)
-                results[key], state = future.result()
+                try:
+                    results[key], state = future.result()
+                except Exception as err:      # name the unit now, not after the other workers' units end
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    raise RuntimeError(f"measuring {_describe(units[key])} failed: {type(err).__name__}: {err}") from err
                 print(said(key), flush=True)
                 task = units[key][1]
                 if task not in states:
