@@ -13,6 +13,8 @@ from hnn_analysis import pages
 def test_a_verdict_rests_on_three_seeds_or_its_page_says_why(name):
     text = pages.section_text(name)
     assert text is not None, f"{pages.PAGES[name]} has no {name} section"
+    if text.strip().startswith("Not measured yet"):     # no numbers, so no verdict yet: say what measures it
+        pytest.skip(f"{name} is not measured yet: {pages.REFRESH[name]}")
     entry = pages.recorded_seeds().get(name)
     assert entry is not None and entry["stamp"] == pages.stamp_of(text), (
         f"section {name!r} records no seeds for its stamp {pages.stamp_of(text)}: regenerate it ({pages.REFRESH[name]})")
