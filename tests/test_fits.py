@@ -172,6 +172,22 @@ def test_the_features_gradients_are_their_values_derivatives():
         assert torch.allclose(features.gradient(x, coef), torch.einsum("rkj,k->rj", auto, coef), atol=1e-11)
 
 
+
+@pytest.mark.parametrize("form,width", [("hamiltonian", 6), ("potential", 3), ("kinetic", 3)])
+def test_a_sparse_librarys_gradient_is_autograds_at_zeros_and_a_few_rows_at_a_time(form, width, monkeypatch):
+    rng = np.random.default_rng(7)
+    x = torch.as_tensor(rng.uniform(-1.5, 1.5, size=(50, width)))
+    x[::4, 0] = 0.0                                   # x^0 and x^1 at x = 0: the product rule without division
+    library = Library(terms(width, form, 2, 1), width)
+    coef = torch.as_tensor(rng.normal(size=library.width))
+    coef[::3] = 0.0                                   # only the kept terms enter
+    z = x.clone().requires_grad_(True)
+    auto, = torch.autograd.grad((library(z) @ coef).sum(), z)
+    assert torch.allclose(library.gradient(x, coef), auto, atol=1e-12)
+    monkeypatch.setattr(hnn.fits.features, "ROW_BYTES", 8 * library.width * 7 * 3)   # a few rows per chunk
+    assert library._rows_at_once(int((coef != 0).sum())) < len(x)
+    assert torch.allclose(library.gradient(x, coef), auto, atol=1e-12)
+
 def test_swim_neurons_span_their_pairs_and_the_seed_decides_them():
     x = np.random.default_rng(7).normal(size=(50, 3))
     w, b = sampling.swim(x, 20, np.random.default_rng(0))

@@ -20,7 +20,7 @@ from torch import nn
 
 # the trig factor of a library term: none, sin(f q_i) or cos(f q_i)
 NONE, SIN, COS = 0, 1, 2
-ROW_BYTES = 2 ** 27     # a library's (rows, terms, in_dim) arrays of a gradient, built a few rows at a time
+ROW_BYTES = 2 ** 27     # a library's gradient is built a few rows at a time, its arrays within this
 
 
 def _frozen(*shape) -> nn.Parameter:
@@ -114,64 +114,98 @@ def terms(width: int, form: str, degree: int, frequencies: int, products: bool =
 
 class Library(nn.Module):
     """Terms theta_k(x) = x^powers_k * trig_k(x), fixed by ``terms(...)``: ``powers`` ``(terms, in_dim)``
-    and ``trig`` ``(terms, 3)`` (kind, column, frequency), buffers."""
+    and ``trig`` ``(terms, 3)`` (kind, column, frequency), buffers.
+
+    A monomial is evaluated as the product of its factors' columns (``slots`` ``(terms, degree)``: x^2 y is
+    columns (x, x, y), padded with a column of ones), so a value or a gradient costs rows * terms * degree
+    multiplications, not rows * terms * in_dim powers (the 3-body's 790 terms on 12 columns: 60x)."""
 
     def __init__(self, term_list: list[tuple], in_dim: int):
         super().__init__()
         self.in_dim, self.width = in_dim, len(term_list)
         self.register_buffer("powers", torch.tensor([t[0] for t in term_list], dtype=torch.int64).reshape(-1, in_dim))
         self.register_buffer("trig", torch.tensor([t[1] for t in term_list], dtype=torch.int64).reshape(-1, 3))
+        degree = max(1, int(self.powers.sum(dim=1).max())) if self.width else 1
+        slots = [[j for j, e in enumerate(row) for _ in range(e)] for row in self.powers.tolist()]
+        # derived from ``powers``, so not saved: index in_dim is the column of ones
+        self.register_buffer("slots", torch.tensor([s + [in_dim] * (degree - len(s)) for s in slots],
+                                                   dtype=torch.int64).reshape(-1, degree), persistent=False)
 
     def _parts(self, x: torch.Tensor, keep: torch.Tensor | None):
-        """Per term: the monomial's factors ``(rows, terms, in_dim)``, the trig factor ``(rows, terms)`` and the
-        terms' rows of ``powers`` and ``trig`` (``keep``: a subset of the terms)."""
-        powers, trig = (self.powers, self.trig) if keep is None else (self.powers[keep], self.trig[keep])
-        factors = x[:, None, :] ** powers[None].to(x.dtype)       # 0 ** 0 = 1
+        """Per term: the monomial's factors (a list of ``degree`` tensors ``(rows, terms)``), the trig factor and
+        its derivative ``(rows, terms)``, and the terms' ``slots`` and ``trig`` rows (``keep``: a subset)."""
+        slots, trig = (self.slots, self.trig) if keep is None else (self.slots[keep], self.trig[keep])
+        padded = torch.cat([x, x.new_ones(len(x), 1)], dim=1)
+        factors = [padded[:, slots[:, s]] for s in range(slots.shape[1])]
         angle = x[:, trig[:, 1]] * trig[:, 2].to(x.dtype)
-        t = torch.where(trig[:, 0] == SIN, torch.sin(angle), torch.where(trig[:, 0] == COS, torch.cos(angle),
-                                                                          torch.ones_like(angle)))
-        return factors, t, powers, trig, angle
+        kind, freq = trig[:, 0], trig[:, 2].to(x.dtype)
+        sin, cos = torch.sin(angle), torch.cos(angle)
+        t = torch.where(kind == SIN, sin, torch.where(kind == COS, cos, torch.ones_like(angle)))
+        dt = torch.where(kind == SIN, freq * cos, torch.where(kind == COS, -freq * sin, torch.zeros_like(angle)))
+        return factors, t, dt, slots, trig
+
+    @staticmethod
+    def _product(factors: list) -> torch.Tensor:
+        out = factors[0]
+        for f in factors[1:]:
+            out = out * f
+        return out
 
     def forward(self, x: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
         """theta ``(rows, terms)`` at ``x`` ``(rows, in_dim)`` (``keep``: only those terms)."""
         factors, t, *_ = self._parts(x, keep)
-        return factors.prod(dim=2) * t
+        return self._product(factors) * t
 
     def _rows_at_once(self, terms: int) -> int:
-        """Rows of ``x`` whose ``(rows, terms, in_dim)`` intermediates stay within ``ROW_BYTES`` (the 3-body's
-        790 terms on its test states built several arrays of gigabytes at once)."""
-        return max(1, ROW_BYTES // (8 * max(terms, 1) * self.in_dim))
+        """Rows of ``x`` whose ``(rows, terms)`` intermediates of a gradient (about degree + 4 of them) stay
+        within ``ROW_BYTES`` (the 3-body's 790 terms on its test states once built arrays of gigabytes)."""
+        return max(1, ROW_BYTES // (8 * max(terms, 1) * (self.slots.shape[1] + 4)))
+
+    def _slopes(self, x, keep):
+        """d theta / d(factor s) for each slot s (a list of ``(rows, terms)``; the product of the other factors,
+        no division), the trig factor's share ``(rows, terms)``, and the ``slots`` and ``trig`` rows."""
+        factors, t, dt, slots, trig = self._parts(x, keep)
+        d = len(factors)
+        before, after = [None] * d, [None] * d
+        for s in range(1, d):
+            before[s] = factors[s - 1] if before[s - 1] is None else before[s - 1] * factors[s - 1]
+            after[d - 1 - s] = factors[d - s] if after[d - s] is None else after[d - s] * factors[d - s]
+        others = [t if b is None and a is None else (b if a is None else a if b is None else b * a) * t
+                  for b, a in zip(before, after)]
+        return others, self._product(factors) * dt, slots, trig
+
+    def _columns(self, index: torch.Tensor, dtype) -> torch.Tensor:
+        """One-hot ``(terms, in_dim + 1)`` of the column each term's factor sits in (in_dim: the ones)."""
+        return torch.nn.functional.one_hot(index, self.in_dim + 1).to(dtype)
 
     def jacobian(self, x: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
-        """d theta_k / d x_j ``(rows, terms, in_dim)``: the product rule over the monomial's factors and the trig factor."""
-        factors, t, powers, trig, angle = self._parts(x, keep)
-        p = powers[None].to(x.dtype)
-        # d x_j^p / d x_j = p x_j^(p-1), zero where p = 0 (x ** -1 at x = 0 would be inf * 0)
-        slope = torch.where(p > 0, p * x[:, None, :] ** (p - 1).clamp_min(0), torch.zeros_like(p))
-        jac = torch.empty_like(factors)
-        for j in range(self.in_dim):       # the product of the other columns' factors (no division by zero)
-            others = torch.cat([factors[:, :, :j], factors[:, :, j + 1:]], dim=2).prod(dim=2)
-            jac[:, :, j] = slope[:, :, j] * others
-        mono = factors.prod(dim=2)
-        jac = jac * t[:, :, None]
-        freq = trig[:, 2].to(x.dtype)
-        dtrig = torch.where(trig[:, 0] == SIN, freq * torch.cos(angle), torch.where(trig[:, 0] == COS,
-                                                                                   -freq * torch.sin(angle),
-                                                                                   torch.zeros_like(angle)))
-        # the trig factor's own derivative lands on its column
-        jac.scatter_add_(2, trig[:, 1][None, :, None].expand(len(x), -1, 1), (mono * dtrig)[:, :, None])
-        return jac
+        """d theta_k / d x_j ``(rows, terms, in_dim)``: the product rule over the monomial's factors and the trig
+        factor (x^2 has slots (x, x): each adds x, 2x in all; the ones column is dropped)."""
+        others, trig_slope, slots, trig = self._slopes(x, keep)
+        rows, terms = trig_slope.shape
+        jac = x.new_zeros(rows, terms, self.in_dim + 1)
+        for s, slope in enumerate(others):
+            jac.scatter_add_(2, slots[:, s][None, :, None].expand(rows, -1, 1), slope[:, :, None])
+        jac.scatter_add_(2, trig[:, 1][None, :, None].expand(rows, -1, 1), trig_slope[:, :, None])
+        return jac[:, :, :self.in_dim]
 
     def gradient(self, x: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
-        """d/dx of theta(x) . coef ``(rows, in_dim)``, over the terms whose coefficient is not zero."""
+        """d/dx of theta(x) . coef ``(rows, in_dim)``, over the terms whose coefficient is not zero: per slot,
+        ``(rows, terms) @ (terms, in_dim)``, no ``(rows, terms, in_dim)`` tensor."""
         keep = coef != 0
         if not bool(keep.any()):
             return torch.zeros_like(x)
-        kept, rows = coef[keep], self._rows_at_once(int(keep.sum()))
-        if len(x) <= rows:
-            return torch.einsum("rkj,k->rj", self.jacobian(x, keep), kept)
-        return torch.cat([torch.einsum("rkj,k->rj", self.jacobian(x[i:i + rows], keep), kept)
-                          for i in range(0, len(x), rows)])
+        kept, rows = coef[keep][:, None], self._rows_at_once(int(keep.sum()))
+        columns = [self._columns(self.slots[keep][:, s], x.dtype) * kept for s in range(self.slots.shape[1])]
+        trig_columns = self._columns(self.trig[keep][:, 1], x.dtype) * kept
+
+        def chunk(xc):
+            others, trig_slope, *_ = self._slopes(xc, keep)
+            grad = trig_slope @ trig_columns
+            for slope, onto in zip(others, columns):
+                grad = grad + slope @ onto
+            return grad[:, :self.in_dim]
+        return chunk(x) if len(x) <= rows else torch.cat([chunk(x[i:i + rows]) for i in range(0, len(x), rows)])
 
     def names(self, columns: list[str]) -> list[str]:
         """Each term as a formula over the column names (``'q^2 p'``, ``'cos(q)'``, ``'sin(2 q1) p1 p2'``)."""
