@@ -245,6 +245,23 @@ def _diverged(err: DivergenceError) -> dict:
     return {"mse": None, "mse_se": None, "why": f"its rollout diverged: {err}"}
 
 
+def _scored_or_diverged(model, run, x0: torch.Tensor, observed: str, protocol, score) -> dict | list[dict]:
+    """``score`` of the rollout of a model, or of each of a group's (one integration where it can): a model
+    that blows up (a sparse fit's cubic terms) scores ``_diverged``, and a group with one such model is
+    rolled out model by model, so that only that one goes without an energy."""
+    def alone(m):
+        try:
+            return score(_model_rollout(m, run, x0, observed))
+        except DivergenceError as err:
+            return _diverged(err)
+    if not isinstance(model, (list, tuple)):
+        return alone(model)
+    try:
+        return [score(traj) for traj in _group_rollout(model, run, x0, observed, protocol)]
+    except DivergenceError:
+        return [alone(m) for m in model]
+
+
 def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: str, tick: Ticker) -> dict:
     """``evaluate_energy`` of a ``'box'`` or ``'seeds'`` protocol; ``tick`` advances after each path."""
     x0 = torch.as_tensor(start_states(protocol, system), dtype=torch.float64, device="cpu")
@@ -265,13 +282,9 @@ def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: s
     for label, model in models.items():
         if _is_map(model):
             out[label] = _each(model, lambda m: _map_scored(system, protocol, m, x0, observed))
-        elif isinstance(model, (list, tuple)):
-            out[label] = [_scored(system, protocol, e_true, t) for t in _group_rollout(model, run, x0, observed, protocol)]
         else:
-            try:
-                out[label] = _scored(system, protocol, e_true, _model_rollout(model, run, x0, observed))
-            except DivergenceError as err:      # a model that blows up (a sparse fit's cubic terms): no energy
-                out[label] = _diverged(err)
+            out[label] = _scored_or_diverged(model, run, x0, observed, protocol,
+                                             lambda traj: _scored(system, protocol, e_true, traj))
         tick.advance(len(model) if isinstance(model, (list, tuple)) else 1)
     return out
 
@@ -301,13 +314,8 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     for label, model in models.items():
         if _is_map(model):
             out[label] = _each(model, lambda m: _map_scored(system, protocol, m, measured[:1], observed, t, e_true))
-        elif isinstance(model, (list, tuple)):
-            out[label] = [scored(p) for p in _group_rollout(model, run, measured[:1], observed, protocol)]
         else:
-            try:
-                out[label] = scored(_model_rollout(model, run, measured[:1], observed))
-            except DivergenceError as err:
-                out[label] = _diverged(err)
+            out[label] = _scored_or_diverged(model, run, measured[:1], observed, protocol, scored)
         tick.advance(len(model) if isinstance(model, (list, tuple)) else 1)
     return out
 

@@ -289,3 +289,19 @@ def test_a_sindy_run_records_pysindy_and_reloads(tmp_path):
     model, args, metrics = hnn.load_run(hnn.run_experiment(config))
     assert metrics["history"]["fit"]["package"].startswith("pysindy ") and not model.conservative
     assert math.isfinite(metrics["test_loss"]) and metrics["test_loss"] < 0.05
+
+
+def test_the_fit_tables_say_how_many_seeds_diverged_and_keep_finite_means():
+    from hnn_analysis.fits import task_fits
+
+    def seeds(*energies):
+        return {s: {"test_loss": 1.0, "energy_mse_corrected": [e, 0.0], "train_seconds": 2.0, "equation": None}
+                for s, e in enumerate(energies)}
+    results = {"tasks": {"spring": {"hnn": seeds(1e-3, 3e-3), "baseline": seeds(1e-2, 1e-2),
+                                    "hnn+library": seeds(1e-9, 3e-9), "baseline+sindy": seeds(1e-8, math.inf)}}}
+    assert task_fits.across(results["tasks"]["spring"]["hnn"], "energy_mse_corrected") == pytest.approx((2e-3, 1e-3))
+    rows = {line.split(" | ")[1]: line for line in task_fits.accuracy_table(results)[2:]}
+    assert "diverged (1 seed)" in rows["baseline+sindy"] and "| no |" in rows["baseline+sindy"]
+    assert "| yes |" in rows["hnn+library"]
+    library = task_fits.library_table(results)[2]
+    assert "| 2e-09 ± 1e-09 | diverged (1 seed) |" in library and "| yes |" in library

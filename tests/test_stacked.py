@@ -158,3 +158,24 @@ def test_a_group_is_scored_on_a_measured_test_segment():
         own = hnn.evaluate_energy(real, {"model": model}, protocol, data)["model"]
         assert mine["traj"].shape == own["traj"].shape == (1, 40, 2)
         np.testing.assert_allclose(mine["traj"], own["traj"], rtol=1e-9, atol=1e-11)
+
+
+@pytest.mark.parametrize("method", ["solve_ivp", "dopri5"])
+def test_a_model_that_blows_up_scores_no_energy_and_its_group_still_scores_the_rest(method):
+    # H = p^2/2 - q^4 sends q to infinity in finite time (q'' = 4 q^3), the spring's H does not
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1, 1, size=(200, 2))
+    fields = {"spring": np.stack([x[:, 1], -x[:, 0]], 1), "blows up": np.stack([x[:, 1], 4 * x[:, 0] ** 3], 1)}
+    models = {name: hnn.fit_least_squares("hnn", x, dxdt, fit="library", progress=False)[0].double()
+              for name, dxdt in fields.items()}
+    spring = hnn.load_task("spring")
+    protocol = dataclasses.replace(hnn.tasks.get_protocol("spring", "corrected"), num_trials=5, method=method,
+                                   rtol=1e-9)
+    group = hnn.evaluate_energy(spring, {"group": [models["spring"], models["blows up"]]}, protocol)["group"]
+    alone = hnn.evaluate_energy(spring, {"model": models["spring"]}, protocol)["model"]
+    assert group[1]["mse"] is None and "diverged" in group[1]["why"]
+    # the library recovers the spring's H, so only the integrator's error (rtol 1e-9) is left
+    assert group[0]["mse"] == pytest.approx(alone["mse"], rel=1e-7) and alone["mse"] < 1e-9
+    # a healthy group of library fits rolls out in one integration (under vmap where the method is row-wise)
+    healthy = hnn.evaluate_energy(spring, {"group": [models["spring"], models["spring"]]}, protocol)["group"]
+    assert [m["mse"] for m in healthy] == pytest.approx([alone["mse"]] * 2, rel=1e-7)

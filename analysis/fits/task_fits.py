@@ -107,7 +107,8 @@ def measure(task: str, by_seed: dict[int, dict], quick: bool) -> dict:
     seeds = sorted(by_seed)
     out: dict[str, dict] = {}
     if hnn.task_spec(task).protocols:
-        rows = _evaluate(task, [by_seed[s] for s in seeds], study.QUICK_TRIALS if quick else None)
+        # a model whose rollout blows up scores inf and says why (``study.evaluate_seeds``)
+        rows = study.evaluate_seeds(task, [by_seed[s] for s in seeds], None, study.QUICK_TRIALS if quick else None)
     else:
         rows = []
         for seed in seeds:
@@ -127,30 +128,6 @@ def measure(task: str, by_seed: dict[int, dict], quick: bool) -> dict:
     return out
 
 
-def _evaluate(task: str, runs: list[dict], trials: int | None) -> list[dict]:
-    """``study.evaluate_seeds`` of every seed's runs; where a model's rollout diverges (a fit far from the
-    task's H), each rung alone, the diverged one's energy MSE inf and its reason recorded."""
-    try:
-        return study.evaluate_seeds(task, runs, None, trials)
-    except hnn.DivergenceError:
-        pass
-    rows = [{} for _ in runs]
-    for label in runs[0]:
-        try:
-            each = study.evaluate_seeds(task, [{label: r[label]} for r in runs], None, trials)
-        except hnn.DivergenceError as err:
-            each = []
-            for r in runs:
-                _, row = study.load_runs(task, {label: r[label]})
-                for name in hnn.task_spec(task).protocols:
-                    row[label][f"energy_mse_{name}"] = [math.inf, 0.0]
-                row[label]["diverged"] = str(err).split(":")[0]
-                each.append(row)
-        for row, got in zip(rows, each):
-            row[label] = got[label]
-    return rows
-
-
 def energy_key(per_seed: dict) -> str:
     """The energy MSE a table reads: the corrected protocol's (the task's true H), else the paper's, else the
     chain's along its rollouts."""
@@ -159,10 +136,13 @@ def energy_key(per_seed: dict) -> str:
 
 
 def across(per_seed: dict, key: str) -> tuple[float, float] | None:
-    """(mean, standard error) over seeds of ``key`` (a ``[mean, se]`` pair's mean, or a number)."""
+    """(mean, standard error) over seeds of ``key`` (a ``[mean, se]`` pair's mean, or a number); a mean of
+    inf where any seed's model diverged (``diverged``: how many)."""
     values = [(v[key][0] if isinstance(v[key], list) else v[key]) for v in per_seed.values() if v.get(key) is not None]
     if not values:
         return None
+    if not all(math.isfinite(v) for v in values):
+        return (math.inf, float(sum(not math.isfinite(v) for v in values)))
     return hnn.metrics.mean_and_se(values) if len(values) > 1 else (float(values[0]), 0.0)
 
 
@@ -173,8 +153,8 @@ def seconds(per_seed: dict) -> float:
 def _g(pair) -> str:
     if pair is None:
         return "n/a"
-    if not math.isfinite(pair[0]):
-        return "diverged"
+    if not math.isfinite(pair[0]):      # (inf, how many seeds diverged)
+        return f"diverged ({pair[1]:.0f} seed{'s' if pair[1] != 1 else ''})"
     return f"{pair[0]:.3g}" + (f" ± {pair[1]:.2g}" if pair[1] else "")
 
 
@@ -211,7 +191,7 @@ def library_table(results: dict) -> list[str]:
         key = energy_key(by_label["hnn+library"])
         ours = across(by_label["hnn+library"], key)
         sindy = across(by_label["baseline+sindy"], key) if "baseline+sindy" in by_label else None
-        nets = {label: across(by_label[label], key) for label in NETWORKS if label in by_label}
+        nets = {label: pair for label in NETWORKS if label in by_label and (pair := across(by_label[label], key))}
         best = min(nets, key=lambda k: nets[k][0]) if nets else None
         ratio = f"{ours[0] / sindy[0]:.3g}" if sindy and sindy[0] > 0 else "n/a"
         below = "yes" if nets and all(ours[0] < v[0] for v in nets.values()) else "no"

@@ -10,6 +10,7 @@ train and read their runs through it too.
 """
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -58,8 +59,12 @@ def evaluate_seeds(task: str, runs: list[dict], fig_dir: Path | None, num_trials
     for (trained, row), energy in zip(loaded, energies):
         for name, result in energy.items():
             for kind in trained.models:
-                if result[kind]["mse"] is not None:     # None: a protocol that does not apply (a learned map's)
+                if result[kind]["mse"] is not None:
                     row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
+                elif "diverged" in result[kind]["why"]:     # a model that blew up: inf, and why
+                    row[kind][f"energy_mse_{name}"] = [math.inf, 0.0]
+                    row[kind]["diverged"] = result[kind]["why"]
+                # else a protocol that does not apply (a learned map's): no number
             row.setdefault("protocols", {})[name] = result.get("description", name)
         row["seconds"] = {"evaluate": t_eval, "figures": 0.0}
         out.append(row)

@@ -18,6 +18,8 @@ import itertools
 import torch
 from torch import nn
 
+from hnn.modes import in_model_axis
+
 # the trig factor of a library term: none, sin(f q_i) or cos(f q_i)
 NONE, SIN, COS = 0, 1, 2
 ROW_BYTES = 2 ** 27     # a library's gradient is built a few rows at a time, its arrays within this
@@ -192,12 +194,17 @@ class Library(nn.Module):
     def gradient(self, x: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
         """d/dx of theta(x) . coef ``(rows, in_dim)``, over the terms whose coefficient is not zero: per slot,
         ``(rows, terms) @ (terms, in_dim)``, no ``(rows, terms, in_dim)`` tensor."""
-        keep = coef != 0
-        if not bool(keep.any()):
-            return torch.zeros_like(x)
-        kept, rows = coef[keep][:, None], self._rows_at_once(int(keep.sum()))
-        columns = [self._columns(self.slots[keep][:, s], x.dtype) * kept for s in range(self.slots.shape[1])]
-        trig_columns = self._columns(self.trig[keep][:, 1], x.dtype) * kept
+        if in_model_axis():     # under vmap over a group's models no value decides a shape: every term, zeros too
+            keep, kept, count = None, coef[:, None], self.width
+        else:
+            keep = coef != 0
+            if not bool(keep.any()):
+                return torch.zeros_like(x)
+            kept, count = coef[keep][:, None], int(keep.sum())
+        slots, trig, rows = self.slots if keep is None else self.slots[keep], self.trig if keep is None else self.trig[keep], \
+            self._rows_at_once(count)
+        columns = [self._columns(slots[:, s], x.dtype) * kept for s in range(slots.shape[1])]
+        trig_columns = self._columns(trig[:, 1], x.dtype) * kept
 
         def chunk(xc):
             others, trig_slope, *_ = self._slopes(xc, keep)
