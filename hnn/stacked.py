@@ -160,11 +160,6 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
                        seconds_before + time.perf_counter() - start)
 
 
-# the rollout methods vmap can run: explicit fixed steps. The implicit ones (midpoint, discrete gradient)
-# iterate to a tolerance and the adaptive ones choose steps by an error: both branch on values
-VMAP_METHODS = ("rk4", "leapfrog", "yoshida4")
-
-
 class _Rollout(nn.Module):
     def __init__(self, model: nn.Module, t_eval, method: str, options: dict):
         super().__init__()
@@ -230,7 +225,7 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
     """Every model of a group rolled out from its own starts: ``x0`` ``(G, batch, dim)`` (or ``(batch, dim)``,
     the same starts for all) -> ``(G, batch, len(t_eval), dim)``, as ``hnn.rollout`` of each model.
 
-    A method of ``VMAP_METHODS`` integrates the whole group in one program (vmap over the stacked
+    A method whose ``Solver`` declares ``vmap`` integrates the whole group in one program (vmap over the stacked
     weights; ``hnn.rollout``'s checks of blown-up rows are skipped there, so a row that blows up shows
     as non-finite values). The per-row adaptive methods (dopri5, dop853) integrate the group's rows in
     one call of ``hnn.rollout`` on its ``group_field``, each row with its own steps, so each model's path
@@ -241,7 +236,7 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
     if x0.dim() != 3 or len(x0) != len(models):
         raise ValueError(f"x0 must be (G, batch, dim) with G = {len(models)} models, or (batch, dim); got "
                          f"{tuple(x0.shape)}")
-    if method not in VMAP_METHODS:
+    if not get_solver(method).vmap:
         if not get_solver(method).row_wise:
             return torch.stack([rollout(m, x, t_eval, method=method, threads=None, **options) for m, x in zip(models, x0)])
         paths = rollout(group_field(models), x0.reshape(-1, x0.shape[-1]), t_eval, method=method, threads=None,
@@ -259,4 +254,4 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
         return vmap(one)(params, x0)
 
 
-__all__ = ["VMAP_METHODS", "fit_stacked", "group_field", "group_options", "rollout_stacked", "stack_key"]
+__all__ = ["fit_stacked", "group_field", "group_options", "rollout_stacked", "stack_key"]

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.integrators.stability import LIMITS, MIN_STEPS, StepSizeWarning, spectral_radius, warn_if_unstable
+from hnn.integrators.stability import MIN_STEPS, StepSizeWarning, spectral_radius, warn_if_unstable
 
 OMEGA = 1e3         # a stiff oscillator: q'' = -omega^2 q, its modes at +-i omega
 
@@ -19,7 +19,15 @@ def stiff(x):
     return torch.stack([OMEGA * x[:, 1], -OMEGA * x[:, 0]], 1)
 
 
-@pytest.mark.parametrize("method", sorted(LIMITS))
+LIMITED = sorted(name for name, solver in hnn.SOLVERS.items() if solver.limit({}) is not None)
+
+
+def test_the_explicit_fixed_step_methods_declare_a_limit_and_no_other_does():
+    assert LIMITED == ["leapfrog", "rk4", "yoshida4"]
+    assert hnn.get_solver("yoshida4").limit({"base": "midpoint"}) is None
+
+
+@pytest.mark.parametrize("method", LIMITED)
 def test_each_limit_is_where_the_method_starts_to_grow_on_the_exact_oscillator(method):
     """At 0.99 of its limit the method's path on the oscillator stays bounded (its largest state over steps
     1000-2000 is within 1.5x of that over steps 0-1000: near the limit a symplectic method's orbit is a
@@ -28,7 +36,7 @@ def test_each_limit_is_where_the_method_starts_to_grow_on_the_exact_oscillator(m
     x0 = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
 
     def growth(fraction):
-        dt = fraction * LIMITS[method] / OMEGA
+        dt = fraction * hnn.get_solver(method).limit({}) / OMEGA
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", StepSizeWarning)
             size = hnn.rollout(stiff, x0, dt * np.arange(2001), method=method, max_norm=None)[0].norm(dim=1)
@@ -65,7 +73,7 @@ def test_a_rollout_past_the_limit_warns_once_naming_dt_and_the_fix():
         # a finer dt than the grid's interval is what is checked
         hnn.rollout(stiff, x0, t, method="rk4", dt=2.0 / OMEGA)
     for method, options in (("midpoint", {}), ("yoshida4", {"base": "midpoint"}), ("dopri5", {})):
-        assert warn_if_unstable(method, stiff, x0, t, options) is None
+        assert warn_if_unstable(hnn.get_solver(method), stiff, x0, t, options) is None
 
 
 def test_a_learned_field_past_the_limit_warns():
@@ -77,3 +85,16 @@ def test_a_learned_field_past_the_limit_warns():
     t = (2.2 / omega) * np.arange(MIN_STEPS + 1)
     with pytest.warns(StepSizeWarning, match="leapfrog"):
         hnn.rollout(model, torch.zeros(1, 2, dtype=torch.float64), t, method="leapfrog", max_norm=None)
+
+
+def test_a_registered_method_that_declares_a_limit_is_checked():
+    """The warning reads the limit from the method's ``Solver``: a new explicit method registered with one warns."""
+    rk4 = hnn.get_solver("rk4")
+    hnn.register_solver(hnn.integrators.solvers.fixed_step_solver("my_rk4", hnn.integrators.fixed_step.RK4, order=4,
+                                                                  stability_limit=rk4.stability_limit))
+    try:
+        with pytest.warns(StepSizeWarning, match="my_rk4"):
+            hnn.rollout(stiff, torch.tensor([[1.0, 0.0]], dtype=torch.float64), (3.0 / OMEGA) * np.arange(MIN_STEPS + 1),
+                        method="my_rk4", max_norm=None)
+    finally:
+        del hnn.SOLVERS["my_rk4"]

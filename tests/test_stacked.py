@@ -99,7 +99,7 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
         # float64: the batched products sum in other orders than one model's, a few ulps a step (the
         # per-row adaptive steps see the same few ulps in their error norms, far from a step's accept line)
         torch.testing.assert_close(together[g], alone, rtol=1e-10, atol=1e-12)
-    if hnn.SOLVERS[method].row_wise and method not in hnn.stacked.VMAP_METHODS:
+    if hnn.SOLVERS[method].row_wise and not hnn.SOLVERS[method].vmap:
         # one integration of the group's rows: as many batched field calls as its hardest model, not their sum
         assert stats["nfev"] <= max(c["nfev"] for c in calls) + 2 < sum(c["nfev"] for c in calls)
 

@@ -195,7 +195,7 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
                 return solver.run(f, x0, t, **options)
         with torch.no_grad(), frozen_weights():     # the weights cannot change: fields may run as kernels
             if not in_model_axis():         # a step past the method's stability limit: one warning, not silence
-                warn_if_unstable(method, f, x0, t, options)
+                warn_if_unstable(solver, f, x0, t, options)
             return solver.run(f, x0, t, **options)
 
 

@@ -21,6 +21,7 @@ import torch
 from .adaptive import DEFAULT_SCIPY_METHOD, dop853_rollout, dopri5_rollout, scipy_rollout
 from .discrete_gradient import DiscreteGradient
 from .fixed_step import RK4, ImplicitStepper, Leapfrog, Midpoint, Stepper, Yoshida4, fixed_step_rollout
+from .stability import LEAPFROG_LIMIT, RK4_LIMIT, YOSHIDA4_LIMIT
 
 
 def _name_and_options(name: str, options: dict) -> str:
@@ -54,6 +55,11 @@ class Solver:
         row_wise: each row's path depends on its own state alone, and every row reaches every call
             of ``f`` (the per-row adaptive methods given ``drop_finished=False``): the rows of many
             models can share one integration, each path as its model's own (``hnn.stacked``).
+        stability_limit: the largest |lambda dt| on the imaginary axis at which a fixed step stays
+            bounded (``hnn.integrators.stability``: past it ``rollout`` warns), a number or a function
+            of the options (yoshida4's depends on its base); None: no limit (implicit, adaptive).
+        vmap: a whole rollout runs under ``torch.vmap`` (explicit fixed steps: no step, iteration or
+            test depends on a value), so a group of models rolls out as one program (``hnn.stacked``).
     """
     name: str
     order: int
@@ -66,6 +72,12 @@ class Solver:
     needs_hamiltonian: bool = False
     options: tuple[str, ...] | None = None
     row_wise: bool = False
+    stability_limit: float | Callable[[dict], float | None] | None = None
+    vmap: bool = False
+
+    def limit(self, options: dict) -> float | None:
+        """The stability limit of this method run with ``options`` (``stability_limit``)."""
+        return self.stability_limit(options) if callable(self.stability_limit) else self.stability_limit
 
     def accepts(self) -> tuple[str, ...]:
         """The keyword options this method takes (``options``, or ``run``'s keywords past ``f, x0, t``)."""
@@ -96,7 +108,7 @@ ITERATION_OPTIONS = ("tol", "max_iter")
 def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic: bool = False,
                       needs_separable: bool = False, energy_preserving: bool = False,
                       needs_hamiltonian: bool = False, options: tuple[str, ...] | None = None,
-                      row_wise: bool = False) -> Solver:
+                      row_wise: bool = False, stability_limit=None, vmap: bool = False) -> Solver:
     """A ``Solver`` running ``stepper`` by ``hnn.integrators.fixed_step.fixed_step_rollout``; its options
     (default): ``dt``, ``max_norm``, ``stats``, and an ``ImplicitStepper``'s ``tol``, ``max_iter``."""
     run = functools.partial(fixed_step_rollout, method=name, stepper=stepper)
@@ -104,7 +116,12 @@ def fixed_step_solver(name: str, stepper: type[Stepper], order: int, symplectic:
         options = FIXED_STEP_OPTIONS + (ITERATION_OPTIONS if issubclass(stepper, ImplicitStepper) else ())
     return Solver(name, order, symplectic, needs_separable, adaptive=False, run=run,
                   energy_preserving=energy_preserving, needs_hamiltonian=needs_hamiltonian, options=options,
-                  row_wise=row_wise)
+                  row_wise=row_wise, stability_limit=stability_limit, vmap=vmap)
+
+
+def _yoshida4_limit(options: dict) -> float | None:
+    """On leapfrog (its default base) an explicit method with a limit; on midpoint an implicit one without."""
+    return YOSHIDA4_LIMIT if options.get("base", "leapfrog") == "leapfrog" else None
 
 
 def _scipy_label(options: dict) -> str:
@@ -118,12 +135,14 @@ SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
     # one step size per row (solve_ivp's is shared by the batch, the implicit methods' iterations too)
     Solver("dopri5", 5, symplectic=False, needs_separable=False, adaptive=True, run=dopri5_rollout, row_wise=True),
     Solver("dop853", 8, symplectic=False, needs_separable=False, adaptive=True, run=dop853_rollout, row_wise=True),
-    fixed_step_solver("rk4", RK4, order=4, row_wise=True),
-    fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True, row_wise=True),
+    fixed_step_solver("rk4", RK4, order=4, row_wise=True, stability_limit=RK4_LIMIT, vmap=True),
+    fixed_step_solver("leapfrog", Leapfrog, order=2, symplectic=True, needs_separable=True, row_wise=True,
+                      stability_limit=LEAPFROG_LIMIT, vmap=True),
     fixed_step_solver("midpoint", Midpoint, order=2, symplectic=True),
     # with its default base='leapfrog'; base='midpoint' makes it symplectic for any H
     fixed_step_solver("yoshida4", Yoshida4, order=4, symplectic=True, needs_separable=True,
-                      options=FIXED_STEP_OPTIONS + ("base",) + ITERATION_OPTIONS),
+                      options=FIXED_STEP_OPTIONS + ("base",) + ITERATION_OPTIONS, stability_limit=_yoshida4_limit,
+                      vmap=True),
     # DGNet's integrator: keeps the field's own H exactly; Gonzalez's discrete gradient, or the field's own
     fixed_step_solver("discrete_gradient", DiscreteGradient, order=2, energy_preserving=True, needs_hamiltonian=True),
 )}

@@ -10,8 +10,9 @@ field) and warns once where dt times it passes the method's limit, naming dt, th
 The limits are on the imaginary axis, where a Hamiltonian field's modes lie near a center (lambda =
 +-i omega): RK4 |lambda dt| < 2 sqrt 2, leapfrog 2, Yoshida's order 4 on leapfrog 1.5734 (the largest
 omega dt at which its one-step matrix on the harmonic oscillator keeps |trace| <= 2;
-``tests/test_stability_warning.py`` measures each on the exact oscillator). The implicit methods
-(midpoint, discrete_gradient, yoshida4 on midpoint) and the adaptive ones have none.
+``tests/test_stability_warning.py`` measures each on the exact oscillator). Each ``Solver`` declares its
+own (``stability_limit``); the implicit methods (midpoint, discrete_gradient, yoshida4 on midpoint) and
+the adaptive ones have none.
 """
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ import warnings
 import numpy as np
 import torch
 
-LIMITS = {"rk4": 2 * math.sqrt(2), "leapfrog": 2.0, "yoshida4": 1.5734064}
+# on the imaginary axis (the numbers the solvers' registry declares)
+RK4_LIMIT, LEAPFROG_LIMIT, YOSHIDA4_LIMIT = 2 * math.sqrt(2), 2.0, 1.5734064
 # checked only where it costs little against the rollout itself: at least this many steps, a state of
 # at most this width (2 width evaluations per start), at most this many starts
 MIN_STEPS, MAX_DIM, MAX_STARTS = 100, 64, 16
@@ -47,18 +49,11 @@ def spectral_radius(f, x0: torch.Tensor) -> float:
     return float(np.abs(eig[finite]).max()) if finite.any() else math.inf
 
 
-def limit_of(method: str, options: dict) -> float | None:
-    """``method``'s stability limit on |lambda dt| (None: implicit or adaptive, no limit)."""
-    if method == "yoshida4" and options.get("base", "leapfrog") != "leapfrog":
-        return None
-    return LIMITS.get(method)
-
-
-def warn_if_unstable(method: str, f, x0: torch.Tensor, t: np.ndarray, options: dict) -> float | None:
+def warn_if_unstable(solver, f, x0: torch.Tensor, t: np.ndarray, options: dict) -> float | None:
     """Warn (``StepSizeWarning``) where the largest step of a fixed-step rollout of ``f`` over ``t`` from
-    ``x0`` times the field's spectral radius at the starts passes ``method``'s limit; returns that
-    product, or None where nothing was checked (no limit, a short rollout, a wide state)."""
-    limit = limit_of(method, options)
+    ``x0`` times the field's spectral radius at the starts passes ``solver``'s limit (``Solver.limit``);
+    returns that product, or None where nothing was checked (no limit, a short rollout, a wide state)."""
+    method, limit = solver.name, solver.limit(options)
     if limit is None or x0.shape[1] > MAX_DIM:
         return None
     spans = np.abs(np.diff(t))
