@@ -156,3 +156,41 @@ def test_the_package_names_no_task():
     for name, path in modules.items():
         named = [s for s in _code_strings(path) if s in names or s.removeprefix("experiment-") in names]
         assert not named, f"{name} names the tasks {named}: a task describes itself in its task.py"
+
+
+class _AnyData:
+    """A task's data module that builds nothing: every function returns a MagicMock."""
+
+    def __getattr__(self, name):
+        from unittest import mock
+        return lambda *args, **kwargs: mock.MagicMock()
+
+
+def _fields_read(config, method: str) -> set[str]:
+    """The dataclass fields of ``config`` that ``config.<method>()`` reads, with every data module stubbed."""
+    import copy
+    import dataclasses
+    names, read = {f.name for f in dataclasses.fields(config)}, set()
+
+    def record(self, name):
+        if name in names:
+            read.add(name)
+        return object.__getattribute__(self, name)
+    probe = copy.copy(config)
+    probe.__class__ = type("Probe", (type(config),), {"__getattribute__": record})
+    getattr(probe, method)()
+    return read
+
+
+@pytest.mark.parametrize("task", hnn.available_tasks())
+def test_every_field_a_tasks_dataset_reads_decides_its_dataset_key(task, monkeypatch):
+    """Runs of a sweep that agree on ``dataset_key()`` share one dataset: a field that ``dataset()`` reads
+    but the key does not (``DATASET_FIELDS`` forgotten) would give runs that differ in it one dataset, silently.
+    Display-only fields (worker counts) change how fast, not what is built."""
+    config = hnn.tasks.task_config(task)
+    monkeypatch.setattr(hnn.tasks, "load_task", lambda name, module="data": _AnyData())
+    monkeypatch.setattr(hnn, "load_task", hnn.tasks.load_task, raising=False)
+    read = _fields_read(config, "dataset")
+    assert read, f"{task}: dataset() read no field of its config"
+    missing = read - _fields_read(config, "dataset_key") - set(config.display_only())
+    assert not missing, f"{task}: dataset() reads {sorted(missing)}, which its DATASET_FIELDS leave out"
