@@ -11,10 +11,8 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-import torch
 
 import hnn
-from hnn.runs import training_subset
 from hnn.threads import torch_threads
 
 BURST_SECONDS = 0.15     # the timed bursts of a training-cost measurement last about this long
@@ -29,28 +27,22 @@ def training_cost(task: str, args: dict, bursts: int = BURSTS, burst_seconds: fl
     fastest of ``bursts`` bursts of about ``burst_seconds`` in all), and ``seconds`` = its ``total_steps + 1``
     steps at that rate. A plan's estimate takes one short burst (``analysis/plan.py``)."""
     config = hnn.tasks.task_config(task, args)
-    objective = config.make_objective()
     data_key = config.dataset_key()
     if data_key not in _DATASETS:
         _DATASETS[data_key] = config.dataset()
-    dataset = objective.prepare(_DATASETS[data_key])
-    saved = {**config.to_dict(), "kind": config.kind}
-    torch.manual_seed(config.seed)
-    model = hnn.kinds.model_from_args(saved, config.device)
-    x, y = (dataset[key] for key in objective.arrays[:2])
-    x, y = training_subset(x, y, config.train_fraction, config.seed)
+    # the run's own model, rows, units, loss and loop settings (its optimizer, schedule, clipping too)
+    prep = hnn.runs.prepare(config, _DATASETS[data_key])
     if config.fit != "adam":
-        return _fit_cost(config, saved, x, y)
-    options = dict(learn_rate=config.learn_rate, weight_decay=config.weight_decay, batch_size=config.batch_size,
-                   seed=config.seed, print_every=10 ** 9, progress=False,
-                   **objective.train_options(model, hnn.specs.run_specs(saved).objective, dataset))
+        return _fit_cost(config, prep)
+    model = prep.fit_model
+    options = prep.train_kwargs(print_every=10 ** 9, verbose=False, progress=False, checkpoint=None)
     start = copy.deepcopy(model.state_dict())
 
     def burst(steps: int) -> float:
         # every burst from the same start: a fresh Adam's first steps are full-size, and bursts chained
         # from one model drove a chain model's weights to divergence
         model.load_state_dict(start)
-        return hnn.train(model, x, y, total_steps=steps - 1, **options)["seconds"]
+        return hnn.train(model, prep.x, prep.y, **{**options, "total_steps": steps - 1})["seconds"]
 
     with torch_threads(1):
         per_step = burst(3) / 3                                           # one-time setup, a first rate
@@ -60,15 +52,15 @@ def training_cost(task: str, args: dict, bursts: int = BURSTS, burst_seconds: fl
     return {"steps_per_s": rate, "steps": config.total_steps + 1, "seconds": (config.total_steps + 1) / rate}
 
 
-def _fit_cost(config, saved: dict, x, y) -> dict:
+def _fit_cost(config, prep) -> dict:
     """``{"steps_per_s": None, "steps": 1, "seconds"}`` of a least-squares fit: its solve (the neurons'
     draw, the design, the QR, the threshold) on a fresh model of ``saved``'s args on one thread, the
     fastest of up to ``BURSTS`` solves within about a second (the recorded wall time of a fit
     inside a sweep shares the box with the sweep's other worker)."""
-    spec = hnn.specs.run_specs(saved)
     seconds = []
     with torch_threads(1):
         while len(seconds) < BURSTS and sum(seconds) < 1.0:
-            model = hnn.kinds.model_from_args(saved, config.device)
-            seconds.append(hnn.fits.solve(model, x, y, **spec.fit.solve_kwargs(), progress=False)["seconds"])
+            model = hnn.kinds.model_from_spec(prep.specs.model, config.device)
+            seconds.append(hnn.fits.solve(model, prep.x, prep.y, **prep.specs.fit.solve_kwargs(), progress=False,
+                                          loss_weights=prep.options.get("loss_weights"))["seconds"])
     return {"steps_per_s": None, "steps": 1, "seconds": min(seconds)}

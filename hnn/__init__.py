@@ -62,7 +62,7 @@ _PUBLIC = {
     "fits": ("FITS", "fit_least_squares"),
     "evaluation": ("EnergyProtocol", "evaluate_energy"),
     "config": ("RunConfig",),
-    "runs": ("load_run", "run_experiment"),
+    "runs": ("Prepared", "load_run", "prepare", "run_experiment"),
     "tasks": ("PROTOCOLS", "TaskSpec", "available_tasks", "load_task", "task_spec"),
 }
 _ROOMS = ("integrators", "models")
@@ -81,7 +81,7 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .fits import FITS, fit_least_squares  # noqa: F401
     from .evaluation import EnergyProtocol, evaluate_energy  # noqa: F401
     from .config import RunConfig  # noqa: F401
-    from .runs import load_run, run_experiment  # noqa: F401
+    from .runs import Prepared, load_run, prepare, run_experiment  # noqa: F401
     from .tasks import PROTOCOLS, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
     from . import integrators, models  # noqa: F401
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -93,21 +94,52 @@ def _materialize(dataset) -> tuple[dict, float | None]:
     return dataset, time.perf_counter() - tic
 
 
-def run_experiment(config, dataset=None, objective: Objective | None = None) -> Path:
-    """Train the model that ``config`` (an ``hnn.RunConfig``) describes and save the run; returns
-    its folder. Every task and model kind trains here.
+@dataclass(frozen=True)
+class Prepared:
+    """What a run of a config trains, built once (``prepare``): every lone run, benchmark and study that
+    trains or times a config's model gets it here, so each trains as ``run_experiment`` would.
+
+    ``saved``: the args.json it saves (``saved_args``, with ``unit_scales`` and ``loss_weights`` where
+    --units and --balance resolved them); ``specs``: ``run_specs(saved)``; ``model``: the model it saves
+    (an ``hnn.units.Rescaled`` where --units rescaled); ``fit_model``: the one that trains (in canonical
+    units); ``dataset``: the objective's prepared arrays in the user's units; ``x``, ``y`` (the training
+    subset), ``test_x``, ``test_y``: ``fit_model``'s, ``(rows, input_dim)``; ``options``: the objective's
+    training options (``Objective.train_options``); ``data_seconds``: the dataset's build time (None when given)."""
+    config: object
+    objective: Objective
+    fit: object
+    saved: dict
+    specs: object
+    model: torch.nn.Module
+    fit_model: torch.nn.Module
+    scales: object
+    dataset: dict
+    x: object
+    y: object
+    test_x: object
+    test_y: object
+    options: dict
+    data_seconds: float | None
+
+    def train_kwargs(self, **overrides) -> dict:
+        """``hnn.train``'s keyword arguments past the arrays: the run's loop settings and the objective's
+        options, --units and --balance already applied (``overrides``: a benchmark's steps, say)."""
+        return {**self.specs.training.train_kwargs(), **self.options, "units": "off", "balance": "off",
+                "threads": None, **overrides}
+
+
+def prepare(config, dataset=None, objective: Objective | None = None) -> Prepared:
+    """The model, objective, rows and options that ``config`` (an ``hnn.RunConfig``) trains on (``Prepared``).
 
     ``dataset`` defaults to ``config.dataset``; it holds the ``objective.arrays`` (default ``x``,
     ``dxdt``, ``test_x``, ``test_dxdt``, ``(rows, input_dim)`` arrays) and, for ``use_rk4``,
     ``dt`` (the time step of its trajectories); or it is a function of no arguments returning that
-    dict, and then the time it takes is saved as ``data_seconds`` in ``metrics.json`` beside
-    ``train_seconds`` (the training loop alone). ``objective`` defaults to ``config.make_objective()``.
-    A value the config's flag would refuse raises ValueError before anything is built.
-    """
+    dict, whose time is ``data_seconds``. ``objective`` defaults to ``config.make_objective()``.
+    A value the config's flag would refuse raises ValueError before anything is built; the model is
+    drawn from ``config.seed``."""
     cli.check(config)
     # a least-squares fit refuses what it cannot fit before any data is built
     fit = check_config(config, get_kind(config.kind).coordinates)
-    check_save_dir(config.save_dir)
     objective = objective or config.make_objective()
     dataset, data_seconds = _materialize(config.dataset if dataset is None else dataset)
     dataset = objective.prepare(dataset)
@@ -129,20 +161,35 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     options = objective.train_options(fit_model, specs.objective, fitted)
     if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
+    return Prepared(config, objective, fit, saved, specs, model, fit_model, scales, dataset, x, y, test_x, test_y,
+                    options, data_seconds)
+
+
+def run_experiment(config, dataset=None, objective: Objective | None = None) -> Path:
+    """Train the model that ``config`` (an ``hnn.RunConfig``) describes and save the run; returns
+    its folder. Every task and model kind trains here, on what ``prepare(config, dataset, objective)``
+    builds (its arguments: ``prepare``'s); a ``dataset`` given as a function has its time saved as
+    ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training loop alone).
+    """
+    cli.check(config)
+    check_save_dir(config.save_dir)
+    prep = prepare(config, dataset, objective)
+    objective, saved, specs, model, scales, dataset = (prep.objective, prep.saved, prep.specs, prep.model,
+                                                       prep.scales, prep.dataset)
+    fit_model, x, y, test_x, test_y, options = prep.fit_model, prep.x, prep.y, prep.test_x, prep.test_y, prep.options
     partial = partial_checkpoint(config)
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        if fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
+        if prep.fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
             stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
                           loss_weights=options.get("loss_weights"))
             if config.verbose and "equation" in stats["fit"]:
                 print(stats["fit"]["equation"])
         else:
-            # the run resolved --units and --balance above (on its whole training set, recorded in args.json);
+            # prepare resolved --units and --balance (on the whole training set, recorded in args.json);
             # threads=None: the count the run was given (a train.py's --threads, a sweep's share), in args.json
-            stats = train(fit_model, x, y, test_x, test_y, **specs.training.train_kwargs(), **options,
-                          checkpoint=partial, units="off", balance="off", threads=None)
+            stats = train(fit_model, x, y, test_x, test_y, **prep.train_kwargs(checkpoint=partial))
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise
@@ -151,7 +198,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         x, y = training_subset(x, y, config.train_fraction, config.seed)
     directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
-                           objective.final_loss(model, test_x, test_y), data_seconds, saved)
+                           objective.final_loss(model, test_x, test_y), prep.data_seconds, saved)
     partial.unlink(missing_ok=True)
     config.finish(directory, dataset)
     return directory

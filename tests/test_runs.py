@@ -288,3 +288,24 @@ def test_a_full_disk_is_one_error_line_naming_the_folder_and_leaves_nothing(tmp_
     assert re.search(rf"error: \[Errno {errno.ENOSPC}\] cannot write in {re.escape(str(tmp_path))}: No space left on "
                      r"device; nothing half-written was left there\. Free space", lines[-1])
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".npz")) == []
+
+
+def test_prepare_is_what_a_run_trains_and_what_its_training_cost_times(tmp_path, monkeypatch):
+    """A run trains ``prepare``'s model on its rows with its options: the same steps from it give the saved
+    weights bit for bit; the training-cost measurement times the run's own loop (its optimizer, schedule and
+    clipping, which it once dropped, timing plain Adam)."""
+    from hnn_analysis.training_cost import training_cost
+    config = hnn.tasks.task_config("spring", {"optimizer": "adamw", "schedule": "cosine", "clip_grad": 1.0,
+                                             "total_steps": 30, "hidden_dim": 16, "save_dir": str(tmp_path)})
+    prep = hnn.prepare(config)
+    kwargs = prep.train_kwargs()
+    assert (kwargs["optimizer"], kwargs["schedule"], kwargs["clip_grad"], kwargs["total_steps"]) == ("adamw", "cosine", 1.0, 30)
+    hnn.train(prep.fit_model, prep.x, prep.y, prep.test_x, prep.test_y, **kwargs)
+    saved = hnn.load_run(hnn.run_experiment(config))[0]
+    for key, value in prep.model.state_dict().items():
+        assert torch.equal(value, saved.state_dict()[key]), key
+    seen = []
+    real_train = hnn.train
+    monkeypatch.setattr(hnn, "train", lambda *a, **kw: seen.append(kw) or real_train(*a, **kw))
+    training_cost("spring", hnn.load_run(hnn.runs.find_run(config))[1], bursts=1, burst_seconds=0.01)
+    assert seen and all((kw["optimizer"], kw["schedule"], kw["clip_grad"]) == ("adamw", "cosine", 1.0) for kw in seen)

@@ -32,13 +32,9 @@ KINDS = ("hnn", "constrained", "constrained_lagrangian")
 def _stepper(kind: str, bobs: int, width: int, batch: int, save_dir: str):
     """``step()``: one training step of a fresh ``kind`` model on the first ``batch`` snippets."""
     config = hnn.tasks.task_config("chain", {"model": kind, "bobs": bobs, "hidden_dim": width, "save_dir": save_dir})
-    objective = config.make_objective()
-    dataset = objective.prepare(config.dataset())
-    saved = {**config.to_dict(), "kind": config.kind}
-    torch.manual_seed(0)
-    model = hnn.kinds.model_from_args(saved)
-    loss = objective.train_options(model, hnn.specs.run_specs(saved).objective, dataset)["loss"]
-    snippets = torch.as_tensor(dataset[objective.arrays[0]][:batch], dtype=torch.float32)
+    prep = hnn.prepare(config)      # the run's model (seed 0), its snippets and its loss
+    model, loss = prep.fit_model, prep.options["loss"]
+    snippets = torch.as_tensor(prep.dataset[prep.objective.arrays[0]][:batch], dtype=torch.float32)
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-5, weight_decay=config.weight_decay)
 
     def step() -> None:

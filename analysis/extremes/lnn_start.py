@@ -28,11 +28,8 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                 config = hnn.tasks.task_config("chain", {"bobs": n, "model": "lagrangian", "nonlinearity": "softplus",
                                                          "learn_rate": 1e-3, "init": init, "n_train": 40, "n_test": 10,
                                                          "seed": seed, "save_dir": str(save_dir)})
-                objective = config.make_objective()
-                data = objective.prepare(config.dataset())
-                saved = {**config.to_dict(), "kind": config.kind}
-                torch.manual_seed(seed)
-                model = hnn.kinds.model_from_args(saved)
+                prep = hnn.prepare(config)      # the run's model (drawn from its seed), rows and options
+                model, objective, data, options = prep.fit_model, prep.objective, prep.dataset, prep.options
                 z = torch.as_tensor(data["x"][:2000], dtype=torch.float32)
                 row = {"bobs": n, "init": init, "seed": seed, "states": len(z)}
                 try:
@@ -41,7 +38,6 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                     row["singular"] = 0
                 except SingularLagrangianError as err:
                     row["singular"] = len(err.states)
-                options = objective.train_options(model, hnn.specs.run_specs(saved).objective, data)
                 first = torch.as_tensor(data[objective.arrays[0]][:200], dtype=torch.float32)
                 try:
                     with torch.no_grad():
@@ -50,10 +46,8 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                     row["first_stop"] = f"{type(err).__name__}: {str(err)[:120]}"
                 if steps:
                     try:
-                        stats = hnn.train(model, data[objective.arrays[0]], data[objective.arrays[1]], total_steps=steps,
-                                          learn_rate=config.learn_rate, weight_decay=config.weight_decay,
-                                          batch_size=config.batch_size, seed=seed, optimizer=config.optimizer,
-                                          schedule=config.schedule, progress=False, **options)
+                        stats = hnn.train(model, prep.x, prep.y, **prep.train_kwargs(total_steps=steps, progress=False,
+                                                                                      print_every=10 ** 9))
                         row["trained_loss"] = stats["train_loss"][-1]
                     except hnn.DivergenceError as err:
                         row["train_stop"] = f"{type(err).__name__}: {str(err)[:120]}"

@@ -56,11 +56,8 @@ def _kinds(columns: dict) -> list[str]:
                   flush=True)
             continue
         try:
-            run = hnn.tasks.task_config(TASK, {**columns, "model": kind, "hidden_dim": 4})
-            objective = run.make_objective()
-            saved = {**run.to_dict(), "kind": run.kind}
-            objective.train_options(hnn.kinds.model_from_args(saved), hnn.specs.run_specs(saved).objective,
-                                    objective.prepare(dataset))
+            # what its run would build (a small one): the model, its objective on these columns, the units
+            hnn.prepare(hnn.tasks.task_config(TASK, {**columns, "model": kind, "hidden_dim": 4}), dataset)
         except (ValueError, KeyError) as err:      # refused by its checks, or it needs what the file lacks
             print(f"  {kind}: does not fit these coordinates ({err})", flush=True)
             continue
