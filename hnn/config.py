@@ -66,7 +66,7 @@ class RunConfig:
                                     parse=cli.fraction)
     nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
     init: str = setting("orthogonal", "how the MLPs' weights start: orthogonal (the paper's: orthogonal weights, "
-                                      "torch's default biases), zero_bias (DGNet's: orthogonal weights, zero biases) "
+                                      "torch's default biases), zero_bias (DGNet's: orthogonal weights, zero biases), "
                                       "lnn (the LNN's: scaled normal weights, zero biases) or lnn_convex (the LNN's with nonnegative weights after "
                                       "the first layer: with softplus, L convex in qdot at step 0, so its first steps "
                                       "train)", choices=INITS,

@@ -74,8 +74,9 @@ class Stepper:
     """One fixed-step method on a batch ``x`` of shape ``(batch, dim)``: all the driver sees of it.
 
     A subclass implements ``step`` and counts its batched calls of ``f`` in ``nfev``. Every
-    stepper is built as ``Stepper(f, dim, dtype, tol=, max_iter=, base=)``: ``rollout`` accepts
-    the midpoint's options for every fixed-step method, and explicit methods ignore them.
+    stepper is built as ``Stepper(f, dim, dtype, tol=, max_iter=, base=)`` by the one driver
+    (``fixed_step_rollout``); what a user may pass is each method's ``Solver.options``, and
+    ``rollout`` refuses the rest (a ``tol`` given to rk4), so an explicit stepper sees them unset.
     """
 
     def __init__(self, f: Field, dim: int, dtype: torch.dtype, **options):

@@ -101,21 +101,14 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
         x0: initial states, ``(batch, dim)`` (a single state ``(dim,)`` is treated as batch 1).
             Its dtype is the dtype ``f`` is evaluated in.
         t_eval: 1-D times (units of the system), starting at the time of ``x0``.
-        method: a name in ``hnn.SOLVERS`` (``hnn.register_solver`` adds one); built in:
-            ``'solve_ivp'`` (scipy, adaptive; options ``rtol``, ``atol``,
-            ``scipy_method='RK45'|'DOP853'|...``), ``'dopri5'`` (the same RK45 in torch with one
-            step size per trajectory, each controlled as in its own scipy call; options ``rtol``,
-            ``atol``), ``'dop853'`` (order 8 with the same per-trajectory control; cheaper than
-            dopri5 at tight tolerances), ``'rk4'`` (fixed step in torch; option ``dt``, default one step per
-            ``t_eval`` interval), or the symplectic fixed-step methods of ``hnn.integrators.fixed_step``
-            (option ``dt`` as for rk4): ``'leapfrog'`` (Stormer-Verlet; exact only for
-            separable H = T(p) + V(q), e.g. true dynamics), ``'midpoint'`` (implicit midpoint,
-            for any H, the choice for learned models; options ``tol`` (default 1e-12 in float64,
-            8 eps in float32) and ``max_iter`` (100) of its fixed-point iteration) and
-            ``'yoshida4'`` (order 4; option ``base='leapfrog'|'midpoint'``); ``'discrete_gradient'``
-            (order 2, implicit, keeps the field's own H exactly: ``f`` must carry it, an ``hnn.Model``
-            that declares ``conservative`` or an ``hnn.interface.EnergyField``; options ``tol``,
-            ``max_iter`` as the midpoint's; ``hnn.integrators.discrete_gradient``). All accept
+        method: a name in ``hnn.SOLVERS`` (``hnn.register_solver`` adds one), whose ``Solver``
+            declares its order, whether it is symplectic, its stability limit and the options it takes
+            (``hnn.get_solver(method)``; docs/integrators.md tabulates them). Built in: ``'solve_ivp'``
+            (scipy, adaptive; ``scipy_method='RK45'|'DOP853'|...``), ``'dopri5'`` and ``'dop853'``
+            (adaptive, in torch, one step size per trajectory), ``'rk4'``, ``'leapfrog'``,
+            ``'midpoint'`` and ``'yoshida4'`` (fixed steps: option ``dt``, default one step per
+            ``t_eval`` interval; the midpoint, the choice for a learned H, iterates to ``tol``) and
+            ``'discrete_gradient'`` (keeps the field's own H exactly: ``f`` must carry it). All accept
             ``stats={}``, filled with ``nfev``, the number of batched evaluations of ``f`` (and
             for the midpoint ``iterations`` and ``max_step_iterations``), and ``max_norm`` (default
             1e6; None to disable): a state with a component beyond it counts as blown up.
