@@ -33,6 +33,7 @@ from pathlib import Path
 import torch
 
 from .errors import DivergenceError
+from .kinds import get_kind
 from .models.hamiltonian import FIELD_ROWS, HNN
 from .models.mlp import MLP
 from .objectives import DerivativeObjective
@@ -42,7 +43,6 @@ from .models.tanh_mlp import closed_form_input_gradient, fast_tanh
 from .training import (CHECKPOINT_EVERY, adam_optimizer, check_data, flushed_denormals, is_test_step, load_checkpoint,
                        save_checkpoint, training_steps)
 
-GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
 # them the dataset may differ)
 _SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
@@ -63,7 +63,7 @@ def group_key(config) -> tuple | None:
     (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
     optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
     Adam on the squared error, or ``balance='rms'``)."""
-    if (config.kind not in GROUPABLE_KINDS or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
+    if (get_kind(config.kind).grouping != "closed_form" or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
             or (config.optimizer, config.schedule, config.clip_grad, config.derivative_loss)
             != ("adam", "constant", 0.0, "l2")
             or type(config.make_objective()) is not DerivativeObjective):
@@ -370,5 +370,5 @@ def drop_failed(weights, optim, alive, finite, failures, names, step, interleave
                         value[mine] = 0
 
 
-__all__ = ["GROUPABLE_KINDS", "GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
+__all__ = ["GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
            "group_stats"]

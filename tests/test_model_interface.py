@@ -12,7 +12,7 @@ from hnn.interface import SplitField
 
 
 def _args(kind: str) -> dict:
-    pixel = kind.startswith("pixel-")
+    pixel = hnn.MODEL_KINDS[kind].family == "pixel"
     # a body tethered to the origin in 2 dimensions: the width-4 state of the Cartesian kinds
     tether = {"bodies": 1, "dim": 2, "tethers": [[0, [0.0, 0.0], 1.0]], "links": []}
     return {"kind": kind, "input_dim": 16 if pixel else 4, "latent_dim": 2, "hidden_dim": 16,

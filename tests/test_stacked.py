@@ -55,7 +55,7 @@ def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
 
 # the kinds CASES leaves out, but the pixel ones (their renders take minutes; tests/test_pixels.py groups them)
 GROUPED_KINDS = sorted(set(hnn.MODEL_KINDS) - {values["model"] for _, values in CASES.values()}
-                       - {k for k in hnn.MODEL_KINDS if k.startswith("pixel-")})
+                       - {k for k, row in hnn.MODEL_KINDS.items() if row.grouping == "alone"})
 
 
 @pytest.mark.parametrize("kind", GROUPED_KINDS)
