@@ -63,7 +63,7 @@ _PUBLIC = {
     "evaluation": ("EnergyProtocol", "evaluate_energy"),
     "config": ("RunConfig",),
     "runs": ("Prepared", "load_run", "prepare", "run_experiment"),
-    "tasks": ("PROTOCOLS", "TaskSpec", "available_tasks", "load_task", "task_spec"),
+    "tasks": ("PROTOCOLS", "TaskData", "TaskSpec", "available_tasks", "load_task", "task_spec"),
 }
 _ROOMS = ("integrators", "models")
 
@@ -82,7 +82,7 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .evaluation import EnergyProtocol, evaluate_energy  # noqa: F401
     from .config import RunConfig  # noqa: F401
     from .runs import Prepared, load_run, prepare, run_experiment  # noqa: F401
-    from .tasks import PROTOCOLS, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
+    from .tasks import PROTOCOLS, TaskData, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
     from . import integrators, models  # noqa: F401
 
 
