@@ -55,8 +55,9 @@ class DiscreteGradientObjective(PathObjective):
     def prepare(self, dataset: dict) -> dict:
         return cut_paths(dataset, ("pairs", "test_pairs"), pairs_from_paths, "the discrete-gradient objective")
 
-    def loss_for(self, model: nn.Module, dt: float | None = None):
-        """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused)."""
+    def loss_for(self, model: nn.Module, dt: float | None = None, observed: str | None = None):
+        """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused) of
+        states in ``observed`` coordinates ``dt`` apart (default: this object's)."""
         dt = self.dt if dt is None else dt
         if dt is None or not (dt > 0 and np.isfinite(dt)):
             raise ValueError(f"the discrete-gradient objective needs the states' positive time step dt, got {dt!r}: "
@@ -67,7 +68,7 @@ class DiscreteGradientObjective(PathObjective):
             raise ValueError(f"the discrete-gradient objective fits S grad-bar H of a learned H, and "
                              f"{type(model).__name__} carries none (conservative={model.conservative}): choose a "
                              "conservative kind such as hnn, separable or mechanical")
-        observed = self.observed
+        observed = self.observed if observed is None else observed
         model.relation(observed)        # a model that cannot read these states: one clear error
 
         def loss(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:

@@ -20,7 +20,6 @@ from .balance import balance_weights
 from .errors import DivergenceError
 from .grouped import fit_group, group_key
 from .stacked import fit_stacked, stack_key
-from .training import fit_loss
 from .units import run_scales
 from .io import check_save_dir
 from .kinds import model_from_spec
@@ -122,8 +121,9 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
             out.append(failures[g])
             continue
         (x, y), (test_x, test_y) = data[g], tests[g]
-        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y),
-                               objective.final_loss(models[g], test_x, test_y), None, saved[g])
+        options = objective.train_options(models[g], specs[g].objective, datasets[g])      # its own, for its numbers
+        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y, options),
+                               objective.final_loss(models[g], test_x, test_y, options), None, saved[g])
         config.finish(directory, datasets[g])
         out.append(directory)
     partial.unlink(missing_ok=True)
@@ -138,12 +138,8 @@ def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) ->
         if len({str(d.get(key)) for d in datasets}) > 1:
             raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
     options = objective.train_options(model, specs.objective, datasets[0])
-    extra = dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
-                 clip_grad=specs.training.clip_grad, input_noise=options.get("input_noise", 0.0))
-    if "loss" in options:
-        return {**extra, "loss_of": lambda m: options["loss"]}
-    return {**extra, "loss_of": lambda m: fit_loss(m, options.get("predict"), specs.objective.derivative_loss,
-                                                   options.get("loss_weights"))}
+    return dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
+                clip_grad=specs.training.clip_grad, input_noise=options.input_noise, loss_of=options.loss_of)
 
 
 def _trains_alone(config, dataset: dict, objective) -> bool:

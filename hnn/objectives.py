@@ -3,8 +3,8 @@
     hnn.run_experiment(config)                                   # config.make_objective(): the kind's
     hnn.run_experiment(config, dataset, hnn.objectives.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
-An objective gives ``hnn.train`` its options for a model and a dataset, and measures the final
-train and test numbers. Which objective trains which model kind is declared by the kinds'
+An objective gives ``hnn.train`` its options for a model and a dataset (``FitOptions``, a frozen
+record: objectives keep no state of a run), and measures the final train and test numbers with them. Which objective trains which model kind is declared by the kinds'
 registry (``hnn.MODEL_KINDS``, ``hnn/kinds.py``); a new kind of objective is an ``Objective``
 subclass named for it and its name in ``hnn.names.OBJECTIVES`` (``hnn.OBJECTIVES`` finds the class).
 
@@ -14,6 +14,9 @@ A dataset says in which coordinates its states are (``dataset["state"]``, a key 
 (``model.observed_field``), or refuse the pair with one error naming the fix.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
 
 import torch
 from torch import nn
@@ -25,9 +28,41 @@ from .metrics import derivative_mse, mean_and_se
 from .specs import ObjectiveSpec
 
 
+@dataclass(frozen=True)
+class FitOptions:
+    """What an objective gives the training loop for one model on one dataset (``Objective.train_options``),
+    and what its final numbers read. The loop's part (``train_kwargs``, ``hnn.train``'s keywords of these
+    names): ``loss`` ``(x, y) -> (batch,)`` or ``(batch, k)``, an objective's own (None: a fit of dx/dt
+    built from ``predict``, ``derivative_loss`` and ``loss_weights``); ``predict`` ``x -> dx/dt`` (None:
+    the model's ``time_derivative``); ``input_noise`` (std of the noise on each batch's inputs);
+    ``generators`` (a loss's own random generators, checkpointed with the run). The final numbers'
+    part: ``row_loss`` (the per-row loss of ``final_loss``; None: ``loss``) and ``field`` (the field a
+    fit of dx/dt is scored by; None: the model's ``time_derivative``)."""
+    loss: Callable | None = None
+    predict: Callable | None = None
+    derivative_loss: str = "l2"
+    loss_weights: object = None
+    input_noise: float = 0.0
+    generators: tuple = ()
+    row_loss: Callable | None = None
+    field: Callable | None = None
+
+    def train_kwargs(self) -> dict:
+        """``hnn.train``'s keyword arguments of the loop's part."""
+        return {"loss": self.loss, "predict": self.predict, "derivative_loss": self.derivative_loss,
+                "loss_weights": self.loss_weights, "input_noise": self.input_noise, "generators": self.generators}
+
+    def loss_of(self, model: nn.Module) -> Callable:
+        """The batch loss ``(x, y) -> (batch, ...)`` the loop minimizes for ``model``: ``loss``, or the fit of
+        dx/dt that ``hnn.train`` builds from ``predict``, ``derivative_loss`` and ``loss_weights``."""
+        from .training import fit_loss      # deferred: the training loop's module reads the objectives (units)
+        return self.loss if self.loss is not None else fit_loss(model, self.predict, self.derivative_loss,
+                                                                self.loss_weights)
+
+
 class Objective:
-    """The interface: subclasses implement ``row_loss`` or ``final_loss`` (and ``train_options`` if
-    they need any).
+    """The interface: subclasses implement ``train_options`` (a ``FitOptions`` with a ``loss`` or a
+    ``row_loss``, or override ``final_loss``); an objective holds its own settings, never a run's state.
 
     ``arrays`` names the dataset's ``(inputs, targets, test inputs, test targets)``, each ``(rows, width)``.
     """
@@ -38,22 +73,20 @@ class Objective:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
         return dataset
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
-        """Keyword arguments for ``hnn.train`` beyond a run's ``TrainingSpec`` (``predict``, ``loss``, ...),
-        from what the run's ``ObjectiveSpec`` asks (``hnn.specs.run_specs(config).objective``)."""
-        return {}
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+        """What ``hnn.train`` adds to a run's ``TrainingSpec`` for ``model`` on ``dataset`` (``predict``,
+        ``loss``, ...), from what the run's ``ObjectiveSpec`` asks (``hnn.specs.run_specs(config).objective``)."""
+        return FitOptions()
 
-    def row_loss(self, model: nn.Module):
-        """``(inputs, targets) -> (rows,)`` or ``(rows, k)``: the loss of each row (its mean over k)."""
-        raise NotImplementedError
-
-    def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        """The ``(mean, ±)`` train or test number saved in metrics.json: ``row_loss`` over all rows, in
-        no-grad batches of ``chunk`` rows, mean ± std/sqrt(rows)."""
+    def final_loss(self, model: nn.Module, inputs, targets, options: FitOptions | None = None) -> tuple[float, float]:
+        """The ``(mean, ±)`` train or test number saved in metrics.json: ``options.row_loss`` (else its
+        ``loss``) over all rows, in no-grad batches of ``chunk`` rows, mean ± std/sqrt(rows). ``options``:
+        ``train_options``' for ``model`` (default: on a dataset of canonical states, this objective's dt)."""
+        options = options or self.train_options(model, ObjectiveSpec(), {})
         param = next(model.parameters())
         y = torch.as_tensor(targets, dtype=param.dtype, device=param.device)
         x = y if inputs is targets else torch.as_tensor(inputs, dtype=param.dtype, device=param.device)
-        loss, c = self.row_loss(model), self.chunk
+        loss, c = options.row_loss or options.loss, self.chunk
         with torch.no_grad():
             per_row = [loss(x[i:i + c], y[i:i + c]) for i in range(0, len(y), c)]
         return mean_and_se(torch.cat([part if part.dim() == 1 else part.mean(1) for part in per_row]))
@@ -79,22 +112,20 @@ def observed_coordinates(dataset: dict) -> str:
 
 class PathObjective(Objective):
     """An objective fit on consecutive observed states ``dt`` apart (the trajectory objective's
-    snippets, DGNet's pairs): a subclass gives ``loss_for(model)``; ``train_options`` reads the
-    dataset's coordinates and time step first, and every row's loss is ``loss_for``'s."""
+    snippets, DGNet's pairs): a subclass gives ``loss_for(model, dt, observed)``; ``train_options``
+    reads the dataset's coordinates and time step (``dt`` and ``observed``, this object's: the defaults
+    where a dataset says neither), and every row's loss is ``loss_for``'s."""
     dt: float | None = None
     observed: str = "canonical"
 
-    def loss_for(self, model: nn.Module):
+    def loss_for(self, model: nn.Module, dt: float | None = None, observed: str | None = None):
         raise NotImplementedError
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
-        self.observed = observed_coordinates(dataset)
-        declared(model).relation(self.observed)      # a model that cannot read these states: one clear error
-        self.dt = float(dataset["dt"]) if "dt" in dataset else self.dt
-        return {"loss": self.loss_for(model)}
-
-    def row_loss(self, model: nn.Module):
-        return self.loss_for(model)
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+        observed = observed_coordinates(dataset) if "state" in dataset else self.observed
+        declared(model).relation(observed)      # a model that cannot read these states: one clear error
+        dt = float(dataset["dt"]) if "dt" in dataset else self.dt
+        return FitOptions(loss=self.loss_for(model, dt, observed))
 
 
 class DerivativeObjective(Objective):
@@ -104,32 +135,30 @@ class DerivativeObjective(Objective):
     ``input_noise`` each training batch's inputs get Gaussian noise.
     """
 
-    field = None    # what final_loss measures: model.time_derivative unless train_options maps states
-
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
         observed = observed_coordinates(dataset)
         targets = dataset.get(self.arrays[1])
-        options = {"input_noise": spec.input_noise, "predict": None, "derivative_loss": spec.derivative_loss,
-                   # --balance reads the training targets' sizes; a caller that passes none trains unweighted
-                   "loss_weights": None if spec.balance == "off" or targets is None
-                   else balance_weights(targets, spec.balance, spec.derivative_loss)}
+        options = FitOptions(input_noise=spec.input_noise, derivative_loss=spec.derivative_loss,
+                             # --balance reads the training targets' sizes; a caller that passes none trains unweighted
+                             loss_weights=None if spec.balance == "off" or targets is None
+                             else balance_weights(targets, spec.balance, spec.derivative_loss))
         if declared(model).relation(observed) == "mapped":
             # a model of its own coordinates fit to d/dt of the observed states through its own map
             if spec.use_rk4:
                 raise ValueError(f"--use_rk4 steps the model's own state; on observed {observed!r} states drop it")
-            self.field = options["predict"] = model.observed_time_derivative
-            return options
+            return replace(options, predict=model.observed_time_derivative, field=model.observed_time_derivative)
         if targets is not None and hasattr(model, "check_data_scale"):     # a model that knows what scale it can learn
             model.check_data_scale(dataset[self.arrays[0]], targets)
         if spec.use_rk4:
             if "dt" not in dataset:
                 raise ValueError("--use_rk4 needs the dataset's time step; this task's get_dataset gives no 'dt'")
             dt = float(dataset["dt"])
-            options["predict"] = lambda x: rk4_step(model.time_derivative, x, dt) / dt
+            return replace(options, predict=lambda x: rk4_step(model.time_derivative, x, dt) / dt)
         return options
 
-    def final_loss(self, model: nn.Module, inputs, targets) -> tuple[float, float]:
-        return derivative_mse(model, inputs, targets, field=self.field)
+    def final_loss(self, model: nn.Module, inputs, targets, options: FitOptions | None = None) -> tuple[float, float]:
+        """The mean squared error of dx/dt (``options.field``'s where it maps states, else the model's own)."""
+        return derivative_mse(model, inputs, targets, field=options.field if options else None)
 
 
 def pixel_loss(model, x: torch.Tensor, x_next: torch.Tensor, input_noise: float = 0.0, use_rk4: bool = False,
@@ -168,12 +197,10 @@ class PixelObjective(Objective):
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
         noise = torch.Generator().manual_seed(spec.seed + 2)
 
         def loss(x, x_next):
             return pixel_loss(model, x, x_next, input_noise=spec.input_noise, use_rk4=spec.use_rk4, generator=noise)
-        return {"loss": loss, "generators": (noise,)}     # a resumed run draws on where it stopped
-
-    def row_loss(self, model: nn.Module):
-        return lambda x, x_next: pixel_loss(model, x, x_next)
+        # a resumed run draws on where it stopped; the final numbers: the loss without noise
+        return FitOptions(loss=loss, generators=(noise,), row_loss=lambda x, x_next: pixel_loss(model, x, x_next))

@@ -270,5 +270,6 @@ def test_mechanical_hnn_with_the_true_m_and_v_gives_the_observed_accelerations()
     z = _starts(chain, 64)
     model = hnn.MechanicalHNN(6, 32, periodic=True).double()
     options = hnn.DerivativeObjective().train_options(model, hnn.specs.ObjectiveSpec(), {"state": "velocity"})
-    stats = hnn.train(model, z, chain.observed_dynamics(z), total_steps=60, learn_rate=1e-2, progress=False, **options)
+    stats = hnn.train(model, z, chain.observed_dynamics(z), total_steps=60, learn_rate=1e-2, progress=False,
+                      **options.train_kwargs())
     assert stats["train_loss"][-1] < 0.5 * stats["train_loss"][0]

@@ -13,6 +13,8 @@ SMALL = {"total_steps": 20, "hidden_dim": 16}
 CHAIN = {"n_train": 20, "n_test": 5}
 CASES = {
     "mechanical": ("spring", {"model": "mechanical"}),
+    # [q, qdot] states the kind maps to its own [q, p]: each member is scored by its own map, not the first's
+    "mechanical-velocity": ("chain", {"model": "mechanical", "objective": "derivative", **CHAIN}),
     "softplus-adamw-cosine-clip": ("spring", {"model": "hnn", "nonlinearity": "softplus", "optimizer": "adamw",
                                               "schedule": "cosine", "clip_grad": 0.5}),
     "constrained": ("chain", {"model": "constrained", **CHAIN}),
