@@ -16,16 +16,17 @@ A dataset says in which coordinates its states are (``dataset["state"]``, a key 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Callable, ClassVar
 
 import torch
 from torch import nn
 
 from .balance import balance_weights
 from .integrators.fixed_step import rk4_step
-from .interface import declared
+from .interface import declared, observed_coordinates
 from .metrics import derivative_mse, mean_and_se
 from .specs import ObjectiveSpec
+from .training import batch_loss
 
 
 @dataclass(frozen=True)
@@ -53,11 +54,9 @@ class FitOptions:
                 "loss_weights": self.loss_weights, "input_noise": self.input_noise, "generators": self.generators}
 
     def loss_of(self, model: nn.Module) -> Callable:
-        """The batch loss ``(x, y) -> (batch, ...)`` the loop minimizes for ``model``: ``loss``, or the fit of
-        dx/dt that ``hnn.train`` builds from ``predict``, ``derivative_loss`` and ``loss_weights``."""
-        from .training import fit_loss      # deferred: the training loop's module reads the objectives (units)
-        return self.loss if self.loss is not None else fit_loss(model, self.predict, self.derivative_loss,
-                                                                self.loss_weights)
+        """The batch loss ``(x, y) -> (batch, ...)`` the loop minimizes for ``model``
+        (``hnn.training.batch_loss``: ``loss``, or the fit of dx/dt built from the other fields)."""
+        return batch_loss(model, **self.train_kwargs())
 
 
 class Objective:
@@ -68,6 +67,8 @@ class Objective:
     """
     arrays: tuple[str, str, str, str] = ("x", "dxdt", "test_x", "test_dxdt")
     chunk = 4096        # rows per no-grad batch of final_loss
+    # its first two arrays are states and their dx/dt, so that --units can rescale them (hnn.units)
+    fits_derivative: ClassVar[bool] = False
 
     def prepare(self, dataset: dict) -> dict:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
@@ -105,11 +106,6 @@ def cut_paths(dataset: dict, names: tuple[str, str], cut, needs: str) -> dict:
     return {**dataset, names[0]: cut(dataset["x"], points), names[1]: cut(dataset["test_x"], points)}
 
 
-def observed_coordinates(dataset: dict) -> str:
-    """The coordinates of ``dataset``'s states (``dataset["state"]``, default ``'canonical'``)."""
-    return dataset.get("state", "canonical")
-
-
 class PathObjective(Objective):
     """An objective fit on consecutive observed states ``dt`` apart (the trajectory objective's
     snippets, DGNet's pairs): a subclass gives ``loss_for(model, dt, observed)``; ``train_options``
@@ -134,6 +130,8 @@ class DerivativeObjective(Objective):
     With ``use_rk4`` the prediction is the RK4 average slope over the dataset's ``dt``; with
     ``input_noise`` each training batch's inputs get Gaussian noise.
     """
+
+    fits_derivative = True
 
     def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
         observed = observed_coordinates(dataset)

@@ -147,6 +147,13 @@ DERIVATIVE_LOSSES = names.checked({"l2": l2_loss, "l1": l1_loss}, names.DERIVATI
                                   "hnn.training.DERIVATIVE_LOSSES")
 
 
+def batch_loss(model, loss: Callable | None = None, predict: Callable | None = None, derivative_loss: str = "l2",
+               loss_weights=None, **unused) -> Callable:
+    """The batch loss ``train`` minimizes, from its keyword arguments of these names (an objective's
+    ``FitOptions.train_kwargs()``): ``loss`` itself, or ``fit_loss`` of the others (``unused``: the rest)."""
+    return loss if loss is not None else fit_loss(model, predict, derivative_loss, loss_weights)
+
+
 def fit_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:
     """The loss ``hnn.train`` minimizes in a fit of dx/dt: ``DERIVATIVE_LOSSES[derivative_loss]`` of
     ``predict`` (default ``model.time_derivative``), each component times ``loss_weights`` ``(dim,)``
