@@ -2,7 +2,7 @@
 model axis, every product of a step one batched product over the models.
 
     stats, failures = hnn.grouped.fit_group(models, data, tests, seeds=[0, 1, 2, 3], total_steps=2000, ...)
-    folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
+    folders = hnn.sweeps.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
 
 A small HNN's step is mostly dispatch, not arithmetic; G of them as one batched step share one
 dispatch (``python analysis/benchmarks/benchmark.py --jobs group`` measures the model-steps per second
@@ -310,7 +310,7 @@ class GroupCheckpoint:
     ``hnn.training.CHECKPOINT_EVERY``). Where the file exists the group resumes from it and ends with the
     floats of an unbroken group (same threads). ``path`` None: no checkpoint. ``names``: the members' run
     folders, kept in the file (``stats["names"]``) so that one no rerun forms again can be found spent
-    (``hnn.group_runs.drop_spent_checkpoints``)."""
+    (``hnn.sweeps.group_runs.drop_spent_checkpoints``)."""
 
     def __init__(self, path, weights: list, optim, rows: tuple, every: float | None = None, names: list | None = None):
         self.path, self.names = (None if path is None else Path(path)), list(names or [])

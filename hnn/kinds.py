@@ -273,7 +273,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
         when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "
              "field call solves an n x n system per state, so it is the costliest kind per step")),
-    "g_sympnet": ModelKind(".models.maps:GSympNet", _width_map, ".map_objective:MapObjective", color="tab:gray",
+    "g_sympnet": ModelKind(".models.maps:GSympNet", _width_map, ".objectives.map:MapObjective", color="tab:gray",
                            doc=KindDoc(
         line="G-SympNet (Jin et al. 2020): a learned symplectic map x_k -> x_{k+1}, one pass a step, no integrator",
         assumes="the data's flow over one step is a symplectic map (a Hamiltonian system without friction), "
@@ -287,7 +287,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
              "`--map_layers` shears a step where RK4 calls a learned field four times (docs/maps.md)")),
     # the scene studies measure one map kind, g_sympnet, whose width their grid varies (an LA-SympNet has none);
     # docs/maps.md (analysis/benchmarks/maps.py) sets the three side by side on the SympNets protocols
-    "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".map_objective:MapObjective", color="silver",
+    "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".objectives.map:MapObjective", color="silver",
                             studied=False, doc=KindDoc(
         line="LA-SympNet (Jin et al. 2020): a symplectic map of linear and activation shears",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step",
@@ -295,7 +295,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="none: `hnn.rollout` steps the map itself at its dt",
         when="few degrees of freedom and few parameters (`--hidden_dim` is not read; `--map_layers` linear "
              "modules of 2 shears each)")),
-    "henon": ModelKind(".models.maps:HenonNet", _width_map, ".map_objective:MapObjective", color="darkgray",
+    "henon": ModelKind(".models.maps:HenonNet", _width_map, ".objectives.map:MapObjective", color="darkgray",
                        studied=False, doc=KindDoc(
         line="HenonNet (Burby et al. 2020): a symplectic map of Henon layers",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step; each layer is four times "
@@ -339,9 +339,9 @@ _check_names(MODEL_KINDS)
 # RunConfig.objective's choices: each name of hnn.names' list the class that fits it ("module:Class",
 # imported on first read, as a kind's ``source``)
 _OBJECTIVE_CLASSES = names.checked({"derivative": ".objectives:DerivativeObjective",
-                                    "trajectory": ".trajectory:TrajectoryObjective",
-                                    "discrete_gradient": ".dgnet:DiscreteGradientObjective",
-                                    "map": ".map_objective:MapObjective"}, names.OBJECTIVES, "hnn.kinds._OBJECTIVE_CLASSES")
+                                    "trajectory": ".objectives.trajectory:TrajectoryObjective",
+                                    "discrete_gradient": ".objectives.dgnet:DiscreteGradientObjective",
+                                    "map": ".objectives.map:MapObjective"}, names.OBJECTIVES, "hnn.kinds._OBJECTIVE_CLASSES")
 
 
 class _Objectives(Mapping):

@@ -11,7 +11,7 @@ a row of ``hnn.kinds``' ``_OBJECTIVE_CLASSES`` (imported on first use); a deriva
 ``hnn.training.DERIVATIVE_LOSSES``; an optimizer a row of ``hnn.training.OPTIMIZERS``; a schedule is a
 branch of ``hnn.training.learning_rate``; a dtype is torch's of that name; a unit mode is a branch of
 ``hnn.units.run_scales``; an LNN solve a branch of ``hnn.models.LagrangianNN.acceleration``; a fit is a
-row of ``hnn.fits.FITS``; a grouping a way ``hnn.sweep`` trains a kind's seeds together. The model
+row of ``hnn.fits.FITS``; a grouping a way ``hnn.sweeps.sweep`` trains a kind's seeds together. The model
 kinds' names, classes and prose are the rows of ``hnn.kinds.MODEL_KINDS``.
 """
 NONLINEARITIES = ("tanh", "relu", "sigmoid", "softplus", "selu", "elu", "swish")
@@ -25,8 +25,8 @@ SCHEDULES = ("constant", "cosine")
 DTYPES = ("float32", "float64")
 UNITS = ("auto", "off", "on")
 LNN_SOLVES = ("solve", "pinv")
-BACKENDS = ("local", "ray")                 # where a sweep trains (hnn.backends)
-GROUP_MODES = ("auto", "all", "off")        # which runs a sweep trains as groups (hnn.sweep.plan_units)
+BACKENDS = ("local", "ray")                 # where a sweep trains (hnn.sweeps.backends)
+GROUP_MODES = ("auto", "all", "off")        # which runs a sweep trains as groups (hnn.sweeps.sweep.plan_units)
 # how a run finds its weights: the training loop, or one least-squares solve (the rows of hnn.fits.FITS)
 FITS = ("adam", "swim", "elm", "library", "sindy")
 # how a sweep trains a kind's seeds as one group (``hnn.kinds.ModelKind.grouping``): the closed-form

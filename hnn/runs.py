@@ -53,7 +53,7 @@ def diverged_record(config) -> Path:
     """Where the run of ``config`` is recorded as failed in training by its own arithmetic (an
     ``hnn.DivergenceError``: a result of its config, which a rerun repeats): ``<save_dir>/.<folder>.diverged.json``
     holding its message. Written where the run fails (``hnn.tasks.run_task``, a sweep's worker) and by the
-    sweep that reads the failure; ``hnn.sweep.reuse(jobs, diverged=True)`` reads it back instead of
+    sweep that reads the failure; ``hnn.sweeps.sweep.reuse(jobs, diverged=True)`` reads it back instead of
     training the run again."""
     directory = run_dir(config)
     return directory.parent / f".{directory.name}.diverged.json"

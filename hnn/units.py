@@ -27,7 +27,7 @@ which no published run's data do, so each trains in its data's units, bit for bi
 wraps the rebuilt model in ``Rescaled`` from them, so ``hnn.load_run`` answers in the user's units. Such
 a run's loss history (metrics.json's ``history``), its ``loss_weights`` and any ``input_noise`` are in
 the canonical units; its final train and test losses are the saved model's, in the user's. It trains
-alone, never in a group (``hnn.group_runs.train_group``).
+alone, never in a group (``hnn.sweeps.group_runs.train_group``).
 
 Supported: fits of dx/dt (``--objective derivative``, with or without ``--use_rk4``, whose dt is
 rescaled too) of every kind that reads [q, p] or [q, qdot]: hnn, baseline, separable, dissipative,

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.group_runs import train_group, unit_key
+from hnn.sweeps.group_runs import train_group, unit_key
 
 SMALL = {"total_steps": 20, "hidden_dim": 16}
 CHAIN = {"n_train": 20, "n_test": 5}
@@ -138,7 +138,7 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
 
 
 def test_a_sweep_groups_every_kind_on_a_gpu_and_the_closed_form_kinds_on_the_cpu():
-    from hnn import sweep
+    from hnn.sweeps import sweep
     Spring = hnn.load_task("spring", "train").Config
 
     def jobs(device, model, width=16):

@@ -37,7 +37,7 @@ PLAIN_STOPS = {"chain2/lagrangian/seed0": 1846, "chain2/lagrangian/seed2": 374, 
                "lnn/lagrangian/seed4": 20612}
 
 
-def _job(key: str, save_dir: Path, solve: str = "pinv") -> hnn.sweep.Job:
+def _job(key: str, save_dir: Path, solve: str = "pinv") -> hnn.sweeps.sweep.Job:
     """The peers' table's job of ``key`` (``chain<N>/lagrangian/seed<S>``), with the ``solve`` of qddot."""
     seed = int(key.rsplit("seed", 1)[1])
     settings = {"kinds": ("lagrangian",), **peer_plan.FULL}

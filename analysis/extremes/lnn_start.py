@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import pages
 from hnn_analysis.provenance import machine
 

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.training_cost import training_cost
 

@@ -29,7 +29,7 @@ import numpy as np
 import hnn
 from hnn.io import write_json
 from hnn_analysis import commands, pages, plan
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
 from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_rungs, scene_tables

@@ -5,10 +5,10 @@ squared error of ``model.step(x_n)`` against x_{n+1}, per component (jpzxshi/sym
 pairs). No derivative and no integrator: a map trained so rolls out at the data's step and no other.
 
     python experiment-pend/train.py --model g_sympnet
-    hnn.train(model, pairs, pairs, loss=hnn.map_objective.MapObjective(dt=0.1).loss_for(model))
+    hnn.train(model, pairs, pairs, loss=hnn.objectives.map.MapObjective(dt=0.1).loss_for(model))
 
 ``prepare`` cuts every pair of consecutive states of each path (``x`` and ``test_x``, path after path,
-``t_eval`` long, as ``hnn.dgnet.pairs_from_paths``) into a row ``[x_n, x_{n+1}]``, or, for a dataset of
+``t_eval`` long, as ``hnn.objectives.dgnet.pairs_from_paths``) into a row ``[x_n, x_{n+1}]``, or, for a dataset of
 timed rows instead of paths (``t``, ``test_t``: the real pendulum), pairs the rows one ``dt`` apart
 (``pairs_from_times``): a gap of several steps pairs nothing. The map's step is the dataset's ``dt``
 (``hnn.specs.ModelSpec.dt``); a map built with another step is refused.
@@ -22,9 +22,9 @@ import torch
 from torch import nn
 
 from .dgnet import pairs_from_paths
-from .interface import declared
-from .objectives import FitOptions, PathObjective, cut_paths
-from .specs import ObjectiveSpec
+from ..interface import declared
+from . import FitOptions, PathObjective, cut_paths
+from ..specs import ObjectiveSpec
 
 # how far two timed rows' spacing may be from dt to count as one step (times written to a few digits)
 STEP_TOLERANCE = 1e-4

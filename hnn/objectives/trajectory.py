@@ -7,8 +7,8 @@ states are compared with the observed ones (mean absolute error, as Finzi et al.
 squared error):
 
     python experiment-spring/train.py --objective trajectory --snippet_steps 4   # any task with paths
-    loss = hnn.trajectory.snippet_loss(model, snippets, dt)      # snippets (batch, points, 2n)
-    hnn.train(model, flat, flat, loss=hnn.trajectory.TrajectoryObjective().loss_for(model, dt))
+    loss = hnn.objectives.trajectory.snippet_loss(model, snippets, dt)      # snippets (batch, points, 2n)
+    hnn.train(model, flat, flat, loss=hnn.objectives.trajectory.TrajectoryObjective().loss_for(model, dt))
 
 A run with ``objective='trajectory'`` (``hnn.RunConfig``) cuts its task's paths (``x`` and
 ``test_x``, path after path, ``t_eval`` long) into non-overlapping snippets of
@@ -27,10 +27,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from .integrators.integrate import rollout
-from .interface import declared
-from .objectives import PathObjective, cut_paths
-from .integrators.solvers import SOLVERS, get_solver
+from ..integrators.integrate import rollout
+from ..interface import declared
+from . import PathObjective, cut_paths
+from ..integrators.solvers import SOLVERS, get_solver
 
 SNIPPET_LOSSES = ("mae", "l2")
 

@@ -10,7 +10,7 @@ and the model so trained rolls out with that solver to the same discrete-time dy
 The loss is the squared error, averaged over components (DGNet's ``L2_loss``).
 
     python experiment-spring/train.py --objective discrete_gradient
-    hnn.run_experiment(config, dataset, hnn.dgnet.DiscreteGradientObjective())
+    hnn.run_experiment(config, dataset, hnn.objectives.dgnet.DiscreteGradientObjective())
 
 A dataset gives its paths as ``x`` and ``test_x`` (trajectory after trajectory, ``len(t_eval)``
 states each) with their spacing ``dt``: ``prepare`` cuts every pair of consecutive states of a path
@@ -23,9 +23,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from .integrators.discrete_gradient import energy_parts, structured
-from .interface import EnergyField, declared
-from .objectives import PathObjective, cut_paths
+from ..integrators.discrete_gradient import energy_parts, structured
+from ..interface import EnergyField, declared
+from . import PathObjective, cut_paths
 
 
 def pairs_from_paths(rows, path_points: int) -> np.ndarray:

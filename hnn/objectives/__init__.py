@@ -4,9 +4,14 @@
     hnn.run_experiment(config, dataset, hnn.objectives.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
 An objective gives ``hnn.train`` its options for a model and a dataset (``FitOptions``, a frozen
-record: objectives keep no state of a run), and measures the final train and test numbers with them. Which objective trains which model kind is declared by the kinds'
-registry (``hnn.MODEL_KINDS``, ``hnn/kinds.py``); a new kind of objective is an ``Objective``
-subclass named for it and its name in ``hnn.names.OBJECTIVES`` (``hnn.OBJECTIVES`` finds the class).
+record: objectives keep no state of a run), and measures the final train and test numbers with them.
+Which objective trains which model kind is declared by the kinds' registry (``hnn.MODEL_KINDS``,
+``hnn/kinds.py``); a new kind of objective is an ``Objective`` subclass, its name in
+``hnn.names.OBJECTIVES`` and its row in ``hnn.kinds``' ``_OBJECTIVE_CLASSES``.
+
+The family is this folder: the interface, the paper's derivative fit and the pixel task's here; the
+trajectory objective (``trajectory``), DGNet's discrete-gradient pairs (``dgnet``) and a learned map's
+step (``map``) beside it, each loaded on first use (``hnn.objectives.trajectory``).
 
 A dataset says in which coordinates its states are (``dataset["state"]``, a key of
 ``hnn.interface.COORDINATES``; ``'canonical'`` if absent) and each model declares what it reads
@@ -21,12 +26,12 @@ from typing import Callable, ClassVar
 import torch
 from torch import nn
 
-from .balance import balance_weights
-from .integrators.fixed_step import rk4_step
-from .interface import declared, observed_coordinates
-from .metrics import derivative_mse, mean_and_se
-from .specs import ObjectiveSpec
-from .training import batch_loss
+from ..balance import balance_weights
+from ..integrators.fixed_step import rk4_step
+from ..interface import declared, observed_coordinates
+from ..metrics import derivative_mse, mean_and_se
+from ..specs import ObjectiveSpec
+from ..training import batch_loss
 
 
 @dataclass(frozen=True)
@@ -202,3 +207,14 @@ class PixelObjective(Objective):
             return pixel_loss(model, x, x_next, input_noise=spec.input_noise, use_rk4=spec.use_rk4, generator=noise)
         # a resumed run draws on where it stopped; the final numbers: the loss without noise
         return FitOptions(loss=loss, generators=(noise,), row_loss=lambda x, x_next: pixel_loss(model, x, x_next))
+
+
+_MODULES = ("dgnet", "map", "trajectory")
+
+
+def __getattr__(name: str):
+    """The family's other modules, loaded on first use (each imports this one)."""
+    if name in _MODULES:
+        import importlib
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

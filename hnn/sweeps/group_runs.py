@@ -2,7 +2,7 @@
 (``hnn.grouped.fit_group`` for the paper's tanh-MLP kinds, ``hnn.stacked.fit_stacked`` for every
 other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` saves a lone run.
 
-    folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
+    folders = hnn.sweeps.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
 
 ``run_group_task`` is the same for a sweep's worker process or Ray task (plain data in and out).
 """
@@ -15,18 +15,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import cli
-from .balance import balance_weights
-from .errors import DivergenceError
-from .grouped import fit_group, group_key
-from .stacked import fit_stacked, stack_key
-from .units import run_scales
-from .io import check_save_dir
-from .kinds import model_from_spec
-from .objectives import DerivativeObjective
-from .runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
-from .specs import RunSpecs, run_specs
-from .tasks import task_config
+from .. import cli
+from ..balance import balance_weights
+from ..errors import DivergenceError
+from ..grouped import fit_group, group_key
+from ..stacked import fit_stacked, stack_key
+from ..units import run_scales
+from ..io import check_save_dir
+from ..kinds import model_from_spec
+from ..objectives import DerivativeObjective
+from ..runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
+from ..specs import RunSpecs, run_specs
+from ..tasks import task_config
 
 
 def unit_key(config) -> tuple | None:
@@ -78,7 +78,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     kill; it is deleted once the runs are saved, when the group fails, or with a config's ``force``."""
     keys = {unit_key(config) for config in configs}
     if None in keys or len(keys) != 1:
-        raise ValueError("train_group needs configs of one group (equal hnn.group_runs.unit_key, none None); "
+        raise ValueError("train_group needs configs of one group (equal hnn.sweeps.group_runs.unit_key, none None); "
                          "train the others alone with hnn.run_experiment")
     for config in configs:
         cli.check(config)
