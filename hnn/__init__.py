@@ -11,7 +11,8 @@ the training loop, the paper's metrics, and saved runs.
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
 at once: the light modules (``_LIGHT``: ``cli``, ``command``, ``config``, ``tasks``, ``io``, ...) and
-``RunConfig`` load on use, and the first use of any other name loads the whole package.
+``RunConfig`` and ``TaskSpec`` (``_LIGHT_NAMES``: a task's ``task.py`` reads it) load on use, and the first
+use of any other name loads the whole package.
 
 The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every import against it):
 a module imports its own layer and those below, never one above, and the two middle rooms know
@@ -39,6 +40,7 @@ from typing import TYPE_CHECKING
 
 _LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "modes", "progress", "tasks", "orbits",
           "sweeps")
+_LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its light module
 
 # layer -> its modules and folders (every module in a folder has the folder's layer); a module may import
 # from its own layer and the ones before it, except that the two rooms of one level, "integrators" and
@@ -108,11 +110,11 @@ def _load_all() -> None:
 
 
 def __getattr__(name: str):
-    """A light module or ``RunConfig`` alone; any other name loads the whole package first."""
+    """A light module or a light name alone; any other name loads the whole package first."""
     if name in _LIGHT:
         return importlib.import_module(f"{__name__}.{name}")
-    if name == "RunConfig":
-        return importlib.import_module(f"{__name__}.config").RunConfig
+    if name in _LIGHT_NAMES:
+        return getattr(importlib.import_module(f"{__name__}.{_LIGHT_NAMES[name]}"), name)
     if name.startswith("__"):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     _load_all()
