@@ -301,7 +301,7 @@ def test_the_fit_tables_say_how_many_seeds_diverged_and_keep_finite_means():
                                     "hnn+library": seeds(1e-9, 3e-9), "baseline+sindy": seeds(1e-8, math.inf)}}}
     assert task_fits.across(results["tasks"]["spring"]["hnn"], "energy_mse_corrected") == pytest.approx((2e-3, 1e-3))
     rows = {line.split(" | ")[1]: line for line in task_fits.accuracy_table(results)[2:]}
-    assert "diverged (1 seed)" in rows["baseline+sindy"] and "| no |" in rows["baseline+sindy"]
+    assert "rollout failed (1 seed)" in rows["baseline+sindy"] and "| no |" in rows["baseline+sindy"]
     assert "| yes |" in rows["hnn+library"]
     library = task_fits.library_table(results)[2]
-    assert "| 2e-09 ± 1e-09 | diverged (1 seed) |" in library and "| yes |" in library
+    assert "| 2e-09 ± 1e-09 | rollout failed (1 seed) |" in library and "| yes |" in library

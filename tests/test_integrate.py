@@ -224,3 +224,20 @@ def test_a_model_s_bound_field_rolls_out_as_the_model():
     b = hnn.rollout(model.time_derivative, x0, t, method="leapfrog", dt=0.1, stats=by_field)
     torch.testing.assert_close(a, b, rtol=0, atol=0)
     assert by_field == by_model
+
+
+def test_solve_ivp_stops_past_max_calls_on_a_stiff_field_and_a_protocol_gives_its_rollouts_a_budget(monkeypatch):
+    """A field stiff along its path makes scipy's RK45 shrink its step without end (here dx/dt = -1e5 x: about
+    3e4 calls over t in [0, 1]); ``max_calls`` stops it with a DivergenceError naming the budget, and an energy
+    protocol's solve_ivp rollouts get ``MAX_FIELD_CALLS`` (a model that fails it scores no energy, and why)."""
+    x0, t = torch.ones(1, 2, dtype=torch.float64), np.linspace(0, 1, 5)
+    with pytest.raises(hnn.DivergenceError, match="over 1000 calls of the field"):
+        hnn.rollout(lambda x: -1e5 * x, x0, t, method="solve_ivp", max_calls=1000)
+    stats = {}
+    hnn.rollout(lambda x: -1e5 * x, x0, t, method="solve_ivp", stats=stats)
+    assert stats["nfev"] > 1000
+    protocol = hnn.tasks.get_protocol("spring", "paper")
+    assert protocol.method == "solve_ivp"
+    monkeypatch.setattr(hnn.evaluation, "MAX_FIELD_CALLS", 1000)
+    with pytest.raises(hnn.DivergenceError, match="over 1000 calls"):
+        hnn.evaluation._protocol_rollout(lambda x: -1e5 * x, x0, t, protocol)

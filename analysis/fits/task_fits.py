@@ -137,7 +137,7 @@ def energy_key(per_seed: dict) -> str:
 
 def across(per_seed: dict, key: str) -> tuple[float, float] | None:
     """(mean, standard error) over seeds of ``key`` (a ``[mean, se]`` pair's mean, or a number); a mean of
-    inf where any seed's model diverged (``diverged``: how many)."""
+    inf where any seed's rollout blew up or stalled (the second number: how many)."""
     values = [(v[key][0] if isinstance(v[key], list) else v[key]) for v in per_seed.values() if v.get(key) is not None]
     if not values:
         return None
@@ -153,8 +153,8 @@ def seconds(per_seed: dict) -> float:
 def _g(pair) -> str:
     if pair is None:
         return "n/a"
-    if not math.isfinite(pair[0]):      # (inf, how many seeds diverged)
-        return f"diverged ({pair[1]:.0f} seed{'s' if pair[1] != 1 else ''})"
+    if not math.isfinite(pair[0]):      # (inf, how many seeds' rollouts blew up or stalled)
+        return f"rollout failed ({pair[1]:.0f} seed{'s' if pair[1] != 1 else ''})"
     return f"{pair[0]:.3g}" + (f" ± {pair[1]:.2g}" if pair[1] else "")
 
 

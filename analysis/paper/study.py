@@ -61,7 +61,7 @@ def evaluate_seeds(task: str, runs: list[dict], fig_dir: Path | None, num_trials
             for kind in trained.models:
                 if result[kind]["mse"] is not None:
                     row[kind][f"energy_mse_{name}"] = [result[kind]["mse"], result[kind]["mse_se"]]
-                elif "diverged" in result[kind]["why"]:     # a model that blew up: inf, and why
+                elif "rollout failed" in result[kind]["why"]:     # a model that blew up or stalled: inf, and why
                     row[kind][f"energy_mse_{name}"] = [math.inf, 0.0]
                     row[kind]["diverged"] = result[kind]["why"]
                 # else a protocol that does not apply (a learned map's): no number

@@ -38,8 +38,10 @@ def default_tolerances(dtype: torch.dtype) -> tuple[float, float]:
 
 def scipy_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL, atol: float = ATOL,
                   scipy_method: str = DEFAULT_SCIPY_METHOD, max_norm: float | None = 1e6,
-                  stats: dict | None = None) -> torch.Tensor:
-    """scipy's adaptive solver on the flattened batch: one call, one batched ``f`` per stage."""
+                  stats: dict | None = None, max_calls: int | None = None) -> torch.Tensor:
+    """scipy's adaptive solver on the flattened batch: one call, one batched ``f`` per stage. ``max_calls``:
+    a ``DivergenceError`` past that many calls of ``f`` (a field stiff along the path shrinks the step
+    without end: scipy has no bound of its own); None: no bound."""
     batch, dim = x0.shape
     dtype, device = x0.dtype, x0.device
     nfev = 0
@@ -47,6 +49,11 @@ def scipy_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL,
     def fun(time, y):
         nonlocal nfev
         nfev += 1
+        if max_calls is not None and nfev > max_calls:
+            raise DivergenceError(f"solve_ivp ({scipy_method}, rtol={rtol}): over {max_calls} calls of the field by "
+                                  f"t={float(time):.4g} of [{t[0]:g}, {t[-1]:g}]: it is stiff along this path, so the "
+                                  "step fell without end; loosen rtol, or check that the starts lie where the "
+                                  "model was trained")
         if max_norm is not None and not np.abs(y).max() <= max_norm:
             rows = np.nonzero(~(np.abs(y.reshape(batch, dim)) <= max_norm).all(axis=1))[0].tolist()
             raise divergence_error(f"solve_ivp: states beyond max_norm={max_norm:g}", rows,
