@@ -13,7 +13,7 @@ Rooms by purpose, each importing only the others' public names:
 - ``fits``: the least-squares fits measured: the Sampling-HNNs protocols and the fits beside Adam and
   SINDy on the paper's tasks and the chains (``sampling_hnns``, ``fit_tasks``).
 - ``provenance`` (commit, versions, machine for every JSON written) and ``pages`` (the generated
-  blocks of README.md and docs/, and the seeds behind their verdicts; ``readme`` is its command). Training many runs is the library's ``hnn.sweep``.
+  blocks of README.md and docs/, and the seeds behind their verdicts; ``readme`` is its command). Training many runs is the library's ``hnn.sweeps.sweep``.
 
 ``reproduce.py`` and ``scene_study.py`` at this level are the README's entry points
 (``python analysis/reproduce.py --quick``); every command also runs by its own path. The name

@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn.io import write_json
 from hnn_analysis import pages
 from hnn_analysis.commands import portable_command

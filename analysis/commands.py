@@ -114,7 +114,7 @@ def run_tasks(tasks: list[tuple], jobs: int, describe) -> list:
     torch thread (spawned: no torch state copied by fork), as a measurement's independent parts; the results in
     the order given. ``describe(task)`` names a task as it ends, after the progress count."""
     results = [None] * len(tasks)
-    progress = hnn.sweep.Progress(len(tasks))
+    progress = hnn.sweeps.sweep.Progress(len(tasks))
     if jobs <= 1:
         for i, task in enumerate(tasks):
             results[i] = _call(task)

@@ -8,7 +8,7 @@ A run's training estimate is its steps at the rate of that config alone on one t
 (``training_cost``, once a config, seeds aside) and what a run costs beside its steps (``overhead``: a
 one-step run of its task, timed once), set as the job's ``expected_seconds``, so the
 sweep also starts the longest first and says its time left at the rate the estimates run at
-(``hnn.sweep.train_jobs``). The runs are shared over ``--jobs`` workers longest first (``schedule``). A stage
+(``hnn.sweeps.sweep.train_jobs``). The runs are shared over ``--jobs`` workers longest first (``schedule``). A stage
 whose cost is not known before it runs (a model's measurement) is counted and timed from its first units
 (``Ahead``): its lines say the time left as it goes. The estimates are for a quiet box: the plan says the load
 it saw, since two torch processes of two threads each ran up to 30x slower than one (docs/speed.md#threads).
@@ -42,7 +42,7 @@ BURSTS, BURST_SECONDS = 1, 0.05
 
 
 def timed(jobs: list, cost=None, overhead_of=None) -> list:
-    """``jobs`` (``hnn.sweep.Job``), each with its ``expected_seconds`` measured: ``cost(task, args)["seconds"]``
+    """``jobs`` (``hnn.sweeps.sweep.Job``), each with its ``expected_seconds`` measured: ``cost(task, args)["seconds"]``
     (default one short burst of ``training_cost``), once per config whatever its seed, plus ``overhead_of(job)``
     (default ``overhead``), once per task; a job that has one keeps it."""
     overhead_of = overhead_of or overhead

@@ -71,3 +71,4 @@ def others_load(start: dict, end: dict) -> float:
         return os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
     wall = max(end["wall"] - start["wall"], 1e-9)
     return max(0.0, (end["machine_busy"] - start["machine_busy"] - (end["own"] - start["own"])) / wall)
+

@@ -62,5 +62,5 @@ def _fit_cost(config, prep) -> dict:
         while len(seconds) < BURSTS and sum(seconds) < 1.0:
             model = hnn.kinds.model_from_spec(prep.specs.model, config.device)
             seconds.append(hnn.fits.solve(model, prep.x, prep.y, **prep.specs.fit.solve_kwargs(), progress=False,
-                                          loss_weights=prep.options.get("loss_weights"))["seconds"])
+                                          loss_weights=prep.options.loss_weights)["seconds"])
     return {"steps_per_s": None, "steps": 1, "seconds": min(seconds)}

@@ -55,7 +55,7 @@ def check(quick: bool = False) -> list[dict]:
     rows, seen, data = [], set(), {}
     for label, config, pinned in _sources(quick):
         objective = config.make_objective()
-        if config.kind.startswith("pixel-"):
+        if hnn.MODEL_KINDS[config.kind].family == "pixel":
             rows.append({"label": label, "sizes": None, "auto": "as given (pixels: no q and p)"})
             continue
         # what the run's model reads: its q as angles or not (auto then judges without q)

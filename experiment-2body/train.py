@@ -17,7 +17,7 @@ HERE = Path(__file__).resolve().parent
 
 
 @dataclass
-class Config(hnn.orbit_config.OrbitConfig):
+class Config(hnn.orbits.config.OrbitConfig):
     """Task 4: two bodies under Newtonian gravity (G = 1, unit masses)."""
     name: str = "2body"
     input_dim: int = 8

@@ -1,7 +1,7 @@
 """Task 4b, three bodies under Newtonian gravity (G = 1, unit masses, no softening).
 
 States are x = [qx_1..qx_3, qy_1..qy_3, px_1..px_3, py_1..py_3], shape (batch, 12); the
-physics (H, dynamics, momenta) is ``hnn.nbody``'s, for any number of bodies. This file holds
+physics (H, dynamics, momenta) is ``hnn.orbits.nbody``'s, for any number of bodies. This file holds
 the system's constants, its sampler of start states and thin wrappers.
 
 Start states (the original's ``random_config``): an equilateral triangle, body 1 at a
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hnn import nbody
-from hnn.nbody import (angular_momentum, dynamics, hamiltonian, kinetic_energy, min_separation,  # noqa: F401
+from hnn.orbits import nbody
+from hnn.orbits.nbody import (angular_momentum, dynamics, hamiltonian, kinetic_energy, min_separation,  # noqa: F401
                        potential_energy, total_momentum)
 
 HERE = Path(__file__).resolve().parent

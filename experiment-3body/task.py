@@ -4,8 +4,8 @@ import hnn
 # the paper's orbit datasets keep every orbit (--min_separation 0, the tasks' default); this row
 # shows what redrawing the close encounters changes (3-body only: no 2-body orbit comes that
 # close, so its cleaned dataset is the same rows)
-CLEAN_ORBITS = {"clean": ({"min_separation": hnn.nbody.MIN_SEPARATION},
-                          f"the cleaned dataset (--min_separation {hnn.nbody.MIN_SEPARATION:g}): orbits whose bodies "
+CLEAN_ORBITS = {"clean": ({"min_separation": hnn.orbits.nbody.MIN_SEPARATION},
+                          f"the cleaned dataset (--min_separation {hnn.orbits.nbody.MIN_SEPARATION:g}): orbits whose bodies "
                           "come closer than that are redrawn, since near-collisions give huge, badly integrated "
                           "dx/dt that dominate the squared loss (about 3% of the 3-body orbits); not the "
                           "paper's setting")}

@@ -16,7 +16,7 @@ HERE = Path(__file__).resolve().parent
 
 
 @dataclass
-class Config(hnn.orbit_config.OrbitConfig):
+class Config(hnn.orbits.config.OrbitConfig):
     """Task 4b: three bodies under Newtonian gravity (G = 1, unit masses)."""
     name: str = "3body"
     input_dim: int = 12

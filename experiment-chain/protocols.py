@@ -92,7 +92,7 @@ def chnn_test_starts(chain, count: int = CHNN["n_test"], seed: int = CHNN["seeds
     generator = torch.Generator().manual_seed(seed)
     z0 = data.sample_chnn_starts(chain, count, generator)
     paths = data.trajectories(chain, z0, CHNN["dt"] * np.arange(CHNN["points"]))
-    return hnn.trajectory.sample_snippets(paths, CHNN["snippet_points"], generator)[:, 0]
+    return hnn.objectives.trajectory.sample_snippets(paths, CHNN["snippet_points"], generator)[:, 0]
 
 
 def perturbed(chain, z0: torch.Tensor, eps: float, generator: torch.Generator) -> torch.Tensor:

@@ -11,40 +11,50 @@ the training loop, the paper's metrics, and saved runs.
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
 at once: the light modules (``_LIGHT``: ``cli``, ``command``, ``config``, ``tasks``, ``io``, ...) and
-``RunConfig`` load on use, and the first use of any other name loads the whole package.
+``RunConfig`` and ``TaskSpec`` (``_LIGHT_NAMES``: a task's ``task.py`` reads it) load on use, and the first
+use of any other name loads the whole package.
 
 The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every import against it):
 a module imports its own layer and those below, never one above, and the two middle rooms know
 nothing of each other.
 
 - base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics, the
-  dataset cache, the GIF writer, the orbits' close-encounter thresholds, a block's torch thread count, progress lines;
+  dataset cache, the GIF writer, a block's torch thread count, progress lines;
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
-- training: objectives, the kinds registry, the loop, grouped training, evaluation, datasets, the
-  gravity of n bodies (``nbody``, the orbit tasks' shared system), and the least-squares fits beside the
-  loop (``hnn.fits``, a folder: ``hnn.fit_least_squares``);
+- training: the objectives (``hnn.objectives``, a folder: the derivative fit, trajectory snippets,
+  DGNet's pairs, a map's step), the kinds registry, the loop, grouped training, evaluation, datasets,
+  and the least-squares fits beside the loop (``hnn.fits``, a folder: ``hnn.fit_least_squares``);
 - runs: config, cli, a ``train.py``'s command, run folders, task discovery;
-- sweeps: many runs at once: the sweep, where it trains (``backends``) and its flags, group runs, stopping.
+- orbits: the orbit tasks' physics and config (``hnn.orbits``, a folder: the gravity of n bodies, the
+  close-encounter thresholds, the 2- and 3-body tasks' ``OrbitConfig``);
+- sweeps: many runs at once (``hnn.sweeps``, a folder: the sweep, where it trains, its flags, group
+  runs, stopping). A library reader can skip it and ``orbits``.
+
+A folder loads its modules on first use (``hnn.sweeps.sweep``), so its light ones (``hnn.sweeps.flags``,
+``hnn.orbits.config``) answer ``--help`` without torch.
 """
 import importlib
+import pkgutil
 from typing import TYPE_CHECKING
 
-_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "orbit_config", "modes", "progress",
-          "tasks", "sweep_flags")
+_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "modes", "progress", "tasks", "orbits",
+          "sweeps")
+_LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its light module
 
-# layer -> its modules; a module may import from its own layer and the ones before it, except that
-# the two rooms of one level, "integrators" and "models" (each a folder: every module in it has
-# the folder's layer), may not import each other
+# layer -> its modules and folders (every module in a folder has the folder's layer); a module may import
+# from its own layer and the ones before it, except that the two rooms of one level, "integrators" and
+# "models", may not import each other
 _LAYERS = {
     "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache", "gifs",
-             "encounters", "threads", "progress"),
+             "threads", "progress"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("balance", "objectives", "units", "trajectory", "dgnet", "map_objective", "training", "grouped",
-                 "stacked", "kinds", "evaluation", "datasets", "nbody", "fits"),
-    "runs": ("config", "cli", "command", "runs", "tasks", "orbit_config"),
-    "sweeps": ("stopping", "group_runs", "backends", "sweep", "sweep_flags"),
+    "training": ("balance", "units", "training", "objectives", "grouped", "stacked", "kinds", "evaluation",
+                 "datasets", "fits"),
+    "runs": ("config", "cli", "command", "runs", "tasks"),
+    "orbits": ("orbits",),
+    "sweeps": ("sweeps",),
 }
 
 # the public face: module -> the names it gives ``hnn``, in the order they load (everything else is
@@ -56,14 +66,14 @@ _PUBLIC = {
     "models": ("HNN", "MLP", "PixelHNN", "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "ConstrainedHNN",
                "build_model"),
     "metrics": ("derivative_mse", "energy_mse"),
-    "objectives": ("DerivativeObjective", "Objective"),
+    "objectives": ("DerivativeObjective", "FitOptions", "Objective"),
     "kinds": ("MODEL_KINDS", "OBJECTIVES"),
     "training": ("train",),
     "fits": ("FITS", "fit_least_squares"),
     "evaluation": ("EnergyProtocol", "evaluate_energy"),
     "config": ("RunConfig",),
     "runs": ("Prepared", "load_run", "prepare", "run_experiment"),
-    "tasks": ("PROTOCOLS", "TaskSpec", "available_tasks", "load_task", "task_spec"),
+    "tasks": ("PROTOCOLS", "TaskData", "TaskSpec", "available_tasks", "load_task", "task_spec"),
 }
 _ROOMS = ("integrators", "models")
 
@@ -75,34 +85,36 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .models import (HNN, MLP, PixelHNN, SeparableHNN, DissipativeHNN, MechanicalHNN,  # noqa: F401
                          ConstrainedHNN, build_model)
     from .metrics import derivative_mse, energy_mse  # noqa: F401
-    from .objectives import DerivativeObjective, Objective  # noqa: F401
+    from .objectives import DerivativeObjective, FitOptions, Objective  # noqa: F401
     from .kinds import MODEL_KINDS, OBJECTIVES  # noqa: F401
     from .training import train  # noqa: F401
     from .fits import FITS, fit_least_squares  # noqa: F401
     from .evaluation import EnergyProtocol, evaluate_energy  # noqa: F401
     from .config import RunConfig  # noqa: F401
     from .runs import Prepared, load_run, prepare, run_experiment  # noqa: F401
-    from .tasks import PROTOCOLS, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
+    from .tasks import PROTOCOLS, TaskData, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
     from . import integrators, models  # noqa: F401
 
 
 def _load_all() -> None:
-    """Import every module of every layer and bind the public names (this is where torch and scipy
-    load; every built-in model kind is registered after it, and ``hnn.<module>`` is bound for each)."""
+    """Import every module of every layer, a folder's too, and bind the public names (this is where torch
+    and scipy load; every built-in model kind is registered after it, and ``hnn.<module>`` is bound for each)."""
     for modules in _LAYERS.values():
         for module in modules:
-            importlib.import_module(f"{__name__}.{module}")
+            loaded = importlib.import_module(f"{__name__}.{module}")
+            for inner in pkgutil.iter_modules(getattr(loaded, "__path__", ())):
+                importlib.import_module(f"{loaded.__name__}.{inner.name}")
     for module, names in _PUBLIC.items():
         loaded = importlib.import_module(f"{__name__}.{module}")
         globals().update({name: getattr(loaded, name) for name in names})
 
 
 def __getattr__(name: str):
-    """A light module or ``RunConfig`` alone; any other name loads the whole package first."""
+    """A light module or a light name alone; any other name loads the whole package first."""
     if name in _LIGHT:
         return importlib.import_module(f"{__name__}.{name}")
-    if name == "RunConfig":
-        return importlib.import_module(f"{__name__}.config").RunConfig
+    if name in _LIGHT_NAMES:
+        return getattr(importlib.import_module(f"{__name__}.{_LIGHT_NAMES[name]}"), name)
     if name.startswith("__"):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     _load_all()

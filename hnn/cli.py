@@ -191,9 +191,9 @@ def registered_kinds() -> list[str]:
 
 def model_choices(cls=None) -> list[str]:
     """The model kinds ``--model`` of config class ``cls`` takes: its ``MODELS``, else every
-    registered kind without a family prefix (the pixel kinds are the pixel task's own)."""
+    registered kind of no family (``ModelKind.family``: the pixel kinds are the pixel task's own)."""
     declared = getattr(cls, "MODELS", None)
-    return list(declared) if declared else [kind for kind in registered_kinds() if "-" not in kind]
+    return list(declared) if declared else [kind for kind in registered_kinds() if MODEL_KINDS[kind].family is None]
 
 
 def _flag_type(cls, f: dataclasses.Field, meta: dict):

@@ -2,7 +2,7 @@
 model axis, every product of a step one batched product over the models.
 
     stats, failures = hnn.grouped.fit_group(models, data, tests, seeds=[0, 1, 2, 3], total_steps=2000, ...)
-    folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
+    folders = hnn.sweeps.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])   # saved runs
 
 A small HNN's step is mostly dispatch, not arithmetic; G of them as one batched step share one
 dispatch (``python analysis/benchmarks/benchmark.py --jobs group`` measures the model-steps per second
@@ -33,6 +33,7 @@ from pathlib import Path
 import torch
 
 from .errors import DivergenceError
+from .kinds import get_kind
 from .models.hamiltonian import FIELD_ROWS, HNN
 from .models.mlp import MLP
 from .objectives import DerivativeObjective
@@ -42,7 +43,6 @@ from .models.tanh_mlp import closed_form_input_gradient, fast_tanh
 from .training import (CHECKPOINT_EVERY, adam_optimizer, check_data, flushed_denormals, is_test_step, load_checkpoint,
                        save_checkpoint, training_steps)
 
-GROUPABLE_KINDS = ("hnn", "baseline", "dissipative", "separable")
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
 # them the dataset may differ)
 _SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
@@ -63,7 +63,7 @@ def group_key(config) -> tuple | None:
     (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
     optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
     Adam on the squared error, or ``balance='rms'``)."""
-    if (config.kind not in GROUPABLE_KINDS or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
+    if (get_kind(config.kind).grouping != "closed_form" or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
             or (config.optimizer, config.schedule, config.clip_grad, config.derivative_loss)
             != ("adam", "constant", 0.0, "l2")
             or type(config.make_objective()) is not DerivativeObjective):
@@ -310,7 +310,7 @@ class GroupCheckpoint:
     ``hnn.training.CHECKPOINT_EVERY``). Where the file exists the group resumes from it and ends with the
     floats of an unbroken group (same threads). ``path`` None: no checkpoint. ``names``: the members' run
     folders, kept in the file (``stats["names"]``) so that one no rerun forms again can be found spent
-    (``hnn.group_runs.drop_spent_checkpoints``)."""
+    (``hnn.sweeps.group_runs.drop_spent_checkpoints``)."""
 
     def __init__(self, path, weights: list, optim, rows: tuple, every: float | None = None, names: list | None = None):
         self.path, self.names = (None if path is None else Path(path)), list(names or [])
@@ -370,5 +370,5 @@ def drop_failed(weights, optim, alive, finite, failures, names, step, interleave
                         value[mine] = 0
 
 
-__all__ = ["GROUPABLE_KINDS", "GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
+__all__ = ["GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
            "group_stats"]

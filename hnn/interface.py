@@ -237,6 +237,11 @@ class Model(nn.Module):
         raise NotImplementedError(f"{type(self).__name__} declares maps={self.maps} but no observed_time_derivative")
 
 
+def observed_coordinates(dataset: dict) -> str:
+    """The coordinates of ``dataset``'s states (``dataset["state"]``, a key of ``COORDINATES``; default ``'canonical'``)."""
+    return dataset.get("state", "canonical")
+
+
 def declared(model) -> Model:
     """``model`` itself if it is an ``hnn.Model`` (whose declarations a consumer reads), else a
     TypeError naming the fix."""

@@ -72,15 +72,25 @@ class ModelKind:
     ``objective``, the class (or ``"module:Class"``) that trains it by default; its plot ``color``;
     ``studied``: whether the studies (scene, measured, peers) train it by default (False for a kind
     whose rollouts are not yet affordable there); ``doc``, its prose for readers (``--help``, the
-    README, docs/python.md). Only ``model``, ``build`` and ``make_objective`` import anything."""
+    README, docs/python.md); ``family``: None for a kind any task's ``--model`` may take, or the family
+    whose tasks alone take it (``'pixel'``: its name is ``pixel-<model>``, and the pixel task's
+    ``KIND_PREFIX`` adds it); ``grouping``: how a sweep trains its seeds as one program
+    (``hnn.names.GROUPINGS``: ``'closed_form'``, the hand-written gradients of ``hnn.grouped``;
+    ``'vmap'``, any kind under ``torch.vmap`` over stacked weights, ``hnn.stacked``, whose contract
+    ``hnn.Model`` states; ``'alone'``, one at a time). Only ``model``, ``build`` and ``make_objective``
+    import anything."""
     source: type | str
     builder: Callable[[type, ModelSpec], Any] | None = None
     objective: type | str = ".objectives:DerivativeObjective"
     color: str = "tab:gray"
     studied: bool = True
     doc: KindDoc | None = None
+    family: str | None = None
+    grouping: str = "vmap"
 
     def __post_init__(self):
+        if self.grouping not in names.GROUPINGS:
+            raise ValueError(f"ModelKind.grouping={self.grouping!r}: choose one of {', '.join(names.GROUPINGS)}")
         for ref in (self.source, self.objective):
             if isinstance(ref, str):
                 _check_ref(ref)
@@ -179,7 +189,7 @@ _PIXEL_OBJECTIVE = ".objectives:PixelObjective"
 
 # the one place a kind is named and described; a run's config says which (RunConfig.kind), its args.json too
 MODEL_KINDS: dict[str, ModelKind] = {
-    "hnn": ModelKind(".models.hamiltonian:HNN", _hnn, color="tab:blue", doc=KindDoc(
+    "hnn": ModelKind(".models.hamiltonian:HNN", _hnn, color="tab:blue", grouping="closed_form", doc=KindDoc(
         line="the paper's HNN: one MLP learns H(q, p), and dx/dt is its symplectic gradient",
         assumes="a conserved energy H(q, p) and nothing about its form",
         coordinates="canonical x = [q, p]. On measured [q, qdot] it takes qdot as p, which is right when "
@@ -188,14 +198,15 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="`midpoint` for long rollouts (symplectic for any H: the learned energy stays bounded); "
                    "`dop853`, `dopri5` or `rk4` for short accurate paths",
         when="a closed system without friction, in canonical coordinates; the paper's tasks")),
-    "baseline": ModelKind(".models.hamiltonian:Baseline", _baseline, color="tab:red", doc=KindDoc(
+    "baseline": ModelKind(".models.hamiltonian:Baseline", _baseline, color="tab:red", grouping="closed_form",
+                          doc=KindDoc(
         line="an MLP that predicts dx/dt directly (the paper's baseline; also `--baseline`)",
         assumes="nothing: any smooth field x -> dx/dt",
         coordinates="any state; it reads no structure into the columns",
         integrator="`rk4`, `dopri5` or `dop853` (it has no structure to keep)",
         when="a reference to measure a structured kind against, or a system with forcing where no energy "
              "exists; its energy drifts on long rollouts")),
-    "separable": ModelKind(".models.structured:SeparableHNN", color="tab:green", doc=KindDoc(
+    "separable": ModelKind(".models.structured:SeparableHNN", color="tab:green", grouping="closed_form", doc=KindDoc(
         line="H = T(p) + V(q), two MLPs; explicit leapfrog is exactly symplectic for it",
         assumes="a conserved energy whose kinetic part does not depend on q (particles of constant mass "
                 "in Cartesian coordinates)",
@@ -203,7 +214,8 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="`leapfrog` or `yoshida4`: explicit, symplectic for the learned H, one dT/dp and one dV/dq "
                    "a step",
         when="long rollouts of particle systems (springs, orbits); not for systems whose mass depends on q")),
-    "dissipative": ModelKind(".models.structured:DissipativeHNN", color="tab:purple", doc=KindDoc(
+    "dissipative": ModelKind(".models.structured:DissipativeHNN", color="tab:purple", grouping="closed_form",
+                             doc=KindDoc(
         line="dx/dt = J grad H + grad D (the D-HNN): a conserved H and a dissipative potential D learned together",
         assumes="energy lost (or gained) along a gradient field; J grad H + grad D can represent any smooth "
                 "planar field (Helmholtz), so it constrains the fit no more than the baseline does",
@@ -261,7 +273,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="`dopri5` or `rk4`; not `discrete_gradient` (its flow is not S grad E in [q, qdot])",
         when="observed positions and velocities when you want an energy but not a Hamiltonian's momenta; each "
              "field call solves an n x n system per state, so it is the costliest kind per step")),
-    "g_sympnet": ModelKind(".models.maps:GSympNet", _width_map, ".map_objective:MapObjective", color="tab:gray",
+    "g_sympnet": ModelKind(".models.maps:GSympNet", _width_map, ".objectives.map:MapObjective", color="tab:gray",
                            doc=KindDoc(
         line="G-SympNet (Jin et al. 2020): a learned symplectic map x_k -> x_{k+1}, one pass a step, no integrator",
         assumes="the data's flow over one step is a symplectic map (a Hamiltonian system without friction), "
@@ -275,7 +287,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
              "`--map_layers` shears a step where RK4 calls a learned field four times (docs/maps.md)")),
     # the scene studies measure one map kind, g_sympnet, whose width their grid varies (an LA-SympNet has none);
     # docs/maps.md (analysis/benchmarks/maps.py) sets the three side by side on the SympNets protocols
-    "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".map_objective:MapObjective", color="silver",
+    "la_sympnet": ModelKind(".models.maps:LASympNet", _la_map, ".objectives.map:MapObjective", color="silver",
                             studied=False, doc=KindDoc(
         line="LA-SympNet (Jin et al. 2020): a symplectic map of linear and activation shears",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step",
@@ -283,7 +295,7 @@ MODEL_KINDS: dict[str, ModelKind] = {
         integrator="none: `hnn.rollout` steps the map itself at its dt",
         when="few degrees of freedom and few parameters (`--hidden_dim` is not read; `--map_layers` linear "
              "modules of 2 shears each)")),
-    "henon": ModelKind(".models.maps:HenonNet", _width_map, ".map_objective:MapObjective", color="darkgray",
+    "henon": ModelKind(".models.maps:HenonNet", _width_map, ".objectives.map:MapObjective", color="darkgray",
                        studied=False, doc=KindDoc(
         line="HenonNet (Burby et al. 2020): a symplectic map of Henon layers",
         assumes="as `g_sympnet`: a symplectic one-step map, paths at a fixed step; each layer is four times "
@@ -291,14 +303,17 @@ MODEL_KINDS: dict[str, ModelKind] = {
         coordinates="canonical x = [q, p] only",
         integrator="none: `hnn.rollout` steps the map itself at its dt",
         when="as `g_sympnet`; four potential gradients a layer, so a step costs about four G-SympNet layers")),
-    "pixel-hnn": ModelKind(".models.pixel:PixelHNN", _pixel, _PIXEL_OBJECTIVE, color="tab:blue", doc=KindDoc(
+    # the pixel objective draws its own noise per model: the seeds train one at a time
+    "pixel-hnn": ModelKind(".models.pixel:PixelHNN", _pixel, _PIXEL_OBJECTIVE, color="tab:blue", family="pixel",
+                           grouping="alone", doc=KindDoc(
         line="the pixel task's HNN: an autoencoder of frames and an HNN on its 2-D latent "
              "(`experiment-pixels/train.py --model hnn`)",
         assumes="the frames come from a system with a conserved energy in a 2-D latent",
         coordinates="a learned latent [q, p]; the inputs are pairs of frames",
         integrator="in the latent: `midpoint` for long rollouts, `rk4` for short ones",
         when="a system seen only as pictures")),
-    "pixel-baseline": ModelKind(".models.pixel:PixelBaseline", _pixel, _PIXEL_OBJECTIVE, color="tab:red", doc=KindDoc(
+    "pixel-baseline": ModelKind(".models.pixel:PixelBaseline", _pixel, _PIXEL_OBJECTIVE, color="tab:red",
+                                family="pixel", grouping="alone", doc=KindDoc(
         line="the pixel task's baseline: the same autoencoder, an MLP predicting the latent's derivative "
              "(`experiment-pixels/train.py --model baseline`)",
         assumes="nothing about the latent's dynamics",
@@ -308,36 +323,41 @@ MODEL_KINDS: dict[str, ModelKind] = {
 }
 
 
+
+
+def _check_names(kinds: dict) -> None:
+    """A kind's name holds a hyphen exactly where it has a family, and starts with it: ``pixel-hnn``."""
+    for name, row in kinds.items():
+        if ("-" in name) != (row.family is not None) or (row.family and not name.startswith(row.family + "-")):
+            raise ImportError(f"model kind {name!r}: a name with a hyphen is '<family>-<model>' of a row declaring "
+                              f"that family (family={row.family!r})")
+
+
+_check_names(MODEL_KINDS)
+
+
+# RunConfig.objective's choices: each name of hnn.names' list the class that fits it ("module:Class",
+# imported on first read, as a kind's ``source``)
+_OBJECTIVE_CLASSES = names.checked({"derivative": ".objectives:DerivativeObjective",
+                                    "trajectory": ".objectives.trajectory:TrajectoryObjective",
+                                    "discrete_gradient": ".objectives.dgnet:DiscreteGradientObjective",
+                                    "map": ".objectives.map:MapObjective"}, names.OBJECTIVES, "hnn.kinds._OBJECTIVE_CLASSES")
+
+
 class _Objectives(Mapping):
-    """``RunConfig.objective``'s choices, name -> class: the names are ``hnn.names.OBJECTIVES``; the class
-    of ``a_b`` is ``ABObjective`` of the first of ``_OBJECTIVE_MODULES`` that has it, imported on first read."""
+    """``RunConfig.objective``'s choices, name -> class (``_OBJECTIVE_CLASSES``, imported on first read)."""
 
     def __getitem__(self, name: str) -> type:
-        if name not in names.OBJECTIVES:
-            raise KeyError(name)
-        return _objective_class(name)
+        return _resolved(_OBJECTIVE_CLASSES[name])
 
     def __iter__(self) -> Iterator[str]:
-        return iter(names.OBJECTIVES)
+        return iter(_OBJECTIVE_CLASSES)
 
     def __len__(self) -> int:
-        return len(names.OBJECTIVES)
+        return len(_OBJECTIVE_CLASSES)
 
     def __repr__(self) -> str:
-        return f"OBJECTIVES({', '.join(names.OBJECTIVES)})"
-
-
-_OBJECTIVE_MODULES = (".objectives", ".trajectory", ".dgnet", ".map_objective")     # where the objective classes live
-
-
-@functools.cache
-def _objective_class(name: str) -> type:
-    wanted = "".join(part.capitalize() for part in name.split("_")) + "Objective"
-    for module in _OBJECTIVE_MODULES:
-        found = getattr(importlib.import_module(module, __package__), wanted, None)
-        if found is not None:
-            return found
-    raise ImportError(f"hnn.names.OBJECTIVES lists {name!r}, but no {wanted} is in {', '.join(_OBJECTIVE_MODULES)}")
+        return f"OBJECTIVES({', '.join(_OBJECTIVE_CLASSES)})"
 
 
 OBJECTIVES: Mapping[str, type] = _Objectives()

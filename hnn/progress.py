@@ -18,7 +18,7 @@ import time
 from collections import deque
 
 # seconds between the lines that say how far a long run is where no bar is drawn: a sweep's runs
-# (``hnn.backends``), and a lone fit or evaluation (``Ticker``)
+# (``hnn.sweeps.backends``), and a lone fit or evaluation (``Ticker``)
 HEARTBEAT = 30.0
 LINE_EVERY = 10.0
 # a bar appears once the work has run this long (shorter work stays silent)

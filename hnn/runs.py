@@ -27,7 +27,7 @@ from . import cli
 from .fits import check_config, solve
 from .io import atomic_folder, check_save_dir, torch_bytes, write_json
 from .kinds import get_kind, model_from_args, model_from_spec
-from .objectives import Objective
+from .objectives import FitOptions, Objective
 from .specs import run_specs
 from .training import train
 from .units import canonical_fit, run_scales, wrap_saved
@@ -53,7 +53,7 @@ def diverged_record(config) -> Path:
     """Where the run of ``config`` is recorded as failed in training by its own arithmetic (an
     ``hnn.DivergenceError``: a result of its config, which a rerun repeats): ``<save_dir>/.<folder>.diverged.json``
     holding its message. Written where the run fails (``hnn.tasks.run_task``, a sweep's worker) and by the
-    sweep that reads the failure; ``hnn.sweep.reuse(jobs, diverged=True)`` reads it back instead of
+    sweep that reads the failure; ``hnn.sweeps.sweep.reuse(jobs, diverged=True)`` reads it back instead of
     training the run again."""
     directory = run_dir(config)
     return directory.parent / f".{directory.name}.diverged.json"
@@ -104,7 +104,8 @@ class Prepared:
     (an ``hnn.units.Rescaled`` where --units rescaled); ``fit_model``: the one that trains (in canonical
     units); ``dataset``: the objective's prepared arrays in the user's units; ``x``, ``y`` (the training
     subset), ``test_x``, ``test_y``: ``fit_model``'s, ``(rows, input_dim)``; ``options``: the objective's
-    training options (``Objective.train_options``); ``data_seconds``: the dataset's build time (None when given)."""
+    ``FitOptions`` for ``fit_model`` (``Objective.train_options``); ``data_seconds``: the dataset's build time
+    (None when given)."""
     config: object
     objective: Objective
     fit: object
@@ -118,13 +119,13 @@ class Prepared:
     y: object
     test_x: object
     test_y: object
-    options: dict
+    options: FitOptions
     data_seconds: float | None
 
     def train_kwargs(self, **overrides) -> dict:
         """``hnn.train``'s keyword arguments past the arrays: the run's loop settings and the objective's
         options, --units and --balance already applied (``overrides``: a benchmark's steps, say)."""
-        return {**self.specs.training.train_kwargs(), **self.options, "units": "off", "balance": "off",
+        return {**self.specs.training.train_kwargs(), **self.options.train_kwargs(), "units": "off", "balance": "off",
                 "threads": None, **overrides}
 
 
@@ -159,8 +160,8 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
     x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
     options = objective.train_options(fit_model, specs.objective, fitted)
-    if options.get("loss_weights") is not None:     # what --balance resolved to: the run's loss, recorded
-        saved["loss_weights"] = [float(w) for w in options["loss_weights"]]
+    if options.loss_weights is not None:     # what --balance resolved to: the run's loss, recorded
+        saved["loss_weights"] = [float(w) for w in options.loss_weights]
     return Prepared(config, objective, fit, saved, specs, model, fit_model, scales, dataset, x, y, test_x, test_y,
                     options, data_seconds)
 
@@ -183,7 +184,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     try:
         if prep.fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
             stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
-                          loss_weights=options.get("loss_weights"))
+                          loss_weights=options.loss_weights)
             if config.verbose and "equation" in stats["fit"]:
                 print(stats["fit"]["equation"])
         else:
@@ -194,11 +195,11 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
         partial.unlink(missing_ok=True)
         raise
     if scales is not None:      # the final numbers: the saved model's, in the user's units
-        objective.train_options(model, specs.objective, dataset)     # points final_loss at it (options unused)
+        options = objective.train_options(model, specs.objective, dataset)
         x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
         x, y = training_subset(x, y, config.train_fraction, config.seed)
-    directory = finish_run(config, model, stats, objective.final_loss(model, x, y),
-                           objective.final_loss(model, test_x, test_y), prep.data_seconds, saved)
+    directory = finish_run(config, model, stats, objective.final_loss(model, x, y, options),
+                           objective.final_loss(model, test_x, test_y, options), prep.data_seconds, saved)
     partial.unlink(missing_ok=True)
     config.finish(directory, dataset)
     return directory

@@ -4,7 +4,7 @@ a saved run's args (``run_specs``), so that no consumer reads a settings dict by
     specs = hnn.specs.run_specs(config)               # an hnn.RunConfig, or the args.json of a run folder
     model = hnn.kinds.model_from_spec(specs.model)
     options = objective.train_options(model, specs.objective, dataset)
-    stats = hnn.train(model, x, y, **specs.training.train_kwargs(), **options)
+    stats = hnn.train(model, x, y, **specs.training.train_kwargs(), **options.train_kwargs())
 
 Four frozen specs, one per consumer: ``ModelSpec`` (what a kind's builder reads), ``TrainingSpec``
 (what ``hnn.train`` reads, by its keyword names), ``ObjectiveSpec`` (what an objective reads:

@@ -29,6 +29,7 @@ from torch.func import functional_call, stack_module_state, vmap
 from .grouped import GroupCheckpoint, GroupRows, WeightStack, drop_failed, group_key, group_stats
 from .integrators.integrate import rollout
 from .integrators.solvers import get_solver
+from .kinds import get_kind
 from .modes import model_axis
 from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, learning_rate, training_steps
 
@@ -42,7 +43,7 @@ def stack_key(config) -> tuple | None:
     ``hnn.grouped.group_key`` groups (its closed form is faster) or that trains alone: the pixel kinds
     (their objective draws noise of its own). The key is the run's identity less ``_OWN_FIELDS``, and
     the facts its model is built from (the chain's constraints)."""
-    if group_key(config) is not None or config.kind.startswith("pixel-"):
+    if group_key(config) is not None or get_kind(config.kind).grouping == "alone":
         return None
     same = {k: v for k, v in config.identity().items() if k not in _OWN_FIELDS}
     return (type(config).__module__, type(config).__qualname__,      # the identity's JSON: a hashable key

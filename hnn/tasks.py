@@ -25,6 +25,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, ModuleType
+from typing import Protocol
 
 from .errors import DivergenceError
 
@@ -231,12 +232,50 @@ def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:
     return mod
 
 
+class TaskData(Protocol):
+    """What a task's ``data.py`` offers (``load_task(name)``), checked when it loads (``check_task_data``).
+
+    - ``get_dataset(**fields) -> dict``: always; its config's ``dataset()`` calls it.
+    - ``hamiltonian(x)`` ``(batch, dim) -> (batch,)``: where the task declares an energy protocol
+      (``TaskSpec.protocols``): the energy the protocol scores.
+    - ``dynamics(x)`` ``(batch, dim) -> (batch, dim)``: where a protocol integrates the truth from
+      starts it draws (``x0`` ``'box'`` or ``'seeds'``; a measured segment needs none).
+
+    Read where present: ``initial_state`` (the orbits' own starts: the integrator study draws its trials
+    from it), ``sample_starts`` and ``true_hamiltonian`` (the pixel task's simulator starts and energy),
+    ``RADIUS_RANGE`` and ``NOISE_STD`` (the toy tasks' data ranges, the studies' starts and noise)."""
+
+    def get_dataset(self, **fields) -> dict: ...
+
+
+def check_task_data(name: str, data: ModuleType) -> None:
+    """TypeError naming what ``experiment-<name>/data.py`` lacks of ``TaskData`` for its declared protocols."""
+    needs = {"get_dataset": "its config's dataset() calls it"}
+    for protocol in task_spec(name).protocols.values():
+        needs.setdefault("hamiltonian", f"its energy protocol {protocol.name!r} scores it")
+        if getattr(protocol, "x0", None) in ("box", "seeds"):     # a task's own protocol class may draw none
+            needs.setdefault("dynamics", f"its protocol {protocol.name!r} integrates the truth with it")
+    missing = [f"{attr} ({why})" for attr, why in needs.items() if not callable(getattr(data, attr, None))]
+    if missing:
+        raise TypeError(f"experiment-{name}/data.py lacks {', '.join(missing)}: define it there "
+                        "(hnn.tasks.TaskData says what a task's data module offers)")
+
+
 def load_task(name: str, module: str = "data") -> ModuleType:
-    """``experiment-<name>/<module>.py`` as a module (cached, so each is loaded once)."""
+    """``experiment-<name>/<module>.py`` as a module (cached, so each is loaded once); a ``data.py`` is
+    checked against ``TaskData`` when it loads."""
     path = repo_root() / f"{_PREFIX}{name}" / f"{module}.py"
     if not path.exists():
         raise ValueError(f"unknown task {name!r} (no {path}); available: {available_tasks()}")
     mod_name = f"hnn_task_{name}_{module}"
-    if mod_name in sys.modules:
-        return sys.modules[mod_name]
-    return _load(mod_name, path)
+    cached = sys.modules.get(mod_name)
+    if cached is not None and getattr(cached, "__file__", None) == str(path):
+        return cached
+    loaded = _load(mod_name, path)      # first use, or a task of that name in another checkout (HNN_REPO)
+    if module == "data":
+        try:
+            check_task_data(name, loaded)
+        except TypeError:
+            del sys.modules[mod_name]
+            raise
+    return loaded

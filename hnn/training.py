@@ -102,9 +102,9 @@ def is_test_step(step: int, test_every: int, total_steps: int) -> bool:
     return step % test_every == 0 or step == total_steps
 
 
-# --optimizer: each name of hnn.names' list the torch.optim class of that name, case aside (adamw: AdamW)
-OPTIMIZERS = {name: next(getattr(torch.optim, attr) for attr in dir(torch.optim) if attr.lower() == name)
-              for name in names.OPTIMIZERS}
+# --optimizer: each name of hnn.names' list its torch.optim class
+OPTIMIZERS = names.checked({"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}, names.OPTIMIZERS,
+                           "hnn.training.OPTIMIZERS")
 SCHEDULES = names.SCHEDULES         # learning_rate's branches
 
 
@@ -142,8 +142,16 @@ def l1_loss(predict: Callable) -> Callable:
     return lambda xb, yb: (yb - predict(xb)).abs()
 
 
-# --derivative_loss: the per-element error of a fit of dx/dt, each name of hnn.names' list the function <name>_loss
-DERIVATIVE_LOSSES = {name: globals()[f"{name}_loss"] for name in names.DERIVATIVE_LOSSES}
+# --derivative_loss: the per-element error of a fit of dx/dt, each name of hnn.names' list its function
+DERIVATIVE_LOSSES = names.checked({"l2": l2_loss, "l1": l1_loss}, names.DERIVATIVE_LOSSES,
+                                  "hnn.training.DERIVATIVE_LOSSES")
+
+
+def batch_loss(model, loss: Callable | None = None, predict: Callable | None = None, derivative_loss: str = "l2",
+               loss_weights=None, **unused) -> Callable:
+    """The batch loss ``train`` minimizes, from its keyword arguments of these names (an objective's
+    ``FitOptions.train_kwargs()``): ``loss`` itself, or ``fit_loss`` of the others (``unused``: the rest)."""
+    return loss if loss is not None else fit_loss(model, predict, derivative_loss, loss_weights)
 
 
 def fit_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:

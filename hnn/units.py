@@ -27,7 +27,7 @@ which no published run's data do, so each trains in its data's units, bit for bi
 wraps the rebuilt model in ``Rescaled`` from them, so ``hnn.load_run`` answers in the user's units. Such
 a run's loss history (metrics.json's ``history``), its ``loss_weights`` and any ``input_noise`` are in
 the canonical units; its final train and test losses are the saved model's, in the user's. It trains
-alone, never in a group (``hnn.group_runs.train_group``).
+alone, never in a group (``hnn.sweeps.group_runs.train_group``).
 
 Supported: fits of dx/dt (``--objective derivative``, with or without ``--use_rk4``, whose dt is
 rescaled too) of every kind that reads [q, p] or [q, qdot]: hnn, baseline, separable, dissipative,
@@ -46,9 +46,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from .interface import Model
+from .interface import Model, observed_coordinates
 from .names import UNITS
-from .objectives import DerivativeObjective, observed_coordinates
 
 # 'auto' (the default) rescales where the RMS of q or p (what a network reads) lies outside
 # [1 / AUTO_FAR["q"], AUTO_FAR["q"]], or that of dq/dt or dp/dt (what it is fit to) outside
@@ -440,7 +439,7 @@ def _arrays(dataset: dict, arrays) -> tuple:
 def sized_arrays(dataset: dict, objective) -> tuple:
     """``(states, their dx/dt or None)`` whose sizes ``--units auto`` reads: a fit of dx/dt's training
     pair, or a path objective's states (and the dataset's dx/dt where it has one)."""
-    if isinstance(objective, DerivativeObjective):
+    if objective.fits_derivative:
         return _arrays(dataset, objective.arrays[:2])
     return dataset.get("x"), dataset.get("dxdt")
 
@@ -466,7 +465,7 @@ def run_scales(mode: str, kind: str, dataset: dict, objective, model: Model) -> 
     if refusal(model) is not None:
         raise ValueError(f"{why}, and the {kind} kind cannot be rescaled: {refusal(model)}; give the data "
                          "in units near 1, or pass --units off to train on them as they are")
-    if not isinstance(objective, DerivativeObjective):
+    if not objective.fits_derivative:
         raise ValueError(f"{why}, which rescales a fit of dx/dt (--objective derivative); the "
                          f"{type(objective).__name__} steps paths in the data's own time: give the data in units near "
                          "1, or pass --units off to train on them as they are")

@@ -105,7 +105,7 @@ def test_mechanical_hnn_with_the_true_m_and_v_is_the_true_field():
     torch.testing.assert_close(model.state_from_observed(z), x)
     torch.testing.assert_close(model.observed_from_state(x), z)
     t = 0.03 * np.arange(11)
-    torch.testing.assert_close(hnn.trajectory.rollout_observed(model, z, t, "velocity", rtol=1e-10, atol=1e-10),
+    torch.testing.assert_close(hnn.objectives.trajectory.rollout_observed(model, z, t, "velocity", rtol=1e-10, atol=1e-10),
                                data.trajectories(chain, z, t), rtol=1e-7, atol=1e-7)
 
 
@@ -149,13 +149,13 @@ def test_bad_input_is_refused_with_the_fix():
         model.time_derivative(torch.zeros(3, 6))
     snippets = torch.zeros(2, 5, 4)
     with pytest.raises(ValueError, match="not separable; use method='rk4'"):
-        hnn.trajectory.snippet_loss(model, snippets, 0.1, method="leapfrog")
+        hnn.objectives.trajectory.snippet_loss(model, snippets, 0.1, method="leapfrog")
     with pytest.raises(ValueError, match="fixed-step"):
-        hnn.trajectory.snippet_loss(model, snippets, 0.1, method="dopri5")
+        hnn.objectives.trajectory.snippet_loss(model, snippets, 0.1, method="dopri5")
     with pytest.raises(ValueError, match="unknown snippet loss"):
-        hnn.trajectory.snippet_loss(model, snippets, 0.1, loss="huber")
+        hnn.objectives.trajectory.snippet_loss(model, snippets, 0.1, loss="huber")
     with pytest.raises(ValueError, match="needs the snippets' time step"):
-        hnn.trajectory.TrajectoryObjective().loss_for(model)
+        hnn.objectives.trajectory.TrajectoryObjective().loss_for(model)
 
 
 # ----------------------------------------------------------------------- trajectory training
@@ -163,11 +163,11 @@ def test_bad_input_is_refused_with_the_fix():
 def test_separable_model_rolls_out_by_leapfrog_exactly_as_hnn_rollout():
     model = hnn.SeparableHNN(2, 8).double()
     z0 = torch.randn(4, 2, dtype=torch.float64)
-    mine = hnn.trajectory.rollout_snippet(model, z0, 6, 0.05)
+    mine = hnn.objectives.trajectory.rollout_snippet(model, z0, 6, 0.05)
     theirs = hnn.rollout(model.time_derivative, z0, 0.05 * np.arange(6), method="leapfrog")
     torch.testing.assert_close(mine, theirs)
     paths = torch.arange(2 * 100 * 3, dtype=torch.float64).reshape(2, 100, 3)
-    cut = hnn.trajectory.sample_snippets(paths, 5, torch.Generator().manual_seed(0))
+    cut = hnn.objectives.trajectory.sample_snippets(paths, 5, torch.Generator().manual_seed(0))
     assert cut.shape == (2, 5, 3) and (cut[:, 0, 0] % 15 == 0).all()        # starts on a 5-state boundary
     torch.testing.assert_close(torch.diff(cut[..., 0], dim=1), torch.full((2, 4), 3.0, dtype=torch.float64))
 
@@ -270,5 +270,6 @@ def test_mechanical_hnn_with_the_true_m_and_v_gives_the_observed_accelerations()
     z = _starts(chain, 64)
     model = hnn.MechanicalHNN(6, 32, periodic=True).double()
     options = hnn.DerivativeObjective().train_options(model, hnn.specs.ObjectiveSpec(), {"state": "velocity"})
-    stats = hnn.train(model, z, chain.observed_dynamics(z), total_steps=60, learn_rate=1e-2, progress=False, **options)
+    stats = hnn.train(model, z, chain.observed_dynamics(z), total_steps=60, learn_rate=1e-2, progress=False,
+                      **options.train_kwargs())
     assert stats["train_loss"][-1] < 0.5 * stats["train_loss"][0]

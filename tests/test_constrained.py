@@ -98,7 +98,7 @@ def test_a_long_float64_rollout_keeps_the_constraints_to_round_off(cls):
     chain = data.chnn_chain(2)
     model = _random_model(cls, chain, seed=5)
     z0 = chain.to_cartesian(_states(chain, 8, seed=6))
-    path = hnn.trajectory.rollout_observed(model, z0, np.linspace(0.0, 5.0, 51), "cartesian", method="dop853",
+    path = hnn.objectives.trajectory.rollout_observed(model, z0, np.linspace(0.0, 5.0, 51), "cartesian", method="dop853",
                                            rtol=1e-12, atol=1e-12)
     off = model.violation(path.reshape(-1, path.shape[-1]), "cartesian")
     assert off.max() < 1e-8, float(off.max())

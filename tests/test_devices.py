@@ -141,7 +141,7 @@ def test_a_group_trains_making_nothing_on_the_default_device(tmp_path):
     configs = [_config("2body", {"batch_size": 8, "input_noise": 0.01, "seed": s}, "cpu", tmp_path) for s in (0, 1)]
     data = [c.dataset() for c in configs]
     with strict_device():
-        folders = hnn.group_runs.train_group(configs, data)
+        folders = hnn.sweeps.group_runs.train_group(configs, data)
     assert all(Path(f).is_dir() for f in folders)
 
 
@@ -199,7 +199,7 @@ def test_every_solver_on_cuda_agrees_with_the_cpu():
 def test_a_group_on_cuda_equals_its_lone_runs(tmp_path):
     Config = hnn.load_task("spring", "train").Config
     configs = [Config(**SMALL, seed=s, device="cuda", save_dir=str(tmp_path / "group")) for s in (0, 1)]
-    folders = hnn.group_runs.train_group(configs)
+    folders = hnn.sweeps.group_runs.train_group(configs)
     for config, folder in zip(configs, folders):
         lone = hnn.run_experiment(Config(**SMALL, seed=config.seed, device="cuda", save_dir=str(tmp_path / "lone")))
         a, b = hnn.load_run(folder)[0], hnn.load_run(lone)[0]

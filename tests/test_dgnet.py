@@ -5,7 +5,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.dgnet import pairs_from_paths
+from hnn.objectives.dgnet import pairs_from_paths
 
 
 class _TrueSpring(hnn.Model):
@@ -34,7 +34,7 @@ def test_with_the_true_h_the_loss_is_the_analytic_finite_difference_residual():
     c, s = np.cos(2 * dt), np.sin(2 * dt)
     x1 = torch.stack([x0[:, 0] * c + x0[:, 1] * s, x0[:, 1] * c - x0[:, 0] * s], 1)
     pairs = torch.cat([x0, x1], 1)
-    loss = hnn.dgnet.DiscreteGradientObjective(dt=dt).loss_for(_TrueSpring().double())(pairs, pairs).mean(1)
+    loss = hnn.objectives.dgnet.DiscreteGradientObjective(dt=dt).loss_for(_TrueSpring().double())(pairs, pairs).mean(1)
     expected = 2 * x0.pow(2).sum(1) * (np.sin(dt) / dt - np.cos(dt)) ** 2
     torch.testing.assert_close(loss, expected, rtol=1e-10, atol=1e-16)
     assert expected.min() > 1e-5        # not a vacuous zero at this dt
@@ -64,7 +64,7 @@ def test_the_real_pendulums_pairs_never_span_a_gap_in_its_measurements():
 
 def test_it_learns_the_spring_from_consecutive_states_alone():
     spring = hnn.load_task("spring")
-    objective = hnn.dgnet.DiscreteGradientObjective()
+    objective = hnn.objectives.dgnet.DiscreteGradientObjective()
     data = objective.prepare(spring.get_dataset(seed=0, noise_std=0.0))
     torch.manual_seed(0)
     model = hnn.build_model(2, 32)
@@ -90,7 +90,7 @@ def test_it_runs_from_the_flags_and_refuses_a_kind_without_h(tmp_path):
         trainer.main(["--objective", "discrete_gradient", "--model", "baseline", "--total_steps", "1",
                       "--hidden_dim", "8", "--save_dir", str(tmp_path)])
     with pytest.raises(ValueError, match="needs paths"):
-        hnn.dgnet.DiscreteGradientObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
+        hnn.objectives.dgnet.DiscreteGradientObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
 
 
 def test_the_protocol_table_puts_every_published_row_beside_ours(tmp_path):

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import hnn
-import hnn.group_runs
+import hnn.sweeps.group_runs
 import hnn.grouped
 import hnn.stacked
 from hnn.training import fit_loss
@@ -118,19 +118,19 @@ def test_a_group_of_runs_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch)
     def configs(save_dir):
         return [hnn.tasks.task_config("spring", {"seed": s, "hidden_dim": 16, "total_steps": 60, "batch_size": 16,
                                                  "save_dir": str(save_dir)}) for s in (0, 1)]
-    unbroken = hnn.group_runs.train_group(configs(tmp_path / "whole"))
+    unbroken = hnn.sweeps.group_runs.train_group(configs(tmp_path / "whole"))
     fit = hnn.grouped.fit_group
 
     def killed(*args, **kwargs):
         return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(30))
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.group_runs, "fit_group", killed)
-        hnn.group_runs.train_group(configs(tmp_path / "broken"))
-    partial = hnn.group_runs.group_checkpoint(configs(tmp_path / "broken"))
+        patch.setattr(hnn.sweeps.group_runs, "fit_group", killed)
+        hnn.sweeps.group_runs.train_group(configs(tmp_path / "broken"))
+    partial = hnn.sweeps.group_runs.group_checkpoint(configs(tmp_path / "broken"))
     assert partial.exists() and partial.parent == tmp_path / "broken" and partial.name.startswith(".group-")
     # another group (other seeds) does not take this group's checkpoint
-    assert hnn.group_runs.group_checkpoint(configs(tmp_path / "broken")[:1]) != partial
-    resumed = hnn.group_runs.train_group(configs(tmp_path / "broken"))
+    assert hnn.sweeps.group_runs.group_checkpoint(configs(tmp_path / "broken")[:1]) != partial
+    resumed = hnn.sweeps.group_runs.train_group(configs(tmp_path / "broken"))
     assert not partial.exists()
     for a, b in zip(unbroken, resumed):
         history = [json.loads((folder / "metrics.json").read_text())["history"] for folder in (a, b)]
@@ -147,18 +147,18 @@ def test_a_killed_groups_checkpoint_is_dropped_once_its_runs_are_saved_by_other_
     def killed(*args, **kwargs):
         return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(20))
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.group_runs, "fit_group", killed)
-        hnn.group_runs.train_group(configs)
-    spent = hnn.group_runs.group_checkpoint(configs)
+        patch.setattr(hnn.sweeps.group_runs, "fit_group", killed)
+        hnn.sweeps.group_runs.train_group(configs)
+    spent = hnn.sweeps.group_runs.group_checkpoint(configs)
     unreadable = tmp_path / ".group-000000000000.partial.pt"
     unreadable.write_bytes(b"half a file")
     # a rerun that no longer forms that group (each run alone, as if the other had been saved meanwhile) leaves
     # the checkpoint while one of its runs is still missing, and drops it once both are saved
-    hnn.group_runs.train_group(configs[:1])
+    hnn.sweeps.group_runs.train_group(configs[:1])
     assert spent.exists()
-    hnn.group_runs.train_group(configs[1:])
+    hnn.sweeps.group_runs.train_group(configs[1:])
     assert not spent.exists() and unreadable.exists()
-    assert hnn.group_runs.drop_spent_checkpoints(tmp_path) == []
+    assert hnn.sweeps.group_runs.drop_spent_checkpoints(tmp_path) == []
 
 
 def test_a_checkpoint_of_another_group_is_refused_with_its_fix(tmp_path):

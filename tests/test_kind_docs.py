@@ -40,7 +40,7 @@ def test_model_help_lists_every_kind_a_task_takes():
             line = "".join(hnn.MODEL_KINDS[Config.KIND_PREFIX + kind].doc.line.split())
             assert f"{kind}({line})" in text, (task, kind)
     spring = hnn.load_task("spring", "train").Config
-    assert set(hnn.cli.model_choices(spring)) == {kind for kind in hnn.MODEL_KINDS if "-" not in kind}
+    assert set(hnn.cli.model_choices(spring)) == {kind for kind, row in hnn.MODEL_KINDS.items() if row.family is None}
 
 
 def test_every_module_keys_its_options_from_the_one_list():
@@ -61,7 +61,11 @@ def test_every_module_keys_its_options_from_the_one_list():
     assert models.hamiltonian.FIELD_ROWS["solenoidal"] == (1,)       # H = F2: Hamilton's equations
     for init in hnn.names.INITS:
         models.initialize(models.MLP(2, 4, 2), init)
-    assert hnn.training.OPTIMIZERS == {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
+    for name in hnn.names.OPTIMIZERS:       # each builds an optimizer that steps
+        w = torch.nn.Linear(1, 1)
+        hnn.training.adam_optimizer(w, 1e-2, 0.0, name).step()
+    with pytest.raises(ImportError, match=r"lacks \['adamw'\] and has extra \['sgd'\]"):
+        hnn.names.checked({"adam": torch.optim.Adam, "sgd": torch.optim.SGD}, hnn.names.OPTIMIZERS, "optimizers")
     for schedule in hnn.names.SCHEDULES:
         assert hnn.training.learning_rate(1.0, 0, 10, schedule) == 1.0
     assert all(isinstance(getattr(torch, name), torch.dtype) for name in hnn.names.DTYPES)
@@ -85,3 +89,17 @@ def test_a_row_naming_its_class_wrongly_says_so():
     row = hnn.kinds.ModelKind(".models.structured:SeparableHNN")      # the default builder and objective
     model = row.build(hnn.kinds.ModelSpec("x", input_dim=2, hidden_dim=4))
     assert isinstance(model, hnn.SeparableHNN) and isinstance(row.make_objective(), hnn.DerivativeObjective)
+
+
+def test_a_kinds_family_and_grouping_are_declared_on_its_row():
+    """--model's default choices are the kinds of no family; a hyphenated name needs its family; a grouping is
+    one of hnn.names.GROUPINGS; the closed form groups exactly the kinds hnn.grouped has gradients for."""
+    assert {k for k, row in hnn.MODEL_KINDS.items() if row.family == "pixel"} == {"pixel-hnn", "pixel-baseline"}
+    assert {k for k, row in hnn.MODEL_KINDS.items() if row.grouping == "closed_form"} == {
+        "hnn", "baseline", "separable", "dissipative"}
+    with pytest.raises(ValueError, match="grouping='batched'"):
+        hnn.kinds.ModelKind(".models.hamiltonian:HNN", grouping="batched")
+    with pytest.raises(ImportError, match="'toy-hnn'"):
+        hnn.kinds._check_names({"toy-hnn": hnn.kinds.ModelKind(".models.hamiltonian:HNN")})
+    with pytest.raises(ImportError, match="'toy'"):
+        hnn.kinds._check_names({"toy": hnn.kinds.ModelKind(".models.hamiltonian:HNN", family="pixel")})

@@ -22,7 +22,7 @@ import hnn_analysis
 PACKAGE = Path(hnn.__file__).parent
 ANALYSIS = Path(hnn_analysis.__file__).parent
 TREES = {"hnn": PACKAGE, "hnn_analysis": ANALYSIS}
-ORDER = {"base": 0, "integrators": 1, "models": 1, "training": 2, "runs": 3, "sweeps": 4}
+ORDER = {"base": 0, "integrators": 1, "models": 1, "training": 2, "runs": 3, "orbits": 4, "sweeps": 5}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -180,7 +180,11 @@ def test_the_walker_reads_rooms_relative_imports_and_imports_inside_functions():
     assert "hnn_analysis.paper.figures" in graph["hnn_analysis.paper.registry"]      # "from pkg import module"
 
 
-@pytest.mark.parametrize("module", [m for layer in ("runs", "sweeps") for m in hnn._LAYERS[layer]])
+TOP_UNITS = {unit for layer in ("runs", "orbits", "sweeps") for unit in hnn._LAYERS[layer]}
+
+
+@pytest.mark.parametrize("module", sorted(m.split(".", 1)[1] for m in modules(PACKAGE, "hnn")
+                                          if m != "hnn" and _hnn_unit(m) in TOP_UNITS))
 def test_each_top_module_of_hnn_imports_first_in_a_fresh_interpreter(module):
     """Imported before anything else (as a worker process or a user's script does), a module of the top
     layers loads, and so does the whole package after it: ``from . import x`` of a module not yet loaded

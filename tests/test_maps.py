@@ -14,7 +14,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.map_objective import MapObjective, pairs_from_times
+from hnn.objectives.map import MapObjective, pairs_from_times
 from hnn.models.maps import (ActivationShear, GradientShear, GSympNet, HenonLayer, HenonNet, LASympNet, LinearShears,
                              SymplecticMap)
 
@@ -269,8 +269,8 @@ def test_a_group_of_maps_trains_as_one_program_as_each_alone(tmp_path):
     group is held to its lone runs by what they predict, a step from the test states."""
     configs = [_small_run("real", "henon", tmp_path / "group", seed=s, total_steps=20, batch_size=64, hidden_dim=32)
                for s in range(3)]
-    assert hnn.group_runs.unit_key(configs[0])[0] == "stacked"
-    folders = hnn.group_runs.train_group(configs)
+    assert hnn.sweeps.group_runs.unit_key(configs[0])[0] == "stacked"
+    folders = hnn.sweeps.group_runs.train_group(configs)
     for config, folder in zip(configs, folders):
         alone = hnn.run_experiment(dataclasses.replace(config, save_dir=str(tmp_path / "alone")))
         (a, args, ma), (b, _, mb) = hnn.load_run(folder), hnn.load_run(alone)

@@ -171,7 +171,7 @@ def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch)
     # every studied kind that reads observed [q, v] (the constrained ones need a constraint graph), and the fits'
     # rungs of them (scene_rungs: a sampled HNN, our library, SINDy where pysindy is installed)
     assert {k for k in kinds if "+" not in k} == {kind for kind, row in hnn.MODEL_KINDS.items()
-                                                  if row.studied and row.reads("velocity") and "-" not in kind}
+                                                  if row.studied and row.reads("velocity") and row.family is None}
     assert {"hnn+swim", "hnn+library"} <= kinds <= {"hnn+swim", "hnn+library", "baseline+sindy"} | {
         k for k in kinds if "+" not in k}
     assert "cheapest to train that is enough" in (out / "scene.md").read_text()

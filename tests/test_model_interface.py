@@ -12,7 +12,7 @@ from hnn.interface import SplitField
 
 
 def _args(kind: str) -> dict:
-    pixel = kind.startswith("pixel-")
+    pixel = hnn.MODEL_KINDS[kind].family == "pixel"
     # a body tethered to the origin in 2 dimensions: the width-4 state of the Cartesian kinds
     tether = {"bodies": 1, "dim": 2, "tethers": [[0, [0.0, 0.0], 1.0]], "links": []}
     return {"kind": kind, "input_dim": 16 if pixel else 4, "latent_dim": 2, "hidden_dim": 16,
@@ -87,9 +87,9 @@ def test_the_mechanical_kind_maps_observed_velocities_both_ways():
     assert model.state_from(z, "canonical") is z
     # d/dt of the observed state is the map's derivative along the flow: finite differences of a rollout
     h = 1e-4
-    ahead = hnn.trajectory.rollout_observed(model, z, [0.0, h], "velocity", method="dop853", rtol=1e-12,
+    ahead = hnn.objectives.trajectory.rollout_observed(model, z, [0.0, h], "velocity", method="dop853", rtol=1e-12,
                                             atol=1e-12)[:, 1]
-    behind = hnn.trajectory.rollout_observed(model, z, [0.0, -h], "velocity", method="dop853", rtol=1e-12,
+    behind = hnn.objectives.trajectory.rollout_observed(model, z, [0.0, -h], "velocity", method="dop853", rtol=1e-12,
                                              atol=1e-12)[:, 1]
     with torch.no_grad():
         torch.testing.assert_close(model.observed_field("velocity")(z), (ahead - behind) / (2 * h), rtol=1e-6,
@@ -121,7 +121,7 @@ def test_declarations_are_checked_when_a_kind_is_written():
     with pytest.raises(TypeError, match="must be an hnn.Model subclass"):
         hnn.kinds.ModelKind(torch.nn.Linear, lambda spec: None)
     with pytest.raises(TypeError, match="is not an hnn.Model"):
-        hnn.trajectory.default_method(torch.nn.Linear(2, 2))
+        hnn.objectives.trajectory.default_method(torch.nn.Linear(2, 2))
 
 
 def test_rollout_steps_a_models_declared_field():
@@ -147,7 +147,7 @@ def test_the_energy_protocol_rolls_a_model_out_in_its_own_state():
                                   method="rk4", options={"dt": 0.05})
     out = hnn.evaluate_energy(spring, {"m": model}, protocol, observed="velocity")
     z0 = torch.as_tensor(out["x0"])
-    expected = hnn.trajectory.rollout_observed(model, z0, np.linspace(0, 1, 5), "velocity", method="rk4", dt=0.05)
+    expected = hnn.objectives.trajectory.rollout_observed(model, z0, np.linspace(0, 1, 5), "velocity", method="rk4", dt=0.05)
     np.testing.assert_allclose(out["m"]["traj"], expected.numpy(), rtol=1e-10, atol=1e-12)
     canonical = hnn.evaluate_energy(spring, {"m": model}, protocol)["m"]["traj"]
     assert np.abs(canonical - out["m"]["traj"]).max() > 1e-6       # a different start state: mapped, not read as is

@@ -8,7 +8,8 @@ import torch
 from scipy.integrate import solve_ivp
 
 import hnn
-from hnn import cache, nbody
+from hnn import cache
+from hnn.orbits import nbody
 
 
 @pytest.fixture(scope="module")

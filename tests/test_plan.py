@@ -4,7 +4,7 @@ import re
 import pytest
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import plan
 from hnn_analysis.paper import reproduce
 

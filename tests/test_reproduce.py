@@ -10,7 +10,7 @@ import torch
 import hnn
 from hnn_analysis.paper import registry, reproduce, study, tables
 from hnn_analysis import commands, pages, plotting, readme
-from hnn import sweep
+from hnn.sweeps import sweep
 
 TINY = 20          # training steps of the end-to-end runs
 

@@ -9,7 +9,7 @@ import torch
 
 import hnn
 import hnn.runs
-import hnn.sweep
+import hnn.sweeps.sweep
 import hnn.training
 
 
@@ -123,7 +123,7 @@ def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_pat
     with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(17)):
         hnn.run_experiment(config)
     assert partial.exists() and hnn.runs.find_run(config) is None
-    _, todo = hnn.sweep.reuse([hnn.sweep.Job("b", "spring", config)])
+    _, todo = hnn.sweeps.sweep.reuse([hnn.sweeps.sweep.Job("b", "spring", config)])
     assert [job.key for job in todo] == ["b"] and "b has a training checkpoint" in capsys.readouterr().out
     resumed = hnn.run_experiment(config)
     assert not partial.exists()

@@ -61,6 +61,8 @@ def test_the_objectives_read_the_spec_by_attribute():
     data = {"x": np.ones((4, 2), np.float32), "dxdt": np.ones((4, 2), np.float32), "dt": 0.1}
     spec = hnn.specs.ObjectiveSpec(input_noise=0.5, use_rk4=True, derivative_loss="l1")
     options = hnn.DerivativeObjective().train_options(model, spec, data)
-    assert options["input_noise"] == 0.5 and options["derivative_loss"] == "l1" and options["predict"] is not None
+    assert options.input_noise == 0.5 and options.derivative_loss == "l1" and options.predict is not None
     x = torch.ones(3, 2)
-    torch.testing.assert_close(options["predict"](x), hnn.integrators.rk4_step(model.time_derivative, x, 0.1) / 0.1)
+    torch.testing.assert_close(options.predict(x), hnn.integrators.rk4_step(model.time_derivative, x, 0.1) / 0.1)
+    with pytest.raises(dataclasses.FrozenInstanceError):     # a record of one run's options, not state to change
+        options.input_noise = 0.0

@@ -7,12 +7,14 @@ import pytest
 import torch
 
 import hnn
-from hnn.group_runs import train_group, unit_key
+from hnn.sweeps.group_runs import train_group, unit_key
 
 SMALL = {"total_steps": 20, "hidden_dim": 16}
 CHAIN = {"n_train": 20, "n_test": 5}
 CASES = {
     "mechanical": ("spring", {"model": "mechanical"}),
+    # [q, qdot] states the kind maps to its own [q, p]: each member is scored by its own map, not the first's
+    "mechanical-velocity": ("chain", {"model": "mechanical", "objective": "derivative", **CHAIN}),
     "softplus-adamw-cosine-clip": ("spring", {"model": "hnn", "nonlinearity": "softplus", "optimizer": "adamw",
                                               "schedule": "cosine", "clip_grad": 0.5}),
     "constrained": ("chain", {"model": "constrained", **CHAIN}),
@@ -55,7 +57,7 @@ def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
 
 # the kinds CASES leaves out, but the pixel ones (their renders take minutes; tests/test_pixels.py groups them)
 GROUPED_KINDS = sorted(set(hnn.MODEL_KINDS) - {values["model"] for _, values in CASES.values()}
-                       - {k for k in hnn.MODEL_KINDS if k.startswith("pixel-")})
+                       - {k for k, row in hnn.MODEL_KINDS.items() if row.grouping == "alone"})
 
 
 @pytest.mark.parametrize("kind", GROUPED_KINDS)
@@ -136,7 +138,7 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
 
 
 def test_a_sweep_groups_every_kind_on_a_gpu_and_the_closed_form_kinds_on_the_cpu():
-    from hnn import sweep
+    from hnn.sweeps import sweep
     Spring = hnn.load_task("spring", "train").Config
 
     def jobs(device, model, width=16):

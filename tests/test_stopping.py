@@ -18,7 +18,7 @@ SWEEP = f"""
 import sys
 from pathlib import Path
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 out = Path(sys.argv[1])
 jobs = [sweep.Job(f"spring/hnn/seed{{seed}}", "spring", hnn.tasks.task_config(
     "spring", {{"seed": seed, "hidden_dim": 8, "total_steps": 400, "save_dir": str(out)}})) for seed in range({RUNS})]

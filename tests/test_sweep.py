@@ -1,4 +1,4 @@
-"""hnn/sweep.py: failed runs are reported and the others train (in this process, in worker
+"""hnn/sweeps/sweep.py: failed runs are reported and the others train (in this process, in worker
 processes, on Ray), Ray gives the numbers of the local workers, and Ray stays an optional extra."""
 import dataclasses
 import importlib.util
@@ -20,7 +20,8 @@ import torch
 
 import hnn
 from hnn_analysis import pages
-from hnn import backends, progress, sweep
+from hnn import progress
+from hnn.sweeps import backends, sweep
 from hnn_analysis.paper import reproduce, study
 
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
@@ -282,7 +283,7 @@ def test_only_the_sweeps_backends_import_ray():
                        if any(line.strip().startswith(("import ray", "from ray")) for line in p.read_text().splitlines()))
     # Ray is an optional extra: the sweep's backend and the benchmark that measures that backend import it,
     # each inside a function that names the extra when it is missing; nothing else may.
-    assert importing == ["analysis/benchmarks/ray_overhead.py", "analysis/benchmarks/ray_runs.py", "hnn/backends.py"]
+    assert importing == ["analysis/benchmarks/ray_overhead.py", "analysis/benchmarks/ray_runs.py", "hnn/sweeps/backends.py"]
 
 
 def test_the_stage_table_says_what_ran_the_runs():
@@ -485,7 +486,7 @@ def test_a_groups_model_that_fails_in_training_is_recorded_as_a_lone_runs_failur
         "spring", {"model": "hnn", "seed": s, "save_dir": str(tmp_path / "runs"), "total_steps": 3,
                    "hidden_dim": 16, "learn_rate": 1e30})) for s in (0, 1)]
     assert len(sweep.plan_units(bad, "all")) == 1
-    outcomes = hnn.group_runs.run_group_task("spring", [job.fields() for job in bad])
+    outcomes = hnn.sweeps.group_runs.run_group_task("spring", [job.fields() for job in bad])
     assert all(o["diverged"] and "not finite" in o["error"] for o in outcomes), outcomes
     for job in bad:
         assert json.loads(hnn.runs.diverged_record(job.config).read_text())["message"].startswith("GroupedRunFailed: ")

@@ -114,6 +114,21 @@ def test_tasks_are_found_by_folder_in_their_declared_order(tmp_path, monkeypatch
         hnn.task_spec("notes")
 
 
+
+def test_a_tasks_data_module_is_checked_against_what_its_protocols_need(tmp_path, monkeypatch):
+    """A task whose box protocol integrates the truth but whose data.py has no dynamics is named when it loads,
+    not deep in a study; one without protocols needs only get_dataset."""
+    lacking = {**TOY, "data.py": TOY["data.py"].replace("def dynamics(x):", "def _dynamics(x):").replace(
+        "ring_dataset(dynamics,", "ring_dataset(_dynamics,")}
+    _write_task(tmp_path, "toy", lacking)
+    _write_task(tmp_path, "bare", {"data.py": "def get_dataset(seed=0):\n    return {}\n"})
+    monkeypatch.setenv("HNN_REPO", str(tmp_path))
+    with pytest.raises(TypeError, match=r"experiment-toy/data.py lacks dynamics \(its protocol 'paper' integrates"):
+        hnn.load_task("toy")
+    with pytest.raises(TypeError, match="lacks dynamics"):       # not cached half-checked: the second load says it too
+        hnn.load_task("toy")
+    assert hnn.load_task("bare").get_dataset() == {}
+
 def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
     spec = hnn.task_spec("spring")
     assert hnn.PROTOCOLS["spring"]["paper"] is spec.protocols["paper"] is hnn.tasks.get_protocol("spring")

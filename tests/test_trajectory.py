@@ -30,7 +30,7 @@ def test_spring_trains_on_its_paths_from_the_command_line(tmp_path):
     model, args, metrics = hnn.load_run(run)
     assert args["objective"] == "trajectory" and args["snippet_steps"] == 4
     data = spring.get_dataset(seed=0)
-    objective = hnn.trajectory.TrajectoryObjective(dt=data["dt"], steps=4)
+    objective = hnn.objectives.trajectory.TrajectoryObjective(dt=data["dt"], steps=4)
     floor, _ = objective.final_loss(_TrueSpring(), *[objective.prepare(data)["test_snippets"]] * 2)
     assert metrics["history"]["test_loss"][0] > 1.5 * floor
     assert metrics["test_loss"] < 1.1 * floor     # measured 1.03x at 100 steps
@@ -41,16 +41,16 @@ def test_spring_trains_on_its_paths_from_the_command_line(tmp_path):
 
 def test_snippets_are_cut_from_whole_paths():
     paths = np.arange(2 * 11 * 3, dtype=float).reshape(22, 3)          # two paths of 11 states, width 3
-    cut = hnn.trajectory.snippets_from_paths(paths, 11, 4)               # 2 snippets of 5 states per path
+    cut = hnn.objectives.trajectory.snippets_from_paths(paths, 11, 4)               # 2 snippets of 5 states per path
     assert cut.shape == (4, 15)
     np.testing.assert_array_equal(cut[:, 0], [0, 15, 33, 48])            # path 2 starts at row 11 (value 33)
     np.testing.assert_array_equal(np.diff(cut[0].reshape(5, 3)[:, 0]), [3, 3, 3, 3])
     with pytest.raises(ValueError, match="not whole paths of 11"):
-        hnn.trajectory.snippets_from_paths(paths[:-1], 11, 4)
+        hnn.objectives.trajectory.snippets_from_paths(paths[:-1], 11, 4)
     with pytest.raises(ValueError, match="snippet_steps must be an integer in \\[1, 10\\]"):
-        hnn.trajectory.snippets_from_paths(paths, 11, 11)
+        hnn.objectives.trajectory.snippets_from_paths(paths, 11, 11)
     # the objective cuts a dataset's x and test_x paths, and names what it needs where there are none
-    objective = hnn.trajectory.TrajectoryObjective(steps=4)
+    objective = hnn.objectives.trajectory.TrajectoryObjective(steps=4)
     data = objective.prepare({"x": paths, "test_x": paths[:11], "dt": 0.1, "t_eval": np.arange(11) * 0.1})
     assert data["snippets"].shape == (4, 15) and data["test_snippets"].shape == (2, 15)
     np.testing.assert_array_equal(data["snippets"], cut)
@@ -68,7 +68,7 @@ def test_unknown_or_unfit_objective_is_refused(tmp_path, capsys):
     with pytest.raises(ValueError, match="on pairs of frames; use objective=.derivative."):
         hnn.load_task("pixels", "train").Config(objective="trajectory").make_objective()
     with pytest.raises(ValueError, match="no 'snippets' and no 'dt' and 't_eval'"):
-        hnn.trajectory.TrajectoryObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
+        hnn.objectives.trajectory.TrajectoryObjective().prepare({"x": np.zeros((4, 2)), "test_x": np.zeros((4, 2))})
 
 
 class _Linear(hnn.Model):
@@ -94,7 +94,7 @@ def test_trajectory_training_recovers_a_linear_oscillator():
     snippets = torch.stack([amplitude[:, None] * torch.cos(angle), -omega * amplitude[:, None] * torch.sin(angle)], -1)
     flat = snippets.reshape(64, -1)
     model = _Linear()
-    loss = hnn.trajectory.TrajectoryObjective(dt=dt, loss="l2").loss_for(model)
+    loss = hnn.objectives.trajectory.TrajectoryObjective(dt=dt, loss="l2").loss_for(model)
     stats = hnn.train(model, flat, flat, total_steps=1500, learn_rate=3e-2, weight_decay=0.0, loss=loss, progress=False)
     # RK4's one-step error at omega dt = 0.2 biases A by about (omega dt)^4 / 120 relative: 1e-5
     torch.testing.assert_close(model.A.detach(), torch.tensor([[0.0, 1.0], [-omega ** 2, 0.0]], dtype=torch.float64),

@@ -207,13 +207,13 @@ def test_units_at_its_default_keeps_the_run_identity(tmp_path):
     """The default moved from off to auto, which trains every published run's data as off did: every run saved
     before keeps its folder (the spring's default key, before --units existed and since), while 'off' and 'on'
     name folders of their own. A run with 'on' trains alone, never in a group; 'auto' groups where it leaves the
-    data as they are (hnn.group_runs.train_group checks the data)."""
+    data as they are (hnn.sweeps.group_runs.train_group checks the data)."""
     Config = hnn.load_task("spring", "train").Config
     assert Config().key() == "cbac7a2b" and Config(units="auto").key() == "cbac7a2b"
     assert "units" not in Config().identity() and Config(units="off").identity()["units"] == "off"
     assert len({Config(units=u).key() for u in ("off", "on", "auto")}) == 3
-    assert hnn.group_runs.unit_key(_spring(tmp_path, units="on")) is None
-    assert hnn.group_runs.unit_key(_spring(tmp_path)) is not None
+    assert hnn.sweeps.group_runs.unit_key(_spring(tmp_path, units="on")) is None
+    assert hnn.sweeps.group_runs.unit_key(_spring(tmp_path)) is not None
 
 
 def test_auto_on_unit_sized_data_is_the_plain_run(tmp_path):

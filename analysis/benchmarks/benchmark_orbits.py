@@ -6,7 +6,7 @@
 Both sides integrate the same start states (the task's sampler on RandomState(--seed)) with
 scipy's RK45 at rtol 1e-9 and solve_ivp's default atol 1e-6, as the original generator did:
 
-- ours: ``hnn.nbody.sample_orbits``, every orbit in one batched call (torch field on the
+- ours: ``hnn.orbits.nbody.sample_orbits``, every orbit in one batched call (torch field on the
   (batch, 4B) state, close-encounter guard, tolerances tightened by sqrt(batch) so that each
   orbit is at least as accurate as in a call of its own);
 - per orbit: a loop of ``solve_ivp`` calls, one per orbit, on a vectorised numpy right-hand side.
@@ -29,7 +29,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 import hnn
-from hnn import nbody
+from hnn.orbits import nbody
 from hnn.io import write_json
 from hnn_analysis.provenance import provenance
 

@@ -11,7 +11,7 @@ out by RK4 and by the implicit midpoint rule and the separable HNN by leapfrog, 
   orbit's first state). Ours integrates with RK45 at rtol 1e-9 (the task's generator); theirs with a
   6th-order Stormer-Verlet of 100 substeps a step.
 
-A field model is trained through one step of its integrator at ``h`` (``hnn.trajectory``: snippets of
+A field model is trained through one step of its integrator at ``h`` (``hnn.objectives.trajectory``: snippets of
 two states, squared error, as the maps' ``MapObjective``): the HNN through RK4, the separable HNN through
 leapfrog; the HNN is rolled out by RK4 and by the midpoint rule (symplectic for its non-separable H).
 """
@@ -26,10 +26,10 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.dgnet import pairs_from_paths
-from hnn.map_objective import MapObjective
+from hnn.objectives.dgnet import pairs_from_paths
+from hnn.objectives.map import MapObjective
 from hnn.models.maps import GSympNet, HenonNet, LASympNet
-from hnn.trajectory import TrajectoryObjective
+from hnn.objectives.trajectory import TrajectoryObjective
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import hnn
-from hnn import sweep, sweep_flags
+from hnn.sweeps import flags as sweep_flags, sweep
 from hnn_analysis import commands, pages
 from hnn_analysis.chains import dgnet_init
 from hnn_analysis.chains.dgnet_protocol import (QUICK, QUICK_DATA, ROWS, SETTINGS, TASKS, TRIALS, PUBLISHED,

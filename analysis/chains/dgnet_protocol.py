@@ -38,7 +38,7 @@ seed: unless that file was removed between trials, every trial after the first l
 orbits.
 
 Ours, and where it differs: the same data recipes (``hnn.datasets.ring_dataset``; experiment-real's
-original split; 2-body: ``hnn.nbody.orbit_dataset`` with experiment-2body's sampler, ``TWO_BODY``:
+original split; 2-body: ``hnn.orbits.nbody.orbit_dataset`` with experiment-2body's sampler, ``TWO_BODY``:
 the original's draws in the original's order, so seed s gives the start states of their
 np.random.seed(s), each seed its own, every orbit by a batched Dormand-Prince 5(4) at least as
 accurate as their RK45 call, generated in about a second and not cached), their settings per task
@@ -83,8 +83,8 @@ import numpy as np
 import torch
 
 import hnn
-from hnn.dgnet import pairs_from_paths
-from hnn.trajectory import TrajectoryObjective
+from hnn.objectives.dgnet import pairs_from_paths
+from hnn.objectives.trajectory import TrajectoryObjective
 from hnn_analysis.provenance import machine
 
 # their README's tables ("Results on the conservative ODE datasets"): (derivative, energy), means of 15
@@ -116,7 +116,7 @@ SETTINGS = {"spring": {"steps": 2000, "batch_size": None, "weight_decay": 1e-4},
             "2body": {"steps": 10000, "batch_size": 200, "weight_decay": 0.0}}
 # their 2-body data: the original HNN generator called with timesteps=500, t_span=[0, 25] (its other
 # arguments at their defaults: 1000 orbits, the first 20% of rows test, solve_ivp's RK45 at rtol 1e-9
-# and atol 1e-6, every orbit kept), through ours (hnn.nbody.orbit_dataset, experiment-2body's sampler)
+# and atol 1e-6, every orbit kept), through ours (hnn.orbits.nbody.orbit_dataset, experiment-2body's sampler)
 TWO_BODY = {"num_trials": 1000, "num_points": 500, "t_span": (0.0, 25.0), "test_split": 0.2, "rtol": 1e-9,
             "atol": 1e-6, "min_separation": 0.0}
 # how each row predicts; the fixed-step ones take one step per interval of the time grid (``dt`` added)
@@ -155,7 +155,7 @@ def dataset(task: str, seed: int, trajectories: int = TRAJECTORIES, orbits: int 
                                                                                        ("test_pairs", "test_x", "test_t"))}
     elif task == "2body":
         # about a second a seed (1000 orbits, batched), so drawn afresh by each run rather than cached
-        data = hnn.nbody.orbit_dataset(system.random_config, seed, **{**TWO_BODY, "num_trials": orbits})
+        data = hnn.orbits.nbody.orbit_dataset(system.random_config, seed, **{**TWO_BODY, "num_trials": orbits})
         points = len(data["t_eval"])
         pairs = {"pairs": pairs_from_paths(data["x"], points), "test_pairs": pairs_from_paths(data["test_x"], points)}
     else:

@@ -16,7 +16,6 @@ import hnn
 from hnn.kinds import model_from_spec
 from hnn.runs import training_subset
 from hnn.specs import run_specs
-from hnn.training import fit_loss
 from hnn.units import run_scales
 from hnn_analysis import pages
 from hnn_analysis.chains import peer_plan
@@ -38,7 +37,7 @@ PLAIN_STOPS = {"chain2/lagrangian/seed0": 1846, "chain2/lagrangian/seed2": 374, 
                "lnn/lagrangian/seed4": 20612}
 
 
-def _job(key: str, save_dir: Path, solve: str = "pinv") -> hnn.sweep.Job:
+def _job(key: str, save_dir: Path, solve: str = "pinv") -> hnn.sweeps.sweep.Job:
     """The peers' table's job of ``key`` (``chain<N>/lagrangian/seed<S>``), with the ``solve`` of qddot."""
     seed = int(key.rsplit("seed", 1)[1])
     settings = {"kinds": ("lagrangian",), **peer_plan.FULL}
@@ -64,12 +63,8 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "
     x, y = training_subset(dataset[objective.arrays[0]], dataset[objective.arrays[1]], config.train_fraction, config.seed)
     options = objective.train_options(model, specs.objective, dataset)
     limit = min(stopped + past, config.total_steps + 1)
-    if "loss" not in options:       # a fit of dx/dt (the LNN protocol): the loss hnn.train builds from these options
-        options = {"input_noise": options.get("input_noise", 0.0),
-                   "loss": fit_loss(model, options.get("predict"), options.get("derivative_loss", "l2"),
-                                    options.get("loss_weights"))}
     counts, losses, last = [], [], {}
-    batch_loss = options["loss"]
+    batch_loss = options.loss_of(model)     # a fit of dx/dt (the LNN protocol): the loss hnn.train builds
 
     def loss(xb, yb):           # the objective's loss, its training batches' mean kept (no number changes)
         out = batch_loss(xb, yb)
@@ -85,7 +80,7 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "
     tic = time.perf_counter()
     with hnn.training.report_progress(count):
         try:
-            hnn.train(model, x, y, **specs.training.train_kwargs(), **{**options, "loss": loss, "progress": False},
+            hnn.train(model, x, y, **specs.training.train_kwargs(), **{**options.train_kwargs(), "loss": loss, "progress": False},
                       units="off", balance="off")
         except _Enough:
             pass

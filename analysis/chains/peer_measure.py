@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis.chains.peer_plan import MAX_ITERATIONS
 from hnn_analysis.training_cost import training_cost
 
@@ -24,7 +24,7 @@ def _rollout(chain, kind: str, model, z0: torch.Tensor, t_eval, rtol: float,
     observed = hnn.load_task("chain").observed_coordinates(kind)
     start = chain.to_cartesian(z0) if observed == "cartesian" else z0
     try:
-        path = hnn.trajectory.rollout_observed(model.double(), start, t_eval, observed, method="dopri5", rtol=rtol,
+        path = hnn.objectives.trajectory.rollout_observed(model.double(), start, t_eval, observed, method="dopri5", rtol=rtol,
                                                atol=rtol, max_iterations=max_iterations)
     except hnn.DivergenceError as err:
         return None, str(err).split(";")[0]

@@ -8,7 +8,7 @@ import fnmatch
 from pathlib import Path
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 
 BOBS = (1, 2, 3, 5)
 # --quick: a smoke run of every stage within its budget (commands.QUICK_BUDGETS); its LNN trains the

@@ -20,7 +20,7 @@ import statistics
 import time
 from pathlib import Path
 
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import plan
 from hnn.io import atomic_write
 from hnn.threads import torch_threads

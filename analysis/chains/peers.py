@@ -10,7 +10,7 @@
 Trains our model kinds (``kinds()``: every registered one that reads the chain's observed states, from
 ``hnn.MODEL_KINDS``, so a new kind reaches the table with no edit here) with ``experiment-chain/train.py``'s config on CHNN's protocol (Finzi et al. 2020) for
 N = 1, 2, 3, 5 bobs, and on the LNN double pendulum (Cranmer et al. 2020), through
-``hnn/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
+``hnn/sweeps/sweep.py`` (a rerun reuses every run of the same config); then measures each on its
 protocol (``experiment-chain/protocols.py``): CHNN's geometric-mean relative error of the
 Cartesian rollout (dopri5 at rtol 1e-7, in float64), mean and median over the test starts, with
 the chaos floor; LNN's energy error at T = 100 s. A rollout that blows up is reported by name
@@ -30,7 +30,7 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
-from hnn import sweep, sweep_flags
+from hnn.sweeps import flags as sweep_flags, sweep
 from hnn_analysis.chains import peer_record
 from hnn_analysis.chains.peer_measure import add_seconds, curves_figure, over_seeds
 from hnn_analysis.chains.peer_plan import FULL, FULL_SEEDS, QUICK, kinds, plan_seeds, quick_cuts, select

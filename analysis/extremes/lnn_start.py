@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import pages
 from hnn_analysis.provenance import machine
 
@@ -41,7 +41,7 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                 first = torch.as_tensor(data[objective.arrays[0]][:200], dtype=torch.float32)
                 try:
                     with torch.no_grad():
-                        row["first_loss"] = float(options["loss"](first, first).mean())
+                        row["first_loss"] = float(options.loss_of(model)(first, first).mean())
                 except hnn.DivergenceError as err:
                     row["first_stop"] = f"{type(err).__name__}: {str(err)[:120]}"
                 if steps:

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import commands, pages
 from hnn_analysis.fits import task_fits
 from hnn_analysis.provenance import provenance

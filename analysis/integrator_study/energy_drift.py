@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import commands, plan
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance

@@ -9,7 +9,7 @@ its figures, for every task in this checkout.
 
 Trains each model from its task's config (``experiment-<task>/train.py``'s ``Config``; a saved
 run of the same config is reused), in this process, in ``--jobs N`` worker processes or as Ray tasks (longest runs
-first; ``hnn.sweep``), with one progress line for the whole job; a run that fails is
+first; ``hnn.sweeps.sweep``), with one progress line for the whole job; a run that fails is
 reported and the others go on (the command then exits with code 1, listing them). Then evaluates
 the energy MSE under the paper's protocol and a corrected one and draws the figures (per task, as
 its ``experiment-<task>/task.py`` says, through ``hnn_analysis.paper.registry``). Writes
@@ -30,7 +30,7 @@ from hnn.io import atomic_write, write_json
 from hnn.threads import torch_threads
 from hnn_analysis.paper import study
 from hnn_analysis import commands, pages, plan, plotting
-from hnn import sweep_flags
+from hnn.sweeps import flags as sweep_flags
 from hnn_analysis.commands import portable_command
 from hnn_analysis.paper.tables import MODELS, headline_markdown, tables_markdown
 # torch-free to here: main checks the flags before it imports the sweep (torch)
@@ -108,7 +108,7 @@ def main(argv=None) -> dict:
     parser = _parser()
     args = parser.parse_args(argv)
     _check(parser, args)
-    from hnn import sweep
+    from hnn.sweeps import sweep
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
     tasks = args.tasks or hnn.tasks.paper_tasks()
     mode, steps = _mode(args)

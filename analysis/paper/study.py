@@ -20,7 +20,7 @@ import hnn
 from hnn_analysis.paper.tables import MODELS
 
 if TYPE_CHECKING:       # torch-free at import: reproduce.py checks its flags before the sweep and registry load
-    from hnn import sweep
+    from hnn.sweeps import sweep
     from hnn_analysis.paper import registry
 
 QUICK_STEPS = 100        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
@@ -113,7 +113,7 @@ def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
          models=MODELS) -> list[sweep.Job]:
     """The run of every row and seed, for the paper's two models and the extra ``models`` kinds
     the row's task has; ``steps`` overrides the tasks' ``total_steps``."""
-    from hnn import sweep
+    from hnn.sweeps import sweep
     jobs = []
     for spec in rows:
         for seed in spec.get("seeds") or seeds:
@@ -144,7 +144,7 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
                   models=MODELS, num_trials: int | None = None) -> None:
     """Evaluate every row at every seed into ``results["tasks"]`` (figures for the first seed of
     each task's paper row); a task that cannot run here goes to ``results["skipped"]`` once."""
-    from hnn import sweep
+    from hnn.sweeps import sweep
     progress = sweep.Progress(len(rows))
     print(f"  {progress.tag()} evaluating {len(rows)} rows" + (" and drawing their figures" if fig_dir else ""),
           flush=True)

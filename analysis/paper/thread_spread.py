@@ -21,7 +21,7 @@ from pathlib import Path
 
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn.threads import torch_threads
 from hnn_analysis import commands
 from hnn_analysis.paper import study
@@ -43,7 +43,7 @@ def measure(tasks: list[str], seeds: list[int], out: Path) -> dict:
         jobs = study.plan(rows, seeds, out / f"threads{threads}", None)
         runs, todo = sweep.reuse(jobs)
         progress = sweep.Progress(len(todo))
-        # in this process, one run at a time: hnn.sweep's in-process runs take one thread by design
+        # in this process, one run at a time: hnn.sweeps.sweep's in-process runs take one thread by design
         with torch_threads(threads):
             for job in todo:
                 runs[job.key] = hnn.run_experiment(job.config)

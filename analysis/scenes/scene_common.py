@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import plan
 from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_metrics as sm, scene_rungs

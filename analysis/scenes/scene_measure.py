@@ -27,7 +27,7 @@ from pathlib import Path
 import torch
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 from hnn_analysis import plan
 from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_common

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 
 import hnn
-from hnn import sweep
+from hnn.sweeps import sweep
 
 # the fits' rungs a scene study adds beside Adam's kinds, where the task takes the kind: the sampled HNN, our
 # library of H's terms and pysindy's SINDy (the other pairs, such as separable+library, train through --fit)

@@ -43,7 +43,7 @@ from hnn_analysis.scenes import measured_inputs
 
 def _parser() -> argparse.ArgumentParser:
     # torch loads here, with the study's modules: main reads a --data file's input before
-    from hnn import sweep_flags
+    from hnn.sweeps import flags as sweep_flags
     from hnn_analysis.paper import study
     from hnn_analysis.scenes import scene_stages
     from hnn_analysis.scenes.scene_common import SEEDS, scenes
@@ -76,7 +76,7 @@ def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     inputs = measured_inputs.precheck(argv)     # a file's input errors answer before torch loads
     parser = _parser()
-    from hnn import sweep, sweep_flags
+    from hnn.sweeps import flags as sweep_flags, sweep
     from hnn_analysis.scenes import measured_study, scene_report, scene_stages
     from hnn_analysis.scenes.scene_common import SEEDS, scenes
 

@@ -11,7 +11,7 @@ Both take ``periodic=True`` when q are angles: the networks then see (cos q, sin
 learned function is 2 pi-periodic in q.
 
 Neither field is separable, so neither may be rolled out with ``leapfrog`` or ``yoshida4``'s
-default base (``hnn.rollout`` would silently be wrong, ``hnn.trajectory`` refuses): use
+default base (``hnn.rollout`` would silently be wrong, ``hnn.objectives.trajectory`` refuses): use
 ``'midpoint'`` (symplectic for any H, so for the MechanicalHNN), ``'dopri5'`` or ``'rk4'``.
 
     model = hnn.MechanicalHNN(4, hidden_dim=200, periodic=True)
@@ -73,7 +73,7 @@ class MechanicalHNN(StateCheckedModel):
     the two-link arm, 3% M^-1 error at 1 kg links, 31% at 10 kg); ``--balance`` (on by default where the
     components' sizes differ over 10x: ``hnn.balance``) weighs each by its own size (docs/stress.md,
     "Balanced loss"). Not separable: roll out with ``midpoint``
-    (symplectic for any H) or ``dopri5``; ``hnn.trajectory`` refuses ``leapfrog`` for it.
+    (symplectic for any H) or ``dopri5``; ``hnn.objectives.trajectory`` refuses ``leapfrog`` for it.
     Declares ``maps = ('velocity',)``: observed [q, qdot] map to [q, p] through its mass matrix.
     """
     conservative = True

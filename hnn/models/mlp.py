@@ -6,7 +6,7 @@ import torch
 from torch import nn
 
 from . import tanh_mlp
-from ..names import INITS, NONLINEARITIES
+from ..names import INITS, NONLINEARITIES, checked
 from ..interface import gradient_of
 from ..modes import in_model_axis
 
@@ -18,19 +18,10 @@ def _swish(x: torch.Tensor) -> torch.Tensor:
 _tanh = tanh_mlp.fast_tanh      # the closed-form kernels' own tanh (MLP._closed_form_applies looks for it)
 
 
-def _activation(name: str):
-    """The function of activation ``name`` of ``hnn.names.NONLINEARITIES``: this module's ``_<name>``,
-    else torch's function of that name, else ``torch.nn.functional``'s (relu: ``torch.relu``; elu: ``F.elu``)."""
-    found = globals().get(f"_{name}") or getattr(torch, name, None) or getattr(nn.functional, name, None)
-    if found is None:
-        raise ImportError(f"hnn.names.NONLINEARITIES lists {name!r}, which neither hnn.models.mlp (_{name}) nor "
-                          "torch defines")
-    return found
-
-
-# the names get_nonlinearity knows (--nonlinearity's choices) and how an MLP's weights start
-# (``initialize``, --init's choices): hnn.names' lists
-_NONLINEARITIES = {name: _activation(name) for name in NONLINEARITIES}
+# the activations get_nonlinearity knows (--nonlinearity's choices): hnn.names' list, each its function
+_NONLINEARITIES = checked({"tanh": _tanh, "relu": torch.relu, "sigmoid": torch.sigmoid,
+                           "softplus": nn.functional.softplus, "selu": torch.selu, "elu": nn.functional.elu,
+                           "swish": _swish}, NONLINEARITIES, "hnn.models.mlp._NONLINEARITIES")
 
 # Piecewise-linear activations: their second derivative is zero almost everywhere, so the
 # symplectic gradient of an HNN built on them is piecewise constant in x and the training

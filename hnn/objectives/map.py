@@ -5,10 +5,10 @@ squared error of ``model.step(x_n)`` against x_{n+1}, per component (jpzxshi/sym
 pairs). No derivative and no integrator: a map trained so rolls out at the data's step and no other.
 
     python experiment-pend/train.py --model g_sympnet
-    hnn.train(model, pairs, pairs, loss=hnn.map_objective.MapObjective(dt=0.1).loss_for(model))
+    hnn.train(model, pairs, pairs, loss=hnn.objectives.map.MapObjective(dt=0.1).loss_for(model))
 
 ``prepare`` cuts every pair of consecutive states of each path (``x`` and ``test_x``, path after path,
-``t_eval`` long, as ``hnn.dgnet.pairs_from_paths``) into a row ``[x_n, x_{n+1}]``, or, for a dataset of
+``t_eval`` long, as ``hnn.objectives.dgnet.pairs_from_paths``) into a row ``[x_n, x_{n+1}]``, or, for a dataset of
 timed rows instead of paths (``t``, ``test_t``: the real pendulum), pairs the rows one ``dt`` apart
 (``pairs_from_times``): a gap of several steps pairs nothing. The map's step is the dataset's ``dt``
 (``hnn.specs.ModelSpec.dt``); a map built with another step is refused.
@@ -22,9 +22,9 @@ import torch
 from torch import nn
 
 from .dgnet import pairs_from_paths
-from .interface import declared
-from .objectives import PathObjective, cut_paths
-from .specs import ObjectiveSpec
+from ..interface import declared
+from . import FitOptions, PathObjective, cut_paths
+from ..specs import ObjectiveSpec
 
 # how far two timed rows' spacing may be from dt to count as one step (times written to a few digits)
 STEP_TOLERANCE = 1e-4
@@ -59,7 +59,7 @@ class MapObjective(PathObjective):
                              "pairs to learn from; choose a field kind (hnn, mechanical, ...) for it")
         return cut_paths(dataset, ("pairs", "test_pairs"), pairs_from_paths, "the map objective")
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> dict:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
         self._check_map(model, float(dataset["dt"]) if "dt" in dataset else self.dt)
         return super().train_options(model, spec, dataset)
 
@@ -81,8 +81,9 @@ class MapObjective(PathObjective):
             raise ValueError(f"this map's step is dt={model.dt:g} but its data are dt={dt:g} apart: a map learns the "
                              f"step of its data; build it with dt={dt:g}")
 
-    def loss_for(self, model: nn.Module, dt: float | None = None):
-        """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused)."""
+    def loss_for(self, model: nn.Module, dt: float | None = None, observed: str | None = None):
+        """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused),
+        canonical states ``dt`` apart (``observed``: checked by ``train_options``, which refuses others)."""
         self._check_map(model, self.dt if dt is None else dt)
         width = model.input_dim
 

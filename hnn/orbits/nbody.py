@@ -25,10 +25,10 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .errors import DivergenceError
+from ..errors import DivergenceError
 from .encounters import MIN_SEPARATION, TASK_MIN_SEPARATION  # noqa: F401  (the tasks read both here)
-from .integrators.integrate import rollout
-from .cache import get_cached_dataset
+from ..integrators.integrate import rollout
+from ..cache import get_cached_dataset
 
 
 DATASET_VERSION = 1   # bump when the generator changes what a given set of params produces

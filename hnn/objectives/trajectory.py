@@ -7,8 +7,8 @@ states are compared with the observed ones (mean absolute error, as Finzi et al.
 squared error):
 
     python experiment-spring/train.py --objective trajectory --snippet_steps 4   # any task with paths
-    loss = hnn.trajectory.snippet_loss(model, snippets, dt)      # snippets (batch, points, 2n)
-    hnn.train(model, flat, flat, loss=hnn.trajectory.TrajectoryObjective().loss_for(model, dt))
+    loss = hnn.objectives.trajectory.snippet_loss(model, snippets, dt)      # snippets (batch, points, 2n)
+    hnn.train(model, flat, flat, loss=hnn.objectives.trajectory.TrajectoryObjective().loss_for(model, dt))
 
 A run with ``objective='trajectory'`` (``hnn.RunConfig``) cuts its task's paths (``x`` and
 ``test_x``, path after path, ``t_eval`` long) into non-overlapping snippets of
@@ -27,10 +27,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from .integrators.integrate import rollout
-from .interface import declared
-from .objectives import PathObjective, cut_paths
-from .integrators.solvers import SOLVERS, get_solver
+from ..integrators.integrate import rollout
+from ..interface import declared
+from . import PathObjective, cut_paths
+from ..integrators.solvers import SOLVERS, get_solver
 
 SNIPPET_LOSSES = ("mae", "l2")
 
@@ -159,9 +159,11 @@ class TrajectoryObjective(PathObjective):
         return cut_paths(dataset, ("snippets", "test_snippets"),
                          lambda rows, points: snippets_from_paths(rows, points, self.steps), "trajectory training")
 
-    def loss_for(self, model: nn.Module, dt: float | None = None):
-        """``(x, y) -> (batch,)`` for ``hnn.train``: x, y flattened snippets (x's first state starts the rollout)."""
+    def loss_for(self, model: nn.Module, dt: float | None = None, observed: str | None = None):
+        """``(x, y) -> (batch,)`` for ``hnn.train``: x, y flattened snippets (x's first state starts the rollout)
+        of states in ``observed`` coordinates ``dt`` apart (default: this object's)."""
         dt = self.dt if dt is None else dt
+        observed = self.observed if observed is None else observed
         if dt is None:
             raise ValueError("trajectory training needs the snippets' time step: TrajectoryObjective(dt=...) "
                              "or a dataset with 'dt'")
@@ -172,7 +174,7 @@ class TrajectoryObjective(PathObjective):
                 raise ValueError(f"snippets of {y.shape[1]} columns are not whole states of width {width}")
             snippets = y.reshape(len(y), -1, width)
             return snippet_loss(model, snippets, dt, self.method, self.loss, self.substeps, start=x[:, :width],
-                                observed=self.observed)
+                                observed=observed)
         return loss
 
 

@@ -10,15 +10,15 @@ a saved run that does not load is reported by name and trained again. Each datas
 here, before the map (the cached ones are then read by every worker). A run that fails is
 reported by name with its error and the others go on; ``exit_if_failed`` ends the command with
 code 1 and the list. A task that cannot run here at all (missing data or optional packages) is
-skipped with its reason once. Where the units train is ``hnn.backends``'s (Ray is optional and
-imported only for ``backend="ray"``); a command's flags that choose it are ``hnn.sweep_flags``'s.
+skipped with its reason once. Where the units train is ``hnn.sweeps.backends``'s (Ray is optional and
+imported only for ``backend="ray"``); a command's flags that choose it are ``hnn.sweeps.flags``'s.
 
 A SIGINT (Ctrl-C) or SIGTERM (``kill``, a job scheduler) to the sweep's own process cancels the
 runs not started, stops the workers (a run in progress leaves no folder: it is written whole or
 not at all), keeps every finished run, says so in one line and exits with 130 or 143; a worker
 whose parent process is gone stops by itself.
 
-With ``group="auto"`` the runs that can train as one program (``hnn.group_runs.unit_key``: one
+With ``group="auto"`` the runs that can train as one program (``hnn.sweeps.group_runs.unit_key``: one
 task, kind and width, seeds and fractions apart) train as groups, each one unit of work for the pool
 or Ray (one GPU each on Ray), each model still saved as its own run folder: on the CPU those narrow
 enough for grouping to pay (``GROUP_MAX_WIDTH``, measured by ``analysis/benchmarks/benchmark.py --jobs
@@ -38,15 +38,15 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
-from . import names
-from .progress import time_left
+from .. import names
+from ..progress import time_left
 from .group_runs import drop_spent_checkpoints, unit_key
-from .runs import diverged_record, find_run, load_run, partial_checkpoint, record_divergence
-from .tasks import task_spec
-from .config import RunConfig
-from .errors import DivergenceError
+from ..runs import diverged_record, find_run, load_run, partial_checkpoint, record_divergence
+from ..tasks import task_spec
+from ..config import RunConfig
+from ..errors import DivergenceError
 from .stopping import interruptible
-from .threads import cores, torch_threads
+from ..threads import cores, torch_threads
 
 GROUP_MODES = names.GROUP_MODES
 # Grouped spring HNN steps against separate runs (benchmark --jobs group --quick, shared machine,
@@ -173,7 +173,7 @@ def say_reused(who: str, found: dict, todo: list[Job]) -> str:
 
 
 def plan_units(jobs: list[Job], group: str = "auto") -> list[list[Job]]:
-    """``jobs`` as units of work: the jobs of one ``hnn.group_runs.unit_key`` as groups, each other job
+    """``jobs`` as units of work: the jobs of one ``hnn.sweeps.group_runs.unit_key`` as groups, each other job
     alone. ``group="all"``: every kind's groups (all but the pixel kinds); ``"auto"``: on the CPU only the
     closed-form groups of the paper's tanh-MLP kinds (a CPU sweep trains every other kind alone, as the
     docs' numbers were made), on another device every kind's; ``"off"``: none. On the CPU a group is at

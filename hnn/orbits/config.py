@@ -1,11 +1,11 @@
 """The orbit tasks' run config, without torch: a ``train.py``'s ``--help`` reads it (and the
-close-encounter thresholds of ``hnn.encounters``) before the gravity code (``hnn.nbody``) loads."""
+close-encounter thresholds of ``hnn.orbits.encounters``) before the gravity code (``hnn.orbits.nbody``) loads."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import ClassVar
 
-from .config import RunConfig, setting
+from ..config import RunConfig, setting
 from .encounters import MIN_SEPARATION, TASK_MIN_SEPARATION
 
 
@@ -21,6 +21,6 @@ class OrbitConfig(RunConfig):
     DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "save_dir", "min_separation")
 
     def dataset(self) -> dict:
-        from .tasks import load_task
+        from ..tasks import load_task
         return load_task(self.TASK).get_dataset(seed=self.seed, save_dir=self.save_dir,
                                                 min_separation=self.min_separation)

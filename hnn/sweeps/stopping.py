@@ -3,7 +3,7 @@ process cancels the runs not started, stops the worker processes (a run in progr
 folder: it is written whole or not at all), keeps every finished run, says so in one line and
 exits with 128 + the signal; a worker whose parent process is gone stops by itself.
 
-``hnn/sweep.py`` starts its process pool's workers with ``worker_start``, submits each unit
+``hnn/sweeps/sweep.py`` starts its process pool's workers with ``worker_start``, submits each unit
 through ``in_worker``, stops the pool with ``stop_pool`` and trains inside ``interruptible``.
 """
 from __future__ import annotations

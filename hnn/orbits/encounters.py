@@ -1,5 +1,5 @@
-"""The orbit tasks' close-encounter thresholds, without torch: the gravity code (``hnn.nbody``) redraws
-by them and the orbit tasks' config (``hnn.orbit_config``) offers them as ``--min_separation``."""
+"""The orbit tasks' close-encounter thresholds, without torch: the gravity code (``hnn.orbits.nbody``) redraws
+by them and the orbit tasks' config (``hnn.orbits.config``) offers them as ``--min_separation``."""
 
 # A trajectory is redrawn when two bodies come closer than this at any state the integrator
 # evaluated. For these unit-mass systems the typical separation is 1-2 and the forces 0.3-1.

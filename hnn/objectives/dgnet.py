@@ -10,7 +10,7 @@ and the model so trained rolls out with that solver to the same discrete-time dy
 The loss is the squared error, averaged over components (DGNet's ``L2_loss``).
 
     python experiment-spring/train.py --objective discrete_gradient
-    hnn.run_experiment(config, dataset, hnn.dgnet.DiscreteGradientObjective())
+    hnn.run_experiment(config, dataset, hnn.objectives.dgnet.DiscreteGradientObjective())
 
 A dataset gives its paths as ``x`` and ``test_x`` (trajectory after trajectory, ``len(t_eval)``
 states each) with their spacing ``dt``: ``prepare`` cuts every pair of consecutive states of a path
@@ -23,9 +23,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from .integrators.discrete_gradient import energy_parts, structured
-from .interface import EnergyField, declared
-from .objectives import PathObjective, cut_paths
+from ..integrators.discrete_gradient import energy_parts, structured
+from ..interface import EnergyField, declared
+from . import PathObjective, cut_paths
 
 
 def pairs_from_paths(rows, path_points: int) -> np.ndarray:
@@ -55,8 +55,9 @@ class DiscreteGradientObjective(PathObjective):
     def prepare(self, dataset: dict) -> dict:
         return cut_paths(dataset, ("pairs", "test_pairs"), pairs_from_paths, "the discrete-gradient objective")
 
-    def loss_for(self, model: nn.Module, dt: float | None = None):
-        """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused)."""
+    def loss_for(self, model: nn.Module, dt: float | None = None, observed: str | None = None):
+        """``(x, y) -> (batch, width)`` squared errors for ``hnn.train``; ``y`` rows ``[x0, x1]`` (``x`` unused) of
+        states in ``observed`` coordinates ``dt`` apart (default: this object's)."""
         dt = self.dt if dt is None else dt
         if dt is None or not (dt > 0 and np.isfinite(dt)):
             raise ValueError(f"the discrete-gradient objective needs the states' positive time step dt, got {dt!r}: "
@@ -67,7 +68,7 @@ class DiscreteGradientObjective(PathObjective):
             raise ValueError(f"the discrete-gradient objective fits S grad-bar H of a learned H, and "
                              f"{type(model).__name__} carries none (conservative={model.conservative}): choose a "
                              "conservative kind such as hnn, separable or mechanical")
-        observed = self.observed
+        observed = self.observed if observed is None else observed
         model.relation(observed)        # a model that cannot read these states: one clear error
 
         def loss(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:

@@ -1,14 +1,14 @@
 """The flags of a sweep's command: ``--device``, ``--backend``, ``--ray-address`` and ``--group``, added to an
-analysis command's parser and checked there, then passed to ``hnn.sweep.train_jobs``.
+analysis command's parser and checked there, then passed to ``hnn.sweeps.sweep.train_jobs``.
 
-    sweep_flags.add_backend_flags(parser)
+    flags.add_backend_flags(parser)
     args = parser.parse_args(argv)
-    sweep_flags.check_backend(parser, args)
+    flags.check_backend(parser, args)
     sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group, args.device)
 """
 from __future__ import annotations
 
-from . import cli, names
+from .. import cli, names
 
 # torch-free: a command's parser takes these flags before torch loads (its input errors answer at once);
 # check_backend imports the backends, and Ray, only when asked for it
@@ -38,7 +38,7 @@ def add_backend_flags(parser) -> None:
     parser.add_argument("--group", choices=names.GROUP_MODES, default="auto",
                         help="auto: train the runs that can share one program (one task, kind and width, seeds "
                              "and data fractions apart) as batched groups, each run still saved as its own folder: "
-                             "on the CPU the paper's tanh-MLP kinds up to a width of hnn.sweep.GROUP_MAX_WIDTH, on "
+                             "on the CPU the paper's tanh-MLP kinds up to a width of hnn.sweeps.sweep.GROUP_MAX_WIDTH, on "
                              "a GPU every kind; all: every kind on every device; off: every run alone")
 
 

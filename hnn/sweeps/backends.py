@@ -1,10 +1,10 @@
 """Where a sweep's units of work train: in this process, in worker processes here, or as Ray tasks
-(on this machine or a cluster). ``hnn.sweep.train_jobs`` chooses one and reads what it yields: each
-``(job, run folder or exception)`` as its unit finishes; a unit is a list of ``hnn.sweep.Job`` (one
-run alone, or a group that trains as one program, ``hnn.group_runs``).
+(on this machine or a cluster). ``hnn.sweeps.sweep.train_jobs`` chooses one and reads what it yields: each
+``(job, run folder or exception)`` as its unit finishes; a unit is a list of ``hnn.sweeps.sweep.Job`` (one
+run alone, or a group that trains as one program, ``hnn.sweeps.group_runs``).
 
 A worker whose parent process is gone stops by itself, and on an interrupt the runs not started are
-cancelled and the workers stopped (``hnn.stopping``). Ray is optional and imported only here, by
+cancelled and the workers stopped (``hnn.sweeps.stopping``). Ray is optional and imported only here, by
 ``import_ray``, which says what to install.
 """
 from __future__ import annotations
@@ -16,15 +16,15 @@ import socket
 import sys
 from pathlib import Path
 
-from . import names
-from .errors import DivergenceError
+from .. import names
+from ..errors import DivergenceError
 from .group_runs import run_group_task, train_group
-from .runs import COMPLETE, run_experiment
-from .tasks import repo_root, run_task
-from .training import report_progress
+from ..runs import COMPLETE, run_experiment
+from ..tasks import repo_root, run_task
+from ..training import report_progress
 from .stopping import in_worker, stop_pool, worker_start
-from .threads import cores
-from . import progress as progress_lines
+from ..threads import cores
+from .. import progress as progress_lines
 
 BACKENDS = names.BACKENDS
 RAY_INSTALL = 'pip install -e ".[ray]"'
@@ -42,7 +42,7 @@ HEARTBEAT = progress_lines.HEARTBEAT
 
 
 def _group_outcomes(unit: list, outcomes: list[dict]):
-    """``(job, folder or exception)`` of each job of a group from ``hnn.group_runs.run_group_task``'s outcomes."""
+    """``(job, folder or exception)`` of each job of a group from ``hnn.sweeps.group_runs.run_group_task``'s outcomes."""
     for job, outcome in zip(unit, outcomes):
         yield job, (Path(outcome["folder"]) if "folder" in outcome else DivergenceError(outcome["error"])
                     if outcome.get("diverged") else RuntimeError(outcome["error"]))

@@ -2,7 +2,7 @@
 (``hnn.grouped.fit_group`` for the paper's tanh-MLP kinds, ``hnn.stacked.fit_stacked`` for every
 other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` saves a lone run.
 
-    folders = hnn.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
+    folders = hnn.sweeps.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
 
 ``run_group_task`` is the same for a sweep's worker process or Ray task (plain data in and out).
 """
@@ -15,19 +15,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import cli
-from .balance import balance_weights
-from .errors import DivergenceError
-from .grouped import fit_group, group_key
-from .stacked import fit_stacked, stack_key
-from .training import fit_loss
-from .units import run_scales
-from .io import check_save_dir
-from .kinds import model_from_spec
-from .objectives import DerivativeObjective
-from .runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
-from .specs import RunSpecs, run_specs
-from .tasks import task_config
+from .. import cli
+from ..balance import balance_weights
+from ..errors import DivergenceError
+from ..grouped import fit_group, group_key
+from ..stacked import fit_stacked, stack_key
+from ..units import run_scales
+from ..io import check_save_dir
+from ..kinds import model_from_spec
+from ..objectives import DerivativeObjective
+from ..runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
+from ..specs import RunSpecs, run_specs
+from ..tasks import task_config
 
 
 def unit_key(config) -> tuple | None:
@@ -79,7 +78,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     kill; it is deleted once the runs are saved, when the group fails, or with a config's ``force``."""
     keys = {unit_key(config) for config in configs}
     if None in keys or len(keys) != 1:
-        raise ValueError("train_group needs configs of one group (equal hnn.group_runs.unit_key, none None); "
+        raise ValueError("train_group needs configs of one group (equal hnn.sweeps.group_runs.unit_key, none None); "
                          "train the others alone with hnn.run_experiment")
     for config in configs:
         cli.check(config)
@@ -122,8 +121,9 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
             out.append(failures[g])
             continue
         (x, y), (test_x, test_y) = data[g], tests[g]
-        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y),
-                               objective.final_loss(models[g], test_x, test_y), None, saved[g])
+        options = objective.train_options(models[g], specs[g].objective, datasets[g])      # its own, for its numbers
+        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y, options),
+                               objective.final_loss(models[g], test_x, test_y, options), None, saved[g])
         config.finish(directory, datasets[g])
         out.append(directory)
     partial.unlink(missing_ok=True)
@@ -138,12 +138,8 @@ def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) ->
         if len({str(d.get(key)) for d in datasets}) > 1:
             raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
     options = objective.train_options(model, specs.objective, datasets[0])
-    extra = dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
-                 clip_grad=specs.training.clip_grad, input_noise=options.get("input_noise", 0.0))
-    if "loss" in options:
-        return {**extra, "loss_of": lambda m: options["loss"]}
-    return {**extra, "loss_of": lambda m: fit_loss(m, options.get("predict"), specs.objective.derivative_loss,
-                                                   options.get("loss_weights"))}
+    return dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
+                clip_grad=specs.training.clip_grad, input_noise=options.input_noise, loss_of=options.loss_of)
 
 
 def _trains_alone(config, dataset: dict, objective) -> bool:
