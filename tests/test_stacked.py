@@ -33,17 +33,22 @@ def _configs(task, values, save_dir, seeds=(0, 1, 2)):
     return [hnn.tasks.task_config(task, {**SMALL, **values, "seed": s, "save_dir": str(save_dir)}) for s in seeds]
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
-def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
-    task, values = CASES[case]
-    configs = _configs(task, values, tmp_path / "group")
-    assert unit_key(configs[0])[0] == "stacked" and len({unit_key(c) for c in configs}) == 1
+def _group_and_lone(task, configs, tmp_path):
+    """``(config, its group run, its lone run)`` (each ``hnn.load_run``'s triple) for ``configs`` trained as one group."""
     data = [c.dataset() for c in configs]
     folders = train_group(configs, data)
     for config, dataset, folder in zip(configs, data, folders):
         lone = hnn.run_experiment(hnn.tasks.task_config(task, {**config.to_dict(), "save_dir": str(tmp_path / "lone")}),
                                   dataset)
-        (a, _, ma), (b, _, mb) = hnn.load_run(folder), hnn.load_run(lone)
+        yield config, hnn.load_run(folder), hnn.load_run(lone)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
+    task, values = CASES[case]
+    configs = _configs(task, values, tmp_path / "group")
+    assert unit_key(configs[0])[0] == "stacked" and len({unit_key(c) for c in configs}) == 1
+    for _config, (a, _, ma), (b, _, mb) in _group_and_lone(task, configs, tmp_path):
         # float32: vmap's batched kernels sum in other orders than a lone model's, 1e-7 relative a step;
         # 20 Adam steps (the LNN's large init weights most) carry it to at most 2e-5 relative on an AVX2 box
         # and, on an AVX-512 one, 5e-5 of a weight tensor's largest and 1.8e-4 of the LNN's losses (its
@@ -52,7 +57,6 @@ def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
             torch.testing.assert_close(w, b.state_dict()[name], rtol=1e-4, atol=1e-4 * b.state_dict()[name].abs().max())
         np.testing.assert_allclose(ma["history"]["train_loss"], mb["history"]["train_loss"], rtol=1e-3)
         np.testing.assert_allclose(ma["test_loss"], mb["test_loss"], rtol=1e-3)
-
 
 
 # the kinds CASES leaves out, but the pixel ones (their renders take minutes; tests/test_pixels.py groups them)
@@ -67,12 +71,7 @@ def test_every_registered_kind_trains_in_a_group_as_its_lone_runs(kind, tmp_path
     on the spring (the chain for a kind that reads velocities or Cartesian states)."""
     task, extra = ("spring", {}) if hnn.MODEL_KINDS[kind].coordinates == "canonical" else ("chain", CHAIN)
     configs = _configs(task, {"model": kind, "total_steps": 5, **extra}, tmp_path / "group", seeds=(0, 1))
-    data = [c.dataset() for c in configs]
-    folders = train_group(configs, data)
-    for config, dataset, folder in zip(configs, data, folders):
-        lone = hnn.run_experiment(hnn.tasks.task_config(task, {**config.to_dict(), "save_dir": str(tmp_path / "lone")}),
-                                  dataset)
-        (a, _, ma), (b, _, mb) = hnn.load_run(folder), hnn.load_run(lone)
+    for config, (a, _, ma), (b, _, mb) in _group_and_lone(task, configs, tmp_path):
         for name, w in a.state_dict().items():
             # float32 sums in other orders, as the cases above; but a Henon layer's shift eta and its potential's
             # bias b have gradients of round-off on the spring's symmetric data (1e-9 and 1e-12, the other
