@@ -4,6 +4,7 @@ paper's Adam-trained HNN and baseline and beside pysindy's SINDy, over seeds.
     python analysis/fits/fit_tasks.py --jobs 2                  # spring pend real 2body 3body chain, 5 seeds
     python analysis/fits/fit_tasks.py --quick                   # spring and pend, one seed, 100 Adam steps
     python analysis/fits/fit_tasks.py --jobs 2 --update-docs    # docs/fits.md, sections fits-tasks, fits-library
+    python analysis/fits/fit_tasks.py --from-json results/fit_tasks.json --update-docs   # the tables again, nothing run
 
 Every rung of ``task_fits.RUNGS`` that a task takes trains at every seed in one sweep (``--jobs`` processes;
 runs saved before with the same args, by this command, reproduce.py or the scene study, are reused), then
@@ -14,6 +15,7 @@ latent coordinates are learned by the autoencoder, which no linear solve finds.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -34,9 +36,19 @@ def main(argv=None) -> dict:
                        seeds="seeds of every rung (default 5)", seeds_default=5,
                        jobs="training processes (one thread each past one)",
                        update_docs="write docs/fits.md's sections fits-tasks and fits-library (full settings only)")
+    p.add_argument("--from-json", type=Path, default=None, metavar="FILE",
+                   help="write the tables of a saved fit_tasks.json (its own command and commit), training and "
+                        "measuring nothing")
     args = p.parse_args(argv)
     if args.update_docs and args.quick:
         p.error("--update-docs writes full-settings results into docs/fits.md; drop --quick")
+    if args.from_json is not None:
+        if not args.from_json.is_file():
+            p.error(f"--from-json {args.from_json}: no such file; give the fit_tasks.json a full run wrote in its --out")
+        results = json.loads(args.from_json.read_text())
+        if args.update_docs and results["meta"]["quick"]:
+            p.error(f"--from-json {args.from_json} holds a --quick run; --update-docs takes full-settings results")
+        return _publish(results, args.from_json.parent, args.update_docs)
     tasks = args.tasks or (["spring", "pend"] if args.quick else list(task_fits.TASKS))
     seeds = list(range(1 if args.quick else args.seeds))
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
@@ -55,15 +67,22 @@ def main(argv=None) -> dict:
         results["tasks"][task] = task_fits.measure(task, by_seed, args.quick)
         print(f"  {task} measured", flush=True)
     results["seconds"]["measure"] = time.perf_counter() - tic
+    _publish(results, out, args.update_docs)
+    sweep.exit_if_failed(runs)
+    return results
+
+
+def _publish(results: dict, out: Path, update_docs: bool) -> dict:
+    """Write ``<out>/fit_tasks.json`` and ``.md`` and, with ``update_docs``, docs/fits.md's two sections."""
     text = task_fits.markdown(results)
     sections = {}
-    if args.update_docs:
+    if update_docs:
         head = text.split("\n\n**Fits beside Adam**")[0] + "\n\n"
         sections = {"fits-tasks": head + "\n".join(task_fits.accuracy_table(results)) + "\n",
                     "fits-library": head + "\n".join(task_fits.library_table(results)) + "\n"}
+    seeds = len(results["meta"]["seeds"])
     commands.publish(out, "fit_tasks", results, text, sections,
-                     pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS else "a --seeds run below 3"))
-    sweep.exit_if_failed(runs)
+                     pages.Seeds(seeds, None if seeds >= pages.MIN_SEEDS else "a --seeds run below 3"))
     return results
 
 
