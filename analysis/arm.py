@@ -102,7 +102,7 @@ def main(argv=None) -> dict:
                 print(f"{progress.advance()} {model} ({balance}) seed {seed}: " + ", ".join(f"{k} {v:.3e}" for k, v in rows[-1].items()
                                                                        if isinstance(v, float)), flush=True)
             results[f"{model} ({balance})"] = rows
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, one torch thread a run): "
+    lines = [pages.generated_by(meta, f"{machine(meta)}, one torch thread a run") + ": "
              f"{args.steps} steps a run, links of {args.mass} kg, --units {args.units}, median (min-max) over seeds "
              f"{', '.join(map(str, args.seeds))}; train s is each run's own loop, on a shared box.", "",
              "| model (--balance) | field error | rollout error | M^-1 error | smallest eigenvalue / truth's | train s |",

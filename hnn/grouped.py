@@ -29,6 +29,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import torch
 
@@ -40,7 +41,8 @@ from .objectives import DerivativeObjective
 from .specs import run_specs
 from .models.structured import SeparableHNN
 from .models.tanh_mlp import closed_form_input_gradient, fast_tanh
-from .training import (CHECKPOINT_EVERY, adam_optimizer, check_data, flushed_denormals, is_test_step, load_checkpoint,
+from .training import (CHECKPOINT_EVERY, adam_optimizer, check_data, flushed_denormals, is_test_step, learning_rate,
+                       load_checkpoint,
                        save_checkpoint, training_steps)
 
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
@@ -224,40 +226,88 @@ def fit_group(models: list[HNN], data: list[tuple], tests: list[tuple] | None = 
     test_every = print_every if test_every is None else test_every
     names = names or [f"model {g}" for g in range(len(models))]
     optim = adam_optimizer(WeightStack(weights), learn_rate, weight_decay)
-    alive = torch.ones(len(models), dtype=torch.bool, device=weights[0].device)
+
+    def losses(group_rows: GroupRows, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return group_rows.loss(_field(weights, x, baseline, rows), y)
+
+    # the loss alone is checked, not the gradient (as hnn.stacked's): the closed form's gradient is a product of
+    # finite weights and bounded tanh terms, and the check would add a dozen small ops to the fast path's step
+    failures, curves, seconds = train_steps(
+        weights, optim, train_rows, test_rows, losses, names=names, total_steps=total_steps, test_every=test_every,
+        input_noise=input_noise, label="group", progress=progress, checkpoint=checkpoint,
+        checkpoint_every=checkpoint_every, after_step=after_step)
+
+    def write_back(g: int, model) -> None:
+        for j, net in enumerate(_nets(model)):
+            for param, stacked in zip(_layers(net), weights):
+                param.copy_(stacked[j * len(models) + g])
+    return group_stats(models, failures, write_back, *curves, seconds)
+
+
+def train_steps(weights: list[torch.Tensor], optim, train_rows: GroupRows, test_rows: GroupRows | None,
+                losses: Callable[[GroupRows, torch.Tensor, torch.Tensor], torch.Tensor], *, names: list[str],
+                total_steps: int, test_every: int, input_noise: float, label: str, progress: bool, checkpoint,
+                checkpoint_every: float | None, learn_rate: float = 0.0, schedule: str = "constant",
+                clip_grad: float = 0.0, check_gradients: bool = False, after_step=None) -> tuple[dict, tuple, float]:
+    """The one training loop of a group (``fit_group`` and ``hnn.stacked.fit_stacked``): each step draws every
+    model's rows and noise, sums the models' losses ``losses(rows, x, y) -> (G,)``, steps ``optim`` over the
+    stacked ``weights``, drops a model whose loss (and, with ``check_gradients``, gradient) is not finite,
+    records the losses and saves the checkpoint.
+
+    Net j of model g is slice ``j * G + g`` of each weight (``hnn.stacked``'s models are one net each: slice g).
+    ``schedule``, ``learn_rate``, ``clip_grad``: as ``hnn.train``'s (each model's gradient clipped to its own
+    norm). Returns ``(failures, (train_loss, test_loss, test_steps), seconds)``, the losses per step ``(G,)``."""
+    alive = torch.ones(len(names), dtype=torch.bool, device=weights[0].device)
     failures: dict[int, GroupedRunFailed] = {}
-    train_loss, test_loss, test_steps = [], [], []
+    curves = train_loss, test_loss, test_steps = [], [], []
     saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every, names)
-    first, seconds_before = saver.resume(total_steps, alive, failures, (train_loss, test_loss, test_steps))
+    first, seconds_before = saver.resume(total_steps, alive, failures, curves)
     with flushed_denormals():
         start = time.perf_counter()
-        for step in training_steps(total_steps, progress, "group", start=first):
+        for step in training_steps(total_steps, progress, label, start=first):
             xb, yb, gens = train_rows.draw()
             xb = train_rows.noisy(xb, gens, input_noise)
-            losses = train_rows.loss(_field(weights, xb, baseline, rows), yb)
+            if schedule != "constant":
+                for group in optim.param_groups:
+                    group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)
+            step_losses = losses(train_rows, xb, yb)
             # a dropped model's loss is replaced, not multiplied by 0 (NaN * 0 is NaN)
-            torch.where(alive, losses, losses.new_zeros(())).sum().backward()
-            finite = torch.isfinite(losses)
+            torch.where(alive, step_losses, step_losses.new_zeros(())).sum().backward()
+            finite = torch.isfinite(step_losses)
+            if check_gradients:
+                finite = finite & torch.stack([torch.isfinite(_per_model(w.grad, len(alive))).all(1)
+                                               for w in weights]).all(0)
             if not bool(finite[alive].all()):
                 drop_failed(weights, optim, alive, finite, failures, names, step)
+            if clip_grad > 0:
+                _clip_each([w.grad for w in weights], clip_grad, len(alive))
             optim.step()
             optim.zero_grad(set_to_none=True)
-            train_loss.append(losses.detach())
+            train_loss.append(step_losses.detach())
             if after_step is not None:
                 after_step(step, weights)
             if test_rows is not None and is_test_step(step, test_every, total_steps):
                 tx, ty, _ = test_rows.draw()
                 with torch.no_grad():
-                    test_loss.append(test_rows.loss(_field(weights, tx, baseline, rows), ty))
+                    test_loss.append(losses(test_rows, tx, ty))
                 test_steps.append(step)
-            saver.after(step, total_steps, alive, failures, (train_loss, test_loss, test_steps),
-                        seconds_before + time.perf_counter() - start)
-    def write_back(g: int, model) -> None:
-        for j, net in enumerate(_nets(model)):
-            for param, stacked in zip(_layers(net), weights):
-                param.copy_(stacked[j * len(models) + g])
-    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps,
-                       seconds_before + time.perf_counter() - start)
+            saver.after(step, total_steps, alive, failures, curves, seconds_before + time.perf_counter() - start)
+    return failures, curves, seconds_before + time.perf_counter() - start
+
+
+def _per_model(w: torch.Tensor, models: int) -> torch.Tensor:
+    """A stacked weight (or its gradient) as ``(models, -1)``: row g holds every slice of model g (net j of
+    model g is slice ``j * models + g``; ``hnn.stacked``'s one net a model is the case j = 0)."""
+    return w.reshape(-1, models, *w.shape[1:]).transpose(0, 1).reshape(models, -1)
+
+
+def _clip_each(grads: list[torch.Tensor], clip: float, models: int) -> None:
+    """Scale each model's slices of ``grads`` to global norm at most ``clip``, in place, as
+    ``torch.nn.utils.clip_grad_norm_`` scales a lone model's."""
+    norms = torch.stack([_per_model(g, models).pow(2).sum(1) for g in grads]).sum(0).sqrt()
+    scale = (clip / (norms + 1e-6)).clamp(max=1.0)
+    for g in grads:
+        g.view(-1, models, *g.shape[1:]).mul_(scale.reshape(1, models, *[1] * (g.dim() - 1)))
 
 
 def group_stats(models: list, failures: dict, write_back, train_loss: list, test_loss: list, test_steps: list,
@@ -352,17 +402,16 @@ class GroupCheckpoint:
         self.saved_at = time.perf_counter()
 
 
-def drop_failed(weights, optim, alive, finite, failures, names, step, interleaved: bool = True) -> None:
-    """Report the newly failed models by name and zero their slices, after the backward of the step
-    that found them. ``interleaved``: net j of model g is slice ``j * G + g`` (``fit_group``'s layout);
-    else slice g of every weight is model g's (``hnn.stacked``)."""
+def drop_failed(weights, optim, alive, finite, failures, names, step) -> None:
+    """Report the newly failed models by name and zero their slices (net j of model g: slice ``j * G + g``),
+    after the backward of the step that found them."""
     for g in torch.nonzero(alive & ~finite).flatten().tolist():
         alive[g] = False
         failures[g] = GroupedRunFailed(names[g], step, "loss is not finite")
         print(f"  {failures[g]}", flush=True)
         with torch.no_grad():
+            mine = slice(g, None, len(alive))
             for w in weights:       # weights, gradient and Adam state: its slices move no more
-                mine = slice(g, None, len(alive)) if interleaved else g
                 w[mine] = 0
                 w.grad[mine] = 0
                 for value in optim.state.get(w, {}).values():
@@ -371,4 +420,4 @@ def drop_failed(weights, optim, alive, finite, failures, names, step, interleave
 
 
 __all__ = ["GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
-           "group_stats"]
+           "group_stats", "train_steps"]

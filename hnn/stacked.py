@@ -19,19 +19,18 @@ equal its lone run's up to float rounding (tests/test_stacked.py says how close)
 from __future__ import annotations
 
 import json
-import time
 from typing import Callable
 
 import torch
 from torch import nn
 from torch.func import functional_call, stack_module_state, vmap
 
-from .grouped import GroupCheckpoint, GroupRows, WeightStack, drop_failed, group_key, group_stats
+from .grouped import GroupRows, WeightStack, group_key, group_stats, train_steps
 from .integrators.integrate import rollout
 from .integrators.solvers import get_solver
 from .kinds import get_kind
 from .modes import model_axis
-from .training import adam_optimizer, check_data, flushed_denormals, is_test_step, learning_rate, training_steps
+from .training import adam_optimizer, check_data
 
 
 # the fields that may differ within a stacked group: each model's seed, data fraction and init
@@ -59,15 +58,6 @@ class _Loss(nn.Module):
 
     def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         return self.loss(x, y)
-
-
-def _clip_each(grads: list[torch.Tensor], clip: float) -> None:
-    """Scale each model's slice of ``grads`` (leading model axis) to global norm at most ``clip``, in place,
-    as ``torch.nn.utils.clip_grad_norm_`` scales a lone model's."""
-    norms = torch.stack([g.reshape(len(g), -1).pow(2).sum(1) for g in grads]).sum(0).sqrt()
-    scale = (clip / (norms + 1e-6)).clamp(max=1.0)
-    for g in grads:
-        g.mul_(scale.reshape(-1, *[1] * (g.dim() - 1)))
 
 
 def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] | None = None, *,
@@ -124,41 +114,19 @@ def fit_stacked(models: list[nn.Module], data: list[tuple], tests: list[tuple] |
     test_every = print_every if test_every is None else test_every
     weights = [params[k] for k in keys]
     optim = adam_optimizer(WeightStack(weights), learn_rate, weight_decay, optimizer)
-    alive = torch.ones(len(models), dtype=torch.bool, device=first.device)
-    failures, train_loss, test_loss, test_steps = {}, [], [], []
-    saver = GroupCheckpoint(checkpoint, weights, optim, (train_rows, test_rows), checkpoint_every, names)
-    first, seconds_before = saver.resume(total_steps, alive, failures, (train_loss, test_loss, test_steps))
-    with flushed_denormals(), model_axis():
-        start = time.perf_counter()
-        for step in training_steps(total_steps, progress, "stacked", start=first):
-            xb, yb, gens = train_rows.draw()
-            xb = train_rows.noisy(xb, gens, input_noise)
-            if schedule != "constant":
-                for group in optim.param_groups:
-                    group["lr"] = learning_rate(learn_rate, step, total_steps, schedule)
-            step_losses = losses(train_rows, xb, yb)
-            torch.where(alive, step_losses, step_losses.new_zeros(())).sum().backward()
-            finite = torch.isfinite(step_losses) & torch.stack(
-                [torch.isfinite(w.grad.reshape(len(w), -1)).all(1) for w in weights]).all(0)
-            if not bool(finite[alive].all()):
-                drop_failed(weights, optim, alive, finite, failures, names, step, interleaved=False)
-            if clip_grad > 0:
-                _clip_each([w.grad for w in weights], clip_grad)
-            optim.step()
-            optim.zero_grad(set_to_none=True)
-            train_loss.append(step_losses.detach())
-            if test_rows is not None and is_test_step(step, test_every, total_steps):
-                tx, ty, _ = test_rows.draw()
-                with torch.no_grad():
-                    test_loss.append(losses(test_rows, tx, ty))
-                test_steps.append(step)
-            saver.after(step, total_steps, alive, failures, (train_loss, test_loss, test_steps),
-                        seconds_before + time.perf_counter() - start)
+    # a model's loss may stay finite while its gradient is not (a second derivative through a solve):
+    # its gradient is checked too
+    with model_axis():
+        failures, curves, seconds = train_steps(
+            weights, optim, train_rows, test_rows, losses, names=names, total_steps=total_steps,
+            test_every=test_every, input_noise=input_noise, label="stacked", progress=progress,
+            checkpoint=checkpoint, checkpoint_every=checkpoint_every, learn_rate=learn_rate, schedule=schedule,
+            clip_grad=clip_grad, check_gradients=True)
+
     def write_back(g: int, model: nn.Module) -> None:
         for name, param in model.named_parameters():
             param.copy_(params[name][g])
-    return group_stats(models, failures, write_back, train_loss, test_loss, test_steps,
-                       seconds_before + time.perf_counter() - start)
+    return group_stats(models, failures, write_back, *curves, seconds)
 
 
 class _Rollout(nn.Module):

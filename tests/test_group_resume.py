@@ -99,7 +99,7 @@ def test_a_killed_stacked_group_resumes_to_the_floats_of_an_unbroken_one(tmp_pat
     options = dict(**GROUP, optimizer="adamw", schedule="cosine", loss_of=lambda m: fit_loss(m, None, "l2", None))
     whole, data, tests = _members()
     expected, _ = hnn.stacked.fit_stacked(whole, data, tests, **options)
-    rate = hnn.stacked.learning_rate
+    rate = hnn.grouped.learning_rate
 
     def killed_at_17(learn_rate, step, total_steps, schedule):
         if step == 17:
@@ -107,7 +107,7 @@ def test_a_killed_stacked_group_resumes_to_the_floats_of_an_unbroken_one(tmp_pat
         return rate(learn_rate, step, total_steps, schedule)
     path = tmp_path / "stacked.partial.pt"
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.stacked, "learning_rate", killed_at_17)
+        patch.setattr(hnn.grouped, "learning_rate", killed_at_17)
         hnn.stacked.fit_stacked(_members()[0], data, tests, **options, checkpoint=path, checkpoint_every=0.0)
     resumed = _members()[0]
     stats, _ = hnn.stacked.fit_stacked(resumed, data, tests, **options, checkpoint=path, checkpoint_every=0.0)

@@ -86,10 +86,11 @@ def main(argv=None) -> int:
         shared = (f" **The machine was shared while measuring** (other processes kept {busy:.1f} of "
                   f"{env['cores']} cores busy on average): they slowed both sides of every ratio, unevenly."
                   if busy > 0.3 else "")
-        stamp = (f"`{command}` on {datetime.date.today().isoformat()} (commit {env['commit']}), torch {env['torch']}, "
-                 f"{env['cores']} cores{', ' + env['cpu'] if env['cpu'] else ''}")
-        head = (f"{stamp}, {env['torch_threads']} threads for the comparisons, {args.repeats} interleaved "
-                f"rounds.{shared}")
+        machine = f"torch {env['torch']}, {env['cores']} cores{', ' + env['cpu'] if env['cpu'] else ''}"
+        meta = {"command": command, "date": datetime.date.today().isoformat(), "commit": env["commit"]}
+        stamp = pages.generated_by(meta, machine)
+        head = (pages.generated_by(meta, f"{machine}, {env['torch_threads']} threads for the comparisons, "
+                                         f"{args.repeats} interleaved rounds") + f".{shared}")
         body = "\n\n".join(t for t in (floor_table, table, rollout_table) if t)
         pages.update_section("benchmark", benchmark_section(head + "\n\n" + body if body else None,
                                                               f"{stamp}.{shared}\n\n{group_table}" if group else None))

@@ -32,6 +32,7 @@ import hnn
 from hnn_analysis import commands
 from hnn_analysis.benchmarks.many_models import WIDTH, measure
 from hnn_analysis.provenance import machine, provenance
+from hnn_analysis.pages import generated_by
 
 ROWS_NOTE = "750 x 2 full batch"
 CPU_SIZES, GPU_SIZES = (1, 16, 128), (1, 16, 128, 1024)
@@ -40,8 +41,8 @@ CPU_SIZES, GPU_SIZES = (1, 16, 128), (1, 16, 128, 1024)
 def table(rows: list[dict], meta: dict) -> str:
     device = rows[0]["device"] if rows else "?"
     where = meta.get("gpu") or machine(meta)
-    lines = [f"From `{meta['command']}` at commit {meta.get('commit', '?')} on {device} ({where}, torch "
-             f"{meta['torch']}, {meta['threads']} thread(s)): K spring HNNs 2-{WIDTH}-{WIDTH}-1 tanh, {ROWS_NOTE}, "
+    lines = [generated_by(meta, f"{device}, {where}, torch {meta['torch']}, {meta['threads']} thread(s)")
+             + f": K spring HNNs 2-{WIDTH}-{WIDTH}-1 tanh, {ROWS_NOTE}, "
              f"Adam; model-steps per second, median of {meta['repeats']} x {rows[0]['steps'] if rows else 0} steps. "
              "anchor: the plain batched `bmm` step with autograd's double backward; group: `hnn.grouped.fit_group` "
              "(closed form); stacked: `hnn.stacked.fit_stacked` (vmap, every kind's path); lone: one model after "

@@ -93,9 +93,9 @@ def main(argv=None) -> dict:
             f"| dataset in memory | {arrays_mib:.0f} MiB | cache file {cache_mib:.1f} MiB |",
             f"| peak resident memory | {result['peak_rss_mib']:.0f} MiB | after the data: {peak_after_data:.0f} MiB |"]
     command = commands.portable_command(list(argv) if argv is not None else sys.argv[1:], "analysis/benchmarks/benchmark_pixels.py")
-    text = (f"`{command}` on {result['date']} (commit {result['commit']}, {machine(result)}), {result['threads']} "
-            f"torch threads, torch {torch.__version__}, "
-            f"rendering in {data_workers} processes:\n\n| stage | time / size | note |\n| --- | --- | --- |\n"
+    text = (pages.generated_by({**result, "command": command}, f"{machine(result)}, {result['threads']} torch threads, "
+                         f"torch {torch.__version__}, rendering in {data_workers} processes") + ":\n\n"
+            "| stage | time / size | note |\n| --- | --- | --- |\n"
             + "\n".join(rows))
     print(text)
     write_json(out, result)

@@ -26,6 +26,7 @@ import torch
 import hnn
 
 from hnn_analysis import commands
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import provenance
 
 STEPS = ("tests", "bench", "reproduce")
@@ -64,8 +65,7 @@ def run_step(step: str, out: Path) -> dict:
 
 def table(results: dict) -> str:
     meta = results["meta"]
-    lines = [f"From `{meta['command']}` at commit {meta.get('commit', '?')} on {meta.get('gpu') or 'no GPU'} "
-             f"(torch {meta['torch']}):", "", "| step | command | exit | seconds | target |", "| --- | --- | --- | ---: | ---: |"]
+    lines = [generated_by(meta, f"{meta.get('gpu') or 'no GPU'}, torch {meta['torch']}") + ":", "", "| step | command | exit | seconds | target |", "| --- | --- | --- | ---: | ---: |"]
     for step, r in results["steps"].items():
         target = f"{r['target']:.0f}" if r["target"] else ""
         lines.append(f"| {step} | `{r['command']}` | {r['exit']} | {r['seconds']:.0f} | {target} |")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import statistics
 
 from hnn_analysis.benchmarks import map_protocols as mp
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import machine
 
 COST_GOAL, ERROR_GOAL = 4.0, 2.0        # the issue's: a step 4x cheaper than HNN + RK4's, an error within 2x
@@ -52,8 +53,7 @@ def section(result: dict) -> str:
     meta, p = result["meta"], result["meta"]["protocol"]
     summary, goal, floors = result["summary"], result["goals"], result["floors"]
     n = len(meta["seeds"])
-    lines = [f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}, torch {meta['torch']}, "
-             f"{machine(meta)}, one thread; {meta['seconds']:.0f} s)."
+    lines = [generated_by(meta, f"torch {meta['torch']}, {machine(meta)}, one thread; {meta['seconds']:.0f} s") + "."
              + (" **QUICK smoke run: not the protocol's settings.**" if meta["quick"] else ""), "",
              f"Step h = {p['h']:g}; {p['train_pairs']} training pairs; {p['test_starts']} test "
              f"start{'s' if p['test_starts'] > 1 else ''}, {p['test_steps']} steps each. Every model: {p['steps']} Adam "

@@ -36,8 +36,8 @@ def section(result: dict) -> str:
     local = [r["wall"] for r in runs if r["backend"] == "local"]
     fixed = result["ray_fixed_cost"]
     cmp = result["comparison"]
-    lines = [f"`{meta['command']}` on {meta['date']} (commit {meta['commit']}, {machine(meta)}, torch "
-             f"{meta['torch']}, Ray {result['ray']}): {len(runs) // 2} run(s) of each backend from nothing, "
+    lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta['torch']}, Ray {result['ray']}")
+             + f": {len(runs) // 2} run(s) of each backend from nothing, "
              f"in the order {', '.join(r['backend'] for r in runs)}; other processes kept "
              f"{_span([r['others_before'] for r in runs], digits=2)} cores busy in the second before each run.", "",
              f"Ray's fixed cost, {len(fixed)} tries: `ray.init` {_span([f['init'] for f in fixed])} s, its first task "

@@ -74,8 +74,8 @@ def main(argv=None) -> dict:
     if "--out" in given:            # where the JSON went is no part of the measurement (and may be a machine's path)
         del given[given.index("--out"):given.index("--out") + 2]
     command = " ".join(["python analysis/benchmarks/threads.py", *given])
-    lines = [f"`{command.strip()}` on {meta['date']} (commit {meta['commit']}, {machine(meta)}, torch "
-             f"{meta['torch']}): each task's default model and data, {args.steps} optimizer steps a run, "
+    lines = [pages.generated_by({**meta, "command": command.strip()}, f"{machine(meta)}, torch {meta['torch']}")
+             + f": each task's default model and data, {args.steps} optimizer steps a run, "
              f"{args.repeats} interleaved rounds; seconds per 100 steps, median (range); others: the cores other "
              "processes kept busy during the runs (min-max)", "",
              "| task | " + " | ".join(f"{t} thread(s)" for t in counts) + " | "

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from hnn_analysis import commands
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import cpu_snapshot, machine, others_load
 
 # the shipped two-mass measurements of docs/measured.md: the --data study's smoke run
@@ -91,8 +92,8 @@ def verdict(row: dict) -> str:
 def section(result: dict) -> str:
     """The Markdown of docs/speed.md's quick-budgets section: the stamp, one row per command."""
     meta = result["meta"]
-    lines = [f"`{meta['command']}` on {meta['date']} (commit {meta['commit']}, {machine(meta)}, torch "
-             f"{meta['torch']}, OMP_NUM_THREADS={result['omp_num_threads'] or 'unset'}): each command from "
+    lines = [generated_by(meta, f"{machine(meta)}, torch {meta['torch']}, "
+                          f"OMP_NUM_THREADS={result['omp_num_threads'] or 'unset'}") + ": each command from "
              "nothing (a fresh clone, a fresh output folder), one at a time. Load: the 1-minute load average "
              "just before and just after each; others: the cores other processes kept busy in the second "
              "before it started. A box with a load above its 2 cores is not the quiet box the budgets are for.",

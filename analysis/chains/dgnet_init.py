@@ -45,8 +45,8 @@ def init_table(results: dict, task: str) -> str:
     n = results["seeds"]
     trained = training_words([run for by_init in rows.values() for runs in by_init.values() for run in runs])
     lines = [f"### {task}: their init against the original HNN's", "",
-             f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread a "
-             f"run), {meta['seconds']:.0f} s{trained}: {n} seeds a row and init, {results['steps'][task]} steps a run "
+             pages.generated_by(meta, f"{machine(meta)}, one torch thread a run")
+             + f", {meta['seconds']:.0f} s{trained}: {n} seeds a row and init, {results['steps'][task]} steps a run "
              f"(theirs: {SETTINGS[task]['steps']}). Zero biases: {INIT_WORDS['zero_bias']}; default biases: "
              f"{INIT_WORDS['orthogonal']}. Energy MSE over the seeds: mean (median, min, max); p: two-sided "
              f"Mann-Whitney U of the two inits' seeds, which the seeds separate under p = {P_SEPARATE:g}.", "",

@@ -85,6 +85,7 @@ import torch
 import hnn
 from hnn.objectives.dgnet import pairs_from_paths
 from hnn.objectives.trajectory import TrajectoryObjective
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import machine
 
 # their README's tables ("Results on the conservative ODE datasets"): (derivative, energy), means of 15
@@ -257,8 +258,8 @@ def task_table(results: dict, task: str) -> str:
     n, steps, meta = results["seeds"], results["steps"][task], results["meta"]
     batch = SETTINGS[task]["batch_size"]
     trained = training_words([run for runs in results["rows"][task].values() for run in runs])
-    lines = [f"### {task}", "", f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, "
-             f"one torch thread a run), {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}){trained}: "
+    lines = [f"### {task}", "", generated_by(meta, f"{machine(meta)}, one torch thread a run")
+             + f", {meta['seconds']:.0f} s for its tasks ({', '.join(results['tasks'])}){trained}: "
              f"{n} seed(s) of their 15 trials, {steps} steps a run (theirs: {SETTINGS[task]['steps']}) of "
              f"{'the full batch' if batch is None else f'minibatches of {batch}'}, every MLP started with "
              f"{INIT_WORDS[results.get('init', 'orthogonal')]}. Energy: mean over the seeds, "

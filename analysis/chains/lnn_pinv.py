@@ -106,7 +106,7 @@ def summary(row: dict) -> dict:
 def lnn_pinv_text(rows: list[dict], meta: dict, past: int) -> str:
     """The section's table: one line per run."""
     jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), "
+    lines = [pages.generated_by(meta, f"{machine(meta)}, {jobs}") + ", "
              f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU: each LNN run of the peers' table "
              f"(docs/peers-runs.json) that stopped with a singular d2L/dqdot2, trained again as that table trains it "
              f"but with --lnn_solve pinv, to {past} steps past the step where it stopped (its cosine schedule still "

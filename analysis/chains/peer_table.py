@@ -4,6 +4,7 @@ the published numbers, and the card of which kind to use on a chain.
 from __future__ import annotations
 
 import hnn
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import machine
 
 def _cell(entry: dict | None) -> str:
@@ -54,7 +55,7 @@ def markdown(results: dict) -> str:
                    f"earlier sitting (every run's recorded training wall time: {sum(walls):.0f} s in all)")
     else:
         trained = f"training {meta['seconds']['training']:.0f} s"
-    lines += [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}); "
+    lines += [generated_by(meta, machine(meta)) + "; "
               f"{trained}, measuring {meta['seconds']['measuring']:.0f} s (every run's rollouts, in the sitting that "
               f"recorded it), timing the kinds {meta['seconds'].get('timing', 0):.0f} s. Training seconds in the tables: each "
               "run's steps at the rate of short bursts of the same config alone on one thread (what it costs on a "

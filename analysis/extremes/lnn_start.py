@@ -58,7 +58,7 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
 
 def lnn_start_text(rows: list[dict], meta: dict, steps: int) -> str:
     jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), "
+    lines = [pages.generated_by(meta, f"{machine(meta)}, {jobs}") + ", "
              f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU: CHNN's chains, the LNN as the peers' "
              "table trains it (softplus, 256 units), seeds 0 to "
              f"{max(r['seed'] for r in rows)}; each seed's own draw of the init.", "",

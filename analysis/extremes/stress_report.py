@@ -30,7 +30,7 @@ def precision_text(rows: list[dict]) -> list[str]:
 def text(results: dict, meta: dict) -> str:
     b = results["budget"]
     jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), "
+    lines = [pages.generated_by(meta, f"{machine(meta)}, {jobs}") + ", "
              f"{meta['seconds']:.0f} s wall, {meta['cpu_seconds']:.0f} s of CPU (load average {meta['load']:.1f} at "
              f"its end, the box shared): seed {results['seed']}, {b['steps']} Adam steps at rate {b['learn_rate']}, "
              f"{b['hidden']} hidden units, {b['rows']} training and {b['rows']} test states, through hnn.train at its "
@@ -95,7 +95,7 @@ def scan_text(rows: list[dict], meta: dict, budget: dict) -> str:
     jobs = f"{meta['jobs']} processes of one torch thread" if meta.get("jobs", 1) > 1 else "one torch thread"
     seeds = sorted({r["seed"] for r in rows})
     kinds = list(dict.fromkeys(r["kind"] for r in rows))
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}, {jobs}), {meta['seconds']:.0f} s "
+    lines = [pages.generated_by(meta, f"{machine(meta)}, {jobs}") + f", {meta['seconds']:.0f} s "
              f"wall: the spring (m = k = 1) with its states read a times theirs (q, p and their rates alike) or its "
              f"rates alone b times theirs (a faster clock), fit in the data's own units (--units off) by hnn.train, "
              f"{budget['steps']} Adam steps at rate {budget['learn_rate']}, {budget['hidden']} hidden units, "

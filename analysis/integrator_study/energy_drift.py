@@ -27,6 +27,7 @@ import hnn
 from hnn.sweeps import sweep
 from hnn_analysis import commands, plan
 from hnn_analysis.commands import portable_command
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import machine, provenance
 
 # model kind -> the integrators compared on it
@@ -62,7 +63,7 @@ def drift(model, method: str, steps: int, dt: float) -> dict:
 def table(results: dict) -> str:
     """The markdown of ``results`` (``energy_drift.json``): its stamp, one row per (model, integrator)."""
     meta = results["meta"]
-    lines = [f"From `{meta['command']}` at commit {meta.get('commit', '?')} ({machine(meta)}, one torch thread): "
+    lines = [generated_by(meta, f"{machine(meta)}, one torch thread") + ": "
              f"{results['steps']} steps of dt = {results['dt']:g} from {STARTS} starts, spring models trained "
              f"{results['train_steps']} steps, float64. Drift: |H(x_t) - H(x_0)| / |H(x_0)| of the model's own H, the "
              "largest over the starts.", "",

@@ -25,6 +25,7 @@ import hnn
 from hnn.integrators.adaptive import default_tolerances
 from hnn_analysis import commands
 from hnn_analysis.integrator_study import settings
+from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import machine, provenance
 
 METHODS = (("solve_ivp", {}), ("solve_ivp", {"scipy_method": "DOP853"}), ("dopri5", {}), ("dop853", {}))
@@ -85,7 +86,7 @@ def float32_rows() -> list[dict]:
 
 def text(results: dict) -> str:
     meta = results["meta"]
-    lines = [f"From `{meta['command']}` on {meta['date']} (commit {meta['commit']}, {machine(meta)}, one thread): "
+    lines = [generated_by(meta, f"{machine(meta)}, one thread") + ": "
              f"max |H(t) - H(0)| / |H(0)| of the true system over {STARTS} starts and {LENGTHS} training lengths, "
              "and the batch's seconds, by setting (rtol / atol).", ""]
     labels = list(settings_measured())

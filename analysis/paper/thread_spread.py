@@ -24,6 +24,7 @@ import hnn
 from hnn.sweeps import sweep
 from hnn.threads import torch_threads
 from hnn_analysis import commands
+from hnn_analysis.pages import generated_by
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import machine, provenance
 
@@ -70,7 +71,7 @@ def _gap(by_threads: dict) -> float:
 
 def markdown(results: dict) -> str:
     meta = results["meta"]
-    lines = [f"From `{meta['command']}` at commit {meta['commit']} ({machine(meta)}), {meta['seconds']:.0f} s: "
+    lines = [generated_by(meta, machine(meta)) + f", {meta['seconds']:.0f} s: "
              f"the paper's runs of {', '.join(results['tasks'])} at full settings, seeds "
              f"{', '.join(map(str, results['seeds']))}, each trained at one torch thread and at two. "
              "Thread gap: the largest ratio between one and two threads at one seed; seed spread: the largest "

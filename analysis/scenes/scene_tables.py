@@ -322,6 +322,6 @@ def guide(results: dict) -> str:
             lines.append(f"| {task} | {card_name(card)} | {_g(card['energy'])} / {_g(card['rollout'])} | "
                          f"{cheapest_words(card)} | {unsettled(card)} |")
     meta = results["meta"]
-    lines += ["", f"From `{meta['command']}` ({meta['date']}, commit {meta['commit']}); every kind, the grids, "
+    lines += ["", generated_by(meta, f"torch {meta['torch']}") + "; every kind, the grids, "
               "the speed at equal accuracy and the D-HNN comparison: [docs/scenes.md](docs/scenes.md)."]
     return "\n".join(lines) + "\n"
