@@ -167,3 +167,19 @@ def test_a_solver_that_diverges_is_a_row_that_says_so_not_a_crash():
     status = {(r["solver"], r["rtol"]): r["status"] for r in rows}
     assert status[("fine", 1e-4)] == "ok" and status[("diverges", 1e-6)].startswith("DivergenceError")
     assert all(r["error"] < 1e-3 for r in rows if r["solver"] == "fine")
+
+
+def test_update_docs_without_the_saved_runs_leaves_the_page_and_says_where_to_find_them(tmp_path, monkeypatch,
+                                                                                         capsys):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "experiment-spring").symlink_to(hnn.tasks.repo_root() / "experiment-spring")
+    page = tmp_path / "docs" / "integrators.md"
+    page.write_text("<!-- work-precision:begin -->\nthe last full ladder\n<!-- work-precision:end -->\n")
+    monkeypatch.setenv("HNN_REPO", str(tmp_path))
+    with pytest.raises(SystemExit):
+        work_precision.main(["--tasks", "spring", "--repeats", "1", "--runs", str(tmp_path / "empty"),
+                             "--out", str(tmp_path / "out"), "--update-docs"])
+    assert "the last full ladder" in page.read_text()
+    err = capsys.readouterr().err
+    assert "no saved run of spring hnn, spring baseline" in err and "--runs" in err
+    assert (tmp_path / "out" / "work_precision.json").exists()

@@ -78,7 +78,15 @@ def main(argv=None) -> dict:
     figure = overview(results["rows"], out / "work-precision.png") if results["rows"] else None
     why_text = "\n" + why_table(results["why"]) if results["why"] else ""
     text, section = markdown(results) + why_text, markdown(results, detail=False) + why_text
-    commands.publish(out, "work_precision", results, text, {"work-precision": section} if args.update_docs else {})
+    # a page is written only from a whole ladder: a missing run would drop its rows from docs/integrators.md
+    absent = [f"{task} {model}" for task in tasks for model in (("hnn",) if args.quick else MODELS)
+              if not any((r["task"], r["model"]) == (task, model) for r in results["rows"])]
+    commands.publish(out, "work_precision", results, text,
+                     {"work-precision": section} if args.update_docs and not absent else {})
+    if args.update_docs and absent:
+        p.error(f"--update-docs: no saved run of {', '.join(absent)} in {runs}, so docs/integrators.md was left as "
+                f"it is (this run's tables are in {out}); train them (python analysis/reproduce.py) or point --runs "
+                "at the folder that holds them")
     if args.update_docs and figure is not None:         # the page shows the HNN's panels; each task's are in out
         atomic_write(root / "docs" / "figures" / figure.name, lambda tmp: shutil.copyfile(figure, tmp))
     print(f"total {results['meta']['seconds']:.0f} s; wrote {out}")
