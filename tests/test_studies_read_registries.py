@@ -81,12 +81,14 @@ def test_the_integrator_study_measures_a_registered_kind_with_a_registered_solve
     spring = speed_measure.study_settings("spring")
     monkeypatch.setattr(speed_measure, "study_settings", lambda task: {**spring, "batch": 2, "dts": (0.1, 0.05)})
     monkeypatch.setattr(speed_measure, "QUICK_RTOLS", (1e-6,))
-    for kind in ("hnn", "baseline", "scaled"):
+    # a learned map beside them has no field for the solvers: left to docs/maps.md, not a crash of the study
+    for kind in ("hnn", "baseline", "scaled", "g_sympnet"):
         _untrained_run("spring", kind, tmp_path)
     notes = []
     rows = speed_measure.measure_task("spring", tmp_path, quick=True, repeats=1, notes=notes)
     measured = {(row["model"], row["method"]) for row in rows if row["status"] == "ok"}
     assert {("scaled", "toy-euler"), ("true", "toy-euler"), ("hnn", "toy-euler"), ("scaled", "midpoint")} <= measured
+    assert "g_sympnet" not in {row["model"] for row in rows}
     assert not notes
 
 

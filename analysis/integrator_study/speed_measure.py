@@ -55,6 +55,8 @@ def _fields(task: str, system, runs: Path | None, notes: list) -> dict:
         return fields
     # every model kind the task trains (hnn.MODEL_KINDS): those reproduce.py --models trained are measured
     for label in hnn.cli.model_choices(hnn.load_task(task, "train").Config):
+        if hnn.MODEL_KINDS[label].steps:        # no field for these solvers: docs/maps.md sets maps beside them
+            continue
         args = hnn.tasks.task_config(task, {"save_dir": str(runs), "seed": 0, "model": label})
         found = hnn.runs.find_run(args)
         if found is None and label not in ("hnn", "baseline"):
