@@ -278,7 +278,7 @@ def train_steps(weights: list[torch.Tensor], optim, train_rows: GroupRows, test_
                 finite = finite & torch.stack([torch.isfinite(_per_model(w.grad, len(alive))).all(1)
                                                for w in weights]).all(0)
             if not bool(finite[alive].all()):
-                drop_failed(weights, optim, alive, finite, failures, names, step)
+                _drop_failed(weights, optim, alive, finite, failures, names, step)
             if clip_grad > 0:
                 _clip_each([w.grad for w in weights], clip_grad, len(alive))
             optim.step()
@@ -402,7 +402,7 @@ class GroupCheckpoint:
         self.saved_at = time.perf_counter()
 
 
-def drop_failed(weights, optim, alive, finite, failures, names, step) -> None:
+def _drop_failed(weights, optim, alive, finite, failures, names, step) -> None:
     """Report the newly failed models by name and zero their slices (net j of model g: slice ``j * G + g``),
     after the backward of the step that found them."""
     for g in torch.nonzero(alive & ~finite).flatten().tolist():
@@ -419,5 +419,5 @@ def drop_failed(weights, optim, alive, finite, failures, names, step) -> None:
                         value[mine] = 0
 
 
-__all__ = ["GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "drop_failed", "fit_group", "group_key",
+__all__ = ["GroupCheckpoint", "GroupRows", "GroupedRunFailed", "WeightStack", "fit_group", "group_key",
            "group_stats", "train_steps"]
