@@ -203,19 +203,19 @@ def run_dataset(task: str, args: Mapping) -> dict:
 def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     """Train the run of ``task`` with config ``values`` (a sweep's job, in a worker process or a Ray
     task; ``threads`` sets torch's thread count first); returns its folder as text."""
-    import torch        # here: finding and reading tasks loads no torch (a command checks its input first)
-    from .runs import record_divergence, run_experiment
+    from .runs import record_divergence, run_experiment     # here: finding and reading tasks loads no torch
+    from .threads import torch_threads
 
-    if threads is not None:
-        torch.set_num_threads(threads)
     config = task_config(task, values)
-    try:
-        return str(run_experiment(config))
-    except DivergenceError as err:
-        # recorded here, as it fails: the sweep that reads this outcome may be busy with another's (its
-        # on_done) or stopped before it does
-        record_divergence(config, err)
-        raise
+    # the caller's thread count comes back afterwards: a library call leaves no global setting changed
+    with torch_threads(threads):
+        try:
+            return str(run_experiment(config))
+        except DivergenceError as err:
+            # recorded here, as it fails: the sweep that reads this outcome may be busy with another's (its
+            # on_done) or stopped before it does
+            record_divergence(config, err)
+            raise
 
 
 def _load(mod_name: str, path: Path, package: Path | None = None) -> ModuleType:

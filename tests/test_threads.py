@@ -78,3 +78,22 @@ def test_a_fit_says_how_far_it_is_where_no_bar_is_drawn_and_nothing_when_told(ca
     assert lines[0].startswith("train: step 1 of 4, about ") and lines[-1].startswith("train: step 4 of 4, about "), lines
     hnn.train(hnn.HNN(2, hnn.MLP(2, 8, 2)), x, dxdt, total_steps=3, progress=False)
     assert capsys.readouterr().err == ""
+
+
+def test_a_sweeps_lone_and_group_jobs_give_the_callers_thread_count_back(tmp_path):
+    """``hnn.tasks.run_task`` and ``hnn.sweeps.group_runs.run_group_task`` run at the job's count and
+    leave the caller's as it was: a library call changes no global setting."""
+    from hnn.sweeps.group_runs import run_group_task
+    from hnn.tasks import run_task
+
+    caller = torch.get_num_threads()
+    other = 2 if caller == 1 else 1
+    values = dict(total_steps=2, save_dir=str(tmp_path), verbose=False)
+    try:
+        assert run_task("spring", values, threads=other)
+        assert torch.get_num_threads() == caller
+        outcomes = run_group_task("spring", [dict(values, seed=1), dict(values, seed=2)], threads=other)
+        assert all("folder" in o for o in outcomes), outcomes
+        assert torch.get_num_threads() == caller
+    finally:
+        torch.set_num_threads(caller)

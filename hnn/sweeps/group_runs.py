@@ -27,6 +27,7 @@ from ..objectives import DerivativeObjective
 from ..runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
 from ..specs import RunSpecs, run_specs
 from ..tasks import task_config
+from ..threads import torch_threads
 
 
 def unit_key(config) -> tuple | None:
@@ -166,11 +167,10 @@ def run_group_task(task: str, values: list[Mapping], threads: int | None = None)
     trained as one group (``threads`` sets torch's thread count first). Per config
     ``{"folder": text}`` or ``{"error": message, "diverged": whether the model itself failed}`` (plain data:
     it crosses process boundaries)."""
-    if threads is not None:
-        torch.set_num_threads(threads)
     configs = [task_config(task, v) for v in values]
     try:
-        outcomes = train_group(configs)
+        with torch_threads(threads):        # the caller's count comes back afterwards
+            outcomes = train_group(configs)
     except DivergenceError as err:
         outcomes = [err] * len(configs)
         _record_diverged(configs, outcomes)
