@@ -93,3 +93,19 @@ def test_the_machine_path_check_catches_a_flags_value_and_leaves_urls_and_repo_p
     assert MACHINE_PATH.findall(f"`python analysis/x.py --runs {runs} --out={tmp_path.resolve()}`") == [
         str(runs), str(tmp_path.resolve())]
     assert not MACHINE_PATH.findall("https://github.com/greydanus/hnn and docs/speed.md and --out DIR")
+
+
+_NUMBERS = {"one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6, "seven": 7, "eight": 8, "nine": 9}
+
+
+def test_the_counts_the_prose_gives_of_the_package_are_the_codes():
+    """The number of ``hnn.__all__``'s names in ``hnn``'s docstring, and of the package's levels in
+    docs/README.md (``hnn._LAYERS``, where the two rooms ``integrators`` and ``models`` share one level)."""
+    said = re.search(r"gives the (\d+) names of ``__all__``", hnn.__doc__)
+    assert said and int(said.group(1)) == len(hnn.__all__), (said and said.group(0), len(hnn.__all__))
+    levels = len(hnn._LAYERS) - 1
+    text = (REPO / "docs" / "README.md").read_text()
+    said = re.search(r"the package in (\w+) levels", text)
+    assert said and _NUMBERS.get(said.group(1)) == levels, (said and said.group(0), levels)
+    for name in hnn._LAYERS:
+        assert name in text.split("**Layout.**")[1].split("\n\n")[0], f"docs/README.md's layout omits {name}"
