@@ -22,8 +22,16 @@ the run read it.
 
 ``--plot`` draws the run's figures from the run alone (into ``--out``, default ``RUN/figures``): the field
 and a trajectory against the truth (1-D tasks), the orbits (2-body, 3-body), the frames (pixels), the
-energy over time under every protocol; for a measured run the held-out tails against its prediction. With
-a folder, one figure per data file also sets each kind's best run beside the others.
+energy over time under every protocol (a learned map, which has no field: its energy over its own steps);
+for a measured run the held-out tails against its prediction. With a folder, one figure per data file also
+sets each kind's best run beside the others.
+
+A run is named by what it is: its kind, with ``+<fit>`` where a least-squares ``--fit`` found its weights
+(``hnn+library``, as its folder: ``hnn.runs.kind_label``), in the table and the figures ("Hamiltonian NN
+(library fit)"). A folder is scored run by run: a run that cannot be scored (an unfinished save, a file
+gone) is named and the others go on; the command then ends with one ``error:`` line listing them (exit
+code 1), after writing ``score.json`` (``"not_scored"``: each one's reason). One unfinished run is one
+``error:`` line with the fix (exit code 2).
 """
 from __future__ import annotations
 
