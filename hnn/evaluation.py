@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from .integrators.integrate import rollout
-from .interface import declared, gradient_of
+from .interface import declared, gradient_of, step_map_of
 from .errors import DivergenceError
 from .metrics import energy_mse, path_errors
 from .integrators.solvers import get_solver
@@ -352,6 +352,8 @@ def model_rollout(f, x0: torch.Tensor, t, options: dict = ROLLOUT_SOLVER) -> tup
     ``options`` (default ``ROLLOUT_SOLVER``; a learned map takes none: it steps itself at its ``dt``),
     the batch at once, or path by path where the batch fails: a path that blows up or does not finish within
     its step budget is ``BLOWN_UP`` everywhere (unrelated to the truth, e(t) ~ 1 over the whole horizon)."""
+    if options is ROLLOUT_SOLVER and step_map_of(f) is not None:     # the default solver is a field's: a map
+        options = {}                                                # steps itself, as its caller asked nothing
     try:
         return quiet_rollout(f, x0, t, **options), 0
     except DivergenceError:

@@ -67,7 +67,7 @@ def test_the_docs_recipe_trains_a_map_that_follows_the_true_pendulum():
     t = model.dt * np.arange(int(10 / model.dt) + 1)
     x0 = torch.as_tensor(np.asarray(data["test_x"])[::len(data["t_eval"])][:10], dtype=torch.float64)
     truth = quiet_rollout(lambda x, t=None: task.dynamics(x), x0, t, method="dop853", rtol=1e-12, atol=1e-12)
-    learned = rollout_errors(float64_copy(model), truth, t)
+    learned = rollout_errors(float64_copy(model), truth, t, options={})     # a map: its own steps
     identity = path_errors(truth[:, :1].expand_as(truth), truth, t)
     # a learned bound, set against the identity map (no learning: 0.53): the command's tanh map here 0.17 of
     # it (0.091), SympNets' sigmoid, the classes' default before, 0.74 (0.39), the noise floor of the data
