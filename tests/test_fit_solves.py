@@ -145,3 +145,28 @@ def test_folding_triangles_is_the_qr_of_their_stacked_rows(rcond):
         truth, residual = np.linalg.lstsq(A, b, rcond=None)[:2]
         assert np.abs(solver.solve().numpy() * scale[:, None] - truth).max() <= AGREE * np.abs(truth).max()
         assert solver.residual().numpy() == pytest.approx(residual, rel=AGREE)
+
+
+def test_cross_validation_picks_the_ridge_of_least_gcv_score_of_explicit_ridge_solves():
+    """``ridge()``: for each right-hand side, the ridge of ``RIDGES`` whose solve of the stacked [B; lam I] (B the
+    rows with the factor's own ridge rows) has the least rss / (1 - dof / rows)^2, dof = sum s^2 / (s^2 + lam^2)
+    over B's singular values; noise of two sizes on the two right-hand sides makes them choose differently."""
+    rng = np.random.default_rng(11)
+    A = rng.normal(size=(120, 60)) @ np.diag(np.logspace(0, -6, 60))
+    Y = np.column_stack([A @ rng.normal(size=60) + 0.003 * rng.normal(size=120),
+                         A @ rng.normal(size=60) + 0.3 * rng.normal(size=120)])
+    scale, rcond = np.linalg.norm(A, axis=0), 1e-13
+    solver = lstsq.StreamingQR(60, 2, torch.as_tensor(scale), rcond)
+    solver.add(torch.as_tensor(A), torch.as_tensor(Y))
+    B = np.vstack([A / scale, rcond * np.eye(60)])
+    s = np.linalg.svd(B, compute_uv=False)
+    expected = []
+    for j in range(2):
+        b = np.concatenate([Y[:, j], np.zeros(60)])
+        scores = []
+        for lam in lstsq.RIDGES:
+            c = np.linalg.lstsq(np.vstack([B, lam * np.eye(60)]), np.concatenate([b, np.zeros(60)]), rcond=None)[0]
+            dof = (s ** 2 / (s ** 2 + lam ** 2)).sum()
+            scores.append(((B @ c - b) ** 2).sum() / (1 - dof / 120) ** 2)
+        expected.append(lstsq.RIDGES[int(np.argmin(scores))])
+    assert solver.ridge().tolist() == expected and expected[0] < expected[1]

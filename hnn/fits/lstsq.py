@@ -18,8 +18,6 @@ Memory: the factor ``(K + rhs)^2`` and one chunk of rows beside it (``chunk_rows
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 from scipy.linalg import lapack
@@ -105,17 +103,15 @@ class StreamingQR:
         lhs, z = self._split()
         U, s, _ = torch.linalg.svd(lhs)
         zhat, floor = U.T @ z, self.residual()
-        best = torch.full((self.rhs,), math.inf, dtype=torch.float64)
-        chosen = torch.full((self.rhs,), self.rcond, dtype=torch.float64)
-        for lam in (r for r in RIDGES if r >= self.rcond):
-            shrink = lam ** 2 / (s ** 2 + lam ** 2)
-            rss = ((shrink[:, None] * zhat) ** 2).sum(dim=0) + floor
-            dof = (1 - shrink).sum()
-            score = rss / max(1.0 - float(dof) / self.rows, 1e-12) ** 2
-            better = score < best
-            best, chosen = torch.where(better, score, best), torch.where(better, torch.tensor(lam, dtype=torch.float64),
-                                                                         chosen)
-        return chosen
+        lams = torch.tensor([r for r in RIDGES if r >= self.rcond], dtype=torch.float64)
+        if not len(lams):
+            return torch.full((self.rhs,), self.rcond, dtype=torch.float64)
+        # every ridge at once (a loop over them cost more than the SVD on a small library)
+        shrink = lams[:, None] ** 2 / (s ** 2 + lams[:, None] ** 2)                     # (ridges, columns)
+        rss = ((shrink[:, :, None] * zhat) ** 2).sum(dim=1) + floor                       # (ridges, rhs)
+        dof = (1 - shrink).sum(dim=1)
+        score = rss / (1.0 - dof / self.rows).clamp(min=1e-12)[:, None] ** 2
+        return lams[score.argmin(dim=0)]        # the first (smallest) ridge of equal scores, as a loop's strict <
 
     def solve(self, ridge: torch.Tensor | None = None) -> torch.Tensor:
         """The coefficients ``(columns, rhs)`` of the rows added so far: with the factor's own ridge ``rcond``, or
