@@ -241,6 +241,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     out = np.empty((batch, num_t, dim), dtype=dtype)
     out[:, 0] = y
     nxt = np.ones(batch, dtype=np.int64)
+    t_next = np.full(batch, t[min(1, num_t - 1)])          # t[nxt] (the last time once past it), kept as nxt moves
     done = np.zeros(batch, dtype=bool)
     bad_time = np.full(batch, np.nan)
     rows = np.arange(batch)
@@ -272,6 +273,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         if drop_finished and live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
+            t_next = t_next[keep]
             err_old = err_old[keep]
             work = Stages.empty(scheme.stages, live, dim, dtype)
             finished = 0
@@ -307,7 +309,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             finished = int(np.count_nonzero(done))
         accept = None if calm else ~done & (err_norm <= 1)          # None: every row
         t_new = np.where(clipped, t_end, tc + h)
-        ahead = t[np.minimum(nxt, num_t - 1)] - t_new
+        ahead = t_next - t_new
         if direction < 0:
             ahead *= direction
         due = ahead <= near if calm else accept & (ahead <= near)
@@ -336,6 +338,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             sigma = ((t[k] - tc[ij]) / h[ij]).astype(dtype)
             out[rows[ij], k] = evaluate(sigma, at[j])
             nxt[i] += np.bincount(j, minlength=len(i))
+            t_next[i] = t[np.minimum(nxt[i], num_t - 1)]
             done |= nxt >= num_t
             finished = int(np.count_nonzero(done))
         if calm or accept.all():
