@@ -23,7 +23,7 @@ from .errors import DivergenceError
 from .io import atomic_write, torch_bytes
 from .progress import Ticker
 from .threads import torch_threads
-from .units import VELOCITY_LIKE, Rescaled, UnitScales, fit_scales, rescale_reason
+from .units import VELOCITY_LIKE, in_canonical_units, rescale_reason
 
 
 def check_data(name: str, a, width: int | None = None, dtype=torch.float32, device="cpu") -> torch.Tensor:
@@ -203,34 +203,6 @@ def _warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, model) -> None:
                       "docs/python.md, 'Scale your states'", stacklevel=3)
 
 
-def _in_canonical_units(model, units: str, x, dxdt, test_x, test_dxdt) -> tuple:
-    """``(the model to fit, x, dxdt, test_x, test_dxdt)`` of a fit of dx/dt under ``units``: an
-    ``hnn.units.Rescaled`` model's inner and the arrays in its canonical units (its scales fit here from
-    ``x``, ``dxdt`` where it has none: by ``units``' rule, 1 where the rule leaves the data as they are);
-    any other model and the arrays themselves, or a ValueError where ``units`` would rescale them (a
-    plain model cannot answer back in the user's units)."""
-    if units not in names.UNITS:
-        raise ValueError(f"units={units!r}: choose one of {', '.join(names.UNITS)}")
-    inner = getattr(model, "inner", model)
-    periodic = bool(getattr(inner, "periodic", False))
-    coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
-    if not isinstance(model, Rescaled):
-        reason = rescale_reason(x, dxdt, periodic, coordinates)
-        if units == "on" or (units == "auto" and reason is not None):
-            raise ValueError(f"units={units!r}: x and dxdt are {reason or 'to be rescaled (units=on)'}, where a network "
-                             f"fits poorly, and {type(model).__name__} answers in the units it is "
-                             "trained in: train hnn.units.Rescaled(model) instead (hnn.train fits its scales from these "
-                             "data, trains the model in them and it answers in yours), or pass units='off' to train "
-                             "on them as they are")
-        return model, x, dxdt, test_x, test_dxdt
-    if model.scales is None:
-        rescale = units == "on" or (units == "auto" and rescale_reason(x, dxdt, periodic, coordinates) is not None)
-        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if rescale else UnitScales(1.0, 1.0, 1.0))
-    pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
-             for a, b in ((x, dxdt), (test_x, test_dxdt))]
-    return (model.inner, *pairs[0], *pairs[1])
-
-
 def _test_diverged(stats: dict, step: int, err: DivergenceError) -> None:
     """Record a test batch that diverged after ``step``, before the last (``stats["test_diverged"]``: the
     step and why) and say so on stderr the first time: training goes on, the test loss skips that step."""
@@ -378,7 +350,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         raise ValueError(f"derivative_loss={derivative_loss!r}: choose one of {', '.join(DERIVATIVE_LOSSES)}")
     resolved = {}
     if loss is None and predict is None:        # a fit of dx/dt itself, in the units of ``units``
-        fitted, *arrays = _in_canonical_units(model, units, *given)
+        fitted, *arrays = in_canonical_units(model, units, *given)     # hnn.fit_least_squares' rule too
         if fitted is not model:     # a Rescaled model: its inner trains on the arrays in its canonical units
             resolved["unit_scales"] = model.scales.to_dict()
             model, param = fitted, next(fitted.parameters())

@@ -210,7 +210,9 @@ def cheapest_words(card: dict) -> str:
     """The card's model enough that trains fastest, in words (a card saved before it was chosen: not chosen)."""
     found = card.get("cheapest")
     if not found:
-        return "none within 2x" if "cheapest" in card else "not chosen"
+        # a measured card where no model predicts well enough (its "enough" False), or no model within 2x
+        return "none is enough" if card.get("enough") is False else "none within 2x" if "cheapest" in card \
+            else "not chosen"
     return f"{scene_rungs.describe(found['kind'], found['width'], found['fraction'])} ({_g(found['train_seconds'])} s)"
 
 
@@ -218,6 +220,8 @@ def library_words(card: dict) -> str:
     """The libraries enough, with their equations; 'none' where no library is (not measured on older cards)."""
     if "libraries" not in card:
         return "not measured"
+    if card.get("enough") is False:
+        return "none (no model is enough)"
     return "; ".join(f"{lib['kind']} ({_g(lib['train_seconds'])} s): `{lib['equation']}`" if lib.get("equation")
                      else lib["kind"] for lib in card["libraries"]) or "none"
 
