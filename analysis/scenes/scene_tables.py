@@ -61,7 +61,22 @@ def kind_table(results: dict) -> list[str]:
             cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
             lines.append(f"| {task} | {kind} | {m['params']} | " + " | ".join(cells)
                          + f" | {_g(_train_seconds(m, measured))} |")
-    return lines + not_applicable_lines(results) + inseparable_lines(results)
+    return lines + not_applicable_lines(results) + stopped_lines(results) + inseparable_lines(results)
+
+
+def stopped_lines(results: dict) -> list[str]:
+    """The rollouts a quick study stopped at their budget (``hnn.evaluation.rollout_budget``): energy protocols
+    with no number above, and rollout errors whose stopped paths count as blown up."""
+    lines = []
+    for task, entry in results["scenes"].items():
+        for kind, measured in entry["kinds"].items():
+            for m in measured["per_seed"].values():
+                for name, why in (m.get("energy_stopped") or {}).items():
+                    lines.append(f"- {task}, {kind}, {name} protocol: {why}")
+                if (m.get("rollout") or {}).get("stopped"):
+                    lines.append(f"- {task}, {kind}, rollout error: {m['rollout']['stopped']} of its paths stopped "
+                                 "over their budget, scored as blown up")
+    return ["", "Rollouts stopped over their budget (--quick):", ""] + lines if lines else []
 
 
 def not_applicable_lines(results: dict) -> list[str]:
