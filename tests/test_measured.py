@@ -253,7 +253,9 @@ def test_the_study_writes_the_card_with_the_issues_fields(tmp_path, monkeypatch)
                                                   if row.studied and row.reads("velocity") and row.family is None}
     assert {"hnn+swim", "hnn+library"} <= kinds <= {"hnn+swim", "hnn+library", "baseline+sindy"} | {
         k for k in kinds if "+" not in k}
-    assert "cheapest to train that is enough" in (out / "scene.md").read_text()
+    # whether anything is enough at 40 steps rests on round-off (SINDy's threshold, the seeds' errors): the card
+    # names its cheapest enough model exactly when it says one is enough, on any box
+    assert ("cheapest to train that is enough" in (out / "scene.md").read_text()) == chosen["enough"]
     assert {"baseline", "hnn", "separable", "dissipative", "mechanical", "second_order"} <= kinds
     for row in card["rows"]:
         assert {"kind", "hidden_dim", "train_fraction", "prediction_error", "run"} <= set(row)
