@@ -13,7 +13,7 @@ A task of several bodies declares its ``Bodies`` (its config's ``BODIES``, saved
 (Hamilton's [q, p], as every kind reads it). ``species``: one label per body of the declared count
 (bodies of one label are identical: they share a mass and may be exchanged), None for bodies that are
 all alike (the orbit tasks' unit masses). ``pairs``: which pairs interact, ``'all'`` (gravity: N(N-1)/2
-pairs, O(N^2) a step) or ``'chain'`` (body i with body i + 1 only: a chain of springs, O(N) a step).
+pairs, O(N^2) a step) or ``'neighbours'`` (body i with body i + 1 only: a chain of springs, O(N) a step).
 ``external``: the scene has a one-body field U(q_i) as well (breaks translation and rotation invariance).
 
 Torch-free: a ``train.py``'s ``--help`` reads a config's declaration before torch loads; ``split`` and
@@ -25,7 +25,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 ORDERS = ("coordinate", "body")
-PAIRS = ("all", "chain")
+PAIRS = ("all", "neighbours")
 
 
 @dataclass(frozen=True)
@@ -129,6 +129,6 @@ class Bodies:
         """One line for a reader: ``'3 bodies in 2-D, coordinate order, all pairs'``."""
         kinds = "alike" if self.species is None else f"of {self.num_species} species"
         return (f"{self.count} bodies in {self.dim}-D ({kinds}), {self.order} order, "
-                f"{'all pairs' if self.pairs == 'all' else 'neighbours along the chain'}"
+                f"{'all pairs' if self.pairs == 'all' else 'neighbours i, i + 1'}"
                 + (", an external field" if self.external else ""))
 

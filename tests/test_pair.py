@@ -103,7 +103,7 @@ def test_exact_gravity_gives_the_analytic_field(count):
 
 
 def test_chain_pairs_are_neighbours_only():
-    model = _model(6, 2, pairs="chain")
+    model = _model(6, 2, pairs="neighbours")
     q, p = _states(6, 2, batch=3)
     x = model.bodies.join(q, p)
     pairs = sum(model.radial(torch.linalg.vector_norm(q[:, a] - q[:, a + 1], dim=1)) for a in range(5))

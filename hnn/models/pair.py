@@ -8,7 +8,7 @@ yoshida4 are symplectic for the learned model.
 
 The pair geometry (``pair_index``, ``separations``, ``pair_gradient``) is public: the least-squares pair fit
 (``hnn.fits.radial``) and the scenes' true forces read the same. A step costs O(pairs): N(N-1)/2 for
-``pairs='all'`` (gravity), N - 1 for ``pairs='chain'`` (neighbours along a chain of springs).
+``pairs='all'`` (gravity), N - 1 for ``pairs='neighbours'`` (neighbours along a chain of springs).
 
 Shapes: states ``(batch, 2 N dim)``; positions and momenta per body ``(batch, N, dim)``; per-pair arrays
 ``(batch, P)``; H ``(batch,)``.
@@ -33,14 +33,14 @@ class TooManyPairsError(MemoryError):
 
 @functools.lru_cache(maxsize=32)
 def _index(count: int, pairs: str) -> tuple[torch.Tensor, torch.Tensor]:
-    if pairs == "chain":
+    if pairs == "neighbours":
         i = torch.arange(count - 1)
         return i, i + 1
     return tuple(torch.triu_indices(count, count, offset=1))
 
 
 def pair_index(count: int, pairs: str = "all", device=None) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(i, j)`` ``(P,)`` each, i < j: every pair of ``count`` bodies (``'all'``) or neighbours along a chain."""
+    """``(i, j)`` ``(P,)`` each, i < j: every pair of ``count`` bodies (``'all'``) or neighbours along the index (``'neighbours'``)."""
     i, j = _index(count, pairs)
     return i.to(device), j.to(device)
 
@@ -52,7 +52,7 @@ def check_pair_memory(batch: int, pairs: int, per_pair: int, itemsize: int) -> N
         raise TooManyPairsError(
             f"{batch} states of {pairs} interacting pairs need about {need / 2 ** 30:.1f} GiB for one field call "
             f"(limit hnn.models.pair.PAIR_BYTES = {PAIR_BYTES / 2 ** 30:.0f} GiB): evaluate fewer states at once "
-            "(a smaller batch), or declare a short-range scene's neighbours (Bodies(pairs='chain'))")
+            "(a smaller batch), or declare a short-range scene's neighbours (Bodies(pairs='neighbours'))")
 
 
 def separations(q: torch.Tensor, i: torch.Tensor, j: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
