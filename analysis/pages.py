@@ -32,6 +32,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "ray-full": "docs/sweeps.md",
          "many-models": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          "fits-sampling": "docs/fits.md", "fits-tasks": "docs/fits.md", "fits-library": "docs/fits.md",
+         "bodies": "docs/bodies.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")},
          **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS},
          **{f"maps-{protocol}": "docs/maps.md" for protocol in MAP_PROTOCOLS}}

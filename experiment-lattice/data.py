@@ -47,16 +47,29 @@ def hamiltonian(x: torch.Tensor) -> torch.Tensor:
     return (p * p).sum(dim=(1, 2)) / 2 + (SPRING * (r - REST) ** 2 / 2).sum(dim=1)
 
 
-def dynamics(x: torch.Tensor) -> torch.Tensor:
-    """Hamilton's equations ``(batch, 4N) -> (batch, 4N)``, O(N): dq/dt = p, dp/dt = the springs' pulls."""
-    squeeze = x.dim() == 1
-    x = x.reshape(-1, x.shape[-1])
-    q, p, d, r = _springs(x)
+def _force(q: torch.Tensor) -> torch.Tensor:
+    """-dV/dq ``(batch, N, 2)`` of positions ``(batch, N, 2)``: each spring pulls its two ends together (or apart)."""
+    d = q[:, 1:] - q[:, :-1]                        # (batch, N - 1, 2): each spring's extent
+    r = torch.linalg.vector_norm(d, dim=-1)
     pull = (SPRING * (r - REST) / r)[..., None] * d          # on body i towards i + 1
     force = torch.zeros_like(q)
     force[:, :-1] += pull
     force[:, 1:] -= pull
-    out = layout(q.shape[1]).join(p, force)
+    return force
+
+
+def potential_gradient(q_half: torch.Tensor) -> torch.Tensor:
+    """dV/dq ``(batch, 2N)`` of one half of the states (positions), O(N): what a split integrator's kick reads."""
+    bodies = layout(q_half.shape[-1] // 2)
+    return -bodies.flat(_force(bodies.bodywise(q_half)))
+
+
+def dynamics(x: torch.Tensor) -> torch.Tensor:
+    """Hamilton's equations ``(batch, 4N) -> (batch, 4N)``, O(N): dq/dt = p, dp/dt = the springs' pulls."""
+    squeeze = x.dim() == 1
+    x = x.reshape(-1, x.shape[-1])
+    q, p = layout(x.shape[-1] // 4).split(x)
+    out = layout(q.shape[1]).join(p, _force(q))
     return out[0] if squeeze else out
 
 
