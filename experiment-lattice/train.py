@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
+from hnn.config import setting
 
 HERE = Path(__file__).resolve().parent
 
@@ -21,6 +22,11 @@ class Config(hnn.RunConfig):
     name: str = "lattice"
     input_dim: int = 32
     save_dir: str = str(HERE)
+    # the bodies' columns differ in size by where each body sits (the chain's ends), not by unit: the scene is in units
+    # near 1 already, and scales per column would bend the pair kind's distances (hnn.units refuses them for it)
+    units: str = setting("off", "train in the canonical units of the data (hnn.units): off (the default here: the scene "
+                                "is in units near 1), auto or on (never for --model pairwise)", choices=hnn.names.UNITS,
+                         identity_at_default=False)
     BODIES: ClassVar[hnn.bodies.Bodies] = hnn.bodies.Bodies(count=8, dim=2, pairs="neighbours")
     DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "save_dir")
 
