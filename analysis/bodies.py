@@ -38,7 +38,7 @@ from hnn_analysis import pages
 from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import machine, provenance
 
-FULL_SIZES = (8, 32, 128, 512, 2048, 4096)
+FULL_SIZES = (8, 64, 512, 4096)
 QUICK_SIZES = (8, 32, 128, 256)
 FITS = ("library", "swim", "adam")
 QUICK_FITS = ("library", "swim")
