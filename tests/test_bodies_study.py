@@ -3,7 +3,7 @@ radial library recovers the lattice's spring exactly, so its paths at every N ar
 paths to round-off: the study's energy and rollout errors for it equal the true forces' to that precision."""
 import pytest
 
-from hnn_analysis import bodies
+from hnn_analysis.scenes import bodies_study as bodies
 
 
 def test_the_exact_library_runs_zero_shot_as_the_true_forces_do():
