@@ -77,6 +77,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "fits-sampling": "python analysis/fits/sampling_hnns.py --update-docs",
            "fits-tasks": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs",
            "fits-library": "python analysis/fits/fit_tasks.py --jobs 2 --update-docs",
+           "bodies": "python analysis/bodies.py --update-docs",
 
            **{f"maps-{protocol}": f"python analysis/benchmarks/maps.py --protocols {protocol} --update-docs"
               for protocol in MAP_PROTOCOLS}}
