@@ -56,6 +56,11 @@ BURSTS, BURST_SECONDS = 1, 0.05
 # fit's: the 3-body library, 90 s over its 100000 rows, issue 79)
 REFERENCE_RUN_SECONDS = 0.5
 REFERENCE_FIT_ROW_SECONDS = 0.9e-3
+# ... and a model's field call in a rollout REFERENCE_FIELD_CALL_SECONDS (a quick study's small models on 5-15
+# states through solve_ivp, the solver's own work between calls included: docs/speed.md gives 115 us of our own
+# work a call on 64 states): a quick study's rollout budget in field calls is its seconds at this rate, so the
+# same rollouts stop on every box
+REFERENCE_FIELD_CALL_SECONDS = 0.1e-3
 
 
 def reference_seconds(job, fit_rows: int | None = None) -> float:
@@ -68,6 +73,14 @@ def reference_seconds(job, fit_rows: int | None = None) -> float:
         return REFERENCE_RUN_SECONDS + REFERENCE_FIT_ROW_SECONDS * fit_rows
     per_step = hnn.task_spec(job.task).cost / hnn.tasks.task_config(job.task, {}).total_steps
     return REFERENCE_RUN_SECONDS + per_step * (config.total_steps + 1)
+
+
+def reference_data_seconds(tasks) -> float:
+    """The seconds of building each of ``tasks``' datasets once at its --quick settings on the reference box:
+    each task's declared ``TaskSpec.data_cost`` (a quick plan's own cost: its runs and its truths read them)."""
+    return sum(hnn.task_spec(task).data_cost for task in sorted(set(tasks)))
+
+
 # a fit's plan: its solve on its first PROBE_ROWS training rows and on twice as many, each timed on one thread:
 # the design and its factoring grow with the rows, the rest (the threshold's re-solves, the neurons' draw) not
 PROBE_ROWS = 128

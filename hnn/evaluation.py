@@ -182,21 +182,32 @@ RATE_CALLS = 20
 
 
 @contextlib.contextmanager
-def rollout_budget(seconds: float, why: str = ""):
+def rollout_budget(seconds: float | None = None, why: str = "", *, calls: int | None = None):
     """Within it, each model's rollout in ``evaluate_energy`` and ``rollout_errors`` (one model's paths under
-    one protocol, or for its rollout error; a group of G models G times it) makes at most the calls of its
-    field that ``seconds`` buys at the rate of its own first calls (``RATE_CALLS``, the solver's work between
-    them included), and past them stops with a ``BudgetError``: its score says "stopped: over its budget"
-    (``why`` names the budget there), never a number. The truth's rollouts are not bounded. Outside it, a
+    one protocol, or for its rollout error; a group of G models G times it) makes at most ``calls`` calls of its
+    field, or, given ``seconds`` instead, the calls that ``seconds`` buys at the rate of its own first calls
+    (``RATE_CALLS``, the solver's work between them included), and past them stops with a ``BudgetError``: its
+    score says "stopped: over its budget" (``why`` names the budget there), never a number. A budget in
+    ``calls`` stops the same models on every box (a quick study's: its share at the reference box's rate); one
+    in ``seconds`` depends on the box and its load. The truth's rollouts are not bounded. Outside it, a
     protocol's solve_ivp rollouts stop at ``MAX_FIELD_CALLS``, as always.
 
-        with hnn.evaluation.rollout_budget(2.0, "the quick study's share"):
+        with hnn.evaluation.rollout_budget(calls=20_000, why="the quick study's share"):
             result = hnn.evaluate_energy(system, models, protocol)
     """
-    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (0 < seconds < math.inf):
-        raise ValueError(f"rollout_budget(seconds={seconds!r}): give the seconds one model's rollout may take, "
-                         "a positive finite number, e.g. rollout_budget(2.0)")
-    token = _BUDGET.set((float(seconds), why))
+    if (seconds is None) == (calls is None):
+        raise ValueError(f"rollout_budget(seconds={seconds!r}, calls={calls!r}): give one of them, e.g. "
+                         "rollout_budget(calls=20000) (the same on every box) or rollout_budget(2.0) (seconds)")
+    if calls is not None:
+        if isinstance(calls, bool) or not isinstance(calls, int) or calls < 1:
+            raise ValueError(f"rollout_budget(calls={calls!r}): give the field calls one model's rollout may make, "
+                             "a positive whole number, e.g. rollout_budget(calls=20000)")
+        token = _BUDGET.set(("calls", calls, why))
+    else:
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (0 < seconds < math.inf):
+            raise ValueError(f"rollout_budget(seconds={seconds!r}): give the seconds one model's rollout may take, "
+                             "a positive finite number, e.g. rollout_budget(2.0)")
+        token = _BUDGET.set(("seconds", float(seconds), why))
     try:
         yield
     finally:
@@ -204,21 +215,25 @@ def rollout_budget(seconds: float, why: str = ""):
 
 
 class _Bounded:
-    """The field ``f`` of a rollout that may take ``seconds``: its calls are timed from the end of the first
-    to the end of call ``RATE_CALLS + 1``, which fixes ``calls``, the budget those seconds buy at that rate
-    (at least those calls, at most ``MAX_FIELD_CALLS``); the call past it raises a ``BudgetError``."""
+    """The field ``f`` of a rollout that may make ``calls`` calls, or take ``seconds``: then its calls are timed
+    from the end of the first to the end of call ``RATE_CALLS + 1``, which fixes ``calls``, the budget those
+    seconds buy at that rate (at least those calls, at most ``MAX_FIELD_CALLS``); the call past it raises a
+    ``BudgetError``."""
 
-    def __init__(self, f, seconds: float, why: str):
+    def __init__(self, f, why: str, seconds: float | None = None, calls: int | None = None):
         self.f, self.seconds, self.why = f, seconds, why
-        self.spent, self.calls, self.per_call, self._since = 0, None, None, None
+        self.spent, self.calls, self.per_call, self._since = 0, calls, None, None
 
     def __call__(self, x: torch.Tensor, *rest) -> torch.Tensor:
         self.spent += 1
         if self.calls is not None and self.spent > self.calls:
-            raise BudgetError(f"stopped: over its budget of {self.calls} calls of the field ({self.seconds:.3g} s "
-                              f"at {self.per_call * 1e3:.3g} ms a call{', ' + self.why if self.why else ''})",
-                              self.calls, self.why)
+            rate = ("" if self.seconds is None else
+                    f" ({self.seconds:.3g} s at {self.per_call * 1e3:.3g} ms a call)")
+            raise BudgetError(f"stopped: over its budget of {self.calls} calls of the field{rate}"
+                              f"{', ' + self.why if self.why else ''}", self.calls, self.why)
         out = self.f(x, *rest)
+        if self.seconds is None:
+            return out
         if self.spent == 1:
             self._since = time.perf_counter()
         elif self.spent == RATE_CALLS + 1:
@@ -233,7 +248,11 @@ def _bounded(f, share: int = 1):
     budget = _BUDGET.get()
     if budget is None:
         return f
-    return _Bounded(f.field if isinstance(f, Model) else f, budget[0] * share, budget[1])
+    field = f.field if isinstance(f, Model) else f
+    how, amount, why = budget
+    if how == "calls":
+        return _Bounded(field, why, calls=amount * share)
+    return _Bounded(field, why, seconds=amount * share)
 
 
 def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol, share: int | None = None,

@@ -47,6 +47,8 @@ class TaskSpec:
         figure_settings: what those figures need from the task, ``{figure name: {setting: value}}``
             plus shared keys (``x0``, the start state of the phase-plane figures).
         cost: relative wall time of one full training run (``--jobs N`` starts the longest first).
+        data_cost: seconds of one build of its dataset at its ``quick`` settings on the quick budgets' reference
+            box (``hnn_analysis.plan``, a quiet 2-core box): a quick mode's plan prices its builds by it.
         quick: config fields for ``reproduce.py --quick``, ``{field: value}`` (e.g. a smaller dataset).
         settings: config fields for every run of ``reproduce.py`` and the sweeps.
         variants: extra table rows, ``{suffix: ({field: value}, why)}``: row ``<task>-<suffix>``
@@ -77,6 +79,7 @@ class TaskSpec:
     figures: tuple[str, ...] = ("energy",)
     figure_settings: Mapping = field(default_factory=dict)
     cost: float = 1.0
+    data_cost: float = 0.1
     quick: Mapping = field(default_factory=dict)
     settings: Mapping = field(default_factory=dict)
     variants: Mapping = field(default_factory=dict)

@@ -325,9 +325,11 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
     assert results["meta"]["rollout_seconds"] == scene_measure.QUICK_ROLLOUT_SECONDS
-    # every kind and the fits' rungs (scene_rungs); the grid holds the kinds and the sampled HNN at 3 cells
-    assert set(entry["kinds"]) == set(scene_common.task_rungs("spring"))
-    assert len(entry["grid"]) == (len(scene_common.task_kinds("spring")) + len(scene_rungs.GRID_RUNGS)) * 3
+    assert results["meta"]["rollout_calls"] == scene_measure.QUICK_ROLLOUT_CALLS
+    # the quick kinds and the fits' rungs over them (scene_rungs); the grid holds the quick grid's at 3 cells
+    rungs, grid_rungs = scene_stages.rungs_of(True)
+    assert set(entry["kinds"]) == set(rungs) & set(scene_common.task_rungs("spring"))
+    assert len(entry["grid"]) == len(set(grid_rungs) & set(scene_common.task_rungs("spring"))) * 3
     assert entry["card"] is not None and entry["card"]["cheapest"] is not None
     assert all("train_cost" in m for m in entry["grid"].values())
     assert set(entry["speed"]) == set(scene_stages.QUICK_SPEED_KINDS) and entry["speed"]["hnn"]["fastest"] is not None
@@ -384,9 +386,14 @@ def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_pat
     assert "energy drift: 3 periods of 1000 (spring), at most 0.5 s a setting of 15" in cuts
     # a fit on a few rows, a rollout within its budget (a stiff one stops there and says so): each cut is said
     assert f"fits: at most {scene_stages.QUICK_FIT_ROWS} training rows each (a cell's fraction of them where that is " \
-           "fewer)" in cuts
-    assert any(cut.startswith(f"rollouts of the models: at most {scene_measure.QUICK_ROLLOUT_SECONDS:g} s each")
+           "fewer); a fit's training cost is the solve its run recorded, not solved again" in cuts
+    assert any(cut.startswith(f"rollouts of the models: at most {scene_measure.QUICK_ROLLOUT_SECONDS:g} s each on "
+                              f"the reference box, {scene_measure.QUICK_ROLLOUT_CALLS} field calls") for cut in cuts)
+    # fewer kinds, one scene's speed study, a scene whose dataset is dear left out: each said
+    assert any(cut.startswith("kinds: baseline, hnn, hnn+swim, hnn+library") and cut.endswith("on the grid hnn, hnn+swim")
                for cut in cuts)
+    assert scene_stages.quick_scenes(["spring", "pixels"]) == ["spring"]
+    assert any(cut.startswith("scenes: pixels left out") for cut in scene_stages.quick_cuts(["spring"], 3, 1, ["pixels"]))
     # the speed study runs for the quick kinds only; every kind is still measured
     runs = {f"spring@200x1/{kind}/seed0": tmp_path for kind in scene_common.task_kinds("spring")}
     units = scene_stages.measure_units(["spring"], runs, [0], [], [0], scene_stages.QUICK_SPEED_KINDS)

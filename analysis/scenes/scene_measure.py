@@ -16,9 +16,11 @@ A model's training seconds are its ``hnn_analysis.training_cost`` (measured in t
 beside at most its other worker); the recorded wall time of a run says more about what else the
 machine did while it trained.
 
-A quick study gives each model's rollout its share of the measuring's seconds (``rollout_seconds``:
-``hnn.evaluation.rollout_budget``): a rollout stiff along its path stops there, and the model's entry says
-so (``energy_stopped``, the rollout's ``stopped`` paths) where a full study would wait for it.
+A quick study gives each model's rollout its share of the measuring's seconds in field calls at the reference
+box's rate (``QUICK_ROLLOUT_CALLS``, ``hnn.evaluation.rollout_budget``): a rollout stiff along its path stops there,
+the same on every box, and the model's entry says so (``energy_stopped``, the rollout's ``stopped`` paths) where a
+full study would wait for it. A quick study's fit is priced by the seconds its run recorded (its solve), not
+solved again.
 """
 from __future__ import annotations
 
@@ -88,8 +90,13 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
     return out
 
 
-def _cost(task: str, directory, quick: bool = False) -> dict:
-    return training_cost(task, hnn.load_run(directory)[1], *(QUICK_BURSTS if quick else ()))
+def _cost(task: str, directory, quick: bool = False) -> dict | None:
+    """A model's ``training_cost``; None for a quick study's fit, whose cost is the solve its run recorded
+    (``cost_seconds`` reads it): measured again, it is solved again (the plan's "fits solved again")."""
+    args = hnn.load_run(directory)[1]
+    if quick and args.get("fit", "adam") != "adam":
+        return None
+    return training_cost(task, args, *(QUICK_BURSTS if quick else ()))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -114,12 +121,13 @@ def rollouts(unit: tuple) -> int:
 
 
 def run_unit(unit: tuple, quick: bool, state: dict | None = None,
-             rollout_seconds: float | None = None) -> tuple[dict, dict | None]:
+             rollout_calls: int | None = None) -> tuple[dict, dict | None]:
     """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread; each model's
-    rollouts within ``rollout_seconds`` each where given (``hnn.evaluation.rollout_budget``)."""
+    rollouts within ``rollout_calls`` field calls each where given (``hnn.evaluation.rollout_budget``)."""
     torch.set_num_threads(1)      # rollouts of 4-15 states: a second thread only adds contention
-    with (contextlib.nullcontext() if rollout_seconds is None else hnn.evaluation.rollout_budget(
-            rollout_seconds, "the quick study's share of a model's rollout")):
+    with (contextlib.nullcontext() if rollout_calls is None else hnn.evaluation.rollout_budget(
+            calls=rollout_calls, why=f"the quick study's {QUICK_ROLLOUT_SECONDS:g} s of a model's rollout at the "
+                                     "reference box's rate")):
         return _run_unit(unit, quick, state)
 
 
@@ -147,26 +155,29 @@ SPEED_WEIGHT = 20
 # its training cost's one short burst, its rollouts when healthy: 0.3-2.6 s a model on a 2-core box at load 8,
 # whose rollouts were stopped at 0.09 s), a quick speed study's (its ladder timed once, three drift runs of
 # scene_common.QUICK's drift_budget) and a scene's truth (its first unit: 20 s for the 3-body at load 8);
-# a fit's training cost solves it again (its plan's estimate)
+# a fit's training cost is the solve its run recorded (nothing solved again)
 MODEL_SECONDS = 0.5
 QUICK_SPEED_SECONDS = 6.0
 TRUTH_SECONDS = 3.0
-# a quick study's budget of each model rollout (under each energy protocol, and for its rollout error): the 3-body
-# library's, stiff off the orbits, ran 350 s; at 1 s a healthy sampled HNN of the spring (the paper's protocol,
-# rtol 1e-12: 1429 calls at 0.7 ms on a 2-core box at load 8) was stopped
+# a quick study's budget of each model rollout (under each energy protocol, and for its rollout error), in seconds
+# on the reference box and so in field calls (QUICK_ROLLOUT_CALLS, the same on every box): the 3-body library's,
+# stiff off the orbits, passed 20000 calls on one trial of 15 and ran 350 s; a healthy sampled HNN of the spring
+# (the paper's protocol, rtol 1e-12) makes 1429. A budget in wall seconds stopped two healthy mechanical models on a
+# loaded box (their calls cost more there), which a budget in calls does not
 QUICK_ROLLOUT_SECONDS = 3.0
+QUICK_ROLLOUT_CALLS = round(QUICK_ROLLOUT_SECONDS / plan.REFERENCE_FIELD_CALL_SECONDS)
 # a quick study's training cost of a model: one short burst, as a plan's (hnn_analysis.plan)
 QUICK_BURSTS = (1, 0.05)
 
 
-def quick_estimate(units: dict, fit_seconds: float = 0.0) -> tuple[float, float]:
-    """``(estimate, at most)`` of a quick study's measuring of ``units``: each model's ``MODEL_SECONDS``, each
-    speed study's ``QUICK_SPEED_SECONDS``, each scene's ``TRUTH_SECONDS`` and ``fit_seconds`` (the fits'
-    training cost, solved again); at most, every rollout stopped at ``QUICK_ROLLOUT_SECONDS`` besides."""
+def quick_estimate(units: dict) -> tuple[float, float]:
+    """``(estimate, at most)`` of a quick study's measuring of ``units`` on the reference box: each model's
+    ``MODEL_SECONDS``, each speed study's ``QUICK_SPEED_SECONDS`` and each scene's ``TRUTH_SECONDS``; at most,
+    every rollout stopped at its ``QUICK_ROLLOUT_CALLS`` (``QUICK_ROLLOUT_SECONDS`` there) besides."""
     models = sum(len(unit[3]) if unit[0] == "kind" else len(unit[2]) for unit in units.values())
     speeds = sum(unit[0] == "kind" and unit[4] is not None for unit in units.values())
     scenes = len({unit[1] for unit in units.values()})
-    estimate = models * MODEL_SECONDS + speeds * QUICK_SPEED_SECONDS + scenes * TRUTH_SECONDS + fit_seconds
+    estimate = models * MODEL_SECONDS + speeds * QUICK_SPEED_SECONDS + scenes * TRUTH_SECONDS
     return estimate, estimate + sum(rollouts(unit) for unit in units.values()) * QUICK_ROLLOUT_SECONDS
 
 
@@ -185,14 +196,14 @@ def _describe(unit: tuple) -> str:
     return f"{unit[1]:7s} {kind} at {len(unit[2])} grid run{'s' if len(unit[2]) != 1 else ''} (cells x seeds)"
 
 
-def run(units: dict, quick: bool, jobs: int = 1, rollout_seconds: float | None = None) -> tuple[dict, dict]:
+def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = None) -> tuple[dict, dict]:
     """``({key: result}, {task: the scene's state})`` of ``units`` (``{key: unit}``): here (``jobs``
     1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
-    which the others reuse); each model's rollouts within ``rollout_seconds`` where given (``run_unit``)."""
+    which the others reuse); each model's rollouts within ``rollout_calls`` where given (``run_unit``)."""
     results, states, progress = {}, {}, sweep.Progress(len(units))
     # the time left by the units' weights: a model a model, a kind's speed study SPEED_WEIGHT models; with a
     # budget, each unit's seconds at most (quick_estimate), so that no unit's stop can swell the time left
-    weights = {key: _weight(unit) if rollout_seconds is None else quick_estimate({key: unit})[1]
+    weights = {key: _weight(unit) if rollout_calls is None else quick_estimate({key: unit})[1]
                for key, unit in units.items()}
     ahead, measured = plan.Ahead(sum(weights.values())), [0.0]
 
@@ -202,7 +213,7 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_seconds: float | None =
     print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
-            results[key], states[unit[1]] = run_unit(unit, quick, None, rollout_seconds)
+            results[key], states[unit[1]] = run_unit(unit, quick, None, rollout_calls)
             print(said(key), flush=True)
         return results, states
     by_task: dict[str, list] = {}
@@ -211,7 +222,7 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_seconds: float | None =
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
     with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
         # the first unit of every scene now; the rest of a scene once its truth is known
-        running = {pool.submit(run_unit, units[keys[0]], quick, None, rollout_seconds): keys[0]
+        running = {pool.submit(run_unit, units[keys[0]], quick, None, rollout_calls): keys[0]
                    for keys in by_task.values()}
         waiting = {task: keys[1:] for task, keys in by_task.items()}
         while running:
@@ -228,5 +239,5 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_seconds: float | None =
                 if task not in states:
                     states[task] = state
                     for other in waiting.pop(task, []):
-                        running[pool.submit(run_unit, units[other], quick, state, rollout_seconds)] = other
+                        running[pool.submit(run_unit, units[other], quick, state, rollout_calls)] = other
     return results, states

@@ -26,13 +26,22 @@ WIDTHS, FRACTIONS = (16, 32, 64, 128, 200), (0.1, 0.25, 0.5, 1.0)
 QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
 QUICK_STEPS = 60
 QUICK_SPEED_KINDS = ("hnn",)
+# --quick: the speed study of the first QUICK_SPEED_STUDIES scenes (the scenes' order) that have a speed ladder
+QUICK_SPEED_STUDIES = 1
+# --quick: the kinds trained by Adam (the paper's pair) and those on the grid; the fits' rungs over them
+# (scene_rungs.RUNGS, GRID_RUNGS) stay
+QUICK_KINDS = ("baseline", "hnn")
+QUICK_GRID_KINDS = ("hnn",)
+# --quick: a scene whose dataset takes longer than this to build (its TaskSpec.data_cost, on the reference box) is
+# left out unless --scenes names it (the pixels' frames: 20 s of the 90 s)
+QUICK_DATA_SECONDS = 5.0
 DEFAULT_CELL = (200, 1.0)
 # --quick: at most this many training rows a fit (scene_rungs.capped): a library's solve grows with its rows,
 # and the 3-body's 100000 took 90 s on a quiet 2-core box (2-body: 78 s on a loaded one)
 QUICK_FIT_ROWS = 500
 # --quick: each stage's share of its budget (commands.QUICK_BUDGETS["scene_study"]), in seconds: the plan says a
 # stage whose estimate passes its share; the rest of the budget is the start, the plan, the datasets, the cards
-QUICK_SHARES = {"train": 40.0, "measure": 30.0}
+QUICK_SHARES = {"train": 35.0, "data": 10.0, "measure": 40.0}
 
 
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
@@ -68,20 +77,47 @@ def plan_rows(scenes, quick: bool) -> list[dict]:
     return rows
 
 
-def quick_cuts(studied: list[str], seeds: int, quick_seeds: int = 1) -> list[str]:
+def quick_scenes(scenes: list[str]) -> list[str]:
+    """The scenes a quick study takes of ``scenes`` when none is named: those whose dataset builds within
+    ``QUICK_DATA_SECONDS`` on the reference box (``TaskSpec.data_cost``)."""
+    return [task for task in scenes if hnn.task_spec(task).data_cost <= QUICK_DATA_SECONDS]
+
+
+def rungs_of(quick: bool) -> tuple[tuple, tuple]:
+    """``(the rungs at the default cell, the rungs on the grid)``: every studied kind and the fits' rungs over
+    them, or a quick study's ``QUICK_KINDS`` and ``QUICK_GRID_KINDS`` and theirs."""
+    kinds, grid_kinds = (QUICK_KINDS, QUICK_GRID_KINDS) if quick else (scene_common.kinds(),) * 2
+    return tuple(kinds + tuple(scene_rungs.fit_rungs(kinds, scene_rungs.RUNGS))), \
+        tuple(grid_kinds + tuple(scene_rungs.fit_rungs(grid_kinds, scene_rungs.GRID_RUNGS)))
+
+
+def speed_scenes(scenes) -> list[str] | None:
+    """The scenes whose speed a quick study measures: the first ``QUICK_SPEED_STUDIES`` with a speed ladder."""
+    return [task for task in scenes if "dts" in scene_settings(task)][:QUICK_SPEED_STUDIES]
+
+
+def quick_cuts(studied: list[str], seeds: int, quick_seeds: int = 1, left_out=()) -> list[str]:
     """What ``--quick`` cuts from the full study of the scenes ``studied`` (``seeds``: the full
     study's ``--seeds``; ``quick_seeds``: the quick run's), one phrase each, as ``main`` prints them."""
     quick, full = scene_common.QUICK, scene_common.FULL
-    drift = [task for task in studied if scene_settings(task).get("drift")]
+    drift = [task for task in speed_scenes(studied) if scene_settings(task).get("drift")]    # the speed study's
     cuts = study.quick_cuts(studied, QUICK_STEPS)
-    cuts += [f"fits: at most {QUICK_FIT_ROWS} training rows each (a cell's fraction of them where that is fewer)",
+    rungs, grid_rungs = rungs_of(True)
+    if left_out:
+        cuts.append(f"scenes: {', '.join(left_out)} left out (a dataset over {QUICK_DATA_SECONDS:g} s to build on the "
+                    "reference box: " + ", ".join(f"{t} {hnn.task_spec(t).data_cost:g} s" for t in left_out)
+                    + "; --scenes names one to study it)")
+    cuts += [f"kinds: {', '.join(rungs)} of every kind and rung; on the grid {', '.join(grid_rungs)}",
+             f"fits: at most {QUICK_FIT_ROWS} training rows each (a cell's fraction of them where that is fewer); "
+             "a fit's training cost is the solve its run recorded, not solved again",
              f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
              f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
              *([f"1 seed of {seeds}, the grid's as the default cell's, so the cards test nothing on seeds"]
                if quick_seeds == 1 else [f"{quick_seeds} seeds of {seeds}"] if quick_seeds < seeds else []),
              f"rollout metrics: {quick['starts']} starts of {full['starts']}, over {quick['horizon']} training "
              f"lengths of {full['horizon']}, {quick['points']} points per length of {full['points']}",
-             f"speed at accuracy: the {', '.join(QUICK_SPEED_KINDS)} kind only of every kind, the "
+             f"speed at accuracy: the {', '.join(QUICK_SPEED_KINDS)} kind only of every kind, of the first "
+             f"{QUICK_SPEED_STUDIES} scene(s) with a speed ladder ({', '.join(speed_scenes(studied)) or 'none here'}), the "
              f"{sm.QUICK_DTS} coarsest of every other step size, tolerances "
              f"{', '.join(f'{r:g}' for r in sm.QUICK_RTOLS)} of {', '.join(f'{r:g}' for r in sm.RTOLS)}, each "
              f"setting timed {quick['timings']} time(s) of {full['timings']}"]
@@ -89,8 +125,9 @@ def quick_cuts(studied: list[str], seeds: int, quick_seeds: int = 1) -> list[str
         cuts.append(f"energy drift: {quick['drift_periods']} periods of " + ", ".join(
             f"{scene_settings(task)['periods']} ({task})" for task in drift)
             + f", at most {quick['drift_budget']:g} s a setting of {full['drift_budget']:g}")
-    cuts.append(f"rollouts of the models: at most {scene_measure.QUICK_ROLLOUT_SECONDS:g} s each (an energy "
-                "protocol's, a rollout error's); one stiff along its path stops there and says so")
+    cuts.append(f"rollouts of the models: at most {scene_measure.QUICK_ROLLOUT_SECONDS:g} s each on the reference "
+                f"box, {scene_measure.QUICK_ROLLOUT_CALLS} field calls (an energy protocol's, a rollout error's); one "
+                "stiff along its path stops there, the same on every box, and says so")
     return cuts
 
 
@@ -248,18 +285,18 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     dhnn_rows = [_row("real", DEFAULT_CELL, args.quick, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
     tic = time.perf_counter()
     # the fits' rungs beside the kinds (scene_rungs): every fit at the default cell, the sampled layer's on the grid
-    rungs, grid_rungs = (scene_common.kinds() + tuple(scene_rungs.fit_rungs(scene_common.kinds(), chosen))
-                         for chosen in (scene_rungs.RUNGS, scene_rungs.GRID_RUNGS))
+    rungs, grid_rungs = rungs_of(args.quick)
     speed_kinds = QUICK_SPEED_KINDS if args.quick else None
+    speed = speed_scenes(studied) if args.quick else None
 
     def measuring(models: int) -> list[plan.Stage]:
-        # the models the training will leave, as if every run trains (the plan's units), and their fits
+        # the models the training will leave, as if every run trains (the plan's units)
         will = {f"{row['row']}/{rung}/seed{seed}": out for batch_rows, batch_seeds, batch_rungs in
                 ((default_rows, seeds, rungs), (grid_rows, grid_seeds, grid_rungs))
                 for row in batch_rows for rung in batch_rungs for seed in batch_seeds}
-        configs = fits(default_rows, seeds, rungs, out) + fits(grid_rows, grid_seeds, grid_rungs, out)
-        return [measure_stage(measure_units(studied, will, seeds, grid_rows, grid_seeds, speed_kinds), models,
-                              args.quick, sum(plan.fit_seconds(config)["seconds"] for config in configs))]
+        units = measure_units(studied, will, seeds, grid_rows, grid_seeds, speed_kinds, speed)
+        return [data_stage(studied, args.quick), measure_stage(units, models, args.quick, len(dhnn_rows) and
+                                                                 len(DHNN_MODELS))]
     runs, _ = train([(default_rows, seeds, steps, rungs), (grid_rows, grid_seeds, steps, grid_rungs),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
                      (dhnn_rows, [0], steps, DHNN_MODELS)], out, args, then=measuring,
@@ -269,11 +306,12 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
     # states, which a second thread does not speed up; --jobs processes share the units
     tic = time.perf_counter()
-    units = measure_units(studied, runs, seeds, grid_rows, grid_seeds, speed_kinds)
-    rollout_seconds = scene_measure.QUICK_ROLLOUT_SECONDS if args.quick else None
-    results["meta"]["rollout_seconds"] = rollout_seconds
+    units = measure_units(studied, runs, seeds, grid_rows, grid_seeds, speed_kinds, speed)
+    rollout_calls = scene_measure.QUICK_ROLLOUT_CALLS if args.quick else None
+    results["meta"]["rollout_seconds"] = scene_measure.QUICK_ROLLOUT_SECONDS if args.quick else None
+    results["meta"]["rollout_calls"] = rollout_calls
     measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1,
-                                         rollout_seconds)
+                                         rollout_calls)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cells_by_scene = {}
@@ -331,38 +369,40 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     return results, runs
 
 
-def fits(rows: list[dict], seeds: list[int], rungs, out: Path) -> list:
-    """The configs of the fits' runs of ``rows`` at ``seeds`` among ``rungs`` (``scene_rungs.jobs``'s, their data
-    in ``out``/runs as the training's)."""
-    return [job.config for job in scene_rungs.jobs(rows, seeds, out / "runs", rungs,
-                                                   lambda task, rung: rung in task_rungs(task))]
+def data_stage(studied, quick: bool) -> plan.Stage:
+    """The plan's own cost: each scene's dataset built once (by the plan's first look at its runs; the runs and the
+    truths read it from the run folder), at its declared ``TaskSpec.data_cost`` on the reference box."""
+    return plan.Stage("build", len(studied), "datasets" if len(studied) != 1 else "dataset",
+                      plan.reference_data_seconds(studied), "each scene's declared build on the reference box",
+                      QUICK_SHARES["data"] if quick else None)
 
 
-def measure_stage(units: dict, models: int, quick: bool, refits: float) -> plan.Stage:
-    """The plan's measuring stage of ``units``: a quick study's from its declared costs (``scene_measure.
-    quick_estimate``, the fits solved again for their training cost in ``refits`` seconds), with its share and
-    what it takes at most (every rollout stopped at its budget); a full study's timed as it runs."""
+def measure_stage(units: dict, models: int, quick: bool, dhnn_models: int = 0) -> plan.Stage:
+    """The plan's measuring stage of ``units`` and the D-HNN protocol's ``dhnn_models``: a quick study's from its
+    declared costs (``scene_measure.quick_estimate``; a D-HNN model a model's), with its share and what it takes
+    at most (every rollout stopped at its budget); a full study's timed as it runs."""
     what = "models (losses, energy MSE, rollout error; each kind's speed at equal accuracy)"
     if not quick:
         return plan.Stage("measure", models, what)
-    estimate, most = scene_measure.quick_estimate(units, refits)
-    return plan.Stage("measure", models, what, estimate,
+    estimate, most = scene_measure.quick_estimate(units)
+    dhnn = dhnn_models * scene_measure.MODEL_SECONDS
+    return plan.Stage("measure", models, what, estimate + dhnn,
                       f"each model's {scene_measure.MODEL_SECONDS:g} s, each speed study's "
                       f"{scene_measure.QUICK_SPEED_SECONDS:g} s, each scene's truth {scene_measure.TRUTH_SECONDS:g} s, "
-                      f"the fits solved again {refits:.2g} s; at most {most:.0f} s, every rollout stopped at "
-                      f"{scene_measure.QUICK_ROLLOUT_SECONDS:g} s", share=QUICK_SHARES["measure"])
+                      f"a fit's training cost its recorded solve; at most {most + dhnn:.0f} s, every rollout "
+                      f"stopped at {scene_measure.QUICK_ROLLOUT_CALLS} field calls", share=QUICK_SHARES["measure"])
 
 
 def reference_plan(studied=None) -> list[plan.Stage]:
     """A quick study's plan on the reference box (``plan.reference_seconds``: declared costs, no data built):
-    its training (every fit at its ``QUICK_FIT_ROWS``) and its measuring (``measure_stage``)."""
-    studied = studied or scene_common.scenes()
+    its training (every fit at its ``QUICK_FIT_ROWS``), its datasets (``data_stage``) and its measuring
+    (``measure_stage``); ``studied`` default: the quick study's own scenes (``quick_scenes``)."""
+    studied = studied or quick_scenes(scene_common.scenes())
     rows = [{k: v for k, v in row.items() if k != "fit_rows"} for row in plan_rows(studied, True)]
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
     dhnn_rows = [_row("real", DEFAULT_CELL, True, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
-    rungs, grid_rungs = (scene_common.kinds() + tuple(scene_rungs.fit_rungs(scene_common.kinds(), chosen))
-                         for chosen in (scene_rungs.RUNGS, scene_rungs.GRID_RUNGS))
+    rungs, grid_rungs = rungs_of(True)
 
     def fits_states(task, rung):
         return rung in task_rungs(task)
@@ -372,18 +412,18 @@ def reference_plan(studied=None) -> list[plan.Stage]:
                  if job.config.model in models and fits_states(job.task, job.config.model)]
         jobs += scene_rungs.jobs(batch, [0], Path("runs"), models, fits_states)
     jobs = [dataclasses.replace(job, expected_seconds=plan.reference_seconds(job, QUICK_FIT_ROWS)) for job in jobs]
-    fit_jobs = [job for job in jobs if job.config.fit != "adam"]
     will = {job.key: Path("runs") for job in jobs}
-    units = measure_units(studied, will, [0], grid_rows, [0], QUICK_SPEED_KINDS)
+    units = measure_units(studied, will, [0], grid_rows, [0], QUICK_SPEED_KINDS, speed_scenes(studied))
     return [plan.training(jobs, 1, QUICK_SHARES["train"], "each run's declared cost on the reference box"),
-            measure_stage(units, len(jobs), True, sum(job.expected_seconds for job in fit_jobs))]
+            data_stage(studied, True), measure_stage(units, len(jobs), True, len(dhnn_rows) and len(DHNN_MODELS))]
 
 
 def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], grid_seeds: list[int],
-                  speed_kinds=None) -> dict:
+                  speed_kinds=None, speed_scenes=None) -> dict:
     """``{key: scene_measure unit}``: per scene, each kind at the default cell (its seeds, and the
     speed study of the first seed where the scene has a truth to roll out, for the ``speed_kinds``
-    only when given), then each kind's grid at ``grid_seeds`` (cells keyed ``kind@WxF/seedS``)."""
+    and the ``speed_scenes`` only when given), then each kind's grid at ``grid_seeds`` (cells keyed
+    ``kind@WxF/seedS``)."""
     units = {}
     for task in scenes:
         for kind in task_rungs(task):
@@ -395,6 +435,7 @@ def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], g
                 # a learned map has one step, its data's: no ladder of integrators to time
                 speed = (seeds[0] if seeds[0] in per_seed and "dts" in scene_settings(task)
                          and (speed_kinds is None or kind in speed_kinds) and "+" not in kind
+                         and (speed_scenes is None or task in speed_scenes)
                          and not hnn.MODEL_KINDS[kind].steps else None)
                 units[("kind", task, kind)] = ("kind", task, kind, per_seed, speed)
     for task in scenes:

@@ -89,8 +89,9 @@ def main(argv=None) -> dict:
     if args.data:
         return measured_study.run(args, argv, parser, inputs)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    studied = args.scenes or scenes()
-    cuts = scene_stages.quick_cuts(studied, SEEDS, given or 1) if args.quick else []
+    studied = args.scenes or (scene_stages.quick_scenes(scenes()) if args.quick else scenes())
+    left_out = [task for task in scenes() if task not in studied] if args.quick and not args.scenes else []
+    cuts = scene_stages.quick_cuts(studied, SEEDS, given or 1, left_out) if args.quick else []
     if cuts:
         commands.say_quick("scene_study", cuts)
     results, runs = scene_stages.run(args, argv, out, studied, cuts)
