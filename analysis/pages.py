@@ -70,7 +70,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
                                     "--jobs 2 --update-docs (their 15 trials)" for task in DGNET_INIT_TASKS},
            "ray-quick": "python analysis/benchmarks/ray_overhead.py --update-docs",
            "many-models": "python analysis/benchmarks/benchmark_many.py --update-docs",
-           "fit-floor": "python analysis/benchmarks/fit_floor.py --update-docs",
+           "fit-floor": "python analysis/fits/fit_floor.py --update-docs",
            "thread-spread": "python analysis/paper/thread_spread.py --update-docs",
            "many-models-gpu": "python analysis/benchmarks/benchmark_many.py --devices cuda --update-docs (on a GPU)",
            "gpu-check": "python analysis/benchmarks/gpu_check.py --update-docs (on a GPU)",

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import hnn
 from hnn.io import write_json
-from hnn_analysis.scenes.scoring import describe, plot_kinds, plot_run, run_folders, score_run, table, task_of
+from hnn_analysis.scenes.scoring import describe, plot_kinds, plot_score, run_folders, score_run, table, task_of
 
 
 def _parser():
@@ -88,7 +88,7 @@ def main(argv=None) -> list[dict]:
             print(f"[{n}/{len(folders)}, {time.perf_counter() - start:.0f} s] " + describe(_named(score))
                   + f"\n  ({score['seconds']:.1f} s)", flush=True)
             if args.plot:
-                drawn = _plot(score, out if single else out / folder.name, args.horizon)
+                drawn = plot_score(score, out if single else out / folder.name, args.horizon)
                 print(f"  figures: {', '.join(str(p) for p in drawn)}", flush=True)
         except Exception as err:        # named and counted: a folder's other runs still score
             failed[folder] = hnn.cli.one_line(f"{type(err).__name__}: {err}")
@@ -127,26 +127,6 @@ def _named(score: dict) -> dict:
     """``score`` with its kind as runs are named by what they are (``hnn.runs.kind_label``: ``hnn+library``)."""
     from hnn.runs import kind_label
     return {**score, "kind": kind_label(score["kind"], score.get("fit"))}
-
-
-def _plot(score: dict, out: Path, horizon: float | None) -> list[Path]:
-    """The figures of one scored run into ``out`` (``plot_run``'s for a measured run): the task's figures that
-    draw one model (``registry.RUN_FIGURES``), titled by what the run is ("Hamiltonian NN (library fit)" where a
-    least-squares fit found its weights); a learned map, which has no field to draw, its energy over its own
-    steps. Returns the files written."""
-    if score["task"] == "measured":
-        return plot_run(score, out, horizon)
-    from hnn_analysis.paper import figures, registry, study
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    before = set(out.iterdir())
-    kind, fit = score["kind"], score.get("fit", "adam")
-    label = kind if fit == "adam" else f"{figures.NAMES.get(kind, kind)} ({fit} fit)"
-    trained, _ = study.load_runs(score["task"], {label: Path(score["run"])})
-    steps = any(hnn.interface.declared(model).steps for model in trained.models.values())
-    only = [name for name in registry.RUN_FIGURES if name == "energy" or not steps]
-    registry.draw_figures(trained, registry.evaluate(trained), out, only=only)
-    return sorted(set(out.iterdir()) - before) or sorted(out.iterdir())
 
 
 if __name__ == "__main__":

@@ -432,7 +432,7 @@ def model_from_spec(spec: ModelSpec, device="cpu"):
     if spec.dtype not in DTYPES:
         raise ValueError(f"dtype={spec.dtype!r}: choose one of {', '.join(DTYPES)}")
     if spec.fit != "adam":      # a least-squares fit's own model, float64 on the CPU where its QR runs (hnn.fits)
-        from .fits import build
+        from .fits.registry import build
         with torch.device("cpu"):
             return build(spec)
     with torch.device("cpu"):

@@ -386,10 +386,16 @@ class Rescaled(Model):
         """H ``(batch,)`` in the user's units of energy (s_q s_p / s_t)."""
         return self.inner.hamiltonian(x / self._own) * self._scaled().energy
 
-    def equation(self, digits: int = 4) -> str:
-        """A library fit's equation in the user's units: its scaling undone exactly (``hnn.fits.equation``)."""
-        from .fits.equations import equation
-        return equation(self, digits=digits)
+    def equation(self, digits: int = 4, frame=None) -> str:
+        """A library fit's equation in the user's units: its scaling undone exactly (``hnn.fits.equation``);
+        ``frame`` (an ``hnn.fits.Frame``) the user's columns, outside these scales."""
+        from .fits.equations import Frame
+
+        if not hasattr(self.inner, "equation"):
+            raise ValueError(f"a {type(self.inner).__name__} is no library fit: it has no equation "
+                             "(fit='library' or 'sindy')")
+        frame = (frame or Frame.own(self.input_dim)).outside(self.scales, self.inner.coordinates)
+        return self.inner.equation(digits=digits, frame=frame)
 
     def structure(self) -> torch.Tensor | None:
         inner = self.inner.structure()

@@ -204,3 +204,23 @@ def plot_kinds(scores: list[dict], out: Path, horizon: float | None = None) -> l
         written.append(measured_figure.tails_figure(models, held, Path(out) / f"{Path(data_file).stem}-kinds.png",
                                                     Path(data_file).name))
     return written
+
+
+def plot_score(score: dict, out: Path, horizon: float | None = None) -> list[Path]:
+    """The figures of one scored run into ``out`` (``plot_run``'s for a measured run): the task's figures that
+    draw one model (``registry.RUN_FIGURES``), titled by what the run is ("Hamiltonian NN (library fit)" where a
+    least-squares fit found its weights); a learned map, which has no field to draw, its energy over its own
+    steps. Returns the files written."""
+    if score["task"] == "measured":
+        return plot_run(score, out, horizon)
+    from hnn_analysis.paper import figures, registry, study
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    before = set(out.iterdir())
+    kind, fit = score["kind"], score.get("fit", "adam")
+    label = kind if fit == "adam" else f"{figures.NAMES.get(kind, kind)} ({fit} fit)"
+    trained, _ = study.load_runs(score["task"], {label: Path(score["run"])})
+    steps = any(hnn.interface.declared(model).steps for model in trained.models.values())
+    only = [name for name in registry.RUN_FIGURES if name == "energy" or not steps]
+    registry.draw_figures(trained, registry.evaluate(trained), out, only=only)
+    return sorted(set(out.iterdir()) - before) or sorted(out.iterdir())

@@ -158,11 +158,7 @@ def equation(model, frame: Frame | None = None, digits: int = 4) -> str:
     """The equation of a library fit ``model`` (``FittedHNN``, ``FittedSeparable``, ``FittedField`` over a
     ``Library``, or an ``hnn.units.Rescaled`` of one) in ``frame`` (default: the model's own q and p; a
     Rescaled model answers in the user's units of its scales): ``'H = ...'``, or ``'dq/dt = ...; dp/dt = ...'``."""
-    from ..units import Rescaled
-
-    if isinstance(model, Rescaled):
-        frame = (frame or Frame.own(model.input_dim)).outside(model.scales, model.inner.coordinates)
-        model = model.inner
+    # a Rescaled model composes its scales with ``frame`` itself (hnn.units.Rescaled.equation)
     if not hasattr(model, "equation"):
         raise ValueError(f"a {type(model).__name__} is no library fit: it has no equation (fit='library' or 'sindy')")
     return model.equation(digits=digits, frame=frame)

@@ -1,9 +1,5 @@
-"""Each least-squares fit beside its arithmetic floor: the linear algebra it performs, timed alone in the same process.
-
-    python analysis/benchmarks/fit_floor.py                   # the table; results/fit_floor/fit_floor.json
-    python analysis/benchmarks/fit_floor.py --update-docs     # and docs/speed.md's section fit-floor
-    python analysis/benchmarks/fit_floor.py --double          # with the double pendulum at widths 5000 and 10000
-
+"""Each least-squares fit beside its arithmetic floor: the fits to time (``FITS``), the calls each makes,
+their floor and the section of docs/speed.md (``analysis/fits/fit_floor.py`` is the command).
 A benchmark, not a test: it prints a table and writes JSON, and passes or fails nothing. Each fit (``FITS``: the
 Sampling-HNNs protocols, ``hnn_analysis.fits.sampling_protocols``, at their settings on 2 threads; the paper's
 tasks' library, sampled and SINDy fits on one thread, as ``train.py`` runs them) runs ``--repeats`` times
@@ -17,12 +13,10 @@ rate measured here (no QR runs at that rate: the Householder panels are matrix-v
 SINDy is timed whole; its floor is one QR of its library's columns beside dx/dt (the least squares it
 must solve at least once). Times on a shared box move with its load: the fit and its floor alternate.
 """
+
 from __future__ import annotations
 
-import argparse
-import os
 import statistics
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,11 +27,11 @@ from scipy.linalg import lapack
 from torch.utils._python_dispatch import TorchDispatchMode
 
 import hnn
-from hnn.io import write_json
 from hnn.specs import ModelSpec
-from hnn_analysis import commands, pages
+from hnn_analysis import pages
 from hnn_analysis.fits import sampling_protocols as protocols
-from hnn_analysis.provenance import machine, provenance
+from hnn_analysis.provenance import machine
+
 
 SECTION = "fit-floor"
 
@@ -75,7 +69,7 @@ FITS = [
 ]
 
 
-def _data(name: str, data_dir: Path | None) -> dict:
+def dataset(name: str, data_dir: Path | None) -> dict:
     """``x``, ``dxdt`` and, for a protocol, its ``anchor``: a Sampling-HNNs protocol's seed 0, or a task's
     dataset of seed 0 (cached in the task's folder as ``train.py`` caches it, or in ``data_dir``)."""
     if name in protocols.PROTOCOLS:
@@ -262,46 +256,3 @@ def section(results: dict) -> str:
               f"rate); ratio = seconds / floor. The float64 matrix-multiply rate here, GFLOP/s: {rates}. SINDy's "
               "floor is one QR of its library's columns beside dx/dt."]
     return "\n".join(lines) + "\n"
-
-
-def main(argv=None) -> dict:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    p = hnn.cli.Parser(prog="fit_floor.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--repeats", type=hnn.cli.int_at_least(1), default=3, help="fits timed per row (default 3)")
-    p.add_argument("--double", action="store_true", help="also the double pendulum at widths 5000 and 10000 "
-                   "(minutes each on 2 cores)")
-    p.add_argument("--only", nargs="+", type=hnn.cli.int_at_least(0), default=None, metavar="ROW",
-                   help=f"these rows of the table only (0-{len(FITS) - 1}; not with --update-docs)")
-    p.add_argument("--data-dir", type=Path, default=None,
-                   help="where the tasks' datasets are cached (default: each task's folder, as train.py)")
-    p.add_argument("--out", type=Path, default=None, help="folder of fit_floor.json (default results/fit_floor)")
-    p.add_argument("--update-docs", dest="update_docs", action="store_true",
-                   help=f"write docs/speed.md's section {SECTION}")
-    args = p.parse_args(argv)
-    if args.update_docs and args.only:
-        p.error("--update-docs writes every row; drop --only")
-    cases = [case for i, case in enumerate(FITS) if (args.only is None or i in args.only) and (args.double or not case.slow)]
-    if hnn.fits.sindy.version() is None:
-        cases = [case for case in cases if case.fit != "sindy"]
-    out = args.out or hnn.tasks.repo_root() / "results" / "fit_floor"
-    meta = {**provenance(), "command": commands.portable_command(argv, "analysis/benchmarks/fit_floor.py")}
-    load_before, rows, rates, datasets = os.getloadavg()[0], [], {}, {}
-    for case in cases:
-        if case.data not in datasets:
-            datasets[case.data] = _data(case.data, args.data_dir)
-        row = measure(case, datasets[case.data], args.repeats, rates)
-        rows.append(row)
-        print(f"{row['label']}: {row['seconds']:.3g} s, floor {row['floor']:.3g} s, ratio {row['ratio']:.2f}", flush=True)
-    results = {"meta": meta, "repeats": args.repeats, "rows": rows, "load": [load_before, os.getloadavg()[0]],
-               "gemm_gflops": {t: r / 1e9 for t, r in rates.items()}}
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "fit_floor.json", results)
-    text = section(results)
-    print("\n" + text + f"\nwrote {out / 'fit_floor.json'}")
-    if args.update_docs:
-        print(f"updated {pages.update_section(SECTION, text)}")
-    return results
-
-
-if __name__ == "__main__":
-    main()
