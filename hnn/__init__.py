@@ -23,8 +23,10 @@ nothing of each other.
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
 - training: the objectives (``hnn.objectives``, a folder: the derivative fit, trajectory snippets,
-  DGNet's pairs, a map's step), the kinds registry, the loop, grouped training, evaluation, datasets,
-  and the least-squares fits beside the loop (``hnn.fits``, a folder: ``hnn.fit_least_squares``);
+  DGNet's pairs, a map's step), the kinds registry, ``hnn.train``, the ways of finding a run's weights
+  (``hnn.trainers``, a folder: the lone loop, the group loop, its closed-form and vmap groups, the
+  least-squares solve's entry), evaluation, datasets, and the least-squares fits (``hnn.fits``, a folder:
+  ``hnn.fit_least_squares``);
 - runs: config, cli, a ``train.py``'s command, run folders, task discovery;
 - orbits: the orbit tasks' physics and config (``hnn.orbits``, a folder: the gravity of n bodies, the
   close-encounter thresholds, the 2- and 3-body tasks' ``OrbitConfig``);
@@ -50,8 +52,8 @@ _LAYERS = {
              "threads", "progress"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("balance", "units", "training", "objectives", "grouped", "stacked", "kinds", "evaluation",
-                 "datasets", "fits"),
+    "training": ("balance", "units", "training", "trainers", "objectives", "kinds", "evaluation", "datasets",
+                 "fits"),
     "runs": ("config", "cli", "command", "runs", "tasks"),
     "orbits": ("orbits",),
     "sweeps": ("sweeps",),

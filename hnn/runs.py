@@ -24,12 +24,13 @@ import numpy as np
 import torch
 
 from . import cli
-from .fits import check_config, solve
+from .fits import check_config
 from .io import atomic_folder, check_save_dir, torch_bytes, write_json
 from .kinds import get_kind, model_from_args, model_from_spec
 from .objectives import FitOptions, Objective
 from .specs import run_specs
-from .training import train
+from .trainers.least_squares import solve_prepared
+from .trainers.lone import train_prepared
 from .units import canonical_fit, run_scales, wrap_saved
 
 
@@ -177,20 +178,14 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     prep = prepare(config, dataset, objective)
     objective, saved, specs, model, scales, dataset = (prep.objective, prep.saved, prep.specs, prep.model,
                                                        prep.scales, prep.dataset)
-    fit_model, x, y, test_x, test_y, options = prep.fit_model, prep.x, prep.y, prep.test_x, prep.test_y, prep.options
+    x, y, test_x, test_y, options = prep.x, prep.y, prep.test_x, prep.test_y, prep.options
     partial = partial_checkpoint(config)
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        if prep.fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
-            stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
-                          loss_weights=options.loss_weights)
-            if config.verbose and "equation" in stats["fit"]:
-                print(stats["fit"]["equation"])
-        else:
-            # prepare resolved --units and --balance (on the whole training set, recorded in args.json);
-            # threads=None: the count the run was given (a train.py's --threads, a sweep's share), in args.json
-            stats = train(fit_model, x, y, test_x, test_y, **prep.train_kwargs(checkpoint=partial))
+        # one linear solve (hnn.fits), not a loop: nothing to checkpoint; else the lone loop on what prepare
+        # resolved (--units, --balance on the whole training set, recorded in args.json; the threads it was given)
+        stats = solve_prepared(prep) if prep.fit.solved else train_prepared(prep, checkpoint=partial)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise

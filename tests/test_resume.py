@@ -115,7 +115,7 @@ def _config(save_dir, **fields):
 
 
 def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(hnn.training, "CHECKPOINT_EVERY", 0.0)
+    monkeypatch.setattr(hnn.trainers.checkpoint, "CHECKPOINT_EVERY", 0.0)
     unbroken = hnn.run_experiment(_config(tmp_path / "a"))
 
     config = _config(tmp_path / "b")
@@ -141,7 +141,7 @@ def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_pat
 
 
 def test_a_run_that_fails_in_training_leaves_no_checkpoint(tmp_path, monkeypatch):
-    monkeypatch.setattr(hnn.training, "CHECKPOINT_EVERY", 0.0)
+    monkeypatch.setattr(hnn.trainers.checkpoint, "CHECKPOINT_EVERY", 0.0)
 
     def fail(done, total):
         if done == 12:

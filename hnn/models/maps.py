@@ -19,7 +19,7 @@ The weights start near zero (N(0, 0.01^2), as jpzxshi/sympnets' modules), so a m
 identity. The step ``dt`` is the data's time step, an attribute given at construction (a run's
 ``ModelSpec.dt``, recorded in its args.json): ``hnn.rollout`` steps the map on ``t_eval`` of
 multiples of it and refuses any other. Plain tensor operations only: groups of maps train under
-``torch.func.vmap`` (``hnn.stacked``).
+``torch.func.vmap`` (``hnn.trainers.vmap``).
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Grouped training as runs: configs that ``unit_key`` puts together trained as one program
-(``hnn.grouped.fit_group`` for the paper's tanh-MLP kinds, ``hnn.stacked.fit_stacked`` for every
+(``hnn.trainers.closed_form`` for the paper's tanh-MLP kinds, ``hnn.trainers.vmap`` for every
 other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` saves a lone run.
 
     folders = hnn.sweeps.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
@@ -9,6 +9,7 @@ other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` 
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -18,8 +19,9 @@ import torch
 from .. import cli
 from ..balance import balance_weights
 from ..errors import DivergenceError
-from ..grouped import fit_group, group_key
-from ..stacked import fit_stacked, stack_key
+from ..kinds import get_kind
+from ..trainers.closed_form import train_closed_form
+from ..trainers.vmap import train_vmap
 from ..units import run_scales
 from ..io import check_save_dir
 from ..kinds import model_from_spec
@@ -30,9 +32,45 @@ from ..tasks import task_config
 from ..threads import torch_threads
 
 
+# the fields that must agree for configs to train as one program (seed, train_fraction and with
+# them the dataset may differ)
+_SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
+                  "print_every", "field_type", "dtype", "device")
+
+
+def group_key(config) -> tuple | None:
+    """Configs with equal keys can train as one closed-form group (``hnn.trainers.closed_form``); None for a config that trains alone
+    (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
+    optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
+    Adam on the squared error, or ``balance='rms'``)."""
+    if (get_kind(config.kind).grouping != "closed_form" or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
+            or (config.optimizer, config.schedule, config.clip_grad, config.derivative_loss)
+            != ("adam", "constant", 0.0, "l2")
+            or type(config.make_objective()) is not DerivativeObjective):
+        return None
+    return ((type(config).__module__, type(config).__qualname__, config.kind, run_specs(config).objective.input_noise)
+            + tuple(getattr(config, name) for name in _SHARED_FIELDS))
+
+
+# the fields that may differ within a stacked group: each model's seed, data fraction and init
+_OWN_FIELDS = ("seed", "train_fraction", "init")
+
+
+def stack_key(config) -> tuple | None:
+    """Configs with equal keys can train as one stacked group (``hnn.trainers.vmap.train_vmap``); None for a config that
+    ``group_key`` groups (its closed form is faster) or that trains alone: the pixel kinds
+    (their objective draws noise of its own). The key is the run's identity less ``_OWN_FIELDS``, and
+    the facts its model is built from (the chain's constraints)."""
+    if group_key(config) is not None or get_kind(config.kind).grouping == "alone":
+        return None
+    same = {k: v for k, v in config.identity().items() if k not in _OWN_FIELDS}
+    return (type(config).__module__, type(config).__qualname__,      # the identity's JSON: a hashable key
+            json.dumps({**same, **config.model_facts()}, sort_keys=True, default=str))
+
+
 def unit_key(config) -> tuple | None:
     """Configs with equal keys train as one group: ``("closed_form", ...)`` for the paper's tanh-MLP kinds
-    (``hnn.grouped.fit_group``), ``("stacked", ...)`` for any other kind (``hnn.stacked.fit_stacked``),
+    (``hnn.trainers.closed_form``), ``("stacked", ...)`` for any other kind (``hnn.trainers.vmap``),
     None for a config that trains alone (the pixel kinds)."""
     specs = run_specs(config)
     if specs.objective.units == "on":     # a rescaled run trains its own canonical data alone
@@ -47,7 +85,7 @@ def unit_key(config) -> tuple | None:
 
 
 def group_checkpoint(configs: list) -> Path:
-    """The training checkpoint of the group of ``configs`` while it trains (``hnn.grouped.GroupCheckpoint``):
+    """The training checkpoint of the group of ``configs`` while it trains (``hnn.trainers.group_loop.GroupCheckpoint``):
     ``<save_dir>/.group-<hash>.partial.pt``, the hash of its runs' folder names, so the same group started
     again finds it and another group does not."""
     names = "\n".join(run_dir(config).name for config in configs)
@@ -108,10 +146,10 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         partial.unlink(missing_ok=True)
     try:
         if next(iter(keys))[0] == "closed_form":
-            stats, failures = fit_group(models, data, tests, input_noise=first.objective.input_noise,
+            stats, failures = train_closed_form(models, data, tests, input_noise=first.objective.input_noise,
                                         checkpoint=partial, **shared)
         else:
-            stats, failures = fit_stacked(models, data, tests, checkpoint=partial, **shared,
+            stats, failures = train_vmap(models, data, tests, checkpoint=partial, **shared,
                                           **_stacked_options(objective, models[0], first, datasets))
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
@@ -133,7 +171,7 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
 
 
 def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) -> dict:
-    """``fit_stacked``'s loss and options from ``objective.train_options``, as ``hnn.train`` reads them.
+    """``train_vmap``'s loss and options from ``objective.train_options``, as ``hnn.train`` reads them.
     The loss is built once for the group: every dataset must give it the same time step and coordinates."""
     for key in ("dt", "state"):
         if len({str(d.get(key)) for d in datasets}) > 1:
@@ -188,4 +226,5 @@ def _record_diverged(configs: list, outcomes: list) -> None:
             record_divergence(config, outcome)
 
 
-__all__ = ["drop_spent_checkpoints", "group_checkpoint", "run_group_task", "train_group", "unit_key"]
+__all__ = ["drop_spent_checkpoints", "group_checkpoint", "group_key", "run_group_task", "stack_key", "train_group",
+           "unit_key"]
