@@ -22,8 +22,16 @@ the run read it.
 
 ``--plot`` draws the run's figures from the run alone (into ``--out``, default ``RUN/figures``): the field
 and a trajectory against the truth (1-D tasks), the orbits (2-body, 3-body), the frames (pixels), the
-energy over time under every protocol; for a measured run the held-out tails against its prediction. With
-a folder, one figure per data file also sets each kind's best run beside the others.
+energy over time under every protocol (a learned map, which has no field: its energy over its own steps);
+for a measured run the held-out tails against its prediction. With a folder, one figure per data file also
+sets each kind's best run beside the others.
+
+A run is named by what it is: its kind, with ``+<fit>`` where a least-squares ``--fit`` found its weights
+(``hnn+library``, as its folder: ``hnn.runs.kind_label``), in the table and the figures ("Hamiltonian NN
+(library fit)"). A folder is scored run by run: a run that cannot be scored (an unfinished save, a file
+gone) is named and the others go on; the command then ends with one ``error:`` line listing them (exit
+code 1), after writing ``score.json`` (``"not_scored"``: each one's reason). One unfinished run is one
+``error:`` line with the fix (exit code 2).
 """
 from __future__ import annotations
 
@@ -62,30 +70,83 @@ def main(argv=None) -> list[dict]:
         folders = run_folders(args.runs)
         if args.task is not None and args.task not in hnn.tasks.task_names():
             raise ValueError(f"--task {args.task}: no such task here; choose from {' '.join(hnn.tasks.task_names())}")
+        single = len(folders) == 1 and folders[0] == args.runs
+        if single:
+            _check_complete(folders[0])
         tasks = {folder: args.task or task_of(json.loads((folder / "args.json").read_text())) for folder in folders}
     except (OSError, ValueError) as err:
         parser.error(str(err))
-    single = len(folders) == 1 and folders[0] == args.runs
     out = args.out or (args.runs / "figures" if single else args.runs / "score")
     print(f"score: {len(folders)} run{'s' if len(folders) != 1 else ''} under {args.runs}", flush=True)
-    scores, start = [], time.perf_counter()
-    for folder in folders:
-        score = score_run(folder, tasks[folder], args.horizon, args.energy)
-        scores.append(score)
-        print(f"[{len(scores)}/{len(folders)}, {time.perf_counter() - start:.0f} s] " + describe(score)
-              + f"\n  ({score['seconds']:.1f} s)", flush=True)
-        if args.plot:
-            drawn = plot_run(score, out if single else out / folder.name, args.horizon)
-            print(f"  figures: {', '.join(str(p) for p in drawn)}", flush=True)
+    scores, failed, start = [], {}, time.perf_counter()
+    for n, folder in enumerate(folders, 1):
+        try:        # run by run: one that cannot be scored or drawn is named, and the others go on
+            if not single:
+                _check_complete(folder)
+            score = _score(folder, tasks[folder], args)
+            scores.append(score)
+            print(f"[{n}/{len(folders)}, {time.perf_counter() - start:.0f} s] " + describe(_named(score))
+                  + f"\n  ({score['seconds']:.1f} s)", flush=True)
+            if args.plot:
+                drawn = _plot(score, out if single else out / folder.name, args.horizon)
+                print(f"  figures: {', '.join(str(p) for p in drawn)}", flush=True)
+        except Exception as err:        # named and counted: a folder's other runs still score
+            failed[folder] = hnn.cli.one_line(f"{type(err).__name__}: {err}")
+            print(f"[{n}/{len(folders)}] {folder}: not scored: {failed[folder]}", flush=True)
     if len(scores) > 1:
-        print("\n" + table(scores))
+        print("\n" + table([_named(s) for s in scores]))
         if args.plot:
             for path in plot_kinds(scores, out, args.horizon):
                 print(f"figure of every kind: {path}")
-    if args.out is not None or not single:
-        write_json(out / "score.json", {"runs": scores})
+    if scores and (args.out is not None or not single):
+        write_json(out / "score.json", {"runs": scores, "not_scored": {str(k): v for k, v in failed.items()}})
         print(f"wrote {out / 'score.json'}")
+    if failed:
+        parser.exit(1, f"error: {len(failed)} of {len(folders)} runs not scored: "
+                       + "; ".join(f"{folder.name}: {why}" for folder, why in failed.items()) + "\n")
     return scores
+
+
+def _check_complete(folder: Path) -> None:
+    """A ValueError with the fix where ``folder`` lacks its completion mark (an interrupted save)."""
+    from hnn.runs import COMPLETE, is_complete
+    if not is_complete(folder):
+        raise ValueError(f"{folder} is not a complete run: it lacks {COMPLETE} or a file that lists, so its save was "
+                         "interrupted; run its train.py again with the same settings (it resumes or retrains) or "
+                         "delete the folder")
+
+
+def _score(folder: Path, task: str, args) -> dict:
+    """``score_run``'s numbers of one run, with its ``fit`` (args.json's: how its weights were found)."""
+    score = score_run(folder, task, args.horizon, args.energy)
+    score["fit"] = json.loads((folder / "args.json").read_text()).get("fit", "adam")
+    return score
+
+
+def _named(score: dict) -> dict:
+    """``score`` with its kind as runs are named by what they are (``hnn.runs.kind_label``: ``hnn+library``)."""
+    from hnn.runs import kind_label
+    return {**score, "kind": kind_label(score["kind"], score.get("fit"))}
+
+
+def _plot(score: dict, out: Path, horizon: float | None) -> list[Path]:
+    """The figures of one scored run into ``out`` (``plot_run``'s for a measured run): the task's figures that
+    draw one model (``registry.RUN_FIGURES``), titled by what the run is ("Hamiltonian NN (library fit)" where a
+    least-squares fit found its weights); a learned map, which has no field to draw, its energy over its own
+    steps. Returns the files written."""
+    if score["task"] == "measured":
+        return plot_run(score, out, horizon)
+    from hnn_analysis.paper import figures, registry, study
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    before = set(out.iterdir())
+    kind, fit = score["kind"], score.get("fit", "adam")
+    label = kind if fit == "adam" else f"{figures.NAMES.get(kind, kind)} ({fit} fit)"
+    trained, _ = study.load_runs(score["task"], {label: Path(score["run"])})
+    steps = any(hnn.interface.declared(model).steps for model in trained.models.values())
+    only = [name for name in registry.RUN_FIGURES if name == "energy" or not steps]
+    registry.draw_figures(trained, registry.evaluate(trained), out, only=only)
+    return sorted(set(out.iterdir()) - before) or sorted(out.iterdir())
 
 
 if __name__ == "__main__":

@@ -275,7 +275,8 @@ def get_dataset(data, time: str = "t", q: str = "", v: str = "", p: str = "", tr
     """Scaled training and held-out rows of the measurements (see the module's docstring).
 
     Returns float32 ``x``, ``dxdt``, ``test_x``, ``test_dxdt`` ``(rows, 2n)`` (angles wrapped),
-    float64 ``t``, ``test_t`` (seconds, your units), ``dt`` (the scaled nominal step), ``state``,
+    float64 ``t``, ``test_t`` (seconds, your units), ``dt`` (the scaled nominal step), ``t_step`` (the
+    nominal step in the units of ``t``: what a learned map's pairs are one step apart by), ``state``,
     ``scale`` (``Scale.to_dict()``), ``periodic`` and ``cache_key`` (the file's name and digest);
     with ``snippet_steps``, ``snippets`` and ``test_snippets`` too (``snippets``).
     """
@@ -295,7 +296,7 @@ def get_dataset(data, time: str = "t", q: str = "", v: str = "", p: str = "", tr
     n = rec.q.shape[1]
     scale = Scale.fit(joined["train"][1], joined["train"][2], rec.periodic, rec.state)
     nominal = float(np.median(np.concatenate([np.diff(rec.t[rows]) for rows in rec.trials()])))
-    out = {"dt": nominal / scale.tau, "state": rec.state,
+    out = {"dt": nominal / scale.tau, "t_step": nominal, "state": rec.state,
            "scale": scale.to_dict(), "periodic": rec.periodic.tolist(),
            "cache_key": f"{Path(rec.path).name}-{rec.sha256[:12]}"}
     for part, prefix in (("train", ""), ("test", "test_")):

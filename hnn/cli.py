@@ -63,10 +63,26 @@ class Parser(argparse.ArgumentParser):
         hints = []
         for word in message.split(":", 1)[1].split():
             flag = word.split("=", 1)[0]
-            close = difflib.get_close_matches(flag, known, n=1, cutoff=0.6) if flag.startswith("--") else []
+            close = nearest_flag(flag, known) if flag.startswith("--") else None
             if close:
-                hints.append(f"{flag}: did you mean {close[0]}?")
+                hints.append(f"{flag}: did you mean {close}?")
         return "; " + "; ".join(hints) if hints else ""
+
+
+def nearest_flag(flag: str, known: Sequence[str]) -> str | None:
+    """The real flag of ``known`` a mistyped ``flag`` most likely means, or None. Its words (split at '-' and
+    '_', which the flags spell '_') decide first: the same words (``--total-steps``), a real flag that is
+    its first words (``--fit-type``: ``--fit``, not the letters' nearest ``--field_type``), or a flag it
+    starts (``--total``: ``--total_steps``, where only one does); then the nearest spelling (difflib)."""
+    words = [w for w in re.split(r"[-_]+", flag.lstrip("-").lower()) if w]
+    by_words = {flag_: [w for w in re.split(r"[-_]+", flag_.lstrip("-").lower()) if w] for flag_ in known}
+    same = [f for f, w in by_words.items() if w == words]
+    heads = sorted((f for f, w in by_words.items() if w and w == words[:len(w)]), key=lambda f: -len(by_words[f]))
+    starts = [f for f, w in by_words.items() if "_".join(w).startswith("_".join(words))]
+    if same or heads or len(starts) == 1:
+        return (same or heads or starts)[0]
+    close = difflib.get_close_matches("--" + "_".join(words), list(known), n=1, cutoff=0.6)
+    return close[0] if close else None
 
 
 def _did_you_mean(value: str, choices: Sequence[str]) -> str:

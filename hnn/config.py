@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import cli
-from .names import (BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, FITS, INITS, LNN_SOLVES, NONLINEARITIES, OBJECTIVES,
-                    OPTIMIZERS, SCHEDULES, UNITS)
+from .names import (ACTIVATION, BALANCES, DERIVATIVE_LOSSES, DTYPES, FIELD_TYPES, FITS, HIDDEN_DIM, INITS, LNN_SOLVES,
+                    MAP_LAYERS, NONLINEARITIES, OBJECTIVES, OPTIMIZERS, SCHEDULES, UNITS)
 
 
 _ANY = object()      # a setting's identity_value when the identity holds the field's own value
@@ -49,7 +49,7 @@ def setting(default: Any, help: str, *, parse=None, choices=None, display_only: 
 class RunConfig:
     """One training run: the original's flags with its defaults, plus the knobs it hard-coded."""
     input_dim: int = setting(2, "width of the state x = [q, p] (fixed by the task)")
-    hidden_dim: int = setting(200, "hidden units per layer of the MLP (of the sampled layer with --fit swim or elm)",
+    hidden_dim: int = setting(HIDDEN_DIM, "hidden units per layer of the MLP (of the sampled layer with --fit swim or elm)",
                               parse=cli.int_at_least(1))
     learn_rate: float = setting(1e-3, "Adam learning rate", parse=cli.positive_float)
     weight_decay: float = setting(1e-4, "Adam weight decay (hard-coded per task in the original)",
@@ -64,7 +64,7 @@ class RunConfig:
     train_fraction: float = setting(1.0, "train on this fraction of the training rows, drawn once from the seed "
                                          "(the test set stays whole); for studies of how much data a model needs",
                                     parse=cli.fraction)
-    nonlinearity: str = setting("tanh", "activation of the MLP", choices=NONLINEARITIES)
+    nonlinearity: str = setting(ACTIVATION, "activation of the MLP", choices=NONLINEARITIES)
     init: str = setting("orthogonal", "how the MLPs' weights start: orthogonal (the paper's: orthogonal weights, "
                                       "torch's default biases), zero_bias (DGNet's: orthogonal weights, zero biases), "
                                       "lnn (the LNN's: scaled normal weights, zero biases) or lnn_convex (the LNN's with nonnegative weights after "
@@ -128,7 +128,7 @@ class RunConfig:
                                              "are not interpolated) or a number (Sampling-HNNs' exact data: 1e-13, "
                                              "as their numpy lstsq rcond)", parse=cli.auto_or_positive_float,
                                      identity_at_default=False)
-    map_layers: int = setting(4, "layers of a learned map (--model g_sympnet, la_sympnet, henon: hnn.models.maps)",
+    map_layers: int = setting(MAP_LAYERS, "layers of a learned map (--model g_sympnet, la_sympnet, henon: hnn.models.maps)",
                               parse=cli.int_at_least(1), identity_at_default=False)
     snippet_steps: int = setting(4, "time steps per snippet of --objective trajectory (CHNN's 5-state snippets: 4)",
                                  parse=cli.int_at_least(1))

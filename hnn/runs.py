@@ -36,8 +36,16 @@ from .units import canonical_fit, run_scales, wrap_saved
 
 def run_label(config) -> str:
     """The middle of a run folder's name: its model kind as ``--model`` names it (``config.model``: the
-    kind without a task's prefix such as ``pixel-``), and ``-rk4`` for ``use_rk4``."""
-    return config.model + ("-rk4" if config.use_rk4 else "")
+    kind without a task's prefix such as ``pixel-``), ``+<fit>`` where a least-squares ``--fit`` found its
+    weights (``hnn+library``: a run of the training loop, the default, keeps the name it always had), and
+    ``-rk4`` for ``use_rk4``."""
+    return kind_label(config.model, config.fit) + ("-rk4" if config.use_rk4 else "")
+
+
+def kind_label(model: str, fit: str = "adam") -> str:
+    """What a run is, in a word: its kind ``model``, with ``+<fit>`` where ``fit`` is not the training loop
+    (``hnn+library``, ``hnn+swim``; ``hnn`` for ``adam``). Read by run folders and ``analysis/score.py``."""
+    return model if fit in (None, "adam") else f"{model}+{fit}"
 
 
 def run_dir(config) -> Path:
@@ -71,7 +79,7 @@ def partial_checkpoint(config) -> Path:
     return directory.parent / f".{directory.name}.partial.pt"
 
 
-def _is_complete(directory: Path) -> bool:
+def is_complete(directory: Path) -> bool:
     """Whether ``directory`` holds a completion mark and every file it lists."""
     try:
         files = json.loads((directory / COMPLETE).read_text())["files"]
@@ -83,7 +91,7 @@ def _is_complete(directory: Path) -> bool:
 def find_run(config) -> Path | None:
     """The complete saved run of this config, or None: a lookup of its folder."""
     directory = run_dir(config)
-    return directory if _is_complete(directory) else None
+    return directory if is_complete(directory) else None
 
 
 def _materialize(dataset) -> tuple[dict, float | None]:
@@ -264,7 +272,7 @@ def load_run(directory, device: torch.device | str = "cpu") -> tuple[torch.nn.Mo
     ckpt = directory / "model.tar"
     if not ckpt.exists():
         raise FileNotFoundError(f"no checkpoint at {ckpt}; train it first (see the task's train.py)")
-    if not _is_complete(directory):
+    if not is_complete(directory):
         raise RuntimeError(f"run folder {directory} lacks {COMPLETE} or a file it lists: its save was interrupted "
                            "; delete the folder and retrain")
     try:

@@ -138,7 +138,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         loss: ``(x, y) -> per-sample or scalar loss`` replacing the L2 loss of ``predict``, for
             models with an objective of their own (the pixel task passes ``x``, ``x_next``; the
             trajectory objective flattened snippets). Its arrays' widths are then not checked
-            against the model's ``input_dim``: the loss reads them.
+            against the model's ``input_dim``: the loss reads them. A ``loss`` with an ``after_training(x, y)``
+            method gets the training arrays once the fit ends (a learned map's warning where it ends no better
+            than the identity: ``hnn.objectives.map.MapObjective.loss_for``).
         progress: None (default): a bar where someone watches (a terminal or a notebook; it appears
             after 2 s, so a short fit stays silent), else a line on stderr every 10 s (``'train: step
             400 of 2001, about 1 min left'``); nothing with ``verbose`` (its own lines) or inside

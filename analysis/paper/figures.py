@@ -179,7 +179,8 @@ def energy_figure(task: str, result: dict, path) -> Path:
     protocol the models' own clock runs ``time_rescale`` faster; that is stated in the title.
     """
     protocol = result["protocol"]
-    labels = [k for k, v in result.items() if k != "protocol" and isinstance(v, dict) and "mse" in v]
+    # a model the protocol does not apply to (a map under a protocol that rescales time) has no energies to draw
+    labels = [k for k, v in result.items() if k != "protocol" and isinstance(v, dict) and v.get("energy") is not None]
     e_true, t_truth = np.asarray(result["energy_truth"]), np.asarray(result["t_truth"])
     trials = e_true.shape[0]
     ncols = min(5, trials)
@@ -192,7 +193,9 @@ def energy_figure(task: str, result: dict, path) -> Path:
             continue
         ax.plot(t_truth[i], e_true[i], color=COLORS["truth"], ls="--", lw=1.2, label=NAMES["truth"])
         for label in labels:
-            ax.plot(t_truth[i], np.asarray(result[label]["energy"])[i], color=COLORS.get(label),
+            # a learned map's energies are at its own steps (``times``), not the truth's points
+            t_model = result[label]["times"] if "times" in result[label] else t_truth[i]
+            ax.plot(t_model, np.asarray(result[label]["energy"])[i], color=COLORS.get(label),
                     lw=1.2, label=NAMES.get(label, label))
         ax.set_title(f"trial {i}, x0 = ({result['x0'][i][0]:.2f}, {result['x0'][i][1]:.2f})"
                      if "x0" in result else f"trial {i}", fontsize=8)

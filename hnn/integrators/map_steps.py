@@ -43,7 +43,8 @@ def check_request(f: StepMap, method: str, default_method: str, options: dict) -
         raise ValueError("this learned map has no step dt (it was built without the data's): build it with dt=... or "
                          "train it through hnn.run_experiment, which gives it the dataset's")
     if method != default_method:
-        raise ValueError(f"a learned map steps itself (dt={f.dt:g}): no integrator applies, drop method={method!r}")
+        raise ValueError(f"a learned map steps itself (dt={f.dt:g}): no integrator applies, drop method={method!r} "
+                         "(hnn.rollout(model, x0, t_eval) steps the map on t_eval)")
     unknown = sorted(set(options) - set(OPTIONS))
     if unknown:
         raise ValueError(f"a learned map's rollout takes the options {', '.join(OPTIONS)}; got {', '.join(unknown)}: "

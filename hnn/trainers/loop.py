@@ -200,4 +200,6 @@ def run_loop(model, loss: Callable, x: torch.Tensor, y: torch.Tensor, test_x: to
                 saved_at = time.perf_counter()
     model.eval()
     stats["seconds"] = seconds_before + time.perf_counter() - start
+    if hasattr(loss, "after_training"):     # a custom loss's check of the fit on its own rows (a learned map's)
+        loss.after_training(x, y)
     return stats
