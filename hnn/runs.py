@@ -14,11 +14,13 @@ when the run is saved, when training fails, and by ``--force``.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 import torch
@@ -138,6 +140,22 @@ class Prepared:
                 "threads": None, **overrides}
 
 
+@contextlib.contextmanager
+def seeded(seed: int, device="cpu") -> Iterator[None]:
+    """Inside this block torch's and numpy's global generators start from ``seed`` (a model's init draws
+    from them: ``hnn.models``); the caller's random state comes back after, however the block ends. On a
+    GPU its generator is forked too."""
+    state = np.random.get_state()
+    cuda = [torch.device(device).index or 0] if torch.device(device).type == "cuda" else []
+    try:
+        with torch.random.fork_rng(devices=cuda):
+            torch.manual_seed(seed)
+            np.random.seed(seed)
+            yield
+    finally:
+        np.random.set_state(state)
+
+
 def prepare(config, dataset=None, objective: Objective | None = None) -> Prepared:
     """The model, objective, rows and options that ``config`` (an ``hnn.RunConfig``) trains on (``Prepared``).
 
@@ -146,7 +164,12 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
     ``dt`` (the time step of its trajectories); or it is a function of no arguments returning that
     dict, whose time is ``data_seconds``. ``objective`` defaults to ``config.make_objective()``.
     A value the config's flag would refuse raises ValueError before anything is built; the model is
-    drawn from ``config.seed``."""
+    drawn from ``config.seed`` (``seeded``: the caller's random state is left as it was).
+
+    The one resolver of a run's policy: its units (``hnn.units.run_scales``), the balance of its loss
+    (``Objective.train_options``, ``hnn.balance``), how its weights are found (``fit``), its seed and its
+    training subset. Every way of training a config goes through it: a lone run (``run_experiment``), a
+    group's members (``hnn.sweeps.group_runs.train_group``) and the studies."""
     cli.check(config)
     # a least-squares fit refuses what it cannot fit before any data is built
     fit = check_config(config, get_kind(config.kind).coordinates)
@@ -158,9 +181,8 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
     saved = saved_args(config, dataset)
     specs = run_specs(saved)        # the config's, and the data's time step (a learned map's step)
-    torch.manual_seed(config.seed)
-    np.random.seed(config.seed)
-    model = model_from_spec(specs.model, config.device)
+    with seeded(config.seed, config.device):        # the model's init, the caller's random state untouched
+        model = model_from_spec(specs.model, config.device)
     scales = run_scales(specs.objective.units, specs.model.kind, dataset, objective, model)
     if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
         saved["unit_scales"] = scales.to_dict()
@@ -175,10 +197,12 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
                     options, data_seconds)
 
 
-def run_experiment(config, dataset=None, objective: Objective | None = None) -> Path:
+def run_experiment(config, dataset=None, objective: Objective | None = None,
+                   on_step: Callable[[int, int], None] | None = None) -> Path:
     """Train the model that ``config`` (an ``hnn.RunConfig``) describes and save the run; returns
     its folder. Every task and model kind trains here, on what ``prepare(config, dataset, objective)``
-    builds (its arguments: ``prepare``'s); a ``dataset`` given as a function has its time saved as
+    builds (its arguments: ``prepare``'s; ``on_step(done, total)`` after each step of its loop: a sweep's
+    bar, or a study that stops a run by raising); a ``dataset`` given as a function has its time saved as
     ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training loop alone).
     """
     cli.check(config)
@@ -193,7 +217,7 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     try:
         # one linear solve (hnn.fits), not a loop: nothing to checkpoint; else the lone loop on what prepare
         # resolved (--units, --balance on the whole training set, recorded in args.json; the threads it was given)
-        stats = solve_prepared(prep) if prep.fit.solved else train_prepared(prep, checkpoint=partial)
+        stats = solve_prepared(prep) if prep.fit.solved else train_prepared(prep, checkpoint=partial, on_step=on_step)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise

@@ -4,10 +4,9 @@ fit of dx/dt trains in and the balance of its loss (``hnn.units``, ``hnn.balance
 run's lone member of the family (``hnn.trainers.lone``) hands it a prepared run's instead."""
 from __future__ import annotations
 
-import contextlib
 import warnings
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable
 
 import torch
 
@@ -15,23 +14,7 @@ from . import names
 from .balance import balance_weights, weighted
 from .trainers.loop import check_loop, run_loop
 from .trainers.rows import checked_pair
-from .units import VELOCITY_LIKE, Rescaled, UnitScales, fit_scales, rescale_reason
-
-
-_PROGRESS_CALLBACKS: list[Callable[[int, int], None]] = []
-
-
-@contextlib.contextmanager
-def report_progress(callback: Callable[[int, int], None]) -> Iterator[None]:
-    """Inside this block every ``train`` call reports ``callback(steps_done, steps_total)`` after
-    each optimizer step, so a caller can follow a run it starts through a task's ``train.py``
-    (whose ``main(argv)`` takes no callback). The callback must be cheap: it runs every step.
-    """
-    _PROGRESS_CALLBACKS.append(callback)
-    try:
-        yield
-    finally:
-        _PROGRESS_CALLBACKS.remove(callback)
+from .units import VELOCITY_LIKE, Rescaled, UnitScales, fit_scales, rescale_reason, units_reason
 
 
 def l2_loss(predict: Callable) -> Callable:
@@ -89,23 +72,20 @@ def _in_canonical_units(model, units: str, x, dxdt, test_x, test_dxdt) -> tuple:
     ``x``, ``dxdt`` where it has none: by ``units``' rule, 1 where the rule leaves the data as they are);
     any other model and the arrays themselves, or a ValueError where ``units`` would rescale them (a
     plain model cannot answer back in the user's units)."""
-    if units not in names.UNITS:
-        raise ValueError(f"units={units!r}: choose one of {', '.join(names.UNITS)}")
     inner = getattr(model, "inner", model)
     periodic = bool(getattr(inner, "periodic", False))
     coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
+    reason = units_reason(units, x, dxdt, periodic, coordinates)      # a run's rule (hnn.runs.prepare's)
     if not isinstance(model, Rescaled):
-        reason = rescale_reason(x, dxdt, periodic, coordinates)
-        if units == "on" or (units == "auto" and reason is not None):
-            raise ValueError(f"units={units!r}: x and dxdt are {reason or 'to be rescaled (units=on)'}, where a network "
+        if reason is not None:
+            raise ValueError(f"units={units!r}: x and dxdt are {reason}, where a network "
                              f"fits poorly, and {type(model).__name__} answers in the units it is "
                              "trained in: train hnn.units.Rescaled(model) instead (hnn.train fits its scales from these "
                              "data, trains the model in them and it answers in yours), or pass units='off' to train "
                              "on them as they are")
         return model, x, dxdt, test_x, test_dxdt
     if model.scales is None:
-        rescale = units == "on" or (units == "auto" and rescale_reason(x, dxdt, periodic, coordinates) is not None)
-        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if rescale else UnitScales(1.0, 1.0, 1.0))
+        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if reason is not None else UnitScales(1.0, 1.0, 1.0))
     pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
              for a, b in ((x, dxdt), (test_x, test_dxdt))]
     return (model.inner, *pairs[0], *pairs[1])
@@ -118,7 +98,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
           optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
           derivative_loss: str = "l2", loss_weights=None, checkpoint: str | Path | None = None,
           checkpoint_every: float | None = None, generators: tuple = (), balance: str = "auto",
-          units: str = "auto", threads: int | None = 1) -> dict:
+          units: str = "auto", threads: int | None = 1, on_step: Callable[[int, int], None] | None = None) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``
@@ -143,8 +123,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
             than the identity: ``hnn.objectives.map.MapObjective.loss_for``).
         progress: None (default): a bar where someone watches (a terminal or a notebook; it appears
             after 2 s, so a short fit stays silent), else a line on stderr every 10 s (``'train: step
-            400 of 2001, about 1 min left'``); nothing with ``verbose`` (its own lines) or inside
-            ``report_progress`` (its caller shows progress its own way). False: nothing; True: a bar.
+            400 of 2001, about 1 min left'``); nothing with ``verbose`` (its own lines) or with
+            ``on_step`` (its caller shows progress its own way). False: nothing; True: a bar.
         optimizer, schedule: ``adam_optimizer``'s kind and ``learning_rate``'s schedule.
         clip_grad: clip each step's gradient to this global norm (0: never).
         derivative_loss: the per-element error of the default loss (``DERIVATIVE_LOSSES``): ``'l2'``
@@ -171,6 +151,8 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         threads: torch's thread count while it trains (default 1, as every ``train.py``: beside other
             work a second thread slows a fit many times over, docs/speed.md#threads); the caller's count
             is restored after, however the fit ends. None: the caller's count as it is.
+        on_step: ``on_step(steps_done, steps_total)`` after each optimizer step, so a caller can follow the
+            fit (or stop it by raising); it must be cheap: it runs every step.
 
     Returns:
         ``{'train_loss': [...], 'test_loss': [...], 'test_steps': [...], 'seconds': float}``:
@@ -182,7 +164,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
     """
     # the loop's settings fail before anything is built or rescaled
     check_loop(total_steps, input_noise, batch_size, print_every, test_every, clip_grad, learn_rate, schedule)
-    if progress is None and (verbose or _PROGRESS_CALLBACKS):     # its own lines, or a report_progress caller's
+    if progress is None and (verbose or on_step is not None):     # its own lines, or its caller's display
         progress = False
     param = next(model.parameters())
     # a custom loss owns its arrays' layout (e.g. flattened trajectory snippets): rows, not widths, are checked
@@ -212,15 +194,9 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         if "unit_scales" not in resolved:
             warn_off_scale(x, dxdt, model)
         loss = fit_loss(model, predict, derivative_loss, loss_weights)
-    callbacks = list(_PROGRESS_CALLBACKS)
-
-    def on_step(done: int, total: int) -> None:
-        for callback in callbacks:
-            callback(done, total)
-
     return run_loop(model, loss, x, dxdt, test_x if has_test else None, test_dxdt if has_test else None,
                     total_steps=total_steps, learn_rate=learn_rate, weight_decay=weight_decay, batch_size=batch_size,
                     seed=seed, print_every=print_every, verbose=verbose, test_every=test_every,
                     input_noise=input_noise, optimizer=optimizer, schedule=schedule, clip_grad=clip_grad,
                     checkpoint=checkpoint, checkpoint_every=checkpoint_every, generators=generators,
-                    threads=threads, progress=progress, on_step=on_step if callbacks else None, resolved=resolved)
+                    threads=threads, progress=progress, on_step=on_step, resolved=resolved)

@@ -297,6 +297,17 @@ def rescale_reason(x, dxdt=None, periodic: bool = False, coordinates: str = "can
     return None
 
 
+def units_reason(mode: str, x, dxdt=None, periodic: bool = False, coordinates: str = "canonical") -> str | None:
+    """Why a fit under ``--units mode`` rescales ``x`` and ``dxdt``, or None where it trains on them as they
+    are: the one rule of a run (``run_scales``) and of ``hnn.train``. ``'on'``: always; ``'auto'``:
+    ``rescale_reason``'s; ``'off'``: never."""
+    if mode not in UNITS:
+        raise ValueError(f"units={mode!r}: choose one of {', '.join(UNITS)}")
+    if mode == "on":
+        return "to be rescaled (units=on)"
+    return rescale_reason(x, dxdt, periodic, coordinates) if mode == "auto" else None
+
+
 def refusal(model) -> str | None:
     """Why ``model``'s state carries a unit the rescaling cannot move, or None: a constrained kind whose
     graph holds rod lengths in the user's units (one without tethers or links rescales), a pixel kind."""
@@ -458,7 +469,7 @@ def run_scales(mode: str, kind: str, dataset: dict, objective, model: Model) -> 
     x, dxdt = sized_arrays(dataset, objective)
     why = f"--units {mode}"
     if mode == "auto":
-        reason = None if x is None else rescale_reason(x, dxdt, periodic, observed_coordinates(dataset))
+        reason = None if x is None else units_reason(mode, x, dxdt, periodic, observed_coordinates(dataset))
         if reason is None:
             return None
         why = f"--units auto (the default) found the training data {reason}"

@@ -125,7 +125,7 @@ def test_a_group_of_runs_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch)
     def killed(*args, **kwargs):
         return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(30))
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.sweeps.group_runs, "train_closed_form", killed)
+        patch.setattr(hnn.trainers.closed_form, "train_closed_form", killed)
         hnn.sweeps.group_runs.train_group(configs(tmp_path / "broken"))
     partial = hnn.sweeps.group_runs.group_checkpoint(configs(tmp_path / "broken"))
     assert partial.exists() and partial.parent == tmp_path / "broken" and partial.name.startswith(".group-")
@@ -148,7 +148,7 @@ def test_a_killed_groups_checkpoint_is_dropped_once_its_runs_are_saved_by_other_
     def killed(*args, **kwargs):
         return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(20))
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.sweeps.group_runs, "train_closed_form", killed)
+        patch.setattr(hnn.trainers.closed_form, "train_closed_form", killed)
         hnn.sweeps.group_runs.train_group(configs)
     spent = hnn.sweeps.group_runs.group_checkpoint(configs)
     unreadable = tmp_path / ".group-000000000000.partial.pt"

@@ -13,23 +13,17 @@ import json
 from collections.abc import Mapping
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from .. import cli
-from ..balance import balance_weights
 from ..errors import DivergenceError
-from ..kinds import get_kind
-from ..trainers.closed_form import train_closed_form
-from ..trainers.vmap import train_vmap
-from ..units import run_scales
 from ..io import check_save_dir
-from ..kinds import model_from_spec
+from ..kinds import get_kind
 from ..objectives import DerivativeObjective
-from ..runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
-from ..specs import RunSpecs, run_specs
+from ..runs import COMPLETE, finish_run, prepare, record_divergence, run_dir, run_experiment
+from ..specs import run_specs
 from ..tasks import task_config
 from ..threads import torch_threads
+from ..trainers import closed_form, vmap
 
 
 # the fields that must agree for configs to train as one program (seed, train_fraction and with
@@ -120,37 +114,20 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         raise ValueError("train_group needs configs of one group (equal hnn.sweeps.group_runs.unit_key, none None); "
                          "train the others alone with hnn.run_experiment")
     for config in configs:
-        cli.check(config)
         check_save_dir(config.save_dir)
     objective = configs[0].make_objective()
-    datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
-    if any([_trains_alone(c, d, objective) for c, d in zip(configs, datasets)]):
-        return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
-    models, data, tests = [], [], []
-    saved = [saved_args(config, dataset) for config, dataset in zip(configs, datasets)]
-    specs = [run_specs(args) for args in saved]     # the configs' and their data's time step (a map's step)
-    for config, dataset, spec in zip(configs, datasets, specs):
-        torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
-        np.random.seed(config.seed)
-        models.append(model_from_spec(spec.model, config.device))
-        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
-        data.append(training_subset(x, y, config.train_fraction, config.seed))
-        tests.append((test_x, test_y))
-    first = specs[0]            # the group's keys make these equal across its configs, but the seeds
-    shared = dict(seeds=[spec.training.seed for spec in specs], total_steps=first.training.total_steps,
-                  learn_rate=first.training.learn_rate, weight_decay=first.training.weight_decay,
-                  batch_size=first.training.batch_size, print_every=first.training.print_every,
-                  names=[run_dir(c).name for c in configs])
+    # each member prepared as its lone run is (its checks, init, units, balance and rows: hnn.runs.prepare)
+    preps = [prepare(config, dataset, objective)
+             for config, dataset in zip(configs, datasets or [config.dataset() for config in configs])]
+    if any(p.scales is not None or p.options.loss_weights is not None for p in preps):
+        # --units or --balance resolved to what a group's program does not do: each trains alone
+        return [_alone(p.config, p.dataset) for p in preps]
     partial = group_checkpoint(configs)
     if any(config.force for config in configs):
         partial.unlink(missing_ok=True)
+    trainer = closed_form if next(iter(keys))[0] == "closed_form" else vmap
     try:
-        if next(iter(keys))[0] == "closed_form":
-            stats, failures = train_closed_form(models, data, tests, input_noise=first.objective.input_noise,
-                                        checkpoint=partial, **shared)
-        else:
-            stats, failures = train_vmap(models, data, tests, checkpoint=partial, **shared,
-                                          **_stacked_options(objective, models[0], first, datasets))
+        stats, failures = trainer.train_prepared(preps, checkpoint=partial, names=[run_dir(c).name for c in configs])
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise
@@ -159,37 +136,14 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         if g in failures:
             out.append(failures[g])
             continue
-        (x, y), (test_x, test_y) = data[g], tests[g]
-        options = objective.train_options(models[g], specs[g].objective, datasets[g])      # its own, for its numbers
-        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y, options),
-                               objective.final_loss(models[g], test_x, test_y, options), None, saved[g])
-        config.finish(directory, datasets[g])
+        p = preps[g]        # its own options, for its numbers
+        directory = finish_run(config, p.model, stats[g], objective.final_loss(p.model, p.x, p.y, p.options),
+                               objective.final_loss(p.model, p.test_x, p.test_y, p.options), None, p.saved)
+        config.finish(directory, p.dataset)
         out.append(directory)
     partial.unlink(missing_ok=True)
     drop_spent_checkpoints(configs[0].save_dir)        # an older group of these runs, killed mid-way
     return out
-
-
-def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) -> dict:
-    """``train_vmap``'s loss and options from ``objective.train_options``, as ``hnn.train`` reads them.
-    The loss is built once for the group: every dataset must give it the same time step and coordinates."""
-    for key in ("dt", "state"):
-        if len({str(d.get(key)) for d in datasets}) > 1:
-            raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
-    options = objective.train_options(model, specs.objective, datasets[0])
-    return dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
-                clip_grad=specs.training.clip_grad, input_noise=options.input_noise, loss_of=options.loss_of)
-
-
-def _trains_alone(config, dataset: dict, objective) -> bool:
-    """Whether ``config``'s run on ``dataset`` needs what a group's program does not do: ``--balance auto``
-    resolved to a balanced loss, or ``--units auto`` to a rescaling (whose refusal, for a kind or an
-    objective it cannot rescale, is raised here as a lone run raises it)."""
-    derivative = isinstance(objective, DerivativeObjective)
-    if derivative and balance_weights(dataset[objective.arrays[1]], config.balance, config.derivative_loss) is not None:
-        return True
-    # the model's declarations (coordinates, angles) decide the rescaling; its weights are drawn again below
-    return run_scales(config.units, config.kind, dataset, objective, model_from_spec(run_specs(config).model)) is not None
 
 
 def _alone(config, dataset):

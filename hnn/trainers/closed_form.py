@@ -33,7 +33,7 @@ from ..models.hamiltonian import FIELD_ROWS, HNN
 from ..models.mlp import MLP
 from ..models.structured import SeparableHNN
 from ..models.tanh_mlp import closed_form_input_gradient, fast_tanh
-from .group_loop import GroupedRunFailed, WeightStack, group_loop, group_stats
+from .group_loop import GroupedRunFailed, WeightStack, group_loop, group_settings, group_stats
 from .loop import adam_optimizer
 from .rows import GroupRows, check_data
 
@@ -151,4 +151,15 @@ def train_closed_form(models: list[HNN], data: list[tuple], tests: list[tuple] |
     return group_stats(models, failures, write_back, *curves, seconds)
 
 
-__all__ = ["train_closed_form"]
+
+def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
+                   progress: bool = False) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
+    """Train the prepared runs ``preps`` (``hnn.runs.prepare``, of one closed-form group: equal
+    ``hnn.sweeps.group_runs.group_key``) as one program, each ``fit_model`` on its own rows with the run's loop
+    settings; ``train_closed_form``'s ``(stats, failures)``."""
+    return train_closed_form([p.fit_model for p in preps], [(p.x, p.y) for p in preps],
+                             [(p.test_x, p.test_y) for p in preps], input_noise=preps[0].specs.objective.input_noise,
+                             names=names, progress=progress, checkpoint=checkpoint, **group_settings(preps))
+
+
+__all__ = ["train_closed_form", "train_prepared"]

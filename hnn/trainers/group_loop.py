@@ -80,6 +80,16 @@ def group_loop(weights: list[torch.Tensor], optim, train_rows: GroupRows, test_r
     return failures, curves, seconds_before + time.perf_counter() - start
 
 
+def group_settings(preps: list) -> dict:
+    """The loop settings a group of prepared runs (``hnn.runs.prepare``) shares, from the first one's
+    ``TrainingSpec`` (a group's key makes them equal), and each member's seed: the keywords of both group
+    trainers of these names."""
+    first = preps[0].specs.training
+    return dict(seeds=[p.specs.training.seed for p in preps], total_steps=first.total_steps,
+                learn_rate=first.learn_rate, weight_decay=first.weight_decay, batch_size=first.batch_size,
+                print_every=first.print_every)
+
+
 def _per_model(w: torch.Tensor, models: int) -> torch.Tensor:
     """A stacked weight (or its gradient) as ``(models, -1)``: row g holds every slice of model g (net j of
     model g is slice ``j * models + g``; ``hnn.trainers.vmap``'s one net a model is the case j = 0)."""

@@ -3,7 +3,6 @@ seed, threads) already decided by ``prepare``, its arrays checked here and hande
 loss to ``hnn.trainers.loop.run_loop``. Returns the stats every member of the family returns."""
 from __future__ import annotations
 
-from .. import training
 from ..training import warn_off_scale
 from .loop import run_loop
 from .rows import checked_pair
@@ -27,12 +26,6 @@ def train_prepared(prep, checkpoint=None, on_step=None, **overrides) -> dict:
         warn_off_scale(x, y, model, stacklevel=4)
     for key in ("predict", "derivative_loss", "loss_weights", "units", "balance"):       # decided: in the loss already
         kwargs.pop(key)
-    callbacks = [*training._PROGRESS_CALLBACKS, *([on_step] if on_step else [])]
-
-    def each(done: int, total: int) -> None:
-        for callback in callbacks:
-            callback(done, total)
-    # its own lines (verbose), or a caller that shows progress its own way: no bar
-    progress = False if kwargs["verbose"] or callbacks else None
-    return run_loop(model, loss, x, y, *test, checkpoint=checkpoint, on_step=each if callbacks else None,
-                    progress=progress, **kwargs)
+    # its own lines (verbose), or a caller that shows progress its own way (on_step): no bar
+    progress = False if kwargs["verbose"] or on_step is not None else None
+    return run_loop(model, loss, x, y, *test, checkpoint=checkpoint, on_step=on_step, progress=progress, **kwargs)

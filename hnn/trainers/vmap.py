@@ -26,7 +26,7 @@ from torch.func import functional_call, stack_module_state, vmap
 
 from ..integrators.groups import shared_buffers
 from ..modes import model_axis
-from .group_loop import group_loop, group_stats, WeightStack
+from .group_loop import WeightStack, group_loop, group_settings, group_stats
 from .loop import adam_optimizer
 from .rows import GroupRows, check_data
 
@@ -111,4 +111,22 @@ def train_vmap(models: list[nn.Module], data: list[tuple], tests: list[tuple] | 
     return group_stats(models, failures, write_back, *curves, seconds)
 
 
-__all__ = ["train_vmap"]
+
+def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
+                   progress: bool = False) -> tuple[list[dict | None], dict]:
+    """Train the prepared runs ``preps`` (``hnn.runs.prepare``, of one vmap group: equal
+    ``hnn.sweeps.group_runs.stack_key``) as one program: each ``fit_model`` on its own rows, the loss and
+    options of the first one's objective (``Prepared.options``, as ``hnn.train`` reads them), built once
+    for the group, so every dataset must give it the same time step and coordinates; ``train_vmap``'s
+    ``(stats, failures)``."""
+    for key in ("dt", "state"):
+        if len({str(p.dataset.get(key)) for p in preps}) > 1:
+            raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
+    training, options = preps[0].specs.training, preps[0].options
+    return train_vmap([p.fit_model for p in preps], [(p.x, p.y) for p in preps], [(p.test_x, p.test_y) for p in preps],
+                      loss_of=options.loss_of, optimizer=training.optimizer, schedule=training.schedule,
+                      clip_grad=training.clip_grad, input_noise=options.input_noise, names=names, progress=progress,
+                      checkpoint=checkpoint, **group_settings(preps))
+
+
+__all__ = ["train_prepared", "train_vmap"]
