@@ -62,7 +62,7 @@ _LAYERS = {
 # the public face: module -> the names it gives ``hnn``, in the order they load (everything else is
 # reached through its room or module: ``hnn.models.ConstraintGraph``, ``hnn.runs.find_run``)
 _PUBLIC = {
-    "errors": ("ConvergenceError", "DivergenceError"),
+    "errors": ("BudgetError", "ConvergenceError", "DivergenceError"),
     "interface": ("Model",),
     "integrators": ("SOLVERS", "Solver", "get_solver", "register_solver", "rollout"),
     "models": ("HNN", "MLP", "PixelHNN", "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "ConstrainedHNN",
@@ -81,7 +81,7 @@ _ROOMS = ("integrators", "models")
 
 if TYPE_CHECKING:     # the public names spelled out for type checkers and editors (tests/test_layers.py
     # holds them equal to _PUBLIC); at run time __getattr__ binds them on first use, so --help loads no torch
-    from .errors import ConvergenceError, DivergenceError  # noqa: F401
+    from .errors import BudgetError, ConvergenceError, DivergenceError  # noqa: F401
     from .interface import Model  # noqa: F401
     from .integrators import SOLVERS, Solver, get_solver, register_solver, rollout  # noqa: F401
     from .models import (HNN, MLP, PixelHNN, SeparableHNN, DissipativeHNN, MechanicalHNN,  # noqa: F401

@@ -1,7 +1,9 @@
 """The errors of a failed rollout, in one module every integrator imports (and nothing else).
 
 ``DivergenceError`` names the trajectories and times that blew up; ``ConvergenceError`` (a
-subclass) says an implicit step's fixed-point iteration did not converge. Both are also ``hnn.<name>``.
+subclass) says an implicit step's fixed-point iteration did not converge; ``BudgetError`` (a subclass)
+says a rollout was stopped at its budget of field calls before it reached its last time. All are also
+``hnn.<name>``.
 """
 from __future__ import annotations
 
@@ -21,6 +23,20 @@ class ConvergenceError(DivergenceError):
 
     A ``DivergenceError``, so code that catches failed rollouts catches this one too.
     """
+
+
+class BudgetError(DivergenceError):
+    """A rollout stopped at its budget of field calls (``calls``) before its last time: a field stiff along
+    its path shrinks the step without end, so the rollout is cut off and reported as stopped, not waited
+    for (``hnn.evaluation.rollout_budget``). ``why`` says where the budget came from.
+
+    A ``DivergenceError``, so code that catches failed rollouts catches this one too; its outcome reads
+    "stopped: over its budget", never a number.
+    """
+
+    def __init__(self, message: str, calls: int, why: str = ""):
+        super().__init__(message)
+        self.calls, self.why = int(calls), why
 
 
 def divergence_error(message: str, bad_rows, times) -> DivergenceError:

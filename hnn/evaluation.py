@@ -17,7 +17,10 @@ pendulum protocol calls q^2 + p^2 the energy. The corrected protocols drop both 
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import copy
+import math
 import time
 import warnings
 from dataclasses import asdict, dataclass
@@ -26,8 +29,8 @@ import numpy as np
 import torch
 
 from .integrators.integrate import rollout
-from .interface import declared, gradient_of
-from .errors import DivergenceError
+from .interface import Model, declared, gradient_of, step_map_of
+from .errors import BudgetError, DivergenceError
 from .metrics import energy_mse, path_errors
 from .integrators.solvers import get_solver
 from .integrators.groups import group_field, group_options
@@ -139,7 +142,7 @@ def _energy(system, protocol: EnergyProtocol, x: torch.Tensor) -> np.ndarray:
 
 
 def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int, protocol,
-                    group: int = 1, **extra) -> torch.Tensor:
+                    group: int = 1, share: int | None = None, **extra) -> torch.Tensor:
     """Trajectories of per-trial length ``durations`` in one batched call.
 
     Trial i integrates dx/ds = T_i f(x) on s in [0, 1], which is x(T_i s): one shared grid
@@ -148,6 +151,7 @@ def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int,
     method that passes every row to every call of ``f`` (dopri5 and dop853 are asked to keep
     their finished rows: ``drop_finished=False``).
     ``group``: ``x0`` holds that many models' blocks of trials (``_group_rollout``), each block scaled alike.
+    ``share``: as ``_protocol_rollout``'s (a model's rollout; None: the truth's).
     """
     same = bool(np.all(durations == durations[0]))
     scale = torch.as_tensor(durations[:1] if same else np.tile(durations, group), dtype=x0.dtype,
@@ -161,7 +165,7 @@ def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int,
                              f"{protocol.method} passed {len(x)} of the {len(scale)} rows to f: use a method "
                              "that keeps every row together (solve_ivp, dopri5, dop853 or a fixed-step one)")
         return scale * f(x)
-    return _protocol_rollout(scaled, x0, np.linspace(0.0, 1.0, num_points), protocol, **extra)
+    return _protocol_rollout(scaled, x0, np.linspace(0.0, 1.0, num_points), protocol, share, **extra)
 
 
 # a protocol's rollout that needs more field calls than this is scored as failed, not waited for: the true
@@ -169,10 +173,76 @@ def _rollout_scaled(f, x0: torch.Tensor, durations: np.ndarray, num_points: int,
 # 3-body, stiff where its polynomial leaves the orbits, passed 20000 on one trial of 15 and did not stop
 MAX_FIELD_CALLS = 200_000
 
+# -- the budget of a measurement's rollouts: a quick study's share of seconds, in calls of each field
 
-def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol, **extra) -> torch.Tensor:
+_BUDGET: contextvars.ContextVar = contextvars.ContextVar("hnn_rollout_budget", default=None)
+# the calls of a bounded rollout that time its rate (the rollout's own: the field and the solver's work beside it),
+# after its first (which may build the field's kernels)
+RATE_CALLS = 20
+
+
+@contextlib.contextmanager
+def rollout_budget(seconds: float, why: str = ""):
+    """Within it, each model's rollout in ``evaluate_energy`` and ``rollout_errors`` (one model's paths under
+    one protocol, or for its rollout error; a group of G models G times it) makes at most the calls of its
+    field that ``seconds`` buys at the rate of its own first calls (``RATE_CALLS``, the solver's work between
+    them included), and past them stops with a ``BudgetError``: its score says "stopped: over its budget"
+    (``why`` names the budget there), never a number. The truth's rollouts are not bounded. Outside it, a
+    protocol's solve_ivp rollouts stop at ``MAX_FIELD_CALLS``, as always.
+
+        with hnn.evaluation.rollout_budget(2.0, "the quick study's share"):
+            result = hnn.evaluate_energy(system, models, protocol)
+    """
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not (0 < seconds < math.inf):
+        raise ValueError(f"rollout_budget(seconds={seconds!r}): give the seconds one model's rollout may take, "
+                         "a positive finite number, e.g. rollout_budget(2.0)")
+    token = _BUDGET.set((float(seconds), why))
+    try:
+        yield
+    finally:
+        _BUDGET.reset(token)
+
+
+class _Bounded:
+    """The field ``f`` of a rollout that may take ``seconds``: its calls are timed from the end of the first
+    to the end of call ``RATE_CALLS + 1``, which fixes ``calls``, the budget those seconds buy at that rate
+    (at least those calls, at most ``MAX_FIELD_CALLS``); the call past it raises a ``BudgetError``."""
+
+    def __init__(self, f, seconds: float, why: str):
+        self.f, self.seconds, self.why = f, seconds, why
+        self.spent, self.calls, self.per_call, self._since = 0, None, None, None
+
+    def __call__(self, x: torch.Tensor, *rest) -> torch.Tensor:
+        self.spent += 1
+        if self.calls is not None and self.spent > self.calls:
+            raise BudgetError(f"stopped: over its budget of {self.calls} calls of the field ({self.seconds:.3g} s "
+                              f"at {self.per_call * 1e3:.3g} ms a call{', ' + self.why if self.why else ''})",
+                              self.calls, self.why)
+        out = self.f(x, *rest)
+        if self.spent == 1:
+            self._since = time.perf_counter()
+        elif self.spent == RATE_CALLS + 1:
+            self.per_call = max((time.perf_counter() - self._since) / RATE_CALLS, 1e-9)
+            self.calls = int(min(MAX_FIELD_CALLS, max(self.spent, self.seconds / self.per_call)))
+        return out
+
+
+def _bounded(f, share: int = 1):
+    """``f`` (a field, or a model: its declared ``field`` as a whole) bounded by the ``rollout_budget`` it runs
+    in (``share`` models' worth), or ``f`` as it is outside one."""
+    budget = _BUDGET.get()
+    if budget is None:
+        return f
+    return _Bounded(f.field if isinstance(f, Model) else f, budget[0] * share, budget[1])
+
+
+def _protocol_rollout(f, x0: torch.Tensor, t_eval: np.ndarray, protocol, share: int | None = None,
+                      **extra) -> torch.Tensor:
     """``rollout`` by the protocol's integrator and tolerances, without the float32-tolerance warning; a method
-    that takes ``max_calls`` (solve_ivp) stops past ``MAX_FIELD_CALLS`` with a ``DivergenceError``."""
+    that takes ``max_calls`` (solve_ivp) stops past ``MAX_FIELD_CALLS`` with a ``DivergenceError``. ``share``:
+    a model's rollout (of that many models), bounded by the ``rollout_budget`` it runs in; None: the truth's."""
+    if share is not None:
+        f = _bounded(f, share)
     with warnings.catch_warnings():
         # the protocols ask float32 models for tight tolerances, as the original did: what that
         # costs in accuracy is a property of the protocol, not news at every evaluation
@@ -252,8 +322,9 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
 
 def _diverged(err: DivergenceError) -> dict:
     """A model's score where its rollout blew up or stalled: no energy MSE, and why (as a map's where a protocol
-    cannot apply)."""
-    return {"mse": None, "mse_se": None, "why": f"its rollout failed: {err}"}
+    cannot apply); one stopped at its ``rollout_budget`` says so in ``stopped`` too."""
+    out = {"mse": None, "mse_se": None, "why": f"its rollout failed: {err}"}
+    return {**out, "stopped": str(err)} if isinstance(err, BudgetError) else out
 
 
 def _scored_or_diverged(model, run, x0: torch.Tensor, observed: str, protocol, score) -> dict | list[dict]:
@@ -289,7 +360,7 @@ def _evaluate_trials(system, models: dict, protocol: EnergyProtocol, observed: s
     tick.advance()
 
     def run(f, x, group=1, **extra):
-        return _rollout_scaled(f, x, model_spans, protocol.num_points, protocol, group, **extra)
+        return _rollout_scaled(f, x, model_spans, protocol.num_points, protocol, group, share=group, **extra)
     for label, model in models.items():
         if _is_map(model):
             out[label] = _each(model, lambda m: _map_scored(system, protocol, m, x0, observed))
@@ -315,7 +386,7 @@ def _evaluate_segment(system, models: dict, protocol: EnergyProtocol, dataset: d
     tick.advance()
 
     def run(f, x, group=1, **extra):
-        return _protocol_rollout(f, x, t, protocol, **extra)
+        return _protocol_rollout(f, x, t, protocol, share=group, **extra)
 
     def scored(traj: torch.Tensor) -> dict:          # one trial, (1, T, dim)
         e_model = _energy(system, protocol, traj[0])
@@ -351,33 +422,47 @@ def model_rollout(f, x0: torch.Tensor, t, options: dict = ROLLOUT_SOLVER) -> tup
     """``(paths (batch, len(t), dim), how many blew up)`` of the field ``f`` from ``x0`` by ``hnn.rollout`` with
     ``options`` (default ``ROLLOUT_SOLVER``; a learned map takes none: it steps itself at its ``dt``),
     the batch at once, or path by path where the batch fails: a path that blows up or does not finish within
-    its step budget is ``BLOWN_UP`` everywhere (unrelated to the truth, e(t) ~ 1 over the whole horizon)."""
+    its step budget is ``BLOWN_UP`` everywhere (unrelated to the truth, e(t) ~ 1 over the whole horizon).
+    Within a ``rollout_budget`` the field's calls are bounded, all paths' together: a path stopped by it is
+    counted here too (``rollout_errors`` says apart which were stopped)."""
+    paths, failed, stopped = _paths(f, x0, t, options)
+    return paths, failed + stopped
+
+
+def _paths(f, x0: torch.Tensor, t, options: dict) -> tuple[torch.Tensor, int, int]:
+    """``model_rollout``'s ``(paths, how many blew up, how many its rollout_budget stopped)``."""
+    if options is ROLLOUT_SOLVER and step_map_of(f) is not None:     # the default solver is a field's: a map
+        options = {}                                                # steps itself, as its caller asked nothing
+    if step_map_of(f) is None:      # a learned map makes its own steps, as many as its times: nothing to bound
+        f = _bounded(f)
     try:
-        return quiet_rollout(f, x0, t, **options), 0
+        return quiet_rollout(f, x0, t, **options), 0, 0
     except DivergenceError:
         pass
-    rows, failed = [], 0
+    rows, failed, stopped = [], 0, 0
     for i in range(len(x0)):
         try:
             rows.append(quiet_rollout(f, x0[i:i + 1], t, **options)[0])
-        except DivergenceError:
-            failed += 1
+        except DivergenceError as err:
+            stopped += isinstance(err, BudgetError)
+            failed += not isinstance(err, BudgetError)
             rows.append(torch.full((len(t), x0.shape[1]), BLOWN_UP, dtype=x0.dtype))
-    return torch.stack(rows), failed
+    return torch.stack(rows), failed, stopped
 
 
 def rollout_errors(f, truth: torch.Tensor, t, threads: int | None = 1, options: dict = ROLLOUT_SOLVER) -> dict:
     """The scene cards' rollout numbers of a model: its field ``f`` (``model.time_derivative``; use a
     ``float64_copy``, as the cards do) rolled out by ``model_rollout`` from every ``truth[:, 0]`` and scored
     against the true paths ``truth`` ``(batch, len(t), dim)`` at times ``t`` (``hnn.metrics.path_errors``):
-    ``{"error", "valid_time", ...}`` plus ``blew_up`` (paths that blew up) and ``seconds`` (the rollout's
-    wall time). On ``threads`` torch threads (the caller's count restored after). ``options``: as
-    ``model_rollout``'s (a learned map: ``{}``, its own steps; ``t`` then on multiples of its ``dt``)."""
+    ``{"error", "valid_time", ...}`` plus ``blew_up`` (paths that blew up), ``stopped`` (paths stopped by the
+    ``rollout_budget`` it runs in: scored as blown up, e(t) ~ 1) and ``seconds`` (the rollout's wall time).
+    On ``threads`` torch threads (the caller's count restored after). ``options``: as ``model_rollout``'s (a
+    learned map: ``{}``, its own steps; ``t`` then on multiples of its ``dt``)."""
     with torch_threads(threads):
         tic = time.perf_counter()
-        pred, failed = model_rollout(f, truth[:, 0], t, options)
+        pred, failed, stopped = _paths(f, truth[:, 0], t, options)
         seconds = time.perf_counter() - tic
-    return {**path_errors(pred, truth, t), "blew_up": failed, "seconds": seconds}
+    return {**path_errors(pred, truth, t), "blew_up": failed, "stopped": stopped, "seconds": seconds}
 
 
 def _is_map(model) -> bool:

@@ -138,6 +138,16 @@ def test_no_flag_is_an_abbreviation_and_a_misspelling_gets_the_nearest_flag(caps
     assert "did you mean" not in capsys.readouterr().err      # nothing near: no guess
 
 
+def test_a_flags_words_decide_before_its_letters():
+    known = ["--fit", "--field_type", "--total_steps", "--learn_rate", "--hidden_dim", "--seed", "--save_dir"]
+    for typed, meant in (("--fit-type", "--fit"),          # its first word is a flag: not the letters' --field_type
+                         ("--total-steps", "--total_steps"),    # '-' for '_'
+                         ("--total", "--total_steps"),          # starts one flag only
+                         ("--learn_rates", "--learn_rate"),     # no word matches: the nearest spelling
+                         ("--zzzz", None)):
+        assert hnn.cli.nearest_flag(typed, known) == meant, typed
+
+
 def test_ctrl_c_is_one_line_and_exit_130(capsys):
     with pytest.raises(SystemExit) as info:
         hnn.command.run_main(_raises(KeyboardInterrupt()), [])

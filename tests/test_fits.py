@@ -152,8 +152,9 @@ def test_a_sampled_layers_factored_solve_is_the_direct_one(kind, monkeypatch):
     x, dxdt = rng.uniform(-1, 1, size=(300, 4)), rng.normal(size=(300, 4))
     factored, _ = hnn.fit_least_squares(kind, x, dxdt, fit="swim", width=40, rcond=1e-10, progress=False,
                                         loss_weights=[1.0, 2.0, 0.5, 1.0])
-    # the models module's test for a sampled layer fails: every part streams its (state, component) rows
-    monkeypatch.setattr(hnn.fits.models, "TanhFeatures", type("NotSampled", (), {}))
+    # every part built without its factored form: it streams its (state, component) rows
+    part = hnn.fits.models.Part
+    monkeypatch.setattr(hnn.fits.models, "Part", lambda *a, **k: part(*a, **{**k, "factored": None}))
     direct, _ = hnn.fit_least_squares(kind, x, dxdt, fit="swim", width=40, rcond=1e-10, progress=False,
                                       loss_weights=[1.0, 2.0, 0.5, 1.0])
     z = torch.as_tensor(x)

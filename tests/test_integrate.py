@@ -241,3 +241,67 @@ def test_solve_ivp_stops_past_max_calls_on_a_stiff_field_and_a_protocol_gives_it
     monkeypatch.setattr(hnn.evaluation, "MAX_FIELD_CALLS", 1000)
     with pytest.raises(hnn.DivergenceError, match="over 1000 calls"):
         hnn.evaluation._protocol_rollout(lambda x: -1e5 * x, x0, t, protocol)
+
+
+def test_a_rollout_budget_stops_a_stiff_models_rollout_and_its_score_says_so():
+    """Within ``hnn.evaluation.rollout_budget``, a model's rollout stops at the field calls its seconds buy at the
+    rollout's own rate (a ``BudgetError``, a ``DivergenceError``), and its score says "stopped: over its budget"
+    instead of a number; a healthy model's score equals its score outside the budget, and the truth is not bounded.
+    Here dx/dt = -1e5 x makes RK45 shrink its step to its stability limit, about 3e4 calls over t in [0, 1]."""
+    stiff = _Stiff()
+    spring = hnn.load_task("spring")
+    protocol = dataclasses.replace(hnn.tasks.get_protocol("spring", "corrected"), num_trials=5, t_span=(0.0, 1.0))
+    healthy = hnn.evaluate_energy(spring, {"true": _True(spring)}, protocol, progress=False)
+    with hnn.evaluation.rollout_budget(0.05, "a test's"):
+        out = hnn.evaluate_energy(spring, {"stiff": stiff}, protocol, progress=False)
+        paths = hnn.evaluation.rollout_errors(stiff.time_derivative, torch.ones(2, 5, 2, dtype=torch.float64),
+                                              np.linspace(0, 1, 5))
+    assert out["stiff"]["mse"] is None and out["stiff"]["stopped"].startswith("stopped: over its budget of ")
+    assert "a test's" in out["stiff"]["stopped"] and "rollout failed" in out["stiff"]["why"]
+    # the truth's rollout is not bounded, and a model within its budget scores as without one (the same path)
+    np.testing.assert_array_equal(out["truth"], healthy["truth"])
+    with hnn.evaluation.rollout_budget(60.0):
+        within = hnn.evaluate_energy(spring, {"true": _True(spring)}, protocol, progress=False)
+    assert within["true"]["mse"] == healthy["true"]["mse"] and "stopped" not in within["true"]
+    np.testing.assert_array_equal(within["true"]["traj"], healthy["true"]["traj"])
+    # the rollout error's paths share one budget: the batch stops, and then each path at once
+    assert paths["stopped"] == 2 and paths["blew_up"] == 0
+    # the budget is the rollout's share at its own rate: far fewer calls than the stiff field needs unbounded
+    assert stiff.calls < 30_000
+    with pytest.raises(hnn.BudgetError, match="over its budget of") as err:
+        with hnn.evaluation.rollout_budget(0.01):
+            hnn.evaluation._protocol_rollout(stiff, torch.ones(1, 2, dtype=torch.float64), np.linspace(0, 1, 5),
+                                             protocol, share=1)
+    assert isinstance(err.value, hnn.DivergenceError) and err.value.calls >= hnn.evaluation.RATE_CALLS
+
+
+@pytest.mark.parametrize("seconds", [0, -1.0, float("inf"), float("nan"), True, "2"])
+def test_a_rollout_budget_refuses_a_budget_that_is_not_a_positive_number_of_seconds(seconds):
+    with pytest.raises(ValueError, match="positive finite number"):
+        with hnn.evaluation.rollout_budget(seconds):
+            pass
+
+
+class _Stiff(hnn.Model):
+    """A model whose field dx/dt = -1e5 x is stiff everywhere; counts its calls."""
+
+    def __init__(self):
+        super().__init__()
+        self.w = torch.nn.Parameter(torch.ones(1, dtype=torch.float64))
+        self.calls = 0
+
+    def time_derivative(self, x, t=None):
+        self.calls += 1
+        return -1e5 * self.w * x
+
+
+class _True(hnn.Model):
+    """The spring's true field as a model (float64)."""
+
+    def __init__(self, system):
+        super().__init__()
+        self.system = system
+        self.w = torch.nn.Parameter(torch.ones(1, dtype=torch.float64))
+
+    def time_derivative(self, x, t=None):
+        return self.system.dynamics(x)

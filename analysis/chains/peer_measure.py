@@ -112,8 +112,14 @@ def _diverged(runs: dict, row: str, kinds, seed: int) -> dict:
 
 
 def diverged_entry(err: sweep.RunFailed) -> dict:
-    """The table's entry of a run that failed in training: ``{"diverged": its error's type, step and first clause}``."""
-    return {"diverged": err.message.split(", where")[0].replace(": at ", " at ", 1)}
+    """The table's entry of a run that failed in training: ``{"diverged": its error's type, step and first clause}``.
+
+    One shape for every ``hnn.DivergenceError``: an LNN whose d2L/dqdot2 is singular to round-off stops in its
+    solve (``SingularLagrangianError at training step 0 of 2: LagrangianNN: d2L/dqdot2 is singular at 3
+    states``), one where it is merely near-singular in its snippet's RK4 (``DivergenceError at training step 1
+    of 2: rk4 (dt=0.03, max_norm=1000000.0): 1 trajectories diverged: #26 at t=0.09``), which of them depends on
+    the machine's round-off; each message's advice (after ``, where`` or its first sentence) is in the run's log."""
+    return {"diverged": err.message.split(", where")[0].split(". ")[0].replace(": at ", " at ", 1)}
 
 
 def _loaded(runs: dict, row: str, kinds, seed: int, load: bool = True) -> dict:

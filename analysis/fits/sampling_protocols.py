@@ -110,7 +110,8 @@ def relative_error(model, data: dict) -> float:
     return float(np.sqrt(((h_hat - data["test_H"]) ** 2).sum() / (data["test_H"] ** 2).sum()))
 
 
-def _anchor(protocol: Protocol) -> tuple:
+def anchor(protocol: Protocol) -> tuple:
+    """``(x0, H(x0))`` at x0 = 0: the one H value their protocol knows, which fixes a learned H's constant."""
     zero = torch.zeros(1, 2 * protocol.dof, dtype=torch.float64)
     return zero[0].numpy(), float(protocol.hamiltonian(zero))
 
@@ -122,7 +123,7 @@ def fit_one(name: str, width: int, variant: str, seed: int, threads: int) -> dic
     data = dataset(protocol, seed)
     torch.set_num_threads(threads)
     model, stats = hnn.fit_least_squares("hnn", data["x"], data["dxdt"], fit="elm" if variant == "elm" else "swim",
-                                         width=width, seed=seed, rcond=RCOND, anchor=_anchor(protocol),
+                                         width=width, seed=seed, rcond=RCOND, anchor=anchor(protocol),
                                          values=data["H"] if variant == "swim" else None, progress=False)
     return {"error": relative_error(model, data), "seconds": stats["seconds"],
             "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20}
@@ -138,7 +139,7 @@ def adam_one(name: str, seed: int, threads: int, steps: int, width: int = 200, b
     model = hnn.build_model(2 * protocol.dof, width).double()
     stats = hnn.train(model, data["x"], data["dxdt"], total_steps=steps, batch_size=batch, seed=seed,
                       print_every=10 ** 9, progress=False)
-    zero, h0 = _anchor(protocol)
+    zero, h0 = anchor(protocol)
     with torch.no_grad():
         offset = h0 - float(model.hamiltonian(torch.as_tensor(zero)[None]))
 

@@ -59,6 +59,11 @@ class TanhFeatures(nn.Module):
         """d phi_k / d x_j ``(rows, width, in_dim)``."""
         return self.slopes(x)[:, :, None] * self.weight[None]
 
+    def gradient_factors(self):
+        """``(slopes, weight)``: d phi_k / d x_i = slopes(x)[:, k] * weight[k, i], the Jacobian as a diagonal
+        ``(width, in_dim)`` on the slopes (a least-squares solve factors the design through them)."""
+        return self.slopes, self.weight
+
     def gradient(self, x: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
         """d/dx of phi(x) . coef, ``(rows, in_dim)``: (1 - phi^2) * coef times W, no ``(rows, width, in_dim)`` tensor."""
         t = self(x)
@@ -213,6 +218,57 @@ class Library(nn.Module):
                 grad = grad + slope @ onto
             return grad[:, :self.in_dim]
         return chunk(x) if len(x) <= rows else torch.cat([chunk(x[i:i + rows]) for i in range(0, len(x), rows)])
+
+    def gradient_factors(self):
+        """``(basis, C)``: every partial derivative of every term as a combination of a few functions,
+        d theta_k / d x_i = sum_m basis(x)[:, m] C[m, k, i]; ``basis`` a callable, ``(rows, M)`` at ``x``
+        ``(rows, in_dim)``, evaluating the distinct terms the derivatives are made of (a ``Library`` of
+        them: x^2 y gives 2 x y and x^2, sin(f q) p gives f cos(f q) p and sin(f q)); ``C`` ``(M, terms,
+        in_dim)``. A least-squares fit of the gradients factors its design through them: the 3-body's 790
+        cubic terms on 12 columns have 427 such functions, so one QR of the states' ``(rows, 427)`` values
+        replaces one of the ``(12 rows, 790)`` Jacobian rows, a thirtieth of the arithmetic."""
+        index: dict[tuple, int] = {}
+        entries = []        # (m, k, i, value)
+        for k, (powers, trig) in enumerate(zip(self.powers.tolist(), self.trig.tolist())):
+            kind, column, freq = trig
+            for i in range(self.in_dim):
+                parts = []
+                if powers[i]:
+                    parts.append((powers[i], tuple(powers[:i]) + (powers[i] - 1,) + tuple(powers[i + 1:]),
+                                  tuple(trig)))
+                if kind != NONE and column == i:     # sin(f q)' = f cos(f q), cos(f q)' = -f sin(f q)
+                    parts.append((freq if kind == SIN else -freq, tuple(powers),
+                                  (COS if kind == SIN else SIN, column, freq)))
+                for value, term_powers, term_trig in parts:
+                    m = index.setdefault((term_powers, term_trig), len(index))
+                    entries.append((m, k, i, float(value)))
+        # the basis ordered plain monomials, then sin, then cos terms: each kind's columns one slice
+        keys = sorted(index, key=lambda key: key[1][0])
+        position = torch.tensor([keys.index(key) for key in index])
+        C = torch.zeros(len(index), self.width, self.in_dim, dtype=torch.float64)
+        if entries:
+            m, k, i, value = zip(*entries)
+            C.index_put_((position[list(m)], torch.tensor(k), torch.tensor(i)),
+                         torch.tensor(value, dtype=torch.float64), accumulate=True)
+        slots = Library([(list(p), list(t)) for p, t in keys], self.in_dim).slots.to(self.powers.device)
+        trig = torch.tensor([t for _, t in keys], dtype=torch.int64, device=self.powers.device).reshape(-1, 3)
+        kinds = trig[:, 0].tolist()
+        spans = {kind: slice(kinds.index(kind), len(kinds) - kinds[::-1].index(kind)) for kind in (SIN, COS)
+                 if kind in kinds}
+
+        def values(x: torch.Tensor) -> torch.Tensor:
+            # forward's product, written in place on the transposed (M, rows): a factor is a gather of whole rows
+            # of x^T and one multiply a slot, sin and cos of the trig terms alone (a gather of columns of
+            # (rows, in_dim) and forward's trig factor and slope of every term cost 3-10x as much)
+            padded = torch.cat([x.T, x.new_ones(1, len(x))])
+            out = padded[slots[:, 0]]
+            for s in range(1, slots.shape[1]):
+                out.mul_(padded[slots[:, s]])
+            for kind, span in spans.items():
+                angle = padded[trig[span, 1]] * trig[span, 2, None].to(x.dtype)
+                out[span].mul_(torch.sin(angle) if kind == SIN else torch.cos(angle))
+            return out.T
+        return values, C
 
     def names(self, columns: list[str]) -> list[str]:
         """Each term as a formula over the column names (``'q^2 p'``, ``'cos(q)'``, ``'sin(2 q1) p1 p2'``)."""

@@ -74,24 +74,34 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
     component, J and signs folded in). A QR of [S | Y] (``states`` rows) gives S = Q R_s and Z = Q^T Y, and
     then |S diag(V_j) c - y_j|^2 = |R_s diag(V_j) c - Z_j|^2 + what Q misses of y_j: the problem of
     ``states * m`` rows becomes one of ``K * m`` rows. At width 5000 on 20k 4-d states the two QRs cost
-    half the direct one's arithmetic (docs/speed.md, "Least-squares fits")."""
-    K, m = V.shape
+    half the direct one's arithmetic (docs/speed.md, "Least-squares fits"). A library's gradient factors as
+    B C_j (B ``(states, M)`` the functions its derivatives are made of, ``V`` ``(M, K, m)``): the same with
+    R_s C_j for R_s diag(V_j), M columns in the first QR (the 3-body's cubic library: 427 for 790 terms)."""
+    dense = V.dim() == 3
+    K, m = V.shape[-2:]
+    M = V.shape[0] if dense else K
     w = torch.ones(m, dtype=torch.float64) if weights is None else \
         torch.as_tensor(weights, dtype=torch.float64)[targets]
     Y = y[:, targets]
-    stage = StreamingQR(K, m)
-    step = max(1, chunk_rows(K, m))
+    stage = StreamingQR(M, m)
+    step = max(1, chunk_rows(M, m))
     for i in range(0, len(x), step):
         stage.add(slopes(x[i:i + step]), Y[i:i + step])
         bar.update(len(x[i:i + step]))
     R = stage.factor
-    Rs, Z, tail = R[:K, :K], R[:K, K:], R[K:, K:]
-    scale = ((Rs * Rs).sum(dim=0) * (V * V * w).sum(dim=1)).sqrt()        # |A_k| over every component's rows
+    Rs, Z, tail = R[:M, :M], R[:M, M:], R[M:, M:]
+    if dense:
+        V = torch.stack([Rs @ V[:, :, j] for j in range(m)], dim=2)        # R_s C_j: the rows, (M, K, m)
+        scale = (V * V * w).sum(dim=(0, 2)).sqrt()
+    else:
+        scale = ((Rs * Rs).sum(dim=0) * (V * V * w).sum(dim=1)).sqrt()    # |A_k| over every component's rows
     solver = StreamingQR(K, 1, scale, rcond)
+    if not dense:       # R_s diag(V_j) is a triangle: folded in one at a time (a fifth of a stacked QR's flops)
+        for j in range(m):
+            solver.add_triangular(w[j].sqrt() * Rs * V[:, j], w[j].sqrt() * Z[:, j:j + 1])
     piece = max(1, chunk_rows(K, 1) // m)
-    for start in range(0, len(Rs), piece):
-        block = Rs[start:start + piece]
-        A = torch.cat([w[j].sqrt() * block * V[:, j] for j in range(m)])
+    for start in range(0, len(Rs) if dense else 0, piece):
+        A = torch.cat([w[j].sqrt() * V[start:start + piece, :, j] for j in range(m)])
         Yb = torch.cat([w[j].sqrt() * Z[start:start + piece, j:j + 1] for j in range(m)])
         solver.add(A, Yb, rows=0)
     solver.rows = len(x) * m

@@ -18,9 +18,9 @@ Memory: the factor ``(K + rhs)^2`` and one chunk of rows beside it (``chunk_rows
 """
 from __future__ import annotations
 
-import math
-
+import numpy as np
 import torch
+from scipy.linalg import lapack
 
 # the stacked matrix [factor; chunk] of one QR update holds at most this many bytes (the chunk itself, the
 # QR's own copy and the new factor come on top): width 5000 updates ~22k rows at a time, width 10000 10k
@@ -66,6 +66,26 @@ class StreamingQR:
         self.factor = torch.linalg.qr(stacked, mode="r").R[:self.columns + self.rhs]
         self.rows += len(Y) if rows is None else rows
 
+    def add_triangular(self, T: torch.Tensor, Y: torch.Tensor) -> None:
+        """Fold the rows of an upper triangular ``T`` ``(columns, columns)`` and its ``Y`` ``(columns, rhs)`` into the
+        factor (rows of a reduced problem: ``rows`` is left to the caller, as ``add(..., rows=0)``). LAPACK's
+        dtpqrt folds a triangle into a triangle in 2/3 columns^3 flops, where the QR of the two stacked (``add``)
+        costs 10/3 columns^3: a sampled layer's factored design is such triangles, one per component."""
+        width = self.columns + self.rhs
+        if T.shape != (self.columns, self.columns) or len(Y) != self.columns:
+            raise ValueError(f"add_triangular takes a ({self.columns}, {self.columns}) triangle and its "
+                             f"({self.columns}, {self.rhs}) right-hand sides, got {tuple(T.shape)} and {tuple(Y.shape)}")
+        top = np.zeros((width, width), order="F")
+        top[:len(self.factor)] = self.factor.numpy()
+        block = np.empty((self.columns, width), order="F")
+        block[:, :self.columns] = (T / self.scale).numpy()
+        block[:, self.columns:] = Y.reshape(self.columns, self.rhs).numpy()
+        # l = columns: every row of [T | Y] is zero left of its diagonal (upper trapezoidal)
+        folded, _, _, info = lapack.dtpqrt(self.columns, min(64, width), top, block, overwrite_a=1, overwrite_b=1)
+        if info:
+            raise RuntimeError(f"LAPACK dtpqrt failed (info {info}) on a ({self.columns}, {width}) block")
+        self.factor = torch.from_numpy(np.triu(folded))
+
     def _split(self):
         R = self.factor[:self.columns]
         return R[:, :self.columns], R[:, self.columns:]
@@ -83,17 +103,15 @@ class StreamingQR:
         lhs, z = self._split()
         U, s, _ = torch.linalg.svd(lhs)
         zhat, floor = U.T @ z, self.residual()
-        best = torch.full((self.rhs,), math.inf, dtype=torch.float64)
-        chosen = torch.full((self.rhs,), self.rcond, dtype=torch.float64)
-        for lam in (r for r in RIDGES if r >= self.rcond):
-            shrink = lam ** 2 / (s ** 2 + lam ** 2)
-            rss = ((shrink[:, None] * zhat) ** 2).sum(dim=0) + floor
-            dof = (1 - shrink).sum()
-            score = rss / max(1.0 - float(dof) / self.rows, 1e-12) ** 2
-            better = score < best
-            best, chosen = torch.where(better, score, best), torch.where(better, torch.tensor(lam, dtype=torch.float64),
-                                                                         chosen)
-        return chosen
+        lams = torch.tensor([r for r in RIDGES if r >= self.rcond], dtype=torch.float64)
+        if not len(lams):
+            return torch.full((self.rhs,), self.rcond, dtype=torch.float64)
+        # every ridge at once (a loop over them cost more than the SVD on a small library)
+        shrink = lams[:, None] ** 2 / (s ** 2 + lams[:, None] ** 2)                     # (ridges, columns)
+        rss = ((shrink[:, :, None] * zhat) ** 2).sum(dim=1) + floor                       # (ridges, rhs)
+        dof = (1 - shrink).sum(dim=1)
+        score = rss / (1.0 - dof / self.rows).clamp(min=1e-12)[:, None] ** 2
+        return lams[score.argmin(dim=0)]        # the first (smallest) ridge of equal scores, as a loop's strict <
 
     def solve(self, ridge: torch.Tensor | None = None) -> torch.Tensor:
         """The coefficients ``(columns, rhs)`` of the rows added so far: with the factor's own ridge ``rcond``, or
@@ -102,39 +120,56 @@ class StreamingQR:
         if ridge is None or bool((ridge <= self.rcond).all()):
             scaled = torch.linalg.solve_triangular(lhs, z, upper=True)
         else:
-            scaled = torch.stack([self._ridged(lhs, z[:, j], float(ridge[j])) for j in range(self.rhs)], dim=1)
+            scaled = torch.stack([_solved(self._ridged(lhs, z[:, j], float(ridge[j]))) for j in range(self.rhs)], dim=1)
         return scaled / self.scale[:, None]
 
     def sparse(self, threshold: float, ridge: torch.Tensor | None = None) -> torch.Tensor:
         """Sequentially thresholded least squares (SINDy's STLSQ) on the same factor: solve, zero every
         coefficient smaller than ``threshold`` in size (in the data's units), solve again on the rest, until
-        none changes; each right-hand side keeps its own terms (and its ``ridge``, as ``solve``). ``(columns, rhs)``."""
+        none changes; each right-hand side keeps its own terms (and its ``ridge``, as ``solve``). ``(columns, rhs)``.
+
+        Each re-solve works on the last one's small factor, never on the rows: F = [R | Q^T y] of the kept
+        columns, upper triangular ``(k + 1, k + 1)``; dropping columns is a QR of F's kept columns and its
+        last (2 (k + 1) k'^2 flops, k' the columns left), which is the factor of the rows' kept columns
+        (the rows = Q F, Q orthogonal: dropping columns of the rows drops those of F)."""
         if not threshold >= 0:
             raise ValueError(f"threshold must be >= 0, got {threshold}")
         lhs, z = self._split()
         out = torch.zeros(self.columns, self.rhs, dtype=torch.float64)
         for j in range(self.rhs):
             lam = self.rcond if ridge is None else float(ridge[j])
-            keep = torch.ones(self.columns, dtype=torch.bool)
+            factor = self._ridged(lhs, z[:, j], lam)
+            keep = torch.arange(self.columns)
             for _ in range(MAX_STLSQ_ITERATIONS):
-                # the ridge rows of the dropped columns only touch those columns: a subset's factor is lhs[:, keep]
-                coef = self._ridged(lhs[:, keep], z[:, j], lam) / self.scale[keep]
+                coef = _solved(factor) / self.scale[keep]
                 small = coef.abs() < threshold
                 if not bool(small.any()):
                     break
-                keep[keep.clone()] = ~small
-                if not bool(keep.any()):
+                keep = keep[~small]
+                if not len(keep):
                     coef = coef[:0]
                     break
+                # the kept columns and the right-hand side (the last column), retriangularized
+                factor = torch.linalg.qr(factor[:, torch.cat([(~small).nonzero()[:, 0],
+                                                              torch.tensor([len(small)])])], mode="r").R
             out[keep, j] = coef
         return out
 
     def _ridged(self, lhs: torch.Tensor, z: torch.Tensor, lam: float) -> torch.Tensor:
-        """min |lhs c - z|^2 + lam^2 |c|^2 in scaled units (``lhs``: columns of the factor, which holds rcond^2 of
-        the ridge already), by a QR of the stacked [lhs; (lam^2 - rcond^2)^(1/2) I]: no singular value is cut."""
+        """The triangular factor ``(k + 1, k + 1)`` of min |lhs c - z|^2 + lam^2 |c|^2 in scaled units, [R | Q^T z]
+        (``lhs`` ``(k, k)``: the factor, which holds rcond^2 of the ridge already): ``lhs`` itself, or with
+        more ridge the QR of the stacked [lhs | z; (lam^2 - rcond^2)^(1/2) I | 0]; no singular value is cut."""
+        k = lhs.shape[1]
         extra = max(lam ** 2 - self.rcond ** 2, 0.0) ** 0.5
-        if extra:
-            lhs = torch.cat([lhs, extra * torch.eye(lhs.shape[1], dtype=torch.float64)])
-            z = torch.cat([z, torch.zeros(lhs.shape[1], dtype=torch.float64)])
-        Q, R = torch.linalg.qr(lhs)
-        return torch.linalg.solve_triangular(R, (Q.T @ z)[:, None], upper=True)[:, 0]
+        if not extra:       # already triangular: [lhs | z] is the factor
+            return torch.cat([lhs, z[:, None]], dim=1)
+        stacked = torch.zeros(len(lhs) + k, k + 1, dtype=torch.float64)
+        stacked[:len(lhs), :k], stacked[:len(lhs), k] = lhs, z
+        stacked[len(lhs):, :k].diagonal().fill_(extra)
+        return torch.linalg.qr(stacked, mode="r").R
+
+
+def _solved(factor: torch.Tensor) -> torch.Tensor:
+    """The coefficients ``(k,)`` of a triangular factor [R | Q^T z] ``(k or k + 1, k + 1)``."""
+    k = factor.shape[1] - 1
+    return torch.linalg.solve_triangular(factor[:k, :k], factor[:k, k:], upper=True)[:, 0]

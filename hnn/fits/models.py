@@ -42,8 +42,10 @@ class Part:
     their ``y`` = dx/dt (``weights`` ``(dim,)`` or None: each component's weight in the loss);
     ``assign(coef (columns, rhs))`` puts the solution in place; ``supervised``: the sampler may draw
     this layer's neurons where ``y`` changes fastest (SWIM with function values); ``factored()``, where the
-    design is a sampled layer's gradient: ``(slopes, V, targets)``, the rows of component ``targets[j]`` being
-    ``slopes(x) * V[:, j]`` (``hnn.fits.fitting`` solves it without building the rows)."""
+    design is the features' gradient: ``(basis, V, targets)``, the rows of component ``targets[j]`` being
+    ``basis(x) * V[:, j]`` (a sampled layer: its slopes, ``V`` ``(K, m)``) or ``basis(x) @ V[:, :, j]`` (a
+    library: the functions its derivatives are made of, ``V`` ``(M, K, m)``; ``gradient_factors()`` of
+    ``hnn.fits.features``); ``hnn.fits.fitting`` solves it without building the rows."""
     features: nn.Module
     inputs: Callable
     design: Callable
@@ -95,11 +97,9 @@ class FittedHNN(Model):
             self.coef.copy_(coef[:, 0])
 
     def _factored(self):
-        if not isinstance(self.features, TanhFeatures):
-            return None
-        W = self.features.weight
-        # d/dt of component j is (J grad H)_j = sum_k c_k (1 - phi_k^2) (J w_k)_j
-        return self.features.slopes, torch.cat([W[:, self.n:], -W[:, :self.n]], dim=1), list(range(self.input_dim))
+        basis, G = self.features.gradient_factors()
+        # d/dt of component j is (J grad H)_j: the gradient's factors with J applied on their last axis
+        return basis, torch.cat([G[..., self.n:], -G[..., :self.n]], dim=-1), list(range(self.input_dim))
 
     def parts(self) -> list[Part]:
         return [Part(self.features, lambda x: x, self._design, self._assign, self.features.width, supervised=True,
@@ -164,9 +164,8 @@ class FittedSeparable(Model):
                 coef.copy_(solution[:, 0])
 
         def factored():
-            if not isinstance(features, TanhFeatures):
-                return None
-            return (lambda x: features.slopes(x[:, half])), sign * features.weight, list(rows)
+            basis, G = features.gradient_factors()
+            return (lambda x: basis(x[:, half])), sign * G, list(rows)
 
         return Part(features, lambda x: x[:, half], design, assign, features.width, name="T" if kinetic else "V",
                     factored=factored)

@@ -115,6 +115,7 @@ class _Dopri5:
     order = 5
     stages = 7
     fsal = 6
+    dense_stages = 0        # the dense output reads the step's own stages: no further calls of f
     safety, min_factor, max_factor, beta = 0.9, 0.2, 10.0, 0.0
 
     def __init__(self, dtype: torch.dtype):
@@ -131,7 +132,8 @@ class _Dopri5:
         err = work.combine(self.E, 7) * hx
         err /= scale_tol(y, stage)
         err *= err
-        return stage, np.sqrt(err.mean(1)).astype(np.float64, copy=False), 6
+        # the mean as numpy's mean computes it (the same bits), without its Python wrapper
+        return stage, np.sqrt(np.add.reduce(err, 1) / err.shape[1]).astype(np.float64, copy=False), 6
 
     def dense(self, field, y, y_new, hx, work: Stages):
         Q = torch.mm(self.PT, work.flat).numpy().reshape(4, *y.shape)
@@ -144,13 +146,17 @@ class _Dopri5:
 
 def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
     """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU."""
+    on_cpu = device.type == "cpu"
+
     def field(y: np.ndarray) -> np.ndarray:
         x = torch.from_numpy(y)
-        if device.type != "cpu":
+        if not on_cpu:
             x = x.to(device)
         dxdt = f(x)
         if dxdt.shape != x.shape:
             raise ValueError(f"f must map (batch, dim) = {tuple(x.shape)} to the same shape, got {tuple(dxdt.shape)}")
+        if dxdt.is_cpu and not dxdt.requires_grad:      # the common case: no detach and no copy to make
+            return dxdt.numpy()
         return dxdt.detach().cpu().numpy()
     return field
 
@@ -235,6 +241,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     out = np.empty((batch, num_t, dim), dtype=dtype)
     out[:, 0] = y
     nxt = np.ones(batch, dtype=np.int64)
+    t_next = np.full(batch, t[min(1, num_t - 1)])          # t[nxt] (the last time once past it), kept as nxt moves
     done = np.zeros(batch, dtype=bool)
     bad_time = np.full(batch, np.nan)
     rows = np.arange(batch)
@@ -243,41 +250,55 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     t_end = float(t[-1])
     near = 1e-12 * max(abs(t_end), 1.0)
     forward = direction * t                                         # the output times, ascending
+    # a state is blown up past this (max_norm None: past the largest finite value, i.e. inf; NaN fails both)
+    bound = max_norm if max_norm is not None else float(np.finfo(np.float64).max)
+    abs_new = None                          # |y_new| of the last attempt, kept by scale_tol for the blow-up test
 
     def scale_tol(y, y_new):
-        scale = np.maximum(np.abs(y), np.abs(y_new))
+        nonlocal abs_new
+        abs_new = np.abs(y_new)
+        scale = np.maximum(np.abs(y), abs_new)
         scale *= rtol
         scale += atol
         return scale
 
+    # Each iteration's own work is some forty numpy calls on arrays of a few elements, each costing its
+    # dispatch, not its arithmetic: the common iteration (no row finished, none rejected or blown up)
+    # takes a shorter way through the same formulas, so every path keeps its bits.
+    finished = 0
     for _ in range(max_iterations):
-        finished = int(np.count_nonzero(done))
         live = len(y) - finished
         if live == 0:
             break
         if drop_finished and live < 0.75 * len(y):        # drop finished rows: f then costs only what still runs
             keep = ~done
             y, k1, tc, prop, nxt, rows, done = y[keep], k1[keep], tc[keep], prop[keep], nxt[keep], rows[keep], done[keep]
+            t_next = t_next[keep]
             err_old = err_old[keep]
             work = Stages.empty(scheme.stages, live, dim, dtype)
+            finished = 0
         K = work.K
-        gap = np.abs(t_end - tc)
+        gap = t_end - tc
+        np.abs(gap, out=gap)
         clipped = prop >= gap                         # this step ends on the last time
-        h = np.minimum(prop, gap)
+        size = np.minimum(prop, gap)                  # |h|
         if finished:
-            h[done] = 0.0
-        h *= direction
+            size[done] = 0.0
+        h = size * direction if direction < 0 else size
         hx = h.astype(dtype, copy=False)[:, None]
         K[0] = k1
         # the tableau products in torch (work.combine): its small products give each row the same bits
         # whatever the other rows (numpy's BLAS does not), so a row's path does not depend on the batch
         y_new, err_norm, calls = scheme.attempt(field, y, hx, work, scale_tol)
         nfev += calls
-        # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm
-        largest = np.abs(y_new).max(1)
-        finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
-        over = err_norm > 1
-        if over.any() or not finite.all():          # else no row blew up or stalled: skip the masks
+        # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm: every row
+        # passes both tests when the largest of each does (NaN fails a comparison)
+        calm = not finished and float(abs_new.max()) <= bound and float(err_norm.max()) <= 1.0
+        if not calm:
+            largest = abs_new.max(1)
+            finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
+            over = err_norm > 1
+        if not calm and (over.any() or not finite.all()):          # else no row blew up or stalled: skip the masks
             running = ~done
             blown = ~finite & running
             too_small = running & finite & over & (np.abs(h) <= 10 * eps * np.maximum(np.abs(tc), 1.0))
@@ -285,9 +306,13 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
                 if mask.any():
                     bad_time[rows[mask]] = tc[mask]
                     done |= mask
-        accept = ~done & (err_norm <= 1)
+            finished = int(np.count_nonzero(done))
+        accept = None if calm else ~done & (err_norm <= 1)          # None: every row
         t_new = np.where(clipped, t_end, tc + h)
-        due = accept & (direction * (t[np.minimum(nxt, num_t - 1)] - t_new) <= near)
+        ahead = t_next - t_new
+        if direction < 0:
+            ahead *= direction
+        due = ahead <= near if calm else accept & (ahead <= near)
         if due.any():
             # every output time inside (tc, t_new] of an accepted row, from the dense output, all at once:
             # each due row's times from nxt on that pass the test (monotone in the index); searchsorted
@@ -295,9 +320,13 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             i = np.flatnonzero(due)
             # a field that ties a row to its position (drop_finished=False) is given every row in every call,
             # the dense stages' too (dop853's): at, the due rows' places among the rows it was given
-            given, at = (i, np.arange(len(i))) if drop_finished else (np.arange(len(y)), i)
-            stages = work if len(given) == len(y) else Stages(np.ascontiguousarray(K[:, given]))
-            evaluate, calls = scheme.dense(field, y[given], y_new[given], hx[given], stages)
+            # (a dense output that calls f for no further stages is read from every row's stages: no copy)
+            if drop_finished and scheme.dense_stages and len(i) < len(y):
+                at = np.arange(len(i))
+                evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], Stages(np.ascontiguousarray(K[:, i])))
+            else:
+                at = i
+                evaluate, calls = scheme.dense(field, y, y_new, hx, work)
             nfev += calls
             first = nxt[i]
             counts = np.minimum(np.searchsorted(forward, direction * t_new[i] + 2 * near, side="right"), num_t) - first
@@ -309,8 +338,10 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             sigma = ((t[k] - tc[ij]) / h[ij]).astype(dtype)
             out[rows[ij], k] = evaluate(sigma, at[j])
             nxt[i] += np.bincount(j, minlength=len(i))
+            t_next[i] = t[np.minimum(nxt[i], num_t - 1)]
             done |= nxt >= num_t
-        if accept.all():
+            finished = int(np.count_nonzero(done))
+        if calm or accept.all():
             y, k1, tc = y_new, K[scheme.fsal].copy(), t_new
         else:
             y = np.where(accept[:, None], y_new, y)
@@ -322,12 +353,13 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         factor *= scheme.safety
         if scheme.beta:
             factor *= err_old ** scheme.beta
-            err_old = np.where(accept, np.maximum(err_norm, 1e-4), err_old)
+            err_old = np.maximum(err_norm, 1e-4) if calm else np.where(accept, np.maximum(err_norm, 1e-4), err_old)
         np.minimum(np.maximum(factor, scheme.min_factor, out=factor), scheme.max_factor, out=factor)
-        reject = ~accept
-        if reject.any():
-            rejected += int(np.count_nonzero(reject & ~done))
-        prop = np.abs(h) * factor
+        if not calm:
+            reject = ~accept
+            if reject.any():
+                rejected += int(np.count_nonzero(reject & ~done))
+        prop = size * factor
     else:
         raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")
     if stats is not None:

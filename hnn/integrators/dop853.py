@@ -117,7 +117,8 @@ class Stages:
         self.K = K
         stages, rows, dim = K.shape
         self.flat = torch.from_numpy(K.reshape(stages, -1))
-        self._leading = {}
+        # flat[:s] for every s, built once: a stage's product then costs one torch.mm and no view
+        self._leading = [self.flat[:s] for s in range(stages + 1)]
         self.product = torch.empty((1, rows * dim), dtype=self.flat.dtype, device="cpu")    # numpy shares it
         self.summed = self.product.numpy().reshape(rows, dim)      # the product, as the rows' states
 
@@ -129,25 +130,24 @@ class Stages:
         """``sum_j a[0, j] K[j]`` over the first ``s`` stages, ``(rows, dim)``, in ``summed`` (overwritten
         by the next call): one small matrix product, whose bits for a row do not depend on the other rows
         (numpy's BLAS sums a row differently with the number of rows; torch's small products do not)."""
-        torch.mm(a, self.leading(s), out=self.product)
+        torch.mm(a, self._leading[s], out=self.product)
         return self.summed
 
     def leading(self, s: int) -> torch.Tensor:
         """``flat[:s]``, the first ``s`` stages (a view kept for the next step)."""
-        found = self._leading.get(s)
-        if found is None:
-            found = self._leading[s] = self.flat[:s]
-        return found
+        return self._leading[s]
 
 
 def rk_stages(field, A_rows, stages, y: np.ndarray, hx: np.ndarray, work: Stages) -> np.ndarray:
     """The explicit Runge-Kutta stages ``stages`` of every row: ``K[s] = field(y + hx * sum_j A[s, j] K[j])``
     with ``work.K`` the stage derivatives and ``A_rows[s]`` row s of the tableau as a ``(1, s)`` tensor;
     returns the last stage's state (an FSAL scheme's new state)."""
+    K, product, summed, leading = work.K, work.product, work.summed, work._leading
     for s in stages:
-        stage = work.combine(A_rows[s], s) * hx
+        torch.mm(A_rows[s], leading[s], out=product)        # work.combine, inlined: it runs every stage
+        stage = summed * hx
         stage += y
-        work.K[s] = field(stage)
+        K[s] = field(stage)
     return stage
 
 
@@ -166,6 +166,7 @@ class DOP853:
     order = 8
     stages = STAGES
     fsal = 12
+    dense_stages = 3        # the continuous extension's further calls of f, on the rows with an output time
     safety, min_factor, max_factor, beta = 0.9, 1 / 3, 6.0, 0.04
 
     def __init__(self, dtype: torch.dtype):

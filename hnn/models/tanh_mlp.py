@@ -249,13 +249,17 @@ def cached_kernel(owner: nn.Module, key: str, mlp: nn.Module, rows: tuple[int, .
     callable giving the kernel's fold, ``weights`` one giving its weights (default ``mlp``'s),
     called when the kernel is built."""
     kernels = frozen_kernels()
-    # the kernel steps numpy arrays: a model on an accelerator keeps its torch path (under vmap over
-    # models _closed_form_applies is False)
-    if kernels is None or not mlp._closed_form_applies() or not mlp.linear1.weight.is_cpu:
+    # under vmap over models the closed form does not apply (_closed_form_applies), whatever was cached
+    if kernels is None or in_model_axis():
         return None
     entry = kernels.get((id(owner), key))
     if entry is None or entry[0] is not owner:      # the owner is held, so its id is not reused meanwhile
-        built = EvaluationKernel(weights() if weights else mlp_weights(mlp), rows, None if fold is None else fold())
+        # decided once per frozen_weights context, as the weights are: a rollout asks at every field call,
+        # and these checks cost more than the kernel's own dispatch. The kernel steps numpy arrays: a model
+        # on an accelerator keeps its torch path (None is cached too)
+        built = None
+        if mlp._closed_form_applies() and mlp.linear1.weight.is_cpu:
+            built = EvaluationKernel(weights() if weights else mlp_weights(mlp), rows, None if fold is None else fold())
         entry = kernels[(id(owner), key)] = (owner, built)
     return entry[1]
 
