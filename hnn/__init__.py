@@ -7,7 +7,7 @@ the training loop, the paper's metrics, and saved runs.
     model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="swim", width=1000)   # one solve, seconds
     traj = hnn.rollout(model.time_derivative, x0, t_eval)   # (batch, time, 2)
 
-``hnn`` itself gives the 41 names of ``__all__``; the rest is reached through its room or module
+``hnn`` itself gives the 42 names of ``__all__``; the rest is reached through its room or module
 (``hnn.models.ConstraintGraph``, ``hnn.integrators.rk4_step``, ``hnn.runs.find_run``).
 ``import hnn`` itself loads no torch, so that a ``train.py``'s ``--help`` and flag errors answer
 at once: the light modules (``_LIGHT``: ``cli``, ``command``, ``config``, ``tasks``, ``io``, ...) and
