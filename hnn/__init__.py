@@ -68,7 +68,7 @@ _PUBLIC = {
     "models": ("HNN", "MLP", "PixelHNN", "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "ConstrainedHNN",
                "build_model"),
     "metrics": ("derivative_mse", "energy_mse"),
-    "objectives": ("DerivativeObjective", "FitOptions", "Objective"),
+    "objectives": ("DerivativeObjective", "LoopOptions", "Objective"),
     "kinds": ("MODEL_KINDS", "OBJECTIVES"),
     "training": ("train",),
     "fits": ("FITS", "fit_least_squares"),
@@ -87,7 +87,7 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .models import (HNN, MLP, PixelHNN, SeparableHNN, DissipativeHNN, MechanicalHNN,  # noqa: F401
                          ConstrainedHNN, build_model)
     from .metrics import derivative_mse, energy_mse  # noqa: F401
-    from .objectives import DerivativeObjective, FitOptions, Objective  # noqa: F401
+    from .objectives import DerivativeObjective, LoopOptions, Objective  # noqa: F401
     from .kinds import MODEL_KINDS, OBJECTIVES  # noqa: F401
     from .training import train  # noqa: F401
     from .fits import FITS, fit_least_squares  # noqa: F401

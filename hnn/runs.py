@@ -29,7 +29,7 @@ from . import cli
 from .fits import check_config
 from .io import atomic_folder, check_save_dir, torch_bytes, write_json
 from .kinds import get_kind, model_from_args, model_from_spec
-from .objectives import FitOptions, Objective
+from .objectives import LoopOptions, Objective
 from .specs import run_specs
 from .trainers.least_squares import solve_prepared
 from .trainers.lone import train_prepared
@@ -112,10 +112,10 @@ class Prepared:
 
     ``saved``: the args.json it saves (``saved_args``, with ``unit_scales`` and ``loss_weights`` where
     --units and --balance resolved them); ``specs``: ``run_specs(saved)``; ``model``: the model it saves
-    (an ``hnn.units.Rescaled`` where --units rescaled); ``fit_model``: the one that trains (in canonical
+    (an ``hnn.units.Rescaled`` where --units rescaled); ``canonical_model``: the one that trains (in canonical
     units); ``dataset``: the objective's prepared arrays in the user's units; ``x``, ``y`` (the training
-    subset), ``test_x``, ``test_y``: ``fit_model``'s, ``(rows, input_dim)``; ``options``: the objective's
-    ``FitOptions`` for ``fit_model`` (``Objective.train_options``); ``data_seconds``: the dataset's build time
+    subset), ``test_x``, ``test_y``: ``canonical_model``'s, ``(rows, input_dim)``; ``options``: the objective's
+    ``LoopOptions`` for ``canonical_model`` (``Objective.train_options``); ``data_seconds``: the dataset's build time
     (None when given)."""
     config: object
     objective: Objective
@@ -123,14 +123,14 @@ class Prepared:
     saved: dict
     specs: object
     model: torch.nn.Module
-    fit_model: torch.nn.Module
+    canonical_model: torch.nn.Module
     scales: object
     dataset: dict
     x: object
     y: object
     test_x: object
     test_y: object
-    options: FitOptions
+    options: LoopOptions
     data_seconds: float | None
 
     def train_kwargs(self, **overrides) -> dict:
@@ -187,13 +187,13 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
     if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
         saved["unit_scales"] = scales.to_dict()
         model = wrap_saved(model, saved)
-    fit_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
+    canonical_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
     x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = objective.train_options(fit_model, specs.objective, fitted)
+    options = objective.train_options(canonical_model, specs.objective, fitted)
     if options.loss_weights is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options.loss_weights]
-    return Prepared(config, objective, fit, saved, specs, model, fit_model, scales, dataset, x, y, test_x, test_y,
+    return Prepared(config, objective, fit, saved, specs, model, canonical_model, scales, dataset, x, y, test_x, test_y,
                     options, data_seconds)
 
 

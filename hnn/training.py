@@ -37,11 +37,11 @@ DERIVATIVE_LOSSES = names.checked({"l2": l2_loss, "l1": l1_loss}, names.DERIVATI
 def batch_loss(model, loss: Callable | None = None, predict: Callable | None = None, derivative_loss: str = "l2",
                loss_weights=None, **unused) -> Callable:
     """The batch loss ``train`` minimizes, from its keyword arguments of these names (an objective's
-    ``FitOptions.train_kwargs()``): ``loss`` itself, or ``fit_loss`` of the others (``unused``: the rest)."""
-    return loss if loss is not None else fit_loss(model, predict, derivative_loss, loss_weights)
+    ``LoopOptions.train_kwargs()``): ``loss`` itself, or ``dxdt_loss`` of the others (``unused``: the rest)."""
+    return loss if loss is not None else dxdt_loss(model, predict, derivative_loss, loss_weights)
 
 
-def fit_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:
+def dxdt_loss(model, predict: Callable | None = None, derivative_loss: str = "l2", loss_weights=None) -> Callable:
     """The loss ``hnn.train`` minimizes in a fit of dx/dt: ``DERIVATIVE_LOSSES[derivative_loss]`` of
     ``predict`` (default ``model.time_derivative``), each component times ``loss_weights`` ``(dim,)``
     (``hnn.balance``; None: all 1), the weights put once on the model's dtype and device."""
@@ -193,7 +193,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
                 resolved["loss_weights"] = [float(w) for w in loss_weights]
         if "unit_scales" not in resolved:
             warn_off_scale(x, dxdt, model)
-        loss = fit_loss(model, predict, derivative_loss, loss_weights)
+        loss = dxdt_loss(model, predict, derivative_loss, loss_weights)
     return run_loop(model, loss, x, dxdt, test_x if has_test else None, test_dxdt if has_test else None,
                     total_steps=total_steps, learn_rate=learn_rate, weight_decay=weight_decay, batch_size=batch_size,
                     seed=seed, print_every=print_every, verbose=verbose, test_every=test_every,

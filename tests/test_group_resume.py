@@ -12,7 +12,7 @@ import hnn.sweeps.group_runs
 import hnn.trainers.closed_form
 import hnn.trainers.group_loop
 import hnn.trainers.vmap
-from hnn.training import fit_loss
+from hnn.training import dxdt_loss
 
 
 class _Kill(KeyboardInterrupt):
@@ -97,7 +97,7 @@ def test_a_killed_group_resumes_to_the_floats_of_an_unbroken_one(device, tmp_pat
 def test_a_killed_stacked_group_resumes_to_the_floats_of_an_unbroken_one(tmp_path, monkeypatch):
     # vmap over the models, AdamW with a cosine rate: a kill at the start of step 17 (the rate of each step is
     # asked for first)
-    options = dict(**GROUP, optimizer="adamw", schedule="cosine", loss_of=lambda m: fit_loss(m, None, "l2", None))
+    options = dict(**GROUP, optimizer="adamw", schedule="cosine", loss_of=lambda m: dxdt_loss(m, None, "l2", None))
     whole, data, tests = _members()
     expected, _ = hnn.trainers.vmap.train_vmap(whole, data, tests, **options)
     rate = hnn.trainers.group_loop.learning_rate

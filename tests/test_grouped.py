@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import hnn
-from hnn.sweeps.group_runs import group_key
+from hnn.sweeps.group_runs import closed_form_key
 from hnn.trainers.closed_form import train_closed_form
 from hnn.runs import training_subset
 
@@ -97,7 +97,7 @@ def test_a_model_that_turns_nan_is_reported_and_the_others_finish_as_alone(capsy
 def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
     configs = [hnn.tasks.task_config("spring", {"seed": s, "train_fraction": f, "hidden_dim": 16, "total_steps": 100,
                                                 "save_dir": str(tmp_path)}) for s in (0, 1) for f in (0.5, 1.0)]
-    assert len({group_key(c) for c in configs}) == 1
+    assert len({closed_form_key(c) for c in configs}) == 1
     folders = hnn.sweeps.group_runs.train_group(configs)
     assert [hnn.runs.find_run(c) for c in configs] == folders        # found by their configs, as lone runs are
     lone_dir = tmp_path / "lone"
@@ -118,8 +118,8 @@ def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
 
 def test_configs_that_cannot_group_say_so():
     config = hnn.tasks.task_config("spring", {"use_rk4": True})
-    assert group_key(config) is None          # the closed form's groups: not through an RK4 step
-    assert hnn.sweeps.group_runs.unit_key(config)[0] == "stacked"
+    assert closed_form_key(config) is None          # the closed form's groups: not through an RK4 step
+    assert hnn.sweeps.group_runs.unit_key(config)[0] == "vmap"
     pixels = hnn.tasks.task_config("pixels", {})
     assert hnn.sweeps.group_runs.unit_key(pixels) is None
     with pytest.raises(ValueError, match="one group"):

@@ -292,7 +292,7 @@ def test_a_group_of_maps_trains_as_one_program_as_each_alone(tmp_path):
     group is held to its lone runs by what they predict, a step from the test states."""
     configs = [_small_run("real", "henon", tmp_path / "group", seed=s, total_steps=20, batch_size=64, hidden_dim=32)
                for s in range(3)]
-    assert hnn.sweeps.group_runs.unit_key(configs[0])[0] == "stacked"
+    assert hnn.sweeps.group_runs.unit_key(configs[0])[0] == "vmap"
     folders = hnn.sweeps.group_runs.train_group(configs)
     for config, folder in zip(configs, folders):
         alone = hnn.run_experiment(dataclasses.replace(config, save_dir=str(tmp_path / "alone")))

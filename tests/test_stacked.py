@@ -47,7 +47,7 @@ def _group_and_lone(task, configs, tmp_path):
 def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
     task, values = CASES[case]
     configs = _configs(task, values, tmp_path / "group")
-    assert unit_key(configs[0])[0] == "stacked" and len({unit_key(c) for c in configs}) == 1
+    assert unit_key(configs[0])[0] == "vmap" and len({unit_key(c) for c in configs}) == 1
     for _config, (a, _, ma), (b, _, mb) in _group_and_lone(task, configs, tmp_path):
         # float32: vmap's batched kernels sum in other orders than a lone model's, 1e-7 relative a step;
         # 20 Adam steps (the LNN's large init weights most) carry it to at most 2e-5 relative on an AVX2 box
@@ -122,7 +122,7 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
     adaptive = hnn.SOLVERS[method].adaptive
     t_eval, options = np.linspace(0.0, 1.0, 5), ({"rtol": 1e-9} if adaptive else {"dt": 0.05})
     stats = {}
-    together = hnn.integrators.groups.rollout_stacked(models, x0, t_eval, method=method, stats=stats, **options)
+    together = hnn.integrators.groups.rollout_group(models, x0, t_eval, method=method, stats=stats, **options)
     assert together.shape == (3, 4, 5, 2)
     calls = []
     for g, model in enumerate(models):

@@ -142,9 +142,9 @@ def test_schedule_and_clipping_change_training_and_bad_values_are_named(spring):
 
 def test_configs_off_the_papers_optimizer_train_alone_not_in_a_group():
     config = hnn.tasks.task_config("spring", {"hidden_dim": 16})
-    assert hnn.sweeps.group_runs.group_key(config) is not None
+    assert hnn.sweeps.group_runs.closed_form_key(config) is not None
     for change in ({"optimizer": "adamw"}, {"schedule": "cosine"}, {"clip_grad": 1.0}, {"derivative_loss": "l1"}):
-        assert hnn.sweeps.group_runs.group_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None
+        assert hnn.sweeps.group_runs.closed_form_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None
 
 
 def test_a_loss_that_turns_nan_stops_training_and_names_its_step(spring):

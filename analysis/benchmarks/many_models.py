@@ -12,7 +12,7 @@ import torch
 import hnn
 from hnn.trainers.closed_form import train_closed_form
 from hnn.trainers.vmap import train_vmap
-from hnn.training import fit_loss
+from hnn.training import dxdt_loss
 
 WIDTH = 200
 LONE_MAX = 16       # lone runs are timed up to this K (their rate does not depend on K)
@@ -73,7 +73,7 @@ def group_seconds(k, data, steps, device) -> float:
 
 
 def stacked_seconds(k, data, steps, device) -> float:
-    return _fit_seconds(lambda *a, **kw: train_vmap(*a, loss_of=fit_loss, **kw), k, data, steps, device)
+    return _fit_seconds(lambda *a, **kw: train_vmap(*a, loss_of=dxdt_loss, **kw), k, data, steps, device)
 
 
 def lone_seconds(k, data, steps, device) -> float:

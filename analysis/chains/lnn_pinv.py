@@ -50,7 +50,7 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "
     prep = hnn.prepare(config)      # the run's init, data, units, balance and rows, as hnn.run_experiment's
     if prep.scales is not None:
         raise ValueError(f"{key}: --units auto rescales this run's data, which the peers' runs did not")
-    model, options = prep.fit_model, prep.options
+    model, options = prep.canonical_model, prep.options
     limit = min(stopped + past, config.total_steps + 1)
     counts, losses, last = [], [], {}
     batch_loss = options.loss_of(model)     # a fit of dx/dt (the LNN protocol): the loss hnn.train builds

@@ -1,4 +1,4 @@
-"""A group's models rolled out together: every model of a group from its own starts (``rollout_stacked``),
+"""A group's models rolled out together: every model of a group from its own starts (``rollout_group``),
 and a group's field as one function of all its rows (``group_field``) for a row-wise method, each model's
 weights stacked along a model axis under ``torch.func.vmap``. Beside ``rollout``: fields in, paths out;
 the models are any ``nn.Module`` with a ``time_derivative``, read through ``functional_call`` alone."""
@@ -75,7 +75,7 @@ def group_options(method: str) -> dict:
     return {"drop_finished": False} if "drop_finished" in get_solver(method).accepts() else {}
 
 
-def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: str = "rk4",
+def rollout_group(models: list[nn.Module], x0: torch.Tensor, t_eval, method: str = "rk4",
                     **options) -> torch.Tensor:
     """Every model of a group rolled out from its own starts: ``x0`` ``(G, batch, dim)`` (or ``(batch, dim)``,
     the same starts for all) -> ``(G, batch, len(t_eval), dim)``, as ``hnn.rollout`` of each model.
@@ -109,4 +109,4 @@ def rollout_stacked(models: list[nn.Module], x0: torch.Tensor, t_eval, method: s
         return vmap(one)(params, x0)
 
 
-__all__ = ["group_field", "group_options", "rollout_stacked", "shared_buffers"]
+__all__ = ["group_field", "group_options", "rollout_group", "shared_buffers"]

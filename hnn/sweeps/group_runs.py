@@ -32,7 +32,7 @@ _SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batc
                   "print_every", "field_type", "dtype", "device")
 
 
-def group_key(config) -> tuple | None:
+def closed_form_key(config) -> tuple | None:
     """Configs with equal keys can train as one closed-form group (``hnn.trainers.closed_form``); None for a config that trains alone
     (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
     optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
@@ -50,12 +50,12 @@ def group_key(config) -> tuple | None:
 _OWN_FIELDS = ("seed", "train_fraction", "init")
 
 
-def stack_key(config) -> tuple | None:
+def vmap_key(config) -> tuple | None:
     """Configs with equal keys can train as one stacked group (``hnn.trainers.vmap.train_vmap``); None for a config that
-    ``group_key`` groups (its closed form is faster) or that trains alone: the pixel kinds
+    ``closed_form_key`` groups (its closed form is faster) or that trains alone: the pixel kinds
     (their objective draws noise of its own). The key is the run's identity less ``_OWN_FIELDS``, and
     the facts its model is built from (the chain's constraints)."""
-    if group_key(config) is not None or get_kind(config.kind).grouping == "alone":
+    if closed_form_key(config) is not None or get_kind(config.kind).grouping == "alone":
         return None
     same = {k: v for k, v in config.identity().items() if k not in _OWN_FIELDS}
     return (type(config).__module__, type(config).__qualname__,      # the identity's JSON: a hashable key
@@ -64,18 +64,18 @@ def stack_key(config) -> tuple | None:
 
 def unit_key(config) -> tuple | None:
     """Configs with equal keys train as one group: ``("closed_form", ...)`` for the paper's tanh-MLP kinds
-    (``hnn.trainers.closed_form``), ``("stacked", ...)`` for any other kind (``hnn.trainers.vmap``),
+    (``hnn.trainers.closed_form``), ``("vmap", ...)`` for any other kind (``hnn.trainers.vmap``),
     None for a config that trains alone (the pixel kinds)."""
     specs = run_specs(config)
     if specs.objective.units == "on":     # a rescaled run trains its own canonical data alone
         return None
     if specs.fit.fit != "adam":            # a least-squares fit is one solve, no loop to share
         return None
-    key = group_key(config)
+    key = closed_form_key(config)
     if key is not None:
         return ("closed_form",) + key
-    key = stack_key(config)
-    return None if key is None else ("stacked",) + key
+    key = vmap_key(config)
+    return None if key is None else ("vmap",) + key
 
 
 def group_checkpoint(configs: list) -> Path:
@@ -180,5 +180,5 @@ def _record_diverged(configs: list, outcomes: list) -> None:
             record_divergence(config, outcome)
 
 
-__all__ = ["drop_spent_checkpoints", "group_checkpoint", "group_key", "run_group_task", "stack_key", "train_group",
+__all__ = ["drop_spent_checkpoints", "group_checkpoint", "closed_form_key", "run_group_task", "vmap_key", "train_group",
            "unit_key"]

@@ -20,7 +20,7 @@ A model whose loss turns NaN or infinite is reported by name, its slice zeroed a
 the remaining updates; the others go on unaffected.
 
 Groupable: the ``hnn``, ``baseline``, ``dissipative`` and ``separable`` kinds on the paper's tanh
-MLP, fitting dx/dt itself (``DerivativeObjective`` without ``use_rk4``); ``hnn.sweeps.group_runs.group_key``
+MLP, fitting dx/dt itself (``DerivativeObjective`` without ``use_rk4``); ``hnn.sweeps.group_runs.closed_form_key``
 says which configs train together. Widths group apart, not padded to the widest: a padded unit is not
 exactly inert under weight decay and Adam, and from width 64 on a step is near its arithmetic
 floor, so padding 16 to 64 would cost the wide step's products (benchmark ``group`` job).
@@ -141,7 +141,7 @@ def train_closed_form(models: list[HNN], data: list[tuple], tests: list[tuple] |
     # finite weights and bounded tanh terms, and the check would add a dozen small ops to the fast path's step
     failures, curves, seconds = group_loop(
         weights, optim, train_rows, test_rows, losses, names=names, total_steps=total_steps, test_every=test_every,
-        input_noise=input_noise, label="group", progress=progress, checkpoint=checkpoint,
+        input_noise=input_noise, label="closed-form group", progress=progress, checkpoint=checkpoint,
         checkpoint_every=checkpoint_every, after_step=after_step)
 
     def write_back(g: int, model) -> None:
@@ -155,9 +155,9 @@ def train_closed_form(models: list[HNN], data: list[tuple], tests: list[tuple] |
 def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
                    progress: bool = False) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
     """Train the prepared runs ``preps`` (``hnn.runs.prepare``, of one closed-form group: equal
-    ``hnn.sweeps.group_runs.group_key``) as one program, each ``fit_model`` on its own rows with the run's loop
+    ``hnn.sweeps.group_runs.closed_form_key``) as one program, each ``canonical_model`` on its own rows with the run's loop
     settings; ``train_closed_form``'s ``(stats, failures)``."""
-    return train_closed_form([p.fit_model for p in preps], [(p.x, p.y) for p in preps],
+    return train_closed_form([p.canonical_model for p in preps], [(p.x, p.y) for p in preps],
                              [(p.test_x, p.test_y) for p in preps], input_noise=preps[0].specs.objective.input_noise,
                              names=names, progress=progress, checkpoint=checkpoint, **group_settings(preps))
 

@@ -9,12 +9,12 @@ from .rows import checked_pair
 
 
 def train_prepared(prep, checkpoint=None, on_step=None, **overrides) -> dict:
-    """Train ``prep.fit_model`` on ``prep``'s training rows (``x``, ``y``) with its loop settings and its
+    """Train ``prep.canonical_model`` on ``prep``'s training rows (``x``, ``y``) with its loop settings and its
     objective's options (``prep.train_kwargs``; ``overrides``: a benchmark's steps, say), keeping
     ``checkpoint`` (a file; None: none). ``on_step(done, total)``: ``run_loop``'s. Returns
     ``hnn.train``'s stats."""
     kwargs = prep.train_kwargs(**overrides)
-    model, loss = prep.fit_model, kwargs.pop("loss")
+    model, loss = prep.canonical_model, kwargs.pop("loss")
     param = next(model.parameters())
     # a custom loss owns its arrays' layout (e.g. flattened trajectory snippets): rows, not widths, are checked
     kw = dict(width=getattr(model, "input_dim", None) if loss is None else None, dtype=param.dtype, device=param.device)

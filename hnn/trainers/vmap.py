@@ -101,7 +101,7 @@ def train_vmap(models: list[nn.Module], data: list[tuple], tests: list[tuple] | 
     with model_axis():
         failures, curves, seconds = group_loop(
             weights, optim, train_rows, test_rows, losses, names=names, total_steps=total_steps,
-            test_every=test_every, input_noise=input_noise, label="stacked", progress=progress,
+            test_every=test_every, input_noise=input_noise, label="vmap group", progress=progress,
             checkpoint=checkpoint, checkpoint_every=checkpoint_every, learn_rate=learn_rate, schedule=schedule,
             clip_grad=clip_grad, check_gradients=True)
 
@@ -115,7 +115,7 @@ def train_vmap(models: list[nn.Module], data: list[tuple], tests: list[tuple] | 
 def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
                    progress: bool = False) -> tuple[list[dict | None], dict]:
     """Train the prepared runs ``preps`` (``hnn.runs.prepare``, of one vmap group: equal
-    ``hnn.sweeps.group_runs.stack_key``) as one program: each ``fit_model`` on its own rows, the loss and
+    ``hnn.sweeps.group_runs.vmap_key``) as one program: each ``canonical_model`` on its own rows, the loss and
     options of the first one's objective (``Prepared.options``, as ``hnn.train`` reads them), built once
     for the group, so every dataset must give it the same time step and coordinates; ``train_vmap``'s
     ``(stats, failures)``."""
@@ -123,7 +123,7 @@ def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
         if len({str(p.dataset.get(key)) for p in preps}) > 1:
             raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
     training, options = preps[0].specs.training, preps[0].options
-    return train_vmap([p.fit_model for p in preps], [(p.x, p.y) for p in preps], [(p.test_x, p.test_y) for p in preps],
+    return train_vmap([p.canonical_model for p in preps], [(p.x, p.y) for p in preps], [(p.test_x, p.test_y) for p in preps],
                       loss_of=options.loss_of, optimizer=training.optimizer, schedule=training.schedule,
                       clip_grad=training.clip_grad, input_noise=options.input_noise, names=names, progress=progress,
                       checkpoint=checkpoint, **group_settings(preps))
