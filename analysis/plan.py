@@ -5,8 +5,9 @@ per-run costs, and the total on this box.
     plan.say("reproduce", [plan.training(jobs, 2), plan.Stage("evaluate", 7, "rows")], jobs=2)
 
 A run's training estimate is its steps at the rate of that config alone on one thread over a short burst
-(``training_cost``, once a config, seeds aside) and what a run costs beside its steps (``overhead``: a
-one-step run of its task, timed once), set as the job's ``expected_seconds``, so the
+(``training_cost``, once a config, seeds aside), or for a least-squares fit its solve on two slices of its
+rows, timed and drawn out to all of them (``fit_seconds``), and what a run costs beside its steps
+(``overhead``: a one-step run of its task, timed once), set as the job's ``expected_seconds``, so the
 sweep also starts the longest first and says its time left at the rate the estimates run at
 (``hnn.sweeps.sweep.train_jobs``). The runs are shared over ``--jobs`` workers longest first (``schedule``). A stage
 whose cost is not known before it runs (a model's measurement) is counted and timed from its first units
@@ -17,10 +18,12 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
+import importlib
 import os
 import tempfile
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import hnn
 from hnn.progress import Rate, say_left
@@ -29,27 +32,99 @@ from hnn.progress import Rate, say_left
 @dataclass
 class Stage:
     """One stage of a plan: ``count`` ``unit`` of ``what``, ``seconds`` its wall-time estimate (None: timed as it
-    runs) and ``how`` that estimate was made."""
+    runs) and ``how`` that estimate was made; ``share``: its seconds of a quick study's budget, where it has one
+    (the plan says a stage whose estimate passes it)."""
     what: str
     count: int
     unit: str
     seconds: float | None = None
     how: str = ""
+    share: float | None = None
+
+    @property
+    def over(self) -> bool:
+        """Whether its estimate passes its share."""
+        return self.share is not None and self.seconds is not None and self.seconds > self.share
 
 
 # the bursts of a plan's measurement of a config: one short one (a plan must cost little beside what it plans)
 BURSTS, BURST_SECONDS = 1, 0.05
+# The reference box of the quick budgets (tests/test_plan.py: a quick mode's plan within its budget there), from
+# declared costs alone: a quiet 2-core box on which a task's training step costs its ``TaskSpec.cost`` (a
+# full run's seconds) over its default steps, a run REFERENCE_RUN_SECONDS beside its steps (its data read, its model
+# built, its losses and folder), and a least-squares fit REFERENCE_FIT_ROW_SECONDS a training row (the dearest
+# fit's: the 3-body library, 90 s over its 100000 rows, issue 79)
+REFERENCE_RUN_SECONDS = 0.5
+REFERENCE_FIT_ROW_SECONDS = 0.9e-3
+
+
+def reference_seconds(job, fit_rows: int | None = None) -> float:
+    """A run's seconds on the reference box (``REFERENCE_RUN_SECONDS``...): its steps at its task's declared
+    rate, or a fit's ``fit_rows`` training rows (a quick study's cap: its rows at most)."""
+    config = job.config
+    if config.fit != "adam":
+        if fit_rows is None:
+            raise ValueError(f"{job.key}: a fit's reference seconds need its training rows (fit_rows)")
+        return REFERENCE_RUN_SECONDS + REFERENCE_FIT_ROW_SECONDS * fit_rows
+    per_step = hnn.task_spec(job.task).cost / hnn.tasks.task_config(job.task, {}).total_steps
+    return REFERENCE_RUN_SECONDS + per_step * (config.total_steps + 1)
+# a fit's plan: its solve on its first PROBE_ROWS training rows and on twice as many, each timed on one thread:
+# the design and its factoring grow with the rows, the rest (the threshold's re-solves, the neurons' draw) not
+PROBE_ROWS = 128
+_DATASETS: dict = {}        # this process's datasets of fit estimates, by dataset key
+_FITS: dict = {}            # this process's fit estimates, by config
+
+
+def fit_seconds(config) -> dict:
+    """``{"seconds", "rows", "per_row", "fixed"}``: a least-squares fit's (``config.fit`` not ``'adam'``) solve
+    on its ``rows`` training rows, estimated on one thread as ``fixed + per_row * rows`` from its solves on its
+    first ``PROBE_ROWS`` rows (a sampled layer's width and one, where more) and on twice as many (its design and QR grow with the rows; the threshold's
+    re-solves on the small factor and the draw of its neurons do not), without solving it on all of them."""
+    from hnn.threads import torch_threads
+    known = (type(config).__module__, config.key())
+    if known not in _FITS:
+        _FITS[known] = _fit_seconds(config, torch_threads)
+    return _FITS[known]
+
+
+def _fit_seconds(config, torch_threads) -> dict:
+    key = config.dataset_key()
+    if key not in _DATASETS:
+        _DATASETS[key] = config.dataset()
+    prep = hnn.runs.prepare(config, _DATASETS[key])
+    rows = len(prep.x)
+    # at least a row a neuron: a sampled layer's factor is square in its width
+    probe = max(PROBE_ROWS, getattr(config, "hidden_dim", 0) + 1)
+    sizes = sorted({min(rows, probe), min(rows, 2 * probe)})
+
+    def solved(n: int) -> float:
+        model = hnn.kinds.model_from_spec(prep.specs.model, config.device)
+        return hnn.fits.solve(model, prep.x[:n], prep.y[:n], **prep.specs.fit.solve_kwargs(), progress=False,
+                              loss_weights=prep.options.loss_weights)["seconds"]
+    package = hnn.fits.FITS[config.fit].package
+    if package is not None:         # imported before the timing: a fit's first solve in a process imports it
+        importlib.import_module(package)
+    with torch_threads(1):
+        timed = [solved(n) for n in sizes]
+    if len(sizes) == 1:         # a dataset of PROBE_ROWS rows or fewer: solved whole
+        return {"seconds": timed[0], "rows": rows, "per_row": 0.0, "fixed": timed[0]}
+    per_row = max(timed[1] - timed[0], 0.0) / (sizes[1] - sizes[0])
+    fixed = max(timed[0] - per_row * sizes[0], 0.0)
+    return {"seconds": fixed + per_row * rows, "rows": rows, "per_row": per_row, "fixed": fixed}
 
 
 def timed(jobs: list, cost=None, overhead_of=None) -> list:
     """``jobs`` (``hnn.sweeps.sweep.Job``), each with its ``expected_seconds`` measured: ``cost(task, args)["seconds"]``
-    (default one short burst of ``training_cost``), once per config whatever its seed, plus ``overhead_of(job)``
-    (default ``overhead``), once per task; a job that has one keeps it."""
+    (default one short burst of ``training_cost``, or a fit's ``fit_seconds``), once per config whatever its
+    seed, plus ``overhead_of(job)`` (default ``overhead``), once per task, of its first run trained by steps (a
+    fit's estimate holds its own); a job that has one keeps it."""
     overhead_of = overhead_of or overhead
     if cost is None:
         from hnn_analysis.training_cost import training_cost
 
         def cost(task, args):
+            if args.get("fit", "adam") != "adam":
+                return fit_seconds(hnn.tasks.task_config(task, args))
             return training_cost(task, args, BURSTS, BURST_SECONDS)
     measured, overheads, out = {}, {}, []
     for job in jobs:
@@ -61,9 +136,10 @@ def timed(jobs: list, cost=None, overhead_of=None) -> list:
                     measured[key] = cost(job.task, args)["seconds"]
                 except Exception:       # a config whose first steps fail: its run fails (and says why) in the sweep
                     measured[key] = None
-            if job.task not in overheads:
+            fit = job.config.fit != "adam"
+            if job.task not in overheads and not fit:      # a fit's one-step run would be its whole solve
                 overheads[job.task] = overhead_of(job) if measured[key] is not None else 0.0
-            seconds = None if measured[key] is None else measured[key] + overheads[job.task]
+            seconds = None if measured[key] is None else measured[key] + overheads.get(job.task, 0.0)
             job = dataclasses.replace(job, expected_seconds=seconds)
         out.append(job)
     return out
@@ -75,6 +151,10 @@ def overhead(job) -> float:
     short runs of a quick study this is most of a run."""
     from hnn.threads import torch_threads
     with tempfile.TemporaryDirectory(prefix="plan-") as tmp, torch_threads(1):
+        # its datasets as the run will read them, from the caches in its folder (a linked file, not a copy):
+        # built again there, the pixel task's frames took 20 s of a 90 s quick budget
+        for cached in Path(job.config.save_dir).glob("*.npz"):
+            (Path(tmp) / cached.name).symlink_to(cached.resolve())
         tic = time.perf_counter()
         try:
             hnn.run_experiment(dataclasses.replace(job.config, total_steps=0, save_dir=tmp))
@@ -91,14 +171,19 @@ def schedule(seconds: list[float], workers: int) -> float:
     return max(free)
 
 
-def training(jobs: list, workers: int) -> Stage:
-    """The training stage of ``jobs`` (``timed`` ones) on ``workers`` processes."""
+def training(jobs: list, workers: int, share: float | None = None, how: str | None = None) -> Stage:
+    """The training stage of ``jobs`` (``timed`` ones) on ``workers`` processes (``share``: its seconds of a
+    quick study's budget); its ``how`` (default: measured now) names the fits (least-squares solves) among them
+    and their estimate."""
     seconds = [job.expected_seconds or 0.0 for job in jobs]
     untimed = sum(job.expected_seconds is None for job in jobs)
+    fits = [job.expected_seconds or 0.0 for job in jobs if job.config.fit != "adam"]
     return Stage("train", len(jobs), "run" if len(jobs) == 1 else "runs", schedule(seconds, workers) if jobs else 0.0,
-                 "each run's steps at its config's one-thread rate, measured now"
+                 (how or "each run's steps at its config's one-thread rate, measured now")
+                 + (f"; {len(fits)} least-squares fits at about {sum(fits):.2g} s" + ("" if how else
+                    f", drawn out from their solves on {PROBE_ROWS} and {2 * PROBE_ROWS} rows") if fits else "")
                  + (f", on {workers} processes" if workers > 1 and len(jobs) > 1 else "")
-                 + (f"; {untimed} could not be timed" if untimed else ""))
+                 + (f"; {untimed} could not be timed" if untimed else ""), share)
 
 
 def _words(seconds: float) -> str:
@@ -112,7 +197,9 @@ def say(who: str, stages: list[Stage]) -> str:
              "slow every stage):"]
     for s in stages:
         estimate = ("timed as it runs, from its first units" if s.seconds is None else _words(s.seconds))
-        lines.append(f"  {s.what} {s.count} {s.unit}: {estimate}" + (f" ({s.how})" if s.how and s.seconds else ""))
+        lines.append(f"  {s.what} {s.count} {s.unit}: {estimate}" + (f" ({s.how})" if s.how and s.seconds else "")
+                     + (f"; OVER its share of {s.share:g} s" if s.over else f"; its share {s.share:g} s"
+                        if s.share is not None else ""))
     if known:
         rest = " and the stages timed as they run" if len(known) < len(stages) else ""
         lines.append(f"  in all: {_words(sum(known))}{rest}")

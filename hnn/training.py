@@ -14,7 +14,7 @@ from . import names
 from .balance import balance_weights, weighted
 from .trainers.loop import check_loop, run_loop
 from .trainers.rows import checked_pair
-from .units import VELOCITY_LIKE, Rescaled, UnitScales, fit_scales, rescale_reason, units_reason
+from .units import VELOCITY_LIKE, in_canonical_units, rescale_reason
 
 
 def l2_loss(predict: Callable) -> Callable:
@@ -64,31 +64,6 @@ def warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, model, stacklevel: int =
         warnings.warn(f"x and dxdt are {reason}; a network fits poorly there. Train hnn.units.Rescaled(model) with "
                       "units='auto' (the default), or rescale q and p so that Hamilton's equations still hold: "
                       "docs/python.md, 'Scale your states'", stacklevel=stacklevel)
-
-
-def _in_canonical_units(model, units: str, x, dxdt, test_x, test_dxdt) -> tuple:
-    """``(the model to fit, x, dxdt, test_x, test_dxdt)`` of a fit of dx/dt under ``units``: an
-    ``hnn.units.Rescaled`` model's inner and the arrays in its canonical units (its scales fit here from
-    ``x``, ``dxdt`` where it has none: by ``units``' rule, 1 where the rule leaves the data as they are);
-    any other model and the arrays themselves, or a ValueError where ``units`` would rescale them (a
-    plain model cannot answer back in the user's units)."""
-    inner = getattr(model, "inner", model)
-    periodic = bool(getattr(inner, "periodic", False))
-    coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
-    reason = units_reason(units, x, dxdt, periodic, coordinates)      # a run's rule (hnn.runs.prepare's)
-    if not isinstance(model, Rescaled):
-        if reason is not None:
-            raise ValueError(f"units={units!r}: x and dxdt are {reason}, where a network "
-                             f"fits poorly, and {type(model).__name__} answers in the units it is "
-                             "trained in: train hnn.units.Rescaled(model) instead (hnn.train fits its scales from these "
-                             "data, trains the model in them and it answers in yours), or pass units='off' to train "
-                             "on them as they are")
-        return model, x, dxdt, test_x, test_dxdt
-    if model.scales is None:
-        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if reason is not None else UnitScales(1.0, 1.0, 1.0))
-    pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
-             for a, b in ((x, dxdt), (test_x, test_dxdt))]
-    return (model.inner, *pairs[0], *pairs[1])
 
 
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
@@ -179,7 +154,7 @@ def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 200
         raise ValueError(f"derivative_loss={derivative_loss!r}: choose one of {', '.join(DERIVATIVE_LOSSES)}")
     resolved = {}
     if loss is None and predict is None:        # a fit of dx/dt itself, in the units of ``units``
-        fitted, *arrays = _in_canonical_units(model, units, *given)
+        fitted, *arrays = in_canonical_units(model, units, *given)     # hnn.fit_least_squares' rule too
         if fitted is not model:     # a Rescaled model: its inner trains on the arrays in its canonical units
             resolved["unit_scales"] = model.scales.to_dict()
             model, param = fitted, next(fitted.parameters())

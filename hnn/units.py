@@ -395,6 +395,11 @@ class Rescaled(Model):
         """H ``(batch,)`` in the user's units of energy (s_q s_p / s_t)."""
         return self.inner.hamiltonian(x / self._own) * self._scaled().energy
 
+    def equation(self, digits: int = 4) -> str:
+        """A library fit's equation in the user's units: its scaling undone exactly (``hnn.fits.equation``)."""
+        from .fits.equations import equation
+        return equation(self, digits=digits)
+
     def structure(self) -> torch.Tensor | None:
         inner = self.inner.structure()
         if inner is None:       # the canonical J: every pair has one product s_q_i s_p_i, so J stays J
@@ -441,6 +446,32 @@ class Rescaled(Model):
 
     def observed_time_derivative(self, z: torch.Tensor) -> torch.Tensor:
         return self.inner.observed_time_derivative(z / self._seen) * (self._seen / self._scaled().t)
+
+
+def in_canonical_units(model, units: str, x, dxdt, test_x=None, test_dxdt=None, caller: str = "hnn.train") -> tuple:
+    """``(the model to fit, x, dxdt, test_x, test_dxdt)`` of a fit of dx/dt under ``units`` (``hnn.train``'s and
+    ``hnn.fit_least_squares``' one rule, ``caller`` naming which in its message): an ``Rescaled`` model's inner
+    and the arrays in its canonical units (its scales fit here from ``x``, ``dxdt`` where it has none: by
+    ``units``' rule, 1 where the rule leaves the data as they are); any other model and the arrays
+    themselves, or a ValueError where ``units`` would rescale them (a plain model cannot answer back in the
+    user's units)."""
+    inner = getattr(model, "inner", model)
+    periodic = bool(getattr(inner, "periodic", False))
+    coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
+    reason = units_reason(units, x, dxdt, periodic, coordinates)      # a run's rule (run_scales') too
+    if not isinstance(model, Rescaled):
+        if reason is not None:
+            verb = "train" if caller == "hnn.train" else "fit"
+            raise ValueError(f"units={units!r}: x and dxdt are {reason}, where a fit "
+                             f"goes wrong, and {type(model).__name__} answers in the units it is fit in: {verb} "
+                             f"hnn.units.Rescaled(model) instead ({caller} fits its scales from these data, {verb}s the "
+                             f"model in them and it answers in yours), or pass units='off' to {verb} on them as they are")
+        return model, x, dxdt, test_x, test_dxdt
+    if model.scales is None:
+        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if reason is not None else UnitScales(1.0, 1.0, 1.0))
+    pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
+             for a, b in ((x, dxdt), (test_x, test_dxdt))]
+    return (model.inner, *pairs[0], *pairs[1])
 
 
 def _arrays(dataset: dict, arrays) -> tuple:

@@ -170,3 +170,19 @@ def test_cross_validation_picks_the_ridge_of_least_gcv_score_of_explicit_ridge_s
             scores.append(((B @ c - b) ** 2).sum() / (1 - dof / 120) ** 2)
         expected.append(lstsq.RIDGES[int(np.argmin(scores))])
     assert solver.ridge().tolist() == expected and expected[0] < expected[1]
+
+
+@pytest.mark.parametrize("form", ["field", "hamiltonian"])
+def test_a_librarys_values_are_its_terms_written_out(form):
+    """theta_k(x) = prod_j x_j^powers_kj * trig_k(x), in numpy, to a few eps of each value (a product of at most
+    degree + 1 factors), all terms and a subset."""
+    library = Library(terms(4, form, 2, 2), 4)
+    x = np.random.default_rng(2).uniform(-2, 2, size=(50, 4))
+    powers, trig = library.powers.numpy(), library.trig.numpy()
+    angle = x[:, trig[:, 1]] * trig[:, 2]
+    factor = np.where(trig[:, 0] == 1, np.sin(angle), np.where(trig[:, 0] == 2, np.cos(angle), 1.0))
+    truth = np.prod(x[:, None, :] ** powers[None], axis=2) * factor
+    keep = torch.arange(library.width) % 3 == 1
+    for subset, expected in ((None, truth), (keep, truth[:, keep.numpy()])):
+        got = library(torch.as_tensor(x), subset).numpy()
+        assert np.abs(got - expected).max() <= 1e-14 * np.abs(expected).max()

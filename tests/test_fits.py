@@ -35,7 +35,7 @@ def _hamilton(grad_h):
 
 def _coefficients(model) -> dict:
     """``{term: coefficient}`` of a library model's nonzero terms."""
-    names = model.features.names(hnn.fits.models.column_names(model.input_dim))
+    names = model.features.names(hnn.fits.equations.column_names(model.input_dim))
     return {name: c for name, c in zip(names, model.coef.tolist()) if c != 0}
 
 
@@ -90,7 +90,72 @@ def test_a_library_fit_of_the_baseline_is_sindys_form_and_recovers_the_field():
     assert not model.conservative
 
 
+def _evaluate(side: str, columns: dict) -> np.ndarray:
+    """The value of one printed side (``'3 - 0.5 cos(0.3 q - 0.1) p^2 + q'``) at ``columns`` ``{name: array}``,
+    read term by term (a trig argument ``a q + b`` inside its brackets), independently of how it was written."""
+    def split(text: str, at: tuple) -> list[str]:
+        pieces, depth, start = [], 0, 0
+        for i, char in enumerate(text):
+            depth += (char == "(") - (char == ")")
+            if depth == 0 and i >= start and text[i:i + len(at[0])] in at:
+                pieces.append(text[start:i])
+                start = i + len(at[0])
+        return pieces + [text[start:]]
+
+    def factor(token: str):
+        if token[:4] in ("cos(", "sin("):
+            inner = split(token[4:-1].replace(" - ", " + -"), (" + ",))
+            angle = sum(math.prod(float(t) if t not in columns else columns[t] for t in part.split()) for part in inner)
+            return (np.cos if token[0] == "c" else np.sin)(angle)
+        if "^" in token:
+            name, power = token.split("^")
+            return columns[name] ** int(power)
+        return columns[token] if token in columns else float(token)
+
+    total = 0.0
+    for term in split(side.replace(" - ", " + -"), (" + ",)):
+        term = term.strip()
+        sign = -1.0 if term.startswith("-") else 1.0
+        total = total + sign * math.prod(factor(t) for t in split(term.lstrip("-"), (" ",)))
+    return total
+
+
+@pytest.mark.parametrize("kind", ["hnn", "separable", "baseline"])
+def test_an_equation_in_the_users_frame_is_the_model_undone_exactly(kind):
+    """Any coefficients over the library, fit in x' = (x - shift) / scale, t' = t / time: the printed equation in
+    the user's columns (expanded polynomials, trig arguments written out) evaluates to the model in user units."""
+    rng = np.random.default_rng(11)
+    model = hnn.fits.build(hnn.specs.ModelSpec(kind=kind, input_dim=4, fit="library", library_degree=3,
+                                               library_frequencies=2))
+    with torch.no_grad():
+        for name, p in model.named_parameters():
+            if "coef" in name or name == "offset":
+                p.copy_(torch.as_tensor(rng.normal(size=tuple(p.shape))))
+    scale, shift, time = np.array([0.3, 2.0, 5.0, 0.75]), np.array([1.5, -0.4, 0.0, 0.2]), 0.6
+    if kind != "baseline":      # an H reads pairs of one product of scales
+        scale[2:] = scale[0] * scale[2] / scale[:2]
+    frame = hnn.fits.Frame(("x", "y", "u", "w"), scale, shift, time)
+    x = rng.uniform(-1, 1, size=(50, 4)) * scale + shift
+    inner = torch.as_tensor((x - shift) / scale)
+    columns = dict(zip(frame.names, x.T))
+    text = model.equation(digits=17, frame=frame)
+    if kind == "baseline":          # dx_j/dt = scale_j / time f'_j(x')
+        want = model.time_derivative(inner).numpy() * scale / time
+        got = np.stack([_evaluate(line.split(" = ")[1], columns) for line in text.split("; ")], 1)
+        assert [line.split(" = ")[0] for line in text.split("; ")] == ["dx/dt", "dy/dt", "du/dt", "dw/dt"]
+    else:                           # H = scale_q scale_p / time H'(x')
+        want = model.hamiltonian(inner).detach().numpy() * scale[0] * scale[2] / time
+        got = _evaluate(text.removeprefix("H = "), columns)
+    # 17 digits print the float64 coefficients exactly; the sums over up to ~100 terms of size up to |x|^4 ~ 2^4
+    # round at 1e-13 relative of the largest term's size
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    # a trig term of the scaled y' = (y + 0.4) / 2 stays one, its argument written out: cos(y'), sin(2 y')
+    short = model.equation(frame=frame)
+    assert "cos(0.5 y + 0.2)" in short and "sin(y + 0.4)" in short
+
+
 # ----------------------------------------------------------------------------------------------
+# a sampled fit of the single pendulum# ----------------------------------------------------------------------------------------------
 # a sampled fit of the single pendulum: the Sampling-HNNs protocol, near their published error in seconds
 
 
@@ -236,6 +301,24 @@ def test_a_fit_run_saves_reloads_bit_equal_and_rolls_out(fit, tmp_path):
     assert hnn.runs.find_run(config) == folder       # a second call reuses it
 
 
+def test_the_spring_cards_library_equation_reads_q2_plus_p2_up_to_its_fit_error(tmp_path):
+    """The scene card's spring equation is the run's (the spring trains in its own q, p: no scaling to undo).
+    Its extra terms are the library's near-collinear ones (cos q = 1 - q^2/2 + q^4/24 on |q| <= 1.2) fitting the
+    data's noise (std 0.1): as a function it is H = q^2 + p^2 up to a constant, within what its field misses."""
+    folder = hnn.run_experiment(SPRING(save_dir=str(tmp_path), fit="library"))
+    model, _, metrics = hnn.load_run(folder)
+    equation = metrics["history"]["fit"]["equation"]
+    x = torch.as_tensor(SPRING().dataset()["x"], dtype=torch.float64)
+    q, p = x[:, 0].numpy(), x[:, 1].numpy()
+    gap = _evaluate(equation.removeprefix("H = "), {"q": q, "p": p}) - (q ** 2 + p ** 2)
+    missed = model.double().time_derivative(x) - torch.stack([2 * x[:, 1], -2 * x[:, 0]], 1)
+    # H's gap is the integral of its gradient's along a path from the ring's centre, at most the data's radius R
+    # long; the gradient's gap is the field's (J is a rotation): RMS for RMS, within RMS(missed) R
+    radius = float(x.norm(dim=1).max())
+    assert np.sqrt(np.mean((gap - gap.mean()) ** 2)) <= float(missed.norm(dim=1).pow(2).mean().sqrt()) * radius
+    assert np.std(gap) < 0.1 * np.std(q ** 2 + p ** 2)     # and so reads H = q^2 + p^2 to a tenth of its spread
+
+
 def test_the_commands_take_fit_and_refuse_what_no_solve_can_fit(tmp_path):
     def run(task, *flags):
         return subprocess.run([sys.executable, str(REPO / f"experiment-{task}/train.py"), "--save_dir", str(tmp_path),
@@ -264,6 +347,60 @@ def test_bad_input_is_named():
                               progress=False)
     with pytest.raises(ValueError, match="choose one of adam, swim"):
         hnn.fit_least_squares("hnn", x, x, fit="lasso", progress=False)
+
+
+def _double_well(metre: float, rows: int = 600, seed: int = 0):
+    """States and exact dx/dt of H = p^2/2 + q^4/4 - q^2/2 (q in metres, unit mass) in units of ``metre``."""
+    rng = np.random.default_rng(seed)
+    x = np.stack([rng.uniform(-1.6, 1.6, rows), rng.uniform(-1, 1, rows)], 1)
+    return metre * x, metre * np.stack([x[:, 1], x[:, 0] - x[:, 0] ** 3], 1)
+
+
+def test_a_library_fit_in_millimetres_is_the_double_well_in_millimetres():
+    """hnn.fit_least_squares applies hnn.train's units rule: data in millimetres (RMS ~ 500) are fit in their
+    canonical units, where the threshold is relative to the data's scale, and the model answers in millimetres:
+    H_mm = 1e6 H(q / 1000, p / 1000) = p^2/2 + 2.5e-7 q^4 - q^2/2. Fit as given (the old default), the threshold of
+    0.05 in mm^2/s^2 cut the quartic (2.5e-7) and left H = 0.33 q^2 + 0.5 p^2, a single well."""
+    x, dxdt = _double_well(1000.0)
+    model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="library", anchor=(np.zeros(2), 0.0), progress=False)
+    assert isinstance(model, hnn.units.Rescaled) and stats["unit_scales"]["q"] == pytest.approx(np.sqrt(np.mean(
+        x[:, 0] ** 2)))
+    z = torch.as_tensor(x)
+    truth = z[:, 1] ** 2 / 2 + z[:, 0] ** 4 / 4e6 - z[:, 0] ** 2 / 2
+    # exact data: the library's H to round-off in its canonical units (1e-10 there, test above), times H's scale
+    assert float((model.hamiltonian(z) - truth).abs().max()) < 1e-9 * float(truth.abs().max())
+    assert stats["train_loss"][0] < 1e-18 * float((torch.as_tensor(dxdt) ** 2).mean())
+    equation = model.equation()
+    assert equation.startswith("H = -0.5 q^2 + 0.5 p^2 + 2.5e-07 q^4"), equation
+    assert stats["fit"]["equation"] == equation
+    # in metres the same physics, and the same terms: the rule leaves unit-sized data as they are
+    metres, _ = hnn.fit_least_squares("hnn", *_double_well(1.0), fit="library", progress=False)
+    assert not isinstance(metres, hnn.units.Rescaled) and metres.equation() == "H = -0.5 q^2 + 0.5 p^2 + 0.25 q^4"
+
+
+def test_fit_least_squares_refuses_as_hnn_train_does_and_names_an_unknown_kind():
+    x, dxdt = _double_well(1000.0, rows=50)
+    built = hnn.fits.build(hnn.specs.ModelSpec(kind="hnn", input_dim=2, fit="library"))
+    # one rule, one message (hnn.units.in_canonical_units), in each caller's words
+    with pytest.raises(ValueError, match=r"far from unit scale .* fit hnn.units.Rescaled\(model\) instead "
+                                         r"\(hnn.fit_least_squares fits its scales .* or pass units='off' to fit"):
+        hnn.fit_least_squares(built, x, dxdt, fit="library", progress=False)
+    with pytest.raises(ValueError, match=r"far from unit scale .* train hnn.units.Rescaled\(model\) instead "
+                                         r"\(hnn.train fits its scales"):
+        hnn.train(hnn.kinds.model_from_args({"kind": "hnn", "input_dim": 2, "hidden_dim": 8}), x, dxdt, total_steps=1,
+                  progress=False)
+    # wrapped, the built model is fit in canonical units and answers in the user's
+    wrapped, _ = hnn.fit_least_squares(hnn.units.Rescaled(built), x, dxdt, fit="library", progress=False)
+    assert wrapped.equation().startswith("H = -0.5 q^2 + 0.5 p^2 + 2.5e-07 q^4")
+    with pytest.raises(ValueError, match=r"^unknown kind 'hnnn'; the kinds are hnn, .*fit='swim' fits hnn, separable, "
+                                         r"baseline; did you mean 'hnn'\?$"):
+        hnn.fit_least_squares("hnnn", x, dxdt, progress=False)
+    with pytest.raises(ValueError, match=r"^fit='swim' solves the last weights of hnn, separable, baseline.*train "
+                                         r"'dissipative' with hnn.train$") as refused:
+        hnn.fit_least_squares("dissipative", x, dxdt, progress=False)
+    assert "--" not in str(refused.value)       # the caller's words, not the command's flags
+    with pytest.raises(ValueError, match=r"^fit='sindy' fits dx/dt with no H: pass 'baseline'$"):
+        hnn.fit_least_squares("hnn", x, dxdt, fit="sindy", progress=False)
 
 
 # ----------------------------------------------------------------------------------------------

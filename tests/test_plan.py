@@ -56,3 +56,68 @@ def test_a_stage_says_its_time_left_at_its_recent_pace(monkeypatch, done, said):
     ahead = plan.Ahead(10.0)
     now[0] += 5.0
     assert ahead.tag(done) == said
+
+
+def test_a_stage_over_its_share_is_said_before_the_study_starts(capsys):
+    stages = [plan.Stage("train", 3, "runs", 50.0, "measured", share=40.0),
+              plan.Stage("measure", 3, "models", 10.0, "declared", share=30.0), plan.Stage("draw", 1, "figure")]
+    text = plan.say("quick", stages)
+    lines = text.splitlines()
+    assert lines[1].endswith("; OVER its share of 40 s") and lines[2].endswith("; its share 30 s")
+    assert "share" not in lines[3] and stages[0].over and not stages[1].over and not stages[2].over
+
+
+def test_a_quick_fit_takes_at_most_its_rows_and_a_cell_keeps_its_fraction_where_that_is_fewer(tmp_path):
+    from hnn_analysis.scenes import scene_rungs
+    config = hnn.tasks.task_config("spring", {"model": "hnn", "fit": "library", "save_dir": str(tmp_path)})
+    rows = scene_rungs.training_rows(config)
+    cut = scene_rungs.capped(config, rows // 4)
+    assert abs(scene_rungs.training_rows(cut) - rows // 4) <= 1 and cut.key() != config.key()
+    assert scene_rungs.capped(config, rows) is config
+
+
+def _reference(jobs):
+    return sum(plan.reference_seconds(job) for job in jobs)
+
+
+def test_the_reference_box_prices_a_run_by_its_tasks_declared_cost_and_a_fit_by_its_rows():
+    spring = sweep.Job("s", "spring", hnn.tasks.task_config("spring", {"total_steps": 99}))
+    per_step = hnn.task_spec("spring").cost / hnn.tasks.task_config("spring", {}).total_steps
+    assert plan.reference_seconds(spring) == pytest.approx(plan.REFERENCE_RUN_SECONDS + 100 * per_step)
+    fit = sweep.Job("f", "spring", hnn.tasks.task_config("spring", {"fit": "library"}))
+    assert plan.reference_seconds(fit, 1000) == pytest.approx(plan.REFERENCE_RUN_SECONDS
+                                                              + 1000 * plan.REFERENCE_FIT_ROW_SECONDS)
+    with pytest.raises(ValueError, match="fit_rows"):
+        plan.reference_seconds(fit)
+
+
+def test_the_quick_paper_reproduction_trains_within_its_budget_on_the_reference_box(tmp_path):
+    """reproduce.py --quick's training on the reference box (declared costs) within commands.QUICK_BUDGETS; its
+    evaluation has no declared cost yet (issue 79), so the training must leave it most of the budget."""
+    from hnn_analysis import commands
+    rows = reproduce.study.table_rows(hnn.tasks.paper_tasks(), True, [0])
+    jobs = reproduce.study.plan(rows, [0], tmp_path, reproduce.study.QUICK_STEPS)
+    assert _reference(jobs) <= commands.QUICK_BUDGETS["reproduce"] / 2
+
+
+def test_the_quick_peers_table_trains_within_its_budget_on_the_reference_box(tmp_path):
+    """peers.py --quick's training on the reference box within half its budget (its measuring: the record's)."""
+    from hnn_analysis import commands
+    from hnn_analysis.chains import peer_plan
+    jobs = peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, tmp_path, 0)
+    assert _reference(jobs) <= commands.QUICK_BUDGETS["peers"] / 2
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue 79: the quick scene study plans about 160 s on the reference box (71 runs and their "
+                          "measuring) against its 90 s: its cuts must go further")
+def test_the_quick_scene_study_plans_within_its_budget_on_the_reference_box():
+    """Every stage of scene_study.py --quick on the reference box (declared costs: plan.reference_seconds,
+    scene_measure's), each within its share and all within commands.QUICK_BUDGETS; a rollout's worst case is its
+    budget (scene_measure.QUICK_ROLLOUT_SECONDS), which the plan says as its "at most"."""
+    from hnn_analysis import commands
+    from hnn_analysis.scenes import scene_stages
+    stages = scene_stages.reference_plan()
+    assert [s.what for s in stages] == ["train", "measure"]
+    assert not [s.what for s in stages if s.over]
+    assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["scene_study"]

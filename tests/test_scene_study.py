@@ -321,15 +321,16 @@ def test_reproduce_models_flag_adds_kinds_only_where_a_task_has_them(tmp_path):
 def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setattr(scene_stages, "QUICK_WIDTHS", (8, 200))
     monkeypatch.setattr(scene_stages, "QUICK_FRACTIONS", (0.5, 1.0))
-    monkeypatch.setattr(scene_study, "QUICK_STEPS", 20)
+    monkeypatch.setattr(scene_stages, "QUICK_STEPS", 20)
     results = scene_study.main(["--quick", "--scenes", "spring", "--out", str(tmp_path)])
     entry = results["scenes"]["spring"]
+    assert results["meta"]["rollout_seconds"] == scene_measure.QUICK_ROLLOUT_SECONDS
     # every kind and the fits' rungs (scene_rungs); the grid holds the kinds and the sampled HNN at 3 cells
     assert set(entry["kinds"]) == set(scene_common.task_rungs("spring"))
     assert len(entry["grid"]) == (len(scene_common.task_kinds("spring")) + len(scene_rungs.GRID_RUNGS)) * 3
     assert entry["card"] is not None and entry["card"]["cheapest"] is not None
     assert all("train_cost" in m for m in entry["grid"].values())
-    assert entry["speed"]["separable"]["fastest"] is not None
+    assert set(entry["speed"]) == set(scene_stages.QUICK_SPEED_KINDS) and entry["speed"]["hnn"]["fastest"] is not None
     saved = json.loads((tmp_path / "scene_study.json").read_text())
     assert saved["scenes"]["spring"]["card"] == json.loads(json.dumps(entry["card"]))
     text = (tmp_path / "scene_study.md").read_text()
@@ -381,6 +382,11 @@ def test_quick_grids_one_narrow_cell_with_fewer_steps_and_says_every_cut(tmp_pat
     assert "grid: widths 16 x fractions 0.25 of 16, 32, 64, 128, 200 x 0.1, 0.25, 0.5, 1.0" in cuts
     assert any(cut.startswith("speed at accuracy: the hnn kind only") for cut in cuts)
     assert "energy drift: 3 periods of 1000 (spring), at most 0.5 s a setting of 15" in cuts
+    # a fit on a few rows, a rollout within its budget (a stiff one stops there and says so): each cut is said
+    assert f"fits: at most {scene_stages.QUICK_FIT_ROWS} training rows each (a cell's fraction of them where that is " \
+           "fewer)" in cuts
+    assert any(cut.startswith(f"rollouts of the models: at most {scene_measure.QUICK_ROLLOUT_SECONDS:g} s each")
+               for cut in cuts)
     # the speed study runs for the quick kinds only; every kind is still measured
     runs = {f"spring@200x1/{kind}/seed0": tmp_path for kind in scene_common.task_kinds("spring")}
     units = scene_stages.measure_units(["spring"], runs, [0], [], [0], scene_stages.QUICK_SPEED_KINDS)

@@ -9,6 +9,7 @@
   ``VALID_FRACTION`` of the tail's RMS spread of positions (median over starts).
 - ``energy_drift``: with ``--energy EXPR``, |E(predicted, t + h) - E(measured, t)| beside the
   measured |E(t + h) - E(t)|, medians over starts.
+- ``equation``: a library fit's equation in your columns and units (the run's scaling undone).
 
 Rollouts run on a float64 copy of the model in its scaled units (``scale.json`` of the run), by
 ``hnn.evaluation.model_rollout`` (dopri5 rtol 1e-6, the scene cards'); a model of canonical [q, p] on observed
@@ -107,6 +108,21 @@ class Model:
         traj = traj.detach().numpy()
         s = traj[..., n:] * self.scale.b
         return self.scale.positions(traj), np.concatenate([self.scale.positions(traj), s], axis=-1)
+
+
+def equation(model: Model, rec) -> str | None:
+    """A library fit's equation (ours, SINDy's) in your columns and units, or None for a model of no formula:
+    the run's scaled coordinates q' = (q - q0) / a, s' = s / b, t' = t / tau undone exactly
+    (``hnn.fits.equations``: H = b^2 H', its polynomials expanded; a sine or cosine of a scaled position keeps
+    its argument written out, cos(q / a - q0 / a)). On [q, v] the hnn kinds read v as p (unit mass)."""
+    n = len(rec.q_names)
+    s = model.scale
+    frame = hnn.fits.Frame(tuple(rec.q_names) + tuple(rec.s_names), (s.a,) * n + (s.b,) * n,
+                           tuple(s.q0) + (0.0,) * n, s.tau)
+    try:
+        return hnn.fits.equation(model.model, frame)
+    except ValueError:      # no library's terms: an MLP, sampled neurons
+        return None
 
 
 def energy_function(expr: str | None, rec):

@@ -10,16 +10,16 @@ sweep (``scene_common.train``: reused runs, ``--jobs`` processes, grouped traini
 measured on the held-out tail of every trial (``measured_metrics``): the prediction error at
 ``--horizon`` seconds beside the naive extrapolation's, the valid prediction time, the energy
 drift with ``--energy``, the derivative loss (on the scaled states, so dimensionless) and the
-training (``hnn_analysis.training_cost``, one thread) and rollout seconds. The card picks the
-smallest model (parameters, then training seconds) within ``CARD_FACTOR`` of the best median
-prediction error (ties: fewer training rows). Writes ``<out>/scene.json`` and ``<out>/scene.md``; ``--update-docs`` files the
+training (``hnn_analysis.training_cost``, one thread) and rollout seconds. The card (``measured_card``: one
+decision its sentences and ``chosen`` both read) picks the smallest model (parameters, then training rows,
+then training seconds) enough: within ``CARD_FACTOR`` of the best median prediction error and under its
+thresholds of the naive error and the positions' spread; where none is, it says so. Writes ``<out>/scene.json`` and ``<out>/scene.md``; ``--update-docs`` files the
 card under the data file's name in docs/measured-scenes.json and rewrites the README's rows of
 measured scenes from that file.
 """
 from __future__ import annotations
 
 import json
-import math
 import shlex
 import time
 from pathlib import Path
@@ -33,14 +33,14 @@ from hnn.sweeps import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes import measured_metrics as mm, scene_common, scene_rungs, scene_tables
+from hnn_analysis.scenes import measured_card, measured_metrics as mm, scene_common, scene_rungs, scene_tables
+from hnn_analysis.scenes.measured_card import error_range, models
 from hnn_analysis.scenes.measured_inputs import TASK, Inputs, check
 from hnn_analysis.training_cost import training_cost
 
 WIDTHS, FRACTIONS = (32, 200), (0.5, 1.0)
 QUICK_WIDTHS, QUICK_FRACTIONS = (64,), (1.0,)
 REGISTRY = "docs/measured-scenes.json"      # the cards --update-docs files, by data file name
-NEAR = 1.25            # "as good as": within this factor of the other's error
 
 
 def _kinds(columns: dict) -> list[str]:
@@ -103,153 +103,15 @@ def velocity_mismatch(columns: dict) -> list[float] | None:
     return [float(v) for v in np.sqrt((gap ** 2).mean(0)) / np.sqrt((d["x"][:, n:] ** 2).mean(0))]
 
 
-def models(rows: list[dict]) -> dict[tuple, dict]:
-    """The measured rows (one a model and seed) by model, ``(kind, width, fraction)``: its seeds, their
-    median prediction errors' ``(mean, min, max)`` as ``error``, and the means over seeds of the rest."""
-    by = {}
-    for r in rows:
-        if r.get("prediction_error"):
-            by.setdefault((r["kind"], r["hidden_dim"], r["train_fraction"]), []).append(r)
-    out = {}
-    for key, per_seed in by.items():
-        def mean(get, per_seed=per_seed) -> float | None:
-            spread = scene_common.seed_spread([get(r) for r in per_seed])
-            return spread[0] if spread else None
-        drift = per_seed[0].get("energy_drift")
-        out[key] = {"kind": key[0], "hidden_dim": key[1], "train_fraction": key[2], "params": per_seed[0]["params"],
-                    "seeds": sorted(r.get("seed", 0) for r in per_seed),
-                    "error": scene_common.seed_spread([r["prediction_error"]["median"] for r in per_seed]),
-                    "error_mean": mean(lambda r: r["prediction_error"]["mean"]),
-                    "valid_time": mean(lambda r: r["valid_time"]["median"]),
-                    "test_loss": mean(lambda r: r["test_loss"]), "train_seconds": mean(lambda r: r["train_seconds"]),
-                    "rollout_seconds": mean(lambda r: r["rollout_seconds"]),
-                    "energy_drift": ({"model": mean(lambda r: r["energy_drift"]["model"]),
-                                      "measured": drift["measured"]} if drift else None),
-                    "runs": [r["run"] for r in sorted(per_seed, key=lambda r: r.get("seed", 0))],
-                    "equation": min(per_seed, key=lambda r: r.get("seed", 0)).get("equation")}
-    return out
-
-
-def _range(m: dict) -> str:
-    mean, low, high = m["error"]
-    return f"{mean:.4g}" + (f" ({low:.3g}-{high:.3g})" if len(m["seeds"]) > 1 else "")
-
-
-def _separate(a: dict, b: dict) -> bool:
-    """Whether the seeds separate two models: one seed each says nothing, so it counts as separated
-    (the card then says one seed); with seeds, their ranges of median error do not overlap."""
-    if len(a["seeds"]) < 2 or len(b["seeds"]) < 2:
-        return True
-    return not scene_common.seeds_overlap(a["error"], b["error"])
-
-
-# a model is "enough" only if it also predicts: its error under this fraction of the naive extrapolation's
-# and under ``measured_metrics.VALID_FRACTION`` of the tails' spread of positions (the valid time's threshold)
-BEATS_NAIVE = 0.5
-
-
 def _card(rows: list[dict], naive: dict, spread: float) -> tuple[dict | None, list[str]]:
-    """The chosen model (smallest whose mean over seeds is within ``CARD_FACTOR`` of the best mean median
-    error) and the card's sentences, which say what the seeds cannot separate; it is called enough only
-    where its error is also under ``BEATS_NAIVE`` of the naive one and ``VALID_FRACTION`` of the tails'
-    RMS spread of positions ``spread`` (a chaotic scene's best model may be neither)."""
-    table = models(rows)
-    if not table:
+    """``(chosen, sentences)`` of the card, both from its one ``measured_card.Decision``: the smallest model
+    enough (within ``CARD_FACTOR`` of the best mean median error, under ``BEATS_NAIVE`` of the naive one and
+    ``VALID_FRACTION`` of the tails' RMS spread of positions ``spread``), else, where none is, the smallest within
+    ``CARD_FACTOR``, called NOT enough (a chaotic scene's best model may be neither)."""
+    decision = measured_card.decide(rows, naive, spread)
+    if decision is None:
         return None, ["no model was measured"]
-    best = min(m["error"][0] for m in table.values())
-    ok = [k for k, m in table.items() if m["error"][0] <= scene_common.CARD_FACTOR * best]
-
-    def size(key) -> tuple:
-        # fewest parameters, then the fewest training rows (both exact), then the fastest to train (a timing)
-        return table[key]["params"], key[2], table[key]["train_seconds"] or 0.0
-
-    pick = min(ok, key=size)
-    m = table[pick]
-    n, err = len(m["seeds"]), m["error"][0]
-    ratio = err / naive["median"] if naive["median"] > 0 else float("inf")
-    of_spread = err / spread if spread > 0 else float("inf")
-    short = [f"not under {BEATS_NAIVE:g} of the naive one"] if ratio > BEATS_NAIVE else []
-    short += [f"over {mm.VALID_FRACTION:g} of the spread"] if of_spread > mm.VALID_FRACTION else []
-    enough = not short
-    seeds = f"mean over {n} seeds" if n > 1 else "one seed"
-    model = (f"{scene_rungs.describe(m['kind'], m['hidden_dim'], m['train_fraction'])} ("
-             f"{m['params']} parameters, {m['train_seconds']:.3g} s to train on one thread)")
-    numbers = (f"its median prediction error ({seeds}) {_range(m)} is within {scene_common.CARD_FACTOR:g}x of the best "
-               f"({best:.4g}), {ratio:.2g}x the naive extrapolation's ({naive['median']:.4g}) and {of_spread:.2g} of "
-               f"the held-out positions' RMS spread ({spread:.4g})")
-    said = [f"{model} is enough: {numbers}." if enough else
-            f"{model} is the smallest model within {scene_common.CARD_FACTOR:g}x of the best, but NOT enough: {numbers}; "
-            f"that is {' and '.join(short)}: no kind predicts this scene well at this horizon."]
-    limit = scene_common.CARD_FACTOR * best
-    smaller = [k for k in sorted(table, key=size)
-               if size(k) < size(pick) and k not in ok and len(table[k]["seeds"]) > 1 and table[k]["error"][1] <= limit]
-    if n > 1:
-        if smaller:
-            said.append(f"The seeds cannot separate from it the smaller {', '.join(f'{k[0]} (width {k[1]}, {k[2]:g})' for k in smaller)}: "
-                        f"their means are over {scene_common.CARD_FACTOR:g}x of the best, their lowest seeds within it.")
-        if m["error"][2] > limit:
-            said.append(f"Its highest seed ({m['error'][2]:.3g}) is over {scene_common.CARD_FACTOR:g}x of the best: "
-                        "the seeds do not settle that it is the one to pick.")
-    else:
-        said.append("One seed: whether seeds separate these models was not tested (--seeds 3 tests it).")
-
-    said += _cheapest_and_libraries(table, ok)
-
-    def best_of(kinds) -> dict | None:
-        pool = [m for m in table.values() if m["kind"] in kinds]
-        return min(pool, key=lambda m: m["error"][0]) if pool else None
-
-    def compare(a: dict, b: dict, verdict: str, tie: str) -> str:
-        numbers = f"best {a['kind']} {_range(a)} against best {b['kind']} {_range(b)}."
-        return f"{verdict}: {numbers}" if _separate(a, b) else f"{tie} cannot be told apart on these seeds: {numbers}"
-
-    # the kinds and the fits' rungs of them, by what their kind declares
-    labels = {m["kind"] for m in table.values()}
-    conserving = best_of([k for k in labels if hnn.MODEL_KINDS[scene_rungs.kind_of(k)].conservative])
-    others = best_of([k for k in labels if not hnn.MODEL_KINDS[scene_rungs.kind_of(k)].conservative])
-    if conserving and others:
-        a, b = conserving["error"][0], others["error"][0]
-        verdict = "helped" if a * NEAR < b else "hurt" if b * NEAR < a else "neither helped nor hurt (within 25%)"
-        said.append(compare(conserving, others, f"The energy-conserving kinds {verdict}",
-                            "The energy-conserving kinds and the others"))
-    baseline, structured = best_of(["baseline"]), best_of([k for k in hnn.MODEL_KINDS if k != "baseline"])
-    if baseline and structured:
-        a, b = baseline["error"][0], structured["error"][0]
-        word = "better than" if a * NEAR < b else "as good as" if a <= NEAR * b else "worse than"
-        said.append(compare(baseline, structured, f"The plain baseline is {word} the structured kinds here",
-                            "The plain baseline and the structured kinds"))
-    chosen = {key: m[key] for key in ("kind", "hidden_dim", "train_fraction", "params", "train_seconds",
-                                      "rollout_seconds", "valid_time", "energy_drift", "seeds")}
-    cheapest = min(ok, key=lambda k: (table[k]["train_seconds"] or math.inf, k[1]))
-    chosen.update({"cheapest": {"kind": cheapest[0], "width": cheapest[1], "fraction": cheapest[2],
-                                "train_seconds": table[cheapest]["train_seconds"]},
-                   "libraries": [{"kind": k[0], "fraction": k[2], "train_seconds": table[k]["train_seconds"],
-                                  "equation": table[k]["equation"]} for k in ok if scene_rungs.is_library(k[0])]})
-    chosen.update({"n_seeds": n, "test_loss": m["test_loss"], "run": m["runs"][0], "runs": m["runs"], "enough": enough,
-                   "of_naive": ratio, "of_spread": of_spread,
-                   # as scene_stages.scene_card words them: None where one seed tests nothing
-                   "unsettled": [f"{k[0]}, width {k[1]}, {k[2]:g} of the data" for k in smaller] if n > 1 else None,
-                   "pick_straddles": m["error"][2] > limit if n > 1 else None,
-                   "prediction_error": {"median": err, "min": m["error"][1], "max": m["error"][2],
-                                        "mean": m["error_mean"]}})
-    return chosen, said
-
-
-def _cheapest_and_libraries(table: dict, ok: list) -> list[str]:
-    """The card's sentences on the model enough that trains fastest, and on the libraries (ours, SINDy's): which
-    are enough here and the equations they found, or that none is."""
-    cheapest = min(ok, key=lambda k: (table[k]["train_seconds"] or math.inf, k[1]))
-    c = table[cheapest]
-    said = [f"The cheapest to train that is enough: {scene_rungs.describe(c['kind'], c['hidden_dim'], c['train_fraction'])}"
-            f", {c['train_seconds']:.3g} s on one thread."]
-    libraries = [k for k in sorted(ok, key=lambda k: table[k]["train_seconds"] or math.inf) if scene_rungs.is_library(k[0])]
-    if libraries:
-        said.append("A library is enough here: it found the equations " + "; ".join(
-            f"{k[0]} `{table[k]['equation']}`" for k in libraries) + ".")
-    elif any(scene_rungs.is_library(k[0]) for k in table):
-        said.append("No library (hnn+library, baseline+sindy) is within 2x of the best: the equations are not among "
-                    "its terms, or the data's noise hides them.")
-    return said
+    return measured_card.chosen(decision), measured_card.sentences(decision)
 
 
 def markdown(result: dict) -> str:
@@ -288,7 +150,7 @@ def markdown(result: dict) -> str:
     for m in sorted(table.values(), key=lambda m: m["error"][0]):
         drift = m["energy_drift"]
         lines.append(f"| {m['kind']} | {m['hidden_dim']} | {m['train_fraction']:g} | {m['params']} | {len(m['seeds'])} | "
-                     f"{_range(m)} / {m['error_mean']:.4g} | {m['valid_time']:.3g} | {m['test_loss']:.3g} | "
+                     f"{error_range(m)} / {m['error_mean']:.4g} | {m['valid_time']:.3g} | {m['test_loss']:.3g} | "
                      + (f"{drift['model']:.3g} ({drift['measured']:.3g}) | " if drift else "| " if energy else "")
                      + f"{m['train_seconds']:.3g} | {m['rollout_seconds']:.3g} |")
     # the naive extrapolation as the table's last row: its error, and an empty cell for every other column
@@ -310,7 +172,8 @@ def guide(registry: dict) -> str:
         spread = f" ({pe['min']:.3g}-{pe['max']:.3g})" if n > 1 else ""
         pick = scene_rungs.describe(c['kind'], c['hidden_dim'], c['train_fraction'])
         if c.get("enough") is False:         # a card filed before "enough" had its thresholds reads as it was filed
-            pick = f"none is enough (over {BEATS_NAIVE:g} of the naive error or {mm.VALID_FRACTION:g} of the spread); best: {pick}"
+            pick = (f"none is enough (over {measured_card.BEATS_NAIVE:g} of the naive error or {mm.VALID_FRACTION:g} of "
+                    f"the spread); smallest within {scene_common.CARD_FACTOR:g}x of the best: {pick}")
         lines.append(f"| {name} | {pick} | "
                      f"{pe['median']:.3g}{spread}; naive {entry['naive']['median']:.3g} ({entry['units']}) | {n} | "
                      f"{scene_tables.unsettled(c)} | "
@@ -380,7 +243,7 @@ def run(args, argv: list[str], parser, inputs: Inputs | None = None) -> dict:
         measured.append({"kind": kind, "hidden_dim": row["cell"][0], "train_fraction": row["cell"][1], "seed": seed,
                          "params": model.params, "test_loss": model.metrics["test_loss"],
                          "train_seconds": cost["seconds"], "run": _in_checkout(directory),
-                         **({"equation": found} if (found := scene_rungs.equation(directory)) else {}),
+                         **({"equation": found} if (found := mm.equation(model, rec)) else {}),
                          **mm.measure(model, held, energy)})
         print(f"  {progress.advance()} {kind:12s} width {row['cell'][0]:3d} fraction {row['cell'][1]:g} seed {seed}: "
               f"prediction error {measured[-1]['prediction_error']['median']:.4g} (naive {held.naive['median']:.4g})"

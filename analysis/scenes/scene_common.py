@@ -85,14 +85,15 @@ def _fits(task: str, kind: str) -> bool:
     return spec.coordinates == "latent" or spec.reads("canonical")
 
 
-def train(batches, out: Path, args, fits=None, then=None, who: str = "scene study") -> tuple[dict, dict]:
+def train(batches, out: Path, args, fits=None, then=None, who: str = "scene study",
+          share: float | None = None) -> tuple[dict, dict]:
     """``({row/kind/seed: run folder or the error of a failed run}, seconds)`` of ``batches``, each
     ``(rows, seeds, steps, models or None for every kind)``: reuse what matches, train the rest
     in one sweep (``args.jobs`` processes, on ``args.backend``), so the pool starts once and the
     longest runs of every batch go first. ``fits(task, kind)``: which kinds fit the rows' states
     (default: the kinds of canonical states). ``then``: where given, the plan is printed first (its
     training measured, ``analysis/plan.py``), with ``then(models)`` the stages after it (``plan.Stage``s),
-    ``models`` the count of runs the study will have."""
+    ``models`` the count of runs the study will have; ``share``: the training's seconds of a quick budget."""
     fits = fits or _fits
     jobs = []
     for rows, seeds, steps, models in batches:
@@ -107,7 +108,7 @@ def train(batches, out: Path, args, fits=None, then=None, who: str = "scene stud
     sweep.say_reused(who, runs, jobs)
     if then is not None:
         jobs = plan.timed(jobs)
-        plan.say(who, [plan.training(jobs, args.jobs if args.backend == "local" else 1), *then(total)])
+        plan.say(who, [plan.training(jobs, args.jobs if args.backend == "local" else 1, share), *then(total)])
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)

@@ -15,6 +15,10 @@ rollout per model, because its wall time is the model's rollout cost in the Pare
 A model's training seconds are its ``hnn_analysis.training_cost`` (measured in the study's own process,
 beside at most its other worker); the recorded wall time of a run says more about what else the
 machine did while it trained.
+
+A quick study gives each model's rollout its share of the measuring's seconds (``rollout_seconds``:
+``hnn.evaluation.rollout_budget``): a rollout stiff along its path stops there, and the model's entry says
+so (``energy_stopped``, the rollout's ``stopped`` paths) where a full study would wait for it.
 """
 from __future__ import annotations
 
@@ -23,6 +27,8 @@ import multiprocessing
 import statistics
 import time
 from pathlib import Path
+
+import contextlib
 
 import torch
 
@@ -54,7 +60,8 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
     if not runs:
         return {}
     if hnn.task_spec(scene.task).evaluate is not None:
-        return {key: scene.measure(kind, directory, protocols) | {"train_cost": _cost(scene.task, directory)}
+        return {key: scene.measure(kind, directory, protocols) | {"train_cost": _cost(scene.task, directory,
+                                                                                        scene.quick)}
                 for key, (kind, directory) in runs.items()}
     tic = time.perf_counter()
     trained, rows = study.load_runs(scene.task, {key: directory for key, (_, directory) in runs.items()})
@@ -65,6 +72,9 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
         model = trained.models[key]
         m = scene_common.saved_numbers(rows[key], model, directory)
         for name, result in energy.items():
+            if result[key].get("stopped"):      # its rollout stopped at its budget (a quick study's): said, no number
+                m.setdefault("energy_stopped", {})[name] = result[key]["stopped"]
+                continue
             if result[key]["mse"] is None:      # a protocol that does not apply to a learned map: why, not a number
                 m.setdefault("energy_not_applicable", {})[name] = result[key]["why"]
                 continue
@@ -73,13 +83,13 @@ def measure_models(scene, runs: dict, protocols: bool = True) -> dict:
         if scene.truth is not None:
             m["rollout"] = scene.rollout(model)
         m["evaluate_seconds"] = shared + time.perf_counter() - tic
-        m["train_cost"] = _cost(scene.task, directory)
+        m["train_cost"] = _cost(scene.task, directory, scene.quick)
         out[key] = m
     return out
 
 
-def _cost(task: str, directory) -> dict:
-    return training_cost(task, hnn.load_run(directory)[1])
+def _cost(task: str, directory, quick: bool = False) -> dict:
+    return training_cost(task, hnn.load_run(directory)[1], *(QUICK_BURSTS if quick else ()))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -95,9 +105,25 @@ def _scene(task: str, quick: bool, state: dict | None, cache: dict):
 _SCENES: dict = {}      # this process's scenes, by task (a worker keeps them between its units)
 
 
-def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict, dict | None]:
-    """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread."""
+def rollouts(unit: tuple) -> int:
+    """The models' rollouts of a unit that a ``rollout_budget`` bounds: each model's under every energy protocol
+    of its task and its rollout error (a task with its own evaluation: the rollout error alone)."""
+    spec = hnn.task_spec(unit[1])
+    per_model = 1 + (len(spec.protocols) if spec.evaluate is None else 0)
+    return per_model * (len(unit[3]) if unit[0] == "kind" else len(unit[2]))
+
+
+def run_unit(unit: tuple, quick: bool, state: dict | None = None,
+             rollout_seconds: float | None = None) -> tuple[dict, dict | None]:
+    """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread; each model's
+    rollouts within ``rollout_seconds`` each where given (``hnn.evaluation.rollout_budget``)."""
     torch.set_num_threads(1)      # rollouts of 4-15 states: a second thread only adds contention
+    with (contextlib.nullcontext() if rollout_seconds is None else hnn.evaluation.rollout_budget(
+            rollout_seconds, "the quick study's share of a model's rollout")):
+        return _run_unit(unit, quick, state)
+
+
+def _run_unit(unit: tuple, quick: bool, state: dict | None) -> tuple[dict, dict | None]:
     unit_type, task = unit[0], unit[1]
     scene = _scene(task, quick, state, _SCENES)
     if unit_type == "kind":
@@ -117,6 +143,31 @@ def run_unit(unit: tuple, quick: bool, state: dict | None = None) -> tuple[dict,
 # a kind's speed study (its ladder and three drift runs of up to DRIFT_BUDGET s) against one model's measuring
 # (spring, measured: about 30 s against about 1.5 s)
 SPEED_WEIGHT = 20
+# a quick study's measuring, on a quiet 2-core box, for its plan: a model's seconds (its run loaded, its losses,
+# its training cost's one short burst, its rollouts when healthy: 0.3-2.6 s a model on a 2-core box at load 8,
+# whose rollouts were stopped at 0.09 s), a quick speed study's (its ladder timed once, three drift runs of
+# scene_common.QUICK's drift_budget) and a scene's truth (its first unit: 20 s for the 3-body at load 8);
+# a fit's training cost solves it again (its plan's estimate)
+MODEL_SECONDS = 0.5
+QUICK_SPEED_SECONDS = 6.0
+TRUTH_SECONDS = 3.0
+# a quick study's budget of each model rollout (under each energy protocol, and for its rollout error): the 3-body
+# library's, stiff off the orbits, ran 350 s; at 1 s a healthy sampled HNN of the spring (the paper's protocol,
+# rtol 1e-12: 1429 calls at 0.7 ms on a 2-core box at load 8) was stopped
+QUICK_ROLLOUT_SECONDS = 3.0
+# a quick study's training cost of a model: one short burst, as a plan's (hnn_analysis.plan)
+QUICK_BURSTS = (1, 0.05)
+
+
+def quick_estimate(units: dict, fit_seconds: float = 0.0) -> tuple[float, float]:
+    """``(estimate, at most)`` of a quick study's measuring of ``units``: each model's ``MODEL_SECONDS``, each
+    speed study's ``QUICK_SPEED_SECONDS``, each scene's ``TRUTH_SECONDS`` and ``fit_seconds`` (the fits'
+    training cost, solved again); at most, every rollout stopped at ``QUICK_ROLLOUT_SECONDS`` besides."""
+    models = sum(len(unit[3]) if unit[0] == "kind" else len(unit[2]) for unit in units.values())
+    speeds = sum(unit[0] == "kind" and unit[4] is not None for unit in units.values())
+    scenes = len({unit[1] for unit in units.values()})
+    estimate = models * MODEL_SECONDS + speeds * QUICK_SPEED_SECONDS + scenes * TRUTH_SECONDS + fit_seconds
+    return estimate, estimate + sum(rollouts(unit) for unit in units.values()) * QUICK_ROLLOUT_SECONDS
 
 
 def _weight(unit: tuple) -> float:
@@ -134,13 +185,15 @@ def _describe(unit: tuple) -> str:
     return f"{unit[1]:7s} {kind} at {len(unit[2])} grid run{'s' if len(unit[2]) != 1 else ''} (cells x seeds)"
 
 
-def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
+def run(units: dict, quick: bool, jobs: int = 1, rollout_seconds: float | None = None) -> tuple[dict, dict]:
     """``({key: result}, {task: the scene's state})`` of ``units`` (``{key: unit}``): here (``jobs``
     1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
-    which the others reuse)."""
+    which the others reuse); each model's rollouts within ``rollout_seconds`` where given (``run_unit``)."""
     results, states, progress = {}, {}, sweep.Progress(len(units))
-    # the time left by the units' weights: a model a model, a kind's speed study SPEED_WEIGHT models
-    weights = {key: _weight(unit) for key, unit in units.items()}
+    # the time left by the units' weights: a model a model, a kind's speed study SPEED_WEIGHT models; with a
+    # budget, each unit's seconds at most (quick_estimate), so that no unit's stop can swell the time left
+    weights = {key: _weight(unit) if rollout_seconds is None else quick_estimate({key: unit})[1]
+               for key, unit in units.items()}
     ahead, measured = plan.Ahead(sum(weights.values())), [0.0]
 
     def said(key) -> str:
@@ -149,7 +202,7 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
-            results[key], states[unit[1]] = run_unit(unit, quick)
+            results[key], states[unit[1]] = run_unit(unit, quick, None, rollout_seconds)
             print(said(key), flush=True)
         return results, states
     by_task: dict[str, list] = {}
@@ -158,7 +211,8 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
     with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
         # the first unit of every scene now; the rest of a scene once its truth is known
-        running = {pool.submit(run_unit, units[keys[0]], quick): keys[0] for keys in by_task.values()}
+        running = {pool.submit(run_unit, units[keys[0]], quick, None, rollout_seconds): keys[0]
+                   for keys in by_task.values()}
         waiting = {task: keys[1:] for task, keys in by_task.items()}
         while running:
             finished, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
@@ -174,5 +228,5 @@ def run(units: dict, quick: bool, jobs: int = 1) -> tuple[dict, dict]:
                 if task not in states:
                     states[task] = state
                     for other in waiting.pop(task, []):
-                        running[pool.submit(run_unit, units[other], quick, state)] = other
+                        running[pool.submit(run_unit, units[other], quick, state, rollout_seconds)] = other
     return results, states

@@ -8,6 +8,7 @@ every run (``<row>/<label>/seed<s>``), ``kind_of`` gives the kind whose declarat
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -65,7 +66,8 @@ def fit_rungs(kinds, rungs=RUNGS) -> list[str]:
 def jobs(rows: list[dict], seeds: list[int], runs_dir: Path, rungs, fits) -> list[sweep.Job]:
     """The runs of the fit ``rungs`` on every row and seed (``fits(task, label)``: whether the rung fits the
     row's states), keyed ``<row>/<label>/seed<s>`` as a kind's: a fit takes the row's fields, its model and its
-    fit (no optimizer steps to cut)."""
+    fit (no optimizer steps to cut); a row with ``fit_rows`` (a quick study's) fits at most that many training
+    rows (``capped``). Their ``expected_seconds`` are left to the plan (``hnn_analysis.plan.fit_seconds``)."""
     out = []
     for row in rows:
         for rung in rungs:
@@ -74,9 +76,27 @@ def jobs(rows: list[dict], seeds: list[int], runs_dir: Path, rungs, fits) -> lis
             for seed in row.get("seeds") or seeds:
                 fields = {**row["fields"], "model": kind_of(rung), "fit": fit_of(rung), "seed": seed,
                           "save_dir": str(runs_dir)}
-                out.append(sweep.Job(f"{row['row']}/{rung}/seed{seed}", row["task"],
-                                     hnn.tasks.task_config(row["task"], fields), expected_seconds=1.0))
+                config = hnn.tasks.task_config(row["task"], fields)
+                if row.get("fit_rows"):
+                    config = capped(config, row["fit_rows"])
+                out.append(sweep.Job(f"{row['row']}/{rung}/seed{seed}", row["task"], config))
     return out
+
+
+def training_rows(config) -> int:
+    """The training rows a run of ``config`` fits: its dataset's (built, or read from its cache in the run's
+    ``save_dir``) at its ``train_fraction``."""
+    return int(round(len(config.dataset()["x"]) * config.train_fraction))
+
+
+def capped(config, rows: int):
+    """``config`` with its ``train_fraction`` cut so that it fits at most ``rows`` training rows (as it is where
+    it fits no more): a quick study's fit, whose solve grows with its rows (the 3-body library's 100000 rows
+    took 90 s on a quiet 2-core box)."""
+    have = training_rows(config)
+    if have <= rows:
+        return config
+    return dataclasses.replace(config, train_fraction=float(f"{config.train_fraction * rows / have:.3g}"))
 
 
 def equation(directory) -> str | None:

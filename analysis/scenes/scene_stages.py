@@ -5,6 +5,7 @@ grid of width x training fraction, the D-HNN split), what it measures (``measure
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import statistics
 import time
@@ -26,6 +27,12 @@ QUICK_WIDTHS, QUICK_FRACTIONS = (16,), (0.25,)
 QUICK_STEPS = 60
 QUICK_SPEED_KINDS = ("hnn",)
 DEFAULT_CELL = (200, 1.0)
+# --quick: at most this many training rows a fit (scene_rungs.capped): a library's solve grows with its rows,
+# and the 3-body's 100000 took 90 s on a quiet 2-core box (2-body: 78 s on a loaded one)
+QUICK_FIT_ROWS = 500
+# --quick: each stage's share of its budget (commands.QUICK_BUDGETS["scene_study"]), in seconds: the plan says a
+# stage whose estimate passes its share; the rest of the budget is the start, the plan, the datasets, the cards
+QUICK_SHARES = {"train": 40.0, "measure": 30.0}
 
 
 DHNN_FIELDS = {"split": "dhnn", "learn_rate": 5e-3, "total_steps": 5000, "batch_size": 128, "weight_decay": 0.0,
@@ -47,7 +54,8 @@ def _row(task: str, cell: tuple, quick: bool, extra=None, name: str | None = Non
     width, fraction = cell
     spec = hnn.task_spec(task)
     fields = {**spec.settings, **(spec.quick if quick else {}), **_cell_fields(width, fraction, task), **(extra or {})}
-    return {"row": name or f"{task}@{width}x{fraction:g}", "task": task, "fields": fields, "note": None, "cell": cell}
+    return {"row": name or f"{task}@{width}x{fraction:g}", "task": task, "fields": fields, "note": None, "cell": cell,
+            **({"fit_rows": QUICK_FIT_ROWS} if quick else {})}
 
 
 def plan_rows(scenes, quick: bool) -> list[dict]:
@@ -66,7 +74,8 @@ def quick_cuts(studied: list[str], seeds: int, quick_seeds: int = 1) -> list[str
     quick, full = scene_common.QUICK, scene_common.FULL
     drift = [task for task in studied if scene_settings(task).get("drift")]
     cuts = study.quick_cuts(studied, QUICK_STEPS)
-    cuts += [f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
+    cuts += [f"fits: at most {QUICK_FIT_ROWS} training rows each (a cell's fraction of them where that is fewer)",
+             f"grid: widths {', '.join(map(str, QUICK_WIDTHS))} x fractions {', '.join(map(str, QUICK_FRACTIONS))} "
              f"of {', '.join(map(str, WIDTHS))} x {', '.join(map(str, FRACTIONS))}",
              *([f"1 seed of {seeds}, the grid's as the default cell's, so the cards test nothing on seeds"]
                if quick_seeds == 1 else [f"{quick_seeds} seeds of {seeds}"] if quick_seeds < seeds else []),
@@ -80,6 +89,8 @@ def quick_cuts(studied: list[str], seeds: int, quick_seeds: int = 1) -> list[str
         cuts.append(f"energy drift: {quick['drift_periods']} periods of " + ", ".join(
             f"{scene_settings(task)['periods']} ({task})" for task in drift)
             + f", at most {quick['drift_budget']:g} s a setting of {full['drift_budget']:g}")
+    cuts.append(f"rollouts of the models: at most {scene_measure.QUICK_ROLLOUT_SECONDS:g} s each (an energy "
+                "protocol's, a rollout error's); one stiff along its path stops there and says so")
     return cuts
 
 
@@ -239,18 +250,30 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     # the fits' rungs beside the kinds (scene_rungs): every fit at the default cell, the sampled layer's on the grid
     rungs, grid_rungs = (scene_common.kinds() + tuple(scene_rungs.fit_rungs(scene_common.kinds(), chosen))
                          for chosen in (scene_rungs.RUNGS, scene_rungs.GRID_RUNGS))
+    speed_kinds = QUICK_SPEED_KINDS if args.quick else None
+
+    def measuring(models: int) -> list[plan.Stage]:
+        # the models the training will leave, as if every run trains (the plan's units), and their fits
+        will = {f"{row['row']}/{rung}/seed{seed}": out for batch_rows, batch_seeds, batch_rungs in
+                ((default_rows, seeds, rungs), (grid_rows, grid_seeds, grid_rungs))
+                for row in batch_rows for rung in batch_rungs for seed in batch_seeds}
+        configs = fits(default_rows, seeds, rungs, out) + fits(grid_rows, grid_seeds, grid_rungs, out)
+        return [measure_stage(measure_units(studied, will, seeds, grid_rows, grid_seeds, speed_kinds), models,
+                              args.quick, sum(plan.fit_seconds(config)["seconds"] for config in configs))]
     runs, _ = train([(default_rows, seeds, steps, rungs), (grid_rows, grid_seeds, steps, grid_rungs),
                      # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
-                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args,
-                    then=lambda models: [plan.Stage("measure", models, "models (losses, energy MSE, rollout error; "
-                                                    "each kind's speed at equal accuracy)")])
+                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args, then=measuring,
+                    share=QUICK_SHARES["train"] if args.quick else None)
     results["seconds"]["training"] = time.perf_counter() - tic
 
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
     # states, which a second thread does not speed up; --jobs processes share the units
     tic = time.perf_counter()
-    units = measure_units(studied, runs, seeds, grid_rows, grid_seeds, QUICK_SPEED_KINDS if args.quick else None)
-    measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1)
+    units = measure_units(studied, runs, seeds, grid_rows, grid_seeds, speed_kinds)
+    rollout_seconds = scene_measure.QUICK_ROLLOUT_SECONDS if args.quick else None
+    results["meta"]["rollout_seconds"] = rollout_seconds
+    measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1,
+                                         rollout_seconds)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     cells_by_scene = {}
@@ -306,6 +329,54 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     results["seconds"]["total"] = time.perf_counter() - start
 
     return results, runs
+
+
+def fits(rows: list[dict], seeds: list[int], rungs, out: Path) -> list:
+    """The configs of the fits' runs of ``rows`` at ``seeds`` among ``rungs`` (``scene_rungs.jobs``'s, their data
+    in ``out``/runs as the training's)."""
+    return [job.config for job in scene_rungs.jobs(rows, seeds, out / "runs", rungs,
+                                                   lambda task, rung: rung in task_rungs(task))]
+
+
+def measure_stage(units: dict, models: int, quick: bool, refits: float) -> plan.Stage:
+    """The plan's measuring stage of ``units``: a quick study's from its declared costs (``scene_measure.
+    quick_estimate``, the fits solved again for their training cost in ``refits`` seconds), with its share and
+    what it takes at most (every rollout stopped at its budget); a full study's timed as it runs."""
+    what = "models (losses, energy MSE, rollout error; each kind's speed at equal accuracy)"
+    if not quick:
+        return plan.Stage("measure", models, what)
+    estimate, most = scene_measure.quick_estimate(units, refits)
+    return plan.Stage("measure", models, what, estimate,
+                      f"each model's {scene_measure.MODEL_SECONDS:g} s, each speed study's "
+                      f"{scene_measure.QUICK_SPEED_SECONDS:g} s, each scene's truth {scene_measure.TRUTH_SECONDS:g} s, "
+                      f"the fits solved again {refits:.2g} s; at most {most:.0f} s, every rollout stopped at "
+                      f"{scene_measure.QUICK_ROLLOUT_SECONDS:g} s", share=QUICK_SHARES["measure"])
+
+
+def reference_plan(studied=None) -> list[plan.Stage]:
+    """A quick study's plan on the reference box (``plan.reference_seconds``: declared costs, no data built):
+    its training (every fit at its ``QUICK_FIT_ROWS``) and its measuring (``measure_stage``)."""
+    studied = studied or scene_common.scenes()
+    rows = [{k: v for k, v in row.items() if k != "fit_rows"} for row in plan_rows(studied, True)]
+    default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
+    grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]
+    dhnn_rows = [_row("real", DEFAULT_CELL, True, DHNN_FIELDS, name="real-dhnn")] if "real" in studied else []
+    rungs, grid_rungs = (scene_common.kinds() + tuple(scene_rungs.fit_rungs(scene_common.kinds(), chosen))
+                         for chosen in (scene_rungs.RUNGS, scene_rungs.GRID_RUNGS))
+
+    def fits_states(task, rung):
+        return rung in task_rungs(task)
+    jobs = []
+    for batch, models in ((default_rows, rungs), (grid_rows, grid_rungs), (dhnn_rows, DHNN_MODELS)):
+        jobs += [job for job in study.plan(batch, [0], Path("runs"), QUICK_STEPS, models)
+                 if job.config.model in models and fits_states(job.task, job.config.model)]
+        jobs += scene_rungs.jobs(batch, [0], Path("runs"), models, fits_states)
+    jobs = [dataclasses.replace(job, expected_seconds=plan.reference_seconds(job, QUICK_FIT_ROWS)) for job in jobs]
+    fit_jobs = [job for job in jobs if job.config.fit != "adam"]
+    will = {job.key: Path("runs") for job in jobs}
+    units = measure_units(studied, will, [0], grid_rows, [0], QUICK_SPEED_KINDS)
+    return [plan.training(jobs, 1, QUICK_SHARES["train"], "each run's declared cost on the reference box"),
+            measure_stage(units, len(jobs), True, sum(job.expected_seconds for job in fit_jobs))]
 
 
 def measure_units(scenes, runs: dict, seeds: list[int], grid_rows: list[dict], grid_seeds: list[int],

@@ -61,7 +61,22 @@ def kind_table(results: dict) -> list[str]:
             cells.append("n/a" if not div else f"{div['divergence_time']:.3g}")
             lines.append(f"| {task} | {kind} | {m['params']} | " + " | ".join(cells)
                          + f" | {_g(_train_seconds(m, measured))} |")
-    return lines + not_applicable_lines(results) + inseparable_lines(results)
+    return lines + not_applicable_lines(results) + stopped_lines(results) + inseparable_lines(results)
+
+
+def stopped_lines(results: dict) -> list[str]:
+    """The rollouts a quick study stopped at their budget (``hnn.evaluation.rollout_budget``): energy protocols
+    with no number above, and rollout errors whose stopped paths count as blown up."""
+    lines = []
+    for task, entry in results["scenes"].items():
+        for kind, measured in entry["kinds"].items():
+            for m in measured["per_seed"].values():
+                for name, why in (m.get("energy_stopped") or {}).items():
+                    lines.append(f"- {task}, {kind}, {name} protocol: {why}")
+                if (m.get("rollout") or {}).get("stopped"):
+                    lines.append(f"- {task}, {kind}, rollout error: {m['rollout']['stopped']} of its paths stopped "
+                                 "over their budget, scored as blown up")
+    return ["", "Rollouts stopped over their budget (--quick):", ""] + lines if lines else []
 
 
 def not_applicable_lines(results: dict) -> list[str]:
@@ -210,7 +225,9 @@ def cheapest_words(card: dict) -> str:
     """The card's model enough that trains fastest, in words (a card saved before it was chosen: not chosen)."""
     found = card.get("cheapest")
     if not found:
-        return "none within 2x" if "cheapest" in card else "not chosen"
+        # a measured card where no model predicts well enough (its "enough" False), or no model within 2x
+        return "none is enough" if card.get("enough") is False else "none within 2x" if "cheapest" in card \
+            else "not chosen"
     return f"{scene_rungs.describe(found['kind'], found['width'], found['fraction'])} ({_g(found['train_seconds'])} s)"
 
 
@@ -218,6 +235,8 @@ def library_words(card: dict) -> str:
     """The libraries enough, with their equations; 'none' where no library is (not measured on older cards)."""
     if "libraries" not in card:
         return "not measured"
+    if card.get("enough") is False:
+        return "none (no model is enough)"
     return "; ".join(f"{lib['kind']} ({_g(lib['train_seconds'])} s): `{lib['equation']}`" if lib.get("equation")
                      else lib["kind"] for lib in card["libraries"]) or "none"
 

@@ -10,14 +10,16 @@ out as any run; its model is an ``hnn.Model`` of its kind (``hnn``, ``separable`
 - ``features``: sampled tanh neurons and the library's terms, values and gradients in closed form;
 - ``sampling``: where sampled neurons come from (SWIM's pairs of points, ELM's random draws);
 - ``models``: the fitted models and their least-squares problems;
+- ``equations``: a library fit's equation, in its own coordinates or the user's columns and units (``Frame``);
 - ``lstsq``: the chunked QR solve in float64 and SINDy's sequential thresholding;
 - ``fitting``: ``solve`` (a run's fit) and ``fit_least_squares`` (``hnn.fit_least_squares``);
 - ``sindy``: pysindy (optional extra ``sindy``) wrapped as a field model.
 """
-from . import sindy
+from . import equations, sindy
+from .equations import Frame, equation
 from .fitting import fit_least_squares, solve
 from .models import FittedField, FittedHNN, FittedSeparable
 from .registry import FITS, LINEAR_KINDS, Fit, build, check, check_config, get_fit
 
-__all__ = ["FITS", "LINEAR_KINDS", "Fit", "FittedField", "FittedHNN", "FittedSeparable", "build", "check",
-           "check_config", "fit_least_squares", "get_fit", "sindy", "solve"]
+__all__ = ["FITS", "LINEAR_KINDS", "Fit", "FittedField", "FittedHNN", "FittedSeparable", "Frame", "build", "check",
+           "check_config", "equation", "equations", "fit_least_squares", "get_fit", "sindy", "solve"]

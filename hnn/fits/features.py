@@ -138,16 +138,23 @@ class Library(nn.Module):
         self.register_buffer("slots", torch.tensor([s + [in_dim] * (degree - len(s)) for s in slots],
                                                    dtype=torch.int64).reshape(-1, degree), persistent=False)
 
-    def _parts(self, x: torch.Tensor, keep: torch.Tensor | None):
+    def _parts(self, x: torch.Tensor, keep: torch.Tensor | None, slopes: bool = True):
         """Per term: the monomial's factors (a list of ``degree`` tensors ``(rows, terms)``), the trig factor and
-        its derivative ``(rows, terms)``, and the terms' ``slots`` and ``trig`` rows (``keep``: a subset)."""
+        its derivative ``(rows, terms)`` (None without ``slopes``: a value needs none), and the terms' ``slots``
+        and ``trig`` rows (``keep``: a subset)."""
         slots, trig = (self.slots, self.trig) if keep is None else (self.slots[keep], self.trig[keep])
-        padded = torch.cat([x, x.new_ones(len(x), 1)], dim=1)
-        factors = [padded[:, slots[:, s]] for s in range(slots.shape[1])]
+        if slopes:
+            padded = torch.cat([x, x.new_ones(len(x), 1)], dim=1)
+            factors = [padded[:, slots[:, s]] for s in range(slots.shape[1])]
+        else:   # a factor as a gather of whole rows of x^T (3-5x faster than of columns), viewed as (rows, terms)
+            padded = torch.cat([x.T, x.new_ones(1, len(x))])
+            factors = [padded[slots[:, s]].T for s in range(slots.shape[1])]
         angle = x[:, trig[:, 1]] * trig[:, 2].to(x.dtype)
         kind, freq = trig[:, 0], trig[:, 2].to(x.dtype)
         sin, cos = torch.sin(angle), torch.cos(angle)
         t = torch.where(kind == SIN, sin, torch.where(kind == COS, cos, torch.ones_like(angle)))
+        if not slopes:
+            return factors, t, None, slots, trig
         dt = torch.where(kind == SIN, freq * cos, torch.where(kind == COS, -freq * sin, torch.zeros_like(angle)))
         return factors, t, dt, slots, trig
 
@@ -160,8 +167,10 @@ class Library(nn.Module):
 
     def forward(self, x: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
         """theta ``(rows, terms)`` at ``x`` ``(rows, in_dim)`` (``keep``: only those terms)."""
-        factors, t, *_ = self._parts(x, keep)
-        return self._product(factors) * t
+        factors, t, *_ = self._parts(x, keep, slopes=False)
+        # the same products as ever, elementwise (the bits do not depend on the layout); row-major out, as before,
+        # for the products a caller takes of it
+        return (self._product(factors) * t).contiguous()
 
     def _rows_at_once(self, terms: int) -> int:
         """Rows of ``x`` whose ``(rows, terms)`` intermediates of a gradient (about degree + 4 of them) stay

@@ -13,6 +13,7 @@ solve; a library is thresholded as SINDy's STLSQ; ``sindy`` hands the rows to py
 """
 from __future__ import annotations
 
+import difflib
 import sys
 import time
 
@@ -23,13 +24,14 @@ from tqdm.auto import tqdm
 from ..metrics import derivative_mse
 from ..specs import ModelSpec
 from ..trainers.rows import check_data
+from ..units import Rescaled, UnitScales, in_canonical_units
 from .features import TanhFeatures
 from .lstsq import RIDGES, StreamingQR, chunk_rows
 from .registry import build, get_fit
 from .sampling import elm, swim
 
 RCOND = "auto"          # the ridge of the solve: chosen by generalized cross-validation (a number: that ridge)
-THRESHOLD = 0.05        # a library's smallest coefficient kept (the data's units)
+THRESHOLD = 0.05        # a library's smallest coefficient kept (the units of the fit: fit_least_squares' units)
 DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
 
 
@@ -189,20 +191,74 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
 def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", width: int = 200,
                       degree: int = 3, frequencies: int = 1, seed: int = 0, rcond=RCOND,
                       threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None,
-                      progress: bool | None = None):
+                      units: str = "auto", progress: bool | None = None):
     """``(model, stats)``: a model of ``dxdt`` at ``x`` ``(rows, 2n)`` found by one least-squares solve.
 
     ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``; ``hnn.fits.FITS[fit].kinds``), built here
     with ``width`` sampled neurons (``fit='swim'`` or ``'elm'``) or the library of polynomials to ``degree``
     (H's to ``degree + 1``) and trig terms of q to ``frequencies`` (``'library'``, ``'sindy'``); or a model
-    ``hnn.fits.build`` made. The rest as ``solve``. The model answers through the model interface:
-    ``time_derivative``, ``hamiltonian`` (hnn, separable), ``equation()`` (a library's), and rolls out with
-    ``hnn.rollout``; float64.
+    ``hnn.fits.build`` made (wrap it in ``hnn.units.Rescaled`` to let ``units`` rescale it).
+
+    ``units``: ``hnn.train``'s rule, by the same function (``hnn.units.in_canonical_units``): ``'auto'`` fits a
+    kind named here in the canonical units of ``x``, ``dxdt`` where their sizes lie far from 1 (or their
+    columns' sizes spread; ``hnn.units.rescale_reason``), so that ``threshold`` (a library's smallest
+    coefficient kept) and the sampled neurons' bends are relative to the data's scale, and the model
+    answers in the user's units (an ``hnn.units.Rescaled``; its ``equation()`` too, the scaling undone
+    exactly); ``'on'`` always; ``'off'`` fits the data as they are. A plain built model on data the rule
+    would rescale is refused with the fix, as ``hnn.train`` refuses it. ``anchor`` ``(x0, H0)`` and
+    ``values`` (H at ``x``) are in the user's units; ``loss_weights`` in those of the fit (as ``hnn.train``'s).
+    The rest as ``solve``. The model answers through the model interface: ``time_derivative``, ``hamiltonian``
+    (hnn, separable), ``equation()`` (a library's), and rolls out with ``hnn.rollout``; float64.
+
+    ``stats``: ``solve``'s, its ``train_loss`` and ``test_loss`` those of the returned model in the user's units,
+    and ``'unit_scales'`` where ``units`` rescaled the fit.
     """
-    if isinstance(model, str):
-        dim = np.shape(x)[1] if len(np.shape(x)) == 2 else None
-        model = build(ModelSpec(kind=model, input_dim=dim, hidden_dim=width, fit=fit, library_degree=degree,
-                                library_frequencies=frequencies))
-    stats = solve(model, x, dxdt, test_x, test_dxdt, fit=fit, seed=seed, rcond=rcond, threshold=threshold,
-                  loss_weights=loss_weights, values=values, anchor=anchor, progress=progress)
-    return model.eval(), stats
+    get_fit(fit)
+    plain = isinstance(model, str)
+    if plain:
+        _check_kind(model, fit)
+        x = check_data("x", x, dtype=torch.float64)
+        model = Rescaled(build(ModelSpec(kind=model, input_dim=x.shape[1], hidden_dim=width, fit=fit,
+                                         library_degree=degree, library_frequencies=frequencies)))
+    dim = model.input_dim
+    given = [None if a is None else check_data(name, a, width=dim, dtype=torch.float64)
+             for name, a in (("x", x), ("dxdt", dxdt), ("test_x", test_x), ("test_dxdt", test_dxdt))]
+    inner, *arrays = in_canonical_units(model, units, *given, caller="hnn.fit_least_squares")
+    scales = model.scales if isinstance(model, Rescaled) else None
+    if scales is not None:
+        c, energy = scales.state(inner.coordinates, dim), scales.energy
+        if anchor is not None:
+            anchor = (torch.as_tensor(anchor[0], dtype=torch.float64).reshape(-1) / c, float(anchor[1]) / energy)
+        if values is not None:
+            values = np.asarray(values, dtype=np.float64) / energy
+    stats = solve(inner, *arrays, fit=fit, seed=seed, rcond=rcond, threshold=threshold, loss_weights=loss_weights,
+                  values=values, anchor=anchor, progress=progress)
+    if scales is None:
+        return model.eval(), stats
+    if plain and scales == UnitScales(1.0, 1.0, 1.0):     # the rule left the data as they are: the model itself
+        return inner.eval(), stats
+    model.eval()
+    stats["unit_scales"] = scales.to_dict()
+    stats["train_loss"] = [derivative_mse(model, given[0], given[1])[0]]
+    if given[2] is not None:
+        stats["test_loss"] = [derivative_mse(model, given[2], given[3])[0]]
+    if "equation" in stats["fit"]:
+        stats["fit"]["equation"] = model.equation()
+    return model, stats
+
+
+def _check_kind(kind: str, fit: str) -> None:
+    """A ValueError in ``fit_least_squares``' words where ``kind`` is no model kind, or one ``fit`` cannot solve."""
+    from ..kinds import MODEL_KINDS
+
+    takes = get_fit(fit).kinds or tuple(MODEL_KINDS)
+    if kind in takes:
+        return
+    if kind not in MODEL_KINDS:
+        close = difflib.get_close_matches(kind, list(MODEL_KINDS), n=1, cutoff=0.6)
+        raise ValueError(f"unknown kind {kind!r}; the kinds are {', '.join(MODEL_KINDS)}, and fit={fit!r} fits "
+                         f"{', '.join(takes)}" + (f"; did you mean {close[0]!r}?" if close else ""))
+    why = ("fits dx/dt with no H: pass 'baseline'" if fit == "sindy" else
+           f"solves the last weights of {', '.join(takes)}, whose field is linear in them, and the {kind} kind's is "
+           f"not: pass one of those kinds, or train {kind!r} with hnn.train")
+    raise ValueError(f"fit={fit!r} {why}")

@@ -20,19 +20,12 @@ import torch
 from torch import nn
 
 from ..interface import ANY_STATE, UNIT_MASS, Model
+from .equations import Frame, terms, written
 from .features import Library, TanhFeatures
 
 
 def _frozen(*shape) -> nn.Parameter:
     return nn.Parameter(torch.zeros(*shape, dtype=torch.float64), requires_grad=False)
-
-
-def column_names(input_dim: int) -> list[str]:
-    """``['q', 'p']`` for one degree of freedom, ``['q1', .., 'qn', 'p1', .., 'pn']`` for more."""
-    n = input_dim // 2
-    if n == 1:
-        return ["q", "p"]
-    return [f"q{i + 1}" for i in range(n)] + [f"p{i + 1}" for i in range(n)]
 
 
 @dataclass
@@ -111,10 +104,12 @@ class FittedHNN(Model):
             self.offset.copy_(torch.as_tensor(H0, dtype=torch.float64).reshape(())
                               - (self.features(x0) @ self.coef).reshape(()))
 
-    def equation(self, digits: int = 4) -> str:
-        """``'H = q^2 + p^2'``: the nonzero terms of a library fit and its constant (a sampled fit has no formula)."""
-        return "H = " + _sum(torch.cat([self.coef, self.offset[None]]),
-                             self.features.names(column_names(self.input_dim)) + ["1"], digits)
+    def equation(self, digits: int = 4, frame: Frame | None = None) -> str:
+        """``'H = q^2 + p^2'``: the nonzero terms of a library fit and its constant, in ``frame``
+        (``hnn.fits.equations.Frame``: the user's columns and units; default the model's own q and p)."""
+        frame = frame or Frame.own(self.input_dim)
+        constant, pairs = terms(_library(self.features), self.coef, frame, frame.energy, digits, float(self.offset))
+        return "H = " + written(constant, pairs, digits)
 
 
 class FittedSeparable(Model):
@@ -179,10 +174,15 @@ class FittedSeparable(Model):
             self.offset.copy_(torch.as_tensor(H0, dtype=torch.float64).reshape(()) - (self.hamiltonian(x0).reshape(())
                                                                                      - self.offset))
 
-    def equation(self, digits: int = 4) -> str:
-        names = column_names(self.input_dim)
-        terms = self.potential_features.names(names[:self.n]) + self.kinetic_features.names(names[self.n:]) + ["1"]
-        return "H = " + _sum(torch.cat([self.potential_coef, self.kinetic_coef, self.offset[None]]), terms, digits)
+    def equation(self, digits: int = 4, frame: Frame | None = None) -> str:
+        """``'H = 3 - 3 cos(q) + p^2'``: V's terms, then T's, in ``frame`` (as ``FittedHNN.equation``)."""
+        frame = frame or Frame.own(self.input_dim)
+        energy, n = frame.energy, self.n
+        v0, potential = terms(_library(self.potential_features), self.potential_coef, frame.columns(slice(None, n)),
+                              energy, digits)
+        t0, kinetic = terms(_library(self.kinetic_features), self.kinetic_coef, frame.columns(slice(n, None)),
+                            energy, digits)
+        return "H = " + written(v0 + t0 + energy * float(self.offset), potential + kinetic, digits)
 
 
 class FittedField(Model):
@@ -219,21 +219,21 @@ class FittedField(Model):
         return [Part(self.features, lambda x: x, self._design, self._assign, self.features.width + self.has_bias,
                      rhs=self.input_dim, supervised=True, name="dx/dt")]
 
-    def equation(self, digits: int = 4) -> str:
-        """One line per component: ``'dq/dt = 2 p'``."""
-        names = column_names(self.input_dim)
-        terms = self.features.names(names)
-        return "; ".join(f"d{name}/dt = " + _sum(self.coef[:, j], terms, digits) for j, name in enumerate(names))
+    def equation(self, digits: int = 4, frame: Frame | None = None) -> str:
+        """One line per component, ``'dq/dt = 2 p'``, in ``frame`` (as ``FittedHNN.equation``): d x_j / dt =
+        scale_j / time * f'_j(x')."""
+        frame = frame or Frame.own(self.input_dim)
+        lines = []
+        for j, name in enumerate(frame.names):
+            rate = frame.scale[j] / frame.time
+            constant, pairs = terms(_library(self.features), self.coef[:, j], frame, rate, digits, float(self.bias[j]))
+            lines.append(f"d{name}/dt = " + written(constant, pairs, digits))
+        return "; ".join(lines)
 
 
-def _sum(coef: torch.Tensor, names: list[str], digits: int) -> str:
-    """``'3 - 3 cos(q) + p^2'``: the nonzero coefficients with their terms, the constant first, then in the
-    library's order (graded monomials, then trig terms); ``'0'`` if none."""
-    pairs = [(float(c), name) for c, name in zip(coef.tolist(), names) if c != 0]
-    pairs.sort(key=lambda cn: cn[1] != "1")
-    text = ""
-    for i, (c, name) in enumerate(pairs):
-        sign = ("-" if c < 0 else "") if i == 0 else (" - " if c < 0 else " + ")
-        value = f"{abs(c):.{digits}g}"
-        text += sign + (name if value == "1" and name != "1" else value if name == "1" else f"{value} {name}")
-    return text or "0"
+def _library(features) -> Library:
+    """A fit's features if they are a library's written-out terms, else a ValueError (sampled neurons have no formula)."""
+    if not isinstance(features, Library):
+        raise ValueError(f"a fit over {type(features).__name__} has no equation: only a library's terms print as one "
+                         "(fit='library' or 'sindy')")
+    return features

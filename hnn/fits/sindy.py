@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from .equations import column_names
 from .features import Library
-from .models import FittedField, column_names
+from .models import FittedField
 
 MATCH = 1e-9        # a pysindy column and our term agree to this (relative) at every probe state
 

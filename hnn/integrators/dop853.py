@@ -117,8 +117,9 @@ class Stages:
         self.K = K
         stages, rows, dim = K.shape
         self.flat = torch.from_numpy(K.reshape(stages, -1))
-        # flat[:s] for every s, built once: a stage's product then costs one torch.mm and no view
-        self._leading = [self.flat[:s] for s in range(stages + 1)]
+        # flat[:s], built at its first use and kept: a stage's product then costs one torch.mm and no view (a
+        # dense output's Stages of the due rows, built every step, uses a few of them)
+        self._leading = [None] * (stages + 1)
         self.product = torch.empty((1, rows * dim), dtype=self.flat.dtype, device="cpu")    # numpy shares it
         self.summed = self.product.numpy().reshape(rows, dim)      # the product, as the rows' states
 
@@ -130,12 +131,15 @@ class Stages:
         """``sum_j a[0, j] K[j]`` over the first ``s`` stages, ``(rows, dim)``, in ``summed`` (overwritten
         by the next call): one small matrix product, whose bits for a row do not depend on the other rows
         (numpy's BLAS sums a row differently with the number of rows; torch's small products do not)."""
-        torch.mm(a, self._leading[s], out=self.product)
+        torch.mm(a, self.leading(s), out=self.product)
         return self.summed
 
     def leading(self, s: int) -> torch.Tensor:
         """``flat[:s]``, the first ``s`` stages (a view kept for the next step)."""
-        return self._leading[s]
+        found = self._leading[s]
+        if found is None:
+            found = self._leading[s] = self.flat[:s]
+        return found
 
 
 def rk_stages(field, A_rows, stages, y: np.ndarray, hx: np.ndarray, work: Stages) -> np.ndarray:
@@ -144,7 +148,8 @@ def rk_stages(field, A_rows, stages, y: np.ndarray, hx: np.ndarray, work: Stages
     returns the last stage's state (an FSAL scheme's new state)."""
     K, product, summed, leading = work.K, work.product, work.summed, work._leading
     for s in stages:
-        torch.mm(A_rows[s], leading[s], out=product)        # work.combine, inlined: it runs every stage
+        lead = leading[s]
+        torch.mm(A_rows[s], work.leading(s) if lead is None else lead, out=product)   # work.combine, inlined
         stage = summed * hx
         stage += y
         K[s] = field(stage)
