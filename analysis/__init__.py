@@ -29,7 +29,7 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 - ``fits``: also the paper's rows of runs and figure registry (its tasks' runs and energy protocols);
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
 - entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``, ``score``,
-  ``units_check``), on any room.
+  ``units_check``, ``bodies``), on any room.
 """
 
 # room -> its units: a folder, or a module at this level by its name ("__init__": this file)
@@ -42,7 +42,7 @@ _ROOMS = {
     "chains": ("chains",),
     "fits": ("fits",),
     "scenes": ("scenes",),
-    "entry": ("reproduce", "scene_study", "peers", "arm", "stress", "readme", "score", "units_check"),
+    "entry": ("reproduce", "scene_study", "peers", "arm", "stress", "readme", "score", "units_check", "bodies"),
 }
 # room -> the rooms it may import besides its own
 _MAY_IMPORT = {

@@ -29,6 +29,7 @@ class Config(hnn.orbits.config.OrbitConfig):
                                       "declared it type=int, so only whole numbers parsed, and added the noise to "
                                       "the predicted derivatives instead)", parse=hnn.cli.nonnegative_float)
     TASK: ClassVar[str] = "2body"
+    BODIES: ClassVar[hnn.bodies.Bodies] = hnn.bodies.Bodies(count=2, dim=2)      # the original's order
 
 
 def main(argv=None):

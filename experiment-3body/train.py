@@ -29,6 +29,7 @@ class Config(hnn.orbits.config.OrbitConfig):
                                              identity_at_default=False)
     save_dir: str = str(HERE)
     TASK: ClassVar[str] = "3body"
+    BODIES: ClassVar[hnn.bodies.Bodies] = hnn.bodies.Bodies(count=3, dim=2)      # the original's order
 
 
 def main(argv=None):

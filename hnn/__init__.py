@@ -41,7 +41,7 @@ import pkgutil
 from typing import TYPE_CHECKING
 
 _LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "modes", "progress", "tasks", "orbits",
-          "sweeps")
+          "sweeps", "bodies")
 _LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its light module
 
 # layer -> its modules and folders (every module in a folder has the folder's layer); a module may import
@@ -49,7 +49,7 @@ _LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its li
 # "models", may not import each other
 _LAYERS = {
     "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache", "gifs",
-             "threads", "progress"),
+             "threads", "progress", "bodies"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "units", "training", "trainers", "objectives", "kinds", "evaluation", "datasets",

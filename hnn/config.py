@@ -109,7 +109,8 @@ class RunConfig:
                                  "rate outside [0.01, 100]: hnn.units), on (always) or off (the data's units)", choices=UNITS,
                          identity_at_default=False)
     fit: str = setting("adam", "how the weights are found: adam (the training loop, the paper's) or one least-squares "
-                               "solve of dx/dt in float64 (hnn.fits; the hnn, separable and baseline kinds): swim (a "
+                               "solve of dx/dt in float64 (hnn.fits; the hnn, separable, baseline and pairwise kinds, the "
+                               "last over radial features of the pairs' distances): swim (a "
                                "hidden layer of --hidden_dim tanh neurons drawn from pairs of training states, Rahma, "
                                "Datar & Dietrich 2024), elm (drawn at random), library (H as a sparse sum of "
                                "polynomials, sines and cosines of q and products, thresholded as SINDy does: it prints "

@@ -185,6 +185,14 @@ def _constrained(cls, spec: ModelSpec):
     return cls(ConstraintGraph.from_dict(spec.constraints), spec.hidden_dim, spec.nonlinearity)
 
 
+def _pair(cls, spec: ModelSpec):
+    if spec.bodies is None:
+        raise ValueError(f"the {spec.kind} kind reads the state as bodies and needs the task's layout (ModelSpec.bodies, "
+                         "from its config's model_facts()); this task declares none: train it on a task of bodies "
+                         "(2body, 3body, lattice) or give the task's Config a BODIES = hnn.bodies.Bodies(...)")
+    return cls(spec.bodies, spec.hidden_dim, spec.nonlinearity)
+
+
 _PIXEL_OBJECTIVE = ".objectives:PixelObjective"
 
 # the one place a kind is named and described; a run's config says which (RunConfig.kind), its args.json too
@@ -303,6 +311,21 @@ MODEL_KINDS: dict[str, ModelKind] = {
         coordinates="canonical x = [q, p] only",
         integrator="none: `hnn.rollout` steps the map itself at its dt",
         when="as `g_sympnet`; four potential gradients a layer, so a step costs about four G-SympNet layers")),
+    # the pair sum's autograd in r runs one model at a time (no group program written for it yet); not in the
+    # scene studies, whose scenes (spring, pendulums) are no bodies: docs/bodies.md studies it
+    "pairwise": ModelKind(".models.pair:PairHNN", _pair, color="darkgoldenrod", grouping="alone", studied=False,
+                          doc=KindDoc(
+        line="H = sum |p_i|^2 / (2 m_i) + sum over pairs V(|q_i - q_j|): one learned function of one distance "
+             "for every pair, and a mass per species",
+        assumes="bodies that interact in pairs through their distance alone (gravity, springs, Lennard-Jones), "
+                "identical bodies exchangeable, no preferred origin or direction (an optional one-body field "
+                "U(q_i) where the task declares one); invariant under translation, rotation and permutation by "
+                "construction, and one set of weights reads any number of bodies",
+        coordinates="canonical x = [q, p] of the bodies the task declares (hnn.bodies.Bodies: count, dimension, "
+                    "order); it reads a state of any N in that layout",
+        integrator="`leapfrog` or `yoshida4` (its H is T(p) + V(q)); `dopri5` for short accurate paths",
+        when="scenes of many bodies: fit on a few, roll out on many (docs/bodies.md); `--fit library` prints "
+             "V as an equation of r, `--fit swim` or `elm` fits sampled radial neurons")),
     # the pixel objective draws its own noise per model: the seeds train one at a time
     "pixel-hnn": ModelKind(".models.pixel:PixelHNN", _pixel, _PIXEL_OBJECTIVE, color="tab:blue", family="pixel",
                            grouping="alone", doc=KindDoc(

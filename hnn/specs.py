@@ -43,7 +43,9 @@ class ModelSpec:
     (``hnn.fits.build``: ``hidden_dim`` sampled neurons, or the library of ``library_degree`` and
     ``library_frequencies``), float64 whatever ``dtype`` says;
     map_layers: a learned map's layers (``hnn.models.maps``); dt: the time step of the run's data (its
-    dataset's ``dt``, recorded in args.json by ``hnn.runs.saved_args``), a learned map's step.
+    dataset's ``dt``, recorded in args.json by ``hnn.runs.saved_args``), a learned map's step; bodies: the
+    state's layout as bodies (``hnn.bodies.Bodies.to_dict()``, from its config's ``model_facts()``), which
+    the pair kind reads.
     """
     kind: str
     input_dim: int | None = None
@@ -62,6 +64,7 @@ class ModelSpec:
     library_frequencies: int = 1
     map_layers: int = 4
     dt: float | None = None
+    bodies: dict | None = None
 
     @classmethod
     def from_args(cls, args: Mapping) -> ModelSpec:

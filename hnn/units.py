@@ -316,6 +316,8 @@ def refusal(model) -> str | None:
     graph = getattr(model, "graph", None)
     if graph is not None and graph.count:
         return "its constraint graph holds lengths in the data's units"
+    if getattr(model, "bodies", None) is not None:     # the pair kind: scales per column would bend its distances
+        return "it reads distances between bodies, which scales per column would distort"
     return None
 
 

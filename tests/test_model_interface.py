@@ -17,7 +17,7 @@ def _args(kind: str) -> dict:
     tether = {"bodies": 1, "dim": 2, "tethers": [[0, [0.0, 0.0], 1.0]], "links": []}
     return {"kind": kind, "input_dim": 16 if pixel else 4, "latent_dim": 2, "hidden_dim": 16,
             "nonlinearity": "tanh", "field_type": "solenoidal", "periodic": False, "dtype": "float64",
-            "constraints": tether}
+            "constraints": tether, "bodies": {"count": 2, "dim": 1}}     # the pair kind's: two bodies on a line
 
 
 def _state_width(model) -> int:

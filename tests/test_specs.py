@@ -24,7 +24,9 @@ def test_a_saved_run_reads_back_to_the_specs_of_its_config(tmp_path):
     config = hnn.cli.parse(trainer.Config, argv)
     specs = hnn.specs.run_specs(config)
     assert specs.objective.input_noise == 0.25 and specs.training.total_steps == 2
-    assert specs.model == hnn.kinds.ModelSpec("hnn", input_dim=8, hidden_dim=8, init="orthogonal")
+    # the 2-body task declares its bodies (model_facts), which the pair kind reads
+    assert specs.model == hnn.kinds.ModelSpec("hnn", input_dim=8, hidden_dim=8, init="orthogonal",
+                                              bodies=hnn.bodies.Bodies(2, 2).to_dict())
     _, saved, _ = hnn.load_run(trainer.main(argv))
     # args.json holds more keys: the specs pick theirs, and the data's time step that only a run knows
     assert saved["dt"] == config.dataset()["dt"]

@@ -11,6 +11,7 @@ out as any run; its model is an ``hnn.Model`` of its kind (``hnn``, ``separable`
 - ``sampling``: where sampled neurons come from (SWIM's pairs of points, ELM's random draws);
 - ``models``: the fitted models and their least-squares problems;
 - ``equations``: a library fit's equation, in its own coordinates or the user's columns and units (``Frame``);
+- ``radial``: the pair kind's fit, V(r) over a radial library or sampled radial neurons, and inverse masses;
 - ``lstsq``: the chunked QR solve in float64 and SINDy's sequential thresholding;
 - ``fitting``: ``solve`` (a run's fit) and ``fit_least_squares`` (``hnn.fit_least_squares``);
 - ``sindy``: pysindy (optional extra ``sindy``) wrapped as a field model.

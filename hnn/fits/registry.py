@@ -14,8 +14,9 @@ from dataclasses import dataclass
 from ..names import FITS as NAMES
 from ..specs import ModelSpec
 
-# the kinds whose field is linear in the last layer's weights: H = phi . c (hnn), T + V (separable), phi C (baseline)
-LINEAR_KINDS = ("hnn", "separable", "baseline")
+# the kinds whose field is linear in the last layer's weights: H = phi . c (hnn), T + V (separable), phi C (baseline),
+# and the pair sum of V(r) = phi(r) . c with inverse masses (pairwise: hnn.fits.radial)
+LINEAR_KINDS = ("hnn", "separable", "baseline", "pairwise")
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,9 @@ def build(spec: ModelSpec):
     from .features import Library, TanhFeatures, terms
     from .models import FittedField, FittedHNN, FittedSeparable
     row = check(spec.kind, spec.fit)
+    if spec.kind == "pairwise":         # radial features of the pairs' distances (hnn.fits.radial)
+        from .radial import build_pair
+        return build_pair(spec)
     dim, n = spec.input_dim, (spec.input_dim or 0) // 2
     if not isinstance(dim, int) or dim < 2 or (spec.kind != "baseline" and dim % 2):
         raise ValueError(f"--fit {spec.fit} needs the state's width x = [q, p], got input_dim={dim!r}")

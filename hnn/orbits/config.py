@@ -1,10 +1,11 @@
-"""The orbit tasks' run config, without torch: a ``train.py``'s ``--help`` reads it (and the
+"""The orbit tasks' run config, without torch: a ``train.py``'s ``--help`` reads it (its bodies, and the
 close-encounter thresholds of ``hnn.orbits.encounters``) before the gravity code (``hnn.orbits.nbody``) loads."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import ClassVar
 
+from ..bodies import Bodies
 from ..config import RunConfig, setting
 from .encounters import MIN_SEPARATION, TASK_MIN_SEPARATION
 
@@ -18,7 +19,14 @@ class OrbitConfig(RunConfig):
                                     f"encounters); 0 keeps them all, as the original did; {MIN_SEPARATION} gives "
                                     "the cleaned dataset", parse=float)
     TASK: ClassVar[str] = ""
+    # the state's layout (the original's: every body's x, then every body's y, in each half); a subclass
+    # declares its count
+    BODIES: ClassVar[Bodies | None] = None
     DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "save_dir", "min_separation")
+
+    def model_facts(self) -> dict:
+        """The task's bodies (``hnn.bodies.Bodies``), which the pair kind reads."""
+        return {} if self.BODIES is None else {"bodies": self.BODIES.to_dict()}
 
     def dataset(self) -> dict:
         from ..tasks import load_task

@@ -82,23 +82,26 @@ def _pair_distances(x: torch.Tensor) -> torch.Tensor:
     return _pair_differences(x).pow(2).sum(-2).sqrt()
 
 
-def _field(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def _field(x: torch.Tensor, softening: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """dx/dt of ``(n, 4B)`` states, and the squared pair distances ``(n, pairs)``.
 
-    a_i = sum_{j != i} (q_j - q_i) / |q_j - q_i|^3 (G = 1, unit masses, no softening); a few
-    whole-batch operations, since the batched integrator calls this once per stage.
+    a_i = sum_{j != i} (q_j - q_i) / (|q_j - q_i|^2 + softening^2)^(3/2) (G = 1, unit masses; the tasks'
+    softening is 0, the original's); a few whole-batch operations, since the batched integrator calls this
+    once per stage.
     """
     n, b = x.shape[0], num_bodies(x)
     d, minus_dt = _incidence(b, x.dtype, x.device)
     diff = x[:, :2 * b].reshape(n, 2, b) @ d               # (n, 2, pairs)
     r2 = (diff * diff).sum(1)                              # (n, pairs)
-    accel = (diff * r2.pow(-1.5).unsqueeze(1)) @ minus_dt  # (n, 2, B): [ax_1..ax_B], [ay_1..ay_B]
+    soft = r2 + softening ** 2 if softening else r2        # exactly the unsoftened arithmetic at 0
+    accel = (diff * soft.pow(-1.5).unsqueeze(1)) @ minus_dt  # (n, 2, B): [ax_1..ax_B], [ay_1..ay_B]
     return torch.cat([x[:, 2 * b:], accel.reshape(n, 2 * b)], dim=1), r2
 
 
-def dynamics(x: torch.Tensor) -> torch.Tensor:
-    """Hamilton's equations ``(..., 4B) -> (..., 4B)``: dq/dt = p, dp/dt = the gravitational acceleration."""
-    dxdt, _ = _field(x.reshape(-1, x.shape[-1]))
+def dynamics(x: torch.Tensor, softening: float = 0.0) -> torch.Tensor:
+    """Hamilton's equations ``(..., 4B) -> (..., 4B)``: dq/dt = p, dp/dt = the gravitational acceleration
+    (Plummer-softened by ``softening``, a length: the potential -1 / sqrt(r^2 + softening^2))."""
+    dxdt, _ = _field(x.reshape(-1, x.shape[-1]), softening)
     return dxdt.reshape(x.shape)
 
 
@@ -107,15 +110,17 @@ def kinetic_energy(x: torch.Tensor) -> torch.Tensor:
     return 0.5 * (x[..., 2 * num_bodies(x):] ** 2).sum(-1)
 
 
-def potential_energy(x: torch.Tensor) -> torch.Tensor:
-    """-sum over all pairs i < j of 1 / |q_i - q_j|, shape ``(...)`` (correct for any B, unlike the
-    original 2-body file, which added only the last pair)."""
+def potential_energy(x: torch.Tensor, softening: float = 0.0) -> torch.Tensor:
+    """-sum over all pairs i < j of 1 / |q_i - q_j| (1 / sqrt(|q_i - q_j|^2 + softening^2) where softened),
+    shape ``(...)`` (correct for any B, unlike the original 2-body file, which added only the last pair)."""
+    if softening:
+        return -(_pair_differences(x).pow(2).sum(-2) + softening ** 2).rsqrt().sum(-1)
     return -(1.0 / _pair_distances(x)).sum(-1)
 
 
-def hamiltonian(x: torch.Tensor) -> torch.Tensor:
-    """The total energy H = kinetic + potential, shape ``(...)``."""
-    return kinetic_energy(x) + potential_energy(x)
+def hamiltonian(x: torch.Tensor, softening: float = 0.0) -> torch.Tensor:
+    """The total energy H = kinetic + potential (softened by ``softening``), shape ``(...)``."""
+    return kinetic_energy(x) + potential_energy(x, softening)
 
 
 def total_momentum(x: torch.Tensor) -> torch.Tensor:

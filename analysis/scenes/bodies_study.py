@@ -1,0 +1,133 @@
+"""The bodies study's machinery (``analysis/bodies.py`` is its command): the pair kind fitted on a chain of 8
+springs (experiment-lattice), the same model rolled out on chains of N bodies beside the true forces' leapfrog,
+and the table of docs/bodies.md. See the command's docstring for the metrics."""
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+import torch
+
+import hnn
+from hnn.interface import SplitField
+from hnn.threads import torch_threads
+from hnn_analysis import pages
+from hnn_analysis.provenance import machine
+
+FULL_SIZES = (8, 64, 512, 4096)
+QUICK_SIZES = (8, 32, 128, 256)
+FITS = ("library", "swim", "adam")
+QUICK_FITS = ("library", "swim")
+REPEATS = 5             # timed rollouts per N (the median counts)
+TIMED_STEPS = 20        # leapfrog steps of each timed rollout
+REFERENCE_RTOL = 1e-10
+
+
+def _fit(fit: str, data: dict, seed: int, adam_steps: int, hidden: int):
+    """``(model, seconds, what)`` of the pair kind fitted on the lattice data by ``fit`` (float64)."""
+    config = hnn.tasks.task_config("lattice", {"seed": seed})
+    args = {**config.to_dict(), "kind": "pairwise", "fit": fit, "hidden_dim": hidden, "dtype": "float64"}
+    torch.manual_seed(seed)
+    model = hnn.kinds.model_from_args(args)
+    x, dxdt = (torch.tensor(data[k], dtype=torch.float64) for k in ("x", "dxdt"))
+    with torch_threads(1):
+        if fit == "adam":
+            stats = hnn.train(model, x, dxdt, total_steps=adam_steps, batch_size=200, seed=seed, weight_decay=0.0,
+                              balance="off", units="off", progress=False)
+            return model.eval(), stats["seconds"], f"{adam_steps + 1} Adam steps, final loss {stats['train_loss'][-1]:.2e}"
+        stats = hnn.fits.solve(model, x, dxdt, fit=fit, seed=seed, progress=False)
+    what = stats["fit"].get("equation") or f"{hidden} sampled radial neurons"
+    return model.eval(), stats["seconds"], f"{what}; train loss {stats['train_loss'][0]:.2e}"
+
+
+def _true_field(data_module) -> SplitField:
+    """The lattice's true field, split as a leapfrog reads it (dT/dp = p, dV/dq in O(N))."""
+    return SplitField(data_module.dynamics, lambda p: p, data_module.potential_gradient)
+
+
+def _seconds_per_step(field, x0: torch.Tensor, dt: float) -> float:
+    t = np.arange(TIMED_STEPS + 1) * dt
+    times = []
+    with torch.no_grad():
+        hnn.rollout(field, x0, t[:3], method="leapfrog", dt=dt)          # warm-up: first-call setup
+        for _ in range(REPEATS):
+            tic = time.perf_counter()
+            hnn.rollout(field, x0, t, method="leapfrog", dt=dt)
+            times.append(time.perf_counter() - tic)
+    return statistics.median(times) / TIMED_STEPS
+
+
+def _errors(path: torch.Tensor, reference: torch.Tensor, energy, count: int) -> dict:
+    """Energy error per body (max over t, mean over starts) and the rollout error at the horizon."""
+    H = energy(path.reshape(-1, path.shape[-1])).reshape(path.shape[:2])
+    per_body = ((H - H[:, :1]).abs().max(dim=1).values / count).mean()
+    end, ref = path[:, -1], reference[:, -1]
+    rollout = (torch.linalg.vector_norm(end - ref, dim=1) / torch.linalg.vector_norm(ref, dim=1)).mean()
+    return {"energy_per_body": float(per_body), "rollout": float(rollout)}
+
+
+def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_steps: int, hidden: int) -> dict:
+    data_module = hnn.load_task("lattice")
+    data = hnn.tasks.task_config("lattice", {"seed": seed}).dataset()
+    models = {}
+    for fit in fits:
+        model, seconds, what = _fit(fit, data, seed, adam_steps, hidden)
+        models[fit] = model
+        print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
+        models[fit + ":meta"] = {"seconds": seconds, "what": what}
+    truth = _true_field(data_module)
+    t = np.linspace(0.0, horizon, int(round(horizon / dt)) + 1)
+    rows = []
+    with torch_threads(1):
+        for count in sizes:
+            rng = np.random.RandomState(seed + 1000)
+            x0 = torch.tensor(np.stack([data_module.random_config(rng, count) for _ in range(starts)]))
+            with torch.no_grad():
+                reference = hnn.rollout(data_module.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
+                                        atol=REFERENCE_RTOL)
+                true_path = hnn.rollout(truth, x0, t, method="leapfrog", dt=dt)
+            row = {"N": count, "true": {**_errors(true_path, reference, data_module.hamiltonian, count),
+                                        "seconds_per_step": _seconds_per_step(truth, x0, dt)}}
+            for fit in fits:
+                with torch.no_grad():
+                    path = hnn.rollout(models[fit].field, x0, t, method="leapfrog", dt=dt)
+                row[fit] = {**_errors(path, reference, data_module.hamiltonian, count),
+                            "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
+            rows.append(row)
+            print(_row_line(row, fits), flush=True)
+    return {"rows": rows, "fits": {fit: models[fit + ":meta"] for fit in fits},
+            "settings": {"sizes": list(sizes), "fits": list(fits), "seed": seed, "starts": starts, "dt": dt,
+                         "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
+                         "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
+                         "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1}}
+
+
+def _row_line(row: dict, fits) -> str:
+    cells = [f"N={row['N']}", f"true: E/N {row['true']['energy_per_body']:.2e} "
+                              f"err {row['true']['rollout']:.2e} {row['true']['seconds_per_step'] * 1e3:.3f} ms"]
+    cells += [f"{fit}: E/N {row[fit]['energy_per_body']:.2e} err {row[fit]['rollout']:.2e} "
+              f"{row[fit]['seconds_per_step'] * 1e3:.3f} ms" for fit in fits]
+    return " | ".join(cells)
+
+
+def table(results: dict) -> str:
+    """The page's section: how each fit was found, then one table per fit against N with the true forces beside."""
+    meta, settings = results["meta"], results["settings"]
+    lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta.get('torch', '?')}, one thread") + ".", "",
+             f"Fitted on a chain of {settings['trained_on']} bodies (seed {settings['seed']}); each N rolled out from "
+             f"{settings['starts']} starts by leapfrog at dt = {settings['dt']:g} to t = {settings['horizon']:g}, "
+             f"float64; reference DOP853 at rtol {settings['reference_rtol']:g}.", ""]
+    for fit, how in results["fits"].items():
+        lines.append(f"- `{fit}` ({how['seconds']:.2f} s to fit): {how['what']}")
+    for fit in settings["fits"]:
+        lines += ["", f"**{fit}**", "",
+                  "| N | energy error / body | true forces' | rollout error | true forces' | ms / step | true forces' "
+                  "| ratio |", "|---|---|---|---|---|---|---|---|"]
+        for row in results["rows"]:
+            mine, true = row[fit], row["true"]
+            lines.append(f"| {row['N']} | {mine['energy_per_body']:.2e} | {true['energy_per_body']:.2e} | "
+                         f"{mine['rollout']:.2e} | {true['rollout']:.2e} | {mine['seconds_per_step'] * 1e3:.3f} | "
+                         f"{true['seconds_per_step'] * 1e3:.3f} | "
+                         f"{mine['seconds_per_step'] / true['seconds_per_step']:.1f}x |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,203 @@
+"""The pair kind fitted by least squares: V(r) = sum_k c_k phi_k(r) over radial features, 1/m per species,
+each found by one linear solve of dx/dt (``hnn.fits.fitting.solve``), as the other fits are.
+
+H = sum_i |p_i|^2 a_s(i) / 2 + sum over pairs sum_k c_k phi_k(r_ij) (+ a constant). dq_i/dt = a_s(i) p_i is
+linear in the inverse masses a, and dp_i/dt = -sum_k c_k sum_j phi_k'(r_ij) (q_i - q_j) / r_ij is linear in c:
+two problems, as the separable fit's T and V. The features:
+
+- ``RadialLibrary``: terms written out (``RADIAL_TERMS``: r^k and r^-k for k = 1..3, exp(-r), the
+  Lennard-Jones r^-6 and r^-12), thresholded as the library fit is, so V prints as an equation of r;
+- sampled radial neurons, tanh(w r + b) (``hnn.fits.features.TanhFeatures`` on one input, r), drawn by
+  SWIM from pairs of observed distances or by ELM (``--fit swim``, ``--fit elm``).
+
+The pair geometry is the pair kind's (``hnn.models.pair``); the layout the task's (``hnn.bodies.Bodies``).
+States ``(rows, 2 N dim)``, float64.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ..bodies import Bodies
+from ..interface import Model
+from ..models.pair import check_pair_memory, pair_gradient, pair_index, separations
+from .features import TanhFeatures
+from .models import Part
+
+# name -> (V's term, its derivative d/dr): the radial library
+RADIAL_TERMS = {
+    "r": (lambda r: r, lambda r: torch.ones_like(r)),
+    "r^2": (lambda r: r ** 2, lambda r: 2 * r),
+    "r^3": (lambda r: r ** 3, lambda r: 3 * r ** 2),
+    "1/r": (lambda r: 1 / r, lambda r: -1 / r ** 2),
+    "1/r^2": (lambda r: r ** -2, lambda r: -2 * r ** -3),
+    "1/r^3": (lambda r: r ** -3, lambda r: -3 * r ** -4),
+    "exp(-r)": (lambda r: torch.exp(-r), lambda r: -torch.exp(-r)),
+    "1/r^6": (lambda r: r ** -6, lambda r: -6 * r ** -7),
+    "1/r^12": (lambda r: r ** -12, lambda r: -12 * r ** -13),
+}
+
+
+class RadialLibrary(nn.Module):
+    """The radial terms ``RADIAL_TERMS``: values and d/dr ``(rows, terms)`` at distances ``r`` ``(rows, 1)``."""
+
+    def __init__(self):
+        super().__init__()
+        self.width = len(RADIAL_TERMS)
+
+    def forward(self, r: torch.Tensor) -> torch.Tensor:
+        return torch.cat([value(r) for value, _ in RADIAL_TERMS.values()], dim=1)
+
+    def derivative(self, r: torch.Tensor) -> torch.Tensor:
+        return torch.cat([slope(r) for _, slope in RADIAL_TERMS.values()], dim=1)
+
+    def names(self) -> list[str]:
+        return list(RADIAL_TERMS)
+
+
+def _derivative(features: nn.Module, r: torch.Tensor) -> torch.Tensor:
+    """d phi_k / dr ``(rows, width)`` at ``r`` ``(rows, 1)``."""
+    if isinstance(features, TanhFeatures):
+        return features.slopes(r) * features.weight[:, 0]
+    return features.derivative(r)
+
+
+def _frozen(*shape) -> nn.Parameter:
+    return nn.Parameter(torch.zeros(*shape, dtype=torch.float64), requires_grad=False)
+
+
+class FittedPair(Model):
+    """The pair kind's fitted model: V(r) = phi(r) . coef over ``features`` (``RadialLibrary`` or a
+    ``TanhFeatures`` of one input), inverse masses ``inverse_mass`` ``(species,)``, for ``bodies``."""
+    conservative = True
+    separable = True
+
+    def __init__(self, bodies: Bodies, features: nn.Module):
+        super().__init__()
+        self.bodies = Bodies.from_dict(bodies)
+        if self.bodies.external:
+            raise ValueError("the least-squares pair fit has no one-body field U(q_i): fit this scene with "
+                             "--fit adam, or declare Bodies(external=False)")
+        self.input_dim = self.bodies.width
+        self.features = features
+        self.coef, self.offset = _frozen(features.width), _frozen(())
+        self.inverse_mass = _frozen(self.bodies.num_species)
+
+    def _geometry(self, q_half: torch.Tensor):
+        q = self.bodies.bodywise(q_half)
+        i, j = pair_index(q.shape[1], self.bodies.pairs, q.device)
+        check_pair_memory(len(q), len(i), 2 * self.features.width + 2 * self.bodies.dim, q.element_size())
+        d, r = separations(q, i, j)
+        return q, i, j, d, r
+
+    def _inverse_masses(self, count: int) -> torch.Tensor:
+        return self.inverse_mass[torch.tensor(self.bodies.labels(count))]
+
+    def radial(self, r: torch.Tensor) -> torch.Tensor:
+        """V(r) of distances ``r`` (any shape), the same shape (without the constant)."""
+        return (self.features(r.reshape(-1, 1)) @ self.coef).reshape(r.shape)
+
+    def kinetic(self, p_half: torch.Tensor) -> torch.Tensor:
+        p = self.bodies.bodywise(p_half)
+        return ((p * p).sum(dim=2) * self._inverse_masses(p.shape[1]) / 2).sum(dim=1)
+
+    def potential(self, q_half: torch.Tensor) -> torch.Tensor:
+        _, _, _, _, r = self._geometry(q_half)
+        return self.radial(r).sum(dim=1)
+
+    def hamiltonian(self, x: torch.Tensor) -> torch.Tensor:
+        """H ``(rows,)`` at ``x`` ``(rows, 2 N dim)``, any N."""
+        half = x.shape[1] // 2
+        return self.kinetic(x[:, half:]) + self.potential(x[:, :half]) + self.offset
+
+    def kinetic_gradient(self, p_half: torch.Tensor) -> torch.Tensor:
+        p = self.bodies.bodywise(p_half)
+        return self.bodies.flat(p * self._inverse_masses(p.shape[1])[:, None])
+
+    def potential_gradient(self, q_half: torch.Tensor) -> torch.Tensor:
+        q, i, j, d, r = self._geometry(q_half)
+        dVdr = (_derivative(self.features, r.reshape(-1, 1)) @ self.coef).reshape(r.shape)
+        return self.bodies.flat(pair_gradient(dVdr, d, r, i, j, q.shape[1]))
+
+    def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        self.bodies.count_of(x.shape[1])
+        half = x.shape[1] // 2
+        return torch.cat([self.kinetic_gradient(x[:, half:]), -self.potential_gradient(x[:, :half])], dim=1)
+
+    # -- the least-squares problems ------------------------------------------------------------------
+
+    def _kinetic_design(self, x, y, weights):
+        half = x.shape[1] // 2
+        p = self.bodies.bodywise(x[:, half:])
+        labels = torch.nn.functional.one_hot(torch.tensor(self.bodies.labels(p.shape[1])),
+                                             self.bodies.num_species).to(x.dtype)          # (N, species)
+        # column s of component (body b, axis a): p_ba where body b is of species s
+        A = p[:, :, :, None] * labels[None, :, None, :]                                    # (rows, N, dim, S)
+        A = torch.stack([self.bodies.flat(A[..., s]) for s in range(A.shape[-1])], dim=2)
+        return _weighted(A.reshape(-1, A.shape[-1]), y[:, :half].reshape(-1, 1), weights, range(half), half)
+
+    def _potential_design(self, x, y, weights):
+        half = x.shape[1] // 2
+        q, i, j, d, r = self._geometry(x[:, :half])
+        slopes = _derivative(self.features, r.reshape(-1, 1)).reshape(*r.shape, -1)        # (rows, P, K)
+        columns = [-self.bodies.flat(pair_gradient(slopes[..., k], d, r, i, j, q.shape[1]))
+                   for k in range(slopes.shape[-1])]
+        A = torch.stack(columns, dim=2)                                                    # (rows, N dim, K)
+        return _weighted(A.reshape(-1, A.shape[-1]), y[:, half:].reshape(-1, 1), weights,
+                         range(half, x.shape[1]), half)
+
+    def _distances(self, x: torch.Tensor) -> torch.Tensor:
+        """Every pair's distance in ``x`` ``(rows * P, 1)``: what sampled radial neurons are drawn from."""
+        return self._geometry(x[:, :x.shape[1] // 2])[4].reshape(-1, 1)
+
+    def _assign(self, target):
+        def assign(solution):
+            with torch.no_grad():
+                target.copy_(solution[:, 0])
+        return assign
+
+    def parts(self) -> list[Part]:
+        return [Part(nn.Identity(), lambda x: x, self._kinetic_design, self._assign(self.inverse_mass),
+                     self.bodies.num_species, name="T"),
+                Part(self.features, self._distances, self._potential_design, self._assign(self.coef),
+                     self.features.width, name="V")]
+
+    def anchor(self, x0: torch.Tensor, H0) -> None:
+        """Fix the constant so that H(x0) = H0 (``x0`` ``(1, 2 N dim)``)."""
+        with torch.no_grad():
+            self.offset.copy_(torch.as_tensor(H0, dtype=torch.float64).reshape(())
+                              - (self.hamiltonian(x0).reshape(()) - self.offset))
+
+    def masses(self) -> torch.Tensor:
+        """The fitted mass of each species ``(species,)`` (1 / the inverse mass)."""
+        return 1 / self.inverse_mass
+
+    def equation(self, digits: int = 4) -> str:
+        """``'H = sum p^2/(2 m) - 1 sum 1/r, m = 1'``: the kinetic energy with its fitted masses, and the pair
+        sum of the library's nonzero terms (a sampled fit's neurons have no formula: their count)."""
+        masses = ", ".join(f"{float(m):.{digits}g}" for m in self.masses())
+        ending = f", m = {masses}" + (f" by species {list(self.bodies.species)}" if self.bodies.species else "")
+        if isinstance(self.features, TanhFeatures):
+            return f"H = sum p^2/(2 m) + sum V(r), V a sum of {self.features.width} tanh(w r + b){ending}"
+        pairs = [(float(c), name) for c, name in zip(self.coef.tolist(), self.features.names()) if c != 0]
+        text = "".join(f" {'-' if c < 0 else '+'} {abs(c):.{digits}g} sum {name}" for c, name in pairs)
+        return f"H = sum p^2/(2 m){text}{ending}"
+
+
+def _weighted(A, Y, weights, components, per_state):
+    """``(A, Y)`` with each row times sqrt(weight of its component) (rows ordered state, component)."""
+    if weights is None:
+        return A, Y
+    w = torch.as_tensor(weights, dtype=A.dtype)[list(components)].sqrt().repeat(len(A) // per_state)[:, None]
+    return A * w, Y * w
+
+
+def build_pair(spec) -> FittedPair:
+    """The untrained fitted pair model of ``spec`` (a ``hnn.specs.ModelSpec`` of kind ``pairwise``): the radial
+    library for ``fit='library'``, else ``hidden_dim`` sampled radial neurons; zeros until solved."""
+    if spec.bodies is None:
+        raise ValueError("the pairwise kind reads the state as bodies and needs the task's layout (ModelSpec.bodies): "
+                         "give the task's Config a BODIES = hnn.bodies.Bodies(...)")
+    if spec.fit == "library":
+        return FittedPair(spec.bodies, RadialLibrary())
+    return FittedPair(spec.bodies, TanhFeatures(spec.hidden_dim, 1))

@@ -1,0 +1,152 @@
+"""The pair kind: H = sum_i |p_i|^2 / (2 m_i) + sum_{i<j} V(|q_i - q_j|) (+ sum_i U(q_i) where the scene has a field).
+
+One learned function V of one distance stands for every pair, so the model is invariant under translation,
+rotation and the exchange of identical bodies by construction, and one set of weights reads any number of
+bodies N (the state's width 2 N dim tells N; ``hnn.bodies.Bodies`` tells the order). Masses are learned, one
+per species (one for bodies that are all alike). H is separable, T(p) + V(q): explicit leapfrog and
+yoshida4 are symplectic for the learned model.
+
+The pair geometry (``pair_index``, ``separations``, ``pair_gradient``) is public: the least-squares pair fit
+(``hnn.fits.radial``) and the scenes' true forces read the same. A step costs O(pairs): N(N-1)/2 for
+``pairs='all'`` (gravity), N - 1 for ``pairs='neighbours'`` (neighbours along a chain of springs).
+
+Shapes: states ``(batch, 2 N dim)``; positions and momenta per body ``(batch, N, dim)``; per-pair arrays
+``(batch, P)``; H ``(batch,)``.
+"""
+from __future__ import annotations
+
+import functools
+
+import torch
+from torch import nn
+
+from ..bodies import Bodies
+from ..interface import Model, gradient_of
+from .mlp import MLP
+
+PAIR_BYTES = 2 ** 32     # the per-pair arrays of one field call are kept within this (4 GiB); more is refused
+
+
+class TooManyPairsError(MemoryError):
+    """A field call over more pairs than ``PAIR_BYTES`` holds: the message says how much it needs and the fix."""
+
+
+@functools.lru_cache(maxsize=32)
+def _index(count: int, pairs: str) -> tuple[torch.Tensor, torch.Tensor]:
+    if pairs == "neighbours":
+        i = torch.arange(count - 1)
+        return i, i + 1
+    return tuple(torch.triu_indices(count, count, offset=1))
+
+
+def pair_index(count: int, pairs: str = "all", device=None) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(i, j)`` ``(P,)`` each, i < j: every pair of ``count`` bodies (``'all'``) or neighbours along the index (``'neighbours'``)."""
+    i, j = _index(count, pairs)
+    return i.to(device), j.to(device)
+
+
+def check_pair_memory(batch: int, pairs: int, per_pair: int, itemsize: int) -> None:
+    """A ``TooManyPairsError`` if ``batch`` states of ``pairs`` pairs, ``per_pair`` numbers each, pass ``PAIR_BYTES``."""
+    need = batch * pairs * per_pair * itemsize
+    if need > PAIR_BYTES:
+        raise TooManyPairsError(
+            f"{batch} states of {pairs} interacting pairs need about {need / 2 ** 30:.1f} GiB for one field call "
+            f"(limit hnn.models.pair.PAIR_BYTES = {PAIR_BYTES / 2 ** 30:.0f} GiB): evaluate fewer states at once "
+            "(a smaller batch), or declare a short-range scene's neighbours (Bodies(pairs='neighbours'))")
+
+
+def separations(q: torch.Tensor, i: torch.Tensor, j: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(d, r)``: d = q_i - q_j ``(batch, P, dim)`` and r = |d| ``(batch, P)`` of positions ``q`` ``(batch, N, dim)``."""
+    d = q[:, i] - q[:, j]
+    return d, torch.linalg.vector_norm(d, dim=-1)
+
+
+def pair_gradient(dVdr: torch.Tensor, d: torch.Tensor, r: torch.Tensor, i: torch.Tensor, j: torch.Tensor,
+                  count: int) -> torch.Tensor:
+    """dV/dq ``(batch, N, dim)`` of V = sum over pairs of V(r): V'(r) d / r onto body i, minus it onto body j."""
+    push = (dVdr / r)[..., None] * d
+    out = push.new_zeros(push.shape[0], count, push.shape[2])
+    return out.index_add(1, i, push).index_add(1, j, -push)
+
+
+class PairHNN(Model):
+    """H = sum |p_i|^2 / (2 m_s(i)) + sum_{pairs} V(r_ij) [+ sum U(q_i)], V an MLP of (r, 1/r), for ``bodies``.
+
+    ``hidden_dim``, ``nonlinearity``: the MLPs'. ``masses(count)`` ``(count,)``: exp of a learned log-mass per
+    species. The input 1/r beside r lets one MLP reach the inverse-distance tail of gravity and the walls of
+    stiff potentials without learning a division."""
+    conservative = True
+    separable = True
+
+    def __init__(self, bodies: Bodies, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+        super().__init__()
+        self.bodies = Bodies.from_dict(bodies)
+        self.input_dim, self.hidden_dim = self.bodies.width, hidden_dim
+        self.radial_net = MLP(2, hidden_dim, 1, nonlinearity)
+        self.log_mass = nn.Parameter(torch.zeros(self.bodies.num_species))
+        self.external_net = MLP(self.bodies.dim, hidden_dim, 1, nonlinearity) if self.bodies.external else None
+
+    def masses(self, count: int) -> torch.Tensor:
+        """The mass of each of ``count`` bodies ``(count,)``, by its species."""
+        labels = torch.tensor(self.bodies.labels(count), device=self.log_mass.device)
+        return self.log_mass.exp()[labels]
+
+    def radial(self, r: torch.Tensor) -> torch.Tensor:
+        """V(r) of distances ``r`` (any shape), the same shape."""
+        flat = r.reshape(-1, 1)
+        return self.radial_net(torch.cat([flat, 1 / flat], dim=1)).reshape(r.shape)
+
+    def _pairs(self, q: torch.Tensor):
+        count = q.shape[1]
+        i, j = pair_index(count, self.bodies.pairs, q.device)
+        check_pair_memory(len(q), len(i), 3 * self.hidden_dim + 2 * self.bodies.dim,
+                          q.element_size())
+        return i, j
+
+    def kinetic(self, p_half: torch.Tensor) -> torch.Tensor:
+        """T ``(batch,)`` of one half ``(batch, N dim)``."""
+        p = self.bodies.bodywise(p_half)
+        return ((p * p).sum(dim=2) / (2 * self.masses(p.shape[1]))).sum(dim=1)
+
+    def potential(self, q_half: torch.Tensor) -> torch.Tensor:
+        """V ``(batch,)`` of one half ``(batch, N dim)``: the pairs' V(r), and U(q_i) where the scene has a field."""
+        q = self.bodies.bodywise(q_half)
+        i, j = self._pairs(q)
+        _, r = separations(q, i, j)
+        out = self.radial(r).sum(dim=1)
+        if self.external_net is not None:
+            out = out + self.external_net(q.reshape(-1, q.shape[2])).reshape(q.shape[:2]).sum(dim=1)
+        return out
+
+    def hamiltonian(self, x: torch.Tensor) -> torch.Tensor:
+        """H ``(batch,)`` at ``x`` ``(batch, 2 N dim)``, any N."""
+        half = self._half(x)
+        return self.kinetic(x[:, half:]) + self.potential(x[:, :half])
+
+    def kinetic_gradient(self, p_half: torch.Tensor) -> torch.Tensor:
+        """dT/dp = p_i / m_i ``(batch, N dim)``."""
+        p = self.bodies.bodywise(p_half)
+        return self.bodies.flat(p / self.masses(p.shape[1])[:, None])
+
+    def potential_gradient(self, q_half: torch.Tensor) -> torch.Tensor:
+        """dV/dq ``(batch, N dim)``: each pair's V'(r) along its separation, O(pairs); U's gradient where present."""
+        q = self.bodies.bodywise(q_half)
+        i, j = self._pairs(q)
+        d, r = separations(q, i, j)
+        dVdr = gradient_of(lambda rr: self.radial(rr).sum(dim=1), r)
+        grad = pair_gradient(dVdr, d, r, i, j, q.shape[1])
+        if self.external_net is not None:
+            flat = q.reshape(-1, q.shape[2])
+            grad = grad + gradient_of(lambda z: self.external_net(z)[:, 0], flat).reshape(q.shape)
+        return self.bodies.flat(grad)
+
+    def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
+        """dx/dt = [dT/dp, -dV/dq] ``(batch, 2 N dim)``."""
+        half = self._half(x)
+        return torch.cat([self.kinetic_gradient(x[:, half:]), -self.potential_gradient(x[:, :half])], dim=1)
+
+    def _half(self, x: torch.Tensor) -> int:
+        if x.dim() != 2:
+            raise ValueError(f"expected states x of shape (batch, 2 N {self.bodies.dim}), got {tuple(x.shape)}")
+        self.bodies.count_of(x.shape[1])
+        return x.shape[1] // 2
