@@ -34,7 +34,7 @@ def training_cost(task: str, args: dict, bursts: int = BURSTS, burst_seconds: fl
     prep = hnn.runs.prepare(config, _DATASETS[data_key])
     if config.fit != "adam":
         return _fit_cost(config, prep)
-    model = prep.fit_model
+    model = prep.canonical_model
     options = prep.train_kwargs(print_every=10 ** 9, verbose=False, progress=False, checkpoint=None)
     start = copy.deepcopy(model.state_dict())
 

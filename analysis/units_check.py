@@ -4,7 +4,7 @@
 
 The default moved from ``--units off`` to ``--units auto``, which rescales where the RMS of q or p lies
 outside [0.1, 10] or that of dq/dt or dp/dt outside [0.01, 100] (``hnn.units.AUTO_FAR``), or where the
-columns of one part spread in size over 10x (``hnn.units.SPREAD``; angles aside). A published
+columns of one part spread in size over 10x (``hnn.units.COLUMN_SPREAD``; angles aside). A published
 number moves only where auto rescales its run's data, so this builds the data of every run the published
 tables train and prints their sizes: each task's defaults, the paper's rows (``analysis/reproduce.py``'s
 plan), the peers' tables on the chains (``analysis/peers.py``'s plan: CHNN's protocol at N = 1, 2, 3, 5 and
@@ -21,7 +21,7 @@ import sys
 
 import hnn
 from hnn.specs import run_specs
-from hnn.units import AUTO_FAR, SPREAD, auto_bounds, rescale_reason, sized_arrays, sizes, spreads
+from hnn.units import AUTO_FAR, COLUMN_SPREAD, auto_bounds, rescale_reason, sized_arrays, sizes, spreads
 from hnn_analysis.chains import peer_plan
 from hnn_analysis.paper import study
 
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     rows = check(args.quick)
     print(f"--units auto leaves {auto_bounds()} (hnn.units.AUTO_FAR = {AUTO_FAR}) whose columns' sizes spread "
-          f"by {SPREAD:g}x at most within each part\n")
+          f"by {COLUMN_SPREAD:g}x at most within each part\n")
     print("| training data | RMS q | RMS p (or qdot) | RMS dq/dt | RMS dp/dt | widest spread | --units auto |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for row in rows:

@@ -23,8 +23,10 @@ nothing of each other.
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
 - training: the objectives (``hnn.objectives``, a folder: the derivative fit, trajectory snippets,
-  DGNet's pairs, a map's step), the kinds registry, the loop, grouped training, evaluation, datasets,
-  and the least-squares fits beside the loop (``hnn.fits``, a folder: ``hnn.fit_least_squares``);
+  DGNet's pairs, a map's step), the kinds registry, ``hnn.train``, the ways of finding a run's weights
+  (``hnn.trainers``, a folder: the lone loop, the group loop, its closed-form and vmap groups, the
+  least-squares solve's entry), evaluation, datasets, and the least-squares fits (``hnn.fits``, a folder:
+  ``hnn.fit_least_squares``);
 - runs: config, cli, a ``train.py``'s command, run folders, task discovery;
 - orbits: the orbit tasks' physics and config (``hnn.orbits``, a folder: the gravity of n bodies, the
   close-encounter thresholds, the 2- and 3-body tasks' ``OrbitConfig``);
@@ -50,8 +52,8 @@ _LAYERS = {
              "threads", "progress", "bodies"),
     "integrators": ("integrators",),
     "models": ("models",),
-    "training": ("balance", "units", "training", "objectives", "grouped", "stacked", "kinds", "evaluation",
-                 "datasets", "fits"),
+    "training": ("balance", "units", "training", "trainers", "objectives", "kinds", "evaluation", "datasets",
+                 "fits"),
     "runs": ("config", "cli", "command", "runs", "tasks"),
     "orbits": ("orbits",),
     "sweeps": ("sweeps",),
@@ -66,7 +68,7 @@ _PUBLIC = {
     "models": ("HNN", "MLP", "PixelHNN", "SeparableHNN", "DissipativeHNN", "MechanicalHNN", "ConstrainedHNN",
                "build_model"),
     "metrics": ("derivative_mse", "energy_mse"),
-    "objectives": ("DerivativeObjective", "FitOptions", "Objective"),
+    "objectives": ("DerivativeObjective", "LoopOptions", "Objective"),
     "kinds": ("MODEL_KINDS", "OBJECTIVES"),
     "training": ("train",),
     "fits": ("FITS", "fit_least_squares"),
@@ -85,7 +87,7 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .models import (HNN, MLP, PixelHNN, SeparableHNN, DissipativeHNN, MechanicalHNN,  # noqa: F401
                          ConstrainedHNN, build_model)
     from .metrics import derivative_mse, energy_mse  # noqa: F401
-    from .objectives import DerivativeObjective, FitOptions, Objective  # noqa: F401
+    from .objectives import DerivativeObjective, LoopOptions, Objective  # noqa: F401
     from .kinds import MODEL_KINDS, OBJECTIVES  # noqa: F401
     from .training import train  # noqa: F401
     from .fits import FITS, fit_least_squares  # noqa: F401

@@ -33,7 +33,7 @@ from .interface import Model, declared, gradient_of, step_map_of
 from .errors import BudgetError, DivergenceError
 from .metrics import energy_mse, path_errors
 from .integrators.solvers import get_solver
-from .stacked import group_field, group_options
+from .integrators.groups import group_field, group_options
 from .progress import Ticker
 from .threads import torch_threads
 
@@ -285,7 +285,7 @@ def _model_rollout(model, run, x0: torch.Tensor, observed: str) -> torch.Tensor:
 
 def _group_rollout(models: list, run, x0: torch.Tensor, observed: str, protocol) -> list[torch.Tensor]:
     """``_model_rollout`` of each model of a group (one kind and shape): where the protocol's method is
-    ``row_wise``, every model's trials in one integration (``hnn.stacked.group_field``: each row its
+    ``row_wise``, every model's trials in one integration (``hnn.integrators.groups.group_field``: each row its
     own steps, so each path is its model's own up to the batched products' rounding); otherwise one
     model after another. ``run(field, start, group=G, **options)`` integrates ``(G * trials, dim)`` rows."""
     if not get_solver(protocol.method).row_wise:
@@ -317,7 +317,7 @@ def evaluate_energy(system, models: dict, protocol: EnergyProtocol, dataset: dic
             mapped from ``observed`` coordinates into it and its path back (``hnn.Model.state_from``).
             A label may name a group, a list of models of one kind and shape (a setting's seeds):
             their paths share one integration where the protocol's method is ``row_wise`` (each
-            row its own steps: ``hnn.stacked.group_field``) and the truth is integrated once for all.
+            row its own steps: ``hnn.integrators.groups.group_field``) and the truth is integrated once for all.
             A learned map (``hnn.Model.steps``) is scored at its own step over the protocol's span, the
             truth on those times; its ``mse`` is None, with ``why``, where the protocol cannot apply.
         dataset: the task's dataset, for ``'test_segment'`` protocols (``test_x``, ``test_t``).

@@ -130,7 +130,7 @@ class Model(nn.Module):
     """The interface of every model kind; subclasses set the declarations and ``time_derivative``
     (a learned map, ``steps``: ``step``, ``inverse`` and ``dt`` instead).
 
-    Groups run a kind under ``torch.vmap`` (``hnn.stacked``: many seeds' models as one batched model,
+    Groups run a kind under ``torch.vmap`` (``hnn.trainers.vmap``: many seeds' models as one batched model,
     in training and in rollouts), where a tensor has no value to branch on: any check that reads one
     (``bool(t)``, ``t.item()``, ``if (x > 0).any()``, a shape chosen by a mask) must be skipped where
     ``hnn.modes.in_model_axis()`` is true, as ``hnn.fits.features.Library.gradient`` does. A kind that

@@ -75,8 +75,8 @@ class ModelKind:
     README, docs/python.md); ``family``: None for a kind any task's ``--model`` may take, or the family
     whose tasks alone take it (``'pixel'``: its name is ``pixel-<model>``, and the pixel task's
     ``KIND_PREFIX`` adds it); ``grouping``: how a sweep trains its seeds as one program
-    (``hnn.names.GROUPINGS``: ``'closed_form'``, the hand-written gradients of ``hnn.grouped``;
-    ``'vmap'``, any kind under ``torch.vmap`` over stacked weights, ``hnn.stacked``, whose contract
+    (``hnn.names.GROUPINGS``: ``'closed_form'``, the hand-written gradients of ``hnn.trainers.closed_form``;
+    ``'vmap'``, any kind under ``torch.vmap`` over stacked weights, ``hnn.trainers.vmap``, whose contract
     ``hnn.Model`` states; ``'alone'``, one at a time). Only ``model``, ``build`` and ``make_objective``
     import anything."""
     source: type | str

@@ -38,7 +38,7 @@ def frozen_kernels() -> dict | None:
 
 @contextlib.contextmanager
 def model_axis():
-    """Within this context models run under ``torch.func.vmap`` over a model axis (``hnn.stacked``):
+    """Within this context models run under ``torch.func.vmap`` over a model axis (``hnn.trainers.vmap``):
     ``torch.autograd.grad`` does not work there (pytorch/functorch#801), so ``hnn.interface.gradient_of``
     and the models' own second derivatives take ``torch.func``'s, and a check that reads a tensor's
     value in Python (a singular d2L/dqdot2, a state off its constraints, a blown-up rollout row) is

@@ -8,8 +8,8 @@ keys ``checked`` holds to this list at import (a missing or extra one fails, nam
 is a row of ``hnn.models.mlp``'s ``_NONLINEARITIES``; an init is a branch of ``hnn.models.initialize``;
 a field type picks the outputs of ``hnn.models.hamiltonian.FIELD_ROWS`` (in this order); an objective
 a row of ``hnn.kinds``' ``_OBJECTIVE_CLASSES`` (imported on first use); a derivative loss a row of
-``hnn.training.DERIVATIVE_LOSSES``; an optimizer a row of ``hnn.training.OPTIMIZERS``; a schedule is a
-branch of ``hnn.training.learning_rate``; a dtype is torch's of that name; a unit mode is a branch of
+``hnn.training.DERIVATIVE_LOSSES``; an optimizer a row of ``hnn.trainers.loop.OPTIMIZERS``; a schedule is a
+branch of ``hnn.trainers.loop.learning_rate``; a dtype is torch's of that name; a unit mode is a branch of
 ``hnn.units.run_scales``; an LNN solve a branch of ``hnn.models.LagrangianNN.acceleration``; a fit is a
 row of ``hnn.fits.FITS``; a grouping a way ``hnn.sweeps.sweep`` trains a kind's seeds together. The model
 kinds' names, classes and prose are the rows of ``hnn.kinds.MODEL_KINDS``.
@@ -30,7 +30,7 @@ GROUP_MODES = ("auto", "all", "off")        # which runs a sweep trains as group
 # how a run finds its weights: the training loop, or one least-squares solve (the rows of hnn.fits.FITS)
 FITS = ("adam", "swim", "elm", "library", "sindy")
 # how a sweep trains a kind's seeds as one group (``hnn.kinds.ModelKind.grouping``): the closed-form
-# gradients of hnn.grouped, vmap over stacked weights (hnn.stacked), or each alone
+# gradients of hnn.trainers.closed_form, vmap over stacked weights (hnn.trainers.vmap), or each alone
 GROUPINGS = ("closed_form", "vmap", "alone")
 # the model every command starts from (``hnn.RunConfig``'s --nonlinearity, --hidden_dim, --map_layers), which
 # the learned maps' classes default to as well (``hnn.models.maps``): a map built in Python is the command's

@@ -14,22 +14,25 @@ when the run is saved, when training fails, and by ``--force``.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 import torch
 
 from . import cli
-from .fits import check_config, solve
+from .fits import check_config
 from .io import atomic_folder, check_save_dir, torch_bytes, write_json
 from .kinds import get_kind, model_from_args, model_from_spec
-from .objectives import FitOptions, Objective
+from .objectives import LoopOptions, Objective
 from .specs import run_specs
-from .training import train
+from .trainers.least_squares import solve_prepared
+from .trainers.lone import train_prepared
 from .units import canonical_fit, run_scales, wrap_saved
 
 
@@ -109,10 +112,10 @@ class Prepared:
 
     ``saved``: the args.json it saves (``saved_args``, with ``unit_scales`` and ``loss_weights`` where
     --units and --balance resolved them); ``specs``: ``run_specs(saved)``; ``model``: the model it saves
-    (an ``hnn.units.Rescaled`` where --units rescaled); ``fit_model``: the one that trains (in canonical
+    (an ``hnn.units.Rescaled`` where --units rescaled); ``canonical_model``: the one that trains (in canonical
     units); ``dataset``: the objective's prepared arrays in the user's units; ``x``, ``y`` (the training
-    subset), ``test_x``, ``test_y``: ``fit_model``'s, ``(rows, input_dim)``; ``options``: the objective's
-    ``FitOptions`` for ``fit_model`` (``Objective.train_options``); ``data_seconds``: the dataset's build time
+    subset), ``test_x``, ``test_y``: ``canonical_model``'s, ``(rows, input_dim)``; ``options``: the objective's
+    ``LoopOptions`` for ``canonical_model`` (``Objective.train_options``); ``data_seconds``: the dataset's build time
     (None when given)."""
     config: object
     objective: Objective
@@ -120,14 +123,14 @@ class Prepared:
     saved: dict
     specs: object
     model: torch.nn.Module
-    fit_model: torch.nn.Module
+    canonical_model: torch.nn.Module
     scales: object
     dataset: dict
     x: object
     y: object
     test_x: object
     test_y: object
-    options: FitOptions
+    options: LoopOptions
     data_seconds: float | None
 
     def train_kwargs(self, **overrides) -> dict:
@@ -135,6 +138,22 @@ class Prepared:
         options, --units and --balance already applied (``overrides``: a benchmark's steps, say)."""
         return {**self.specs.training.train_kwargs(), **self.options.train_kwargs(), "units": "off", "balance": "off",
                 "threads": None, **overrides}
+
+
+@contextlib.contextmanager
+def seeded(seed: int, device="cpu") -> Iterator[None]:
+    """Inside this block torch's and numpy's global generators start from ``seed`` (a model's init draws
+    from them: ``hnn.models``); the caller's random state comes back after, however the block ends. On a
+    GPU its generator is forked too."""
+    state = np.random.get_state()
+    cuda = [torch.device(device).index or 0] if torch.device(device).type == "cuda" else []
+    try:
+        with torch.random.fork_rng(devices=cuda):
+            torch.manual_seed(seed)
+            np.random.seed(seed)
+            yield
+    finally:
+        np.random.set_state(state)
 
 
 def prepare(config, dataset=None, objective: Objective | None = None) -> Prepared:
@@ -145,7 +164,12 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
     ``dt`` (the time step of its trajectories); or it is a function of no arguments returning that
     dict, whose time is ``data_seconds``. ``objective`` defaults to ``config.make_objective()``.
     A value the config's flag would refuse raises ValueError before anything is built; the model is
-    drawn from ``config.seed``."""
+    drawn from ``config.seed`` (``seeded``: the caller's random state is left as it was).
+
+    The one resolver of a run's policy: its units (``hnn.units.run_scales``), the balance of its loss
+    (``Objective.train_options``, ``hnn.balance``), how its weights are found (``fit``), its seed and its
+    training subset. Every way of training a config goes through it: a lone run (``run_experiment``), a
+    group's members (``hnn.sweeps.group_runs.train_group``) and the studies."""
     cli.check(config)
     # a least-squares fit refuses what it cannot fit before any data is built
     fit = check_config(config, get_kind(config.kind).coordinates)
@@ -157,27 +181,28 @@ def prepare(config, dataset=None, objective: Objective | None = None) -> Prepare
         raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
     saved = saved_args(config, dataset)
     specs = run_specs(saved)        # the config's, and the data's time step (a learned map's step)
-    torch.manual_seed(config.seed)
-    np.random.seed(config.seed)
-    model = model_from_spec(specs.model, config.device)
+    with seeded(config.seed, config.device):        # the model's init, the caller's random state untouched
+        model = model_from_spec(specs.model, config.device)
     scales = run_scales(specs.objective.units, specs.model.kind, dataset, objective, model)
     if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
         saved["unit_scales"] = scales.to_dict()
         model = wrap_saved(model, saved)
-    fit_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
+    canonical_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
     x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
     x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = objective.train_options(fit_model, specs.objective, fitted)
+    options = objective.train_options(canonical_model, specs.objective, fitted)
     if options.loss_weights is not None:     # what --balance resolved to: the run's loss, recorded
         saved["loss_weights"] = [float(w) for w in options.loss_weights]
-    return Prepared(config, objective, fit, saved, specs, model, fit_model, scales, dataset, x, y, test_x, test_y,
+    return Prepared(config, objective, fit, saved, specs, model, canonical_model, scales, dataset, x, y, test_x, test_y,
                     options, data_seconds)
 
 
-def run_experiment(config, dataset=None, objective: Objective | None = None) -> Path:
+def run_experiment(config, dataset=None, objective: Objective | None = None,
+                   on_step: Callable[[int, int], None] | None = None) -> Path:
     """Train the model that ``config`` (an ``hnn.RunConfig``) describes and save the run; returns
     its folder. Every task and model kind trains here, on what ``prepare(config, dataset, objective)``
-    builds (its arguments: ``prepare``'s); a ``dataset`` given as a function has its time saved as
+    builds (its arguments: ``prepare``'s; ``on_step(done, total)`` after each step of its loop: a sweep's
+    bar, or a study that stops a run by raising); a ``dataset`` given as a function has its time saved as
     ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training loop alone).
     """
     cli.check(config)
@@ -185,20 +210,14 @@ def run_experiment(config, dataset=None, objective: Objective | None = None) -> 
     prep = prepare(config, dataset, objective)
     objective, saved, specs, model, scales, dataset = (prep.objective, prep.saved, prep.specs, prep.model,
                                                        prep.scales, prep.dataset)
-    fit_model, x, y, test_x, test_y, options = prep.fit_model, prep.x, prep.y, prep.test_x, prep.test_y, prep.options
+    x, y, test_x, test_y, options = prep.x, prep.y, prep.test_x, prep.test_y, prep.options
     partial = partial_checkpoint(config)
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        if prep.fit.solved:      # one linear solve (hnn.fits), not a loop: nothing to checkpoint
-            stats = solve(fit_model, x, y, test_x, test_y, **specs.fit.solve_kwargs(),
-                          loss_weights=options.loss_weights)
-            if config.verbose and "equation" in stats["fit"]:
-                print(stats["fit"]["equation"])
-        else:
-            # prepare resolved --units and --balance (on the whole training set, recorded in args.json);
-            # threads=None: the count the run was given (a train.py's --threads, a sweep's share), in args.json
-            stats = train(fit_model, x, y, test_x, test_y, **prep.train_kwargs(checkpoint=partial))
+        # one linear solve (hnn.fits), not a loop: nothing to checkpoint; else the lone loop on what prepare
+        # resolved (--units, --balance on the whole training set, recorded in args.json; the threads it was given)
+        stats = solve_prepared(prep) if prep.fit.solved else train_prepared(prep, checkpoint=partial, on_step=on_step)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise

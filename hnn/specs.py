@@ -100,7 +100,7 @@ class TrainingSpec:
         return cls(**_picked(cls, args))
 
     def train_kwargs(self) -> dict[str, Any]:
-        """``hnn.train``'s keyword arguments (and ``hnn.stacked.fit_stacked``'s of the same names)."""
+        """``hnn.train``'s keyword arguments (and ``hnn.trainers.vmap.train_vmap``'s of the same names)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 

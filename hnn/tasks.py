@@ -203,9 +203,10 @@ def run_dataset(task: str, args: Mapping) -> dict:
     return data
 
 
-def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
+def run_task(task: str, values: Mapping, threads: int | None = None, on_step=None) -> str:
     """Train the run of ``task`` with config ``values`` (a sweep's job, in a worker process or a Ray
-    task; ``threads`` sets torch's thread count first); returns its folder as text."""
+    task; ``threads`` sets torch's thread count first; ``on_step``: ``hnn.run_experiment``'s); returns its
+    folder as text."""
     from .runs import record_divergence, run_experiment     # here: finding and reading tasks loads no torch
     from .threads import torch_threads
 
@@ -213,7 +214,7 @@ def run_task(task: str, values: Mapping, threads: int | None = None) -> str:
     # the caller's thread count comes back afterwards: a library call leaves no global setting changed
     with torch_threads(threads):
         try:
-            return str(run_experiment(config))
+            return str(run_experiment(config, on_step=on_step))
         except DivergenceError as err:
             # recorded here, as it fails: the sweep that reads this outcome may be busy with another's (its
             # on_done) or stopped before it does

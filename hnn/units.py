@@ -62,7 +62,7 @@ from .names import UNITS
 # scales are never exactly 1 and it would move every published number.
 AUTO_FAR = {"q": 10.0, "p": 10.0, "dq/dt": 100.0, "dp/dt": 100.0}
 # the spread of one block's columns (all q, ...) past which one scale cannot serve them all (fit_scales)
-SPREAD = 10.0
+COLUMN_SPREAD = 10.0
 # the state coordinates whose second half is a velocity (its scale s_q / s_t), and those it is a momentum
 VELOCITY_LIKE = ("velocity", "cartesian")
 CANONICAL_LIKE = ("canonical",)
@@ -153,11 +153,11 @@ class UnitScales:
 
 def _one_scale_serves(blocks: list[np.ndarray]) -> bool:
     """Whether one scale per block (all q, all p, ...) serves: within each block the columns' RMS values
-    lie within SPREAD of each other. A column of RMS 0 has no scale of its own: one scale serves then."""
+    lie within COLUMN_SPREAD of each other. A column of RMS 0 has no scale of its own: one scale serves then."""
     spreads = [_column_rms(block) for block in blocks]
     if any(not rms.min() > 0 for rms in spreads):
         return True
-    return all(rms.max() / rms.min() <= SPREAD for rms in spreads)
+    return all(rms.max() / rms.min() <= COLUMN_SPREAD for rms in spreads)
 
 
 def _pair_scales(n: int, rows: list[tuple[np.ndarray, float, float]]) -> tuple[np.ndarray, float, float]:
@@ -185,7 +185,7 @@ def fit_scales(x, dxdt, coordinates: str = "canonical", periodic: bool = False,
     rates are of size 1 (the ratio of the two rates is the system's own, for ``hnn.balance`` to weigh).
     On velocity-like states s_t = s_q / rms(qdot) and s_p = s_q / s_t (unit mass: a mass is not
     observable from velocities). Where one scale cannot serve (the RMS values of the q columns, the p
-    columns or either half of ``dxdt`` spread over more than SPREAD: bodies of very different mass)
+    columns or either half of ``dxdt`` spread over more than COLUMN_SPREAD: bodies of very different mass)
     and q are not angles, one s_q_i per coordinate with s_p_i = C / s_q_i (one product for every pair:
     Hamilton's equations hold) and one s_t, chosen so that the logs of every column's RMS in the new
     units are nearest 0 in the least-squares sense (on velocity-like states: of q, qdot and qddot, the
@@ -283,18 +283,29 @@ def spreads(x, dxdt=None) -> dict[str, float]:
 def rescale_reason(x, dxdt=None, periodic: bool = False, coordinates: str = "canonical") -> str | None:
     """Why ``--units auto`` rescales states ``x`` and their ``dxdt`` in ``coordinates``, or None where it leaves
     them: their sizes lie outside its bounds (``far_from_unit``), or (unless angles, whose s_q stays 1) the
-    columns of one part spread in size over SPREAD, which one scale cannot serve (a scale per coordinate
+    columns of one part spread in size over COLUMN_SPREAD, which one scale cannot serve (a scale per coordinate
     pair can: ``fit_scales`` reads the same parts, q, qdot and qddot on velocity-like states)."""
     if far_from_unit(x, dxdt, periodic):
         return f"far from unit scale (RMS {describe_sizes(x, dxdt, periodic)}; auto leaves {auto_bounds()})"
     read = spreads(x, dxdt)
     if coordinates in VELOCITY_LIKE:        # dq/dt is qdot itself
         read.pop("dq/dt", None)
-    wide = {} if periodic else {name: s for name, s in read.items() if s > SPREAD}
+    wide = {} if periodic else {name: s for name, s in read.items() if s > COLUMN_SPREAD}
     if wide:
-        return (f"of columns whose sizes spread over {SPREAD:g}x within one part ("
+        return (f"of columns whose sizes spread over {COLUMN_SPREAD:g}x within one part ("
                 + ", ".join(f"{name} {s:.3g}x" for name, s in wide.items()) + "), which one scale cannot serve")
     return None
+
+
+def units_reason(mode: str, x, dxdt=None, periodic: bool = False, coordinates: str = "canonical") -> str | None:
+    """Why a fit under ``--units mode`` rescales ``x`` and ``dxdt``, or None where it trains on them as they
+    are: the one rule of a run (``run_scales``) and of ``hnn.train``. ``'on'``: always; ``'auto'``:
+    ``rescale_reason``'s; ``'off'``: never."""
+    if mode not in UNITS:
+        raise ValueError(f"units={mode!r}: choose one of {', '.join(UNITS)}")
+    if mode == "on":
+        return "to be rescaled (units=on)"
+    return rescale_reason(x, dxdt, periodic, coordinates) if mode == "auto" else None
 
 
 def refusal(model) -> str | None:
@@ -452,23 +463,20 @@ def in_canonical_units(model, units: str, x, dxdt, test_x=None, test_dxdt=None, 
     ``units``' rule, 1 where the rule leaves the data as they are); any other model and the arrays
     themselves, or a ValueError where ``units`` would rescale them (a plain model cannot answer back in the
     user's units)."""
-    if units not in UNITS:
-        raise ValueError(f"units={units!r}: choose one of {', '.join(UNITS)}")
     inner = getattr(model, "inner", model)
     periodic = bool(getattr(inner, "periodic", False))
     coordinates = "velocity" if getattr(inner, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
+    reason = units_reason(units, x, dxdt, periodic, coordinates)      # a run's rule (run_scales') too
     if not isinstance(model, Rescaled):
-        reason = rescale_reason(x, dxdt, periodic, coordinates)
-        if units == "on" or (units == "auto" and reason is not None):
+        if reason is not None:
             verb = "train" if caller == "hnn.train" else "fit"
-            raise ValueError(f"units={units!r}: x and dxdt are {reason or 'to be rescaled (units=on)'}, where a fit "
+            raise ValueError(f"units={units!r}: x and dxdt are {reason}, where a fit "
                              f"goes wrong, and {type(model).__name__} answers in the units it is fit in: {verb} "
                              f"hnn.units.Rescaled(model) instead ({caller} fits its scales from these data, {verb}s the "
                              f"model in them and it answers in yours), or pass units='off' to {verb} on them as they are")
         return model, x, dxdt, test_x, test_dxdt
     if model.scales is None:
-        rescale = units == "on" or (units == "auto" and rescale_reason(x, dxdt, periodic, coordinates) is not None)
-        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if rescale else UnitScales(1.0, 1.0, 1.0))
+        model.set_scales(fit_scales(x, dxdt, coordinates, periodic) if reason is not None else UnitScales(1.0, 1.0, 1.0))
     pairs = [model.scales.to_canonical(a, b, coordinates) if a is not None else (a, b)
              for a, b in ((x, dxdt), (test_x, test_dxdt))]
     return (model.inner, *pairs[0], *pairs[1])
@@ -500,7 +508,7 @@ def run_scales(mode: str, kind: str, dataset: dict, objective, model: Model) -> 
     x, dxdt = sized_arrays(dataset, objective)
     why = f"--units {mode}"
     if mode == "auto":
-        reason = None if x is None else rescale_reason(x, dxdt, periodic, observed_coordinates(dataset))
+        reason = None if x is None else units_reason(mode, x, dxdt, periodic, observed_coordinates(dataset))
         if reason is None:
             return None
         why = f"--units auto (the default) found the training data {reason}"

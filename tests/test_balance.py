@@ -121,7 +121,7 @@ def test_a_group_whose_data_balance_trains_each_run_alone_with_its_weights(tmp_p
     arm in its own units) or --units auto rescales (the same at the defaults), each run trains alone, as
     ``hnn.run_experiment`` would, so its folder is the lone run's (what auto resolved to recorded)."""
     configs = [_arm_config(tmp_path, model="hnn", mass=10.0, seed=s, units=units) for s in (0, 1)]
-    assert hnn.grouped.group_key(configs[0]) is not None and hnn.grouped.group_key(_arm_config(tmp_path, balance="rms")) is None
+    assert hnn.sweeps.group_runs.closed_form_key(configs[0]) is not None and hnn.sweeps.group_runs.closed_form_key(_arm_config(tmp_path, balance="rms")) is None
     folders = hnn.sweeps.group_runs.train_group(configs)
     assert [f.name for f in folders] == [hnn.runs.run_dir(c).name for c in configs]
     assert all(recorded in json.loads((f / "args.json").read_text()) for f in folders)

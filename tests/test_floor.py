@@ -4,7 +4,8 @@ import pytest
 import torch
 
 import hnn
-from hnn.training import adam_optimizer, l2_loss, optimizer_step
+from hnn.trainers.loop import adam_optimizer, optimizer_step
+from hnn.training import l2_loss
 from hnn_analysis.benchmarks import benchmark_report, floor, floor_job
 
 

@@ -1,5 +1,5 @@
 """A group of models that is killed resumes from its checkpoint and ends with the floats of a group that
-never stopped (``hnn.grouped.GroupCheckpoint``: ``fit_group``, ``fit_stacked`` and ``train_group``): the
+never stopped (``hnn.trainers.group_loop.GroupCheckpoint``: ``train_closed_form``, ``train_vmap`` and ``train_group``): the
 stacked weights, the Adam moments, every model's minibatch and noise samplers, the losses so far and the
 members that failed before the kill."""
 import json
@@ -9,9 +9,10 @@ import torch
 
 import hnn
 import hnn.sweeps.group_runs
-import hnn.grouped
-import hnn.stacked
-from hnn.training import fit_loss
+import hnn.trainers.closed_form
+import hnn.trainers.group_loop
+import hnn.trainers.vmap
+from hnn.training import dxdt_loss
 
 
 class _Kill(KeyboardInterrupt):
@@ -76,13 +77,13 @@ def test_a_killed_group_resumes_to_the_floats_of_an_unbroken_one(device, tmp_pat
     # torch's default device is meta (tests/test_devices.py): a tensor the checkpoint makes without a device fails
     torch.set_default_device("meta")
     try:
-        expected, failed = hnn.grouped.fit_group(whole, data, tests, **GROUP, after_step=_poison_b())
+        expected, failed = hnn.trainers.closed_form.train_closed_form(whole, data, tests, **GROUP, after_step=_poison_b())
         with pytest.raises(_Kill):
-            hnn.grouped.fit_group(broken, data, tests, **GROUP, after_step=_poison_b(kill_at=23),
+            hnn.trainers.closed_form.train_closed_form(broken, data, tests, **GROUP, after_step=_poison_b(kill_at=23),
                                   checkpoint=path, checkpoint_every=0.0)
         assert path.exists()
         # a fresh process: new models, then the checkpoint's weights
-        stats, failures = hnn.grouped.fit_group(resumed, data, tests, **GROUP, checkpoint=path, checkpoint_every=0.0)
+        stats, failures = hnn.trainers.closed_form.train_closed_form(resumed, data, tests, **GROUP, checkpoint=path, checkpoint_every=0.0)
     finally:
         torch.set_default_device(None)
     assert list(failed) == [1]
@@ -96,10 +97,10 @@ def test_a_killed_group_resumes_to_the_floats_of_an_unbroken_one(device, tmp_pat
 def test_a_killed_stacked_group_resumes_to_the_floats_of_an_unbroken_one(tmp_path, monkeypatch):
     # vmap over the models, AdamW with a cosine rate: a kill at the start of step 17 (the rate of each step is
     # asked for first)
-    options = dict(**GROUP, optimizer="adamw", schedule="cosine", loss_of=lambda m: fit_loss(m, None, "l2", None))
+    options = dict(**GROUP, optimizer="adamw", schedule="cosine", loss_of=lambda m: dxdt_loss(m, None, "l2", None))
     whole, data, tests = _members()
-    expected, _ = hnn.stacked.fit_stacked(whole, data, tests, **options)
-    rate = hnn.grouped.learning_rate
+    expected, _ = hnn.trainers.vmap.train_vmap(whole, data, tests, **options)
+    rate = hnn.trainers.group_loop.learning_rate
 
     def killed_at_17(learn_rate, step, total_steps, schedule):
         if step == 17:
@@ -107,10 +108,10 @@ def test_a_killed_stacked_group_resumes_to_the_floats_of_an_unbroken_one(tmp_pat
         return rate(learn_rate, step, total_steps, schedule)
     path = tmp_path / "stacked.partial.pt"
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.grouped, "learning_rate", killed_at_17)
-        hnn.stacked.fit_stacked(_members()[0], data, tests, **options, checkpoint=path, checkpoint_every=0.0)
+        patch.setattr(hnn.trainers.group_loop, "learning_rate", killed_at_17)
+        hnn.trainers.vmap.train_vmap(_members()[0], data, tests, **options, checkpoint=path, checkpoint_every=0.0)
     resumed = _members()[0]
-    stats, _ = hnn.stacked.fit_stacked(resumed, data, tests, **options, checkpoint=path, checkpoint_every=0.0)
+    stats, _ = hnn.trainers.vmap.train_vmap(resumed, data, tests, **options, checkpoint=path, checkpoint_every=0.0)
     _same(whole, expected, resumed, stats)
 
 
@@ -119,12 +120,12 @@ def test_a_group_of_runs_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch)
         return [hnn.tasks.task_config("spring", {"seed": s, "hidden_dim": 16, "total_steps": 60, "batch_size": 16,
                                                  "save_dir": str(save_dir)}) for s in (0, 1)]
     unbroken = hnn.sweeps.group_runs.train_group(configs(tmp_path / "whole"))
-    fit = hnn.grouped.fit_group
+    fit = hnn.trainers.closed_form.train_closed_form
 
     def killed(*args, **kwargs):
         return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(30))
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.sweeps.group_runs, "fit_group", killed)
+        patch.setattr(hnn.trainers.closed_form, "train_closed_form", killed)
         hnn.sweeps.group_runs.train_group(configs(tmp_path / "broken"))
     partial = hnn.sweeps.group_runs.group_checkpoint(configs(tmp_path / "broken"))
     assert partial.exists() and partial.parent == tmp_path / "broken" and partial.name.startswith(".group-")
@@ -142,12 +143,12 @@ def test_a_group_of_runs_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch)
 def test_a_killed_groups_checkpoint_is_dropped_once_its_runs_are_saved_by_other_groups(tmp_path, monkeypatch):
     configs = [hnn.tasks.task_config("spring", {"seed": s, "hidden_dim": 16, "total_steps": 40, "batch_size": 16,
                                                 "save_dir": str(tmp_path)}) for s in (0, 1)]
-    fit = hnn.grouped.fit_group
+    fit = hnn.trainers.closed_form.train_closed_form
 
     def killed(*args, **kwargs):
         return fit(*args, **kwargs, checkpoint_every=0.0, after_step=_kill_at(20))
     with monkeypatch.context() as patch, pytest.raises(_Kill):
-        patch.setattr(hnn.sweeps.group_runs, "fit_group", killed)
+        patch.setattr(hnn.trainers.closed_form, "train_closed_form", killed)
         hnn.sweeps.group_runs.train_group(configs)
     spent = hnn.sweeps.group_runs.group_checkpoint(configs)
     unreadable = tmp_path / ".group-000000000000.partial.pt"
@@ -165,9 +166,9 @@ def test_a_checkpoint_of_another_group_is_refused_with_its_fix(tmp_path):
     models, data, tests = _members()
     path = tmp_path / "group.partial.pt"
     with pytest.raises(_Kill):
-        hnn.grouped.fit_group(models, data, tests, **GROUP, after_step=_kill_at(5), checkpoint=path,
+        hnn.trainers.closed_form.train_closed_form(models, data, tests, **GROUP, after_step=_kill_at(5), checkpoint=path,
                               checkpoint_every=0.0)
     two, data2, tests2 = _members((0, 1))
     with pytest.raises(ValueError, match=r"is of another model \(its stacked weights are of shapes .*delete .* to "
                                          r"train from the start"):
-        hnn.grouped.fit_group(two, data2, tests2, **{**GROUP, "seeds": [0, 1], "names": ["a", "b"]}, checkpoint=path)
+        hnn.trainers.closed_form.train_closed_form(two, data2, tests2, **{**GROUP, "seeds": [0, 1], "names": ["a", "b"]}, checkpoint=path)

@@ -8,7 +8,8 @@ import pytest
 import torch
 
 import hnn
-from hnn import grouped
+from hnn.sweeps.group_runs import closed_form_key
+from hnn.trainers.closed_form import train_closed_form
 from hnn.runs import training_subset
 
 # Measured (spring, 300 and 2000 steps, 1 and 2 threads): final weights and per-step losses of a
@@ -53,7 +54,7 @@ def test_grouped_training_agrees_with_lone_runs(kind, batch_size, noise):
         alone = [copy.deepcopy(m) for m in models]
         pairs = [training_subset(data[s]["x"], data[s]["dxdt"], f, s) for _, s, f in mine]
         tests = [(data[s]["test_x"], data[s]["test_dxdt"]) for _, s, _ in mine]
-        stats, failures = grouped.fit_group(models, pairs, tests, seeds=[s for _, s, _ in mine], total_steps=STEPS,
+        stats, failures = train_closed_form(models, pairs, tests, seeds=[s for _, s, _ in mine], total_steps=STEPS,
                                             batch_size=batch_size, input_noise=noise)
         assert failures == {}
         for g, (_, seed, _) in enumerate(mine):
@@ -80,7 +81,7 @@ def test_a_model_that_turns_nan_is_reported_and_the_others_finish_as_alone(capsy
             with torch.no_grad():
                 weights[2][1, 0, 0] = float("nan")     # model 1's W2: its loss is NaN from step 41
 
-    stats, failures = grouped.fit_group(models, pairs, tests, seeds=[s for _, s, _ in cells], total_steps=STEPS,
+    stats, failures = train_closed_form(models, pairs, tests, seeds=[s for _, s, _ in cells], total_steps=STEPS,
                                         names=["spring-a", "spring-b", "spring-c"], after_step=poison)
     assert list(failures) == [1] and stats[1] is None
     assert failures[1].name == "spring-b" and failures[1].step == 41
@@ -96,7 +97,7 @@ def test_a_model_that_turns_nan_is_reported_and_the_others_finish_as_alone(capsy
 def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
     configs = [hnn.tasks.task_config("spring", {"seed": s, "train_fraction": f, "hidden_dim": 16, "total_steps": 100,
                                                 "save_dir": str(tmp_path)}) for s in (0, 1) for f in (0.5, 1.0)]
-    assert len({grouped.group_key(c) for c in configs}) == 1
+    assert len({closed_form_key(c) for c in configs}) == 1
     folders = hnn.sweeps.group_runs.train_group(configs)
     assert [hnn.runs.find_run(c) for c in configs] == folders        # found by their configs, as lone runs are
     lone_dir = tmp_path / "lone"
@@ -117,8 +118,8 @@ def test_grouped_runs_save_as_ordinary_runs_that_load_and_evaluate(tmp_path):
 
 def test_configs_that_cannot_group_say_so():
     config = hnn.tasks.task_config("spring", {"use_rk4": True})
-    assert grouped.group_key(config) is None          # the closed form's groups: not through an RK4 step
-    assert hnn.sweeps.group_runs.unit_key(config)[0] == "stacked"
+    assert closed_form_key(config) is None          # the closed form's groups: not through an RK4 step
+    assert hnn.sweeps.group_runs.unit_key(config)[0] == "vmap"
     pixels = hnn.tasks.task_config("pixels", {})
     assert hnn.sweeps.group_runs.unit_key(pixels) is None
     with pytest.raises(ValueError, match="one group"):

@@ -63,11 +63,11 @@ def test_every_module_keys_its_options_from_the_one_list():
         models.initialize(models.MLP(2, 4, 2), init)
     for name in hnn.names.OPTIMIZERS:       # each builds an optimizer that steps
         w = torch.nn.Linear(1, 1)
-        hnn.training.adam_optimizer(w, 1e-2, 0.0, name).step()
+        hnn.trainers.loop.adam_optimizer(w, 1e-2, 0.0, name).step()
     with pytest.raises(ImportError, match=r"lacks \['adamw'\] and has extra \['sgd'\]"):
         hnn.names.checked({"adam": torch.optim.Adam, "sgd": torch.optim.SGD}, hnn.names.OPTIMIZERS, "optimizers")
     for schedule in hnn.names.SCHEDULES:
-        assert hnn.training.learning_rate(1.0, 0, 10, schedule) == 1.0
+        assert hnn.trainers.loop.learning_rate(1.0, 0, 10, schedule) == 1.0
     assert all(isinstance(getattr(torch, name), torch.dtype) for name in hnn.names.DTYPES)
 
 
@@ -93,7 +93,7 @@ def test_a_row_naming_its_class_wrongly_says_so():
 
 def test_a_kinds_family_and_grouping_are_declared_on_its_row():
     """--model's default choices are the kinds of no family; a hyphenated name needs its family; a grouping is
-    one of hnn.names.GROUPINGS; the closed form groups exactly the kinds hnn.grouped has gradients for."""
+    one of hnn.names.GROUPINGS; the closed form groups exactly the kinds hnn.trainers.closed_form has gradients for."""
     assert {k for k, row in hnn.MODEL_KINDS.items() if row.family == "pixel"} == {"pixel-hnn", "pixel-baseline"}
     assert {k for k, row in hnn.MODEL_KINDS.items() if row.grouping == "closed_form"} == {
         "hnn", "baseline", "separable", "dissipative"}

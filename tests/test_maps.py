@@ -286,13 +286,13 @@ def test_an_energy_protocol_scores_a_map_at_its_own_step_and_says_where_it_does_
 
 
 def test_a_group_of_maps_trains_as_one_program_as_each_alone(tmp_path):
-    """The map kinds are group-safe (``hnn.stacked``: vmap over stacked weights; tests/test_stacked.py holds
+    """The map kinds are group-safe (``hnn.trainers.vmap``: vmap over stacked weights; tests/test_stacked.py holds
     a G-SympNet group's weights to its lone runs'). A HenonNet's zero-started shifts and biases get gradients
     near Adam's eps, where float rounding in another summation order moves a weight by 1e-7 absolute: its
     group is held to its lone runs by what they predict, a step from the test states."""
     configs = [_small_run("real", "henon", tmp_path / "group", seed=s, total_steps=20, batch_size=64, hidden_dim=32)
                for s in range(3)]
-    assert hnn.sweeps.group_runs.unit_key(configs[0])[0] == "stacked"
+    assert hnn.sweeps.group_runs.unit_key(configs[0])[0] == "vmap"
     folders = hnn.sweeps.group_runs.train_group(configs)
     for config, folder in zip(configs, folders):
         alone = hnn.run_experiment(dataclasses.replace(config, save_dir=str(tmp_path / "alone")))

@@ -1,7 +1,6 @@
 """A training run that is killed resumes from its checkpoint and ends with the floats of a run that never
 stopped: the weights, the Adam moments, the minibatch and noise samplers and the loss history all
 carry over (``hnn.train(checkpoint=...)``, ``hnn.run_experiment``)."""
-import contextlib
 import json
 
 import pytest
@@ -47,8 +46,8 @@ def test_a_killed_run_resumes_to_the_floats_of_an_unbroken_one(tmp_path):
 
     path = tmp_path / "run.partial.pt"
     broken = _model()
-    with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(23)):
-        hnn.train(broken, *_data(), **OPTIONS, checkpoint=path, checkpoint_every=0.0)
+    with pytest.raises(_Kill):
+        hnn.train(broken, *_data(), **OPTIONS, checkpoint=path, checkpoint_every=0.0, on_step=_stop_at(23))
     assert path.exists()
     resumed = _model()              # a fresh process: the weights of a new model, then the checkpoint's
     stats = hnn.train(resumed, *_data(), **OPTIONS, checkpoint=path, checkpoint_every=0.0)
@@ -67,9 +66,8 @@ def test_the_generators_of_a_custom_loss_resume_where_they_stopped(tmp_path):
 
         def loss(x, y):
             return ((model.time_derivative(x + 0.1 * torch.randn(x.shape, generator=noise)) - y) ** 2).mean(1)
-        with (hnn.training.report_progress(_stop_at(stop)) if stop else contextlib.nullcontext()):
-            return hnn.train(model, *_data(), total_steps=30, loss=loss, checkpoint=path, checkpoint_every=0.0,
-                             generators=(noise,))
+        return hnn.train(model, *_data(), total_steps=30, loss=loss, checkpoint=path, checkpoint_every=0.0,
+                         generators=(noise,), on_step=_stop_at(stop) if stop else None)
     expected = run(_model())
     path = tmp_path / "run.partial.pt"
     with pytest.raises(_Kill):
@@ -86,8 +84,8 @@ def test_a_run_resumes_on_the_model_device_making_nothing_on_the_default_one(dev
     torch.set_default_device("meta")
     try:
         expected = hnn.train(models[0], *data, **OPTIONS)
-        with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(11)):
-            hnn.train(models[1], *data, **OPTIONS, checkpoint=path, checkpoint_every=0.0)
+        with pytest.raises(_Kill):
+            hnn.train(models[1], *data, **OPTIONS, checkpoint=path, checkpoint_every=0.0, on_step=_stop_at(11))
         stats = hnn.train(models[2], *data, **OPTIONS, checkpoint=path, checkpoint_every=0.0)
     finally:
         torch.set_default_device(None)
@@ -97,8 +95,8 @@ def test_a_run_resumes_on_the_model_device_making_nothing_on_the_default_one(dev
 
 def test_a_checkpoint_of_another_run_is_refused_with_the_fix(tmp_path):
     path = tmp_path / "run.partial.pt"
-    with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(5)):
-        hnn.train(_model(), *_data(), **OPTIONS, checkpoint=path, checkpoint_every=0.0)
+    with pytest.raises(_Kill):
+        hnn.train(_model(), *_data(), **OPTIONS, checkpoint=path, checkpoint_every=0.0, on_step=_stop_at(5))
     with pytest.raises(ValueError, match="run of 40 steps, not 60; delete .* to train from the start"):
         hnn.train(_model(), *_data(), **{**OPTIONS, "total_steps": 60}, checkpoint=path)
     torch.manual_seed(0)
@@ -115,13 +113,13 @@ def _config(save_dir, **fields):
 
 
 def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(hnn.training, "CHECKPOINT_EVERY", 0.0)
+    monkeypatch.setattr(hnn.trainers.checkpoint, "CHECKPOINT_EVERY", 0.0)
     unbroken = hnn.run_experiment(_config(tmp_path / "a"))
 
     config = _config(tmp_path / "b")
     partial = hnn.runs.partial_checkpoint(config)
-    with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(17)):
-        hnn.run_experiment(config)
+    with pytest.raises(_Kill):
+        hnn.run_experiment(config, on_step=_stop_at(17))
     assert partial.exists() and hnn.runs.find_run(config) is None
     _, todo = hnn.sweeps.sweep.reuse([hnn.sweeps.sweep.Job("b", "spring", config)])
     assert [job.key for job in todo] == ["b"] and "b has a training checkpoint" in capsys.readouterr().out
@@ -131,22 +129,21 @@ def test_a_run_interrupted_mid_training_resumes_and_leaves_no_checkpoint(tmp_pat
     for key in ("train_loss", "test_loss"):
         assert metrics[0][key] == metrics[1][key]
     # --force trains from the start: the checkpoint of an interrupted attempt is dropped
-    with pytest.raises(_Kill), hnn.training.report_progress(_stop_at(9)):
-        hnn.run_experiment(_config(tmp_path / "c"))
+    with pytest.raises(_Kill):
+        hnn.run_experiment(_config(tmp_path / "c"), on_step=_stop_at(9))
     forced = _config(tmp_path / "c", force=True)
     calls = []
-    with hnn.training.report_progress(lambda done, total: calls.append(done)):
-        hnn.run_experiment(forced)
+    hnn.run_experiment(forced, on_step=lambda done, total: calls.append(done))
     assert calls[0] == 1 and not hnn.runs.partial_checkpoint(forced).exists()
 
 
 def test_a_run_that_fails_in_training_leaves_no_checkpoint(tmp_path, monkeypatch):
-    monkeypatch.setattr(hnn.training, "CHECKPOINT_EVERY", 0.0)
+    monkeypatch.setattr(hnn.trainers.checkpoint, "CHECKPOINT_EVERY", 0.0)
 
     def fail(done, total):
         if done == 12:
             raise hnn.DivergenceError("a singular field, say")
     config = _config(tmp_path)
-    with pytest.raises(hnn.DivergenceError), hnn.training.report_progress(fail):
-        hnn.run_experiment(config)
+    with pytest.raises(hnn.DivergenceError):
+        hnn.run_experiment(config, on_step=fail)
     assert not hnn.runs.partial_checkpoint(config).exists()

@@ -255,8 +255,9 @@ def test_train_fraction_draws_a_seeded_ordered_subset_of_the_training_rows():
 
 def test_a_run_trains_on_its_fraction(tmp_path, monkeypatch):
     seen = []
-    real_train = hnn.runs.train
-    monkeypatch.setattr(hnn.runs, "train", lambda model, x, *a, **k: seen.append(len(x)) or real_train(model, x, *a, **k))
+    real_loop = hnn.trainers.lone.run_loop          # the lone loop a prepared run trains through
+    monkeypatch.setattr(hnn.trainers.lone, "run_loop",
+                        lambda model, loss, x, *a, **k: seen.append(len(x)) or real_loop(model, loss, x, *a, **k))
     trainer = hnn.load_task("spring", "train")
     argv = ["--save_dir", str(tmp_path), "--total_steps", "2", "--hidden_dim", "8"]
     folder = trainer.main(argv + ["--train_fraction", "0.1", "--name", "small"])
@@ -300,7 +301,7 @@ def test_prepare_is_what_a_run_trains_and_what_its_training_cost_times(tmp_path,
     prep = hnn.prepare(config)
     kwargs = prep.train_kwargs()
     assert (kwargs["optimizer"], kwargs["schedule"], kwargs["clip_grad"], kwargs["total_steps"]) == ("adamw", "cosine", 1.0, 30)
-    hnn.train(prep.fit_model, prep.x, prep.y, prep.test_x, prep.test_y, **kwargs)
+    hnn.train(prep.canonical_model, prep.x, prep.y, prep.test_x, prep.test_y, **kwargs)
     saved = hnn.load_run(hnn.run_experiment(config))[0]
     for key, value in prep.model.state_dict().items():
         assert torch.equal(value, saved.state_dict()[key]), key

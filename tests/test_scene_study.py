@@ -341,7 +341,7 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
 
 
 def test_models_measured_together_get_the_numbers_each_gets_alone(tmp_path):
-    # runs trained as one group (hnn.grouped), measured as the study's grid is: one energy call for all
+    # runs trained as one group (hnn.trainers.closed_form), measured as the study's grid is: one energy call for all
     configs = [hnn.tasks.task_config("spring", {"seed": s, "train_fraction": f, "hidden_dim": 16, "total_steps": 30,
                                                 "save_dir": str(tmp_path)}) for s, f in ((0, 1.0), (1, 0.5), (2, 1.0))]
     folders = hnn.sweeps.group_runs.train_group(configs)

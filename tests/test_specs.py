@@ -45,14 +45,14 @@ def test_an_old_run_without_a_field_reads_as_it_trained():
 
 
 def test_input_noise_goes_from_the_flag_to_the_training_batches(monkeypatch, tmp_path):
-    """The 2-body flag's value arrives as hnn.train's input_noise, read off the objective's spec (no dict)."""
+    """The 2-body flag's value arrives as the loop's input_noise, read off the objective's spec (no dict)."""
     seen = {}
-    real = hnn.runs.train
+    real = hnn.trainers.lone.run_loop          # the lone loop a prepared run trains through
 
     def spy(model, *arrays, **options):
         seen.update(options)
         return real(model, *arrays, **options)
-    monkeypatch.setattr(hnn.runs, "train", spy)
+    monkeypatch.setattr(hnn.trainers.lone, "run_loop", spy)
     hnn.load_task("2body", "train").main(["--total_steps", "1", "--hidden_dim", "8", "--input_noise", "0.5",
                                           "--save_dir", str(tmp_path)])
     assert seen["input_noise"] == 0.5 and seen["total_steps"] == 1

@@ -1,4 +1,4 @@
-"""Groups of every kind the studies train (``hnn.stacked``: torch.func's vmap over a model axis) give
+"""Groups of every kind the studies train (``hnn.trainers.vmap``: torch.func's vmap over a model axis) give
 their members' lone runs, and a member that fails is named and dropped while the others go on."""
 import dataclasses
 
@@ -47,7 +47,7 @@ def _group_and_lone(task, configs, tmp_path):
 def test_a_stacked_group_equals_its_lone_runs(case, tmp_path):
     task, values = CASES[case]
     configs = _configs(task, values, tmp_path / "group")
-    assert unit_key(configs[0])[0] == "stacked" and len({unit_key(c) for c in configs}) == 1
+    assert unit_key(configs[0])[0] == "vmap" and len({unit_key(c) for c in configs}) == 1
     for _config, (a, _, ma), (b, _, mb) in _group_and_lone(task, configs, tmp_path):
         # float32: vmap's batched kernels sum in other orders than a lone model's, 1e-7 relative a step;
         # 20 Adam steps (the LNN's large init weights most) carry it to at most 2e-5 relative on an AVX2 box
@@ -91,7 +91,7 @@ def test_a_stacked_member_that_fails_is_named_and_dropped_while_the_others_train
     blown = dict(data[1])
     blown["dxdt"] = np.asarray(data[1]["dxdt"]) * 1e30       # finite data, an infinite squared error
     folders = train_group(configs, [data[0], blown])
-    assert isinstance(folders[1], hnn.grouped.GroupedRunFailed) and folders[1].step == 0
+    assert isinstance(folders[1], hnn.trainers.group_loop.GroupedRunFailed) and folders[1].step == 0
     assert configs[1].name in str(folders[1]) and "not finite" in capsys.readouterr().out
     lone = hnn.run_experiment(configs[0].__class__(**{**configs[0].to_dict(), "save_dir": str(tmp_path / "l")}),
                               data[0])
@@ -122,7 +122,7 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
     adaptive = hnn.SOLVERS[method].adaptive
     t_eval, options = np.linspace(0.0, 1.0, 5), ({"rtol": 1e-9} if adaptive else {"dt": 0.05})
     stats = {}
-    together = hnn.stacked.rollout_stacked(models, x0, t_eval, method=method, stats=stats, **options)
+    together = hnn.integrators.groups.rollout_group(models, x0, t_eval, method=method, stats=stats, **options)
     assert together.shape == (3, 4, 5, 2)
     calls = []
     for g, model in enumerate(models):

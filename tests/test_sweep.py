@@ -480,7 +480,7 @@ def test_a_worker_records_its_runs_divergence_as_it_fails_before_any_sweep_reads
 
 @pytest.mark.parametrize("n_jobs", [1, 2])
 def test_a_groups_model_that_fails_in_training_is_recorded_as_a_lone_runs_failure_is(n_jobs, tmp_path):
-    # a group's model whose loss is no longer finite fails as a lone run does (hnn.grouped.GroupedRunFailed
+    # a group's model whose loss is no longer finite fails as a lone run does (hnn.trainers.group_loop.GroupedRunFailed
     # is a DivergenceError): marked diverged in the sweep, recorded by the worker as it fails, reused as such
     bad = [sweep.Job(f"spring/hnn/seed{s}", "spring", hnn.tasks.task_config(
         "spring", {"model": "hnn", "seed": s, "save_dir": str(tmp_path / "runs"), "total_steps": 3,

@@ -39,7 +39,7 @@ def test_train_restores_the_callers_denormal_flushing(before):
     try:
         hnn.train(model, x, x, total_steps=2)
         assert (torch.full((1,), tiny) / 2 == 0).item() == before    # half of it is denormal unless flushed
-        assert hnn.training.flushes_denormals() == before
+        assert hnn.trainers.loop.flushes_denormals() == before
     finally:
         torch.set_flush_denormal(False)
 
@@ -100,7 +100,7 @@ def test_unreadable_checkpoint_says_what_to_do(tmp_path):
 
 
 def test_cosine_schedule_anneals_from_the_rate_to_zero():
-    from hnn.training import learning_rate
+    from hnn.trainers.loop import learning_rate
     assert learning_rate(3e-3, 0, 100, "cosine") == 3e-3
     assert learning_rate(3e-3, 50, 100, "cosine") == pytest.approx(1.5e-3, rel=1e-12)
     assert learning_rate(3e-3, 100, 100, "cosine") == pytest.approx(0.0, abs=1e-18)
@@ -113,7 +113,7 @@ def test_cosine_schedule_anneals_from_the_rate_to_zero():
 def test_adam_and_adamw_decay_weights_as_their_definitions_say(kind):
     """A weight whose loss has no gradient, one step: Adam's decay enters the gradient, so the step is
     lr * g / |g| = lr; AdamW's is decoupled, w <- w (1 - lr wd), and the zero gradient moves nothing."""
-    from hnn.training import adam_optimizer
+    from hnn.trainers.loop import adam_optimizer
     w = torch.nn.Parameter(torch.tensor([2.0], dtype=torch.float64))
     optim = adam_optimizer(torch.nn.ParameterList([w]), learn_rate=0.1, weight_decay=0.5, kind=kind)
     (0.0 * w).sum().backward()
@@ -142,9 +142,9 @@ def test_schedule_and_clipping_change_training_and_bad_values_are_named(spring):
 
 def test_configs_off_the_papers_optimizer_train_alone_not_in_a_group():
     config = hnn.tasks.task_config("spring", {"hidden_dim": 16})
-    assert hnn.grouped.group_key(config) is not None
+    assert hnn.sweeps.group_runs.closed_form_key(config) is not None
     for change in ({"optimizer": "adamw"}, {"schedule": "cosine"}, {"clip_grad": 1.0}, {"derivative_loss": "l1"}):
-        assert hnn.grouped.group_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None
+        assert hnn.sweeps.group_runs.closed_form_key(hnn.tasks.task_config("spring", {"hidden_dim": 16, **change})) is None
 
 
 def test_a_loss_that_turns_nan_stops_training_and_names_its_step(spring):

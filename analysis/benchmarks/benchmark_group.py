@@ -5,7 +5,7 @@
 
 For each hidden width and group size G: G spring HNNs (seeds 0..G-1 for the init and the
 minibatches, the seed-0 dataset, 750 x 2 full batch, as the scene study's grid) trained for the
-same steps by ``hnn.grouped.fit_group`` as one program, against the same G models trained one
+same steps by ``hnn.trainers.closed_form.train_closed_form`` as one program, against the same G models trained one
 after another by ``hnn.train`` (the separate runs' time is that of ``min(G, 4)`` of them scaled
 to G: separate runs are independent, each costs the same). Both in this process, at the
 benchmark's thread count, alternated for ``repeats`` rounds; the table gives model-steps per
@@ -23,7 +23,7 @@ import time
 import torch
 
 import hnn
-from hnn import grouped
+from hnn.trainers.closed_form import train_closed_form
 from hnn_analysis.benchmarks import floor
 
 WIDTHS, SIZES = (16, 32, 64, 200), (1, 4, 16, 64)
@@ -43,7 +43,7 @@ def _grouped_seconds(models, data, steps: int) -> float:
     models = copy.deepcopy(models)
     pairs, tests = [(data["x"], data["dxdt"])] * len(models), [(data["test_x"], data["test_dxdt"])] * len(models)
     tic = time.perf_counter()
-    grouped.fit_group(models, pairs, tests, seeds=list(range(len(models))), total_steps=steps)
+    train_closed_form(models, pairs, tests, seeds=list(range(len(models))), total_steps=steps)
     return time.perf_counter() - tic
 
 
@@ -51,7 +51,7 @@ def _group_products(models, data) -> list[tuple[int, ...]]:
     """The matrix products of one grouped training step (no test data: a step's products only)."""
     models = copy.deepcopy(models)
     pairs = [(data["x"], data["dxdt"])] * len(models)
-    return floor.products(lambda: grouped.fit_group(models, pairs, seeds=list(range(len(models))), total_steps=0))
+    return floor.products(lambda: train_closed_form(models, pairs, seeds=list(range(len(models))), total_steps=0))
 
 
 def _separate_seconds(models, data, steps: int) -> float:
@@ -94,7 +94,7 @@ def job_group(quick: bool, steps: int | None = None, repeats: int = 1) -> dict:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = [f"Grouped training (`hnn.grouped.fit_group`) of G spring HNNs (750 x 2 full batch, "
+    lines = [f"Grouped training (`hnn.trainers.closed_form.train_closed_form`) of G spring HNNs (750 x 2 full batch, "
              f"{rows[0]['steps'] if rows else 0} steps, {torch.get_num_threads()} thread(s)) against G separate "
              "`hnn.train` runs, in model-steps per second; the floor: the batched matrix products of one grouped "
              "step, each alone in its fastest layout, timed in the same process:", "",

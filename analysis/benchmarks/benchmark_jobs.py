@@ -7,13 +7,13 @@ same) against their matrix-product floor, by ``analysis/benchmarks/floor.py``: e
 performs (captured during one step, forward, backward and double backward), each timed alone in
 its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
 quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
-The step is ``hnn.training.optimizer_step``, the very function ``hnn.train`` runs. It checks the pixel
+The step is ``hnn.trainers.loop.optimizer_step``, the very function ``hnn.train`` runs. It checks the pixel
 loss and its gradients against the original's formulation on one batch.
 
 ``rollout``: a learned field on a few states, a fixed-step step and dopri5 against their floors
 and against torchdiffeq and scipy, by ``analysis/benchmarks/benchmark_rollouts.py`` (its docstring says how).
 
-``group``: G spring HNNs trained as one program (``hnn.grouped``) against G separate runs, per width
+``group``: G spring HNNs trained as one program (``hnn.trainers.closed_form``) against G separate runs, per width
 and G, in model-steps per second, and the grouped step against its batched products' floor, by
 ``analysis/benchmarks/benchmark_group.py`` (its docstring says how). ``--update-docs`` keeps its table
 apart in the generated section of docs/speed.md, under its own stamp: a run with ``--jobs group``

@@ -10,9 +10,9 @@ batch, Adam at lr 1e-3 and weight decay 1e-4), each step timed four ways in one 
 - ``anchor``: the plain batched step, written here in a few lines: weights stacked along a model
   axis, the forward by ``baddbmm``/``bmm``, the symplectic gradient by ``torch.autograd.grad`` with
   ``create_graph``, one fused Adam over the stacks. The yardstick a group must reach.
-- ``group``: ``hnn.grouped.fit_group`` (the tanh MLP's closed-form input gradient and its
+- ``group``: ``hnn.trainers.closed_form.train_closed_form`` (the tanh MLP's closed-form input gradient and its
   hand-written backward, batched over the model axis): no double backward.
-- ``stacked``: ``hnn.stacked.fit_stacked`` on the same models (``torch.func.vmap`` over the model
+- ``stacked``: ``hnn.trainers.vmap.train_vmap`` on the same models (``torch.func.vmap`` over the model
   axis, ``torch.func.grad`` for the input gradient): the path every other kind takes.
 - ``lone``: ``hnn.train`` on one model after another (K = 1 and 16 only; its rate does not depend on K).
 
@@ -44,8 +44,8 @@ def table(rows: list[dict], meta: dict) -> str:
     lines = [generated_by(meta, f"{device}, {where}, torch {meta['torch']}, {meta['threads']} thread(s)")
              + f": K spring HNNs 2-{WIDTH}-{WIDTH}-1 tanh, {ROWS_NOTE}, "
              f"Adam; model-steps per second, median of {meta['repeats']} x {rows[0]['steps'] if rows else 0} steps. "
-             "anchor: the plain batched `bmm` step with autograd's double backward; group: `hnn.grouped.fit_group` "
-             "(closed form); stacked: `hnn.stacked.fit_stacked` (vmap, every kind's path); lone: one model after "
+             "anchor: the plain batched `bmm` step with autograd's double backward; group: `hnn.trainers.closed_form.train_closed_form` "
+             "(closed form); stacked: `hnn.trainers.vmap.train_vmap` (vmap, every kind's path); lone: one model after "
              "another.", "",
              "| K | anchor | group | stacked | lone | group / anchor | group / lone |",
              "| ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]

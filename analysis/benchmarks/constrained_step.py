@@ -33,7 +33,7 @@ def _stepper(kind: str, bobs: int, width: int, batch: int, save_dir: str):
     """``step()``: one training step of a fresh ``kind`` model on the first ``batch`` snippets."""
     config = hnn.tasks.task_config("chain", {"model": kind, "bobs": bobs, "hidden_dim": width, "save_dir": save_dir})
     prep = hnn.prepare(config)      # the run's model (seed 0), its snippets and its loss
-    model = prep.fit_model
+    model = prep.canonical_model
     loss = prep.options.loss_of(model)
     snippets = torch.as_tensor(prep.dataset[prep.objective.arrays[0]][:batch], dtype=torch.float32)
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-5, weight_decay=config.weight_decay)

@@ -9,7 +9,9 @@ import torch
 import hnn
 from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
-from hnn.training import adam_optimizer, l2_loss, minibatch, optimizer_step
+from hnn.trainers.loop import adam_optimizer, optimizer_step
+from hnn.trainers.rows import minibatch
+from hnn.training import l2_loss
 from hnn_analysis.benchmarks import floor
 
 HIDDEN = 200
@@ -94,7 +96,7 @@ def job_floor(d: dict, rounds: int) -> dict:
     """Each step against its matrix-product floor, at 1 and then 2 threads in this process
     (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
     steps = {"spring": (spring_step(d), rounds), "pixels": (pixel_step(), max(10, rounds // 4))}
-    threads, flushing = torch.get_num_threads(), hnn.training.flushes_denormals()
+    threads, flushing = torch.get_num_threads(), hnn.trainers.loop.flushes_denormals()
     torch.set_flush_denormal(True)
     out = {}
     try:

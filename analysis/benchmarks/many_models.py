@@ -1,6 +1,6 @@
 """Many models at once, measured (``analysis/benchmarks/benchmark_many.py`` is its command, and its
 docstring says what each way is): K spring HNNs stepped as the plain batched anchor, as a group
-(``hnn.grouped``), stacked (``hnn.stacked``) and one after another (``hnn.train``).
+(``hnn.trainers.closed_form``), stacked (``hnn.trainers.vmap``) and one after another (``hnn.train``).
 """
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ import time
 import torch
 
 import hnn
-from hnn import grouped, stacked
-from hnn.training import fit_loss
+from hnn.trainers.closed_form import train_closed_form
+from hnn.trainers.vmap import train_vmap
+from hnn.training import dxdt_loss
 
 WIDTH = 200
 LONE_MAX = 16       # lone runs are timed up to this K (their rate does not depend on K)
@@ -68,11 +69,11 @@ def _fit_seconds(fit, k: int, data: dict, steps: int, device: torch.device) -> f
 
 
 def group_seconds(k, data, steps, device) -> float:
-    return _fit_seconds(grouped.fit_group, k, data, steps, device)
+    return _fit_seconds(train_closed_form, k, data, steps, device)
 
 
 def stacked_seconds(k, data, steps, device) -> float:
-    return _fit_seconds(lambda *a, **kw: stacked.fit_stacked(*a, loss_of=fit_loss, **kw), k, data, steps, device)
+    return _fit_seconds(lambda *a, **kw: train_vmap(*a, loss_of=dxdt_loss, **kw), k, data, steps, device)
 
 
 def lone_seconds(k, data, steps, device) -> float:

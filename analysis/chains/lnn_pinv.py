@@ -9,14 +9,9 @@ import dataclasses
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 import hnn
-from hnn.kinds import model_from_spec
-from hnn.runs import training_subset
-from hnn.specs import run_specs
-from hnn.units import run_scales
 from hnn_analysis import pages
 from hnn_analysis.chains import peer_plan
 from hnn_analysis.commands import run_tasks
@@ -52,16 +47,10 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "
     plain solve instead, to check that a recorded stop repeats on this machine. A worker's task."""
     torch.set_num_threads(1)
     config = _job(key, save_dir, solve).config
-    objective = config.make_objective()
-    dataset = objective.prepare(config.dataset())
-    specs = run_specs(config)
-    torch.manual_seed(config.seed)
-    np.random.seed(config.seed)
-    model = model_from_spec(specs.model, config.device)
-    if run_scales(specs.objective.units, specs.model.kind, dataset, objective, model) is not None:
+    prep = hnn.prepare(config)      # the run's init, data, units, balance and rows, as hnn.run_experiment's
+    if prep.scales is not None:
         raise ValueError(f"{key}: --units auto rescales this run's data, which the peers' runs did not")
-    x, y = training_subset(dataset[objective.arrays[0]], dataset[objective.arrays[1]], config.train_fraction, config.seed)
-    options = objective.train_options(model, specs.objective, dataset)
+    model, options = prep.canonical_model, prep.options
     limit = min(stopped + past, config.total_steps + 1)
     counts, losses, last = [], [], {}
     batch_loss = options.loss_of(model)     # a fit of dx/dt (the LNN protocol): the loss hnn.train builds
@@ -78,16 +67,15 @@ def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "
             raise _Enough
     row = {"key": key, "stopped": stopped, "limit": limit, "total_steps": config.total_steps}
     tic = time.perf_counter()
-    with hnn.training.report_progress(count):
-        try:
-            hnn.train(model, x, y, **specs.training.train_kwargs(), **{**options.train_kwargs(), "loss": loss, "progress": False},
-                      units="off", balance="off")
-        except _Enough:
-            pass
-        except hnn.DivergenceError as err:
-            row["stop"] = f"{type(err).__name__}: {str(err)[:200]}"
-            # the step that failed: the states its pseudo-inverse took before the failure (no callback ran)
-            row["pinv_at_stop"] = model.pinv_states - sum(counts)
+    try:
+        # no test batch: its forward passes would add pseudo-inverse states to the steps' counts
+        hnn.trainers.lone.train_prepared(dataclasses.replace(prep, test_x=None, test_y=None), on_step=count, loss=loss)
+    except _Enough:
+        pass
+    except hnn.DivergenceError as err:
+        row["stop"] = f"{type(err).__name__}: {str(err)[:200]}"
+        # the step that failed: the states its pseudo-inverse took before the failure (no callback ran)
+        row["pinv_at_stop"] = model.pinv_states - sum(counts)
     row["seconds"] = time.perf_counter() - tic
     row["steps"] = len(counts)
     row["pinv_per_step"], row["loss"] = counts, losses

@@ -29,7 +29,7 @@ def lnn_start(bobs=(1, 3, 5), seeds: int = 5, inits=("lnn", "lnn_convex"), steps
                                                          "learn_rate": 1e-3, "init": init, "n_train": 40, "n_test": 10,
                                                          "seed": seed, "save_dir": str(save_dir)})
                 prep = hnn.prepare(config)      # the run's model (drawn from its seed), rows and options
-                model, objective, data, options = prep.fit_model, prep.objective, prep.dataset, prep.options
+                model, objective, data, options = prep.canonical_model, prep.objective, prep.dataset, prep.options
                 z = torch.as_tensor(data["x"][:2000], dtype=torch.float32)
                 row = {"bobs": n, "init": init, "seed": seed, "states": len(z)}
                 try:

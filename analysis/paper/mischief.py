@@ -2,7 +2,8 @@
 
     hnn.evaluation.energy_bump(model, x0, ...)           # flow, climb grad H, flow again: the learned H steps up
     reversibility(models, x0, horizons)       # forward T then backward T: |x_back - x0| per model
-    mischief_figures(task, system, models, x0, fig_dir)   # both, as PNGs, and their numbers
+    energy_bump_figures(task, system, models, x0, fig_dir)   # each as a PNG, and its numbers
+    reversibility_figures(task, models, x0, fig_dir)
 
 Models are integrated in float64 copies (the trained float32 weights, evaluated in float64) so
 the curves show the fields, not float32 rounding. States are ``x = [q, p]`` ``(batch, 2)``.
@@ -129,8 +130,3 @@ def reversibility_figures(task: str, models: dict, x0, fig_dir: Path) -> dict:
     errors = reversibility(models, x0)
     reversibility_figure(task, models, x0, HORIZONS, errors, Path(fig_dir) / f"{task}-reversibility.png")
     return {"reversibility": {"x0": list(x0), "T": list(HORIZONS), **REVERSE_TOL, "error": errors}}
-
-
-def mischief_figures(task: str, system, models: dict, x0, fig_dir: Path) -> dict:
-    """``<task>-energy-bump.png`` and ``<task>-reversibility.png``; returns their numbers."""
-    return {**energy_bump_figures(task, system, models, x0, fig_dir), **reversibility_figures(task, models, x0, fig_dir)}

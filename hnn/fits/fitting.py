@@ -23,7 +23,7 @@ from tqdm.auto import tqdm
 
 from ..metrics import derivative_mse
 from ..specs import ModelSpec
-from ..training import check_data
+from ..trainers.rows import check_data
 from ..units import Rescaled, UnitScales, in_canonical_units
 from .features import TanhFeatures
 from .lstsq import RIDGES, StreamingQR, chunk_rows

@@ -176,7 +176,7 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
     sees only rows still running: it must treat rows independently (true of dynamics and of
     models). ``drop_finished=False`` passes every row to every call of ``f`` instead (a finished row
     is held with a zero step), for a ``f`` that ties a row to its position: a per-trajectory time
-    scale, a group's stacked field (``hnn.stacked.group_field``); each row's path is the same either
+    scale, a group's stacked field (``hnn.integrators.groups.group_field``); each row's path is the same either
     way. The stepping runs in numpy on the states' dtype (on a few states an operation
     costs several times less there than in torch: docs/speed.md, "Why the fast paths"), ``f`` on tensors sharing the arrays' memory.
     """

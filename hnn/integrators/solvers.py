@@ -54,12 +54,12 @@ class Solver:
             (None: the keywords ``run`` takes).
         row_wise: each row's path depends on its own state alone, and every row reaches every call
             of ``f`` (the per-row adaptive methods given ``drop_finished=False``): the rows of many
-            models can share one integration, each path as its model's own (``hnn.stacked``).
+            models can share one integration, each path as its model's own (``hnn.trainers.vmap``).
         stability_limit: the largest |lambda dt| on the imaginary axis at which a fixed step stays
             bounded (``hnn.integrators.stability``: past it ``rollout`` warns), a number or a function
             of the options (yoshida4's depends on its base); None: no limit (implicit, adaptive).
         vmap: a whole rollout runs under ``torch.vmap`` (explicit fixed steps: no step, iteration or
-            test depends on a value), so a group of models rolls out as one program (``hnn.stacked``).
+            test depends on a value), so a group of models rolls out as one program (``hnn.trainers.vmap``).
     """
     name: str
     order: int

@@ -109,7 +109,7 @@ class LagrangianNN(StateCheckedModel):
         # rows of different states never mix, so each derivative of the batch's summed L is every
         # state's own; the rows need a graph of their own only when the caller trains through them
         keep = torch.is_grad_enabled()
-        if in_model_axis():         # under vmap over models (hnn.stacked): torch.func's derivatives
+        if in_model_axis():         # under vmap over models (hnn.trainers.vmap): torch.func's derivatives
             dL_of = torch.func.grad(lambda zz: self.lagrangian(zz).sum())
             dL = dL_of(z)
             rows = torch.func.jacrev(lambda zz: dL_of(zz)[:, n:].sum(0))(z).movedim(0, 1)

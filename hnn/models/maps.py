@@ -21,7 +21,7 @@ identity. The classes' defaults are the commands' (``hnn.names``: tanh, ``--hidd
 left the pendulum's map near the identity in p (docs/maps.md, "Train a map on your own pairs"). The step ``dt`` is the data's time step, an attribute given at construction (a run's
 ``ModelSpec.dt``, recorded in its args.json): ``hnn.rollout`` steps the map on ``t_eval`` of
 multiples of it and refuses any other. Plain tensor operations only: groups of maps train under
-``torch.func.vmap`` (``hnn.stacked``).
+``torch.func.vmap`` (``hnn.trainers.vmap``).
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The paper's tanh MLP in arithmetic: a faster tanh, and the closed-form input gradient
 d(w . tanh(W2 tanh(W1 x + b1) + b2))/dx with its hand-written backward, written once for one model
 or a group's G models along a leading axis (``closed_form_input_gradient``: ``hnn.MLP`` uses it in
-``MLP.input_gradient``, ``hnn.grouped`` for a group's step), and ``EvaluationKernel``, the same
+``MLP.input_gradient``, ``hnn.trainers.closed_form`` for a group's step), and ``EvaluationKernel``, the same
 closed form in numpy for a rollout's few states.
 """
 from __future__ import annotations

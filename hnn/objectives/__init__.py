@@ -3,7 +3,7 @@
     hnn.run_experiment(config)                                   # config.make_objective(): the kind's
     hnn.run_experiment(config, dataset, hnn.objectives.PixelObjective(("pixels", "next_pixels", "test_pixels", "test_next_pixels")))
 
-An objective gives ``hnn.train`` its options for a model and a dataset (``FitOptions``, a frozen
+An objective gives ``hnn.train`` its options for a model and a dataset (``LoopOptions``, a frozen
 record: objectives keep no state of a run), and measures the final train and test numbers with them.
 Which objective trains which model kind is declared by the kinds' registry (``hnn.MODEL_KINDS``,
 ``hnn/kinds.py``); a new kind of objective is an ``Objective`` subclass, its name in
@@ -35,7 +35,7 @@ from ..training import batch_loss
 
 
 @dataclass(frozen=True)
-class FitOptions:
+class LoopOptions:
     """What an objective gives the training loop for one model on one dataset (``Objective.train_options``),
     and what its final numbers read. The loop's part (``train_kwargs``, ``hnn.train``'s keywords of these
     names): ``loss`` ``(x, y) -> (batch,)`` or ``(batch, k)``, an objective's own (None: a fit of dx/dt
@@ -65,7 +65,7 @@ class FitOptions:
 
 
 class Objective:
-    """The interface: subclasses implement ``train_options`` (a ``FitOptions`` with a ``loss`` or a
+    """The interface: subclasses implement ``train_options`` (a ``LoopOptions`` with a ``loss`` or a
     ``row_loss``, or override ``final_loss``); an objective holds its own settings, never a run's state.
 
     ``arrays`` names the dataset's ``(inputs, targets, test inputs, test targets)``, each ``(rows, width)``.
@@ -79,12 +79,12 @@ class Objective:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
         return dataset
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> LoopOptions:
         """What ``hnn.train`` adds to a run's ``TrainingSpec`` for ``model`` on ``dataset`` (``predict``,
         ``loss``, ...), from what the run's ``ObjectiveSpec`` asks (``hnn.specs.run_specs(config).objective``)."""
-        return FitOptions()
+        return LoopOptions()
 
-    def final_loss(self, model: nn.Module, inputs, targets, options: FitOptions | None = None) -> tuple[float, float]:
+    def final_loss(self, model: nn.Module, inputs, targets, options: LoopOptions | None = None) -> tuple[float, float]:
         """The ``(mean, ±)`` train or test number saved in metrics.json: ``options.row_loss`` (else its
         ``loss``) over all rows, in no-grad batches of ``chunk`` rows, mean ± std/sqrt(rows). ``options``:
         ``train_options``' for ``model`` (default: on a dataset of canonical states, this objective's dt)."""
@@ -122,11 +122,11 @@ class PathObjective(Objective):
     def loss_for(self, model: nn.Module, dt: float | None = None, observed: str | None = None):
         raise NotImplementedError
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> LoopOptions:
         observed = observed_coordinates(dataset) if "state" in dataset else self.observed
         declared(model).relation(observed)      # a model that cannot read these states: one clear error
         dt = float(dataset["dt"]) if "dt" in dataset else self.dt
-        return FitOptions(loss=self.loss_for(model, dt, observed))
+        return LoopOptions(loss=self.loss_for(model, dt, observed))
 
 
 class DerivativeObjective(Objective):
@@ -138,10 +138,10 @@ class DerivativeObjective(Objective):
 
     fits_derivative = True
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> LoopOptions:
         observed = observed_coordinates(dataset)
         targets = dataset.get(self.arrays[1])
-        options = FitOptions(input_noise=spec.input_noise, derivative_loss=spec.derivative_loss,
+        options = LoopOptions(input_noise=spec.input_noise, derivative_loss=spec.derivative_loss,
                              # --balance reads the training targets' sizes; a caller that passes none trains unweighted
                              loss_weights=None if spec.balance == "off" or targets is None
                              else balance_weights(targets, spec.balance, spec.derivative_loss))
@@ -159,7 +159,7 @@ class DerivativeObjective(Objective):
             return replace(options, predict=lambda x: rk4_step(model.time_derivative, x, dt) / dt)
         return options
 
-    def final_loss(self, model: nn.Module, inputs, targets, options: FitOptions | None = None) -> tuple[float, float]:
+    def final_loss(self, model: nn.Module, inputs, targets, options: LoopOptions | None = None) -> tuple[float, float]:
         """The mean squared error of dx/dt (``options.field``'s where it maps states, else the model's own)."""
         return derivative_mse(model, inputs, targets, field=options.field if options else None)
 
@@ -200,13 +200,13 @@ class PixelObjective(Objective):
     def __init__(self, arrays: tuple[str, str, str, str] = ("x", "x_next", "test_x", "test_x_next")):
         self.arrays = tuple(arrays)
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> LoopOptions:
         noise = torch.Generator().manual_seed(spec.seed + 2)
 
         def loss(x, x_next):
             return pixel_loss(model, x, x_next, input_noise=spec.input_noise, use_rk4=spec.use_rk4, generator=noise)
         # a resumed run draws on where it stopped; the final numbers: the loss without noise
-        return FitOptions(loss=loss, generators=(noise,), row_loss=lambda x, x_next: pixel_loss(model, x, x_next))
+        return LoopOptions(loss=loss, generators=(noise,), row_loss=lambda x, x_next: pixel_loss(model, x, x_next))
 
 
 _MODULES = ("dgnet", "map", "trajectory")

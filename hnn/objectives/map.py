@@ -30,7 +30,7 @@ from torch import nn
 
 from .dgnet import pairs_from_paths
 from ..interface import declared
-from . import FitOptions, PathObjective, cut_paths
+from . import LoopOptions, PathObjective, cut_paths
 from ..specs import ObjectiveSpec
 
 # how far two timed rows' spacing may be from dt to count as one step (times written to a few digits)
@@ -83,7 +83,7 @@ class MapObjective(PathObjective):
         _check_pairs(out, "its paths (t_eval) are shorter than two states")
         return out
 
-    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> FitOptions:
+    def train_options(self, model: nn.Module, spec: ObjectiveSpec, dataset: dict) -> LoopOptions:
         self._check_map(model, float(dataset["dt"]) if "dt" in dataset else self.dt)
         return super().train_options(model, spec, dataset)
 

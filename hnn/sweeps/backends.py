@@ -21,7 +21,6 @@ from ..errors import DivergenceError
 from .group_runs import run_group_task, train_group
 from ..runs import COMPLETE, run_experiment
 from ..tasks import repo_root, run_task
-from ..training import report_progress
 from .stopping import in_worker, stop_pool, worker_start
 from ..threads import cores
 from .. import progress as progress_lines
@@ -71,8 +70,7 @@ def train_here(units: list[list], data: dict, bar, progress):
             if bar.disable and (line := beat.due(step, total)):        # no bar: a line now and then
                 say(bar, f"  {progress.tag()} {job.key}: {line}")
         try:
-            with report_progress(advance):
-                outcome = run_experiment(job.config, data[job.config.dataset_key()])
+            outcome = run_experiment(job.config, data[job.config.dataset_key()], on_step=advance)
         except Exception as err:        # one bad run must not end the sweep (KeyboardInterrupt still does)
             outcome = err
         bar.update(job.steps - done[0])
@@ -90,8 +88,7 @@ def run_reported(task: str, values, key: str, threads: int | None = None) -> str
     def advance(step: int, total: int) -> None:
         if line := beat.due(step, total):
             print(f"  {key}: {line}", flush=True)
-    with report_progress(advance):
-        return run_task(task, values, threads)
+    return run_task(task, values, threads, on_step=advance)
 
 
 def _submit(unit: list) -> tuple:

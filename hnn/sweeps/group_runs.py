@@ -1,5 +1,5 @@
 """Grouped training as runs: configs that ``unit_key`` puts together trained as one program
-(``hnn.grouped.fit_group`` for the paper's tanh-MLP kinds, ``hnn.stacked.fit_stacked`` for every
+(``hnn.trainers.closed_form`` for the paper's tanh-MLP kinds, ``hnn.trainers.vmap`` for every
 other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` saves a lone run.
 
     folders = hnn.sweeps.group_runs.train_group([SpringConfig(seed=s, hidden_dim=32) for s in range(4)])
@@ -9,45 +9,77 @@ other) and saved each as its own ordinary run folder, as ``hnn.run_experiment`` 
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Mapping
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from .. import cli
-from ..balance import balance_weights
 from ..errors import DivergenceError
-from ..grouped import fit_group, group_key
-from ..stacked import fit_stacked, stack_key
-from ..units import run_scales
 from ..io import check_save_dir
-from ..kinds import model_from_spec
+from ..kinds import get_kind
 from ..objectives import DerivativeObjective
-from ..runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment, saved_args, training_subset
-from ..specs import RunSpecs, run_specs
+from ..runs import COMPLETE, finish_run, prepare, record_divergence, run_dir, run_experiment
+from ..specs import run_specs
 from ..tasks import task_config
 from ..threads import torch_threads
+from ..trainers import closed_form, vmap
+
+
+# the fields that must agree for configs to train as one program (seed, train_fraction and with
+# them the dataset may differ)
+_SHARED_FIELDS = ("input_dim", "hidden_dim", "learn_rate", "weight_decay", "batch_size", "total_steps",
+                  "print_every", "field_type", "dtype", "device")
+
+
+def closed_form_key(config) -> tuple | None:
+    """Configs with equal keys can train as one closed-form group (``hnn.trainers.closed_form``); None for a config that trains alone
+    (another kind, ``use_rk4``, another nonlinearity than tanh, an objective of its own, or an
+    optimizer, schedule, gradient clipping or derivative loss other than the paper's constant-rate
+    Adam on the squared error, or ``balance='rms'``)."""
+    if (get_kind(config.kind).grouping != "closed_form" or config.use_rk4 or config.nonlinearity != "tanh" or config.balance == "rms"
+            or (config.optimizer, config.schedule, config.clip_grad, config.derivative_loss)
+            != ("adam", "constant", 0.0, "l2")
+            or type(config.make_objective()) is not DerivativeObjective):
+        return None
+    return ((type(config).__module__, type(config).__qualname__, config.kind, run_specs(config).objective.input_noise)
+            + tuple(getattr(config, name) for name in _SHARED_FIELDS))
+
+
+# the fields that may differ within a stacked group: each model's seed, data fraction and init
+_OWN_FIELDS = ("seed", "train_fraction", "init")
+
+
+def vmap_key(config) -> tuple | None:
+    """Configs with equal keys can train as one stacked group (``hnn.trainers.vmap.train_vmap``); None for a config that
+    ``closed_form_key`` groups (its closed form is faster) or that trains alone: the pixel kinds
+    (their objective draws noise of its own). The key is the run's identity less ``_OWN_FIELDS``, and
+    the facts its model is built from (the chain's constraints)."""
+    if closed_form_key(config) is not None or get_kind(config.kind).grouping == "alone":
+        return None
+    same = {k: v for k, v in config.identity().items() if k not in _OWN_FIELDS}
+    return (type(config).__module__, type(config).__qualname__,      # the identity's JSON: a hashable key
+            json.dumps({**same, **config.model_facts()}, sort_keys=True, default=str))
 
 
 def unit_key(config) -> tuple | None:
     """Configs with equal keys train as one group: ``("closed_form", ...)`` for the paper's tanh-MLP kinds
-    (``hnn.grouped.fit_group``), ``("stacked", ...)`` for any other kind (``hnn.stacked.fit_stacked``),
+    (``hnn.trainers.closed_form``), ``("vmap", ...)`` for any other kind (``hnn.trainers.vmap``),
     None for a config that trains alone (the pixel kinds)."""
     specs = run_specs(config)
     if specs.objective.units == "on":     # a rescaled run trains its own canonical data alone
         return None
     if specs.fit.fit != "adam":            # a least-squares fit is one solve, no loop to share
         return None
-    key = group_key(config)
+    key = closed_form_key(config)
     if key is not None:
         return ("closed_form",) + key
-    key = stack_key(config)
-    return None if key is None else ("stacked",) + key
+    key = vmap_key(config)
+    return None if key is None else ("vmap",) + key
 
 
 def group_checkpoint(configs: list) -> Path:
-    """The training checkpoint of the group of ``configs`` while it trains (``hnn.grouped.GroupCheckpoint``):
+    """The training checkpoint of the group of ``configs`` while it trains (``hnn.trainers.group_loop.GroupCheckpoint``):
     ``<save_dir>/.group-<hash>.partial.pt``, the hash of its runs' folder names, so the same group started
     again finds it and another group does not."""
     names = "\n".join(run_dir(config).name for config in configs)
@@ -82,37 +114,20 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         raise ValueError("train_group needs configs of one group (equal hnn.sweeps.group_runs.unit_key, none None); "
                          "train the others alone with hnn.run_experiment")
     for config in configs:
-        cli.check(config)
         check_save_dir(config.save_dir)
     objective = configs[0].make_objective()
-    datasets = [objective.prepare(d) for d in (datasets or [config.dataset() for config in configs])]
-    if any([_trains_alone(c, d, objective) for c, d in zip(configs, datasets)]):
-        return [_alone(config, dataset) for config, dataset in zip(configs, datasets)]
-    models, data, tests = [], [], []
-    saved = [saved_args(config, dataset) for config, dataset in zip(configs, datasets)]
-    specs = [run_specs(args) for args in saved]     # the configs' and their data's time step (a map's step)
-    for config, dataset, spec in zip(configs, datasets, specs):
-        torch.manual_seed(config.seed)         # the lone run's init, drawn the lone run's way
-        np.random.seed(config.seed)
-        models.append(model_from_spec(spec.model, config.device))
-        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
-        data.append(training_subset(x, y, config.train_fraction, config.seed))
-        tests.append((test_x, test_y))
-    first = specs[0]            # the group's keys make these equal across its configs, but the seeds
-    shared = dict(seeds=[spec.training.seed for spec in specs], total_steps=first.training.total_steps,
-                  learn_rate=first.training.learn_rate, weight_decay=first.training.weight_decay,
-                  batch_size=first.training.batch_size, print_every=first.training.print_every,
-                  names=[run_dir(c).name for c in configs])
+    # each member prepared as its lone run is (its checks, init, units, balance and rows: hnn.runs.prepare)
+    preps = [prepare(config, dataset, objective)
+             for config, dataset in zip(configs, datasets or [config.dataset() for config in configs])]
+    if any(p.scales is not None or p.options.loss_weights is not None for p in preps):
+        # --units or --balance resolved to what a group's program does not do: each trains alone
+        return [_alone(p.config, p.dataset) for p in preps]
     partial = group_checkpoint(configs)
     if any(config.force for config in configs):
         partial.unlink(missing_ok=True)
+    trainer = closed_form if next(iter(keys))[0] == "closed_form" else vmap
     try:
-        if next(iter(keys))[0] == "closed_form":
-            stats, failures = fit_group(models, data, tests, input_noise=first.objective.input_noise,
-                                        checkpoint=partial, **shared)
-        else:
-            stats, failures = fit_stacked(models, data, tests, checkpoint=partial, **shared,
-                                          **_stacked_options(objective, models[0], first, datasets))
+        stats, failures = trainer.train_prepared(preps, checkpoint=partial, names=[run_dir(c).name for c in configs])
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise
@@ -121,37 +136,14 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         if g in failures:
             out.append(failures[g])
             continue
-        (x, y), (test_x, test_y) = data[g], tests[g]
-        options = objective.train_options(models[g], specs[g].objective, datasets[g])      # its own, for its numbers
-        directory = finish_run(config, models[g], stats[g], objective.final_loss(models[g], x, y, options),
-                               objective.final_loss(models[g], test_x, test_y, options), None, saved[g])
-        config.finish(directory, datasets[g])
+        p = preps[g]        # its own options, for its numbers
+        directory = finish_run(config, p.model, stats[g], objective.final_loss(p.model, p.x, p.y, p.options),
+                               objective.final_loss(p.model, p.test_x, p.test_y, p.options), None, p.saved)
+        config.finish(directory, p.dataset)
         out.append(directory)
     partial.unlink(missing_ok=True)
     drop_spent_checkpoints(configs[0].save_dir)        # an older group of these runs, killed mid-way
     return out
-
-
-def _stacked_options(objective, model, specs: RunSpecs, datasets: list[dict]) -> dict:
-    """``fit_stacked``'s loss and options from ``objective.train_options``, as ``hnn.train`` reads them.
-    The loss is built once for the group: every dataset must give it the same time step and coordinates."""
-    for key in ("dt", "state"):
-        if len({str(d.get(key)) for d in datasets}) > 1:
-            raise ValueError(f"a group's datasets differ in {key!r}: train these runs alone")
-    options = objective.train_options(model, specs.objective, datasets[0])
-    return dict(optimizer=specs.training.optimizer, schedule=specs.training.schedule,
-                clip_grad=specs.training.clip_grad, input_noise=options.input_noise, loss_of=options.loss_of)
-
-
-def _trains_alone(config, dataset: dict, objective) -> bool:
-    """Whether ``config``'s run on ``dataset`` needs what a group's program does not do: ``--balance auto``
-    resolved to a balanced loss, or ``--units auto`` to a rescaling (whose refusal, for a kind or an
-    objective it cannot rescale, is raised here as a lone run raises it)."""
-    derivative = isinstance(objective, DerivativeObjective)
-    if derivative and balance_weights(dataset[objective.arrays[1]], config.balance, config.derivative_loss) is not None:
-        return True
-    # the model's declarations (coordinates, angles) decide the rescaling; its weights are drawn again below
-    return run_scales(config.units, config.kind, dataset, objective, model_from_spec(run_specs(config).model)) is not None
 
 
 def _alone(config, dataset):
@@ -188,4 +180,5 @@ def _record_diverged(configs: list, outcomes: list) -> None:
             record_divergence(config, outcome)
 
 
-__all__ = ["drop_spent_checkpoints", "group_checkpoint", "run_group_task", "train_group", "unit_key"]
+__all__ = ["drop_spent_checkpoints", "group_checkpoint", "closed_form_key", "run_group_task", "vmap_key", "train_group",
+           "unit_key"]
