@@ -13,7 +13,8 @@ TASK = hnn.TaskSpec(
     },
     figures=("energy", "orbits"),
     cost=60,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
-    data_cost=1.2,    # seconds of one build of its --quick dataset (1000 orbits: 1.1 s on a 2-core box at load 5)
+    data_cost=0.3,    # seconds of one build of its --quick dataset (1000 orbits: 0.2 s on a 2-core box at load 2, 1.1 s at 5)
+    evaluate_cost=3.5,    # seconds of its --quick evaluation of a row (0.1 s its energy protocols, 3.1 s its 2 figures (the orbits 2.6); 2-core box at load 3)
     scene_study={"T": 20.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01), "period": None, "periods": 100,
                  "unit": "orbits", "grid": True, "drift": True},
     integrator_study={"T": 3.0, "dts": (0.2, 0.1, 0.03, 0.01, 0.002), "batch": 8, "quick": True},

@@ -22,7 +22,8 @@ TASK = hnn.TaskSpec(
     },
     figures=("energy", "orbits"),
     cost=90,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
-    data_cost=4.5,    # seconds of one build of its --quick dataset (5000 orbits: 4.4 s on a 2-core box at load 5)
+    data_cost=1,    # seconds of one build of its --quick dataset (5000 orbits: 0.8 s on a 2-core box at load 2, 4.4 s at 5)
+    evaluate_cost=5,    # seconds of its --quick evaluation of a row (0.1 s its energy protocols, 4.9 s its 2 figures (the orbits 4.0); 2-core box at load 3)
     variants=CLEAN_ORBITS,
     scene_study={"T": 5.0, "dts": (0.05, 0.02, 0.01, 0.005, 0.002)},
     integrator_study={"T": 1.0, "dts": (0.05, 0.02, 0.01, 0.003, 0.0005), "batch": 4},

@@ -23,6 +23,7 @@ TASK = hnn.TaskSpec(
     figure_settings={"pixel_add_energy": metric.ADD_ENERGY},
     cost=250,
     data_cost=20,    # seconds of one build of its --quick dataset (its 20 quick trials' frames rendered: 21 s on a 2-core box at load 5)
+    evaluate_cost=5,    # seconds of its --quick evaluation of a row (2.7 s its protocols, 2.2 s its 4 figures; 2-core box at load 3)
     # --quick renders 20 trajectories instead of 200 (rendering is most of a quick run's pixel time)
     quick={"trials": 20},
     # train.py's own evaluation is skipped: reproduce evaluates both models together

@@ -20,5 +20,7 @@ TASK = hnn.TaskSpec(
     },
     figures=("energy", "real_fields", "energy_bump", "reversibility"),
     cost=8,     # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    data_cost=0.1,    # seconds of one build of its --quick dataset (0.02 s on a 2-core box at load 5)
+    evaluate_cost=3,    # seconds of its --quick evaluation of a row (0.2 s its energy protocols, 2.5 s its 4 figures; 2-core box at load 3)
     scene_study={},
 )

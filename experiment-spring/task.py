@@ -22,6 +22,8 @@ TASK = hnn.TaskSpec(
                      "fields": {"lim": 1.2, "gridsize": 10, "t_span": (0.0, 30.0), "num_points": 2000},
                      "integration": {"t_span": (0.0, 20.0), "num_points": 2000}},
     cost=12,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    data_cost=0.1,    # seconds of one build of its --quick dataset (0.03 s on a 2-core box at load 5)
+    evaluate_cost=5,    # seconds of its --quick evaluation of a row (0.4 s its energy protocols, 4.4 s its 5 figures; 2-core box at load 3)
     scene_study={"T": 3.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002), "period": math.pi,
                  "periods": 1000, "unit": "periods", "grid": True, "drift": True},
     integrator_study={"T": 5.0, "dts": (0.3, 0.1, 0.03, 0.01, 0.003), "batch": 8, "quick": True},

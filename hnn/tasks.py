@@ -49,6 +49,8 @@ class TaskSpec:
         cost: relative wall time of one full training run (``--jobs N`` starts the longest first).
         data_cost: seconds of one build of its dataset at its ``quick`` settings on the quick budgets' reference
             box (``hnn_analysis.plan``, a quiet 2-core box): a quick mode's plan prices its builds by it.
+        evaluate_cost: seconds of its ``reproduce.py --quick`` evaluation of a row on that reference box: the
+            paper's pair under every energy protocol at the quick trials, and the row's figures.
         quick: config fields for ``reproduce.py --quick``, ``{field: value}`` (e.g. a smaller dataset).
         settings: config fields for every run of ``reproduce.py`` and the sweeps.
         variants: extra table rows, ``{suffix: ({field: value}, why)}``: row ``<task>-<suffix>``
@@ -79,7 +81,8 @@ class TaskSpec:
     figures: tuple[str, ...] = ("energy",)
     figure_settings: Mapping = field(default_factory=dict)
     cost: float = 1.0
-    data_cost: float = 0.1
+    data_cost: float = 1.0
+    evaluate_cost: float = 5.0
     quick: Mapping = field(default_factory=dict)
     settings: Mapping = field(default_factory=dict)
     variants: Mapping = field(default_factory=dict)

@@ -110,11 +110,16 @@ def main(argv=None) -> dict:
     _check(parser, args)
     from hnn.sweeps import sweep
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    tasks = args.tasks or hnn.tasks.paper_tasks()
+    tasks = args.tasks or (study.quick_tasks(hnn.tasks.paper_tasks()) if args.quick else hnn.tasks.paper_tasks())
+    left_out = [task for task in hnn.tasks.paper_tasks() if task not in tasks] if args.quick and not args.tasks else []
     mode, steps = _mode(args)
     backend = "" if args.backend == "local" else f" --backend {args.backend}"
     print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)
     cuts = study.quick_cuts(tasks, steps) if args.quick else []
+    if left_out:
+        cuts.append(f"tasks: {', '.join(left_out)} left out (a dataset over {study.QUICK_DATA_SECONDS:g} s to build on "
+                    "the reference box: " + ", ".join(f"{t} {hnn.task_spec(t).data_cost:g} s" for t in left_out)
+                    + "; --tasks names one to reproduce it)")
     if cuts:
         commands.say_quick("reproduce", cuts)
     pages.warn_stale(("headline", "results"))
@@ -126,7 +131,10 @@ def main(argv=None) -> dict:
     runs, jobs = sweep.reuse(study.plan(rows, seeds, out / "runs", steps, args.models))
     sweep.say_reused("reproduce", runs, jobs)
     jobs = plan.timed(jobs)
-    results["meta"]["plan"] = plan.say("reproduce", [plan.training(jobs, args.jobs), plan.Stage("evaluate", len(rows), "rows")])
+    # a quick run's datasets and evaluation at their declared costs (the reference box's); a full run's timed
+    stages = ([study.data_stage(tasks), plan.training(jobs, args.jobs), study.evaluation_stage(rows)] if args.quick
+              else [plan.training(jobs, args.jobs), plan.Stage("evaluate", len(rows), "rows")])
+    results["meta"]["plan"] = plan.say("reproduce", stages)
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)

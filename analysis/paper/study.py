@@ -25,6 +25,9 @@ if TYPE_CHECKING:       # torch-free at import: reproduce.py checks its flags be
 
 QUICK_STEPS = 100        # --quick: training steps per model (its budget: commands.QUICK_BUDGETS)
 QUICK_TRIALS = 5         # --quick: trials of each energy protocol (theirs: 15; a multiple of its 5 splits)
+# --quick: a task whose dataset takes longer than this to build (its TaskSpec.data_cost, on the reference box of
+# hnn_analysis.plan) is left out unless --tasks names it (the pixels' frames: 20 s of the 60 s)
+QUICK_DATA_SECONDS = 5.0
 
 
 def load_runs(task: str, runs: dict) -> tuple[registry.Trained, dict]:
@@ -193,3 +196,36 @@ def quick_cuts(tasks: list[str], steps: int | None) -> list[str]:
     if trials:
         cuts.append(f"energy MSE: {QUICK_TRIALS} trials of each protocol's {', '.join(map(str, sorted(trials)))}")
     return cuts
+
+
+def quick_tasks(tasks: list[str]) -> list[str]:
+    """The tasks ``--quick`` takes of ``tasks`` when none is named: those whose dataset builds within
+    ``QUICK_DATA_SECONDS`` on the reference box (``TaskSpec.data_cost``)."""
+    return [task for task in tasks if hnn.task_spec(task).data_cost <= QUICK_DATA_SECONDS]
+
+
+def reference_plan(tasks: list[str], steps: int = QUICK_STEPS) -> list:
+    """``reproduce.py --quick``'s plan of ``tasks`` on the quick budgets' reference box (``hnn_analysis.plan``:
+    declared costs, nothing built): its training (``plan.reference_seconds``), its datasets (each task's
+    ``TaskSpec.data_cost``) and its evaluation (``evaluation_stage``)."""
+    from hnn_analysis import plan as plans
+    rows = table_rows(tasks, True, [0])
+    jobs = plan(rows, [0], Path("runs"), steps)
+    training = plans.Stage("train", len(jobs), "runs", sum(plans.reference_seconds(job) for job in jobs),
+                           "each run's declared cost on the reference box")
+    return [training, data_stage(tasks), evaluation_stage(rows)]
+
+
+def data_stage(tasks: list[str]):
+    """The datasets the runs build, once a task, at each task's declared ``TaskSpec.data_cost``."""
+    from hnn_analysis import plan as plans
+    return plans.Stage("build", len(tasks), "datasets" if len(tasks) != 1 else "dataset",
+                       plans.reference_data_seconds(tasks), "each task's declared build on the reference box")
+
+
+def evaluation_stage(rows: list[dict]):
+    """The --quick evaluation of ``rows`` on the reference box: each row's ``TaskSpec.evaluate_cost`` (its energy
+    protocols at ``QUICK_TRIALS`` trials and its figures; a variant row, which draws none, priced as its task's)."""
+    from hnn_analysis import plan as plans
+    return plans.Stage("evaluate", len(rows), "rows", sum(hnn.task_spec(row["task"]).evaluate_cost for row in rows),
+                       "each task's declared evaluation and figures on the reference box")
