@@ -393,7 +393,7 @@ def test_fit_least_squares_refuses_as_hnn_train_does_and_names_an_unknown_kind()
     wrapped, _ = hnn.fit_least_squares(hnn.units.Rescaled(built), x, dxdt, fit="library", progress=False)
     assert wrapped.equation().startswith("H = -0.5 q^2 + 0.5 p^2 + 2.5e-07 q^4")
     with pytest.raises(ValueError, match=r"^unknown kind 'hnnn'; the kinds are hnn, .*fit='swim' fits hnn, separable, "
-                                         r"baseline; did you mean 'hnn'\?$"):
+                                         r"baseline\b.*; did you mean 'hnn'\?$"):
         hnn.fit_least_squares("hnnn", x, dxdt, progress=False)
     with pytest.raises(ValueError, match=r"^fit='swim' solves the last weights of hnn, separable, baseline.*train "
                                          r"'dissipative' with hnn.train$") as refused:

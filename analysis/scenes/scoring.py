@@ -36,7 +36,10 @@ def run_folders(path: Path) -> list[Path]:
 
 
 def _task_fields(task: str) -> set[str]:
-    return {f.name for f in dataclasses.fields(hnn.tasks.load_task(task, "train").Config)}
+    """The keys a run of ``task`` records: its config's fields and the facts its task declares
+    (``model_facts``: the chain's ``constraints``, the bodies of an N-body task)."""
+    config = hnn.tasks.task_config(task)
+    return {f.name for f in dataclasses.fields(config)} | set(config.model_facts())
 
 
 def task_of(args: dict) -> str:
