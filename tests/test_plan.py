@@ -1,5 +1,6 @@
 """analysis/plan.py: a study says its stages and their estimates from measured per-run costs before it starts."""
 import re
+from pathlib import Path
 
 import pytest
 
@@ -78,10 +79,6 @@ def test_a_quick_fit_takes_at_most_its_rows_and_a_cell_keeps_its_fraction_where_
     assert scene_rungs.capped(config, rows) is config
 
 
-def _reference(jobs):
-    return sum(plan.reference_seconds(job) for job in jobs)
-
-
 def test_the_reference_box_prices_a_run_by_its_tasks_declared_cost_and_a_fit_by_its_rows():
     spring = sweep.Job("s", "spring", hnn.tasks.task_config("spring", {"total_steps": 99}))
     per_step = hnn.task_spec("spring").cost / hnn.tasks.task_config("spring", {}).total_steps
@@ -112,12 +109,19 @@ def test_the_quick_paper_reproduction_plans_within_its_budget_on_the_reference_b
     assert sum(s.seconds for s in with_pixels) > sum(s.seconds for s in stages) + hnn.task_spec("pixels").data_cost
 
 
-def test_the_quick_peers_table_trains_within_its_budget_on_the_reference_box(tmp_path):
-    """peers.py --quick's training on the reference box within half its budget (its measuring: the record's)."""
+def test_the_quick_peers_table_plans_within_its_budget_on_the_reference_box():
+    """peers.py --quick on the reference box (declared costs: the chain's TaskSpec.data_cost, peer_plan.QUICK_COSTS
+    by kind and bobs), every stage priced, within commands.QUICK_BUDGETS; a Lagrangian kind's run is priced above
+    the chain's mean step (its Hessians), and a run's measuring grows with its bobs."""
     from hnn_analysis import commands
     from hnn_analysis.chains import peer_plan
-    jobs = peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, tmp_path, 0)
-    assert _reference(jobs) <= commands.QUICK_BUDGETS["peers"] / 2
+    stages = peer_plan.reference_plan()
+    assert [s.what for s in stages] == ["build", "train", "measure", "time"] and all(s.seconds > 0 for s in stages)
+    assert stages[1].count == len(peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, Path("runs")))
+    assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["peers"]
+    # the declared costs move the plan as they should: more bobs, dearer runs and measuring
+    more = peer_plan.reference_plan({**peer_plan.QUICK, "bobs": (1, 2, 3)})
+    assert more[1].seconds > stages[1].seconds and more[2].seconds > stages[2].seconds
 
 
 def test_the_quick_scene_study_plans_within_its_budget_on_the_reference_box():
