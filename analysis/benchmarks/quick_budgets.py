@@ -13,7 +13,9 @@ output in a fresh temporary folder and its tasks read from a fresh clone of this
 ``hnn_analysis.commands.QUICK_BUDGETS``, each written in its command's ``--help``. Beside every time
 stand the machine's load averages (``os.getloadavg``) just before and just after, and the cores that
 other processes kept busy in the second before it started: a time on a busy box says little about a
-quiet one. ``--out`` gets ``quick_budgets.json`` and each command's log.
+quiet one. Beside each quick mode that has one stands its plan on the reference box (``reference_plans``: its
+stages at their declared costs, what tests/test_plan.py holds within the budget). ``--out`` gets
+``quick_budgets.json`` and each command's log.
 """
 from __future__ import annotations
 
@@ -29,6 +31,15 @@ from hnn.io import write_json
 from hnn_analysis import commands, pages
 from hnn_analysis.benchmarks.timed_commands import COMMANDS, verdict, run_one, section
 from hnn_analysis.provenance import provenance
+
+
+def reference_plans() -> dict:
+    """``{command name: its stages on the reference box}`` (``hnn_analysis.plan``: declared costs, nothing run)."""
+    from hnn_analysis.chains import peer_plan
+    from hnn_analysis.paper import study
+    from hnn_analysis.scenes import scene_stages
+    return {"reproduce": study.reference_plan(study.quick_tasks(hnn.tasks.paper_tasks())),
+            "scene_study": scene_stages.reference_plan(), "peers": peer_plan.reference_plan()}
 
 
 def main(argv=None) -> dict:
@@ -50,14 +61,20 @@ def main(argv=None) -> dict:
     names = args.only or list(COMMANDS)
     meta = {**provenance(), "command": commands.portable_command([shlex.quote(a) for a in argv],
                                                                  "analysis/benchmarks/quick_budgets.py")}
-    runs, tic = [], time.perf_counter()
+    runs, tic, planned = [], time.perf_counter(), reference_plans()
     for i, name in enumerate(names, 1):
         print(f"[{i}/{len(names)}, {time.perf_counter() - tic:.0f} s] {name}: python {' '.join(COMMANDS[name])} "
               "(from nothing) ...", flush=True)
         row = run_one(name, root, out)
+        if name in planned:
+            row["reference_plan"] = {stage.what: stage.seconds for stage in planned[name]}
         runs.append(row)
         print(f"  {row['wall']:.1f} s against a budget of {row['budget']} s: {verdict(row)}; load "
               f"{row['load_before'][0]:.2f} before, {row['load_after'][0]:.2f} after; log {row['log']}", flush=True)
+        if name in planned:
+            print(f"  its plan on the reference box: {sum(row['reference_plan'].values()):.0f} s ("
+                  + ", ".join(f"{what} {seconds:.0f} s" for what, seconds in row["reference_plan"].items()) + ")",
+                  flush=True)
     result = {"meta": meta, "omp_num_threads": os.environ.get("OMP_NUM_THREADS"), "runs": runs}
     write_json(out / "quick_budgets.json", result)
     text = section(result)
