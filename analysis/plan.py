@@ -56,11 +56,11 @@ BURSTS, BURST_SECONDS = 1, 0.05
 # fit's: the 3-body library, 90 s over its 100000 rows, issue 79)
 REFERENCE_RUN_SECONDS = 0.5
 REFERENCE_FIT_ROW_SECONDS = 0.9e-3
-# ... and a model's field call in a rollout REFERENCE_FIELD_CALL_SECONDS (a quick study's small models on 5-15
-# states through solve_ivp, the solver's own work between calls included: docs/speed.md gives 115 us of our own
-# work a call on 64 states): a quick study's rollout budget in field calls is its seconds at this rate, so the
-# same rollouts stop on every box
-REFERENCE_FIELD_CALL_SECONDS = 0.1e-3
+# ... and a model's field call in a rollout REFERENCE_FIELD_CALL_SECONDS, the dearest field of a quick study's (the
+# 3-body library's on 2-5 states, the solver's work between calls included: 0.9 ms a call on a 2-core box at load 2;
+# an MLP's 0.1-0.5 ms): a quick study's rollout budget in field calls is its seconds at this rate, so the same
+# rollouts stop on every box
+REFERENCE_FIELD_CALL_SECONDS = 0.5e-3
 
 
 def reference_seconds(job, fit_rows: int | None = None) -> float:

@@ -161,9 +161,10 @@ QUICK_SPEED_SECONDS = 6.0
 TRUTH_SECONDS = 3.0
 # a quick study's budget of each model rollout (under each energy protocol, and for its rollout error), in seconds
 # on the reference box and so in field calls (QUICK_ROLLOUT_CALLS, the same on every box): the 3-body library's,
-# stiff off the orbits, passed 20000 calls on one trial of 15 and ran 350 s; a healthy sampled HNN of the spring
-# (the paper's protocol, rtol 1e-12) makes 1429. A budget in wall seconds stopped two healthy mechanical models on a
-# loaded box (their calls cost more there), which a budget in calls does not
+# stiff off the orbits, passed 20000 calls on one trial of 15 and ran 350 s; of the healthy models of a quick study
+# the hungriest rollout made 4412 calls (the spring's hnn+swim, its rollout error; every other under 4000), so 6000
+# stop the library alone. A budget in wall seconds stopped two healthy mechanical models on a loaded box (their
+# calls cost more there), which a budget in calls does not
 QUICK_ROLLOUT_SECONDS = 3.0
 QUICK_ROLLOUT_CALLS = round(QUICK_ROLLOUT_SECONDS / plan.REFERENCE_FIELD_CALL_SECONDS)
 # a quick study's training cost of a model: one short burst, as a plan's (hnn_analysis.plan)
