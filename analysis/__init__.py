@@ -25,7 +25,8 @@ the rooms its row names, and ``hnn``; ``hnn`` imports none of them.
 
 - shared: what every command uses (``commands``, ``provenance``, ``pages``, ``plotting``,
   ``training_cost``, ``plan``: a study's estimate before it starts); it imports no room;
-- ``paper``, ``benchmarks``, ``integrator_study``, ``chains``, ``extremes``: each on the shared modules alone;
+- ``paper``, ``integrator_study``, ``chains``, ``extremes``: each on the shared modules alone;
+- ``benchmarks``: also the studies whose quick modes it times beside their plans (``paper``, ``scenes``, ``chains``);
 - ``fits``: also the paper's rows of runs and figure registry (its tasks' runs and energy protocols);
 - ``scenes``: also the paper's rows of runs and figure registry, and the integrator study's settings;
 - entry: the commands at this level (the README's entry points, ``arm``, ``stress``, ``readme``, ``score``,
@@ -48,7 +49,7 @@ _ROOMS = {
 _MAY_IMPORT = {
     "shared": (),
     "paper": ("shared",),
-    "benchmarks": ("shared",),
+    "benchmarks": ("shared", "paper", "scenes", "chains"),
     "integrator_study": ("shared",),
     "chains": ("shared",),
     "extremes": ("shared",),

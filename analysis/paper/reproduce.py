@@ -24,7 +24,6 @@ import sys
 import time
 from pathlib import Path
 
-
 import hnn
 from hnn.io import atomic_write, write_json
 from hnn.threads import torch_threads
@@ -115,11 +114,7 @@ def main(argv=None) -> dict:
     mode, steps = _mode(args)
     backend = "" if args.backend == "local" else f" --backend {args.backend}"
     print(f"reproduce: tasks {', '.join(tasks)}; {mode}; --jobs {args.jobs}{backend}; output {out}", flush=True)
-    cuts = study.quick_cuts(tasks, steps) if args.quick else []
-    if left_out:
-        cuts.append(f"tasks: {', '.join(left_out)} left out (a dataset over {study.QUICK_DATA_SECONDS:g} s to build on "
-                    "the reference box: " + ", ".join(f"{t} {hnn.task_spec(t).data_cost:g} s" for t in left_out)
-                    + "; --tasks names one to reproduce it)")
+    cuts = study.quick_cuts(tasks, steps, left_out) if args.quick else []
     if cuts:
         commands.say_quick("reproduce", cuts)
     pages.warn_stale(("headline", "results"))
@@ -131,10 +126,7 @@ def main(argv=None) -> dict:
     runs, jobs = sweep.reuse(study.plan(rows, seeds, out / "runs", steps, args.models))
     sweep.say_reused("reproduce", runs, jobs)
     jobs = plan.timed(jobs)
-    # a quick run's datasets and evaluation at their declared costs (the reference box's); a full run's timed
-    stages = ([study.data_stage(tasks), plan.training(jobs, args.jobs), study.evaluation_stage(rows)] if args.quick
-              else [plan.training(jobs, args.jobs), plan.Stage("evaluate", len(rows), "rows")])
-    results["meta"]["plan"] = plan.say("reproduce", stages)
+    results["meta"]["plan"] = plan.say("reproduce", study.stages(tasks, rows, plan.training(jobs, args.jobs), args.quick))
     trained, seconds = sweep.train_jobs(jobs, args.jobs, out / "logs", args.backend, args.ray_address, args.group,
                                         args.device)
     runs.update(trained)

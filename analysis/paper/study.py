@@ -179,9 +179,14 @@ def evaluate_rows(rows: list[dict], seeds: list[int], runs: dict, results: dict,
               flush=True)
 
 
-def quick_cuts(tasks: list[str], steps: int | None) -> list[str]:
-    """What ``--quick`` cuts from the tasks' own settings, one phrase each, as ``main`` prints them."""
+def quick_cuts(tasks: list[str], steps: int | None, left_out: list[str] = ()) -> list[str]:
+    """What ``--quick`` cuts from the tasks' own settings, one phrase each, as ``main`` prints them; ``left_out``:
+    the paper's tasks it leaves out for their dataset's cost (``quick_tasks``)."""
     cuts = []
+    if left_out:
+        cuts.append(f"tasks: {', '.join(left_out)} left out (a dataset over {QUICK_DATA_SECONDS:g} s to build on the "
+                    "reference box: " + ", ".join(f"{t} {hnn.task_spec(t).data_cost:g} s" for t in left_out)
+                    + "; --tasks names one to reproduce it)")
     if steps is not None:
         own = {task: hnn.tasks.task_config(task, hnn.task_spec(task).settings).total_steps for task in tasks}
         cuts.append(f"{steps} training steps a model of the tasks' own "
@@ -229,3 +234,12 @@ def evaluation_stage(rows: list[dict]):
     from hnn_analysis import plan as plans
     return plans.Stage("evaluate", len(rows), "rows", sum(hnn.task_spec(row["task"]).evaluate_cost for row in rows),
                        "each task's declared evaluation and figures on the reference box")
+
+
+def stages(tasks: list[str], rows: list[dict], training, quick: bool) -> list:
+    """``reproduce.py``'s plan around its ``training`` stage: a quick run's datasets and evaluation at their
+    declared costs (the reference box's); a full run's evaluation timed as it goes."""
+    from hnn_analysis import plan as plans
+    if quick:
+        return [data_stage(tasks), training, evaluation_stage(rows)]
+    return [training, plans.Stage("evaluate", len(rows), "rows")]
