@@ -118,13 +118,7 @@ def get_dataset(seed: int = 0, save_dir=HERE, **params) -> dict:
         rng = np.random.RandomState(seed)
         x0 = torch.tensor(np.stack([random_config(rng, p["num_bodies"]) for _ in range(p["num_trials"])]))
         t_eval = np.linspace(*p["t_span"], p["num_points"])
-        paths = hnn.rollout(dynamics, x0, t_eval, method="dop853", rtol=p["rtol"], atol=p["atol"])
-        x = paths.reshape(-1, paths.shape[-1])
-        dxdt = dynamics(x)
-        split = int(p["num_trials"] * p["test_split"]) * p["num_points"]
-        as32 = lambda a: np.ascontiguousarray(a.numpy(), dtype=np.float32)  # noqa: E731
-        return {"x": as32(x[split:]), "dxdt": as32(dxdt[split:]), "test_x": as32(x[:split]),
-                "test_dxdt": as32(dxdt[:split]), "dt": float(t_eval[1] - t_eval[0]), "t_eval": t_eval}
+        return hnn.datasets.paths_dataset(dynamics, x0, t_eval, p["test_split"], rtol=p["rtol"], atol=p["atol"])
 
     return get_cached_dataset(save_dir, NAME, p, build,
                               describe=lambda d: f"{p['num_trials']} paths of a Lennard-Jones cluster of "

@@ -66,3 +66,18 @@ def ring_dataset(dynamics, seed: int, samples: int, t_span: tuple[float, float],
     t_eval = np.linspace(t_span[0], t_span[1], int(timescale * (t_span[1] - t_span[0])))
     x0, noise = sample_ring(np.random.RandomState(seed), samples, radius_range, len(t_eval), noise_std)
     return trajectory_dataset(dynamics, x0, t_eval, noise, test_split)
+
+
+def paths_dataset(dynamics, x0: torch.Tensor, t_eval: np.ndarray, test_split: float, rtol: float, atol: float,
+                  method: str = "dop853") -> dict:
+    """The many-body scenes' recipe: every start state ``x0`` ``(num, dim)`` integrated at once by ``method``
+    on ``t_eval`` ``(T,)``, no noise; the first ``test_split`` of the paths test, the rest train (the orbit
+    tasks' split). Float32 ``x``, ``dxdt`` (``dynamics`` at each row), ``test_x``, ``test_dxdt`` ``(rows, dim)``
+    (trajectory-major), the grid step ``dt`` and ``t_eval``."""
+    paths = rollout(dynamics, x0, t_eval, method=method, rtol=rtol, atol=atol)
+    x = paths.reshape(-1, paths.shape[-1])
+    dxdt = dynamics(x)
+    split = int(len(x0) * test_split) * len(t_eval)
+    as32 = lambda a: np.ascontiguousarray(a.numpy(), dtype=np.float32)  # noqa: E731
+    return {"x": as32(x[split:]), "dxdt": as32(dxdt[split:]), "test_x": as32(x[:split]),
+            "test_dxdt": as32(dxdt[:split]), "dt": float(t_eval[1] - t_eval[0]), "t_eval": t_eval}
