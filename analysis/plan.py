@@ -104,7 +104,7 @@ def _fit_seconds(config, torch_threads) -> dict:
     key = config.dataset_key()
     if key not in _DATASETS:
         _DATASETS[key] = config.dataset()
-    prep = hnn.runs.prepare(config, _DATASETS[key])
+    prep = hnn.prepare(config, _DATASETS[key])
     rows = len(prep.x)
     # at least a row a neuron: a sampled layer's factor is square in its width
     probe = max(PROBE_ROWS, getattr(config, "hidden_dim", 0) + 1)

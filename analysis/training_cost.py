@@ -31,7 +31,7 @@ def training_cost(task: str, args: dict, bursts: int = BURSTS, burst_seconds: fl
     if data_key not in _DATASETS:
         _DATASETS[data_key] = config.dataset()
     # the run's own model, rows, units, loss and loop settings (its optimizer, schedule, clipping too)
-    prep = hnn.runs.prepare(config, _DATASETS[data_key])
+    prep = hnn.prepare(config, _DATASETS[data_key])
     if config.fit != "adam":
         return _fit_cost(config, prep)
     model = prep.canonical_model

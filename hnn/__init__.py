@@ -27,7 +27,8 @@ nothing of each other.
   (``hnn.trainers``, a folder: the lone loop, the group loop, its closed-form and vmap groups, the
   least-squares solve's entry), evaluation, datasets, and the least-squares fits (``hnn.fits``, a folder:
   ``hnn.fit_least_squares``);
-- runs: config, cli, a ``train.py``'s command, run folders, task discovery;
+- runs: config, cli, a ``train.py``'s command, a run's policy settled once (``hnn.prepare``), run folders,
+  task discovery;
 - orbits: the orbit tasks' physics and config (``hnn.orbits``, a folder: the gravity of n bodies, the
   close-encounter thresholds, the 2- and 3-body tasks' ``OrbitConfig``);
 - sweeps: many runs at once (``hnn.sweeps``, a folder: the sweep, where it trains, its flags, group
@@ -54,7 +55,7 @@ _LAYERS = {
     "models": ("models",),
     "training": ("balance", "units", "training", "trainers", "objectives", "kinds", "evaluation", "datasets",
                  "fits"),
-    "runs": ("config", "cli", "command", "runs", "tasks"),
+    "runs": ("config", "cli", "command", "policy", "runs", "tasks"),
     "orbits": ("orbits",),
     "sweeps": ("sweeps",),
 }
@@ -74,7 +75,8 @@ _PUBLIC = {
     "fits": ("FITS", "fit_least_squares"),
     "evaluation": ("EnergyProtocol", "evaluate_energy"),
     "config": ("RunConfig",),
-    "runs": ("Prepared", "load_run", "prepare", "run_experiment"),
+    "policy": ("Prepared", "prepare"),
+    "runs": ("load_run", "run_experiment"),
     "tasks": ("PROTOCOLS", "TaskData", "TaskSpec", "available_tasks", "load_task", "task_spec"),
 }
 _ROOMS = ("integrators", "models")
@@ -93,7 +95,8 @@ if TYPE_CHECKING:     # the public names spelled out for type checkers and edito
     from .fits import FITS, fit_least_squares  # noqa: F401
     from .evaluation import EnergyProtocol, evaluate_energy  # noqa: F401
     from .config import RunConfig  # noqa: F401
-    from .runs import Prepared, load_run, prepare, run_experiment  # noqa: F401
+    from .policy import Prepared, prepare  # noqa: F401
+    from .runs import load_run, run_experiment  # noqa: F401
     from .tasks import PROTOCOLS, TaskData, TaskSpec, available_tasks, load_task, task_spec  # noqa: F401
     from . import integrators, models  # noqa: F401
 

@@ -1,4 +1,5 @@
-"""A run: train one model from its config (``hnn.RunConfig``), and save / load it.
+"""A run: train one model from its config (``hnn.RunConfig``: settled by ``hnn.policy.prepare``, its weights
+found by ``hnn.trainers.lone``), and save / load it.
 
 A run folder ``<save_dir>/<name>-<model>-seed<seed>-<key>/`` (``key``: the short hash of the
 config's identity, ``RunConfig.key``) holds ``model.tar`` (state dict and args; loads with
@@ -14,26 +15,17 @@ when the run is saved, when training fails, and by ``--force``.
 """
 from __future__ import annotations
 
-import contextlib
 import json
-import math
-import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable
 
-import numpy as np
 import torch
 
-from . import cli
-from .fits import check_config
-from .io import atomic_folder, check_save_dir, torch_bytes, write_json
-from .kinds import get_kind, model_from_args, model_from_spec
-from .objectives import LoopOptions, Objective
-from .specs import run_specs
-from .trainers.least_squares import solve_prepared
-from .trainers.lone import train_prepared
-from .units import canonical_fit, run_scales, wrap_saved
+from .io import atomic_folder, torch_bytes, write_json
+from .kinds import model_from_args
+from .objectives import Objective
+from .policy import Prepared, prepare, seeded
+from .trainers.lone import find_weights
 
 
 def run_label(config) -> str:
@@ -96,177 +88,46 @@ def find_run(config) -> Path | None:
     return directory if is_complete(directory) else None
 
 
-def _materialize(dataset) -> tuple[dict, float | None]:
-    """``(dataset, seconds it took)``: calls a dataset given as a function (None seconds otherwise)."""
-    if not callable(dataset):
-        return dataset, None
-    tic = time.perf_counter()
-    dataset = dataset()
-    return dataset, time.perf_counter() - tic
-
-
-@dataclass(frozen=True)
-class Prepared:
-    """What a run of a config trains, built once (``prepare``): every lone run, benchmark and study that
-    trains or times a config's model gets it here, so each trains as ``run_experiment`` would.
-
-    ``saved``: the args.json it saves (``saved_args``, with ``unit_scales`` and ``loss_weights`` where
-    --units and --balance resolved them); ``specs``: ``run_specs(saved)``; ``model``: the model it saves
-    (an ``hnn.units.Rescaled`` where --units rescaled); ``canonical_model``: the one that trains (in canonical
-    units); ``dataset``: the objective's prepared arrays in the user's units; ``x``, ``y`` (the training
-    subset), ``test_x``, ``test_y``: ``canonical_model``'s, ``(rows, input_dim)``; ``options``: the objective's
-    ``LoopOptions`` for ``canonical_model`` (``Objective.train_options``); ``data_seconds``: the dataset's build time
-    (None when given)."""
-    config: object
-    objective: Objective
-    fit: object
-    saved: dict
-    specs: object
-    model: torch.nn.Module
-    canonical_model: torch.nn.Module
-    scales: object
-    dataset: dict
-    x: object
-    y: object
-    test_x: object
-    test_y: object
-    options: LoopOptions
-    data_seconds: float | None
-
-    def train_kwargs(self, **overrides) -> dict:
-        """``hnn.train``'s keyword arguments past the arrays: the run's loop settings and the objective's
-        options, --units and --balance already applied (``overrides``: a benchmark's steps, say)."""
-        return {**self.specs.training.train_kwargs(), **self.options.train_kwargs(), "units": "off", "balance": "off",
-                "threads": None, **overrides}
-
-
-@contextlib.contextmanager
-def seeded(seed: int, device="cpu") -> Iterator[None]:
-    """Inside this block torch's and numpy's global generators start from ``seed`` (a model's init draws
-    from them: ``hnn.models``); the caller's random state comes back after, however the block ends. On a
-    GPU its generator is forked too."""
-    state = np.random.get_state()
-    cuda = [torch.device(device).index or 0] if torch.device(device).type == "cuda" else []
-    try:
-        with torch.random.fork_rng(devices=cuda):
-            torch.manual_seed(seed)
-            np.random.seed(seed)
-            yield
-    finally:
-        np.random.set_state(state)
-
-
-def prepare(config, dataset=None, objective: Objective | None = None) -> Prepared:
-    """The model, objective, rows and options that ``config`` (an ``hnn.RunConfig``) trains on (``Prepared``).
-
-    ``dataset`` defaults to ``config.dataset``; it holds the ``objective.arrays`` (default ``x``,
-    ``dxdt``, ``test_x``, ``test_dxdt``, ``(rows, input_dim)`` arrays) and, for ``use_rk4``,
-    ``dt`` (the time step of its trajectories); or it is a function of no arguments returning that
-    dict, whose time is ``data_seconds``. ``objective`` defaults to ``config.make_objective()``.
-    A value the config's flag would refuse raises ValueError before anything is built; the model is
-    drawn from ``config.seed`` (``seeded``: the caller's random state is left as it was).
-
-    The one resolver of a run's policy: its units (``hnn.units.run_scales``), the balance of its loss
-    (``Objective.train_options``, ``hnn.balance``), how its weights are found (``fit``), its seed and its
-    training subset. Every way of training a config goes through it: a lone run (``run_experiment``), a
-    group's members (``hnn.sweeps.group_runs.train_group``) and the studies."""
-    cli.check(config)
-    # a least-squares fit refuses what it cannot fit before any data is built
-    fit = check_config(config, get_kind(config.kind).coordinates)
-    objective = objective or config.make_objective()
-    dataset, data_seconds = _materialize(config.dataset if dataset is None else dataset)
-    dataset = objective.prepare(dataset)
-    missing = [key for key in objective.arrays if key not in dataset]
-    if missing:
-        raise KeyError(f"dataset lacks {missing}; this task's dataset() must return {list(objective.arrays)}")
-    saved = saved_args(config, dataset)
-    specs = run_specs(saved)        # the config's, and the data's time step (a learned map's step)
-    with seeded(config.seed, config.device):        # the model's init, the caller's random state untouched
-        model = model_from_spec(specs.model, config.device)
-    scales = run_scales(specs.objective.units, specs.model.kind, dataset, objective, model)
-    if scales is not None:      # --units: the model trains in the canonical units of its data (hnn.units)
-        saved["unit_scales"] = scales.to_dict()
-        model = wrap_saved(model, saved)
-    canonical_model, fitted = (model, dataset) if scales is None else canonical_fit(model, dataset, objective.arrays)
-    x, y, test_x, test_y = (fitted[key] for key in objective.arrays)
-    x, y = training_subset(x, y, config.train_fraction, config.seed)
-    options = objective.train_options(canonical_model, specs.objective, fitted)
-    if options.loss_weights is not None:     # what --balance resolved to: the run's loss, recorded
-        saved["loss_weights"] = [float(w) for w in options.loss_weights]
-    return Prepared(config, objective, fit, saved, specs, model, canonical_model, scales, dataset, x, y, test_x, test_y,
-                    options, data_seconds)
-
-
 def run_experiment(config, dataset=None, objective: Objective | None = None,
                    on_step: Callable[[int, int], None] | None = None) -> Path:
     """Train the model that ``config`` (an ``hnn.RunConfig``) describes and save the run; returns
-    its folder. Every task and model kind trains here, on what ``prepare(config, dataset, objective)``
-    builds (its arguments: ``prepare``'s; ``on_step(done, total)`` after each step of its loop: a sweep's
-    bar, or a study that stops a run by raising); a ``dataset`` given as a function has its time saved as
-    ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training loop alone).
+    its folder. Every task and model kind trains here, in three stages: ``hnn.policy.prepare(config, dataset,
+    objective)`` settles the run (its arguments: ``prepare``'s), ``hnn.trainers.lone.find_weights`` finds its
+    weights (``on_step(done, total)`` after each step of its loop: a sweep's bar, or a study that stops a run
+    by raising) and ``finish_run`` scores and saves it; a ``dataset`` given as a function has its time saved
+    as ``data_seconds`` in ``metrics.json`` beside ``train_seconds`` (the training loop alone).
     """
-    cli.check(config)
-    check_save_dir(config.save_dir)
-    prep = prepare(config, dataset, objective)
-    objective, saved, specs, model, scales, dataset = (prep.objective, prep.saved, prep.specs, prep.model,
-                                                       prep.scales, prep.dataset)
-    x, y, test_x, test_y, options = prep.x, prep.y, prep.test_x, prep.test_y, prep.options
+    prep = prepare(config, dataset, objective, saves=True)
     partial = partial_checkpoint(config)
     if config.force:
         partial.unlink(missing_ok=True)
     try:
-        # one linear solve (hnn.fits), not a loop: nothing to checkpoint; else the lone loop on what prepare
-        # resolved (--units, --balance on the whole training set, recorded in args.json; the threads it was given)
-        stats = solve_prepared(prep) if prep.fit.solved else train_prepared(prep, checkpoint=partial, on_step=on_step)
+        stats = find_weights(prep, checkpoint=partial, on_step=on_step)
     except Exception:       # a failure repeats from the checkpoint; an interrupt (not an Exception) keeps it
         partial.unlink(missing_ok=True)
         raise
-    if scales is not None:      # the final numbers: the saved model's, in the user's units
-        options = objective.train_options(model, specs.objective, dataset)
-        x, y, test_x, test_y = (dataset[key] for key in objective.arrays)
-        x, y = training_subset(x, y, config.train_fraction, config.seed)
-    directory = finish_run(config, model, stats, objective.final_loss(model, x, y, options),
-                           objective.final_loss(model, test_x, test_y, options), prep.data_seconds, saved)
-    partial.unlink(missing_ok=True)
-    config.finish(directory, dataset)
-    return directory
+    return finish_run(prep, stats, spent=partial)
 
 
-def saved_args(config, dataset: dict) -> dict:
-    """What a run's args.json holds: the config's fields and model facts, the kind, the threads it trains
-    on (as torch has them: a train.py sets ``config.threads``, a sweep or a caller its own), the
-    cached dataset it reads (a lone run and a group's member alike) and its time step ``dt`` where it
-    has one (a learned map's step: ``hnn.specs.ModelSpec.dt``)."""
-    return {**config.to_dict(), "threads": torch.get_num_threads(), "kind": config.kind,
-            "dataset_cache_key": dataset.get("cache_key"),
-            **({"dt": float(dataset["dt"])} if dataset.get("dt") is not None else {})}
-
-
-def training_subset(x, y, fraction: float, seed: int):
-    """The first ``ceil(fraction * rows)`` of a seeded permutation of the training rows (kept in
-    their original order), or ``(x, y)`` themselves for ``fraction`` 1. The draw has its own
-    generator, so the init and the minibatches see the same random streams at every fraction."""
-    if not 0 < fraction <= 1:
-        raise ValueError(f"train_fraction must be in (0, 1], got {fraction!r}")
-    if fraction == 1:
-        return x, y
-    rows = len(x)
-    keep = np.sort(np.random.default_rng(seed).permutation(rows)[:max(1, math.ceil(fraction * rows))])
-    return x[keep], y[keep]
-
-
-def finish_run(config, model, stats: dict, train_loss, test_loss, data_seconds: float | None,
-               saved_args: dict) -> Path:
-    """Print (with ``verbose``) and save a trained run: its final ``(mean, ±)`` train and test
-    losses, the seconds of its data and of its loop, and the loss history ``stats``.
-    ``saved_args`` is what args.json holds."""
+def finish_run(prep: Prepared, stats: dict, spent: Path | None = None) -> Path:
+    """Score, print (with ``verbose``) and save the trained run ``prep`` (``hnn.policy.Prepared``) as its folder
+    (``run_dir``): its final ``(mean, ±)`` train and test losses in the user's units (``Prepared.final_losses``),
+    the seconds of its data and of its loop, and the loss history ``stats``; then deletes ``spent`` (its
+    training checkpoint, if any) and runs the config's own ``finish`` (a pixel run's rollout and GIFs).
+    Returns the folder."""
+    config = prep.config
+    train_loss, test_loss = prep.final_losses()
     if config.verbose:
         print(f"Final train loss {train_loss[0]:.4e} +/- {train_loss[1]:.4e}\n"
               f"Final test loss {test_loss[0]:.4e} +/- {test_loss[1]:.4e}")
     metrics = {"train_loss": train_loss[0], "train_loss_se": train_loss[1],
                "test_loss": test_loss[0], "test_loss_se": test_loss[1],
-               "data_seconds": data_seconds, "train_seconds": stats["seconds"], "history": stats}
-    return save_run(run_dir(config), model, saved_args, metrics)
+               "data_seconds": prep.data_seconds, "train_seconds": stats["seconds"], "history": stats}
+    directory = save_run(run_dir(config), prep.model, prep.saved, metrics)
+    if spent is not None:
+        spent.unlink(missing_ok=True)
+    config.finish(directory, prep.dataset)
+    return directory
 
 
 def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Path:
@@ -291,7 +152,8 @@ def save_run(directory, model: torch.nn.Module, args: dict, metrics: dict) -> Pa
 
 def load_run(directory, device: torch.device | str = "cpu") -> tuple[torch.nn.Module, dict, dict]:
     """``(model in eval mode, args, metrics)`` of a saved run, its model on ``device`` (the run's
-    recorded device is where it trained, not where it must be read: a GPU's run loads on a CPU)."""
+    recorded device is where it trained, not where it must be read: a GPU's run loads on a CPU); the caller's
+    random state is left as it was."""
     directory = Path(directory)
     ckpt = directory / "model.tar"
     if not ckpt.exists():
@@ -301,7 +163,8 @@ def load_run(directory, device: torch.device | str = "cpu") -> tuple[torch.nn.Mo
                            "; delete the folder and retrain")
     try:
         blob = torch.load(ckpt, map_location="cpu", weights_only=True)
-        model = model_from_args(blob["args"])
+        with seeded(0):     # its init's draws, replaced by the saved weights, leave the caller's random state be
+            model = model_from_args(blob["args"])
         model.load_state_dict(blob["state_dict"])
         model = model.to(device)
     except Exception as err:

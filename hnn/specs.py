@@ -43,7 +43,7 @@ class ModelSpec:
     (``hnn.fits.build``: ``hidden_dim`` sampled neurons, or the library of ``library_degree`` and
     ``library_frequencies``), float64 whatever ``dtype`` says;
     map_layers: a learned map's layers (``hnn.models.maps``); dt: the time step of the run's data (its
-    dataset's ``dt``, recorded in args.json by ``hnn.runs.saved_args``), a learned map's step; bodies: the
+    dataset's ``dt``, recorded in args.json by ``hnn.policy.saved_args``), a learned map's step; bodies: the
     state's layout as bodies (``hnn.bodies.Bodies.to_dict()``, from its config's ``model_facts()``), which
     the pair kind reads.
     """

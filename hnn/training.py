@@ -4,7 +4,6 @@ fit of dx/dt trains in and the balance of its loss (``hnn.units``, ``hnn.balance
 run's lone member of the family (``hnn.trainers.lone``) hands it a prepared run's instead."""
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -13,8 +12,8 @@ import torch
 from . import names
 from .balance import balance_weights, weighted
 from .trainers.loop import check_loop, run_loop
-from .trainers.rows import checked_pair
-from .units import VELOCITY_LIKE, in_canonical_units, rescale_reason
+from .trainers.rows import checked_pair, warn_off_scale
+from .units import in_canonical_units
 
 
 def l2_loss(predict: Callable) -> Callable:
@@ -50,20 +49,6 @@ def dxdt_loss(model, predict: Callable | None = None, derivative_loss: str = "l2
         return loss
     param = next(model.parameters())
     return weighted(loss, torch.as_tensor(loss_weights, dtype=param.dtype, device=param.device))
-
-
-def warn_off_scale(x: torch.Tensor, dxdt: torch.Tensor, model, stacklevel: int = 3) -> None:
-    """Warn when a fit of dx/dt trains on data as given that ``units='auto'`` would rescale
-    (``hnn.units.rescale_reason``: the RMS of q, unless angles, of p or of either half of ``dxdt``, each over
-    all of its columns, lies outside its bounds, or one part's columns spread over 10x in size). Adam's steps
-    of about learn_rate and tanh's unit-wide bend suit data near unit scale: a heavy mass (p of RMS 28, dq/dt
-    of 0.028) degraded a fit 40x, unwarned while only the largest column was read."""
-    coordinates = "velocity" if getattr(model, "coordinates", "canonical") in VELOCITY_LIKE else "canonical"
-    reason = rescale_reason(x, dxdt, bool(getattr(model, "periodic", False)), coordinates) if len(x) else None
-    if reason is not None:
-        warnings.warn(f"x and dxdt are {reason}; a network fits poorly there. Train hnn.units.Rescaled(model) with "
-                      "units='auto' (the default), or rescale q and p so that Hamilton's equations still hold: "
-                      "docs/python.md, 'Scale your states'", stacklevel=stacklevel)
 
 
 def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,

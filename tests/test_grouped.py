@@ -10,7 +10,7 @@ import torch
 import hnn
 from hnn.sweeps.group_runs import closed_form_key
 from hnn.trainers.closed_form import train_closed_form
-from hnn.runs import training_subset
+from hnn.policy import training_subset
 
 # Measured (spring, 300 and 2000 steps, 1 and 2 threads): final weights and per-step losses of a
 # grouped model are within 1e-6 relative of its lone run's. They are not equal bit for bit because

@@ -1,4 +1,4 @@
-"""A run's policy is resolved in one place (``hnn.runs.prepare``, and the same resolvers in ``hnn.train``'s
+"""A run's policy is resolved in one place (``hnn.policy.prepare``, and the same resolvers in ``hnn.train``'s
 front door): a rule changed there reaches a lone run, a group's members and ``hnn.train`` alike; and no
 library call leaves the caller's global random state changed."""
 import json

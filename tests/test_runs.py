@@ -241,16 +241,16 @@ def test_display_only_fields_and_save_dir_are_not_the_identity(tmp_path):
 def test_train_fraction_draws_a_seeded_ordered_subset_of_the_training_rows():
     x = torch.arange(40.0).reshape(20, 2)
     y = -x
-    sub_x, sub_y = hnn.runs.training_subset(x, y, 0.25, seed=3)
+    sub_x, sub_y = hnn.policy.training_subset(x, y, 0.25, seed=3)
     assert len(sub_x) == 5 and torch.equal(sub_y, -sub_x)
     rows = (sub_x[:, 0] / 2).long()
     assert torch.all(rows[1:] > rows[:-1])                        # the rows keep their order
-    assert torch.equal(hnn.runs.training_subset(x, y, 0.25, seed=3)[0], sub_x)
-    assert not torch.equal(hnn.runs.training_subset(x, y, 0.25, seed=4)[0], sub_x)
-    assert hnn.runs.training_subset(x, y, 1.0, seed=3)[0] is x
-    assert len(hnn.runs.training_subset(x, y, 0.01, seed=0)[0]) == 1   # never empty
+    assert torch.equal(hnn.policy.training_subset(x, y, 0.25, seed=3)[0], sub_x)
+    assert not torch.equal(hnn.policy.training_subset(x, y, 0.25, seed=4)[0], sub_x)
+    assert hnn.policy.training_subset(x, y, 1.0, seed=3)[0] is x
+    assert len(hnn.policy.training_subset(x, y, 0.01, seed=0)[0]) == 1   # never empty
     with pytest.raises(ValueError, match="train_fraction"):
-        hnn.runs.training_subset(x, y, 0.0, seed=0)
+        hnn.policy.training_subset(x, y, 0.0, seed=0)
 
 
 def test_a_run_trains_on_its_fraction(tmp_path, monkeypatch):

@@ -16,10 +16,10 @@ from pathlib import Path
 import torch
 
 from ..errors import DivergenceError
-from ..io import check_save_dir
 from ..kinds import get_kind
 from ..objectives import DerivativeObjective
-from ..runs import COMPLETE, finish_run, prepare, record_divergence, run_dir, run_experiment
+from ..policy import prepare
+from ..runs import COMPLETE, finish_run, record_divergence, run_dir, run_experiment
 from ..specs import run_specs
 from ..tasks import task_config
 from ..threads import torch_threads
@@ -113,11 +113,9 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
     if None in keys or len(keys) != 1:
         raise ValueError("train_group needs configs of one group (equal hnn.sweeps.group_runs.unit_key, none None); "
                          "train the others alone with hnn.run_experiment")
-    for config in configs:
-        check_save_dir(config.save_dir)
     objective = configs[0].make_objective()
-    # each member prepared as its lone run is (its checks, init, units, balance and rows: hnn.runs.prepare)
-    preps = [prepare(config, dataset, objective)
+    # each member prepared as its lone run is (its checks, save_dir, init, units, balance and rows: hnn.policy.prepare)
+    preps = [prepare(config, dataset, objective, saves=True)
              for config, dataset in zip(configs, datasets or [config.dataset() for config in configs])]
     if any(p.scales is not None or p.options.loss_weights is not None for p in preps):
         # --units or --balance resolved to what a group's program does not do: each trains alone
@@ -132,15 +130,9 @@ def train_group(configs: list, datasets: list[dict] | None = None) -> list:
         partial.unlink(missing_ok=True)
         raise
     out = []
-    for g, config in enumerate(configs):
-        if g in failures:
-            out.append(failures[g])
-            continue
-        p = preps[g]        # its own options, for its numbers
-        directory = finish_run(config, p.model, stats[g], objective.final_loss(p.model, p.x, p.y, p.options),
-                               objective.final_loss(p.model, p.test_x, p.test_y, p.options), None, p.saved)
-        config.finish(directory, p.dataset)
-        out.append(directory)
+    for g, prep in enumerate(preps):
+        # a failed model's failure, else its run saved with its own options' numbers
+        out.append(failures[g] if g in failures else finish_run(prep, stats[g]))
     partial.unlink(missing_ok=True)
     drop_spent_checkpoints(configs[0].save_dir)        # an older group of these runs, killed mid-way
     return out

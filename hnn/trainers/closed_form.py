@@ -154,7 +154,7 @@ def train_closed_form(models: list[HNN], data: list[tuple], tests: list[tuple] |
 
 def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
                    progress: bool = False) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:
-    """Train the prepared runs ``preps`` (``hnn.runs.prepare``, of one closed-form group: equal
+    """Train the prepared runs ``preps`` (``hnn.policy.prepare``, of one closed-form group: equal
     ``hnn.sweeps.group_runs.closed_form_key``) as one program, each ``canonical_model`` on its own rows with the run's loop
     settings; ``train_closed_form``'s ``(stats, failures)``."""
     return train_closed_form([p.canonical_model for p in preps], [(p.x, p.y) for p in preps],

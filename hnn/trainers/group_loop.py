@@ -81,7 +81,7 @@ def group_loop(weights: list[torch.Tensor], optim, train_rows: GroupRows, test_r
 
 
 def group_settings(preps: list) -> dict:
-    """The loop settings a group of prepared runs (``hnn.runs.prepare``) shares, from the first one's
+    """The loop settings a group of prepared runs (``hnn.policy.prepare``) shares, from the first one's
     ``TrainingSpec`` (a group's key makes them equal), and each member's seed: the keywords of both group
     trainers of these names."""
     first = preps[0].specs.training

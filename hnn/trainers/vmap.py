@@ -114,7 +114,7 @@ def train_vmap(models: list[nn.Module], data: list[tuple], tests: list[tuple] | 
 
 def train_prepared(preps: list, checkpoint=None, names: list[str] | None = None,
                    progress: bool = False) -> tuple[list[dict | None], dict]:
-    """Train the prepared runs ``preps`` (``hnn.runs.prepare``, of one vmap group: equal
+    """Train the prepared runs ``preps`` (``hnn.policy.prepare``, of one vmap group: equal
     ``hnn.sweeps.group_runs.vmap_key``) as one program: each ``canonical_model`` on its own rows, the loss and
     options of the first one's objective (``Prepared.options``, as ``hnn.train`` reads them), built once
     for the group, so every dataset must give it the same time step and coordinates; ``train_vmap``'s
