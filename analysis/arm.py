@@ -26,6 +26,7 @@ import torch
 import hnn
 from hnn.sweeps import sweep
 from hnn.io import write_json
+from hnn.threads import torch_threads
 from hnn_analysis import pages
 from hnn_analysis.commands import portable_command
 from hnn_analysis.provenance import machine, provenance
@@ -65,6 +66,7 @@ def _summary(rows: list[dict], key: str) -> str:
     return f"{statistics.median(values):.2e}{spread}"
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     parser = hnn.cli.Parser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=hnn.cli.int_at_least(1), default=3000, help="optimizer steps per run")
@@ -83,7 +85,6 @@ def main(argv=None) -> dict:
     parser.add_argument("--section", choices=("arm-balance", "arm-balance-long"), default="arm-balance",
                         help="the section of docs/stress.md that --update-docs writes")
     args = parser.parse_args(argv)
-    torch.set_num_threads(1)
     meta = {**provenance(), "command": portable_command(sys.argv[1:] if argv is None else list(argv), "analysis/arm.py")}
     data = hnn.load_task("arm")
     arm = data.Arm((args.mass, args.mass))

@@ -20,9 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis import commands, pages, plan
 from hnn_analysis.chains.lnn_pinv import measure as lnn_pinv, pinv_results_text, pinv_seeds
 from hnn_analysis.extremes.lnn_start import lnn_start, start_results_text, start_seeds
@@ -72,6 +72,7 @@ def _cpu_seconds() -> float:
     return time.process_time() + children.ru_utime + children.ru_stime
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     parser = hnn.cli.Parser(description=__doc__.split("\n")[0])
     commands.add_flags(parser, quick="two kinds, five cells, 150 steps, a 1000-step horizon, one heavy seed, no precision "
@@ -108,7 +109,6 @@ def main(argv=None) -> dict:
         _publish(results, None, args.update_docs)
         return results
     section = "units-scan" if args.scan else "lnn-start" if args.lnn_start else "lnn-pinv" if args.lnn_pinv else "stress"
-    torch.set_num_threads(1)
     meta = {**provenance(), "command": commands.portable_command(sys.argv[1:] if argv is None else list(argv),
                                                                  "analysis/stress.py")}
     tic, cpu = time.perf_counter(), _cpu_seconds()

@@ -6,7 +6,7 @@ HNN (batch 200 of 16000 pairs of 28x28 frames; uniform noise for pixels, which c
 same) against their matrix-product floor, by ``analysis/benchmarks/floor.py``: every product the step
 performs (captured during one step, forward, backward and double backward), each timed alone in
 its fastest layout, alternated with the step for ``--floor-rounds`` rounds (the pixel step a
-quarter as many), first at 1 thread, then at 2 in the same process (``torch.set_num_threads``).
+quarter as many), first at 1 thread, then at 2 in the same process (``hnn.threads.torch_threads``).
 The step is ``hnn.trainers.loop.optimizer_step``, the very function ``hnn.train`` runs. It checks the pixel
 loss and its gradients against the original's formulation on one batch.
 
@@ -56,6 +56,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis.benchmarks import benchmark_group, benchmark_rollouts
 from hnn_analysis.benchmarks import floor_job, original
 from hnn_analysis.benchmarks.floor_job import HIDDEN, LEARN_RATE, WEIGHT_DECAY
@@ -193,28 +194,28 @@ def run_jobs(args) -> dict:
     results, dataset, model, floors = {}, None, None, None
     if "floor" in args.jobs:
         floors = floor_job.job_floor(task.get_dataset(seed=0), args.floor_rounds)
-    torch.set_num_threads(args.threads)
-    if "data" in args.jobs:
-        results["data"], dataset = job_data(task, args.repeats)
-        print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
-              flush=True)
-    if dataset is None and ({"train", "eval", "rollout"} & set(args.jobs)):
-        dataset = task.get_dataset(seed=0)
-    if "train" in args.jobs:
-        results["train"], model = job_train(dataset, steps, args.repeats)
-        print(f"train done: ours {results['train']['median_ours']:.3f} s, "
-              f"original {results['train']['median_original']:.3f} s", flush=True)
-    if model is None and ({"eval", "rollout"} & set(args.jobs)):   # trained once, outside the timed region
-        model, _ = _ours_train(dataset, steps)
-    if "eval" in args.jobs:
-        results["eval"] = job_eval(task, model, protocol, args.repeats)
-        print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
-              f"original {results['eval']['median_original']:.3f} s", flush=True)
-    rollouts = None
-    if "rollout" in args.jobs:
-        rollouts = benchmark_rollouts.job_rollout(model, rounds=max(20, args.floor_rounds // 2),
-                                                  repeats=max(1, min(args.repeats, 3)))
-    group = benchmark_group.job_group(args.quick, repeats=max(1, min(args.repeats, 3))) if "group" in args.jobs else None
+    with torch_threads(args.threads):      # the count compared, the caller's back after
+        if "data" in args.jobs:
+            results["data"], dataset = job_data(task, args.repeats)
+            print(f"data done: ours {results['data']['median_ours']:.3f} s, original {results['data']['median_original']:.3f} s",
+                  flush=True)
+        if dataset is None and ({"train", "eval", "rollout"} & set(args.jobs)):
+            dataset = task.get_dataset(seed=0)
+        if "train" in args.jobs:
+            results["train"], model = job_train(dataset, steps, args.repeats)
+            print(f"train done: ours {results['train']['median_ours']:.3f} s, "
+                  f"original {results['train']['median_original']:.3f} s", flush=True)
+        if model is None and ({"eval", "rollout"} & set(args.jobs)):   # trained once, outside the timed region
+            model, _ = _ours_train(dataset, steps)
+        if "eval" in args.jobs:
+            results["eval"] = job_eval(task, model, protocol, args.repeats)
+            print(f"eval done: ours {results['eval']['median_ours']:.3f} s, "
+                  f"original {results['eval']['median_original']:.3f} s", flush=True)
+        rollouts = None
+        if "rollout" in args.jobs:
+            rollouts = benchmark_rollouts.job_rollout(model, rounds=max(20, args.floor_rounds // 2),
+                                                      repeats=max(1, min(args.repeats, 3)))
+        group = benchmark_group.job_group(args.quick, repeats=max(1, min(args.repeats, 3))) if "group" in args.jobs else None
     env["others_load"] = others_load(started, cpu_snapshot())
     return {"steps": steps, "protocol": protocol, "env": env, "results": results, "floors": floors,
             "rollouts": rollouts, "group": group}

@@ -24,6 +24,7 @@ from tqdm.auto import tqdm
 
 import hnn
 from hnn.io import write_json
+from hnn.threads import torch_threads
 from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance
 
 KINDS = ("hnn", "constrained", "constrained_lagrangian")
@@ -76,6 +77,7 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     p = hnn.cli.Parser(prog="constrained_step.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bobs", type=hnn.cli.int_at_least(1), default=5, help="bobs N of the chain")
@@ -86,7 +88,6 @@ def main(argv=None) -> dict:
     p.add_argument("--out", type=Path, default=hnn.tasks.repo_root() / "results" / "speed",
                    help="folder of constrained_step.json (and of the chain's cached dataset)")
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
-    torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
     result = measure(args.bobs, args.width, args.batch, args.rounds, args.steps, str(args.out))
     result["meta"] = {**provenance(), "bobs": args.bobs, "width": args.width, "batch": args.batch,

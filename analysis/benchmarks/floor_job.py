@@ -11,6 +11,7 @@ from hnn.models import PixelHNN
 from hnn.objectives import pixel_loss
 from hnn.trainers.loop import adam_optimizer, optimizer_step
 from hnn.trainers.rows import minibatch
+from hnn.threads import torch_threads
 from hnn.training import l2_loss
 from hnn_analysis.benchmarks import floor
 
@@ -94,9 +95,9 @@ def pixelcheck() -> dict:
 
 def job_floor(d: dict, rounds: int) -> dict:
     """Each step against its matrix-product floor, at 1 and then 2 threads in this process
-    (``torch.set_num_threads``), with denormals flushed as ``hnn.train`` does."""
+    (``hnn.threads.torch_threads``), with denormals flushed as ``hnn.train`` does."""
     steps = {"spring": (spring_step(d), rounds), "pixels": (pixel_step(), max(10, rounds // 4))}
-    threads, flushing = torch.get_num_threads(), hnn.trainers.loop.flushes_denormals()
+    flushing = hnn.trainers.loop.flushes_denormals()
     torch.set_flush_denormal(True)
     out = {}
     try:
@@ -104,14 +105,13 @@ def job_floor(d: dict, rounds: int) -> dict:
             shapes = floor.products(step)
             out[name] = {"products": floor.describe_products(shapes), "by_threads": {}}
             for t in FLOOR_THREADS:
-                torch.set_num_threads(t)
-                out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5),
-                                                                block=max(2, n // 20))
+                with torch_threads(t):      # this count, the caller's back after
+                    out[name]["by_threads"][str(t)] = floor.compare(step, shapes, rounds=n, warmup=max(5, n // 5),
+                                                                    block=max(2, n // 20))
                 r = out[name]["by_threads"][str(t)]
                 print(f"floor {name}, {t} thread(s): step {r['step_ms']:.2f} ms, floor {r['floor_ms']:.2f} ms, "
                       f"ratio {r['ratio']:.2f} (fastest rounds {r['best_ratio']:.2f})", flush=True)
     finally:
-        torch.set_num_threads(threads)
         torch.set_flush_denormal(flushing)
     out["checks"] = [pixelcheck()]
     return out

@@ -18,9 +18,9 @@ import sys
 import time
 from pathlib import Path
 
-import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis import commands, pages
 from hnn_analysis.benchmarks import map_protocols as mp
 from hnn_analysis.benchmarks.map_report import goals, section, summarize
@@ -44,6 +44,7 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = _parser()
@@ -54,7 +55,6 @@ def main(argv=None) -> dict:
     repeats = args.repeats or (3 if args.quick else 11)
     rounds = args.floor_rounds or (20 if args.quick else 200)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    torch.set_num_threads(1)
     results = {}
     for name in args.protocols:
         protocol = mp.PROTOCOLS[name]

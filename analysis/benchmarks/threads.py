@@ -5,7 +5,7 @@
     python analysis/benchmarks/threads.py --update-docs            # docs/speed.md's section "threads"
 
 Each round trains every task's default model and data for ``--steps`` optimizer steps at each
-thread count of ``--threads`` (``torch.set_num_threads`` in this process, interleaved: 1, 2, 1, 2,
+thread count of ``--threads`` (``hnn.threads.torch_threads`` in this process, interleaved: 1, 2, 1, 2,
 ...), each with the round's seed, and reads the training loop's seconds (``train_seconds`` of
 ``metrics.json``; the dataset is built once per task, untimed). Beside each run, the cores other
 processes kept busy meanwhile (``provenance.others_load``): a second thread pays only where a second
@@ -24,10 +24,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-import torch
 
 import hnn
 from hnn.io import write_json
+from hnn.threads import torch_threads
 from hnn_analysis import pages
 from hnn_analysis.provenance import cpu_snapshot, machine, others_load, provenance
 
@@ -36,10 +36,10 @@ def _time(task: str, threads: int, steps: int, seed: int, dataset: dict, save_di
     """One run of ``task``'s defaults for ``steps`` steps at ``threads`` threads: its loop's seconds and the load."""
     config = hnn.tasks.task_config(task, {"total_steps": steps, "seed": seed, "threads": threads,
                                           "save_dir": str(save_dir / f"t{threads}")})
-    torch.set_num_threads(threads)
-    start = cpu_snapshot()
-    run = hnn.run_experiment(config, dataset)
-    others = others_load(start, cpu_snapshot())
+    with torch_threads(threads):        # the count timed, the caller's back after
+        start = cpu_snapshot()
+        run = hnn.run_experiment(config, dataset)
+        others = others_load(start, cpu_snapshot())
     metrics = json.loads((run / "metrics.json").read_text())
     return {"threads": threads, "seed": seed, "seconds": metrics["train_seconds"], "others": others,
             "loadavg": os.getloadavg()[0]}

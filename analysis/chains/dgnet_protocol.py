@@ -85,6 +85,7 @@ import torch
 import hnn
 from hnn.objectives.dgnet import pairs_from_paths
 from hnn.objectives.trajectory import TrajectoryObjective
+from hnn.threads import torch_threads
 from hnn_analysis.pages import generated_by
 from hnn_analysis.provenance import machine
 
@@ -241,8 +242,8 @@ def measure(task: str, label: str, seed: int, steps: int, out: Path, init: str =
 
 def measure_job(args: tuple) -> tuple:
     """``((task, label, seed, init), measure(*args))`` on one thread (a worker's task)."""
-    torch.set_num_threads(1)
-    return (*args[:3], args[5]), measure(*args)
+    with torch_threads(1):      # the caller's count back after: it also runs in the command's own process
+        return (*args[:3], args[5]), measure(*args)
 
 
 def rows_for(task: str) -> list[str]:

@@ -9,9 +9,9 @@ import dataclasses
 import time
 from pathlib import Path
 
-import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis import pages
 from hnn_analysis.chains import peer_plan
 from hnn_analysis.commands import run_tasks
@@ -40,12 +40,12 @@ def _job(key: str, save_dir: Path, solve: str = "pinv") -> hnn.sweeps.sweep.Job:
     return dataclasses.replace(job, config=dataclasses.replace(job.config, lnn_solve=solve))
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (it also runs in-process)
 def train_past(key: str, stopped: int, past: int, save_dir: Path, solve: str = "pinv") -> dict:
     """Train the run ``key`` with the pseudo-inverse solve as ``hnn.run_experiment`` trains it (its seed's init,
     data, minibatches and schedule; no test batch, which draws from its own generator) for ``stopped + past``
     steps, or to its end; per step the training states solved by the pseudo-inverse. ``solve='solve'``: the
     plain solve instead, to check that a recorded stop repeats on this machine. A worker's task."""
-    torch.set_num_threads(1)
     config = _job(key, save_dir, solve).config
     prep = hnn.prepare(config)      # the run's init, data, units, balance and rows, as hnn.run_experiment's
     if prep.scales is not None:

@@ -28,6 +28,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 
 import hnn
 from hnn.specs import ModelSpec
+from hnn.threads import torch_threads
 from hnn_analysis import pages
 from hnn_analysis.fits import sampling_protocols as protocols
 from hnn_analysis.provenance import machine
@@ -190,8 +191,13 @@ def _features_flops(model, rows: int) -> float:
 
 
 def measure(case: Fit, data: dict, repeats: int, rates: dict) -> dict:
-    """The fit's seconds (median of ``repeats``), its calls and its floor (see the module's docstring)."""
-    torch.set_num_threads(case.threads)
+    """The fit's seconds (median of ``repeats``), its calls and its floor (see the module's docstring), at
+    ``case.threads`` torch threads (the caller's count back after)."""
+    with torch_threads(case.threads):
+        return _measure(case, data, repeats, rates)
+
+
+def _measure(case: Fit, data: dict, repeats: int, rates: dict) -> dict:
     if case.threads not in rates:
         rates[case.threads] = gemm_rate()
     rate = rates[case.threads]

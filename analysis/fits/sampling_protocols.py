@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis.pages import generated_by
 
 
@@ -121,10 +122,10 @@ def fit_one(name: str, width: int, variant: str, seed: int, threads: int) -> dic
     peak resident memory so far; the command runs each width in a fresh process)."""
     protocol = PROTOCOLS[name]
     data = dataset(protocol, seed)
-    torch.set_num_threads(threads)
-    model, stats = hnn.fit_least_squares("hnn", data["x"], data["dxdt"], fit="elm" if variant == "elm" else "swim",
-                                         width=width, seed=seed, rcond=RCOND, anchor=anchor(protocol),
-                                         values=data["H"] if variant == "swim" else None, progress=False)
+    with torch_threads(threads):        # the count measured, the caller's back after
+        model, stats = hnn.fit_least_squares("hnn", data["x"], data["dxdt"], fit="elm" if variant == "elm" else "swim",
+                                             width=width, seed=seed, rcond=RCOND, anchor=anchor(protocol),
+                                             values=data["H"] if variant == "swim" else None, progress=False)
     return {"error": relative_error(model, data), "seconds": stats["seconds"],
             "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20}
 
@@ -134,19 +135,20 @@ def adam_one(name: str, seed: int, threads: int, steps: int, width: int = 200, b
     ``steps`` Adam steps of minibatches of ``batch``, the learned H anchored at H(0) as theirs."""
     protocol = PROTOCOLS[name]
     data = dataset(protocol, seed)
-    torch.set_num_threads(threads)
-    torch.manual_seed(seed)
-    model = hnn.build_model(2 * protocol.dof, width).double()
-    stats = hnn.train(model, data["x"], data["dxdt"], total_steps=steps, batch_size=batch, seed=seed,
-                      print_every=10 ** 9, progress=False)
-    zero, h0 = anchor(protocol)
-    with torch.no_grad():
-        offset = h0 - float(model.hamiltonian(torch.as_tensor(zero)[None]))
+    # at ``threads`` threads (the loop at hnn.train's one), the caller's count and random state back after
+    with torch_threads(threads):
+        with hnn.policy.seeded(seed):       # the init drawn from the seed
+            model = hnn.build_model(2 * protocol.dof, width).double()
+        stats = hnn.train(model, data["x"], data["dxdt"], total_steps=steps, batch_size=batch, seed=seed,
+                          print_every=10 ** 9, progress=False)
+        zero, h0 = anchor(protocol)
+        with torch.no_grad():
+            offset = h0 - float(model.hamiltonian(torch.as_tensor(zero)[None]))
 
-    class Anchored:
-        def hamiltonian(self, x):
-            return model.hamiltonian(x) + offset
-    return {"error": relative_error(Anchored(), data), "seconds": stats["seconds"], "steps": steps}
+        class Anchored:
+            def hamiltonian(self, x):
+                return model.hamiltonian(x) + offset
+        return {"error": relative_error(Anchored(), data), "seconds": stats["seconds"], "steps": steps}
 
 
 def summary(values: list[float]) -> tuple[float, float]:

@@ -25,6 +25,7 @@ import torch
 
 import hnn
 from hnn.sweeps import sweep
+from hnn.threads import torch_threads
 from hnn_analysis import commands, plan
 from hnn_analysis.commands import portable_command
 from hnn_analysis.pages import generated_by
@@ -76,6 +77,7 @@ def table(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     parser = hnn.cli.Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=10_000, help="integrator steps of each rollout")
@@ -89,7 +91,6 @@ def main(argv=None) -> dict:
                  f"{args.steps}, {args.train_steps}, {args.dt}")
     argv = sys.argv[1:] if argv is None else list(argv)
     meta = {**provenance(), "command": portable_command(argv, "analysis/integrator_study/energy_drift.py")}
-    torch.set_num_threads(1)
     rows, progress = {}, sweep.Progress(sum(len(methods) for methods in METHODS.values()))
     plan.say("energy_drift", [plan.Stage("train", len(METHODS), f"models of {args.train_steps} steps (a saved one is reused)"),
                               plan.Stage("roll out", progress.total, f"drift runs of {args.steps} steps")])

@@ -23,6 +23,7 @@ import torch
 
 import hnn
 from hnn.integrators.adaptive import default_tolerances
+from hnn.threads import torch_threads
 from hnn_analysis import commands
 from hnn_analysis.integrator_study import settings
 from hnn_analysis.pages import generated_by
@@ -105,13 +106,13 @@ def text(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+@torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     p = hnn.cli.Parser(prog="tolerances.py", description=__doc__.split("\n\n")[0])
     commands.add_flags(p, out="folder of tolerances.json", out_default=Path("results/tolerances"),
                        update_docs="write the default-tolerances section of docs/integrators.md")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(argv)
-    torch.set_num_threads(1)
     meta = {**provenance(), "command": commands.portable_command(argv, "analysis/integrator_study/tolerances.py")}
     results = {"meta": meta, "energy": energy_rows(), "float32": float32_rows()}
     body = text(results)

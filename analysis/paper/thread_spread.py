@@ -6,7 +6,7 @@ between seeds: the spread a table's seeds must cover (docs/testing.md, section `
     python analysis/paper/thread_spread.py --update-docs         # docs/testing.md
 
 Each task's paper runs (baseline and HNN, full settings) train at every seed once at one thread and
-once at two (``torch.set_num_threads`` in this process; each count's runs in their own folder under
+once at two (``hnn.threads.torch_threads`` in this process; each count's runs in their own folder under
 ``--out``, since the thread count is not part of a run's identity), one run at a time. Float32 sums
 in other orders at two threads, so the same seed ends on other weights; the table puts that gap (the
 largest ratio between the thread counts at one seed) beside the ratio of the largest to the smallest

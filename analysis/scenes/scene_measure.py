@@ -32,10 +32,10 @@ from pathlib import Path
 
 import contextlib
 
-import torch
 
 import hnn
 from hnn.sweeps import sweep
+from hnn.threads import torch_threads
 from hnn_analysis import plan
 from hnn_analysis.paper import registry, study
 from hnn_analysis.scenes import scene_common
@@ -124,8 +124,8 @@ def run_unit(unit: tuple, quick: bool, state: dict | None = None,
              rollout_calls: int | None = None) -> tuple[dict, dict | None]:
     """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread; each model's
     rollouts within ``rollout_calls`` field calls each where given (``hnn.evaluation.rollout_budget``)."""
-    torch.set_num_threads(1)      # rollouts of 4-15 states: a second thread only adds contention
-    with (contextlib.nullcontext() if rollout_calls is None else hnn.evaluation.rollout_budget(
+    # rollouts of 4-15 states: a second thread only adds contention; the caller's count back after
+    with torch_threads(1), (contextlib.nullcontext() if rollout_calls is None else hnn.evaluation.rollout_budget(
             calls=rollout_calls, why=f"the quick study's {QUICK_ROLLOUT_SECONDS:g} s of a model's rollout at the "
                                      "reference box's rate")):
         return _run_unit(unit, quick, state)

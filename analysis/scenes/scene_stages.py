@@ -11,9 +11,9 @@ import statistics
 import time
 from pathlib import Path
 
-import torch
 
 import hnn
+from hnn.threads import torch_threads
 from hnn_analysis import plan
 from hnn_analysis.paper import study
 from hnn_analysis.provenance import provenance
@@ -312,8 +312,6 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     results["meta"]["rollout_calls"] = rollout_calls
     measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1,
                                          rollout_calls)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
     cells_by_scene = {}
     for task in studied:
         entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "grid_seeds": {},
@@ -359,11 +357,11 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
             keys = {s: f"{row['row']}/{card['kind']}/seed{s}" for s in seeds}
             found = {s: (card["kind"], more[k]) for s, k in keys.items() if isinstance(more.get(k), Path)}
             scene = Scene(task, args.quick, states.get(task))
-            card["seeds"] = _across(scene_measure.measure_models(scene, found))
+            with torch_threads(1):      # as the units' measurements (run_unit); the caller's count after
+                card["seeds"] = _across(scene_measure.measure_models(scene, found))
         elif card and card["n_seeds"] > 1:
             card["seeds"] = _across(cells[(card["kind"], card["width"], card["fraction"])])
     results["seconds"]["cards"] = time.perf_counter() - tic
-    torch.set_num_threads(threads)
     results["seconds"]["total"] = time.perf_counter() - start
 
     return results, runs
