@@ -6,10 +6,11 @@ line every so often where nobody does (a log, a pipe), nothing when asked.
             ...
             tick.advance()
 
-``time_left`` and ``Heartbeat`` are the words and the pace of those lines (the sweeps' too). The time left
-is taken at the rate of the recent past (``Rate``), not the average since the start: a run that slows
-down (another job joins the box, a kind whose steps grow dearer) is said to at the next line, not
-minutes later. Nothing here imports torch.
+A sweep's bar is a ``Ticker`` too, with ``lines=False`` (its runs say their own lines, through
+``Ticker.say``, above the bar). ``say_left`` and ``Heartbeat`` are the words and the pace of those lines (the
+sweeps' too). The time left is taken at the rate of the recent past (``Rate``), not the average since the
+start: a run that slows down (another job joins the box, a kind whose steps grow dearer) is said to at the
+next line, not minutes later. Nothing here imports torch.
 """
 from __future__ import annotations
 
@@ -68,15 +69,6 @@ class Rate:
         return (total - done1) * (t1 - t0) / (done1 - done0) + (t1 - now)
 
 
-def time_left(step: int, total: int, first_step: int, first_time: float) -> str:
-    """``', about 12 min left'``: the steps still to run at the rate since ``first_step`` (at
-    ``first_time``, ``time.perf_counter``'s), or nothing before a rate is known."""
-    elapsed = time.perf_counter() - first_time
-    if step <= first_step or elapsed <= 0:
-        return ""
-    return ", " + say_left((total - step) * elapsed / (step - first_step))
-
-
 class Heartbeat:
     """How far one run is, every ``every`` seconds: ``due(step, total)`` gives ``'step s of total, about
     m min left'`` when a line is due (else None), at the rate of the recent past (``Rate``, from the first
@@ -102,15 +94,18 @@ class Heartbeat:
 class Ticker:
     """The progress of one loop of ``total`` units named ``desc``: ``progress`` True draws a bar, False
     nothing, None (auto) a bar where someone watches (``watched``: after ``BAR_DELAY`` s, so short work
-    stays silent) and else a line on stderr every ``LINE_EVERY`` s (``'train: step 400 of 2001, about 1
-    min left'``). Use as a context manager; ``advance(n)`` after each unit."""
+    stays silent) and else, with ``lines``, a line on stderr every ``LINE_EVERY`` s (``'train: step 400 of
+    2001, about 1 min left'``; ``lines=False``: none, where the caller says its own through ``say``). Use as a
+    context manager; ``advance(n)`` after each unit."""
 
-    def __init__(self, total: int, desc: str, progress: bool | None = None, start: int = 0, unit: str = "step"):
+    def __init__(self, total: int, desc: str, progress: bool | None = None, start: int = 0, unit: str = "step",
+                 lines: bool = True):
         self.total, self.desc, self.done, self.unit = total, desc, start, unit
         self.bar, self.beat = None, None
         if progress is None and not watched():
-            self.beat = Heartbeat(LINE_EVERY)
-            self.beat.due(start, total)
+            if lines:
+                self.beat = Heartbeat(LINE_EVERY)
+                self.beat.due(start, total)
         elif progress is None or progress:
             from tqdm.auto import tqdm          # here: tqdm.auto looks for a notebook, which costs an import
             self.bar = tqdm(total=total, initial=start, desc=desc, unit=unit, leave=False, file=sys.stderr,
@@ -122,6 +117,25 @@ class Ticker:
             self.bar.update(n)
         elif self.beat is not None and (line := self.beat.due(self.done, self.total)):
             print(f"{self.desc}: {line.replace('step', self.unit, 1)}", file=sys.stderr, flush=True)
+
+    @property
+    def drawn(self) -> bool:
+        """Whether a bar is drawn (else a caller's own lines are the only word of how far the work is)."""
+        return self.bar is not None
+
+    def say(self, line: str) -> None:
+        """Print ``line`` on stdout above the bar, flushed: tqdm's ``write`` does not flush, and a command's
+        output piped to a file or a pager (no terminal: no bar either) would hold every line until it ends."""
+        if self.bar is not None:
+            self.bar.write(line)
+        else:
+            print(line)
+        sys.stdout.flush()
+
+    def note(self, text: str) -> None:
+        """``text`` beside the bar (``'3/21 runs'``), shown at its next refresh; nothing without a bar."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(text, refresh=False)
 
     def close(self) -> None:
         if self.bar is not None:

@@ -227,16 +227,20 @@ def test_a_run_in_a_worker_says_its_step_where_its_output_is_a_log(tmp_path, mon
                                                                          r"left", lines[-1]), lines
 
 
-def test_a_long_run_says_how_long_it_has_left_at_its_own_rate(monkeypatch):
-    now = [1000.0]
-    monkeypatch.setattr(progress.time, "perf_counter", lambda: now[0])
+def test_a_long_run_says_how_long_it_has_left_at_its_own_rate():
     # first seen at step 3000 (a resumed run: the steps before were trained in another sitting), 100 s later
     # at step 3500: 5 steps a second, 4500 steps to go
-    now[0] += 100
-    assert progress.time_left(3500, 8000, 3000, 1000.0) == ", about 15 min left"
-    assert progress.time_left(7900, 8000, 3000, 0.0) == ", about 22 s left"        # 4900 steps in 1100 s
-    assert progress.time_left(3000, 8000, 3000, 1000.0) == ""                        # no rate yet
-    assert progress.time_left(100, 8000, 0, 0.0) == ", about 24.1 h left"           # a day's sweep, in hours
+    rate = progress.Rate(3000, now=1000.0)
+    assert rate.left(8000) is None                                                   # no rate yet
+    rate.add(3500, now=1100.0)
+    assert progress.say_left(rate.left(8000)) == "about 15 min left"
+    assert progress.say_left(rate.left(8000, now=1110.0)) == "about 15 min left"     # 10 s since: 890 s
+    rate = progress.Rate(0, now=0.0)
+    rate.add(4900, now=1100.0)
+    assert progress.say_left(rate.left(5000)) == "about 22 s left"                   # 4900 steps in 1100 s
+    rate = progress.Rate(0, now=0.0)
+    rate.add(100, now=100.0)
+    assert progress.say_left(rate.left(8000)) == "about 2.2 h left"                  # a long sweep, in hours
 
 
 def test_the_time_left_follows_a_run_that_slows_down(monkeypatch):
@@ -256,7 +260,7 @@ def test_the_time_left_follows_a_run_that_slows_down(monkeypatch):
     said = float(re.search(r"about (\d+) min left", lines[-1]).group(1)) * 60
     assert abs(said - left) <= 60, (lines[-1], left)
     # the mean since the start would have said less than half of it
-    assert progress.time_left(step, total, 0, 0.0) != f", {progress.say_left(left)}"
+    assert (total - step) * now[0] / step < left / 2
 
 
 def test_progress_counts_and_times():

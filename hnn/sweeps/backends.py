@@ -29,13 +29,6 @@ BACKENDS = names.BACKENDS
 RAY_INSTALL = 'pip install -e ".[ray]"'
 
 
-def say(bar, line: str) -> None:
-    """Print ``line`` above the bar, flushed: tqdm's ``write`` does not flush, and a command's output
-    piped to a file or a pager (no terminal: no bar either) would hold every line until it ends."""
-    bar.write(line)
-    sys.stdout.flush()
-
-
 # seconds between the lines that say how far a long run is, where no bar is drawn (no terminal)
 HEARTBEAT = progress_lines.HEARTBEAT
 
@@ -47,10 +40,11 @@ def _group_outcomes(unit: list, outcomes: list[dict]):
                     if outcome.get("diverged") else RuntimeError(outcome["error"]))
 
 
-def train_here(units: list[list], data: dict, bar, progress):
+def train_here(units: list[list], data: dict, tick, progress):
     """Yield ``(job, folder or exception)`` for each run trained here, one unit after another, on
-    the datasets built; the bar moves with every step of a lone run, after a group (without a
-    terminal, a lone run says its step every ``HEARTBEAT`` seconds, with ``progress``'s tag)."""
+    the datasets built; the sweep's ``hnn.progress.Ticker`` ``tick`` moves with every step of a lone run,
+    after a group (where it draws no bar, a lone run says its step every ``HEARTBEAT`` seconds, with
+    ``progress``'s tag)."""
     for unit in units:
         if len(unit) > 1:
             try:
@@ -59,21 +53,21 @@ def train_here(units: list[list], data: dict, bar, progress):
             except Exception as err:        # the whole group failed: each of its runs is reported
                 outcomes = [err] * len(unit)
             for job, outcome in zip(unit, outcomes):
-                bar.update(job.steps)
+                tick.advance(job.steps)
                 yield job, outcome
             continue
         job, done, beat = unit[0], [0], progress_lines.Heartbeat(HEARTBEAT)
 
         def advance(step: int, total: int, done=done, beat=beat, job=job) -> None:
-            bar.update(step - done[0])
+            tick.advance(step - done[0])
             done[0] = step
-            if bar.disable and (line := beat.due(step, total)):        # no bar: a line now and then
-                say(bar, f"  {progress.tag()} {job.key}: {line}")
+            if not tick.drawn and (line := beat.due(step, total)):        # no bar: a line now and then
+                tick.say(f"  {progress.tag()} {job.key}: {line}")
         try:
             outcome = run_experiment(job.config, data[job.config.dataset_key()], on_step=advance)
         except Exception as err:        # one bad run must not end the sweep (KeyboardInterrupt still does)
             outcome = err
-        bar.update(job.steps - done[0])
+        tick.advance(job.steps - done[0])
         yield job, outcome
 
 

@@ -35,11 +35,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from tqdm.auto import tqdm
-
-from .backends import BACKENDS, say, train_here, train_in_pool, train_on_ray
+from .backends import BACKENDS, train_here, train_in_pool, train_on_ray
 from .. import names
-from ..progress import time_left
+from ..progress import Rate, Ticker, say_left
 from .group_runs import drop_spent_checkpoints, unit_key
 from ..runs import diverged_record, find_run, load_run, partial_checkpoint, record_divergence
 from ..tasks import task_spec
@@ -214,7 +212,7 @@ def longest_first(units: list[list[Job]]) -> list[list[Job]]:
     return sorted(units, key=cost, reverse=True)
 
 
-def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
+def _build_datasets(jobs: list[Job], tick: Ticker) -> tuple[dict, dict, dict]:
     """Each distinct dataset of ``jobs`` built once: ``({dataset key: data}, {dataset key: seconds},
     {task: the error of a task that cannot run here})``."""
     data, seconds, skipped = {}, {}, {}
@@ -227,19 +225,19 @@ def _build_datasets(jobs: list[Job], bar) -> tuple[dict, dict, dict]:
             data[key] = job.config.dataset()
         except _CANNOT_RUN as err:
             skipped[job.task] = err
-            say(bar, f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
+            tick.say(f"  {job.task:11s} cannot run here, skipping all its runs: {err}")
             continue
         seconds[key] = time.perf_counter() - tic
     return data, seconds, skipped
 
 
-def _failure(job: Job, err: BaseException, log_dir: Path, bar, tag: str = "") -> RunFailed:
+def _failure(job: Job, err: BaseException, log_dir: Path, tick: Ticker, tag: str = "") -> RunFailed:
     """Report a failed run by name with its error, its traceback in ``<log_dir>/<key>.log``."""
     log = Path(log_dir) / f"{job.key.replace('/', '-')}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
     log.write_text("".join(traceback.format_exception(err)))
     failed = RunFailed(job.key, f"{type(err).__name__}: {err}", log, diverged=isinstance(err, DivergenceError))
-    say(bar, f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
+    tick.say(f"  {tag}{job.key} FAILED: {failed.message} (log: {log})")
     if failed.diverged:         # a result of the config: recorded for a later sitting (reuse(..., diverged=True))
         record_divergence(job.config, err)
     return failed
@@ -282,9 +280,10 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     tic, done, per_run = time.perf_counter(), {}, {}
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
-    with torch_threads(threads if in_process else None), interruptible(done, len(jobs)), tqdm(total=sum(job.steps for job in jobs), unit="step", file=sys.stderr,
-                                          disable=None, dynamic_ncols=True) as bar:
-        data, data_seconds, skipped = _build_datasets(jobs, bar)
+    # one bar of the sweep's steps where someone watches (hnn.progress.Ticker); its runs say their own lines
+    with torch_threads(threads if in_process else None), interruptible(done, len(jobs)), \
+            Ticker(sum(job.steps for job in jobs), "sweep", lines=False) as tick:
+        data, data_seconds, skipped = _build_datasets(jobs, tick)
         done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
         todo = [job for job in jobs if job.task not in skipped]
         units = longest_first(plan_units(todo, group))
@@ -293,23 +292,25 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
         # one line per run, with the runs done of those to do and the time so far: the bar above is
         # drawn only on a terminal, and a long run (thousands of steps) leaves it still for minutes
         progress = Progress(len(todo))
-        results = (train_here(units, data, bar, progress) if in_process else train_in_pool(units, n_jobs, threads)
+        results = (train_here(units, data, tick, progress) if in_process else train_in_pool(units, n_jobs, threads)
                    if backend == "local" else train_on_ray(units, threads, ray_address))
         if todo:
-            say(bar, f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
+            tick.say(f"  {progress.tag()} training {len(todo)} run{'s' if len(todo) != 1 else ''} in "
                       f"{len(units)} unit{'s' if len(units) != 1 else ''} of work")
-        # the time left of the whole sweep at the pace its runs' expected seconds have run at so far (a plan's
-        # measured costs: analysis/plan.py), else its steps per second so far (as the bar's on a terminal)
+        # the time left of the whole sweep at the recent pace (hnn.progress.Rate) of its runs' expected seconds (a
+        # plan's measured costs: analysis/plan.py), else of its steps (as the bar's on a terminal)
         def weight(job: Job) -> float:
             return job.expected_seconds if all(j.expected_seconds for j in todo) else job.steps
-        total, done_weight, started = sum(weight(job) for job in todo), 0.0, time.perf_counter()
+        total, done_weight, rate = sum(weight(job) for job in todo), 0.0, Rate()
         for job, outcome in results:
             tag = progress.advance() + " "
             done_weight += weight(job)
-            left = time_left(done_weight, total, 0, started) if done_weight < total else ""
-            bar.set_postfix_str(f"{progress.done}/{progress.total} runs", refresh=False)
+            rate.add(done_weight)
+            seconds_left = rate.left(total) if done_weight < total else None
+            left = f"; the sweep: {say_left(seconds_left)}" if seconds_left is not None else ""
+            tick.note(f"{progress.done}/{progress.total} runs")
             if isinstance(outcome, BaseException):
-                done[job.key] = _failure(job, outcome, log_dir, bar, tag)
+                done[job.key] = _failure(job, outcome, log_dir, tick, tag)
             else:
                 done[job.key] = outcome
                 diverged_record(job.config).unlink(missing_ok=True)     # trained now: no failure to recall
@@ -317,10 +318,9 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
                 built = data_seconds.pop(job.config.dataset_key(), 0.0)
                 per_run[job.key] = {"data": built + (metrics.get("data_seconds") or 0.0),
                                     "train": metrics.get("train_seconds")}
-                say(bar, f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s)"
-                         + (f"; the sweep:{left[1:]}" if left else ""))
+                tick.say(f"  {tag}{job.key} trained {outcome} ({metrics.get('train_seconds', 0):.1f} s){left}")
             if not in_process:
-                bar.update(job.steps)
+                tick.advance(job.steps)
             if on_done is not None:
                 on_done(job, done[job.key])
     for save_dir in dict.fromkeys(str(job.config.save_dir) for job in todo):
