@@ -140,9 +140,9 @@ def _oscillator_file(path: Path, seconds_per_unit: float) -> Path:
     return path
 
 
-# t in seconds and in minutes (milliseconds put dq/dt outside --units auto's bounds, which a map's objective
-# refuses: hnn.units)
-@pytest.mark.parametrize("seconds_per_unit", [1.0, 60.0])
+# t in seconds, in minutes and in milliseconds (whose dq/dt, 1e-3 of the seconds', lies outside --units auto's
+# bounds: a map's loss reads no rate, so auto judges its states alone, hnn.units.sized_arrays)
+@pytest.mark.parametrize("seconds_per_unit", [1.0, 60.0, 1e-3])
 def test_a_measured_map_trains_on_pairs_at_the_files_own_step(tmp_path, seconds_per_unit):
     data = _oscillator_file(tmp_path / "osc.csv", seconds_per_unit)
     argv = ["--data", str(data), "--time", "t", "--q", "x", "--p", "px", "--trial", "trial"]
@@ -152,6 +152,24 @@ def test_a_measured_map_trains_on_pairs_at_the_files_own_step(tmp_path, seconds_
     # each trial's training part and test part are rows at the file's step: every consecutive two a pair
     dataset = MapObjective().prepare(hnn.load_task("measured").get_dataset(str(data), "t", "x", p="px", trial="trial"))
     assert len(dataset["pairs"]) == len(dataset["x"]) - 2 and len(dataset["test_pairs"]) == len(dataset["test_x"]) - 2
+
+
+def test_a_measured_map_is_the_same_map_whatever_the_unit_of_the_files_time(tmp_path):
+    # the file in seconds and in milliseconds holds the same states at the same samples: a map fits one state to
+    # the next and reads no time, so --units auto (the default) trains the same map on both, each at its file's step
+    runs = {}
+    for seconds_per_unit in (1.0, 1e-3):
+        data = _oscillator_file(tmp_path / f"osc-{seconds_per_unit:g}.csv", seconds_per_unit)
+        runs[seconds_per_unit] = Path(hnn.load_task("measured", "train").main(
+            ["--data", str(data), "--time", "t", "--q", "x", "--p", "px", "--trial", "trial", "--model", "g_sympnet",
+             "--total_steps", "20", "--hidden_dim", "8", "--save_dir", str(tmp_path / "runs")]))
+    metrics = {k: json.loads((run / "metrics.json").read_text()) for k, run in runs.items()}
+    # the same rows and seed through the same arithmetic in one process: the same bits, not a tolerance
+    assert metrics[1.0]["train_loss"] == metrics[1e-3]["train_loss"]
+    assert metrics[1.0]["test_loss"] == metrics[1e-3]["test_loss"]
+    for seconds_per_unit, run in runs.items():      # its step, back in the file's time: 0.05 s, or 50 ms
+        step = json.loads((run / "args.json").read_text())["dt"] * json.loads((run / "scale.json").read_text())["tau"]
+        assert step == pytest.approx(0.05 / seconds_per_unit, rel=1e-12)
 
 
 def test_a_dataset_with_no_pair_one_step_apart_is_an_error_naming_it():

@@ -62,6 +62,9 @@ class MapObjective(PathObjective):
     """Fit ``model.step(x0)`` to ``x1`` on rows ``[x0, x1]`` of consecutive states ``dt`` apart; the
     model must be a learned map (``steps``) of that step. ``dt`` (default the dataset's)."""
     arrays = ("pairs", "pairs", "test_pairs", "test_pairs")
+    # a map fits the state one step later to a state: no rate and no time enters its loss, so its fit is the same
+    # whatever the unit of the data's time (a file's t in ms or in s pairs the same rows; ``hnn.units.sized_arrays``)
+    reads_rates = False
 
     def __init__(self, dt: float | None = None, observed: str = "canonical"):
         self.dt, self.observed = dt, observed
