@@ -1,7 +1,10 @@
-"""Fitted on a few, run on many: the pair kind fitted on a chain of 8 springs, rolled out on chains of N = 8 ... 4096.
+"""Fitted on a few, run on many: the pair kind fitted on a chain of 8 springs, rolled out on chains of N = 8 ... 4096;
+and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols over seeds.
 
     python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits (about a minute)
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
+    python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
+    python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
 
 The pair kind (``--model pairwise``) is fitted once on the lattice task's data (experiment-lattice: 8 bodies,
 the default dataset of ``--seed``) by each of ``--fits``: ``library`` (the radial library, one solve),
@@ -19,6 +22,12 @@ Per N and fit:
 
 Prints a table, writes ``bodies.json`` and ``bodies.md`` under ``--out``, and with ``--update-docs`` the
 ``bodies`` section of docs/bodies.md. Numbers come from this command, never typed by hand.
+
+``--paper`` (``hnn_analysis.scenes.bodies_paper``): the pair kind by Adam, the radial library and sampled radial
+neurons on the 2-body and 3-body tasks at ``--seeds`` seeds, trained in one sweep of ``--jobs`` processes into
+``--runs`` (default results/runs, which ``fit_tasks.py`` and the scene study reuse), each measured on the paper's
+energy protocol, its one-thread training seconds and Sampling-HNNs' H error; writes ``bodies_paper.json`` and
+``.md`` under ``--out`` and with ``--update-docs`` the ``bodies-paper`` section.
 """
 from __future__ import annotations
 
@@ -30,11 +39,13 @@ from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import provenance
 from hnn_analysis.scenes.bodies_study import FITS, FULL_SIZES, QUICK_FITS, QUICK_SIZES, study, table
 
+DEFAULT_OUT = Path("results/bodies")
+
 
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     add_flags(p, quick=f"N = {', '.join(map(str, QUICK_SIZES))} and the least-squares fits only (no Adam)",
-              out="folder for bodies.json and bodies.md", out_default=Path("results/bodies"),
+              out="folder for bodies.json and bodies.md", out_default=DEFAULT_OUT,
               update_docs="write the bodies section of docs/bodies.md")
     p.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths N (default {FULL_SIZES}; --quick {QUICK_SIZES})")
     p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted (default {FITS}; --quick "
@@ -46,7 +57,15 @@ def main(argv=None) -> dict:
     p.add_argument("--adam-steps", dest="adam_steps", type=int, default=2000, help="Adam's steps (default 2000)")
     p.add_argument("--hidden-dim", dest="hidden_dim", type=int, default=64,
                    help="the MLP's width (adam) and the sampled neurons (swim) (default 64)")
+    p.add_argument("--paper", action="store_true", help="the paper's 2-body and 3-body protocols instead (see above)")
+    add_flags(p, seeds="--paper: seeds of every rung (default 5; --quick 1)", seeds_default=None,
+              jobs="--paper: training processes (one thread each past one)")
+    p.add_argument("--runs", type=Path, default=None,
+                   help="--paper: the runs folder (default results/runs, results-quick/runs with --quick)")
     args = p.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if args.paper:
+        return _paper(args, argv)
     sizes = tuple(args.sizes or (QUICK_SIZES if args.quick else FULL_SIZES))
     fits = tuple(args.fits or (QUICK_FITS if args.quick else FITS))
     for value, name in ((args.starts, "--starts"), (args.dt, "--dt"), (args.horizon, "--horizon")):
@@ -55,10 +74,43 @@ def main(argv=None) -> dict:
     if min(sizes) < 2:
         raise SystemExit(f"--sizes {min(sizes)}: a chain needs at least 2 bodies")
     results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim)
-    results["meta"] = {**provenance(), "command": portable_command(list(sys.argv[1:] if argv is None else argv),
-                                                                    "analysis/bodies.py")}
+    results["meta"] = {**provenance(), "command": portable_command(argv, "analysis/bodies.py")}
     text = table(results)
     publish(args.out, "bodies", results, text, {"bodies": text} if args.update_docs else None)
+    return results
+
+
+def _paper(args, argv: list[str]) -> dict:
+    """The paper's protocols (``bodies_paper``): train what the runs folder lacks, measure every seed, publish."""
+    import hnn
+    from hnn.sweeps import sweep
+    from hnn_analysis import pages
+    from hnn_analysis.scenes import bodies_paper
+
+    if args.update_docs and args.quick:
+        raise SystemExit("--update-docs writes the protocols' settings into docs/bodies.md; drop --quick")
+    seeds = list(range(args.seeds or (1 if args.quick else 5)))
+    root = hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
+    runs_dir = args.runs or root / "runs"
+    runs, todo = sweep.reuse(bodies_paper.plan(bodies_paper.TASKS, seeds, runs_dir, args.quick))
+    print(f"bodies --paper: {len(runs)} runs reused, {len(todo)} to train", flush=True)
+    trained, _ = sweep.train_jobs(todo, args.jobs, runs_dir.parent / "logs")
+    runs.update(trained)
+    results = {"meta": {**provenance(), "seeds": seeds, "quick": args.quick,
+                        "command": portable_command(argv, "analysis/bodies.py")}, "tasks": {}}
+    for task in bodies_paper.TASKS:
+        by_seed = {seed: {label: runs[key] for label in bodies_paper.RUNGS
+                          if isinstance(runs.get(key := f"{task}/{label}/seed{seed}"), Path)} for seed in seeds}
+        by_seed = {seed: found for seed, found in by_seed.items() if found}
+        if by_seed:
+            results["tasks"][task] = {"rungs": bodies_paper.measure(task, by_seed, args.quick),
+                                      "reference": bodies_paper.reference(task, runs_dir, args.quick)}
+            print(f"  {task} measured", flush=True)
+    text = bodies_paper.table(results)
+    out = args.out if args.out != DEFAULT_OUT else root / "bodies"
+    publish(out, "bodies_paper", results, text, {"bodies-paper": text} if args.update_docs else None,
+            pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS else "a --seeds run below 3"))
+    sweep.exit_if_failed(runs)
     return results
 
 
