@@ -202,6 +202,24 @@ def test_a_measured_map_is_the_same_map_whatever_the_unit_of_the_files_time(tmp_
         assert step == pytest.approx(0.05 / seconds_per_unit, rel=1e-12)
 
 
+def test_score_reads_a_measured_map_at_its_own_steps_the_same_in_seconds_and_milliseconds(tmp_path, capsys):
+    # the held-out horizon is a whole number of the file's steps, which the map was trained at: score.py steps
+    # it there (it has no field to integrate to an arbitrary time); the same map on the same states in seconds
+    # and in milliseconds predicts the same positions, so both files' errors are one number
+    errors = {}
+    for seconds_per_unit in (1.0, 1e-3):
+        data = _oscillator_file(tmp_path / f"osc-{seconds_per_unit:g}.csv", seconds_per_unit)
+        run = hnn.load_task("measured", "train").main(
+            ["--data", str(data), "--time", "t", "--q", "x", "--p", "px", "--trial", "trial", "--model", "g_sympnet",
+             "--total_steps", "20", "--hidden_dim", "8", "--save_dir", str(tmp_path / f"runs{seconds_per_unit:g}")])
+        [scored] = score.main([str(run), "--out", str(tmp_path / f"score{seconds_per_unit:g}")])
+        assert "next-state MSE" in capsys.readouterr().out
+        errors[seconds_per_unit] = scored["prediction_error"]
+        assert scored["horizon"] * seconds_per_unit == pytest.approx(0.295, rel=1e-9)   # a tenth of a 60-row tail
+    assert errors[1.0]["starts"] == errors[1e-3]["starts"] > 0
+    assert errors[1.0]["median"] == pytest.approx(errors[1e-3]["median"], rel=1e-9)
+
+
 def test_a_dataset_with_no_pair_one_step_apart_is_an_error_naming_it():
     x = np.zeros((10, 2))
     dataset = {"x": x, "test_x": x, "t": 0.3 * np.arange(10), "test_t": 0.3 * np.arange(10), "dt": 0.1}
