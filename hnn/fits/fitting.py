@@ -24,9 +24,9 @@ from ..metrics import derivative_mse
 from ..progress import Ticker
 from ..specs import ModelSpec
 from ..trainers.rows import check_data
-from ..units import Rescaled, UnitScales, in_canonical_units
+from ..units import Rescaled, UnitScales, in_canonical_units, refusal, units_reason
 from .lstsq import RIDGES, StreamingQR, chunk_rows
-from .registry import build, get_fit
+from .registry import build, fitted_model, get_fit
 
 RCOND = "auto"          # the ridge of the solve: chosen by generalized cross-validation (a number: that ridge)
 THRESHOLD = 0.05        # a library's smallest coefficient kept (the units of the fit: fit_least_squares' units)
@@ -188,13 +188,16 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
 def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", width: int = 200,
                       degree: int = 3, frequencies: int = 1, seed: int = 0, rcond=RCOND,
                       threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None,
-                      units: str = "auto", progress: bool | None = None):
+                      units: str = "auto", bodies=None, progress: bool | None = None):
     """``(model, stats)``: a model of ``dxdt`` at ``x`` ``(rows, 2n)`` found by one least-squares solve.
 
-    ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``; ``hnn.fits.FITS[fit].kinds``), built here
-    with ``width`` sampled neurons (``fit='swim'`` or ``'elm'``) or the library of polynomials to ``degree``
-    (H's to ``degree + 1``) and trig terms of q to ``frequencies`` (``'library'``, ``'sindy'``); or a model
-    ``hnn.fits.build`` made (wrap it in ``hnn.units.Rescaled`` to let ``units`` rescale it).
+    ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``, ``'pairwise'``; ``hnn.fits.FITS[fit].kinds``),
+    built here with ``width`` sampled neurons (``fit='swim'`` or ``'elm'``) or the library of polynomials to
+    ``degree`` (H's to ``degree + 1``) and trig terms of q to ``frequencies`` (``'library'``, ``'sindy'``); or
+    a model ``hnn.fits.build`` made (wrap it in ``hnn.units.Rescaled`` to let ``units`` rescale it).
+    ``bodies``: the pair kind's layout of ``x``'s columns (an ``hnn.bodies.Bodies`` or its dict: count, dimension,
+    order), which it needs; a task's is its Config's ``BODIES``. The pair kind reads distances, which no
+    scale per column keeps: it fits the data as they are, and refuses data the units rule would rescale.
 
     ``units``: ``hnn.train``'s rule, by the same function (``hnn.units.in_canonical_units``): ``'auto'`` fits a
     kind named here in the canonical units of ``x``, ``dxdt`` where their sizes lie far from 1 (or their
@@ -215,8 +218,19 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
     if plain:
         _check_kind(model, fit)
         x = check_data("x", x, dtype=torch.float64)
-        model = Rescaled(build(ModelSpec(kind=model, input_dim=x.shape[1], hidden_dim=width, fit=fit,
-                                         library_degree=degree, library_frequencies=frequencies)))
+        kind = model
+        model = build(ModelSpec(kind=kind, input_dim=x.shape[1], hidden_dim=width, fit=fit, library_degree=degree,
+                                library_frequencies=frequencies, bodies=_layout(kind, bodies)))
+        why = refusal(model)
+        if why is None:
+            model = Rescaled(model)
+        else:
+            reason = units_reason(units, x, check_data("dxdt", dxdt, width=x.shape[1], dtype=torch.float64))
+            if reason is not None:
+                raise ValueError(f"units={units!r}: x and dxdt are {reason}, and the {kind} kind cannot be "
+                                 f"rescaled: {why}; give the data in units near 1, or pass units='off' to fit them "
+                                 "as they are")
+            units = "off"
     dim = model.input_dim
     given = [None if a is None else check_data(name, a, width=dim, dtype=torch.float64)
              for name, a in (("x", x), ("dxdt", dxdt), ("test_x", test_x), ("test_dxdt", test_dxdt))]
@@ -242,6 +256,24 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
     if "equation" in stats["fit"]:
         stats["fit"]["equation"] = model.equation()
     return model, stats
+
+
+def _layout(kind: str, bodies):
+    """``bodies`` as a ``ModelSpec`` carries it (a dict), or None; a ValueError naming the missing layout and the fix
+    where the kind reads bodies and none is given, or where one is given to a kind that reads none."""
+    from ..bodies import Bodies
+
+    reads = fitted_model(kind).reads_bodies
+    if bodies is None:
+        if reads:
+            raise ValueError(f"the {kind} kind reads x as bodies and needs their layout: pass bodies="
+                             "hnn.bodies.Bodies(count=N, dim=d) (N bodies in d dimensions, x's columns "
+                             "[q of every body, then p]; order='body' where each body's coordinates sit together)")
+        return None
+    if not reads:
+        raise ValueError(f"bodies= is the layout of a kind that reads bodies (pairwise); the {kind} kind reads x as "
+                         "it is: drop bodies")
+    return Bodies.from_dict(bodies).to_dict()
 
 
 def _check_kind(kind: str, fit: str) -> None:

@@ -70,6 +70,7 @@ def _state_width(spec, even: bool = True) -> int:
 
 class FittedHNN(Model):
     """H(x) = phi(x) . coef + offset over ``features`` (sampled neurons or a library of H's terms)."""
+    reads_bodies = False        # the fitted models' declaration: x read as it is (the pair model reads bodies)
     conservative = True
     takes = UNIT_MASS
     kind = "hnn"
@@ -138,6 +139,7 @@ class FittedSeparable(Model):
     separable = True
     takes = UNIT_MASS
     kind = "separable"
+    reads_bodies = False
 
     @classmethod
     def from_spec(cls, spec, features: Callable) -> FittedSeparable:
@@ -219,6 +221,7 @@ class FittedField(Model):
     """dx/dt = phi(x) coef + bias: a field with no H (the baseline's, SINDy's)."""
     takes = ANY_STATE
     kind = "baseline"
+    reads_bodies = False
 
     @classmethod
     def from_spec(cls, spec, features: Callable) -> FittedField:

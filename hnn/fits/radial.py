@@ -80,6 +80,7 @@ class FittedPair(Model):
     separable = True
 
     kind = "pairwise"
+    reads_bodies = True         # x's columns as the bodies' (``bodies``), any count of them
 
     def __init__(self, bodies: Bodies, features: Features):
         super().__init__()
@@ -98,8 +99,8 @@ class FittedPair(Model):
         ``features('radial', 1)`` (the fit row's radial features); zeros until solved."""
         if spec.bodies is None:
             raise ValueError("the pairwise kind reads the state as bodies and needs their layout (ModelSpec.bodies): "
-                             "give the task's Config a BODIES = hnn.bodies.Bodies(...), or pass "
-                             "hnn.fit_least_squares(..., bodies=hnn.bodies.Bodies(count=N, dim=d))")
+                             "a task declares it (its Config's BODIES = hnn.bodies.Bodies(...)), "
+                             "hnn.fit_least_squares takes it as bodies=hnn.bodies.Bodies(count=N, dim=d)")
         return cls(spec.bodies, features("radial", 1))
 
     def _geometry(self, q_half: torch.Tensor):

@@ -140,6 +140,14 @@ def check_config(config, coordinates: str = "canonical") -> Fit:
                  input_noise=getattr(config, "input_noise", 0.0))
 
 
+def fitted_model(kind: str):
+    """The fitted model class of ``kind`` (one of ``LINEAR_KINDS``), or a ValueError naming them."""
+    for model in FITTED_MODELS:
+        if model.kind == kind:
+            return model
+    raise ValueError(f"no fitted model of kind {kind!r}; a least-squares fit makes {', '.join(LINEAR_KINDS)}")
+
+
 def build(spec: ModelSpec):
     """The untrained fitted model of ``spec`` (its ``fit``, ``kind``, ``input_dim``, ``hidden_dim``, the
     library's ``library_degree`` and ``library_frequencies``, the pair kind's ``bodies``): the kind's fitted
@@ -147,5 +155,4 @@ def build(spec: ModelSpec):
     ``hnn.fits.fitting.solve`` fits it (``hnn.kinds.model_from_spec`` builds it for a run, and again for
     ``hnn.load_run``)."""
     row = check(spec.kind, spec.fit)
-    model = next(model for model in FITTED_MODELS if model.kind == spec.kind)
-    return model.from_spec(spec, lambda form, in_dim: made(row.features, spec, form, in_dim))
+    return fitted_model(spec.kind).from_spec(spec, lambda form, in_dim: made(row.features, spec, form, in_dim))
