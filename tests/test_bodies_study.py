@@ -61,3 +61,22 @@ def test_the_paper_protocols_plan_the_pair_rungs_and_judge_them_against_the_targ
                         "cores": 2, "cpu": "test", "torch": "2", "seeds": list(range(5))}, "tasks": {"3body": entry}}
     text = bodies_paper.table(results)
     assert "| the paper's HNN | 0.0419 (published) | 50 |" in text and "| pairwise+swim |" in text
+
+
+def test_the_pair_rungs_are_planned_exactly_where_a_task_declares_bodies(tmp_path):
+    from hnn_analysis.fits import task_fits
+    from hnn_analysis.scenes import scene_common, scene_rungs, scene_stages
+
+    pair = {"pairwise", "pairwise+swim", "pairwise+library"}
+    for task in scene_common.scenes():
+        assert (pair <= set(scene_common.task_rungs(task))) == (task in ("2body", "3body")), task
+        assert not pair & set(scene_common.task_rungs(task)) or task in ("2body", "3body"), task
+    # the full study's jobs at the default cell: every rung asked of every scene, the pixels' own kinds too
+    rows = [row for row in scene_stages.plan_rows(scene_common.scenes(), False)
+            if row["cell"] == scene_stages.DEFAULT_CELL]
+    rungs = scene_stages.rungs_of(False)[0]
+    keys = {job.key for job in scene_rungs.jobs(rows, [0], tmp_path, rungs, scene_common._fits)}
+    assert {key.split("/")[0].split("@")[0] for key in keys if "/pairwise+" in key} == {"2body", "3body"}
+    for task in task_fits.TASKS:
+        assert (pair <= set(task_fits.rungs(task))) == (task in ("2body", "3body")), task
+        assert not pair & set(task_fits.rungs(task)) or task in ("2body", "3body"), task

@@ -76,6 +76,8 @@ def _fits(task: str, kind: str) -> bool:
     declared coordinates; the objectives would refuse its run otherwise), or, for a pixel model
     (``'latent'``), the frames its own encoder maps to its latent [q, p]; a fit must apply to the run too, and its
     model must build from what the task declares (the pair kind reads the bodies of 2body and 3body; spring has none)."""
+    if scene_rungs.kind_of(kind) not in hnn.cli.model_choices(hnn.load_task(task, "train").Config):
+        return False        # the task's --model does not take it (the pixel task takes its own two)
     config = hnn.tasks.task_config(task, {"model": scene_rungs.kind_of(kind), "fit": scene_rungs.fit_of(kind)})
     spec = hnn.MODEL_KINDS[config.kind]
     if config.fit != "adam":
