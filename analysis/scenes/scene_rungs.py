@@ -38,7 +38,7 @@ def fit_of(rung: str) -> str:
 
 def is_library(rung: str) -> bool:
     """Whether the rung's model is a sum of written-out terms (ours or SINDy's): it prints as equations."""
-    return hnn.fits.FITS[fit_of(rung)].features == "library"
+    return hnn.fits.FITS[fit_of(rung)].prints_equation
 
 
 def describe(rung: str, width: int, fraction: float) -> str:

@@ -6,30 +6,28 @@ users (``hnn.fit_least_squares``); ``solve`` fits a model that ``hnn.fits.build`
     model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="library")
     print(model.equation())                       # H = 3 - 3 cos(q) + p^2 ... as the data say
 
-For each least-squares problem of the model (``part``): draw the hidden layer from the data (``swim``,
-``elm``), then stream the design rows through a QR factor (``hnn.fits.lstsq``), chunk by chunk, and
-solve; a library is thresholded as SINDy's STLSQ; ``sindy`` hands the rows to pysindy
-(``hnn.fits.sindy``). All in float64; the seed decides the sampled neurons.
+For each least-squares problem of the model (``part``): draw its features from the data where they are
+drawn (by the row's ``sampler``: ``swim``, ``elm``), then stream the design rows through a QR factor
+(``hnn.fits.lstsq``), chunk by chunk, and solve by the row's strategy (``hnn.fits.solves``: plain, or
+thresholded as SINDy's STLSQ); a strategy of the whole model (``sindy``: pysindy, ``hnn.fits.sindy``)
+takes the rows itself. All in float64; the seed decides the sampled neurons.
 """
 from __future__ import annotations
 
 import difflib
-import sys
 import time
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from ..metrics import derivative_mse
+from ..progress import Ticker
 from ..settings import RunSettings
 from ..specs import ModelSpec
 from ..trainers.rows import check_data
 from ..units import Rescaled, UnitScales, in_canonical_units
-from .features import TanhFeatures
 from .lstsq import RIDGES, StreamingQR, chunk_rows
 from .registry import build, get_fit
-from .sampling import elm, swim
 
 DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
 
@@ -64,7 +62,7 @@ def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) 
     solver = StreamingQR(part.columns, part.rhs, sumsq.sqrt(), rcond)
     for c in chunks:
         solver.add(*design(c))
-        bar.update(len(x[c]))
+        bar.advance(len(x[c]))
     return solver
 
 
@@ -88,7 +86,7 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
     step = max(1, chunk_rows(M, m))
     for i in range(0, len(x), step):
         stage.add(slopes(x[i:i + step]), Y[i:i + step])
-        bar.update(len(x[i:i + step]))
+        bar.advance(len(x[i:i + step]))
     R = stage.factor
     Rs, Z, tail = R[:M, :M], R[:M, M:], R[M:, M:]
     if dense:
@@ -110,15 +108,13 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
     return solver
 
 
-def _draw(part, fit: str, x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator, values) -> None:
-    """Set a sampled layer's neurons from the states this part reads (SWIM supervised by ``values``,
-    the function's values, where the part takes them: H for an HNN, dx/dt for a field)."""
+def _draw(part, sampler, x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator, values) -> None:
+    """Set a drawn layer's neurons from the states this part reads by ``sampler`` (the fit row's; SWIM
+    supervised by ``values``, the function's values, where the part takes them: H for an HNN, dx/dt for a
+    field; ELM reads none)."""
     z = part.inputs(x).numpy()
-    if fit == "elm":
-        part.features.set(*elm(z, part.features.width, rng))
-        return
     supervise = (values if values is not None else y.numpy() if part.rhs > 1 else None) if part.supervised else None
-    part.features.set(*swim(z, part.features.width, rng, supervise))
+    part.features.set(*sampler(z, part.features.width, rng, supervise))
 
 
 def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", seed: int = RunSettings.seed,
@@ -148,23 +144,20 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
     if values is not None:
         values = np.asarray(values, dtype=np.float64).reshape(len(x), -1)
     weights = None if loss_weights is None else torch.as_tensor(loss_weights, dtype=torch.float64)
-    if progress is None:
-        progress = sys.stderr.isatty()
     info = {"fit": fit, "rows": len(x), "seed": seed}
     rng = np.random.default_rng(seed)
     tic = time.perf_counter()
-    if fit == "sindy":
-        from .sindy import fit_sindy
-        info.update(fit_sindy(model, x.numpy(), dxdt.numpy(), threshold))
+    if row.solve.whole is not None:         # a strategy of the whole model (SINDy's pysindy)
+        info.update(row.solve.whole(model, x, dxdt, threshold))
     else:
         parts = model.parts()
-        with tqdm(total=len(x) * len(parts), desc=f"fit {fit}", disable=not progress, leave=False) as bar:
+        with Ticker(len(x) * len(parts), f"fit {fit}", progress, unit="state") as bar:
             for part in parts:
-                if isinstance(part.features, TanhFeatures):
-                    _draw(part, fit, x, dxdt, rng, values)
+                if part.features is not None and part.features.drawn:
+                    _draw(part, row.sampler, x, dxdt, rng, values)
                 solver = _stream(part, x, dxdt, weights, RIDGES[0] if rcond == "auto" else rcond, bar)
                 ridge = solver.ridge() if rcond == "auto" else None
-                part.assign(solver.sparse(threshold, ridge) if row.features == "library" else solver.solve(ridge))
+                part.assign(row.solve.coefficients(solver, threshold, ridge))
                 if ridge is not None:
                     info.setdefault("ridge", {})[part.name] = [float(r) for r in ridge]
         info["rcond"] = rcond
@@ -175,8 +168,9 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
                         dtype=torch.float64)
         model.anchor(x0, anchor[1])
     seconds = time.perf_counter() - tic
-    if row.features == "library":
+    if row.solve.sparse:        # some features kept, the rest dropped: how many, and the equation they make
         info["terms"] = int(sum(int((p != 0).sum()) for name, p in model.named_parameters() if "coef" in name))
+    if row.prints_equation:
         info["equation"] = model.equation()
     stats = {"train_loss": [derivative_mse(model, x, dxdt)[0]], "test_loss": [], "test_steps": [], "seconds": seconds,
              "fit": info}
@@ -259,7 +253,8 @@ def _check_kind(kind: str, fit: str) -> None:
         close = difflib.get_close_matches(kind, list(MODEL_KINDS), n=1, cutoff=0.6)
         raise ValueError(f"unknown kind {kind!r}; the kinds are {', '.join(MODEL_KINDS)}, and fit={fit!r} fits "
                          f"{', '.join(takes)}" + (f"; did you mean {close[0]!r}?" if close else ""))
-    why = ("fits dx/dt with no H: pass 'baseline'" if fit == "sindy" else
+    only = get_fit(fit).only
+    why = (f"{only}: pass {' or '.join(repr(k) for k in takes)}" if only else
            f"solves the last weights of {', '.join(takes)}, whose field is linear in them, and the {kind} kind's is "
            f"not: pass one of those kinds, or train {kind!r} with hnn.train")
     raise ValueError(f"fit={fit!r} {why}")

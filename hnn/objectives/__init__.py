@@ -75,6 +75,9 @@ class Objective:
     chunk = 4096        # rows per no-grad batch of final_loss
     # its first two arrays are states and their dx/dt, so that --units can rescale them (hnn.units)
     fits_derivative: ClassVar[bool] = False
+    # whether its fit reads the data's rates (dx/dt, or states stepped through time by a field): a learned map's
+    # fits a state to the next one and never reads a time, so --units auto judges its states' sizes alone
+    reads_rates: ClassVar[bool] = True
 
     def prepare(self, dataset: dict) -> dict:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""
