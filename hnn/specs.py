@@ -72,25 +72,19 @@ class _FitReads(_Spec):
 MODEL_FACTS = (("constraints", "dict | None"), ("dt", "float | None"), ("bodies", "dict | None"))
 
 _DOCS = {
-    "model": """What a kind's builder reads of a run, declared (a run's ``args.json`` holds these among the
-    rest of its config; ``from_args`` picks them out): the settings of stage ``model`` (``hnn.settings``:
-    ``input_dim``, None in a spec without it: the constrained kinds read theirs from the graph;
-    ``hidden_dim``, ``nonlinearity``, ``field_type``, ``dtype``, ``init``, ``lnn_solve``, ``fit``,
-    ``library_degree``, ``library_frequencies``, ``map_layers``; the tasks' ``latent_dim``,
-    ``ae_nonlinearity``, ``periodic``), ``kind`` (a key of ``MODEL_KINDS``) and the facts: ``constraints``
-    (``ConstraintGraph.to_dict()``, the constrained kinds), ``dt`` (the time step of the run's data, a
-    learned map's step) and ``bodies`` (``hnn.bodies.Bodies.to_dict()``, which the pair kind reads). A fit
-    other than ``'adam'`` builds its own model (``hnn.fits.build``), float64 whatever ``dtype`` says.""",
-    "training": """What ``hnn.train`` reads of a run: its keyword arguments of the same names, the settings of
-    stage ``training`` (``hnn.settings``). The loop's own options (``predict``, ``loss``, ``input_noise``,
-    ...) are the objective's (``Objective.train_options``).""",
-    "objective": """What an objective reads of a run (``Objective.train_options``): the settings of stage
-    ``objective`` (``hnn.settings``): ``seed`` (the pixel objective's noise generator starts at seed + 2),
-    ``input_noise``, ``use_rk4``, ``derivative_loss``, ``balance`` (a run saved before the field existed
-    trained unbalanced: ``'off'``) and ``units`` (``'off'`` before the field existed).""",
-    "fit": """What a least-squares fit reads of a run (``hnn.fits.solve``'s keywords): the settings of stage
-    ``fit`` (``hnn.settings``): ``fit`` (a run saved before the field existed trained by ``'adam'``),
-    ``seed`` (draws the sampled neurons), ``fit_rcond`` and ``library_threshold``.""",
+    "model": """What a kind's builder reads of a run (a run's ``args.json`` holds these among the rest of its
+    config; ``from_args`` picks them out): ``kind`` (a key of ``MODEL_KINDS``), the settings of stage
+    ``model`` (``input_dim`` is None in a spec without it: the constrained kinds read theirs from the graph;
+    a fit other than ``'adam'`` builds its own model, ``hnn.fits.build``, float64 whatever ``dtype`` says)
+    and the facts: ``constraints`` (``ConstraintGraph.to_dict()``, the constrained kinds), ``dt`` (the time
+    step of the run's data, a learned map's step) and ``bodies`` (``hnn.bodies.Bodies.to_dict()``, which the
+    pair kind reads).""",
+    "training": """What ``hnn.train`` reads of a run: its keyword arguments of the same names. The loop's own
+    options (``predict``, ``loss``, ``input_noise``, ...) are the objective's (``Objective.train_options``).""",
+    "objective": """What an objective reads of a run (``Objective.train_options``); ``seed`` starts the pixel
+    objective's noise generator at seed + 2.""",
+    "fit": """What a least-squares fit reads of a run (``hnn.fits.solve``'s keywords); ``seed`` draws the
+    sampled neurons.""",
 }
 _BASES = {"model": _ModelReads, "training": _TrainingReads, "objective": _Spec, "fit": _FitReads}
 _NAMES = {"model": "ModelSpec", "training": "TrainingSpec", "objective": "ObjectiveSpec", "fit": "FitSpec"}
@@ -102,8 +96,9 @@ def _made(name: str, declared: list, bases: tuple, doc: str | None) -> type:
     spec = dataclasses.make_dataclass(name, [(n, t, dataclasses.field(default=d)) for n, t, d in declared],
                                       bases=bases, frozen=True)
     spec.__module__, spec.__qualname__ = __name__, name
-    if doc:
-        spec.__doc__ = doc
+    if doc:     # the fields, read off the declaration, so that the list is never stale
+        names = ", ".join(f"``{f.name}``" for f in fields(spec))
+        spec.__doc__ = f"{doc}\n\n    Its fields (each setting's meaning is its ``--help``, ``hnn.settings``): {names}."
     return spec
 
 
