@@ -38,8 +38,13 @@ def _rows_per_state(part, x, y) -> int:
 
 
 def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) -> StreamingQR:
-    """The QR factor of ``part``'s design over every state, built chunk by chunk (two passes: the columns'
-    norms, then the factor); through ``_stream_factored`` where the part's design factors."""
+    """The QR factor of ``part``'s design over every state, its design built once, chunk by chunk; through
+    ``_stream_factored`` where the part's design factors.
+
+    The rows go into a plain QR (no ridge, unit scales); the columns' norms are those of its factor's
+    (A = Q R, Q orthogonal), so the ridged factor on unit-norm columns is then the QR of the small
+    [R diag(1/norms) | Q^T y; rcond I | 0], ``(columns + rhs)`` rows more, never the rows again (which a
+    library built twice, once for the norms and once for the factor)."""
     factored = part.factored() if part.factored is not None else None
     if factored is not None:
         return _stream_factored(*factored, x, y, weights, rcond, bar)
@@ -47,22 +52,20 @@ def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) 
     states = max(1, chunk_rows(part.columns, part.rhs) // per_state)
     # the design of a few states at a time: a library's terms build (states, terms, dim) arrays several times over
     step = max(1, DESIGN_BYTES // (8 * part.columns * per_state))
-
-    def design(c: slice):
-        pieces = [part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
-                  for i in range(c.start, min(c.stop, len(x)), step)]
-        return torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces])
-
-    chunks = [slice(i, i + states) for i in range(0, len(x), states)]
-    sumsq = torch.zeros(part.columns, dtype=torch.float64)
-    for c in chunks:
-        for i in range(c.start, min(c.stop, len(x)), step):
-            A, _ = part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
-            sumsq += (A * A).sum(dim=0)
-    solver = StreamingQR(part.columns, part.rhs, sumsq.sqrt(), rcond)
-    for c in chunks:
-        solver.add(*design(c))
-        bar.advance(len(x[c]))
+    plain = StreamingQR(part.columns, part.rhs)
+    for start in range(0, len(x), states):
+        stop = min(start + states, len(x))
+        pieces = [part.design(x[i:min(i + step, stop)], y[i:min(i + step, stop)], weights)
+                  for i in range(start, stop, step)]
+        if len(pieces) == 1:
+            plain.add(*pieces[0])
+        else:
+            plain.add(torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces]))
+        del pieces
+        bar.advance(stop - start)
+    R = plain.factor
+    solver = StreamingQR(part.columns, part.rhs, R[:, :part.columns].norm(dim=0), rcond)
+    solver.add(R[:, :part.columns], R[:, part.columns:], rows=plain.rows)
     return solver
 
 
