@@ -22,14 +22,13 @@ import torch
 
 from ..metrics import derivative_mse
 from ..progress import Ticker
+from ..settings import RunSettings
 from ..specs import ModelSpec
 from ..trainers.rows import check_data
 from ..units import Rescaled, UnitScales, in_canonical_units, refusal, units_reason
 from .lstsq import RIDGES, StreamingQR, chunk_rows
 from .registry import build, fitted_model, get_fit
 
-RCOND = "auto"          # the ridge of the solve: chosen by generalized cross-validation (a number: that ridge)
-THRESHOLD = 0.05        # a library's smallest coefficient kept (the units of the fit: fit_least_squares' units)
 DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
 
 
@@ -121,9 +120,9 @@ def _draw(part, sampler, x: torch.Tensor, y: torch.Tensor, rng: np.random.Genera
     part.features.set(*sampler(z, part.features.width, rng, supervise))
 
 
-def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", seed: int = 0, rcond=RCOND,
-          threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None, progress: bool | None = None
-          ) -> dict:
+def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", seed: int = RunSettings.seed,
+          rcond=RunSettings.fit_rcond, threshold: float = RunSettings.library_threshold, loss_weights=None,
+          values=None, anchor=None, progress: bool | None = None) -> dict:
     """Fit ``model`` (``hnn.fits.build``'s, of fit ``fit``) to ``dxdt`` at ``x`` ``(rows, dim)`` in place.
 
     ``seed`` draws the sampled neurons; ``rcond``: the ridge relative to the design's unit-norm columns, or
@@ -185,10 +184,12 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
     return stats
 
 
-def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", width: int = 200,
-                      degree: int = 3, frequencies: int = 1, seed: int = 0, rcond=RCOND,
-                      threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None,
-                      units: str = "auto", bodies=None, progress: bool | None = None):
+def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim",
+                      width: int = RunSettings.hidden_dim, degree: int = RunSettings.library_degree,
+                      frequencies: int = RunSettings.library_frequencies, seed: int = RunSettings.seed,
+                      rcond=RunSettings.fit_rcond, threshold: float = RunSettings.library_threshold,
+                      loss_weights=None, values=None, anchor=None, units: str = RunSettings.units,
+                      bodies=None, progress: bool | None = None):
     """``(model, stats)``: a model of ``dxdt`` at ``x`` ``(rows, 2n)`` found by one least-squares solve.
 
     ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``, ``'pairwise'``; ``hnn.fits.FITS[fit].kinds``),

@@ -38,6 +38,7 @@ from ..errors import DivergenceError
 from ..modes import in_model_axis
 from .mechanical import check_width, embed_angles, StateCheckedModel
 from ..names import LNN_SOLVES
+from ..settings import RunSettings
 from .mlp import MLP
 
 
@@ -97,7 +98,8 @@ class LagrangianNN(StateCheckedModel):
     takes = {"cartesian": "positions and velocities of bodies: L(x, xdot) of any state [q, qdot]"}
     conservative = True
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False,
+    def __init__(self, input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity, periodic: bool = False,
                  solve: str = "solve"):
         super().__init__()
         if solve not in LNN_SOLVES:

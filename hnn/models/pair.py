@@ -22,6 +22,7 @@ from torch import nn
 
 from ..bodies import Bodies
 from ..interface import Model, gradient_of
+from ..settings import RunSettings
 from .mlp import MLP
 
 PAIR_BYTES = 2 ** 32     # the per-pair arrays of one field call are kept within this (4 GiB); more is refused
@@ -82,7 +83,8 @@ class PairHNN(Model):
     conservative = True
     separable = True
 
-    def __init__(self, bodies: Bodies, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+    def __init__(self, bodies: Bodies, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity):
         super().__init__()
         self.bodies = Bodies.from_dict(bodies)
         self.input_dim, self.hidden_dim = self.bodies.width, hidden_dim

@@ -30,6 +30,7 @@ from ..balance import balance_weights
 from ..integrators.fixed_step import rk4_step
 from ..interface import declared, observed_coordinates
 from ..metrics import derivative_mse, mean_and_se
+from ..settings import RunSettings
 from ..specs import ObjectiveSpec
 from ..training import batch_loss
 
@@ -46,7 +47,7 @@ class LoopOptions:
     fit of dx/dt is scored by; None: the model's ``time_derivative``)."""
     loss: Callable | None = None
     predict: Callable | None = None
-    derivative_loss: str = "l2"
+    derivative_loss: str = RunSettings.derivative_loss
     loss_weights: object = None
     input_noise: float = 0.0
     generators: tuple = ()
