@@ -3,15 +3,18 @@ and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols 
 
     python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits (about a minute)
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
+    python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity; section bodies-gravity
     python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
     python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
 
-The pair kind (``--model pairwise``) is fitted once on the lattice task's data (experiment-lattice: 8 bodies,
-the default dataset of ``--seed``) by each of ``--fits``: ``library`` (the radial library, one solve),
+The pair kind (``--model pairwise``) is fitted once on the ``--scene`` task's data (experiment-lattice, a chain of
+springs, or experiment-gravity, a softened rotating disk: 8 bodies, the default dataset of ``--seed``) by each of
+``--fits``: ``library`` (the radial library, one solve),
 ``swim`` (sampled radial neurons, one solve) and ``adam`` (an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of
 batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
-leapfrog on the true forces (``experiment-lattice/data.py``, O(N)), and the reference: DOP853 at rtol 1e-10.
+leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``),
+and the reference: DOP853 at rtol 1e-10.
 
 Per N and fit:
 - **energy error per body**: max over t of |H(x(t)) - H(x(0))| / N along the model's path, H the true energy
@@ -37,7 +40,7 @@ from pathlib import Path
 
 from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes.bodies_study import FITS, FULL_SIZES, QUICK_FITS, QUICK_SIZES, study, table
+from hnn_analysis.scenes.bodies_study import FITS, FULL_SIZES, QUICK_FITS, QUICK_SIZES, SCENES, study, table
 
 DEFAULT_OUT = Path("results/bodies")
 
@@ -50,10 +53,13 @@ def main(argv=None) -> dict:
     p.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths N (default {FULL_SIZES}; --quick {QUICK_SIZES})")
     p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted (default {FITS}; --quick "
                                                           f"{QUICK_FITS})")
+    p.add_argument("--scene", choices=SCENES, default="lattice",
+                   help="the scene (its task): the chain of springs, or gravity (default lattice)")
     p.add_argument("--seed", type=int, default=0, help="the training data's seed and the fits' (default 0)")
-    p.add_argument("--starts", type=int, default=4, help="start states per N (default 4)")
-    p.add_argument("--dt", type=float, default=0.05, help="the leapfrog's step (default 0.05)")
-    p.add_argument("--horizon", type=float, default=10.0, help="the rollouts' length in time units (default 10)")
+    p.add_argument("--starts", type=int, default=None, help="start states per N (default: the scene's, 4 or 2)")
+    p.add_argument("--dt", type=float, default=None, help="the leapfrog's step (default: the scene's, 0.05 or 0.01)")
+    p.add_argument("--horizon", type=float, default=None,
+                   help="the rollouts' length in time units (default: the scene's, 10 or 0.5)")
     p.add_argument("--adam-steps", dest="adam_steps", type=int, default=2000, help="Adam's steps (default 2000)")
     p.add_argument("--hidden-dim", dest="hidden_dim", type=int, default=64,
                    help="the MLP's width (adam) and the sampled neurons (swim) (default 64)")
@@ -66,6 +72,9 @@ def main(argv=None) -> dict:
     argv = list(sys.argv[1:] if argv is None else argv)
     if args.paper:
         return _paper(args, argv)
+    scene = SCENES[args.scene]
+    args.starts, args.dt, args.horizon = (scene[name] if value is None else value for name, value in
+                                          (("starts", args.starts), ("dt", args.dt), ("horizon", args.horizon)))
     sizes = tuple(args.sizes or (QUICK_SIZES if args.quick else FULL_SIZES))
     fits = tuple(args.fits or (QUICK_FITS if args.quick else FITS))
     for value, name in ((args.starts, "--starts"), (args.dt, "--dt"), (args.horizon, "--horizon")):
@@ -73,10 +82,12 @@ def main(argv=None) -> dict:
             raise SystemExit(f"{name} {value}: must be > 0")
     if min(sizes) < 2:
         raise SystemExit(f"--sizes {min(sizes)}: a chain needs at least 2 bodies")
-    results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim)
+    results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim,
+                    args.scene)
     results["meta"] = {**provenance(), "command": portable_command(argv, "analysis/bodies.py")}
     text = table(results)
-    publish(args.out, "bodies", results, text, {"bodies": text} if args.update_docs else None)
+    stem = "bodies" if args.scene == "lattice" else f"bodies-{args.scene}"
+    publish(args.out, stem, results, text, {scene["section"]: text} if args.update_docs else None)
     return results
 
 

@@ -80,3 +80,21 @@ def test_the_pair_rungs_are_planned_exactly_where_a_task_declares_bodies(tmp_pat
     for task in task_fits.TASKS:
         assert (pair <= set(task_fits.rungs(task))) == (task in ("2body", "3body")), task
         assert not pair & set(task_fits.rungs(task)) or task in ("2body", "3body"), task
+
+
+def test_gravity_runs_zero_shot_and_a_diverged_model_is_a_row_that_says_so():
+    results = bodies.study(sizes=(8, 70), fits=("swim",), seed=0, starts=1, dt=0.01, horizon=0.05, adam_steps=0,
+                           hidden=8, scene="gravity")       # 70 bodies: past nbody.DENSE_BODIES, the blocked sums
+    assert [row["N"] for row in results["rows"]] == [8, 70] and results["settings"]["scene"] == "gravity"
+    for row in results["rows"]:
+        # the true forces' leapfrog over 5 steps of 0.01: its energy error is the step's, far below the energy per
+        # body (about 2 at N = 8); its rollout error against DOP853 at rtol 1e-10 too
+        assert 0 < row["true"]["energy_per_body"] < 1e-2 and row["true"]["rollout"] < 1e-3
+        assert "diverged" in row["swim"] or row["swim"]["energy_per_body"] >= 0
+    row = {"N": 64, "true": {"energy_per_body": 1e-3, "rollout": 1e-4, "seconds_per_step": 1e-3},
+           "swim": {"diverged": "leapfrog (dt=0.01): 1 trajectories diverged", "seconds_per_step": 2e-3}}
+    results["rows"].append(row)
+    results["meta"] = {"command": "python analysis/bodies.py --scene gravity", "cores": 2, "cpu": "test"}
+    text = bodies.table(results)
+    assert "| 64 | diverged: leapfrog (dt=0.01): 1 trajectories diverged | 1.00e-03 | | 1.00e-04 | 2.000 |" in text
+    assert "softened gravity" in text
