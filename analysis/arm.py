@@ -69,10 +69,10 @@ def _summary(rows: list[dict], key: str) -> str:
 @torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     parser = hnn.cli.Parser(description=__doc__.split("\n")[0])
-    parser.add_argument("--steps", type=hnn.cli.int_at_least(1), default=3000, help="optimizer steps per run")
-    parser.add_argument("--seeds", type=hnn.cli.int_at_least(0), nargs="+", default=[0, 1, 2])
+    parser.add_argument("--steps", type=hnn.settings.int_at_least(1), default=3000, help="optimizer steps per run")
+    parser.add_argument("--seeds", type=hnn.settings.int_at_least(0), nargs="+", default=[0, 1, 2])
     parser.add_argument("--models", nargs="+", default=["hnn", "mechanical"], help="model kinds to train")
-    parser.add_argument("--mass", type=hnn.cli.positive_float, default=1.0, help="mass of each link in kg")
+    parser.add_argument("--mass", type=hnn.settings.positive_float, default=1.0, help="mass of each link in kg")
     parser.add_argument("--balance", choices=hnn.names.BALANCES, nargs="+", default=["auto"],
                         help="the runs' --balance, one set of runs each: the loss's weights of the components of "
                              "dx/dt (hnn.balance)")

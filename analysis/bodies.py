@@ -1,14 +1,20 @@
-"""Fitted on a few, run on many: the pair kind fitted on a chain of 8 springs, rolled out on chains of N = 8 ... 4096.
+"""Fitted on a few, run on many: the pair kind fitted on a chain of 8 springs, rolled out on chains of N = 8 ... 4096;
+and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols over seeds.
 
     python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits (about a minute)
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
+    python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity; section bodies-gravity
+    python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
+    python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
 
-The pair kind (``--model pairwise``) is fitted once on the lattice task's data (experiment-lattice: 8 bodies,
-the default dataset of ``--seed``) by each of ``--fits``: ``library`` (the radial library, one solve),
+The pair kind (``--model pairwise``) is fitted once on the ``--scene`` task's data (experiment-lattice, a chain of
+springs, or experiment-gravity, a softened rotating disk: 8 bodies, the default dataset of ``--seed``) by each of
+``--fits``: ``library`` (the radial library, one solve),
 ``swim`` (sampled radial neurons, one solve) and ``adam`` (an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of
 batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
-leapfrog on the true forces (``experiment-lattice/data.py``, O(N)), and the reference: DOP853 at rtol 1e-10.
+leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``),
+and the reference: DOP853 at rtol 1e-10.
 
 Per N and fit:
 - **energy error per body**: max over t of |H(x(t)) - H(x(0))| / N along the model's path, H the true energy
@@ -19,6 +25,12 @@ Per N and fit:
 
 Prints a table, writes ``bodies.json`` and ``bodies.md`` under ``--out``, and with ``--update-docs`` the
 ``bodies`` section of docs/bodies.md. Numbers come from this command, never typed by hand.
+
+``--paper`` (``hnn_analysis.scenes.bodies_paper``): the pair kind by Adam, the radial library and sampled radial
+neurons on the 2-body and 3-body tasks at ``--seeds`` seeds, trained in one sweep of ``--jobs`` processes into
+``--runs`` (default results/runs, which ``fit_tasks.py`` and the scene study reuse), each measured on the paper's
+energy protocol, its one-thread training seconds and Sampling-HNNs' H error; writes ``bodies_paper.json`` and
+``.md`` under ``--out`` and with ``--update-docs`` the ``bodies-paper`` section.
 """
 from __future__ import annotations
 
@@ -28,25 +40,41 @@ from pathlib import Path
 
 from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes.bodies_study import FITS, FULL_SIZES, QUICK_FITS, QUICK_SIZES, study, table
+from hnn_analysis.scenes.bodies_study import FITS, FULL_SIZES, QUICK_FITS, QUICK_SIZES, SCENES, study, table
+
+DEFAULT_OUT = Path("results/bodies")
 
 
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     add_flags(p, quick=f"N = {', '.join(map(str, QUICK_SIZES))} and the least-squares fits only (no Adam)",
-              out="folder for bodies.json and bodies.md", out_default=Path("results/bodies"),
+              out="folder for bodies.json and bodies.md", out_default=DEFAULT_OUT,
               update_docs="write the bodies section of docs/bodies.md")
     p.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths N (default {FULL_SIZES}; --quick {QUICK_SIZES})")
     p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted (default {FITS}; --quick "
                                                           f"{QUICK_FITS})")
+    p.add_argument("--scene", choices=SCENES, default="lattice",
+                   help="the scene (its task): the chain of springs, or gravity (default lattice)")
     p.add_argument("--seed", type=int, default=0, help="the training data's seed and the fits' (default 0)")
-    p.add_argument("--starts", type=int, default=4, help="start states per N (default 4)")
-    p.add_argument("--dt", type=float, default=0.05, help="the leapfrog's step (default 0.05)")
-    p.add_argument("--horizon", type=float, default=10.0, help="the rollouts' length in time units (default 10)")
+    p.add_argument("--starts", type=int, default=None, help="start states per N (default: the scene's, 4 or 2)")
+    p.add_argument("--dt", type=float, default=None, help="the leapfrog's step (default: the scene's, 0.05 or 0.01)")
+    p.add_argument("--horizon", type=float, default=None,
+                   help="the rollouts' length in time units (default: the scene's, 10 or 0.5)")
     p.add_argument("--adam-steps", dest="adam_steps", type=int, default=2000, help="Adam's steps (default 2000)")
     p.add_argument("--hidden-dim", dest="hidden_dim", type=int, default=64,
                    help="the MLP's width (adam) and the sampled neurons (swim) (default 64)")
+    p.add_argument("--paper", action="store_true", help="the paper's 2-body and 3-body protocols instead (see above)")
+    add_flags(p, seeds="--paper: seeds of every rung (default 5; --quick 1)", seeds_default=None,
+              jobs="--paper: training processes (one thread each past one)")
+    p.add_argument("--runs", type=Path, default=None,
+                   help="--paper: the runs folder (default results/runs, results-quick/runs with --quick)")
     args = p.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if args.paper:
+        return _paper(args, argv)
+    scene = SCENES[args.scene]
+    args.starts, args.dt, args.horizon = (scene[name] if value is None else value for name, value in
+                                          (("starts", args.starts), ("dt", args.dt), ("horizon", args.horizon)))
     sizes = tuple(args.sizes or (QUICK_SIZES if args.quick else FULL_SIZES))
     fits = tuple(args.fits or (QUICK_FITS if args.quick else FITS))
     for value, name in ((args.starts, "--starts"), (args.dt, "--dt"), (args.horizon, "--horizon")):
@@ -54,11 +82,46 @@ def main(argv=None) -> dict:
             raise SystemExit(f"{name} {value}: must be > 0")
     if min(sizes) < 2:
         raise SystemExit(f"--sizes {min(sizes)}: a chain needs at least 2 bodies")
-    results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim)
-    results["meta"] = {**provenance(), "command": portable_command(list(sys.argv[1:] if argv is None else argv),
-                                                                    "analysis/bodies.py")}
+    results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim,
+                    args.scene)
+    results["meta"] = {**provenance(), "command": portable_command(argv, "analysis/bodies.py")}
     text = table(results)
-    publish(args.out, "bodies", results, text, {"bodies": text} if args.update_docs else None)
+    stem = "bodies" if args.scene == "lattice" else f"bodies-{args.scene}"
+    publish(args.out, stem, results, text, {scene["section"]: text} if args.update_docs else None)
+    return results
+
+
+def _paper(args, argv: list[str]) -> dict:
+    """The paper's protocols (``bodies_paper``): train what the runs folder lacks, measure every seed, publish."""
+    import hnn
+    from hnn.sweeps import sweep
+    from hnn_analysis import pages
+    from hnn_analysis.scenes import bodies_paper
+
+    if args.update_docs and args.quick:
+        raise SystemExit("--update-docs writes the protocols' settings into docs/bodies.md; drop --quick")
+    seeds = list(range(args.seeds or (1 if args.quick else 5)))
+    root = hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
+    runs_dir = args.runs or root / "runs"
+    runs, todo = sweep.reuse(bodies_paper.plan(bodies_paper.TASKS, seeds, runs_dir, args.quick))
+    print(f"bodies --paper: {len(runs)} runs reused, {len(todo)} to train", flush=True)
+    trained, _ = sweep.train_jobs(todo, args.jobs, runs_dir.parent / "logs")
+    runs.update(trained)
+    results = {"meta": {**provenance(), "seeds": seeds, "quick": args.quick,
+                        "command": portable_command(argv, "analysis/bodies.py")}, "tasks": {}}
+    for task in bodies_paper.TASKS:
+        by_seed = {seed: {label: runs[key] for label in bodies_paper.RUNGS
+                          if isinstance(runs.get(key := f"{task}/{label}/seed{seed}"), Path)} for seed in seeds}
+        by_seed = {seed: found for seed, found in by_seed.items() if found}
+        if by_seed:
+            results["tasks"][task] = {"rungs": bodies_paper.measure(task, by_seed, args.quick),
+                                      "reference": bodies_paper.reference(task, runs_dir, args.quick)}
+            print(f"  {task} measured", flush=True)
+    text = bodies_paper.table(results)
+    out = args.out if args.out != DEFAULT_OUT else root / "bodies"
+    publish(out, "bodies_paper", results, text, {"bodies-paper": text} if args.update_docs else None,
+            pages.Seeds(len(seeds), None if len(seeds) >= pages.MIN_SEEDS else "a --seeds run below 3"))
+    sweep.exit_if_failed(runs)
     return results
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import hnn
 
-from hnn.cli import int_at_least
+from hnn.settings import int_at_least
 from hnn.io import atomic_write, write_json
 
 from hnn_analysis import pages

@@ -55,7 +55,7 @@ def _parser():
                    help="where the figures and score.json go (default: RUN/figures for one run, FOLDER/score for a "
                         "folder)")
     p.add_argument("--task", default=None, help="the runs' task, where a run's name does not tell it")
-    p.add_argument("--horizon", type=hnn.cli.positive_float, default=None,
+    p.add_argument("--horizon", type=hnn.settings.positive_float, default=None,
                    help="measured runs: seconds ahead of the prediction error (default, as the study: a tenth of the "
                         "shortest held-out tail)")
     p.add_argument("--energy", default=None, help="measured runs: an energy of the file's columns, as the study's --energy")

@@ -79,8 +79,8 @@ def main(argv=None) -> dict:
                                      "part (under a minute)",
                        out="folder for the results' JSON and table", out_default=Path("results/stress"),
                        update_docs="write the section of docs/stress.md")
-    parser.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="seed of the data and the inits")
-    parser.add_argument("--jobs", type=hnn.cli.int_at_least(1), default=2,
+    parser.add_argument("--seed", type=hnn.settings.int_at_least(0), default=0, help="seed of the data and the inits")
+    parser.add_argument("--jobs", type=hnn.settings.int_at_least(1), default=2,
                         help="worker processes, one torch thread each (default 2: the CPU time over two cores; the "
                              "numbers do not depend on it)")
     parser.add_argument("--scan", action="store_true",
@@ -88,15 +88,15 @@ def main(argv=None) -> dict:
                              "scaled, where --units auto starts (units-scan section)")
     parser.add_argument("--lnn-start", dest="lnn_start", action="store_true",
                         help="instead of the grid: the LNN's start on CHNN's chains at N = 1, 3, 5 (lnn-start section)")
-    parser.add_argument("--lnn-seeds", dest="lnn_seeds", type=hnn.cli.int_at_least(1), default=5,
+    parser.add_argument("--lnn-seeds", dest="lnn_seeds", type=hnn.settings.int_at_least(1), default=5,
                         help="seeds of --lnn-start")
-    parser.add_argument("--lnn-steps", dest="lnn_steps", type=hnn.cli.int_at_least(0), default=0,
+    parser.add_argument("--lnn-steps", dest="lnn_steps", type=hnn.settings.int_at_least(0), default=0,
                         help="training steps of --lnn-start after the first batch (0: none)")
     parser.add_argument("--lnn-pinv", dest="lnn_pinv", action="store_true",
                         help="instead of the grid: the peers' LNN runs that stopped with a singular d2L/dqdot2 "
                              "(docs/peers-runs.json), trained again with --lnn_solve pinv past that step (lnn-pinv "
                              "section)")
-    parser.add_argument("--lnn-past", dest="lnn_past", type=hnn.cli.int_at_least(1), default=500,
+    parser.add_argument("--lnn-past", dest="lnn_past", type=hnn.settings.int_at_least(1), default=500,
                         help="steps of --lnn-pinv past the step where each run stopped")
     parser.add_argument("--lnn-runs", dest="lnn_runs", nargs="+", default=None, metavar="KEY",
                         help="--lnn-pinv's runs (e.g. chain5/lagrangian/seed1; default: every one that stopped)")

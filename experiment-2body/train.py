@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.config import setting
+from hnn.settings import task_setting
 
 HERE = Path(__file__).resolve().parent
 
@@ -25,9 +25,10 @@ class Config(hnn.orbits.config.OrbitConfig):
     total_steps: int = 10000
     batch_size: int | None = 200
     save_dir: str = str(HERE)
-    input_noise: float = setting(0.0, "std of Gaussian noise added to each training batch's inputs x (the original "
-                                      "declared it type=int, so only whole numbers parsed, and added the noise to "
-                                      "the predicted derivatives instead)", parse=hnn.cli.nonnegative_float)
+    input_noise: float = task_setting("input_noise", help="std of Gaussian noise added to each training batch's "
+                                                          "inputs x (the original declared it type=int, so only whole "
+                                                          "numbers parsed, and added the noise to the predicted "
+                                                          "derivatives instead)")
     TASK: ClassVar[str] = "2body"
     BODIES: ClassVar[hnn.bodies.Bodies] = hnn.bodies.Bodies(count=2, dim=2)      # the original's order
 

@@ -24,8 +24,8 @@ class Config(hnn.orbits.config.OrbitConfig):
     batch_size: int | None = 600
     # 12 coordinates make H's quartic library 2155 terms (a solve of many minutes on the task's rows, one per
     # seed); the cubic one has 790, our library's and SINDy's alike (--fit library, sindy)
-    library_degree: int = hnn.config.setting(2, "polynomial degree of the library's fields (--fit library, sindy): "
-                                                "H's terms go to degree + 1", parse=hnn.cli.int_at_least(1),
+    library_degree: int = hnn.settings.setting(2, "polynomial degree of the library's fields (--fit library, sindy): "
+                                                "H's terms go to degree + 1", parse=hnn.settings.int_at_least(1),
                                              identity_at_default=False)
     save_dir: str = str(HERE)
     TASK: ClassVar[str] = "3body"

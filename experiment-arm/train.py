@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.config import setting
+from hnn.settings import setting, task_setting
 
 HERE = Path(__file__).resolve().parent
 
@@ -22,11 +22,11 @@ class Config(hnn.RunConfig):
     """The two-link arm in a vertical plane: H = 1/2 p^T M(q)^-1 p + V(q), M varying 4x with the elbow."""
     name: str = "arm"
     input_dim: int = 4
-    n_train: int = setting(2000, "training states (random q and qdot)", parse=hnn.cli.int_at_least(1))
-    n_test: int = setting(1000, "test states, drawn under seed + 1", parse=hnn.cli.int_at_least(1))
+    n_train: int = setting(2000, "training states (random q and qdot)", parse=hnn.settings.int_at_least(1))
+    n_test: int = setting(1000, "test states, drawn under seed + 1", parse=hnn.settings.int_at_least(1))
     mass: float = setting(1.0, "mass of each link in kg (M, V and p scale with it; the motions do not)",
-                          parse=hnn.cli.positive_float)
-    periodic: bool = setting(True, "the mechanical and second-order networks see (cos q, sin q): q are angles")
+                          parse=hnn.settings.positive_float)
+    periodic: bool = task_setting("periodic", default=True)
     save_dir: str = str(HERE)
     DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("seed", "n_train", "n_test", "mass")
 

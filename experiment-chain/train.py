@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.config import setting
+from hnn.settings import setting, task_setting
 
 HERE = Path(__file__).resolve().parent
 
 
 def _state_width(text: str) -> int:
-    return hnn.cli.int_at_least(2, even=True, why=" (2 per bob; --bobs sets it)")(text)
+    return hnn.settings.int_at_least(2, even=True, why=" (2 per bob; --bobs sets it)")(text)
 
 
 @dataclass
@@ -31,14 +31,14 @@ class Config(hnn.RunConfig):
     """The pendulum chain: N point masses on rods from a fixed pivot, observed as [q, qdot]."""
     name: str = "chain"
     input_dim: int = setting(4, "width of the state [q, qdot]: 2 per bob, set by --bobs", parse=_state_width)
-    bobs: int = setting(2, "number of bobs N", parse=hnn.cli.int_at_least(1, why=" (a chain needs a bob)"))
+    bobs: int = setting(2, "number of bobs N", parse=hnn.settings.int_at_least(1, why=" (a chain needs a bob)"))
     unit: bool = setting(False, "unit masses and rod lengths (m = l = 1) instead of CHNN's 0.6 + 0.8 U(0, 1)")
     protocol: str = setting("chnn", "chnn: paths from CHNN's start law (Finzi et al. 2020); lnn: the LNN double "
                                     "pendulum's derivative data at q ~ U[0, 2 pi], qdot ~ U[-10, 10] (Cranmer et al. "
                                     "2020; --objective derivative)", choices=("chnn", "lnn"))
-    n_train: int = setting(800, "training paths (chnn) or states (lnn)", parse=hnn.cli.int_at_least(1))
-    n_test: int = setting(100, "test paths (chnn) or states (lnn)", parse=hnn.cli.int_at_least(1))
-    periodic: bool = setting(True, "the mechanical and second-order networks see (cos q, sin q): q are angles")
+    n_train: int = setting(800, "training paths (chnn) or states (lnn)", parse=hnn.settings.int_at_least(1))
+    n_test: int = setting(100, "test paths (chnn) or states (lnn)", parse=hnn.settings.int_at_least(1))
+    periodic: bool = task_setting("periodic", default=True)
     objective: str = "trajectory"
     optimizer: str = "adamw"
     schedule: str = "cosine"

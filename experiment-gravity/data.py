@@ -6,7 +6,8 @@ x = [qx_1..qx_N, qy_1..qy_N, px_1..px_N, py_1..py_N] ``(batch, 4N)``. The task t
 ``random_config`` draws any count.
 
 Start states: a rotating disk. Positions uniform in the disk of radius 1.5 (redrawn until every pair is at least
-0.2 apart); each body moves on the circle through it at 0.8 of the speed that the bodies inside its radius
+0.2 apart; past ``NUM_BODIES`` bodies the disk grows as sqrt(N / NUM_BODIES), the training's density, and only the
+bodies too close to another are redrawn, since a whole draw of many bodies would almost never pass); each body moves on the circle through it at 0.8 of the speed that the bodies inside its radius
 would hold it at (sqrt(n(< r) / r), treating them as a point at the centre), plus N(0, 0.05^2) per component,
 less the mean momentum. Paths by DOP853 (rtol 1e-10) on [0, 2]. Without softening the paths come from the orbit
 tasks' generator (``hnn.orbits.nbody.orbit_dataset``: dopri5), which redraws a path whose bodies come closer than
@@ -51,20 +52,45 @@ def dynamics(x: torch.Tensor, softening: float = SOFTENING) -> torch.Tensor:
     return nbody.dynamics(x, softening)
 
 
+def potential_gradient(q_half: torch.Tensor, softening: float = SOFTENING) -> torch.Tensor:
+    """dV/dq ``(batch, 2N)`` of one half of the states (positions): minus the pull on each body, what a split
+    integrator's kick reads (the field of the states at rest, whose second half is the pull)."""
+    return -nbody.dynamics(torch.cat([q_half, torch.zeros_like(q_half)], dim=1), softening)[:, q_half.shape[1]:]
+
+
 def random_config(rng: np.random.RandomState, count: int = NUM_BODIES) -> np.ndarray:
     """One start state ``(4 count,)`` of the rotating disk above, drawn from ``rng``."""
-    while True:
-        r = RADIUS * np.sqrt(rng.rand(count))
-        angle = 2 * np.pi * rng.rand(count)
+    if count > NUM_BODIES:
+        r, angle = _spread_disk(rng, count)
         q = np.stack([r * np.cos(angle), r * np.sin(angle)], axis=1)
-        gaps = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(count) * 1e9
-        if gaps.min() >= MIN_START_SEPARATION:
-            break
+    else:
+        while True:
+            r = RADIUS * np.sqrt(rng.rand(count))
+            angle = 2 * np.pi * rng.rand(count)
+            q = np.stack([r * np.cos(angle), r * np.sin(angle)], axis=1)
+            gaps = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(count) * 1e9
+            if gaps.min() >= MIN_START_SEPARATION:
+                break
     inside = (r[None, :] < r[:, None]).sum(axis=1) + 1                 # itself too: never a zero speed
     speed = SPEED * np.sqrt(inside / np.maximum(r, 1e-3))
     p = np.stack([-np.sin(angle), np.cos(angle)], axis=1) * speed[:, None] + NOISE * rng.randn(count, 2)
     p -= p.mean(axis=0)
     return np.concatenate([q[:, 0], q[:, 1], p[:, 0], p[:, 1]])
+
+
+def _spread_disk(rng: np.random.RandomState, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(r, angle)`` of ``count`` bodies uniform in the disk of the training's density (radius RADIUS sqrt(count /
+    NUM_BODIES)), each body closer than MIN_START_SEPARATION to an earlier one redrawn alone until none is."""
+    radius = RADIUS * np.sqrt(count / NUM_BODIES)
+    r, angle = radius * np.sqrt(rng.rand(count)), 2 * np.pi * rng.rand(count)
+    while True:
+        q = np.stack([r * np.cos(angle), r * np.sin(angle)], axis=1)
+        gaps = np.linalg.norm(q[:, None] - q[None], axis=-1)
+        close = np.triu(gaps < MIN_START_SEPARATION, k=1).any(axis=0)       # the later body of each close pair
+        if not close.any():
+            return r, angle
+        redraw = int(close.sum())
+        r[close], angle[close] = radius * np.sqrt(rng.rand(redraw)), 2 * np.pi * rng.rand(redraw)
 
 
 def initial_state(seed: int, count: int = NUM_BODIES) -> np.ndarray:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.config import setting
+from hnn.settings import setting
 
 HERE = Path(__file__).resolve().parent
 

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.config import setting
+from hnn.settings import setting, task_setting
 from hnn.io import write_json
 
 HERE = Path(__file__).resolve().parent
@@ -25,11 +25,11 @@ PERIODIC_KINDS = ("mechanical", "second_order")     # kinds whose networks see (
 
 
 def _width(text: str) -> int:
-    return hnn.cli.int_at_least(2, even=True, why=" (2 per --q column; --q sets it)")(text)
+    return hnn.settings.int_at_least(2, even=True, why=" (2 per --q column; --q sets it)")(text)
 
 
 def _test_fraction(text: str) -> float:
-    value = hnn.cli.fraction(text)
+    value = hnn.settings.fraction(text)
     if value >= 1:
         raise hnn.cli.argparse.ArgumentTypeError(f"must be below 1 (some rows must train), got {text!r}")
     return value
@@ -48,13 +48,14 @@ class Config(hnn.RunConfig):
     p: str = setting("", "their canonical momenta, one per --q column (state [q, p]); or give --v", parse=str)
     trial: str = setting("", "the column that numbers the recordings, if the file holds several (rows of one trial "
                              "contiguous)", parse=str)
-    periodic: str = setting("", "the --q columns that are angles in radians (unwrapped or wrapped); mechanical and "
-                                "second_order see (cos q, sin q)", parse=str)
+    periodic: str = task_setting("periodic", default="", parse=str,
+                                 help="the --q columns that are angles in radians (unwrapped or wrapped); mechanical "
+                                      "and second_order see (cos q, sin q)")
     dxdt: str = setting("", "columns of measured dx/dt (d/dt of every --q, then every --v/--p column) instead of "
                             "finite differences", parse=str)
     test_fraction: float = setting(0.3, "the last fraction of each trial's rows is held out", parse=_test_fraction)
     max_gap: float = setting(3.0, "no finite difference spans a time step over this many nominal (median) steps",
-                             parse=hnn.cli.positive_float)
+                             parse=hnn.settings.positive_float)
     save_dir: str = str(HERE)
     STATE: ClassVar[str] = "state [q, v] or [q, p]"
     DATASET_FIELDS: ClassVar[tuple[str, ...]] = ("data", "time", "q", "v", "p", "trial", "periodic", "dxdt",

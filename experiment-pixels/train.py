@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.cli import int_at_least, nonnegative_float
-from hnn.config import setting
+from hnn.settings import int_at_least, setting, task_setting
 
 HERE = Path(__file__).resolve().parent
 
@@ -28,11 +27,10 @@ class Config(hnn.RunConfig):
     total_steps: int = 10000
     batch_size: int | None = 200
     save_dir: str = str(HERE)
-    latent_dim: int = setting(2, "width of the latent state z = [q, p]",
-                              parse=int_at_least(2, even=True, why=" (z = [q, p])"))
-    input_noise: float = setting(0.0, "std of Gaussian noise added to the latent z before the latent field",
-                                 parse=nonnegative_float)
-    ae_nonlinearity: str = setting("relu", "activation of the autoencoder", choices=hnn.names.NONLINEARITIES)
+    latent_dim: int = task_setting("latent_dim")
+    input_noise: float = task_setting("input_noise", help="std of Gaussian noise added to the latent z before the "
+                                                          "latent field")
+    ae_nonlinearity: str = task_setting("ae_nonlinearity")
     trials: int = setting(200, "rendered trajectories (the first 20%% test)",
                           parse=int_at_least(5, why=" (the first 20% of them are the test set)"))
     timesteps: int = setting(103, "frames per trajectory (each gives timesteps - 3 rows)",

@@ -18,8 +18,9 @@ The modules stand in layers (``_LAYERS``; ``tests/test_layers.py`` reads every i
 a module imports its own layer and those below, never one above, and the two middle rooms know
 nothing of each other.
 
-- base: errors, the model interface, modes a caller sets for a lower layer, names, io, metrics, the
-  dataset cache, the GIF writer, a block's torch thread count, progress lines;
+- base: errors, the model interface, modes a caller sets for a lower layer, names, a run's settings (each
+  declared once: ``hnn.settings``) and their specs, io, metrics, the dataset cache, the GIF writer, a block's
+  torch thread count, progress lines;
 - two rooms of one level, each a folder: ``hnn.integrators`` (fields in, paths out: no network) |
   ``hnn.models`` (networks and their fields: no solver, no objective);
 - training: the objectives (``hnn.objectives``, a folder: the derivative fit, trajectory snippets,
@@ -41,7 +42,7 @@ import importlib
 import pkgutil
 from typing import TYPE_CHECKING
 
-_LIGHT = ("cli", "command", "config", "names", "kind_docs", "io", "errors", "modes", "progress", "tasks", "orbits",
+_LIGHT = ("cli", "command", "config", "settings", "names", "kind_docs", "io", "errors", "modes", "progress", "tasks", "orbits",
           "sweeps", "bodies")
 _LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its light module
 
@@ -49,8 +50,8 @@ _LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its li
 # from its own layer and the ones before it, except that the two rooms of one level, "integrators" and
 # "models", may not import each other
 _LAYERS = {
-    "base": ("errors", "names", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache", "gifs",
-             "threads", "progress", "bodies"),
+    "base": ("errors", "names", "settings", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache",
+             "gifs", "threads", "progress", "bodies"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "units", "training", "trainers", "objectives", "kinds", "evaluation", "datasets",

@@ -18,7 +18,6 @@ import argparse
 import dataclasses
 import difflib
 import inspect
-import math
 import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -91,64 +90,6 @@ def _did_you_mean(value: str, choices: Sequence[str]) -> str:
     return f"; did you mean {close[0]!r}?" if close else ""
 
 
-# ----------------------------------------------------------------------------------------------
-# argparse types: each turns the flag's text into a value or raises a one-line error that says
-# what is wanted (argparse prefixes "argument --flag: ")
-
-
-def int_at_least(low: int, *, even: bool = False, why: str = "") -> Callable[[str], int]:
-    """An argparse ``type``: an integer >= ``low`` (and even, if ``even``); ``why`` explains the rule."""
-    rule = f"an {'even ' if even else ''}integer >= {low}{why}"
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = None
-        if value is None or value < low or (even and value % 2):
-            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
-        return value
-
-    return parse
-
-
-def _finite_float(text: str, rule: str, ok: Callable[[float], bool]) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and ok(value)):
-        raise argparse.ArgumentTypeError(f"must be a finite number {rule}, got {text!r}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """An argparse ``type``: a finite number > 0."""
-    return _finite_float(text, "> 0", lambda v: v > 0)
-
-
-def auto_or_positive_float(text: str) -> float | str:
-    """An argparse ``type``: ``auto`` (the program chooses) or a finite number > 0."""
-    return "auto" if text == "auto" else _finite_float(text, "> 0, or auto", lambda v: v > 0)
-
-
-def nonnegative_float(text: str) -> float:
-    """An argparse ``type``: a finite number >= 0."""
-    return _finite_float(text, ">= 0", lambda v: v >= 0)
-
-
-def fraction(text: str) -> float:
-    """An argparse ``type``: a finite number in (0, 1]."""
-    return _finite_float(text, "in (0, 1]", lambda v: 0 < v <= 1)
-
-
-def optional_int(text: str) -> int | None:
-    """``--batch_size``: a positive integer, or none/0/full for the full batch (None)."""
-    if text.lower() in ("none", "0", "full"):
-        return None
-    return int_at_least(1, why=", or none/0/full for the full batch")(text)
-
-
 def _fixed_width(width: int, task: str, state: str) -> Callable[[str], int]:
     """``--input_dim``: the original's flag, but the task fixes the state width; only it parses."""
     def parse(text: str) -> int:
@@ -165,32 +106,12 @@ def _fixed_width(width: int, task: str, state: str) -> Callable[[str], int]:
     return parse
 
 
-def device(text: str) -> str:
-    """``--device``: a torch device string this machine has (kept as text: it is saved in args.json).
-    The default, cpu, is taken without loading torch."""
-    if text == "cpu":
-        return text
-    import torch     # only to check a device other than the cpu
-    try:
-        found = torch.device(text)
-    except RuntimeError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a torch device; use e.g. cpu, cuda or cuda:1") from None
-    backend = getattr(torch, found.type, None)     # torch.cuda, torch.mps, ...: None for exotic types
-    if found.type != "cpu" and backend is not None and not backend.is_available():
-        raise argparse.ArgumentTypeError(f"{text!r}: this torch build sees no {found.type} device; use --device cpu")
-    if found.type != "cpu" and found.index is not None and backend is not None \
-            and found.index >= backend.device_count():
-        raise argparse.ArgumentTypeError(f"{text!r}: only {backend.device_count()} {found.type} device(s) here, "
-                                         "numbered from 0")
-    return text
-
-
 # ----------------------------------------------------------------------------------------------
 # the parser of a config class
 
 
 def field_meta(cls: type, name: str) -> dict:
-    """The ``hnn.config.setting`` metadata of field ``name`` of dataclass ``cls``: a subclass that
+    """The ``hnn.settings.setting`` metadata of field ``name`` of dataclass ``cls``: a subclass that
     only changes a default inherits the help text and parsing of the class that declared the field."""
     for klass in cls.__mro__:
         found = getattr(klass, "__dataclass_fields__", {}).get(name)

@@ -311,9 +311,9 @@ MODEL_KINDS: dict[str, ModelKind] = {
         coordinates="canonical x = [q, p] only",
         integrator="none: `hnn.rollout` steps the map itself at its dt",
         when="as `g_sympnet`; four potential gradients a layer, so a step costs about four G-SympNet layers")),
-    # the pair sum's autograd in r runs one model at a time (no group program written for it yet); not in the
-    # scene studies, whose scenes (spring, pendulums) are no bodies: docs/bodies.md studies it
-    "pairwise": ModelKind(".models.pair:PairHNN", _pair, color="darkgoldenrod", grouping="alone", studied=False,
+    # the pair sum's autograd in r runs one model at a time (no group program written for it yet); the studies
+    # train it where a task declares its bodies (2body, 3body): its builder refuses a task that declares none
+    "pairwise": ModelKind(".models.pair:PairHNN", _pair, color="darkgoldenrod", grouping="alone",
                           doc=KindDoc(
         line="H = sum |p_i|^2 / (2 m_i) + sum over pairs V(|q_i - q_j|): one learned function of one distance "
              "for every pair, and a mass per species",

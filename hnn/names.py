@@ -32,11 +32,6 @@ FITS = ("adam", "swim", "elm", "library", "sindy")
 # how a sweep trains a kind's seeds as one group (``hnn.kinds.ModelKind.grouping``): the closed-form
 # gradients of hnn.trainers.closed_form, vmap over stacked weights (hnn.trainers.vmap), or each alone
 GROUPINGS = ("closed_form", "vmap", "alone")
-# the model every command starts from (``hnn.RunConfig``'s --nonlinearity, --hidden_dim, --map_layers), which
-# the learned maps' classes default to as well (``hnn.models.maps``): a map built in Python is the command's
-ACTIVATION = "tanh"
-HIDDEN_DIM = 200
-MAP_LAYERS = 4
 
 
 def checked(table: dict, declared: tuple, what: str) -> dict:

@@ -6,19 +6,26 @@ a saved run's args (``run_specs``), so that no consumer reads a settings dict by
     options = objective.train_options(model, specs.objective, dataset)
     stats = hnn.train(model, x, y, **specs.training.train_kwargs(), **options.train_kwargs())
 
-Four frozen specs, one per consumer: ``ModelSpec`` (what a kind's builder reads), ``TrainingSpec``
-(what ``hnn.train`` reads, by its keyword names), ``ObjectiveSpec`` (what an objective reads:
-``Objective.train_options``) and ``FitSpec`` (what a least-squares fit reads: ``hnn.fits.solve``). A field a saved run lacks (a run saved before the field existed, or a
-task without it, such as ``input_noise`` outside the 2-body and pixel tasks) takes its default, the
-value that run trained with. Torch-free; a run's identity and its args.json are the config's
-(``hnn.RunConfig``), untouched here.
+Four frozen specs, one per stage (``hnn.settings.STAGES``): ``ModelSpec`` (what a kind's builder reads),
+``TrainingSpec`` (what ``hnn.train`` reads, by its keyword names), ``ObjectiveSpec`` (what an objective
+reads: ``Objective.train_options``) and ``FitSpec`` (what a least-squares fit reads: ``hnn.fits.solve``).
+Their fields are not written here: each is a setting declared with that ``stage`` (``hnn.settings``:
+``RunSettings``' fields and the shared ``TASK_SETTINGS``), at its ``absent`` value, the value a run whose
+args lack it trained with (a run saved before the field existed, or a task without it, such as
+``input_noise`` outside the 2-body and pixel tasks); the model's spec adds the facts a task declares
+(``MODEL_FACTS``). A config class that declares a staged field of its own gets specs with it
+(``specs_of``). Torch-free; a run's identity and its args.json are the config's (``hnn.RunConfig``),
+untouched here.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
+
+from .settings import RunSettings, stage_fields, task_stage_fields
 
 
 def _picked(cls, values: Mapping) -> dict:
@@ -26,49 +33,19 @@ def _picked(cls, values: Mapping) -> dict:
     return {f.name: values[f.name] for f in fields(cls) if f.name in values}
 
 
-@dataclass(frozen=True)
-class ModelSpec:
-    """What a kind's builder reads of a run, declared (a run's ``args.json`` holds these among the
-    rest of its config; ``from_args`` picks them out).
-
-    kind: a key of ``MODEL_KINDS``; input_dim: the state's width 2n (pixels: the frame's pixels; the
-    constrained kinds read theirs from the graph);
-    hidden_dim, nonlinearity: the MLPs'; field_type: what the paper's HNN learns (solenoidal,
-    conservative, both); latent_dim, ae_nonlinearity: the pixel autoencoder's; periodic: positions
-    are angles (the second-order kinds read cos q, sin q); constraints: the task's constraint graph
-    (``ConstraintGraph.to_dict()``, the constrained kinds); dtype: float32 or float64; init: how
-    every MLP of the model starts (``hnn.models.initialize``), applied after the kind's builder; lnn_solve:
-    how the lagrangian kind solves for qddot (``hnn.names.LNN_SOLVES``); fit: how
-    the weights are found (``hnn.fits.FITS``): a fit other than ``'adam'`` builds its own model
-    (``hnn.fits.build``: ``hidden_dim`` sampled neurons, or the library of ``library_degree`` and
-    ``library_frequencies``), float64 whatever ``dtype`` says;
-    map_layers: a learned map's layers (``hnn.models.maps``); dt: the time step of the run's data (its
-    dataset's ``dt``, recorded in args.json by ``hnn.policy.saved_args``), a learned map's step; bodies: the
-    state's layout as bodies (``hnn.bodies.Bodies.to_dict()``, from its config's ``model_facts()``), which
-    the pair kind reads.
-    """
-    kind: str
-    input_dim: int | None = None
-    hidden_dim: int = 200
-    nonlinearity: str = "tanh"
-    field_type: str = "solenoidal"
-    latent_dim: int = 2
-    ae_nonlinearity: str = "relu"
-    periodic: bool = False
-    constraints: dict | None = None
-    dtype: str = "float32"
-    init: str = "orthogonal"
-    lnn_solve: str = "solve"
-    fit: str = "adam"
-    library_degree: int = 3
-    library_frequencies: int = 1
-    map_layers: int = 4
-    dt: float | None = None
-    bodies: dict | None = None
+class _Spec:
+    """What every spec does: read a run's (saved) args."""
 
     @classmethod
-    def from_args(cls, args: Mapping) -> ModelSpec:
-        """The spec of a run's (saved) args: its declared fields, the defaults for any it lacks."""
+    def from_args(cls, args: Mapping):
+        """The spec of a run's (saved) args: its fields, the ``absent`` value of any it lacks."""
+        return cls(**_picked(cls, args))
+
+
+class _ModelReads(_Spec):
+    @classmethod
+    def from_args(cls, args: Mapping):
+        """The spec of a run's (saved) args: its declared fields, the ``absent`` value of any it lacks."""
         if "kind" not in args:
             raise ValueError(f"a run's args need its model's kind to build it; got keys {sorted(args)}")
         values = _picked(cls, args)
@@ -78,71 +55,78 @@ class ModelSpec:
         return cls(**values)
 
 
-@dataclass(frozen=True)
-class TrainingSpec:
-    """What ``hnn.train`` reads of a run: its keyword arguments of the same names (their defaults are
-    ``hnn.train``'s). The loop's own options (``predict``, ``loss``, ``input_noise``, ...) are the
-    objective's (``Objective.train_options``)."""
-    total_steps: int = 2000
-    learn_rate: float = 1e-3
-    weight_decay: float = 1e-4
-    batch_size: int | None = None
-    seed: int = 0
-    print_every: int = 200
-    verbose: bool = False
-    optimizer: str = "adam"
-    schedule: str = "constant"
-    clip_grad: float = 0.0
-
-    @classmethod
-    def from_args(cls, args: Mapping) -> TrainingSpec:
-        """The spec of a run's (saved) args: its fields, the defaults for any it lacks."""
-        return cls(**_picked(cls, args))
-
+class _TrainingReads(_Spec):
     def train_kwargs(self) -> dict[str, Any]:
         """``hnn.train``'s keyword arguments (and ``hnn.trainers.vmap.train_vmap``'s of the same names)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-@dataclass(frozen=True)
-class ObjectiveSpec:
-    """What an objective reads of a run (``Objective.train_options``): ``seed`` (the pixel objective's
-    noise generator starts at seed + 2), ``input_noise`` (std of the Gaussian noise on each training
-    batch's inputs, or on the pixel latent), ``use_rk4`` (fit the RK4 average slope over the data's dt),
-    ``derivative_loss`` (``hnn.names.DERIVATIVE_LOSSES``), ``balance`` (``hnn.names.BALANCES``; a run
-    saved before the field existed trained unbalanced: ``'off'``) and ``units`` (``hnn.names.UNITS``: the
-    coordinates the fit runs in, ``hnn.units``; ``'off'`` before the field existed)."""
-    seed: int = 0
-    input_noise: float = 0.0
-    use_rk4: bool = False
-    derivative_loss: str = "l2"
-    balance: str = "off"
-    units: str = "off"
-
-    @classmethod
-    def from_args(cls, args: Mapping) -> ObjectiveSpec:
-        """The spec of a run's (saved) args: its fields, the defaults for any it lacks."""
-        return cls(**_picked(cls, args))
-
-
-@dataclass(frozen=True)
-class FitSpec:
-    """What a least-squares fit reads of a run (``hnn.fits.solve``'s keywords): ``fit`` (``hnn.names.FITS``; a run
-    saved before the field existed trained by ``'adam'``), ``seed`` (draws the sampled neurons), ``fit_rcond``
-    (the ridge relative to unit columns, or ``'auto'``) and ``library_threshold`` (a library's smallest coefficient kept)."""
-    fit: str = "adam"
-    seed: int = 0
-    fit_rcond: float | str = "auto"
-    library_threshold: float = 0.05
-
-    @classmethod
-    def from_args(cls, args: Mapping) -> FitSpec:
-        """The spec of a run's (saved) args: its fields, the defaults for any it lacks."""
-        return cls(**_picked(cls, args))
-
+class _FitReads(_Spec):
     def solve_kwargs(self) -> dict[str, Any]:
         """``hnn.fits.solve``'s keyword arguments."""
         return {"fit": self.fit, "seed": self.seed, "rcond": self.fit_rcond, "threshold": self.library_threshold}
+
+
+# what a kind's builder reads that no setting declares: the kind (required), and the facts of a task or of
+# its data (a config's ``model_facts()`` and ``hnn.policy.saved_args``), None where a task has none
+MODEL_FACTS = (("constraints", "dict | None"), ("dt", "float | None"), ("bodies", "dict | None"))
+
+_DOCS = {
+    "model": """What a kind's builder reads of a run (a run's ``args.json`` holds these among the rest of its
+    config; ``from_args`` picks them out): ``kind`` (a key of ``MODEL_KINDS``), the settings of stage
+    ``model`` (``input_dim`` is None in a spec without it: the constrained kinds read theirs from the graph;
+    a fit other than ``'adam'`` builds its own model, ``hnn.fits.build``, float64 whatever ``dtype`` says)
+    and the facts: ``constraints`` (``ConstraintGraph.to_dict()``, the constrained kinds), ``dt`` (the time
+    step of the run's data, a learned map's step) and ``bodies`` (``hnn.bodies.Bodies.to_dict()``, which the
+    pair kind reads).""",
+    "training": """What ``hnn.train`` reads of a run: its keyword arguments of the same names. The loop's own
+    options (``predict``, ``loss``, ``input_noise``, ...) are the objective's (``Objective.train_options``).""",
+    "objective": """What an objective reads of a run (``Objective.train_options``); ``seed`` starts the pixel
+    objective's noise generator at seed + 2.""",
+    "fit": """What a least-squares fit reads of a run (``hnn.fits.solve``'s keywords); ``seed`` draws the
+    sampled neurons.""",
+}
+_BASES = {"model": _ModelReads, "training": _TrainingReads, "objective": _Spec, "fit": _FitReads}
+_NAMES = {"model": "ModelSpec", "training": "TrainingSpec", "objective": "ObjectiveSpec", "fit": "FitSpec"}
+
+
+def _made(name: str, declared: list, bases: tuple, doc: str | None) -> type:
+    """A frozen dataclass ``name`` of the ``declared`` ``(name, type, default)`` fields (``MISSING``: none),
+    in this module."""
+    spec = dataclasses.make_dataclass(name, [(n, t, dataclasses.field(default=d)) for n, t, d in declared],
+                                      bases=bases, frozen=True)
+    spec.__module__, spec.__qualname__ = __name__, name
+    if doc:     # the fields, read off the declaration, so that the list is never stale
+        names = ", ".join(f"``{f.name}``" for f in fields(spec))
+        spec.__doc__ = f"{doc}\n\n    Its fields (each setting's meaning is its ``--help``, ``hnn.settings``): {names}."
+    return spec
+
+
+def _library_spec(stage: str) -> type:
+    """The spec of ``stage``: its declared settings, and for the model its kind (required) and facts."""
+    declared = stage_fields(RunSettings, stage) + task_stage_fields(stage)
+    if stage == "model":
+        declared = [("kind", "str", dataclasses.MISSING), *declared, *((n, t, None) for n, t in MODEL_FACTS)]
+    return _made(_NAMES[stage], declared, (_BASES[stage],), _DOCS[stage])
+
+
+ModelSpec = _library_spec("model")
+TrainingSpec = _library_spec("training")
+ObjectiveSpec = _library_spec("objective")
+FitSpec = _library_spec("fit")
+_LIBRARY = {"model": ModelSpec, "training": TrainingSpec, "objective": ObjectiveSpec, "fit": FitSpec}
+
+
+@functools.cache
+def specs_of(config_class: type) -> dict[str, type]:
+    """The spec class of each stage for configs of ``config_class``: the library's, or a subclass of it
+    with the staged fields that ``config_class`` declares beyond the library's settings."""
+    out = {}
+    for stage, spec in _LIBRARY.items():
+        known = {f.name for f in fields(spec)}
+        extra = [row for row in stage_fields(config_class, stage) if row[0] not in known]
+        out[stage] = _made(spec.__name__, extra, (spec,), None) if extra else spec
+    return out
 
 
 @dataclass(frozen=True)
@@ -156,12 +140,12 @@ class RunSpecs:
 
 def run_specs(source) -> RunSpecs:
     """The typed specs of a run: ``source`` is its config (an ``hnn.RunConfig``: its fields, model facts
-    and kind) or a saved run's args (``args.json``, as ``hnn.load_run`` returns them)."""
+    and kind, read by its class's specs, ``specs_of``) or a saved run's args (``args.json``, as
+    ``hnn.load_run`` returns them, read by the library's)."""
     if isinstance(source, Mapping):
-        values = source
+        values, classes = source, _LIBRARY
     elif dataclasses.is_dataclass(source) and hasattr(source, "to_dict"):
-        values = {**source.to_dict(), "kind": source.kind}
+        values, classes = {**source.to_dict(), "kind": source.kind}, specs_of(type(source))
     else:
         raise TypeError(f"run_specs reads an hnn.RunConfig or a run's saved args (a dict), got {type(source).__name__}")
-    return RunSpecs(ModelSpec.from_args(values), TrainingSpec.from_args(values), ObjectiveSpec.from_args(values),
-                    FitSpec.from_args(values))
+    return RunSpecs(*(classes[stage].from_args(values) for stage in ("model", "training", "objective", "fit")))

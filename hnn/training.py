@@ -11,6 +11,7 @@ import torch
 
 from . import names
 from .balance import balance_weights, weighted
+from .settings import RunSettings
 from .trainers.loop import check_loop, run_loop
 from .trainers.rows import checked_pair, warn_off_scale
 from .units import in_canonical_units
@@ -51,14 +52,17 @@ def dxdt_loss(model, predict: Callable | None = None, derivative_loss: str = "l2
     return weighted(loss, torch.as_tensor(loss_weights, dtype=param.dtype, device=param.device))
 
 
-def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
-          weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
-          verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
+def train(model, x, dxdt, test_x=None, test_dxdt=None, *, total_steps: int = RunSettings.total_steps,
+          learn_rate: float = RunSettings.learn_rate, weight_decay: float = RunSettings.weight_decay,
+          batch_size: int | None = RunSettings.batch_size, seed: int = RunSettings.seed,
+          print_every: int = RunSettings.print_every, verbose: bool = RunSettings.verbose,
+          test_every: int | None = None, input_noise: float = 0.0,
           predict: Callable | None = None, loss: Callable | None = None, progress: bool | None = None,
-          optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
-          derivative_loss: str = "l2", loss_weights=None, checkpoint: str | Path | None = None,
-          checkpoint_every: float | None = None, generators: tuple = (), balance: str = "auto",
-          units: str = "auto", threads: int | None = 1, on_step: Callable[[int, int], None] | None = None) -> dict:
+          optimizer: str = RunSettings.optimizer, schedule: str = RunSettings.schedule,
+          clip_grad: float = RunSettings.clip_grad, derivative_loss: str = RunSettings.derivative_loss,
+          loss_weights=None, checkpoint: str | Path | None = None, checkpoint_every: float | None = None,
+          generators: tuple = (), balance: str = RunSettings.balance, units: str = RunSettings.units,
+          threads: int | None = RunSettings.threads, on_step: Callable[[int, int], None] | None = None) -> dict:
     """Fit ``model.time_derivative`` to ``dxdt`` (or minimize ``loss``) with ``optimizer``; returns the stats.
 
     Runs ``total_steps + 1`` optimizer steps, as the original. Full batch when ``batch_size``

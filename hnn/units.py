@@ -35,7 +35,9 @@ mechanical (on [q, p], or mapping observed [q, qdot]), second_order and lagrangi
 ValueError naming ``--units off``, where the rescaling would apply (``on``, or ``auto`` on data far from
 unit scale): the constrained kinds (their constraint graph holds rod lengths in the user's units, which
 the model does not rescale) and the path objectives (trajectory, discrete_gradient: their snippets step
-the data's own time; not built yet). The pixel kinds read pixels (no q and p): ``on`` refuses them,
+the data's own time; not built yet). A learned map's objective reads no rate and no time (it fits a state to
+the next one), so ``auto`` judges its states alone: a file whose time is in milliseconds trains the same map
+as in seconds. The pixel kinds read pixels (no q and p): ``on`` refuses them,
 ``auto`` leaves them as they are.
 """
 from __future__ import annotations
@@ -488,10 +490,12 @@ def _arrays(dataset: dict, arrays) -> tuple:
 
 def sized_arrays(dataset: dict, objective) -> tuple:
     """``(states, their dx/dt or None)`` whose sizes ``--units auto`` reads: a fit of dx/dt's training
-    pair, or a path objective's states (and the dataset's dx/dt where it has one)."""
+    pair, or a path objective's states (and the dataset's dx/dt where it has one and the objective reads
+    rates: a learned map's loss holds no rate and no time, ``Objective.reads_rates``, so the unit of the data's
+    time cannot move its fit and only its states' sizes are judged)."""
     if objective.fits_derivative:
         return _arrays(dataset, objective.arrays[:2])
-    return dataset.get("x"), dataset.get("dxdt")
+    return dataset.get("x"), dataset.get("dxdt") if objective.reads_rates else None
 
 
 def run_scales(mode: str, kind: str, dataset: dict, objective, model: Model) -> UnitScales | None:

@@ -21,3 +21,80 @@ def test_the_exact_library_runs_zero_shot_as_the_true_forces_do():
     results["meta"] = {"command": "python analysis/bodies.py --quick", "cores": 2, "cpu": "test"}
     text = bodies.table(results)
     assert "| 20 |" in text and "**library**" in text
+
+
+def test_the_paper_protocols_plan_the_pair_rungs_and_judge_them_against_the_targets(tmp_path):
+    import math
+
+    import torch
+
+    import hnn
+    from hnn_analysis.scenes import bodies_paper
+
+    jobs = bodies_paper.plan(bodies_paper.TASKS, [0, 1], tmp_path, quick=False)
+    assert {job.key for job in jobs} == {f"{task}/{label}/seed{s}" for task in ("2body", "3body")
+                                         for label in bodies_paper.RUNGS for s in (0, 1)}
+    assert all(job.config.kind == "pairwise" for job in jobs)
+    # the true H scores zero; a learned H off by a constant too (its constant is fixed at the anchor state)
+    system = hnn.load_task("3body")
+    x = torch.randn(50, 12, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 2
+
+    class Shifted(torch.nn.Module):
+        def hamiltonian(self, states):
+            return system.hamiltonian(states) + 3.0
+    assert bodies_paper.h_error(Shifted(), x, x[:1], system.hamiltonian) <= 50 * torch.finfo(torch.float64).eps
+
+    def seeds(energy, seconds, error, equation=None):
+        return {s: {"energy_mse": [energy, 0.0], "train_seconds": seconds, "h_error": error, "test_loss": 1e-3,
+                    "equation": equation} for s in range(5)}
+    entry = {"reference": {"energy_mse": [4.19e-2, 3.4e-2], "train_seconds": 50.0},
+             "rungs": {"pairwise": seeds(1e-4, 40.0, 1e-2), "pairwise+library": seeds(1e-15, 1.0, 1e-8, "H = x"),
+                       "pairwise+swim": seeds(1e-7, 70.0, 2e-3)}}
+    said = bodies_paper.verdicts("3body", entry)
+    assert "419x below the paper's HNN" in said[0] and "target 100x: met" in said[0] and said[0].endswith("(met).")
+    assert "`H = x`" in said[1]
+    assert "(error met, seconds not met)" in said[2]         # 70 s against their 58
+    entry["rungs"]["pairwise"] = {**seeds(1e-4, 40.0, 1e-2), 4: {**seeds(math.inf, 40.0, 1e-2)[4]}}
+    failed = bodies_paper.verdicts("3body", entry)[0]
+    assert "rollout failed (1 of 5 seeds)" in failed and "target 100x: not met" in failed
+    results = {"meta": {"command": "python analysis/bodies.py --paper", "date": "2026-01-01", "commit": "abcdef1",
+                        "cores": 2, "cpu": "test", "torch": "2", "seeds": list(range(5))}, "tasks": {"3body": entry}}
+    text = bodies_paper.table(results)
+    assert "| the paper's HNN | 0.0419 (published) | 50 |" in text and "| pairwise+swim |" in text
+
+
+def test_the_pair_rungs_are_planned_exactly_where_a_task_declares_bodies(tmp_path):
+    from hnn_analysis.fits import task_fits
+    from hnn_analysis.scenes import scene_common, scene_rungs, scene_stages
+
+    pair = {"pairwise", "pairwise+swim", "pairwise+library"}
+    for task in scene_common.scenes():
+        assert (pair <= set(scene_common.task_rungs(task))) == (task in ("2body", "3body")), task
+        assert not pair & set(scene_common.task_rungs(task)) or task in ("2body", "3body"), task
+    # the full study's jobs at the default cell: every rung asked of every scene, the pixels' own kinds too
+    rows = [row for row in scene_stages.plan_rows(scene_common.scenes(), False)
+            if row["cell"] == scene_stages.DEFAULT_CELL]
+    rungs = scene_stages.rungs_of(False)[0]
+    keys = {job.key for job in scene_rungs.jobs(rows, [0], tmp_path, rungs, scene_common._fits)}
+    assert {key.split("/")[0].split("@")[0] for key in keys if "/pairwise+" in key} == {"2body", "3body"}
+    for task in task_fits.TASKS:
+        assert (pair <= set(task_fits.rungs(task))) == (task in ("2body", "3body")), task
+        assert not pair & set(task_fits.rungs(task)) or task in ("2body", "3body"), task
+
+
+def test_gravity_runs_zero_shot_and_a_diverged_model_is_a_row_that_says_so():
+    results = bodies.study(sizes=(8, 70), fits=("swim",), seed=0, starts=1, dt=0.01, horizon=0.05, adam_steps=0,
+                           hidden=8, scene="gravity")       # 70 bodies: past nbody.DENSE_BODIES, the blocked sums
+    assert [row["N"] for row in results["rows"]] == [8, 70] and results["settings"]["scene"] == "gravity"
+    for row in results["rows"]:
+        # the true forces' leapfrog over 5 steps of 0.01: its energy error is the step's, far below the energy per
+        # body (about 2 at N = 8); its rollout error against DOP853 at rtol 1e-10 too
+        assert 0 < row["true"]["energy_per_body"] < 1e-2 and row["true"]["rollout"] < 1e-3
+        assert "diverged" in row["swim"] or row["swim"]["energy_per_body"] >= 0
+    row = {"N": 64, "true": {"energy_per_body": 1e-3, "rollout": 1e-4, "seconds_per_step": 1e-3},
+           "swim": {"diverged": "leapfrog (dt=0.01): 1 trajectories diverged", "seconds_per_step": 2e-3}}
+    results["rows"].append(row)
+    results["meta"] = {"command": "python analysis/bodies.py --scene gravity", "cores": 2, "cpu": "test"}
+    text = bodies.table(results)
+    assert "| 64 | diverged: leapfrog (dt=0.01): 1 trajectories diverged | 1.00e-03 | | 1.00e-04 | 2.000 |" in text
+    assert "softened gravity" in text

@@ -399,7 +399,7 @@ def test_fit_least_squares_refuses_as_hnn_train_does_and_names_an_unknown_kind()
                                          r"'dissipative' with hnn.train$") as refused:
         hnn.fit_least_squares("dissipative", x, dxdt, progress=False)
     assert "--" not in str(refused.value)       # the caller's words, not the command's flags
-    with pytest.raises(ValueError, match=r"^fit='sindy' fits dx/dt with no H: pass 'baseline'$"):
+    with pytest.raises(ValueError, match=r"^fit='sindy' fits dx/dt = Theta\(x\) Xi with no H: pass 'baseline'$"):
         hnn.fit_least_squares("hnn", x, dxdt, fit="sindy", progress=False)
 
 

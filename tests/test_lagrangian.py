@@ -204,3 +204,77 @@ def test_the_two_solves_agree_where_d2l_dqdot2_is_well_conditioned(n):
     target = plain.time_derivative(states).detach() * 0.9
     losses = [hnn.train(m, states, target, total_steps=3, progress=False)["train_loss"] for m in models]
     assert losses[0] == losses[1] and pinv.pinv_states == 0
+
+
+# ----------------------------------------------------------------------------------------------
+# the singular verdict in any units: the same physics, L in other units of energy, of time or of one q_i
+
+
+_MASS = torch.tensor([[2.0, 0.5], [0.5, 1.0]], dtype=torch.float64)        # condition 2.1 (its scaled form 2.1)
+_SPRING = torch.tensor([[3.0, -1.0], [-1.0, 2.0]], dtype=torch.float64)
+
+
+class _CoupledL(hnn.models.LagrangianNN):
+    """L' = c (v'^T S M S v' - q'^T S K S q') / 2: two coupled oscillators (L = (v^T M v - q^T K q) / 2) in units
+    where q = S q' (S = diag(1, d): the second position in units d of the first's) and c units of L; with
+    ``w`` instead, a rank-one kinetic term c cosh(w . S v'), whose d2L/dqdot2 is singular everywhere."""
+
+    def __init__(self, c: float, d: float, w=None):
+        super().__init__(4, hidden_dim=4)
+        self.c, self.s, self.w = c, torch.tensor([1.0, d], dtype=torch.float64), w
+
+    def lagrangian_at(self, q, v):
+        s = self.s.to(q.dtype)
+        q, v = s * q, s * v
+        kinetic = torch.cosh(v @ self.w.to(q.dtype)) if self.w is not None else v @ _MASS.to(q.dtype) @ v / 2
+        return self.c * (kinetic - q @ _SPRING.to(q.dtype) @ q / 2)
+
+
+# a second position in units 1e-4 (float32) or 1e-8 (float64) of the first's puts d2L/dqdot2's own condition
+# number (2e8, 2e16) past 1 / eps, the verdict's bound before it was scaled; c from tiny to huge energy units
+_UNITS = {torch.float32: [(1.0, 1.0), (1e-12, 1.0), (1e12, 1.0), (1.0, 1e-4), (1e-12, 1e-4), (1e12, 1e-4)],
+          torch.float64: [(1.0, 1.0), (1e-30, 1.0), (1e30, 1.0), (1.0, 1e-8), (1e-30, 1e-8), (1e30, 1e-8)]}
+_CASES = [pytest.param(dtype, c, d, id=f"{str(dtype)[6:]}-c{c:g}-d{d:g}") for dtype, units in _UNITS.items()
+          for c, d in units]
+
+
+def _states(d: float, dtype) -> torch.Tensor:
+    """Eight states [q', qdot'] in the units of ``_CoupledL(c, d)``: physical states q, v of size 1 over S."""
+    z = torch.randn(8, 4, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    return (z / torch.tensor([1.0, d, 1.0, d], dtype=torch.float64)).to(dtype)
+
+
+@pytest.mark.parametrize("dtype, c, d", _CASES)
+def test_a_well_conditioned_l_is_solved_in_any_units_and_its_qddot_is_the_physics(dtype, c, d):
+    z = _states(d, dtype)
+    qddot = _CoupledL(c, d).to(dtype).acceleration(z).double()       # no SingularLagrangianError
+    # the same physics: S qddot' = -M^-1 K q of the physical q = S q'
+    s = torch.tensor([1.0, d], dtype=torch.float64)
+    truth = -(torch.linalg.solve(_MASS, _SPRING) @ (s * z[:, :2].double()).T).T
+    # the rounding: each entry of d2L/dqdot2 and of the right side is a product c s_i s_j M_ij of 3 roundings
+    # summed over 2 terms (4 eps), the LU solve's backward error 2n eps (4 eps), amplified by the scaled matrix's
+    # condition number 2.1: about 2.1 (4 + 4 + 4) = 25 eps, held to 32 (measured: at most 2.0 eps)
+    err = (s * qddot - truth).norm(dim=1) / truth.norm(dim=1)
+    assert err.max() < 32 * torch.finfo(dtype).eps, err.max()
+
+
+@pytest.mark.parametrize("dtype, c, d", _CASES)
+def test_a_singular_l_is_flagged_at_every_state_in_any_units(dtype, c, d):
+    w = torch.tensor([0.7, -1.3], dtype=torch.float64)      # not powers of 2: its Hessian c cosh w w^T is rounded
+    with pytest.raises(hnn.models.SingularLagrangianError) as err:
+        _CoupledL(c, d, w).to(dtype).acceleration(_states(d, dtype))
+    assert err.value.states == list(range(8))
+
+
+class _NotFinite(hnn.models.LagrangianNN):      # L = log(q) qdot^2 / 2: nan where q < 0, every derivative with it
+    def lagrangian_at(self, q, v):
+        return (torch.log(q) * v ** 2).sum() / 2
+
+
+@pytest.mark.parametrize("solve", ["solve", "pinv"])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_a_non_finite_d2l_dqdot2_is_the_singular_error_not_the_svds(dtype, solve):
+    z = torch.tensor([[1.5, 2.0, 0.3, 0.1], [-1.0, 2.0, 0.2, 0.4]], dtype=dtype)      # the second state: q < 0
+    with pytest.raises(hnn.models.SingularLagrangianError) as err:
+        _NotFinite(4, 4, solve=solve).to(dtype).acceleration(z)
+    assert err.value.states == [1]

@@ -96,9 +96,16 @@ def test_a_model_that_diverges_is_marked_so(n_jobs, tmp_path):
     runs, _ = sweep.train_jobs([job], n_jobs, tmp_path / "logs")
     failed = runs[job.key]
     assert isinstance(failed, sweep.RunFailed) and failed.diverged, failed
-    # the training loop says where the model failed: in a step or in the test batch after it
-    assert re.match(r"SingularLagrangianError: at (the test batch after )?training step [0-2] of 2: LagrangianNN: "
-                    r"d2L/dqdot2 is singular", failed.message), failed.message
+    # the training loop says where the model failed: in a step or in the test batch after it. Which numerical
+    # failure it meets first is round-off's choice (d2L/dqdot2 ~ 0, a 1 x 1 matrix: no finite qddot, a
+    # SingularLagrangianError, or a huge finite one whose RK4 snippet diverges, a DivergenceError: tests/test_peers.py),
+    # so the failure is asserted by its class, a DivergenceError, and where
+    numerical, todo = set(), [hnn.DivergenceError]
+    while todo:
+        numerical.add(todo[-1].__name__)
+        todo += todo.pop().__subclasses__()
+    found = re.match(r"(\w+): at (the test batch after )?training step [0-2] of 2: ", failed.message)
+    assert found and found[1] in numerical, failed.message
 
 
 def test_a_sweep_job_parses_no_argv(tmp_path, monkeypatch):

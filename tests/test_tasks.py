@@ -38,7 +38,7 @@ TOY = {
         from typing import ClassVar
 
         import hnn
-        from hnn.config import setting
+        from hnn.settings import setting
 
 
         @dataclass
@@ -46,7 +46,7 @@ TOY = {
             """A toy oscillator."""
             name: str = "toy"
             save_dir: str = "."
-            samples: int = setting(20, "trajectories in the dataset", parse=hnn.cli.int_at_least(2))
+            samples: int = setting(20, "trajectories in the dataset", parse=hnn.settings.int_at_least(2))
             DATASET_FIELDS: ClassVar[tuple] = ("seed", "samples")
 
             def dataset(self):

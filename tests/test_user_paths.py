@@ -16,7 +16,7 @@ import hnn
 from hnn.evaluation import float64_copy, quiet_rollout, rollout_errors
 from hnn.metrics import path_errors
 from hnn.models import GSympNet, HenonNet, LASympNet
-from hnn.objectives.map import MapNotLearnedWarning, MapObjective
+from hnn.objectives.map import MapNotLearnedWarning, MapObjective, identity_errors
 from hnn_analysis import score
 
 REPO = Path(__file__).resolve().parent.parent
@@ -86,6 +86,36 @@ def test_a_map_that_ends_no_better_than_the_identity_warns_with_the_fix():
                   total_steps=3, progress=False)
 
 
+def test_a_map_that_learned_q_and_left_p_where_it_was_warns_naming_p():
+    # the shears that move p held at 0 (an exact identity in p), those that move q trained: the whole state's
+    # error is below the identity's (q's gain hides p's none), so only a judge of each half catches it
+    data = MapObjective().prepare(hnn.load_task("pend").get_dataset(seed=0))
+    model = GSympNet(2, 16, 2, dt=float(data["dt"]))
+    for layer in model.layers:
+        if layer.part == "p":
+            for w in layer.parameters():
+                w.requires_grad_(False).zero_()
+    with pytest.warns(MapNotLearnedWarning, match=r"in p (\S+) against \1: it learned nothing of how p moves"):
+        hnn.train(model, data["pairs"], data["pairs"], loss=MapObjective(dt=model.dt).loss_for(model),
+                  total_steps=300, progress=False)
+    error, identity = identity_errors(model, data["pairs"])
+    assert error.mean() < identity.mean() and error[0] < identity[0] and error[1] == identity[1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task", ["spring", "pend"])
+def test_the_commands_default_map_learns_both_halves_without_a_warning(task, tmp_path):
+    # the command's map (tanh, width 200, 4 layers, its steps): better than the identity in q and in p by a
+    # wide margin (pend: 0.41 and 0.42 of the identity's error, the rest the data's noise), so no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MapNotLearnedWarning)
+        run = hnn.load_task(task, "train").main(["--model", "g_sympnet", "--save_dir", str(tmp_path)])
+    model = hnn.load_run(run)[0]
+    data = MapObjective().prepare(hnn.load_task(task).get_dataset(seed=0))
+    error, identity = identity_errors(model, data["pairs"])
+    assert (error < identity).all(), (error, identity)
+
+
 # ----------------------------------------------------------------------------------------------
 # 2. score.py ends in a result or one error line
 
@@ -140,9 +170,9 @@ def _oscillator_file(path: Path, seconds_per_unit: float) -> Path:
     return path
 
 
-# t in seconds and in minutes (milliseconds put dq/dt outside --units auto's bounds, which a map's objective
-# refuses: hnn.units)
-@pytest.mark.parametrize("seconds_per_unit", [1.0, 60.0])
+# t in seconds, in minutes and in milliseconds (whose dq/dt, 1e-3 of the seconds', lies outside --units auto's
+# bounds: a map's loss reads no rate, so auto judges its states alone, hnn.units.sized_arrays)
+@pytest.mark.parametrize("seconds_per_unit", [1.0, 60.0, 1e-3])
 def test_a_measured_map_trains_on_pairs_at_the_files_own_step(tmp_path, seconds_per_unit):
     data = _oscillator_file(tmp_path / "osc.csv", seconds_per_unit)
     argv = ["--data", str(data), "--time", "t", "--q", "x", "--p", "px", "--trial", "trial"]
@@ -152,6 +182,42 @@ def test_a_measured_map_trains_on_pairs_at_the_files_own_step(tmp_path, seconds_
     # each trial's training part and test part are rows at the file's step: every consecutive two a pair
     dataset = MapObjective().prepare(hnn.load_task("measured").get_dataset(str(data), "t", "x", p="px", trial="trial"))
     assert len(dataset["pairs"]) == len(dataset["x"]) - 2 and len(dataset["test_pairs"]) == len(dataset["test_x"]) - 2
+
+
+def test_a_measured_map_is_the_same_map_whatever_the_unit_of_the_files_time(tmp_path):
+    # the file in seconds and in milliseconds holds the same states at the same samples: a map fits one state to
+    # the next and reads no time, so --units auto (the default) trains the same map on both, each at its file's step
+    runs = {}
+    for seconds_per_unit in (1.0, 1e-3):
+        data = _oscillator_file(tmp_path / f"osc-{seconds_per_unit:g}.csv", seconds_per_unit)
+        runs[seconds_per_unit] = Path(hnn.load_task("measured", "train").main(
+            ["--data", str(data), "--time", "t", "--q", "x", "--p", "px", "--trial", "trial", "--model", "g_sympnet",
+             "--total_steps", "20", "--hidden_dim", "8", "--save_dir", str(tmp_path / "runs")]))
+    metrics = {k: json.loads((run / "metrics.json").read_text()) for k, run in runs.items()}
+    # the same rows and seed through the same arithmetic in one process: the same bits, not a tolerance
+    assert metrics[1.0]["train_loss"] == metrics[1e-3]["train_loss"]
+    assert metrics[1.0]["test_loss"] == metrics[1e-3]["test_loss"]
+    for seconds_per_unit, run in runs.items():      # its step, back in the file's time: 0.05 s, or 50 ms
+        step = json.loads((run / "args.json").read_text())["dt"] * json.loads((run / "scale.json").read_text())["tau"]
+        assert step == pytest.approx(0.05 / seconds_per_unit, rel=1e-12)
+
+
+def test_score_reads_a_measured_map_at_its_own_steps_the_same_in_seconds_and_milliseconds(tmp_path, capsys):
+    # the held-out horizon is a whole number of the file's steps, which the map was trained at: score.py steps
+    # it there (it has no field to integrate to an arbitrary time); the same map on the same states in seconds
+    # and in milliseconds predicts the same positions, so both files' errors are one number
+    errors = {}
+    for seconds_per_unit in (1.0, 1e-3):
+        data = _oscillator_file(tmp_path / f"osc-{seconds_per_unit:g}.csv", seconds_per_unit)
+        run = hnn.load_task("measured", "train").main(
+            ["--data", str(data), "--time", "t", "--q", "x", "--p", "px", "--trial", "trial", "--model", "g_sympnet",
+             "--total_steps", "20", "--hidden_dim", "8", "--save_dir", str(tmp_path / f"runs{seconds_per_unit:g}")])
+        [scored] = score.main([str(run), "--out", str(tmp_path / f"score{seconds_per_unit:g}")])
+        assert "next-state MSE" in capsys.readouterr().out
+        errors[seconds_per_unit] = scored["prediction_error"]
+        assert scored["horizon"] * seconds_per_unit == pytest.approx(0.295, rel=1e-9)   # a tenth of a 60-row tail
+    assert errors[1.0]["starts"] == errors[1e-3]["starts"] > 0
+    assert errors[1.0]["median"] == pytest.approx(errors[1e-3]["median"], rel=1e-9)
 
 
 def test_a_dataset_with_no_pair_one_step_apart_is_an_error_naming_it():

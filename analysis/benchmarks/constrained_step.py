@@ -80,11 +80,11 @@ def table(result: dict) -> str:
 @torch_threads(1)       # one torch thread, the caller's count back after (tests call main in-process)
 def main(argv=None) -> dict:
     p = hnn.cli.Parser(prog="constrained_step.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--bobs", type=hnn.cli.int_at_least(1), default=5, help="bobs N of the chain")
-    p.add_argument("--width", type=hnn.cli.int_at_least(1), default=256, help="hidden units")
-    p.add_argument("--batch", type=hnn.cli.int_at_least(1), default=200, help="snippets a step")
-    p.add_argument("--rounds", type=hnn.cli.int_at_least(1), default=5, help="rounds of alternated steps")
-    p.add_argument("--steps", type=hnn.cli.int_at_least(1), default=5, help="steps of each kind per round")
+    p.add_argument("--bobs", type=hnn.settings.int_at_least(1), default=5, help="bobs N of the chain")
+    p.add_argument("--width", type=hnn.settings.int_at_least(1), default=256, help="hidden units")
+    p.add_argument("--batch", type=hnn.settings.int_at_least(1), default=200, help="snippets a step")
+    p.add_argument("--rounds", type=hnn.settings.int_at_least(1), default=5, help="rounds of alternated steps")
+    p.add_argument("--steps", type=hnn.settings.int_at_least(1), default=5, help="steps of each kind per round")
     p.add_argument("--out", type=Path, default=hnn.tasks.repo_root() / "results" / "speed",
                    help="folder of constrained_step.json (and of the chain's cached dataset)")
     args = p.parse_args(sys.argv[1:] if argv is None else argv)

@@ -54,10 +54,10 @@ def markdown(rows: list[dict]) -> str:
 def main(argv=None) -> dict:
     p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--kinds", nargs="+", default=["hnn", "baseline"], choices=KINDS, help="model kinds")
-    p.add_argument("--width", type=hnn.cli.int_at_least(1), default=200, help="hidden units")
+    p.add_argument("--width", type=hnn.settings.int_at_least(1), default=200, help="hidden units")
     p.add_argument("--dtype", default="float64", choices=sorted(DTYPES), help="the states' and weights' dtype")
-    p.add_argument("--batches", nargs="+", type=hnn.cli.int_at_least(1), default=[1, 15, 64], help="states a call")
-    p.add_argument("--rounds", type=hnn.cli.int_at_least(10), default=300, help="timed calls (and floors) each")
+    p.add_argument("--batches", nargs="+", type=hnn.settings.int_at_least(1), default=[1, 15, 64], help="states a call")
+    p.add_argument("--rounds", type=hnn.settings.int_at_least(10), default=300, help="timed calls (and floors) each")
     p.add_argument("--out", type=Path, default=Path("results/field_call.json"), help="JSON output")
     args = p.parse_args(argv)
     rows = [measure(kind, args.width, DTYPES[args.dtype], batch, args.rounds)

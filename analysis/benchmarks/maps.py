@@ -33,9 +33,9 @@ def _parser() -> argparse.ArgumentParser:
     p = hnn.cli.Parser(prog="maps.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--protocols", nargs="+", default=list(mp.PROTOCOLS), choices=list(mp.PROTOCOLS),
                    help="the SympNets protocols to run (default: both)")
-    p.add_argument("--repeats", type=hnn.cli.int_at_least(1), default=None,
+    p.add_argument("--repeats", type=hnn.settings.int_at_least(1), default=None,
                    help="timed rollouts per model (default 11; --quick 3)")
-    p.add_argument("--floor-rounds", type=hnn.cli.int_at_least(1), default=None,
+    p.add_argument("--floor-rounds", type=hnn.settings.int_at_least(1), default=None,
                    help="step/floor rounds of the step table (default 200; --quick 20)")
     commands.add_flags(p, quick="smoke run: each protocol's quick training steps, 2 seeds, 250 3-body orbits",
                        out="output folder (default results/ or results-quick/)", out_default=None,

@@ -48,8 +48,8 @@ def _time(task: str, threads: int, steps: int, seed: int, dataset: dict, save_di
 def main(argv=None) -> dict:
     p = hnn.cli.Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", default="spring,2body,chain", help="comma-separated tasks (their default sizes)")
-    p.add_argument("--steps", type=hnn.cli.int_at_least(1), default=100, help="optimizer steps a run")
-    p.add_argument("--repeats", type=hnn.cli.int_at_least(1), default=3, help="interleaved rounds")
+    p.add_argument("--steps", type=hnn.settings.int_at_least(1), default=100, help="optimizer steps a run")
+    p.add_argument("--repeats", type=hnn.settings.int_at_least(1), default=3, help="interleaved rounds")
     p.add_argument("--threads", default="1,2", help="comma-separated thread counts")
     p.add_argument("--out", type=Path, default=Path("results/threads.json"))
     p.add_argument("--update-docs", action="store_true", help="write the table into docs/speed.md")
@@ -58,7 +58,7 @@ def main(argv=None) -> dict:
     unknown = set(tasks) - set(hnn.available_tasks())
     if unknown:
         p.error(f"--tasks {','.join(sorted(unknown))}: no such task; choose from {', '.join(hnn.available_tasks())}")
-    counts = [hnn.cli.int_at_least(1)(t) for t in args.threads.split(",")]
+    counts = [hnn.settings.int_at_least(1)(t) for t in args.threads.split(",")]
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
         data = {task: hnn.tasks.task_config(task, {"seed": 0}).dataset() for task in tasks}

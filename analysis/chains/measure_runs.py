@@ -20,7 +20,7 @@ from hnn_analysis.chains.peer_measure import measure_chnn
 def main(argv=None) -> dict:
     p = hnn.cli.Parser(prog="measure_runs.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("runs", nargs="+", type=Path, help="run folders of experiment-chain/train.py (CHNN protocol)")
-    p.add_argument("--starts", type=hnn.cli.int_at_least(1), default=100, help="test starts (CHNN's: 100)")
+    p.add_argument("--starts", type=hnn.settings.int_at_least(1), default=100, help="test starts (CHNN's: 100)")
     p.add_argument("--out", type=Path, default=Path("."), help="folder of measured.json")
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
     data, protocols = hnn.load_task("chain"), hnn.load_task("chain", "protocols")

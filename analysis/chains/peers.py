@@ -45,8 +45,8 @@ def _parser() -> argparse.ArgumentParser:
                        + commands.budget_words("peers"),
                        out="output folder (default: results/peers, or results-quick/peers with --quick)",
                        jobs="worker processes of the training and of the seeds' rollouts (1: in this process)")
-    p.add_argument("--seed", type=hnn.cli.int_at_least(0), default=0, help="the first seed")
-    p.add_argument("--seeds", type=hnn.cli.int_at_least(1), default=None,
+    p.add_argument("--seed", type=hnn.settings.int_at_least(0), default=0, help="the first seed")
+    p.add_argument("--seeds", type=hnn.settings.int_at_least(1), default=None,
                    help="seeds seed .. seed + seeds - 1 of every run, the tables' means over them with their range "
                         f"(default: {FULL_SEEDS} for the full table, 1 with --quick)")
     p.add_argument("--train-only", action="store_true",

@@ -23,10 +23,10 @@ from hnn_analysis.provenance import provenance
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     p = hnn.cli.Parser(prog="fit_floor.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--repeats", type=hnn.cli.int_at_least(1), default=3, help="fits timed per row (default 3)")
+    p.add_argument("--repeats", type=hnn.settings.int_at_least(1), default=3, help="fits timed per row (default 3)")
     p.add_argument("--double", action="store_true", help="also the double pendulum at widths 5000 and 10000 "
                    "(minutes each on 2 cores)")
-    p.add_argument("--only", nargs="+", type=hnn.cli.int_at_least(0), default=None, metavar="ROW",
+    p.add_argument("--only", nargs="+", type=hnn.settings.int_at_least(0), default=None, metavar="ROW",
                    help=f"these rows of the table only (0-{len(FITS) - 1}; not with --update-docs)")
     p.add_argument("--data-dir", type=Path, default=None,
                    help="where the tasks' datasets are cached (default: each task's folder, as train.py)")

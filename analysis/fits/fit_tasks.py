@@ -6,7 +6,8 @@ paper's Adam-trained HNN and baseline and beside pysindy's SINDy, over seeds.
     python analysis/fits/fit_tasks.py --jobs 2 --update-docs    # docs/fits.md, sections fits-tasks, fits-library
     python analysis/fits/fit_tasks.py --from-json results/fit_tasks.json --update-docs   # the tables again, nothing run
 
-Every rung of ``task_fits.RUNGS`` that a task takes trains at every seed in one sweep (``--jobs`` processes;
+Every rung of ``task_fits.RUNGS`` that a task takes (the pair kind's three on the tasks that declare their
+bodies, 2body and 3body) trains at every seed in one sweep (``--jobs`` processes;
 runs saved before with the same args, by this command, reproduce.py or the scene study, are reused), then
 each is measured (``task_fits.measure``): its test loss, the energy MSE of the task's protocols and its
 training seconds on one thread. Writes ``<out>/fit_tasks.json`` and ``.md``. Pixels: not a rung; its

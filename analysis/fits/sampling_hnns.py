@@ -60,15 +60,15 @@ def main(argv=None) -> dict:
     p = hnn.cli.Parser(prog="sampling_hnns.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--protocols", nargs="+", choices=list(sp.PROTOCOLS), default=list(sp.PROTOCOLS),
                    help="the systems (default: both)")
-    p.add_argument("--widths", nargs="+", type=hnn.cli.int_at_least(1), default=None,
+    p.add_argument("--widths", nargs="+", type=hnn.settings.int_at_least(1), default=None,
                    help="hidden widths (default: each system's published widths: single 1000, double 5000 10000)")
     p.add_argument("--variants", nargs="+", choices=list(sp.VARIANTS), default=None,
                    help="; ".join(f"{k}: {v}" for k, v in sp.VARIANTS.items())
                    + " (default: all three at width 1000, uswim and swim at 5000, uswim alone at 10000: a fit there "
                      "takes minutes on 2 cores)")
-    p.add_argument("--threads", type=hnn.cli.int_at_least(1), default=2, help="torch threads of every fit")
-    p.add_argument("--adam-seeds", type=hnn.cli.int_at_least(0), default=5, help="seeds of the Adam HNN (0: none)")
-    p.add_argument("--adam-steps", type=hnn.cli.int_at_least(1), default=3000,
+    p.add_argument("--threads", type=hnn.settings.int_at_least(1), default=2, help="torch threads of every fit")
+    p.add_argument("--adam-seeds", type=hnn.settings.int_at_least(0), default=5, help="seeds of the Adam HNN (0: none)")
+    p.add_argument("--adam-steps", type=hnn.settings.int_at_least(1), default=3000,
                    help="Adam steps a seed (batch 2048; theirs: 180000 on 64 threads)")
     commands.add_flags(p, quick="single pendulum, width 1000, one seed, no Adam: a smoke run of seconds",
                        out="output folder (default results/fits)", out_default=Path("results/fits"),

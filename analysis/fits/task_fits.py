@@ -6,8 +6,9 @@ our library against SINDy and the networks). ``analysis/fits/fit_tasks.py`` is i
 A rung is a model kind and how its weights are found: ``hnn`` and ``baseline`` by Adam (each task's own
 settings, the paper's runs), ``hnn+swim`` (a sampled layer of ``SWIM_WIDTH`` neurons, the last layer by
 least squares), ``hnn+library`` (H as a sparse sum of terms) and ``baseline+sindy`` (pysindy's SINDy, where
-it is installed). Measured per seed: the test loss (the saved run's), the energy MSE of every protocol of
-the task (``registry.evaluate``: the paper's and the corrected; the chain: along CHNN's 3 s rollouts,
+it is installed); on a task that declares its bodies (2body, 3body), the pair kind by Adam (``pairwise``), by
+the task's width of sampled radial neurons (``pairwise+swim``) and by the radial library (``pairwise+library``).
+Measured per seed: the test loss (the saved run's), the energy MSE of every protocol of the task (``registry.evaluate``: the paper's and the corrected; the chain: along CHNN's 3 s rollouts,
 below) and the training seconds on one thread (``hnn_analysis.training_cost``: Adam's steps at their
 timed rate, a fit's whole solve). The pixel task is not one: its latent coordinates are learned by the
 autoencoder, which no linear solve can find (``--fit`` refuses it).
@@ -29,13 +30,21 @@ from hnn_analysis.pages import generated_by
 
 TASKS = ("spring", "pend", "real", "2body", "3body", "chain")
 SWIM_WIDTH = 1000          # a sampled layer needs more neurons than a trained one; its solve stays seconds
-# label -> the run's fields: Adam's kinds at the task's own settings, then the fits
+# label -> the run's fields: Adam's kinds at the task's own settings, then the fits; the pair kind's three where
+# the task declares its bodies (2body, 3body: ``rungs``); its sampled neurons read one distance, at the task's width
+# (200 fit the 3-body's H to a relative error of 1.9e-3 in 23 s, 1000 to 6.3e-4 in 137 s and 5 GB; seed 0, one
+# thread, 2-core box at load 2), the runs analysis/bodies.py --paper and the scene study train
 RUNGS = {"hnn": {"model": "hnn"}, "baseline": {"model": "baseline"},
          "hnn+swim": {"model": "hnn", "fit": "swim", "hidden_dim": SWIM_WIDTH},
          "hnn+library": {"model": "hnn", "fit": "library"},
-         "baseline+sindy": {"model": "baseline", "fit": "sindy"}}
+         "baseline+sindy": {"model": "baseline", "fit": "sindy"},
+         "pairwise": {"model": "pairwise"},
+         "pairwise+swim": {"model": "pairwise", "fit": "swim"},
+         "pairwise+library": {"model": "pairwise", "fit": "library"}}
 ADAM = ("hnn", "baseline")
-NETWORKS = ("hnn", "baseline", "hnn+swim")     # the rungs whose model is a network (the library table's "every network")
+# the rungs whose model is a network (the library table's "every network")
+NETWORKS = ("hnn", "baseline", "hnn+swim", "pairwise", "pairwise+swim")
+LIBRARIES = ("hnn+library", "pairwise+library")      # the library table's rows: ours over x = [q, p], and over r
 NEAR = 2.0                 # "as accurate": a mean within this factor of Adam's HNN on test loss and energy MSE
 # the chain (CHNN's 2-bob protocol, trained on [q, qdot]): its rollouts from CHNN's test starts
 CHAIN_STARTS, CHAIN_RTOL = 25, 1e-7
@@ -50,19 +59,32 @@ def own_objective(task: str, label: str) -> bool:
 
 
 def rungs(task: str) -> dict[str, dict]:
-    """The rungs ``task`` trains: each whose kind its ``--model`` takes, whose fit applies to that kind, and
-    whose package is installed (SINDy's)."""
+    """The rungs ``task`` trains: each whose kind its ``--model`` takes, whose fit applies to that kind, whose
+    model builds from what the task declares (the pair kind: its bodies), and whose package is installed (SINDy's)."""
     takes = hnn.cli.model_choices(hnn.load_task(task, "train").Config)
     out = {}
     for label, fields in RUNGS.items():
         fit = hnn.fits.FITS[fields.get("fit", "adam")]
         if fields["model"] not in takes or (fit.kinds is not None and fields["model"] not in fit.kinds):
             continue
+        if not _builds(task, fields):
+            continue
         if fit.package == "pysindy" and hnn.fits.sindy.version() is None:
             continue
         # a library's degree is its task's (experiment-3body/train.py keeps its 12 coordinates' library small)
         out[label] = {**fields, **(FIT_FIELDS.get(task, {}) if fit.solved else {})}
     return out
+
+
+def _builds(task: str, fields: dict) -> bool:
+    """Whether the model of ``fields`` on ``task`` builds from what the task declares (a small one): the pair kind's
+    builder refuses a task that declares no bodies (spring, the chain) with a ValueError."""
+    spec = hnn.specs.run_specs(hnn.tasks.task_config(task, {**fields, "hidden_dim": 4})).model
+    try:
+        hnn.kinds.model_from_spec(spec)
+    except ValueError:
+        return False
+    return True
 
 
 def plan(tasks, seeds: list[int], runs_dir: Path, quick: bool) -> list[sweep.Job]:
@@ -189,25 +211,24 @@ def accuracy_table(results: dict) -> list[str]:
 
 
 def library_table(results: dict) -> list[str]:
-    """Per task: our library's energy MSE against SINDy's (their ratio, target within 10x) and every
-    network's (is it below all of them?), and the equation each library found (seed 0)."""
-    lines = ["| task | library: energy MSE | SINDy: energy MSE | library / SINDy | best network (energy MSE) | "
+    """Per task and library (``LIBRARIES``: the HNN's over x = [q, p], the pair kind's over r where the task
+    declares bodies): its energy MSE against SINDy's (their ratio, target within 10x) and every network's (is it
+    below all of them?), and the equation each library found (seed 0)."""
+    lines = ["| task | library | energy MSE | SINDy: energy MSE | library / SINDy | best network (energy MSE) | "
              "library below every network? | library's H (seed 0) | SINDy's dx/dt (seed 0) |",
-             "| --- | --- | --- | ---: | --- | --- | --- | --- |"]
+             "| --- | --- | --- | --- | ---: | --- | --- | --- | --- |"]
     for task, by_label in results["tasks"].items():
-        if "hnn+library" not in by_label:
-            continue
-        key = energy_key(by_label["hnn+library"])
-        ours = across(by_label["hnn+library"], key)
-        sindy = across(by_label["baseline+sindy"], key) if "baseline+sindy" in by_label else None
-        nets = {label: pair for label in NETWORKS if label in by_label and (pair := across(by_label[label], key))}
-        best = min(nets, key=lambda k: nets[k][0]) if nets else None
-        ratio = (f"{ours[0] / sindy[0]:.3g}" if sindy and 0 < sindy[0] < math.inf and math.isfinite(ours[0])
-                 else "n/a")
-        below = "yes" if nets and all(ours[0] < v[0] for v in nets.values()) else "no"
-
-        lines.append(f"| {task} | {_g(ours)} | {_g(sindy)} | {ratio} | {best} ({_g(nets.get(best))}) | {below} | "
-                     f"`{_equation(by_label, 'hnn+library')}` | `{_equation(by_label, 'baseline+sindy')}` |")
+        for library in (label for label in LIBRARIES if label in by_label):
+            key = energy_key(by_label[library])
+            ours = across(by_label[library], key)
+            sindy = across(by_label["baseline+sindy"], key) if "baseline+sindy" in by_label else None
+            nets = {label: pair for label in NETWORKS if label in by_label and (pair := across(by_label[label], key))}
+            best = min(nets, key=lambda k: nets[k][0]) if nets else None
+            ratio = (f"{ours[0] / sindy[0]:.3g}" if sindy and 0 < sindy[0] < math.inf and math.isfinite(ours[0])
+                     else "n/a")
+            below = "yes" if nets and all(ours[0] < v[0] for v in nets.values()) else "no"
+            lines.append(f"| {task} | {library} | {_g(ours)} | {_g(sindy)} | {ratio} | {best} ({_g(nets.get(best))}) | "
+                         f"{below} | `{_equation(by_label, library)}` | `{_equation(by_label, 'baseline+sindy')}` |")
     return lines
 
 

@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 
 import hnn
-from hnn.cli import int_at_least
+from hnn.settings import int_at_least
 from hnn.io import atomic_write
 from hnn_analysis import commands
 from hnn_analysis.integrator_study import peer_solvers

@@ -1,6 +1,7 @@
-"""The bodies study's machinery (``analysis/bodies.py`` is its command): the pair kind fitted on a chain of 8
-springs (experiment-lattice), the same model rolled out on chains of N bodies beside the true forces' leapfrog,
-and the table of docs/bodies.md. See the command's docstring for the metrics."""
+"""The bodies study's machinery (``analysis/bodies.py`` is its command): the pair kind fitted on a scene of 8 bodies
+(``SCENES``: the chain of springs of experiment-lattice, or the softened gravity of experiment-gravity), the same
+model rolled out on the scene at N bodies beside the true forces' leapfrog, and the tables of docs/bodies.md. See
+the command's docstring for the metrics."""
 from __future__ import annotations
 
 import statistics
@@ -17,6 +18,14 @@ from hnn_analysis.provenance import machine
 
 FULL_SIZES = (8, 64, 512, 4096)
 QUICK_SIZES = (8, 32, 128, 256)
+# scene (its task) -> its bodies in the page's sentence, its section of docs/bodies.md and its rollouts' defaults;
+# every scene's task declares the same functions of any N: dynamics, hamiltonian, potential_gradient, random_config.
+# Gravity's pulls reach every body, so a step at N = 4096 costs N^2 pairs (seconds), and its bodies speed up with N
+# (the disk keeps its density): a shorter horizon at a finer step than the chain's
+SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "section": "bodies",
+                      "dt": 0.05, "horizon": 10.0, "starts": 4},
+          "gravity": {"bodies": "{n} bodies under softened gravity (a rotating disk)", "section": "bodies-gravity",
+                      "dt": 0.01, "horizon": 0.5, "starts": 2}}
 FITS = ("library", "swim", "adam")
 QUICK_FITS = ("library", "swim")
 REPEATS = 5             # timed rollouts per N (the median counts)
@@ -24,9 +33,9 @@ TIMED_STEPS = 20        # leapfrog steps of each timed rollout
 REFERENCE_RTOL = 1e-10
 
 
-def _fit(fit: str, data: dict, seed: int, adam_steps: int, hidden: int):
-    """``(model, seconds, what)`` of the pair kind fitted on the lattice data by ``fit`` (float64)."""
-    config = hnn.tasks.task_config("lattice", {"seed": seed})
+def _fit(scene: str, fit: str, data: dict, seed: int, adam_steps: int, hidden: int):
+    """``(model, seconds, what)`` of the pair kind fitted on the ``scene`` task's data by ``fit`` (float64)."""
+    config = hnn.tasks.task_config(scene, {"seed": seed})
     args = {**config.to_dict(), "kind": "pairwise", "fit": fit, "hidden_dim": hidden, "dtype": "float64"}
     torch.manual_seed(seed)
     model = hnn.kinds.model_from_args(args)
@@ -42,7 +51,7 @@ def _fit(fit: str, data: dict, seed: int, adam_steps: int, hidden: int):
 
 
 def _true_field(data_module) -> SplitField:
-    """The lattice's true field, split as a leapfrog reads it (dT/dp = p, dV/dq in O(N))."""
+    """The scene's true field, split as a leapfrog reads it (dT/dp = p: unit masses; dV/dq the task's)."""
     return SplitField(data_module.dynamics, lambda p: p, data_module.potential_gradient)
 
 
@@ -67,12 +76,15 @@ def _errors(path: torch.Tensor, reference: torch.Tensor, energy, count: int) -> 
     return {"energy_per_body": float(per_body), "rollout": float(rollout)}
 
 
-def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_steps: int, hidden: int) -> dict:
-    data_module = hnn.load_task("lattice")
-    data = hnn.tasks.task_config("lattice", {"seed": seed}).dataset()
+def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_steps: int, hidden: int,
+          scene: str = "lattice") -> dict:
+    if scene not in SCENES:
+        raise ValueError(f"scene {scene!r}: choose one of {', '.join(SCENES)}")
+    data_module = hnn.load_task(scene)
+    data = hnn.tasks.task_config(scene, {"seed": seed}).dataset()
     models = {}
     for fit in fits:
-        model, seconds, what = _fit(fit, data, seed, adam_steps, hidden)
+        model, seconds, what = _fit(scene, fit, data, seed, adam_steps, hidden)
         models[fit] = model
         print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
         models[fit + ":meta"] = {"seconds": seconds, "what": what}
@@ -90,15 +102,20 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
             row = {"N": count, "true": {**_errors(true_path, reference, data_module.hamiltonian, count),
                                         "seconds_per_step": _seconds_per_step(truth, x0, dt)}}
             for fit in fits:
-                with torch.no_grad():
-                    path = hnn.rollout(models[fit].field, x0, t, method="leapfrog", dt=dt)
+                try:
+                    with torch.no_grad():
+                        path = hnn.rollout(models[fit].field, x0, t, method="leapfrog", dt=dt)
+                except hnn.DivergenceError as err:      # a model whose paths leave where it was fitted: said, not hidden
+                    row[fit] = {"diverged": str(err).split(". ")[0],
+                                "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
+                    continue
                 row[fit] = {**_errors(path, reference, data_module.hamiltonian, count),
                             "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
             rows.append(row)
             print(_row_line(row, fits), flush=True)
     return {"rows": rows, "fits": {fit: models[fit + ":meta"] for fit in fits},
-            "settings": {"sizes": list(sizes), "fits": list(fits), "seed": seed, "starts": starts, "dt": dt,
-                         "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
+            "settings": {"scene": scene, "sizes": list(sizes), "fits": list(fits), "seed": seed, "starts": starts,
+                         "dt": dt, "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
                          "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
                          "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1}}
 
@@ -106,16 +123,23 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
 def _row_line(row: dict, fits) -> str:
     cells = [f"N={row['N']}", f"true: E/N {row['true']['energy_per_body']:.2e} "
                               f"err {row['true']['rollout']:.2e} {row['true']['seconds_per_step'] * 1e3:.3f} ms"]
-    cells += [f"{fit}: E/N {row[fit]['energy_per_body']:.2e} err {row[fit]['rollout']:.2e} "
-              f"{row[fit]['seconds_per_step'] * 1e3:.3f} ms" for fit in fits]
+    cells += [f"{fit}: " + (f"diverged ({row[fit]['diverged']})" if "diverged" in row[fit] else
+                            f"E/N {row[fit]['energy_per_body']:.2e} err {row[fit]['rollout']:.2e}")
+              + f" {row[fit]['seconds_per_step'] * 1e3:.3f} ms" for fit in fits]
     return " | ".join(cells)
+
+
+def _bodies(settings: dict, count: int) -> str:
+    """``'a chain of 8 bodies joined by springs'``: the scene's bodies in the page's words (a study saved before
+    scenes: the lattice)."""
+    return SCENES[settings.get("scene", "lattice")]["bodies"].format(n=count)
 
 
 def table(results: dict) -> str:
     """The page's section: how each fit was found, then one table per fit against N with the true forces beside."""
     meta, settings = results["meta"], results["settings"]
     lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta.get('torch', '?')}, one thread") + ".", "",
-             f"Fitted on a chain of {settings['trained_on']} bodies (seed {settings['seed']}); each N rolled out from "
+             f"Fitted on {_bodies(settings, settings['trained_on'])} (seed {settings['seed']}); each N rolled out from "
              f"{settings['starts']} starts by leapfrog at dt = {settings['dt']:g} to t = {settings['horizon']:g}, "
              f"float64; reference DOP853 at rtol {settings['reference_rtol']:g}.", ""]
     for fit, how in results["fits"].items():
@@ -126,8 +150,10 @@ def table(results: dict) -> str:
                   "| ratio |", "|---|---|---|---|---|---|---|---|"]
         for row in results["rows"]:
             mine, true = row[fit], row["true"]
-            lines.append(f"| {row['N']} | {mine['energy_per_body']:.2e} | {true['energy_per_body']:.2e} | "
-                         f"{mine['rollout']:.2e} | {true['rollout']:.2e} | {mine['seconds_per_step'] * 1e3:.3f} | "
+            errors = (f"diverged: {mine['diverged']} | {true['energy_per_body']:.2e} | | {true['rollout']:.2e}"
+                      if "diverged" in mine else f"{mine['energy_per_body']:.2e} | {true['energy_per_body']:.2e} | "
+                                                 f"{mine['rollout']:.2e} | {true['rollout']:.2e}")
+            lines.append(f"| {row['N']} | {errors} | {mine['seconds_per_step'] * 1e3:.3f} | "
                          f"{true['seconds_per_step'] * 1e3:.3f} | "
                          f"{mine['seconds_per_step'] / true['seconds_per_step']:.1f}x |")
     return "\n".join(lines) + "\n"

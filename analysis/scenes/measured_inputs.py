@@ -23,7 +23,7 @@ def add_flags(parser) -> None:
         meta = hnn.cli.field_meta(defaults, name)
         group.add_argument(f"--{name}", type=meta.get("parse") or str, default=getattr(defaults, name),
                            help=meta.get("help"))
-    group.add_argument("--horizon", type=hnn.cli.positive_float, default=None,
+    group.add_argument("--horizon", type=hnn.settings.positive_float, default=None,
                        help="seconds ahead of the prediction error (default: a tenth of the shortest held-out tail)")
     group.add_argument("--energy", default=None,
                        help="an energy of your columns as a numpy expression (e.g. '0.5*v**2 + 2*x**2'): its drift")

@@ -102,7 +102,15 @@ class Model:
         x0[:, :n][:, rec.periodic] = (x0[:, :n][:, rec.periodic] + math.pi) % (2 * math.pi) - math.pi
         with torch.no_grad():
             x0 = self.model.state_from(torch.as_tensor(x0, dtype=torch.float64), self.observed)
-        traj, _ = hnn.evaluation.model_rollout(self.model.field, x0, np.asarray(t) / self.scale.tau)
+        t = np.asarray(t, dtype=np.float64) / self.scale.tau
+        step = hnn.interface.step_map_of(self.model.field)
+        if step is None:
+            traj, _ = hnn.evaluation.model_rollout(self.model.field, x0, t)
+        else:       # a map steps only by its dt: each time is read at its nearest step (within MATCH of a
+            k = np.rint(t / step.dt).astype(np.int64)      # sample step, as the horizon pairs are matched)
+            steps = np.arange(k.max() + 1)
+            traj, _ = hnn.evaluation.model_rollout(self.model.field, x0, t[0] + step.dt * steps)
+            traj = traj[:, k - k[0]]
         with torch.no_grad():
             traj = self.model.observed_from(traj.reshape(-1, 2 * n), self.observed).reshape(traj.shape)
         traj = traj.detach().numpy()

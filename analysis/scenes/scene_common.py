@@ -74,7 +74,10 @@ def task_rungs(task: str, rungs=scene_rungs.RUNGS) -> list[str]:
 def _fits(task: str, kind: str) -> bool:
     """Whether the kind's model (or a rung's, ``scene_rungs``) reads the scene's states: canonical [q, p] (its
     declared coordinates; the objectives would refuse its run otherwise), or, for a pixel model
-    (``'latent'``), the frames its own encoder maps to its latent [q, p]; a fit must apply to the run too."""
+    (``'latent'``), the frames its own encoder maps to its latent [q, p]; a fit must apply to the run too, and its
+    model must build from what the task declares (the pair kind reads the bodies of 2body and 3body; spring has none)."""
+    if scene_rungs.kind_of(kind) not in hnn.cli.model_choices(hnn.load_task(task, "train").Config):
+        return False        # the task's --model does not take it (the pixel task takes its own two)
     config = hnn.tasks.task_config(task, {"model": scene_rungs.kind_of(kind), "fit": scene_rungs.fit_of(kind)})
     spec = hnn.MODEL_KINDS[config.kind]
     if config.fit != "adam":
@@ -82,6 +85,8 @@ def _fits(task: str, kind: str) -> bool:
             hnn.fits.check_config(config, spec.coordinates)
         except ValueError:
             return False
+    if not scene_rungs.builds(config):
+        return False
     return spec.coordinates == "latent" or spec.reads("canonical")
 
 

@@ -16,9 +16,10 @@ import hnn
 from hnn.sweeps import sweep
 
 # the fits' rungs a scene study adds beside Adam's kinds, where the task takes the kind: the sampled HNN, our
-# library of H's terms and pysindy's SINDy (the other pairs, such as separable+library, train through --fit)
-RUNGS = ("hnn+swim", "hnn+library", "baseline+sindy")
-GRID_RUNGS = ("hnn+swim",)               # ... and across its width x data grid (a sampled layer has a width)
+# library of H's terms and pysindy's SINDy, and the pair kind's sampled radial neurons and radial library where a
+# task declares bodies (the other pairs, such as separable+library, train through --fit)
+RUNGS = ("hnn+swim", "hnn+library", "baseline+sindy", "pairwise+swim", "pairwise+library")
+GRID_RUNGS = ("hnn+swim", "pairwise+swim")   # ... and across its width x data grid (a sampled layer has a width)
 
 
 def label(kind: str, fit: str = "adam") -> str:
@@ -38,7 +39,7 @@ def fit_of(rung: str) -> str:
 
 def is_library(rung: str) -> bool:
     """Whether the rung's model is a sum of written-out terms (ours or SINDy's): it prints as equations."""
-    return hnn.fits.FITS[fit_of(rung)].features == "library"
+    return hnn.fits.FITS[fit_of(rung)].prints_equation
 
 
 def describe(rung: str, width: int, fraction: float) -> str:
@@ -61,6 +62,17 @@ def fit_rungs(kinds, rungs=RUNGS) -> list[str]:
         if kind_of(rung) in kinds:
             out.append(rung)
     return out
+
+
+def builds(config) -> bool:
+    """Whether the model of run ``config`` builds from what its task declares (a small one, untrained): the pair kind
+    needs the task's bodies, a constrained kind its constraint graph; the builder's ValueError says which is missing."""
+    spec = hnn.specs.run_specs(config).model
+    try:
+        hnn.kinds.model_from_spec(dataclasses.replace(spec, hidden_dim=min(spec.hidden_dim or 4, 4)))
+    except ValueError:
+        return False
+    return True
 
 
 def jobs(rows: list[dict], seeds: list[int], runs_dir: Path, rungs, fits) -> list[sweep.Job]:

@@ -62,7 +62,7 @@ def _parser() -> argparse.ArgumentParser:
                        seeds_default=None,
                        jobs="training processes, as reproduce.py --jobs; then as many measuring processes (local "
                             "backend)")
-    p.add_argument("--grid-seeds", type=hnn.cli.int_at_least(1), default=None,
+    p.add_argument("--grid-seeds", type=hnn.settings.int_at_least(1), default=None,
                    help="seeds of every width x fraction cell, the cards' candidates (default: --seeds; 1 trains "
                         "the grid at seed 0 alone, a third of the cost, and the page says the cards rest on one seed)")
     sweep_flags.add_backend_flags(p)

@@ -120,7 +120,9 @@ def describe(score: dict) -> str:
     head = f"{score['task']} {score['kind']}: {score['run']}"
     if score["task"] == "measured":
         pe, naive = score["prediction_error"], score["naive"]
-        lines = [head, f"  test loss {_g(score['test_loss'])} (derivative MSE on the scaled states)",
+        loss = ("next-state MSE" if score["kind"] in hnn.MODEL_KINDS and hnn.MODEL_KINDS[score["kind"]].steps
+                else "derivative MSE")
+        lines = [head, f"  test loss {_g(score['test_loss'])} ({loss} on the scaled states)",
                  f"  prediction error at {score['horizon']:.4g} s: median {_g(pe['median'])}, mean {_g(pe['mean'])} "
                  f"over {pe['starts']} starts (naive q + h v: {_g(naive['median'])}; the positions' spread "
                  f"{_g(score['spread'])})",

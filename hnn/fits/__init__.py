@@ -6,7 +6,10 @@ of dx/dt over features that are drawn or written out, never trained (``FITS``: `
 dx/dt is one least-squares problem, conservative by construction. A fitted run saves, reloads and rolls
 out as any run; its model is an ``hnn.Model`` of its kind (``hnn``, ``separable``, ``baseline``).
 
-- ``registry``: the rows (``FITS``), which kinds each applies to (``check``), the untrained model (``build``);
+- ``registry``: the rows (``FITS``): each fit's kinds (``check``), feature sets, sampler and solve; the untrained
+  model (``build``);
+- ``base``: the features interface (``Features``): a new feature set is one module and one row;
+- ``solves``: how a row's problems become coefficients (plain, thresholded as STLSQ, pysindy's);
 - ``features``: sampled tanh neurons and the library's terms, values and gradients in closed form;
 - ``sampling``: where sampled neurons come from (SWIM's pairs of points, ELM's random draws);
 - ``models``: the fitted models and their least-squares problems;

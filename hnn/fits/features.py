@@ -7,9 +7,10 @@
   the positions, and their products with monomials of the momenta; each prints as its formula, so a
   sparse combination of them prints as an equation.
 
-Both are ``nn.Module``s whose tensors are parameters (``requires_grad=False``: drawn or fixed, never
-trained) and buffers, so a fitted model saves and reloads as any model does; shapes ``(rows, width)``
-for values and ``(rows, width, in_dim)`` for gradients, float64.
+Both are ``hnn.fits.base.Features`` (the feature sets' interface): ``nn.Module``s whose tensors are
+parameters (``requires_grad=False``: drawn or fixed, never trained) and buffers, so a fitted model saves and
+reloads as any model does; shapes ``(rows, width)`` for values and ``(rows, width, in_dim)`` for gradients,
+float64.
 """
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ from torch import nn
 
 from hnn.modes import in_model_axis
 
+from .base import FORMS, Features
+
 # the trig factor of a library term: none, sin(f q_i) or cos(f q_i)
 NONE, SIN, COS = 0, 1, 2
 ROW_BYTES = 2 ** 27     # a library's gradient is built a few rows at a time, its arrays within this
@@ -29,9 +32,12 @@ def _frozen(*shape) -> nn.Parameter:
     return nn.Parameter(torch.zeros(*shape, dtype=torch.float64), requires_grad=False)
 
 
-class TanhFeatures(nn.Module):
+class TanhFeatures(Features):
     """phi(x) = tanh(x W^T + b): ``width`` neurons on inputs of width ``in_dim``; ``weight`` ``(width, in_dim)``
-    and ``bias`` ``(width,)`` are set by a sampler (``hnn.fits.sampling``), zero until then."""
+    and ``bias`` ``(width,)`` are set by a sampler (``hnn.fits.sampling``), zero until then. Any form: a
+    run's ``hidden_dim`` neurons on the inputs its kind reads (x, q, p or a pair distance)."""
+    forms = FORMS
+    drawn = True
 
     def __init__(self, width: int, in_dim: int):
         super().__init__()
@@ -39,6 +45,11 @@ class TanhFeatures(nn.Module):
             raise ValueError(f"a sampled layer needs a width >= 1 (--hidden_dim), got {width!r}")
         self.width, self.in_dim = width, in_dim
         self.weight, self.bias = _frozen(width, in_dim), _frozen(width)
+
+    @classmethod
+    def make(cls, spec, form: str, in_dim: int) -> TanhFeatures:
+        """``spec.hidden_dim`` neurons on ``in_dim`` inputs, zero until drawn."""
+        return cls(spec.hidden_dim, in_dim)
 
     def set(self, weight, bias) -> None:
         """Set the sampled ``weight`` ``(width, in_dim)`` and ``bias`` ``(width,)``."""
@@ -71,6 +82,9 @@ class TanhFeatures(nn.Module):
 
     def names(self, columns: list[str]) -> list[str]:
         return [f"tanh(w{k} . x + b{k})" for k in range(self.width)]
+
+    def describe(self, column: str) -> str:
+        return f"tanh(w {column} + b)"
 
 
 def _monomials(dim: int, low: int, high: int, columns=None) -> list[tuple[int, ...]]:
@@ -119,17 +133,24 @@ def terms(width: int, form: str, degree: int, frequencies: int, products: bool =
     return out
 
 
-class Library(nn.Module):
+class Library(Features):
     """Terms theta_k(x) = x^powers_k * trig_k(x), fixed by ``terms(...)``: ``powers`` ``(terms, in_dim)``
-    and ``trig`` ``(terms, 3)`` (kind, column, frequency), buffers.
+    and ``trig`` ``(terms, 3)`` (kind, column, frequency), buffers. ``make``: the terms of a form (``terms``)
+    to the run's ``library_degree`` and ``library_frequencies``, trig terms times momenta where ``products``.
 
     A monomial is evaluated as the product of its factors' columns (``slots`` ``(terms, degree)``: x^2 y is
     columns (x, x, y), padded with a column of ones), so a value or a gradient costs rows * terms * degree
     multiplications, not rows * terms * in_dim powers (the 3-body's 790 terms on 12 columns: 60x)."""
+    forms = ("hamiltonian", "field", "kinetic", "potential")
+    formula = True
+    subset = True
+    products = True     # the trig terms times monomials of the momenta (``terms``' ``products``)
 
     def __init__(self, term_list: list[tuple], in_dim: int):
         super().__init__()
         self.in_dim, self.width = in_dim, len(term_list)
+        # a constant term (the field form's): a field model over it needs no bias of its own
+        self.constant = any(not any(powers) and trig[0] == NONE for powers, trig in term_list)
         self.register_buffer("powers", torch.tensor([t[0] for t in term_list], dtype=torch.int64).reshape(-1, in_dim))
         self.register_buffer("trig", torch.tensor([t[1] for t in term_list], dtype=torch.int64).reshape(-1, 3))
         degree = max(1, int(self.powers.sum(dim=1).max())) if self.width else 1
@@ -137,6 +158,11 @@ class Library(nn.Module):
         # derived from ``powers``, so not saved: index in_dim is the column of ones
         self.register_buffer("slots", torch.tensor([s + [in_dim] * (degree - len(s)) for s in slots],
                                                    dtype=torch.int64).reshape(-1, degree), persistent=False)
+
+    @classmethod
+    def make(cls, spec, form: str, in_dim: int) -> Library:
+        """The ``form``'s terms on ``in_dim`` columns to ``spec.library_degree`` and ``spec.library_frequencies``."""
+        return cls(terms(in_dim, form, spec.library_degree, spec.library_frequencies, products=cls.products), in_dim)
 
     def _parts(self, x: torch.Tensor, keep: torch.Tensor | None, slopes: bool = True):
         """Per term: the monomial's factors (a list of ``degree`` tensors ``(rows, terms)``), the trig factor and

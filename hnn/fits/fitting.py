@@ -6,32 +6,29 @@ users (``hnn.fit_least_squares``); ``solve`` fits a model that ``hnn.fits.build`
     model, stats = hnn.fit_least_squares("hnn", x, dxdt, fit="library")
     print(model.equation())                       # H = 3 - 3 cos(q) + p^2 ... as the data say
 
-For each least-squares problem of the model (``part``): draw the hidden layer from the data (``swim``,
-``elm``), then stream the design rows through a QR factor (``hnn.fits.lstsq``), chunk by chunk, and
-solve; a library is thresholded as SINDy's STLSQ; ``sindy`` hands the rows to pysindy
-(``hnn.fits.sindy``). All in float64; the seed decides the sampled neurons.
+For each least-squares problem of the model (``part``): draw its features from the data where they are
+drawn (by the row's ``sampler``: ``swim``, ``elm``), then stream the design rows through a QR factor
+(``hnn.fits.lstsq``), chunk by chunk, and solve by the row's strategy (``hnn.fits.solves``: plain, or
+thresholded as SINDy's STLSQ); a strategy of the whole model (``sindy``: pysindy, ``hnn.fits.sindy``)
+takes the rows itself. All in float64; the seed decides the sampled neurons.
 """
 from __future__ import annotations
 
 import difflib
-import sys
 import time
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from ..metrics import derivative_mse
+from ..progress import Ticker
+from ..settings import RunSettings
 from ..specs import ModelSpec
 from ..trainers.rows import check_data
-from ..units import Rescaled, UnitScales, in_canonical_units
-from .features import TanhFeatures
+from ..units import Rescaled, UnitScales, in_canonical_units, refusal, units_reason
 from .lstsq import RIDGES, StreamingQR, chunk_rows
-from .registry import build, get_fit
-from .sampling import elm, swim
+from .registry import build, fitted_model, get_fit
 
-RCOND = "auto"          # the ridge of the solve: chosen by generalized cross-validation (a number: that ridge)
-THRESHOLD = 0.05        # a library's smallest coefficient kept (the units of the fit: fit_least_squares' units)
 DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
 
 
@@ -41,8 +38,13 @@ def _rows_per_state(part, x, y) -> int:
 
 
 def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) -> StreamingQR:
-    """The QR factor of ``part``'s design over every state, built chunk by chunk (two passes: the columns'
-    norms, then the factor); through ``_stream_factored`` where the part's design factors."""
+    """The QR factor of ``part``'s design over every state, its design built once, chunk by chunk; through
+    ``_stream_factored`` where the part's design factors.
+
+    The rows go into a plain QR (no ridge, unit scales); the columns' norms are those of its factor's
+    (A = Q R, Q orthogonal), so the ridged factor on unit-norm columns is then the QR of the small
+    [R diag(1/norms) | Q^T y; rcond I | 0], ``(columns + rhs)`` rows more, never the rows again (which a
+    library built twice, once for the norms and once for the factor)."""
     factored = part.factored() if part.factored is not None else None
     if factored is not None:
         return _stream_factored(*factored, x, y, weights, rcond, bar)
@@ -50,22 +52,20 @@ def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) 
     states = max(1, chunk_rows(part.columns, part.rhs) // per_state)
     # the design of a few states at a time: a library's terms build (states, terms, dim) arrays several times over
     step = max(1, DESIGN_BYTES // (8 * part.columns * per_state))
-
-    def design(c: slice):
-        pieces = [part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
-                  for i in range(c.start, min(c.stop, len(x)), step)]
-        return torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces])
-
-    chunks = [slice(i, i + states) for i in range(0, len(x), states)]
-    sumsq = torch.zeros(part.columns, dtype=torch.float64)
-    for c in chunks:
-        for i in range(c.start, min(c.stop, len(x)), step):
-            A, _ = part.design(x[i:min(i + step, c.stop)], y[i:min(i + step, c.stop)], weights)
-            sumsq += (A * A).sum(dim=0)
-    solver = StreamingQR(part.columns, part.rhs, sumsq.sqrt(), rcond)
-    for c in chunks:
-        solver.add(*design(c))
-        bar.update(len(x[c]))
+    plain = StreamingQR(part.columns, part.rhs)
+    for start in range(0, len(x), states):
+        stop = min(start + states, len(x))
+        pieces = [part.design(x[i:min(i + step, stop)], y[i:min(i + step, stop)], weights)
+                  for i in range(start, stop, step)]
+        if len(pieces) == 1:
+            plain.add(*pieces[0])
+        else:
+            plain.add(torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces]))
+        del pieces
+        bar.advance(stop - start)
+    R = plain.factor
+    solver = StreamingQR(part.columns, part.rhs, R[:, :part.columns].norm(dim=0), rcond)
+    solver.add(R[:, :part.columns], R[:, part.columns:], rows=plain.rows)
     return solver
 
 
@@ -89,7 +89,7 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
     step = max(1, chunk_rows(M, m))
     for i in range(0, len(x), step):
         stage.add(slopes(x[i:i + step]), Y[i:i + step])
-        bar.update(len(x[i:i + step]))
+        bar.advance(len(x[i:i + step]))
     R = stage.factor
     Rs, Z, tail = R[:M, :M], R[:M, M:], R[M:, M:]
     if dense:
@@ -111,20 +111,18 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
     return solver
 
 
-def _draw(part, fit: str, x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator, values) -> None:
-    """Set a sampled layer's neurons from the states this part reads (SWIM supervised by ``values``,
-    the function's values, where the part takes them: H for an HNN, dx/dt for a field)."""
+def _draw(part, sampler, x: torch.Tensor, y: torch.Tensor, rng: np.random.Generator, values) -> None:
+    """Set a drawn layer's neurons from the states this part reads by ``sampler`` (the fit row's; SWIM
+    supervised by ``values``, the function's values, where the part takes them: H for an HNN, dx/dt for a
+    field; ELM reads none)."""
     z = part.inputs(x).numpy()
-    if fit == "elm":
-        part.features.set(*elm(z, part.features.width, rng))
-        return
     supervise = (values if values is not None else y.numpy() if part.rhs > 1 else None) if part.supervised else None
-    part.features.set(*swim(z, part.features.width, rng, supervise))
+    part.features.set(*sampler(z, part.features.width, rng, supervise))
 
 
-def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", seed: int = 0, rcond=RCOND,
-          threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None, progress: bool | None = None
-          ) -> dict:
+def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", seed: int = RunSettings.seed,
+          rcond=RunSettings.fit_rcond, threshold: float = RunSettings.library_threshold, loss_weights=None,
+          values=None, anchor=None, progress: bool | None = None) -> dict:
     """Fit ``model`` (``hnn.fits.build``'s, of fit ``fit``) to ``dxdt`` at ``x`` ``(rows, dim)`` in place.
 
     ``seed`` draws the sampled neurons; ``rcond``: the ridge relative to the design's unit-norm columns, or
@@ -149,23 +147,20 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
     if values is not None:
         values = np.asarray(values, dtype=np.float64).reshape(len(x), -1)
     weights = None if loss_weights is None else torch.as_tensor(loss_weights, dtype=torch.float64)
-    if progress is None:
-        progress = sys.stderr.isatty()
     info = {"fit": fit, "rows": len(x), "seed": seed}
     rng = np.random.default_rng(seed)
     tic = time.perf_counter()
-    if fit == "sindy":
-        from .sindy import fit_sindy
-        info.update(fit_sindy(model, x.numpy(), dxdt.numpy(), threshold))
+    if row.solve.whole is not None:         # a strategy of the whole model (SINDy's pysindy)
+        info.update(row.solve.whole(model, x, dxdt, threshold))
     else:
         parts = model.parts()
-        with tqdm(total=len(x) * len(parts), desc=f"fit {fit}", disable=not progress, leave=False) as bar:
+        with Ticker(len(x) * len(parts), f"fit {fit}", progress, unit="state") as bar:
             for part in parts:
-                if isinstance(part.features, TanhFeatures):
-                    _draw(part, fit, x, dxdt, rng, values)
+                if part.features is not None and part.features.drawn:
+                    _draw(part, row.sampler, x, dxdt, rng, values)
                 solver = _stream(part, x, dxdt, weights, RIDGES[0] if rcond == "auto" else rcond, bar)
                 ridge = solver.ridge() if rcond == "auto" else None
-                part.assign(solver.sparse(threshold, ridge) if row.features == "library" else solver.solve(ridge))
+                part.assign(row.solve.coefficients(solver, threshold, ridge))
                 if ridge is not None:
                     info.setdefault("ridge", {})[part.name] = [float(r) for r in ridge]
         info["rcond"] = rcond
@@ -176,8 +171,9 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
                         dtype=torch.float64)
         model.anchor(x0, anchor[1])
     seconds = time.perf_counter() - tic
-    if row.features == "library":
+    if row.solve.sparse:        # some features kept, the rest dropped: how many, and the equation they make
         info["terms"] = int(sum(int((p != 0).sum()) for name, p in model.named_parameters() if "coef" in name))
+    if row.prints_equation:
         info["equation"] = model.equation()
     stats = {"train_loss": [derivative_mse(model, x, dxdt)[0]], "test_loss": [], "test_steps": [], "seconds": seconds,
              "fit": info}
@@ -188,16 +184,21 @@ def solve(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", see
     return stats
 
 
-def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim", width: int = 200,
-                      degree: int = 3, frequencies: int = 1, seed: int = 0, rcond=RCOND,
-                      threshold: float = THRESHOLD, loss_weights=None, values=None, anchor=None,
-                      units: str = "auto", progress: bool | None = None):
+def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str = "swim",
+                      width: int = RunSettings.hidden_dim, degree: int = RunSettings.library_degree,
+                      frequencies: int = RunSettings.library_frequencies, seed: int = RunSettings.seed,
+                      rcond=RunSettings.fit_rcond, threshold: float = RunSettings.library_threshold,
+                      loss_weights=None, values=None, anchor=None, units: str = RunSettings.units,
+                      bodies=None, progress: bool | None = None):
     """``(model, stats)``: a model of ``dxdt`` at ``x`` ``(rows, 2n)`` found by one least-squares solve.
 
-    ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``; ``hnn.fits.FITS[fit].kinds``), built here
-    with ``width`` sampled neurons (``fit='swim'`` or ``'elm'``) or the library of polynomials to ``degree``
-    (H's to ``degree + 1``) and trig terms of q to ``frequencies`` (``'library'``, ``'sindy'``); or a model
-    ``hnn.fits.build`` made (wrap it in ``hnn.units.Rescaled`` to let ``units`` rescale it).
+    ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``, ``'pairwise'``; ``hnn.fits.FITS[fit].kinds``),
+    built here with ``width`` sampled neurons (``fit='swim'`` or ``'elm'``) or the library of polynomials to
+    ``degree`` (H's to ``degree + 1``) and trig terms of q to ``frequencies`` (``'library'``, ``'sindy'``); or
+    a model ``hnn.fits.build`` made (wrap it in ``hnn.units.Rescaled`` to let ``units`` rescale it).
+    ``bodies``: the pair kind's layout of ``x``'s columns (an ``hnn.bodies.Bodies`` or its dict: count, dimension,
+    order), which it needs; a task's is its Config's ``BODIES``. The pair kind reads distances, which no
+    scale per column keeps: it fits the data as they are, and refuses data the units rule would rescale.
 
     ``units``: ``hnn.train``'s rule, by the same function (``hnn.units.in_canonical_units``): ``'auto'`` fits a
     kind named here in the canonical units of ``x``, ``dxdt`` where their sizes lie far from 1 (or their
@@ -218,8 +219,19 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
     if plain:
         _check_kind(model, fit)
         x = check_data("x", x, dtype=torch.float64)
-        model = Rescaled(build(ModelSpec(kind=model, input_dim=x.shape[1], hidden_dim=width, fit=fit,
-                                         library_degree=degree, library_frequencies=frequencies)))
+        kind = model
+        model = build(ModelSpec(kind=kind, input_dim=x.shape[1], hidden_dim=width, fit=fit, library_degree=degree,
+                                library_frequencies=frequencies, bodies=_layout(kind, bodies)))
+        why = refusal(model)
+        if why is None:
+            model = Rescaled(model)
+        else:
+            reason = units_reason(units, x, check_data("dxdt", dxdt, width=x.shape[1], dtype=torch.float64))
+            if reason is not None:
+                raise ValueError(f"units={units!r}: x and dxdt are {reason}, and the {kind} kind cannot be "
+                                 f"rescaled: {why}; give the data in units near 1, or pass units='off' to fit them "
+                                 "as they are")
+            units = "off"
     dim = model.input_dim
     given = [None if a is None else check_data(name, a, width=dim, dtype=torch.float64)
              for name, a in (("x", x), ("dxdt", dxdt), ("test_x", test_x), ("test_dxdt", test_dxdt))]
@@ -247,6 +259,24 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
     return model, stats
 
 
+def _layout(kind: str, bodies):
+    """``bodies`` as a ``ModelSpec`` carries it (a dict), or None; a ValueError naming the missing layout and the fix
+    where the kind reads bodies and none is given, or where one is given to a kind that reads none."""
+    from ..bodies import Bodies
+
+    reads = fitted_model(kind).reads_bodies
+    if bodies is None:
+        if reads:
+            raise ValueError(f"the {kind} kind reads x as bodies and needs their layout: pass bodies="
+                             "hnn.bodies.Bodies(count=N, dim=d) (N bodies in d dimensions, x's columns "
+                             "[q of every body, then p]; order='body' where each body's coordinates sit together)")
+        return None
+    if not reads:
+        raise ValueError(f"bodies= is the layout of a kind that reads bodies (pairwise); the {kind} kind reads x as "
+                         "it is: drop bodies")
+    return Bodies.from_dict(bodies).to_dict()
+
+
 def _check_kind(kind: str, fit: str) -> None:
     """A ValueError in ``fit_least_squares``' words where ``kind`` is no model kind, or one ``fit`` cannot solve."""
     from ..kinds import MODEL_KINDS
@@ -258,7 +288,8 @@ def _check_kind(kind: str, fit: str) -> None:
         close = difflib.get_close_matches(kind, list(MODEL_KINDS), n=1, cutoff=0.6)
         raise ValueError(f"unknown kind {kind!r}; the kinds are {', '.join(MODEL_KINDS)}, and fit={fit!r} fits "
                          f"{', '.join(takes)}" + (f"; did you mean {close[0]!r}?" if close else ""))
-    why = ("fits dx/dt with no H: pass 'baseline'" if fit == "sindy" else
+    only = get_fit(fit).only
+    why = (f"{only}: pass {' or '.join(repr(k) for k in takes)}" if only else
            f"solves the last weights of {', '.join(takes)}, whose field is linear in them, and the {kind} kind's is "
            f"not: pass one of those kinds, or train {kind!r} with hnn.train")
     raise ValueError(f"fit={fit!r} {why}")

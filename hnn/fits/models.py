@@ -20,8 +20,9 @@ import torch
 from torch import nn
 
 from ..interface import ANY_STATE, UNIT_MASS, Model
+from .base import Features
 from .equations import Frame, terms, written
-from .features import Library, TanhFeatures
+from .features import Library
 
 
 def _frozen(*shape) -> nn.Parameter:
@@ -30,7 +31,8 @@ def _frozen(*shape) -> nn.Parameter:
 
 @dataclass
 class Part:
-    """One least-squares problem of a fitted model: ``features`` reading ``inputs(x)`` of the states;
+    """One least-squares problem of a fitted model: ``features`` reading ``inputs(x)`` of the states (None: the
+    columns are no feature set's, as a pair model's inverse masses);
     ``design(x, y, weights)``, the rows ``(A (rows, columns), Y (rows, rhs))`` of a chunk of states ``x`` and
     their ``y`` = dx/dt (``weights`` ``(dim,)`` or None: each component's weight in the loss);
     ``assign(coef (columns, rhs))`` puts the solution in place; ``supervised``: the sampler may draw
@@ -39,7 +41,7 @@ class Part:
     ``basis(x) * V[:, j]`` (a sampled layer: its slopes, ``V`` ``(K, m)``) or ``basis(x) @ V[:, :, j]`` (a
     library: the functions its derivatives are made of, ``V`` ``(M, K, m)``; ``gradient_factors()`` of
     ``hnn.fits.features``); ``hnn.fits.fitting`` solves it without building the rows."""
-    features: nn.Module
+    features: Features | None
     inputs: Callable
     design: Callable
     assign: Callable
@@ -58,12 +60,28 @@ def _weighted(A: torch.Tensor, Y: torch.Tensor, weights, rows_per_state: int, co
     return A * w, Y * w
 
 
+def _state_width(spec, even: bool = True) -> int:
+    """``spec.input_dim``, or a ValueError where it is no state x = [q, p] (of even width where ``even``)."""
+    dim = spec.input_dim
+    if not isinstance(dim, int) or dim < 2 or (even and dim % 2):
+        raise ValueError(f"--fit {spec.fit} needs the state's width x = [q, p], got input_dim={dim!r}")
+    return dim
+
+
 class FittedHNN(Model):
     """H(x) = phi(x) . coef + offset over ``features`` (sampled neurons or a library of H's terms)."""
+    reads_bodies = False        # the fitted models' declaration: x read as it is (the pair model reads bodies)
     conservative = True
     takes = UNIT_MASS
+    kind = "hnn"
 
-    def __init__(self, input_dim: int, features: nn.Module):
+    @classmethod
+    def from_spec(cls, spec, features: Callable) -> FittedHNN:
+        """The untrained model of ``spec`` over ``features('hamiltonian', width)`` (the fit row's, made)."""
+        dim = _state_width(spec)
+        return cls(dim, features("hamiltonian", dim))
+
+    def __init__(self, input_dim: int, features: Features):
         super().__init__()
         if input_dim % 2:
             raise ValueError(f"a fitted HNN reads x = [q, p] of even width, got {input_dim}")
@@ -90,7 +108,10 @@ class FittedHNN(Model):
             self.coef.copy_(coef[:, 0])
 
     def _factored(self):
-        basis, G = self.features.gradient_factors()
+        factors = self.features.gradient_factors()
+        if factors is None:
+            return None
+        basis, G = factors
         # d/dt of component j is (J grad H)_j: the gradient's factors with J applied on their last axis
         return basis, torch.cat([G[..., self.n:], -G[..., :self.n]], dim=-1), list(range(self.input_dim))
 
@@ -117,8 +138,16 @@ class FittedSeparable(Model):
     conservative = True
     separable = True
     takes = UNIT_MASS
+    kind = "separable"
+    reads_bodies = False
 
-    def __init__(self, input_dim: int, kinetic: nn.Module, potential: nn.Module):
+    @classmethod
+    def from_spec(cls, spec, features: Callable) -> FittedSeparable:
+        """The untrained model of ``spec`` over ``features('kinetic', n)`` and ``features('potential', n)``."""
+        dim = _state_width(spec)
+        return cls(dim, features("kinetic", dim // 2), features("potential", dim // 2))
+
+    def __init__(self, input_dim: int, kinetic: Features, potential: Features):
         super().__init__()
         if input_dim % 2:
             raise ValueError(f"a fitted separable HNN reads x = [q, p] of even width, got {input_dim}")
@@ -159,7 +188,10 @@ class FittedSeparable(Model):
                 coef.copy_(solution[:, 0])
 
         def factored():
-            basis, G = features.gradient_factors()
+            factors = features.gradient_factors()
+            if factors is None:
+                return None
+            basis, G = factors
             return (lambda x: basis(x[:, half])), sign * G, list(rows)
 
         return Part(features, lambda x: x[:, half], design, assign, features.width, name="T" if kinetic else "V",
@@ -188,17 +220,26 @@ class FittedSeparable(Model):
 class FittedField(Model):
     """dx/dt = phi(x) coef + bias: a field with no H (the baseline's, SINDy's)."""
     takes = ANY_STATE
+    kind = "baseline"
+    reads_bodies = False
 
-    def __init__(self, input_dim: int, features: nn.Module):
+    @classmethod
+    def from_spec(cls, spec, features: Callable) -> FittedField:
+        """The untrained model of ``spec`` over ``features('field', width)``."""
+        dim = _state_width(spec, even=False)
+        return cls(dim, features("field", dim))
+
+    def __init__(self, input_dim: int, features: Features):
         super().__init__()
         self.input_dim = input_dim
         self.features = features
-        # sampled neurons get a bias row of their own; a library's constant term is one of its terms
-        self.has_bias = isinstance(features, TanhFeatures)
+        # features with no constant among them (sampled neurons) get a bias row of their own; a library's
+        # constant term is one of its terms
+        self.has_bias = not features.constant
         self.coef, self.bias = _frozen(features.width, input_dim), _frozen(input_dim)
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
-        if isinstance(self.features, Library):      # only the terms some component uses
+        if self.features.subset:      # only the terms some component uses
             keep = (self.coef != 0).any(dim=1)
             return self.features(x, keep) @ self.coef[keep] + self.bias
         return self.features(x) @ self.coef + self.bias
@@ -231,9 +272,10 @@ class FittedField(Model):
         return "; ".join(lines)
 
 
-def _library(features) -> Library:
-    """A fit's features if they are a library's written-out terms, else a ValueError (sampled neurons have no formula)."""
-    if not isinstance(features, Library):
+def _library(features: Features) -> Library:
+    """A fit's features if they are formulas (a library's written-out terms, which ``hnn.fits.equations``
+    expands), else a ValueError (sampled neurons have no formula)."""
+    if not features.formula:
         raise ValueError(f"a fit over {type(features).__name__} has no equation: only a library's terms print as one "
                          "(fit='library' or 'sindy')")
     return features

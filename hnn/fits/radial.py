@@ -21,7 +21,7 @@ from torch import nn
 from ..bodies import Bodies
 from ..interface import Model
 from ..models.pair import check_pair_memory, pair_gradient, pair_index, separations
-from .features import TanhFeatures
+from .base import Features
 from .models import Part
 
 # name -> (V's term, its derivative d/dr): the radial library
@@ -38,28 +38,35 @@ RADIAL_TERMS = {
 }
 
 
-class RadialLibrary(nn.Module):
-    """The radial terms ``RADIAL_TERMS``: values and d/dr ``(rows, terms)`` at distances ``r`` ``(rows, 1)``."""
+class RadialLibrary(Features):
+    """The radial terms ``RADIAL_TERMS``: values and d/dr ``(rows, terms)`` at distances ``r`` ``(rows, 1)``; the
+    ``library`` fit's features of the ``radial`` form (a pair potential V(r)), printed as its formula."""
+    forms = ("radial",)
+    formula = True
 
     def __init__(self):
         super().__init__()
-        self.width = len(RADIAL_TERMS)
+        self.width, self.in_dim = len(RADIAL_TERMS), 1
+
+    @classmethod
+    def make(cls, spec, form: str, in_dim: int) -> RadialLibrary:
+        """Every term of ``RADIAL_TERMS`` (the library is fixed: no setting of ``spec`` changes it)."""
+        return cls()
 
     def forward(self, r: torch.Tensor) -> torch.Tensor:
         return torch.cat([value(r) for value, _ in RADIAL_TERMS.values()], dim=1)
 
-    def derivative(self, r: torch.Tensor) -> torch.Tensor:
-        return torch.cat([slope(r) for _, slope in RADIAL_TERMS.values()], dim=1)
+    def jacobian(self, r: torch.Tensor) -> torch.Tensor:
+        """d phi_k / dr ``(rows, terms, 1)``."""
+        return torch.cat([slope(r) for _, slope in RADIAL_TERMS.values()], dim=1)[:, :, None]
 
-    def names(self) -> list[str]:
+    def names(self, columns: list[str] | None = None) -> list[str]:
         return list(RADIAL_TERMS)
 
 
-def _derivative(features: nn.Module, r: torch.Tensor) -> torch.Tensor:
-    """d phi_k / dr ``(rows, width)`` at ``r`` ``(rows, 1)``."""
-    if isinstance(features, TanhFeatures):
-        return features.slopes(r) * features.weight[:, 0]
-    return features.derivative(r)
+def _derivative(features: Features, r: torch.Tensor) -> torch.Tensor:
+    """d phi_k / dr ``(rows, width)`` at ``r`` ``(rows, 1)``: any radial feature set's one column of its Jacobian."""
+    return features.jacobian(r)[:, :, 0]
 
 
 def _frozen(*shape) -> nn.Parameter:
@@ -72,7 +79,10 @@ class FittedPair(Model):
     conservative = True
     separable = True
 
-    def __init__(self, bodies: Bodies, features: nn.Module):
+    kind = "pairwise"
+    reads_bodies = True         # x's columns as the bodies' (``bodies``), any count of them
+
+    def __init__(self, bodies: Bodies, features: Features):
         super().__init__()
         self.bodies = Bodies.from_dict(bodies)
         if self.bodies.external:
@@ -82,6 +92,16 @@ class FittedPair(Model):
         self.features = features
         self.coef, self.offset = _frozen(features.width), _frozen(())
         self.inverse_mass = _frozen(self.bodies.num_species)
+
+    @classmethod
+    def from_spec(cls, spec, features) -> FittedPair:
+        """The untrained model of ``spec`` (kind ``pairwise``, its ``bodies`` the task's layout) over
+        ``features('radial', 1)`` (the fit row's radial features); zeros until solved."""
+        if spec.bodies is None:
+            raise ValueError("the pairwise kind reads the state as bodies and needs their layout (ModelSpec.bodies): "
+                             "a task declares it (its Config's BODIES = hnn.bodies.Bodies(...)), "
+                             "hnn.fit_least_squares takes it as bodies=hnn.bodies.Bodies(count=N, dim=d)")
+        return cls(spec.bodies, features("radial", 1))
 
     def _geometry(self, q_half: torch.Tensor):
         q = self.bodies.bodywise(q_half)
@@ -157,7 +177,7 @@ class FittedPair(Model):
         return assign
 
     def parts(self) -> list[Part]:
-        return [Part(nn.Identity(), lambda x: x, self._kinetic_design, self._assign(self.inverse_mass),
+        return [Part(None, lambda x: x, self._kinetic_design, self._assign(self.inverse_mass),
                      self.bodies.num_species, name="T"),
                 Part(self.features, self._distances, self._potential_design, self._assign(self.coef),
                      self.features.width, name="V")]
@@ -177,9 +197,10 @@ class FittedPair(Model):
         sum of the library's nonzero terms (a sampled fit's neurons have no formula: their count)."""
         masses = ", ".join(f"{float(m):.{digits}g}" for m in self.masses())
         ending = f", m = {masses}" + (f" by species {list(self.bodies.species)}" if self.bodies.species else "")
-        if isinstance(self.features, TanhFeatures):
-            return f"H = sum p^2/(2 m) + sum V(r), V a sum of {self.features.width} tanh(w r + b){ending}"
-        pairs = [(float(c), name) for c, name in zip(self.coef.tolist(), self.features.names()) if c != 0]
+        if not self.features.formula:
+            return f"H = sum p^2/(2 m) + sum V(r), V a sum of {self.features.width} {self.features.describe('r')}" \
+                   f"{ending}"
+        pairs = [(float(c), name) for c, name in zip(self.coef.tolist(), self.features.names(["r"])) if c != 0]
         text = "".join(f" {'-' if c < 0 else '+'} {abs(c):.{digits}g} sum {name}" for c, name in pairs)
         return f"H = sum p^2/(2 m){text}{ending}"
 
@@ -190,14 +211,3 @@ def _weighted(A, Y, weights, components, per_state):
         return A, Y
     w = torch.as_tensor(weights, dtype=A.dtype)[list(components)].sqrt().repeat(len(A) // per_state)[:, None]
     return A * w, Y * w
-
-
-def build_pair(spec) -> FittedPair:
-    """The untrained fitted pair model of ``spec`` (a ``hnn.specs.ModelSpec`` of kind ``pairwise``): the radial
-    library for ``fit='library'``, else ``hidden_dim`` sampled radial neurons; zeros until solved."""
-    if spec.bodies is None:
-        raise ValueError("the pairwise kind reads the state as bodies and needs the task's layout (ModelSpec.bodies): "
-                         "give the task's Config a BODIES = hnn.bodies.Bodies(...)")
-    if spec.fit == "library":
-        return FittedPair(spec.bodies, RadialLibrary())
-    return FittedPair(spec.bodies, TanhFeatures(spec.hidden_dim, 1))

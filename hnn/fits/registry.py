@@ -3,56 +3,93 @@
 ``adam`` is the training loop (``hnn.train``); every other row is one linear least-squares solve in
 float64 (``hnn.fits.fitting``) over features that are drawn or written out, never trained: the fitted
 field is linear in the last weights, so fitting dx/dt is one problem. A row declares the model kinds it
-applies to, the features it combines, the package it needs, and its prose; ``check`` refuses a run the
-fit cannot serve, naming the fix; ``build`` makes the untrained model of a run's ``ModelSpec`` (it also
-rebuilds a saved run's model for ``hnn.load_run``).
+applies to, the feature sets it combines (``hnn.fits.base.Features``), how their neurons are drawn, its
+solve (``hnn.fits.solves``), the package it needs, and its prose; ``check`` refuses a run the fit cannot
+serve, naming the fix; ``build`` makes the untrained model of a run's ``ModelSpec`` (it also rebuilds a
+saved run's model for ``hnn.load_run``).
+
+A new feature set is one module (its ``Features``) and one row here (or its class added to a row's
+``features``): ``build`` asks the row's sets for the form the kind reads (``hnn.fits.base.made``), and
+the solve does what the row and the features declare.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..names import FITS as NAMES
 from ..specs import ModelSpec
+from .base import made
+from .features import Library, TanhFeatures
+from .models import FittedField, FittedHNN, FittedSeparable
+from .radial import FittedPair, RadialLibrary
+from .sampling import elm, swim
+from .sindy import SindyLibrary
+from .solves import PLAIN, SINDY, THRESHOLDED, Solve
 
-# the kinds whose field is linear in the last layer's weights: H = phi . c (hnn), T + V (separable), phi C (baseline),
-# and the pair sum of V(r) = phi(r) . c with inverse masses (pairwise: hnn.fits.radial)
-LINEAR_KINDS = ("hnn", "separable", "baseline", "pairwise")
+# the fitted models, one a kind whose field is linear in the last layer's weights: H = phi . c (hnn), T + V
+# (separable), phi C (baseline), and the pair sum of V(r) = phi(r) . c with inverse masses (pairwise)
+FITTED_MODELS = (FittedHNN, FittedSeparable, FittedField, FittedPair)
+LINEAR_KINDS = tuple(model.kind for model in FITTED_MODELS)
 
 
 @dataclass(frozen=True)
 class Fit:
-    """A fit: ``kinds`` it applies to (None: every kind); ``features``: ``'swim'`` or ``'elm'`` (a sampled
-    tanh layer of ``--hidden_dim`` neurons), ``'library'`` (terms written out, sparse by thresholding),
-    or None (trained by Adam); ``package``: the optional package it imports (pip extra ``extra``);
-    ``line``: what it is, for readers; ``marker``: its points' marker in the studies' plots (a kind's colour
-    beside it says which model)."""
+    """A fit: ``kinds`` it applies to (None: every kind); ``features``: the feature sets it combines
+    (``hnn.fits.base.Features`` classes; a kind's model takes the first that stands for the form it reads:
+    a library of x's terms, or of a pair distance's); ``sampler``: how a drawn set's neurons come from
+    the data, ``(z (rows, in_dim), width, rng, values) -> (weight, bias)`` (``hnn.fits.sampling``);
+    ``solve``: how the least-squares problems become coefficients (``hnn.fits.solves``; None: trained by
+    Adam); ``only``: where the row takes fewer kinds than the linear ones, why (the fix: one of its
+    ``kinds``); ``package``: the optional package it imports (pip extra ``extra``); ``line``: what
+    it is, for readers; ``marker``: its points' marker in the studies' plots (a kind's colour beside it says
+    which model)."""
     name: str
     line: str
     kinds: tuple[str, ...] | None = LINEAR_KINDS
-    features: str | None = None
+    features: tuple = ()
+    sampler: Callable | None = None
+    solve: Solve | None = None
+    only: str | None = None
     package: str | None = None
     extra: str | None = None
     marker: str = "o"
 
+    def __post_init__(self):
+        drawn = any(features.drawn for features in self.features)
+        if (self.solve is None) != (not self.features) or drawn != (self.sampler is not None):
+            raise ValueError(f"fit {self.name!r}: a solved fit names its features and its solve, and a sampler "
+                             f"exactly where its features are drawn; got features={self.features}, "
+                             f"sampler={self.sampler}, solve={self.solve}")
+
     @property
     def solved(self) -> bool:
         """One linear solve (not a training loop): the run is a fit of dx/dt, in float64."""
-        return self.name != "adam"
+        return self.solve is not None
+
+    @property
+    def prints_equation(self) -> bool:
+        """Its models are sums of written-out terms (ours or SINDy's) that print as equations."""
+        return self.solved and all(features.formula for features in self.features)
 
 
 FITS: dict[str, Fit] = {
     "adam": Fit("adam", "the training loop: Adam on the kind's objective (hnn.train), the paper's", kinds=None),
     "swim": Fit("swim", "a hidden layer of --hidden_dim tanh neurons, each from a pair of training states "
-                        "(SWIM, Rahma, Datar & Dietrich 2024), and the last layer by least squares", features="swim",
-                marker="s"),
+                        "(SWIM, Rahma, Datar & Dietrich 2024), and the last layer by least squares",
+                features=(TanhFeatures,), sampler=swim, solve=PLAIN, marker="s"),
     "elm": Fit("elm", "a hidden layer of --hidden_dim tanh neurons drawn at random (an extreme learning machine), "
-                      "and the last layer by least squares", features="elm", marker="v"),
+                      "and the last layer by least squares", features=(TanhFeatures,), sampler=elm, solve=PLAIN,
+               marker="v"),
     "library": Fit("library", "H (or, for the baseline, dx/dt) as a sparse sum of terms: polynomials of q and p, "
-                              "sines and cosines of q and their products with p; least squares thresholded as "
-                              "SINDy's STLSQ, so the model prints as an equation", features="library", marker="^"),
+                              "sines and cosines of q and their products with p (for the pair kind, powers of the "
+                              "distance r); least squares thresholded as SINDy's STLSQ, so the model prints as an "
+                              "equation", features=(Library, RadialLibrary), solve=THRESHOLDED, marker="^"),
     "sindy": Fit("sindy", "pysindy's SINDy: dx/dt = Theta(x) Xi over polynomials and sines and cosines of q, its "
                           "STLSQ; no H (--model baseline); rolled out and measured as our models are",
-                 kinds=("baseline",), features="library", package="pysindy", extra="sindy", marker="D"),
+                 kinds=("baseline",), features=(SindyLibrary,), solve=SINDY,
+                 only="fits dx/dt = Theta(x) Xi with no H", package="pysindy", extra="sindy",
+                 marker="D"),
 }
 if tuple(FITS) != NAMES:
     raise ImportError(f"hnn.names.FITS lists {NAMES}, hnn.fits.FITS has rows {tuple(FITS)}")
@@ -78,7 +115,7 @@ def check(kind: str, fit: str, *, coordinates: str = "canonical", objective: str
                          "solve can find (the features would need coordinates the frames do not give); train it "
                          "with --fit adam")
     if kind not in row.kinds:
-        why = ("fits dx/dt = Theta(x) Xi with no H: pass --model baseline" if fit == "sindy" else
+        why = (f"{row.only}: pass --model {' or '.join(row.kinds)}" if row.only else
                f"solves the last weights of the {', '.join(row.kinds)} kinds, whose field is linear in them; "
                f"the {kind} kind's is not: train it with --fit adam, or pick one of those kinds")
         raise ValueError(f"{flag} {why}")
@@ -103,34 +140,19 @@ def check_config(config, coordinates: str = "canonical") -> Fit:
                  input_noise=getattr(config, "input_noise", 0.0))
 
 
+def fitted_model(kind: str):
+    """The fitted model class of ``kind`` (one of ``LINEAR_KINDS``), or a ValueError naming them."""
+    for model in FITTED_MODELS:
+        if model.kind == kind:
+            return model
+    raise ValueError(f"no fitted model of kind {kind!r}; a least-squares fit makes {', '.join(LINEAR_KINDS)}")
+
+
 def build(spec: ModelSpec):
-    """The untrained fitted model of ``spec`` (its ``fit``, ``kind``, ``input_dim``, ``hidden_dim`` and the
-    library's ``library_degree`` and ``library_frequencies``): zeros until ``hnn.fits.fitting.solve`` fits it
-    (``hnn.kinds.model_from_spec`` builds it for a run, and again for ``hnn.load_run``)."""
-    from .features import Library, TanhFeatures, terms
-    from .models import FittedField, FittedHNN, FittedSeparable
+    """The untrained fitted model of ``spec`` (its ``fit``, ``kind``, ``input_dim``, ``hidden_dim``, the
+    library's ``library_degree`` and ``library_frequencies``, the pair kind's ``bodies``): the kind's fitted
+    model (``FITTED_MODELS``) over the row's features for the forms it reads; zeros until
+    ``hnn.fits.fitting.solve`` fits it (``hnn.kinds.model_from_spec`` builds it for a run, and again for
+    ``hnn.load_run``)."""
     row = check(spec.kind, spec.fit)
-    if spec.kind == "pairwise":         # radial features of the pairs' distances (hnn.fits.radial)
-        from .radial import build_pair
-        return build_pair(spec)
-    dim, n = spec.input_dim, (spec.input_dim or 0) // 2
-    if not isinstance(dim, int) or dim < 2 or (spec.kind != "baseline" and dim % 2):
-        raise ValueError(f"--fit {spec.fit} needs the state's width x = [q, p], got input_dim={dim!r}")
-
-    def library(width: int, form: str):
-        # SINDy's library as a user would write it in pysindy: polynomials and sines/cosines of q, no products
-        return Library(terms(width, form, spec.library_degree, spec.library_frequencies,
-                             products=spec.fit != "sindy"), width)
-
-    if row.features == "library":
-        if spec.kind == "hnn":
-            return FittedHNN(dim, library(dim, "hamiltonian"))
-        if spec.kind == "separable":
-            return FittedSeparable(dim, library(n, "kinetic"), library(n, "potential"))
-        return FittedField(dim, library(dim, "field"))
-    width = spec.hidden_dim
-    if spec.kind == "hnn":
-        return FittedHNN(dim, TanhFeatures(width, dim))
-    if spec.kind == "separable":
-        return FittedSeparable(dim, TanhFeatures(width, n), TanhFeatures(width, n))
-    return FittedField(dim, TanhFeatures(width, dim))
+    return fitted_model(spec.kind).from_spec(spec, lambda form, in_dim: made(row.features, spec, form, in_dim))

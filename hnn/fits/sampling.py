@@ -55,8 +55,9 @@ def swim(x: np.ndarray, width: int, rng: np.random.Generator, values: np.ndarray
     return w, -(w * a).sum(axis=1) - SPREAD
 
 
-def elm(x: np.ndarray, width: int, rng: np.random.Generator):
-    """``(weight (width, in_dim), bias (width,))``: w ~ N(0, I), b ~ U[min x, max x] over every entry of ``x``."""
+def elm(x: np.ndarray, width: int, rng: np.random.Generator, values: np.ndarray | None = None):
+    """``(weight (width, in_dim), bias (width,))``: w ~ N(0, I), b ~ U[min x, max x] over every entry of ``x``;
+    ``values`` (a sampler's signature, ``swim``'s): unread, an ELM draws without looking at the function."""
     x = np.asarray(x, dtype=np.float64)
     low, high = float(x.min()), float(x.max())
     weight = rng.normal(size=(width, x.shape[1]))

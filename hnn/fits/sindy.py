@@ -20,6 +20,13 @@ from .models import FittedField
 MATCH = 1e-9        # a pysindy column and our term agree to this (relative) at every probe state
 
 
+class SindyLibrary(Library):
+    """SINDy's library as a user would write it in pysindy: dx/dt's terms (the ``field`` form), polynomials of
+    every column and sines and cosines of q, no products of the two (the ``sindy`` fit's features)."""
+    forms = ("field",)
+    products = False
+
+
 def pysindy():
     """The pysindy module, or a ValueError naming the extra that installs it."""
     try:
@@ -65,7 +72,7 @@ def _match(theirs: np.ndarray, ours: np.ndarray) -> list[int]:
 def fit_sindy(model: FittedField, x: np.ndarray, dxdt: np.ndarray, threshold: float) -> dict:
     """Fit ``model`` (a ``FittedField`` over the SINDy library, ``hnn.fits.build(fit='sindy')``) with pysindy
     on states ``x`` and their ``dxdt`` ``(rows, 2n)``; returns what to record (pysindy's version, its terms)."""
-    if not (isinstance(model, FittedField) and isinstance(model.features, Library)):
+    if not (isinstance(model, FittedField) and model.features.formula):
         raise ValueError("the sindy fit fills a FittedField over the field library: build it with "
                          "hnn.fits.build(ModelSpec(kind='baseline', fit='sindy', ...))")
     ps = pysindy()

@@ -136,11 +136,21 @@ class _Dopri5:
         return stage, np.sqrt(np.add.reduce(err, 1) / err.shape[1]).astype(np.float64, copy=False), 6
 
     def dense(self, field, y, y_new, hx, work: Stages):
-        Q = torch.mm(self.PT, work.flat).numpy().reshape(4, *y.shape)
+        # Q as (4, dim, rows): a row's powers of sigma then scale a contiguous run (the (rows, dim) layout
+        # broadcast them over runs of dim, several times slower on a few states; the same products)
+        Q = torch.mm(self.PT, work.flat).numpy().reshape(4, *y.shape).transpose(0, 2, 1)
 
         def evaluate(sigma, j):
-            powers = np.stack([sigma, sigma ** 2, sigma ** 3, sigma ** 4])       # (4, n)
-            return y[j] + hx[j] * (powers[:, :, None] * Q[:, j]).sum(0)
+            q = Q.take(j, 2)            # (4, dim, n); take, not q[..., j]: the same rows without the indexing's overhead
+            # sum_m sigma^(m+1) Q[m] in the order numpy's sum over the powers took (np.stack's, several times the sum)
+            value = sigma * q[0]
+            value += sigma ** 2 * q[1]
+            value += sigma ** 3 * q[2]
+            value += sigma ** 4 * q[3]
+            value = value.T
+            value *= hx.take(j, 0)
+            value += y.take(j, 0)
+            return value
         return evaluate, 0
 
 
@@ -195,6 +205,9 @@ def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
     tolerances it takes several times fewer steps than dopri5 for the same error.
     """
     return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
+
+
+_largest = np.maximum.reduce       # a.max() as its ufunc computes it (NaN wins), without the method's wrapper
 
 
 @functools.lru_cache(maxsize=None)
@@ -278,24 +291,26 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
             work = Stages.empty(scheme.stages, live, dim, dtype)
             finished = 0
         K = work.K
-        gap = t_end - tc
-        np.abs(gap, out=gap)
+        gap = np.abs(t_end - tc)
         clipped = prop >= gap                         # this step ends on the last time
         size = np.minimum(prop, gap)                  # |h|
         if finished:
             size[done] = 0.0
         h = size * direction if direction < 0 else size
-        hx = h.astype(dtype, copy=False)[:, None]
+        # each row's step on each of its components, (rows, dim): a product with it then runs over contiguous
+        # elements (a (rows, 1) column broadcast over a few components costs several times as much; the same bits)
+        hx = h.astype(dtype, copy=False)[:, None].repeat(dim, 1)
         K[0] = k1
         # the tableau products in torch (work.combine): its small products give each row the same bits
         # whatever the other rows (numpy's BLAS does not), so a row's path does not depend on the batch
         y_new, err_norm, calls = scheme.attempt(field, y, hx, work, scale_tol)
         nfev += calls
         # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm: every row
-        # passes both tests when the largest of each does (NaN fails a comparison)
-        calm = not finished and float(abs_new.max()) <= bound and float(err_norm.max()) <= 1.0
+        # passes both tests when the largest of each does (NaN fails a comparison). The ufuncs' own reduce and
+        # count_nonzero below, not the methods max and any: the same answers without their Python wrappers
+        calm = not finished and float(_largest(abs_new, None)) <= bound and float(_largest(err_norm)) <= 1.0
         if not calm:
-            largest = abs_new.max(1)
+            largest = _largest(abs_new, 1)
             finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
             over = err_norm > 1
         if not calm and (over.any() or not finite.all()):          # else no row blew up or stalled: skip the masks
@@ -313,32 +328,44 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         if direction < 0:
             ahead *= direction
         due = ahead <= near if calm else accept & (ahead <= near)
-        if due.any():
-            # every output time inside (tc, t_new] of an accepted row, from the dense output, all at once:
-            # each due row's times from nxt on that pass the test (monotone in the index); searchsorted
-            # on the times in the direction of travel bounds them, with room for its rounding
-            i = np.flatnonzero(due)
+        if np.count_nonzero(due):
+            # every output time inside (tc, t_new] of an accepted row, from the dense output, all at once
+            i = due.nonzero()[0]
             # a field that ties a row to its position (drop_finished=False) is given every row in every call,
             # the dense stages' too (dop853's): at, the due rows' places among the rows it was given
             # (a dense output that calls f for no further stages is read from every row's stages: no copy)
             if drop_finished and scheme.dense_stages and len(i) < len(y):
                 at = np.arange(len(i))
-                evaluate, calls = scheme.dense(field, y[i], y_new[i], hx[i], Stages(np.ascontiguousarray(K[:, i])))
+                evaluate, calls = scheme.dense(field, y.take(i, 0), y_new.take(i, 0), hx.take(i, 0), Stages(K.take(i, 1)))
             else:
                 at = i
                 evaluate, calls = scheme.dense(field, y, y_new, hx, work)
             nfev += calls
-            first = nxt[i]
-            counts = np.minimum(np.searchsorted(forward, direction * t_new[i] + 2 * near, side="right"), num_t) - first
-            j = np.repeat(np.arange(len(i)), counts)                # a due row (index into i) per output
-            k = np.arange(len(j)) + np.repeat(first - (np.cumsum(counts) - counts), counts)     # its output time
-            inside = direction * (t[k] - t_new[i[j]]) <= near
-            j, k = j[inside], k[inside]
-            ij = i[j]
-            sigma = ((t[k] - tc[ij]) / h[ij]).astype(dtype)
-            out[rows[ij], k] = evaluate(sigma, at[j])
-            nxt[i] += np.bincount(j, minlength=len(i))
-            t_next[i] = t[np.minimum(nxt[i], num_t - 1)]
+            first = nxt.take(i)
+            after = first + 1
+            following = t.take(np.minimum(after, num_t - 1))      # each due row's next output time (or the last)
+            beyond = following - t_new.take(i)
+            if direction < 0:
+                beyond *= direction
+            if np.count_nonzero((beyond <= near) & (after < num_t)):
+                # some row's step holds several output times: each due row's times from nxt on that pass
+                # the test (monotone in the index); searchsorted on the times in the direction of travel
+                # bounds them, with room for its rounding
+                counts = np.minimum(forward.searchsorted(direction * t_new.take(i) + 2 * near, "right"), num_t) - first
+                j = np.repeat(np.arange(len(i)), counts)                # a due row (index into i) per output
+                k = np.arange(len(j)) + np.repeat(first - (np.cumsum(counts) - counts), counts)     # its output time
+                inside = direction * (t[k] - t_new[i[j]]) <= near
+                j, k = j[inside], k[inside]
+                ij = i[j]
+                sigma = ((t[k] - tc[ij]) / h[ij]).astype(dtype, copy=False)
+                out[rows[ij], k] = evaluate(sigma, at[j])
+                nxt[i] += np.bincount(j, minlength=len(i))
+                t_next[i] = t[np.minimum(nxt[i], num_t - 1)]
+            else:       # the common step: one output time in each due row's step, nxt's (the same as above)
+                sigma = ((t.take(first) - tc.take(i)) / h.take(i)).astype(dtype, copy=False)
+                out[rows.take(i), first] = evaluate(sigma, at)
+                nxt[i] = after
+                t_next[i] = following
             done |= nxt >= num_t
             finished = int(np.count_nonzero(done))
         if calm or accept.all():
@@ -354,7 +381,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         if scheme.beta:
             factor *= err_old ** scheme.beta
             err_old = np.maximum(err_norm, 1e-4) if calm else np.where(accept, np.maximum(err_norm, 1e-4), err_old)
-        np.minimum(np.maximum(factor, scheme.min_factor, out=factor), scheme.max_factor, out=factor)
+        factor = np.minimum(np.maximum(factor, scheme.min_factor), scheme.max_factor)     # new arrays: out= costs more
         if not calm:
             reject = ~accept
             if reject.any():

@@ -208,13 +208,17 @@ class DOP853:
         diff = y_new - y
         bspl = hx * K[0] - diff
         high = torch.mm(self.D, work.flat).numpy().reshape(4, rows, dim) * hx
-        c = (y, diff, bspl, diff - hx * K[12] - bspl, *high)
+        # the coefficients as (dim, rows): a row's sigma then scales a contiguous run (the (rows, dim) layout
+        # broadcast it over runs of dim, several times slower on a few states; the same products)
+        low = tuple(a.T for a in (y, diff, bspl, diff - hx * K[12] - bspl))
+        high = high.transpose(0, 2, 1)
 
         def evaluate(sigma: np.ndarray, j: np.ndarray) -> np.ndarray:
-            s = sigma[:, None]
-            s1 = 1 - s
-            value = c[7][j]
+            # take, not [..., j]: the same rows without the indexing's overhead
+            c = (*(a.take(j, 1) for a in low), *high.take(j, 2))
+            s1 = 1 - sigma
+            value = c[7]
             for m in range(6, 0, -1):      # Horner in s and 1 - s, alternately
-                value = c[m][j] + (s1 if m % 2 else s) * value
-            return c[0][j] + s * value
+                value = c[m] + (s1 if m % 2 else sigma) * value
+            return (c[0] + sigma * value).T
         return evaluate, 3

@@ -30,6 +30,7 @@ import torch
 from torch import nn
 
 from ..interface import Model
+from ..settings import RunSettings
 from ..modes import in_model_axis
 from .mlp import MLP
 from .structured import scalar_gradient
@@ -127,7 +128,7 @@ class ConstraintGraph:
 class _Constrained(Model):
     """What both kinds share: the graph, V(x), the log-masses and the distance algebra."""
 
-    def __init__(self, graph: ConstraintGraph, hidden_dim: int = 256, nonlinearity: str = "tanh",
+    def __init__(self, graph: ConstraintGraph, hidden_dim: int = 256, nonlinearity: str = RunSettings.nonlinearity,
                  tolerance: float = STATE_TOLERANCE):
         super().__init__()
         if not isinstance(graph, ConstraintGraph):

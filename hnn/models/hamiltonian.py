@@ -12,6 +12,7 @@ from torch import nn
 
 from ..interface import ANY_STATE, UNIT_MASS, Model
 from ..names import FIELD_TYPES
+from ..settings import RunSettings
 from . import tanh_mlp
 from .mlp import MLP, PIECEWISE_LINEAR, input_gradient
 
@@ -38,7 +39,7 @@ class HNN(Model):
     conservative = True
     takes = UNIT_MASS
 
-    def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = "solenoidal",
+    def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = RunSettings.field_type,
                  baseline: bool = False):
         super().__init__()
         if field_type not in FIELD_TYPES:
@@ -144,12 +145,13 @@ class Baseline(HNN):
     conservative = False
     takes = ANY_STATE
 
-    def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = "solenoidal"):
+    def __init__(self, input_dim: int, differentiable_model: nn.Module, field_type: str = RunSettings.field_type):
         super().__init__(input_dim, differentiable_model, field_type, baseline=True)
 
 
-def build_model(input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", baseline: bool = False,
-                field_type: str = "solenoidal") -> HNN:
+def build_model(input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                nonlinearity: str = RunSettings.nonlinearity, baseline: bool = False,
+                field_type: str = RunSettings.field_type) -> HNN:
     """The paper's model for one task: ``HNN(input_dim, MLP(input_dim, hidden_dim, out))``, or ``Baseline``.
 
     ``out`` is 2 (F1, F2) for the HNN and ``input_dim`` (dx/dt directly) for the baseline.

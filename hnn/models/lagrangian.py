@@ -8,7 +8,8 @@ momenta, no mass matrix, any L. The derivatives are batched autograd passes: dL/
 pass per qdot_i for the row d(dL/dqdot_i)/dz (n + 1 backward passes over the whole batch, about half
 the time of a per-state ``vmap(jacfwd(grad))``: docs/speed.md). Where d2L/dqdot2 is singular the
 equations do not determine qddot: ``time_derivative`` raises ``SingularLagrangianError`` naming the
-states. ``solve='pinv'`` solves as LNN's own code does (MilesCranmer/lagrangian_nns, ``lnn.py``:
+states (singular to working precision, ``singular_condition``, judged on the matrix scaled by its diagonal,
+``equilibrated_condition``, so the same physics gets the same verdict in any units). ``solve='pinv'`` solves as LNN's own code does (MilesCranmer/lagrangian_nns, ``lnn.py``:
 ``jnp.linalg.pinv`` of d2L/dqdot2, whose default cutoff drops singular values below 10 n eps of the
 largest): where every singular value lies above that cutoff the pseudo-inverse is the inverse, so there
 the plain solve is used (the same qddot, bit for bit; ``tests/test_lagrangian.py``), and at the states
@@ -37,7 +38,40 @@ from ..errors import DivergenceError
 from ..modes import in_model_axis
 from .mechanical import check_width, embed_angles, StateCheckedModel
 from ..names import LNN_SOLVES
+from ..settings import RunSettings
 from .mlp import MLP
+
+
+def equilibrated_condition(hess: torch.Tensor) -> torch.Tensor:
+    """The 2-norm condition number ``(batch,)`` of each d2L/dqdot2 ``(batch, n, n)`` scaled by its diagonal,
+    D^-1/2 M D^-1/2 with D = |diag M| (a row whose diagonal is 0 scaled by its largest entry; inf where the
+    matrix is singular or not finite).
+
+    Why scaled: a change of the units of L, of time or of any one q_i is M -> c S M S with S diagonal, which
+    moves M's own condition number by up to (max S / min S)^2 (a q in millimetres beside one in metres: 10^6)
+    but not this one, so the same physics gets the same verdict in any units. Nothing is lost by it: among
+    all diagonal scalings of a definite M this one is within a factor n of the best (van der Sluis 1969), and
+    the LU solve's rounding acts on the scaled matrix (its backward error is small entry by entry relative
+    to the scaled rows and columns)."""
+    finite = torch.isfinite(hess).all(-1).all(-1)
+    # a non-finite matrix is singular by fiat; an identity in its place keeps the SVD from refusing the batch
+    hess = torch.where(finite[..., None, None], hess, torch.eye(hess.shape[-1], dtype=hess.dtype, device=hess.device))
+    diagonal = hess.diagonal(dim1=-2, dim2=-1).abs()
+    scale = torch.where(diagonal > 0, diagonal, hess.abs().amax(dim=-1))
+    scale = torch.where(scale > 0, scale, torch.ones_like(scale)).rsqrt()
+    values = torch.linalg.svdvals(hess * scale[..., :, None] * scale[..., None, :])
+    cond = (values[..., 0] / values[..., -1]).nan_to_num(nan=float("inf"))       # 0 / 0: a zero matrix
+    return torch.where(finite, cond, torch.full_like(cond, float("inf")))
+
+
+def singular_condition(n: int, dtype: torch.dtype) -> float:
+    """The condition number ``1 / (n eps)`` from which an n x n d2L/dqdot2 in ``dtype`` is singular to working
+    precision: the LU solve's backward error is about n eps of the matrix's norm, so a smallest singular
+    value under n eps of the largest is within the solve's own rounding of 0 and the equations no longer
+    determine qddot (``numpy.linalg.matrix_rank``'s default tolerance). A singular M whose entries are rounded
+    (a rank-deficient L differentiated twice) lands under it: its computed ratio is about eps (measured at
+    most 0.8 eps over 1000 states of n = 2 and less at 3 and 5, in float32 and float64)."""
+    return 1.0 / (n * torch.finfo(dtype).eps)
 
 
 class SingularLagrangianError(DivergenceError, ValueError):
@@ -64,7 +98,8 @@ class LagrangianNN(StateCheckedModel):
     takes = {"cartesian": "positions and velocities of bodies: L(x, xdot) of any state [q, qdot]"}
     conservative = True
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False,
+    def __init__(self, input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity, periodic: bool = False,
                  solve: str = "solve"):
         super().__init__()
         if solve not in LNN_SOLVES:
@@ -131,9 +166,8 @@ class LagrangianNN(StateCheckedModel):
         if in_model_axis():         # vmap cannot branch on a value: a singular model's loss is not finite
             return qddot
         with torch.no_grad():
-            cond = torch.linalg.cond(hess_vv.detach())
-            bad = (info != 0) | ~torch.isfinite(cond) | (cond > 1 / torch.finfo(z.dtype).eps) \
-                | ~torch.isfinite(qddot).all(1)
+            cond = equilibrated_condition(hess_vv.detach())
+            bad = (info != 0) | ~(cond < singular_condition(n, z.dtype)) | ~torch.isfinite(qddot).all(1)
         if bad.any():
             rows = torch.nonzero(bad).flatten().tolist()
             shown = "; ".join(f"#{i} [q, qdot] = {[round(float(c), 4) for c in z[i].detach()]} (cond {float(cond[i]):.3g})"
@@ -158,6 +192,9 @@ class LagrangianNN(StateCheckedModel):
         if in_model_axis():         # vmap cannot pick states by a value: the pseudo-inverse at every state
             return (torch.linalg.pinv(hess_vv, rtol=rtol, hermitian=True) @ rhs[..., None])[..., 0]
         with torch.no_grad():
+            finite = torch.isfinite(hess_vv.detach()).all(-1).all(-1)
+            if not finite.all():        # a non-finite L, which the SVDs below would refuse with their own error
+                raise _not_finite(torch.nonzero(~finite).flatten().tolist())
             cond = torch.linalg.cond(hess_vv.detach())
             cut = ~torch.isfinite(cond) | (cond * rtol > 1)
         # the plain solve where the inverse exists; an identity in place of the others keeps its graph finite
@@ -170,7 +207,10 @@ class LagrangianNN(StateCheckedModel):
             self.pinv_states += len(at)
         bad = ~torch.isfinite(qddot.detach()).all(1)
         if bad.any():       # a non-finite L: no solve determines qddot
-            rows = torch.nonzero(bad).flatten().tolist()
-            raise SingularLagrangianError(f"LagrangianNN: d2L/dqdot2 or dL/dq is not finite at {len(rows)} states "
-                                          f"(#{rows[0]} first), so no solve determines qddot there", rows)
+            raise _not_finite(torch.nonzero(bad).flatten().tolist())
         return qddot
+
+
+def _not_finite(rows: list[int]) -> SingularLagrangianError:
+    return SingularLagrangianError(f"LagrangianNN: d2L/dqdot2 or dL/dq is not finite at {len(rows)} states "
+                                   f"(#{rows[0]} first), so no solve determines qddot there", rows)

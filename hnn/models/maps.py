@@ -16,7 +16,7 @@ backwards too. Every potential is V(y) = sum_j a_j S(K y + b)_j with S' the acti
 gradient K^T (a * act(K y + b)) costs two matrix products and no derivative of the activation.
 
 The weights start near zero (N(0, 0.01^2), as jpzxshi/sympnets' modules), so a map starts near the
-identity. The classes' defaults are the commands' (``hnn.names``: tanh, ``--hidden_dim`` 200 terms,
+identity. The classes' defaults are the commands' (``hnn.settings.RunSettings``: tanh, ``--hidden_dim`` 200 terms,
 ``--map_layers`` 4), so a map built in Python is the one ``--model g_sympnet`` trains: SympNets' sigmoid
 left the pendulum's map near the identity in p (docs/maps.md, "Train a map on your own pairs"). The step ``dt`` is the data's time step, an attribute given at construction (a run's
 ``ModelSpec.dt``, recorded in its args.json): ``hnn.rollout`` steps the map on ``t_eval`` of
@@ -34,7 +34,7 @@ from torch import nn
 
 from ..interface import Model
 from ..modes import frozen_kernels, in_model_axis
-from ..names import ACTIVATION, HIDDEN_DIM, MAP_LAYERS
+from ..settings import RunSettings
 from .mlp import get_nonlinearity
 from .tanh_mlp import KERNEL_MAX_ROWS
 
@@ -122,7 +122,7 @@ class Shear(nn.Module):
 class GradientShear(Shear):
     """A G-SympNet module: the shear by ``PotentialGradient``, ``width`` terms."""
 
-    def __init__(self, n: int, width: int, part: str, activation: str = ACTIVATION):
+    def __init__(self, n: int, width: int, part: str, activation: str = RunSettings.nonlinearity):
         super().__init__(part)
         self.potential = PotentialGradient(n, width, activation)
 
@@ -137,7 +137,7 @@ class ActivationShear(Shear):
     """An LA-SympNet activation module: the shear z <- z + a * act(y), ``a`` ``(n,)`` (the gradient
     of sum_i a_i S(y_i))."""
 
-    def __init__(self, n: int, part: str, activation: str = ACTIVATION):
+    def __init__(self, n: int, part: str, activation: str = RunSettings.nonlinearity):
         super().__init__(part)
         self.activation, self._act = activation, _activation(activation)
         self.a = _small(n)
@@ -204,7 +204,7 @@ class HenonLayer(nn.Module):
     """A HenonNet layer: four times the Henon map (q, p) -> (p + eta, -q + grad V(p)) of one
     potential V (``PotentialGradient``, ``width`` terms) and one shift ``eta`` ``(n,)``."""
 
-    def __init__(self, n: int, width: int, activation: str = ACTIVATION):
+    def __init__(self, n: int, width: int, activation: str = RunSettings.nonlinearity):
         super().__init__()
         self.potential = PotentialGradient(n, width, activation)
         self.eta = nn.Parameter(torch.zeros(n))
@@ -337,8 +337,8 @@ def _parts(count: int) -> list[str]:
 class GSympNet(SymplecticMap):
     """G-SympNet (Jin et al. 2020): ``layers`` gradient shears of ``width`` terms, moving p then q alternately."""
 
-    def __init__(self, input_dim: int, width: int = HIDDEN_DIM, layers: int = MAP_LAYERS, activation: str = ACTIVATION,
-                 dt: float | None = None):
+    def __init__(self, input_dim: int, width: int = RunSettings.hidden_dim, layers: int = RunSettings.map_layers,
+                 activation: str = RunSettings.nonlinearity, dt: float | None = None):
         n = input_dim // 2
         super().__init__(input_dim, [GradientShear(n, width, part, activation) for part in _parts(layers)], dt)
 
@@ -347,8 +347,8 @@ class LASympNet(SymplecticMap):
     """LA-SympNet (Jin et al. 2020): ``layers`` linear modules of ``sublayers`` shears each, with an
     activation shear between two consecutive ones (``layers - 1``), the halves alternating."""
 
-    def __init__(self, input_dim: int, layers: int = MAP_LAYERS, sublayers: int = 2, activation: str = ACTIVATION,
-                 dt: float | None = None):
+    def __init__(self, input_dim: int, layers: int = RunSettings.map_layers, sublayers: int = 2,
+                 activation: str = RunSettings.nonlinearity, dt: float | None = None):
         n = input_dim // 2
         parts = _parts(layers)
         modules: list[nn.Module] = []
@@ -362,8 +362,8 @@ class LASympNet(SymplecticMap):
 class HenonNet(SymplecticMap):
     """HenonNet (Burby, Tang & Qin 2020): ``layers`` Henon layers, each potential of ``width`` terms."""
 
-    def __init__(self, input_dim: int, width: int = HIDDEN_DIM, layers: int = MAP_LAYERS, activation: str = ACTIVATION,
-                 dt: float | None = None):
+    def __init__(self, input_dim: int, width: int = RunSettings.hidden_dim, layers: int = RunSettings.map_layers,
+                 activation: str = RunSettings.nonlinearity, dt: float | None = None):
         super().__init__(input_dim, [HenonLayer(input_dim // 2, width, activation) for _ in range(layers)], dt)
 
 

@@ -30,6 +30,7 @@ from torch import nn
 
 from ..interface import Model, gradient_of
 from ..modes import in_model_axis
+from ..settings import RunSettings
 from .mlp import MLP
 
 
@@ -79,7 +80,8 @@ class MechanicalHNN(StateCheckedModel):
     conservative = True
     maps = ("velocity",)
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False,
+    def __init__(self, input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity, periodic: bool = False,
                  eps: float = 1e-4):
         super().__init__()
         self.n = check_width(input_dim, "MechanicalHNN")
@@ -182,7 +184,8 @@ class SecondOrderNODE(StateCheckedModel):
     coordinates = "velocity"
     takes = {"cartesian": "positions and velocities of bodies: a second-order field of any state [q, qdot]"}
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh", periodic: bool = False):
+    def __init__(self, input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity, periodic: bool = False):
         super().__init__()
         self.n = check_width(input_dim, "SecondOrderNODE")
         self.input_dim, self.periodic = input_dim, bool(periodic)

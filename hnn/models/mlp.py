@@ -9,6 +9,7 @@ from . import tanh_mlp
 from ..names import INITS, NONLINEARITIES, checked
 from ..interface import gradient_of
 from ..modes import in_model_axis
+from ..settings import RunSettings
 
 
 def _swish(x: torch.Tensor) -> torch.Tensor:
@@ -45,7 +46,7 @@ class MLP(nn.Module):
     Maps ``(batch, input_dim)`` to ``(batch, output_dim)``.
     """
 
-    def __init__(self, input_dim: int, hidden_dim: int, output_dim: int, nonlinearity: str = "tanh"):
+    def __init__(self, input_dim: int, hidden_dim: int, output_dim: int, nonlinearity: str = RunSettings.nonlinearity):
         super().__init__()
         for label, value in (("input_dim", input_dim), ("hidden_dim", hidden_dim), ("output_dim", output_dim)):
             if not isinstance(value, int) or value < 1:

@@ -22,9 +22,14 @@ from torch import nn
 
 from ..bodies import Bodies
 from ..interface import Model, gradient_of
+from ..settings import RunSettings
 from .mlp import MLP
 
 PAIR_BYTES = 2 ** 32     # the per-pair arrays of one field call are kept within this (4 GiB); more is refused
+# V's network runs over the pairs in chunks whose activations stay within this (256 MB): a field call's memory then
+# grows with the pairs' few numbers each (``_pairs``), not with the network's width, so gravity at N = 4096 (8.4
+# million pairs) fits
+CHUNK_BYTES = 2 ** 28
 
 
 class TooManyPairsError(MemoryError):
@@ -78,7 +83,8 @@ class PairHNN(Model):
     conservative = True
     separable = True
 
-    def __init__(self, bodies: Bodies, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+    def __init__(self, bodies: Bodies, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity):
         super().__init__()
         self.bodies = Bodies.from_dict(bodies)
         self.input_dim, self.hidden_dim = self.bodies.width, hidden_dim
@@ -96,11 +102,29 @@ class PairHNN(Model):
         flat = r.reshape(-1, 1)
         return self.radial_net(torch.cat([flat, 1 / flat], dim=1)).reshape(r.shape)
 
+    def _chunks(self, r: torch.Tensor) -> list[slice]:
+        """The pairs of ``r`` ``(batch, P)`` in chunks whose network activations (3 x width numbers a pair and
+        state) stay within ``CHUNK_BYTES``: one chunk of every pair where they fit (the lattice's 4095 neighbours
+        of 4 states at width 64 do: its published numbers come from one chunk)."""
+        per_pair = 3 * self.hidden_dim * r.shape[0] * r.element_size()
+        size = max(1, CHUNK_BYTES // per_pair)
+        return [slice(k, k + size) for k in range(0, r.shape[1], size)]
+
+    def _pair_energy(self, r: torch.Tensor) -> torch.Tensor:
+        """sum over pairs of V(r) ``(batch,)`` of distances ``r`` ``(batch, P)``, chunk by chunk."""
+        return sum(self.radial(r[:, chunk]).sum(dim=1) for chunk in self._chunks(r))
+
+    def _pair_slope(self, r: torch.Tensor) -> torch.Tensor:
+        """V'(r) ``(batch, P)`` by autograd, chunk by chunk (the graph of one chunk at a time outside training)."""
+        chunks = self._chunks(r)
+        slopes = [gradient_of(lambda rr: self.radial(rr).sum(dim=1), r[:, chunk]) for chunk in chunks]
+        return slopes[0] if len(slopes) == 1 else torch.cat(slopes, dim=1)
+
     def _pairs(self, q: torch.Tensor):
         count = q.shape[1]
         i, j = pair_index(count, self.bodies.pairs, q.device)
-        check_pair_memory(len(q), len(i), 3 * self.hidden_dim + 2 * self.bodies.dim,
-                          q.element_size())
+        # the numbers a pair and state holds at once: r, 1/r and V'(r), and d, its gathered ends' and the push
+        check_pair_memory(len(q), len(i), 3 + 3 * self.bodies.dim, q.element_size())
         return i, j
 
     def kinetic(self, p_half: torch.Tensor) -> torch.Tensor:
@@ -113,7 +137,7 @@ class PairHNN(Model):
         q = self.bodies.bodywise(q_half)
         i, j = self._pairs(q)
         _, r = separations(q, i, j)
-        out = self.radial(r).sum(dim=1)
+        out = self._pair_energy(r)
         if self.external_net is not None:
             out = out + self.external_net(q.reshape(-1, q.shape[2])).reshape(q.shape[:2]).sum(dim=1)
         return out
@@ -133,8 +157,7 @@ class PairHNN(Model):
         q = self.bodies.bodywise(q_half)
         i, j = self._pairs(q)
         d, r = separations(q, i, j)
-        dVdr = gradient_of(lambda rr: self.radial(rr).sum(dim=1), r)
-        grad = pair_gradient(dVdr, d, r, i, j, q.shape[1])
+        grad = pair_gradient(self._pair_slope(r), d, r, i, j, q.shape[1])
         if self.external_net is not None:
             flat = q.reshape(-1, q.shape[2])
             grad = grad + gradient_of(lambda z: self.external_net(z)[:, 0], flat).reshape(q.shape)

@@ -5,6 +5,7 @@ import torch
 from torch import nn
 
 from ..interface import Model
+from ..settings import RunSettings
 from .hamiltonian import build_model
 from .mlp import get_nonlinearity
 
@@ -63,8 +64,10 @@ class PixelHNN(Model):
     coordinates = "latent"
     conservative = True
 
-    def __init__(self, input_dim: int, latent_dim: int = 2, hidden_dim: int = 200, nonlinearity: str = "tanh",
-                 baseline: bool = False, field_type: str = "solenoidal", autoencoder_nonlinearity: str = "relu"):
+    def __init__(self, input_dim: int, latent_dim: int = 2, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity,
+                 baseline: bool = False, field_type: str = RunSettings.field_type,
+                 autoencoder_nonlinearity: str = "relu"):
         super().__init__()
         if latent_dim % 2:
             raise ValueError(f"latent_dim must be even (z = [q, p]), got {latent_dim}")
@@ -99,6 +102,7 @@ class PixelBaseline(PixelHNN):
     """``PixelHNN`` whose latent moves by a plain MLP (the paper's pixel baseline): no H."""
     conservative = False
 
-    def __init__(self, input_dim: int, latent_dim: int = 2, hidden_dim: int = 200, nonlinearity: str = "tanh",
-                 field_type: str = "solenoidal", autoencoder_nonlinearity: str = "relu"):
+    def __init__(self, input_dim: int, latent_dim: int = 2, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity,
+                 field_type: str = RunSettings.field_type, autoencoder_nonlinearity: str = "relu"):
         super().__init__(input_dim, latent_dim, hidden_dim, nonlinearity, True, field_type, autoencoder_nonlinearity)

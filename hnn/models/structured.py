@@ -18,6 +18,7 @@ from torch import nn
 
 from . import tanh_mlp
 from ..interface import UNIT_MASS, Model, gradient_of
+from ..settings import RunSettings
 from .hamiltonian import HNN, permutation_tensor
 from .mlp import MLP
 
@@ -43,7 +44,8 @@ class SeparableHNN(Model):
     separable = True
     takes = UNIT_MASS
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+    def __init__(self, input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity):
         super().__init__()
         self.n = _check_even(input_dim, "SeparableHNN")
         self.input_dim = input_dim
@@ -129,7 +131,8 @@ class DissipativeHNN(HNN):
     conservative = False
     dissipative = True
 
-    def __init__(self, input_dim: int, hidden_dim: int = 200, nonlinearity: str = "tanh"):
+    def __init__(self, input_dim: int, hidden_dim: int = RunSettings.hidden_dim,
+                 nonlinearity: str = RunSettings.nonlinearity):
         _check_even(input_dim, "DissipativeHNN")
         super().__init__(input_dim, MLP(input_dim, hidden_dim, 2, nonlinearity), field_type="both")
 

@@ -30,6 +30,7 @@ from ..balance import balance_weights
 from ..integrators.fixed_step import rk4_step
 from ..interface import declared, observed_coordinates
 from ..metrics import derivative_mse, mean_and_se
+from ..settings import RunSettings
 from ..specs import ObjectiveSpec
 from ..training import batch_loss
 
@@ -46,7 +47,7 @@ class LoopOptions:
     fit of dx/dt is scored by; None: the model's ``time_derivative``)."""
     loss: Callable | None = None
     predict: Callable | None = None
-    derivative_loss: str = "l2"
+    derivative_loss: str = RunSettings.derivative_loss
     loss_weights: object = None
     input_noise: float = 0.0
     generators: tuple = ()
@@ -74,6 +75,9 @@ class Objective:
     chunk = 4096        # rows per no-grad batch of final_loss
     # its first two arrays are states and their dx/dt, so that --units can rescale them (hnn.units)
     fits_derivative: ClassVar[bool] = False
+    # whether its fit reads the data's rates (dx/dt, or states stepped through time by a field): a learned map's
+    # fits a state to the next one and never reads a time, so --units auto judges its states' sizes alone
+    reads_rates: ClassVar[bool] = True
 
     def prepare(self, dataset: dict) -> dict:
         """The dataset with the ``arrays`` this objective trains on (derived ones added); itself by default."""

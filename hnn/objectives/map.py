@@ -8,7 +8,7 @@ pairs). No derivative and no integrator: a map trained so rolls out at the data'
     model = hnn.models.GSympNet(2, dt=0.1)             # the classes' defaults are the command's (tanh, 200, 4)
     hnn.train(model, pairs, pairs, loss=hnn.objectives.map.MapObjective(dt=0.1).loss_for(model))
 
-A fit that ends no better than the identity map on its own training pairs warns (``MapNotLearnedWarning``,
+A fit that ends no better than the identity map in q or in p on its own training pairs warns (``MapNotLearnedWarning``,
 ``warn_if_not_learned``), naming the fix; docs/maps.md has the recipe for your own pairs.
 
 ``prepare`` cuts every pair of consecutive states of each path (``x`` and ``test_x``, path after path,
@@ -62,6 +62,9 @@ class MapObjective(PathObjective):
     """Fit ``model.step(x0)`` to ``x1`` on rows ``[x0, x1]`` of consecutive states ``dt`` apart; the
     model must be a learned map (``steps``) of that step. ``dt`` (default the dataset's)."""
     arrays = ("pairs", "pairs", "test_pairs", "test_pairs")
+    # a map fits the state one step later to a state: no rate and no time enters its loss, so its fit is the same
+    # whatever the unit of the data's time (a file's t in ms or in s pairs the same rows; ``hnn.units.sized_arrays``)
+    reads_rates = False
 
     def __init__(self, dt: float | None = None, observed: str = "canonical"):
         self.dt, self.observed = dt, observed
@@ -113,32 +116,45 @@ class MapObjective(PathObjective):
 
 
 class MapNotLearnedWarning(UserWarning):
-    """A trained map's step is no closer to its training pairs' next states than the identity map's."""
+    """A trained map's step is no closer to its training pairs' next states than the identity map's, in q or in p."""
 
 
-def identity_errors(model: nn.Module, pairs) -> tuple[float, float]:
-    """``(the map's, the identity map's)`` mean squared one-step error over the rows ``[x_n, x_{n+1}]`` of
-    ``pairs`` ``(rows, 2 * input_dim)``: ``model.step(x_n)``, and ``x_n`` itself, against ``x_{n+1}``."""
+HALVES = ("q", "p")
+
+
+def identity_errors(model: nn.Module, pairs) -> tuple[np.ndarray, np.ndarray]:
+    """``(the map's, the identity map's)`` mean squared one-step errors ``(2,)``, of the q half and of the p half,
+    over the rows ``[x_n, x_{n+1}]`` of ``pairs`` ``(rows, 2 * input_dim)``: ``model.step(x_n)``, and ``x_n``
+    itself, against ``x_{n+1}``."""
     param, width = next(model.parameters()), model.input_dim
     y = torch.as_tensor(pairs, dtype=param.dtype, device=param.device)
     if y.dim() != 2 or y.shape[1] != 2 * width or not len(y):
         raise ValueError(f"pairs must be rows [x_n, x_(n+1)] of shape (rows >= 1, {2 * width}), got {tuple(y.shape)}")
     with torch.no_grad():
         step = torch.cat([model.step(part[:, :width]) for part in y.split(4096)])
-    return (float((step - y[:, width:]).pow(2).mean()), float((y[:, :width] - y[:, width:]).pow(2).mean()))
+
+    def halves(error: torch.Tensor) -> np.ndarray:
+        return error.pow(2).reshape(len(y), 2, width // 2).mean(dim=(0, 2)).double().cpu().numpy()
+    return halves(step - y[:, width:]), halves(y[:, :width] - y[:, width:])
 
 
 def warn_if_not_learned(model: nn.Module, pairs, stacklevel: int = 2) -> None:
     """A ``MapNotLearnedWarning`` where ``model``'s step on its training ``pairs`` is no better than the identity
-    map's (``identity_errors``): a fit that learned nothing returns without a word otherwise."""
+    map's in the q half or in the p half (``identity_errors``): a fit that learned nothing returns without a word
+    otherwise. Each half is judged on its own, since a map that learned how q moves and left p where it was has
+    the smaller error over the whole state (q's gain hides p's none) and rolls out as badly as one that learned
+    nothing. A half that the identity already steps exactly (error 0: a free particle's momenta) has nothing
+    to learn and is not judged."""
     error, identity = identity_errors(model, pairs)
-    if not error < identity:
+    idle = [k for k in range(2) if identity[k] > 0 and not error[k] < identity[k]]
+    if idle:
+        said = "; ".join(f"in {HALVES[k]} {error[k]:.4g} against {identity[k]:.4g}" for k in idle)
         warnings.warn(MapNotLearnedWarning(
-            f"this learned map's mean squared one-step error on its {len(pairs)} training pairs, {error:.4g}, is no "
-            f"smaller than the identity map's (x_(n+1) = x_n), {identity:.4g}: it learned nothing from them. Train it "
-            "as the commands do (the classes' defaults: tanh, width 200, 4 layers; learn_rate 1e-3 for 2000 steps or "
-            "more), and check that each pair's states are one step dt apart (docs/maps.md, 'Train a map on your "
-            "own pairs')"), stacklevel=stacklevel)
+            f"this learned map's mean squared one-step error on its {len(pairs)} training pairs is no smaller than "
+            f"the identity map's (x_(n+1) = x_n) {said}: it learned nothing of how "
+            f"{' and '.join(HALVES[k] for k in idle)} moves. Train it as the commands do (the classes' defaults: "
+            "tanh, width 200, 4 layers; learn_rate 1e-3 for 2000 steps or more), and check that each pair's states "
+            "are one step dt apart (docs/maps.md, 'Train a map on your own pairs')"), stacklevel=stacklevel)
 
 
 class _StepLoss:

@@ -31,6 +31,7 @@ from ..integrators.integrate import rollout
 from ..interface import declared
 from . import PathObjective, cut_paths
 from ..integrators.solvers import SOLVERS, get_solver
+from ..settings import RunSettings
 
 SNIPPET_LOSSES = ("mae", "l2")
 
@@ -151,7 +152,7 @@ class TrajectoryObjective(PathObjective):
     arrays = ("snippets", "snippets", "test_snippets", "test_snippets")
 
     def __init__(self, dt: float | None = None, loss: str = "mae", method: str | None = None, substeps: int = 1,
-                 steps: int = 4, observed: str = "canonical"):
+                 steps: int = RunSettings.snippet_steps, observed: str = "canonical"):
         self.dt, self.loss, self.method, self.substeps, self.steps = dt, loss, method, substeps, steps
         self.observed = observed
 

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from ..bodies import Bodies
-from ..config import RunConfig, setting
+from ..config import RunConfig
+from ..settings import setting
 from .encounters import MIN_SEPARATION, TASK_MIN_SEPARATION
 
 

@@ -7,7 +7,13 @@ canonical ordering of the original code (docs/original.md),
 
 so the first half is q and the second half p, matching the HNN's M = [[0, I], [-I, 0]]. Every
 physics function takes a torch tensor of shape ``(..., 4B)`` (usually ``(batch, 4B)``, float64)
-and infers B from the width. There is no softening: forces are exactly 1/r^2.
+and infers B from the width. There is no softening by default: forces are exactly 1/r^2.
+
+Up to ``DENSE_BODIES`` bodies the pair sums are products with a dense incidence matrix ``(B, pairs)``
+(every dataset of the orbit tasks); past it that matrix would not fit (B = 4096: 275 GB), so the sums
+run over blocks of bodies, each block's rows against every body, within ``BLOCK_BYTES`` a block:
+O(B^2) work and memory of a block, any B. A call that cannot fit even one body's row of pairs
+raises ``hnn.models.pair.TooManyPairsError`` saying how much it needs.
 
 The generator (``sample_orbits``) integrates all trajectories in one batched ``hnn.rollout``
 call (or a few large chunks) and redraws close encounters and failed integrations; the dataset
@@ -26,12 +32,20 @@ import numpy as np
 import torch
 
 from ..errors import DivergenceError
+from ..models.pair import PAIR_BYTES, TooManyPairsError
 from .encounters import MIN_SEPARATION, TASK_MIN_SEPARATION  # noqa: F401  (the tasks read both here)
 from ..integrators.integrate import rollout
 from ..cache import get_cached_dataset
 
 
 DATASET_VERSION = 1   # bump when the generator changes what a given set of params produces
+DENSE_BODIES = 64     # up to this many bodies the pair sums use the incidence matrix (64 x 2016: 1 MB)
+# past it, the pair arrays of one block of bodies stay within this: 4 MB blocks stay in cache (4 states of 4096
+# bodies: 2.0 s a call against 5.4 s with 256 MB blocks, one thread, loaded 2-core box)
+BLOCK_BYTES = 2 ** 22
+# numbers per (state, body, body) that a block holds at once, at most: dx, dy, r^2 (and a square's temporary), its
+# inverse cube, a product
+_BLOCK_ARRAYS = 6
 
 
 # --------------------------------------------------------------------------- physics
@@ -82,20 +96,59 @@ def _pair_distances(x: torch.Tensor) -> torch.Tensor:
     return _pair_differences(x).pow(2).sum(-2).sqrt()
 
 
+def _blocks(x: torch.Tensor):
+    """For ``(n, 4B)`` states past ``DENSE_BODIES``: ``(rows, dx, dy, r2)`` per block of bodies ``rows`` (a slice):
+    ``dx``, ``dy`` ``(n, c, B)`` the components of q_j - q_i of each body i of the block against every body j,
+    ``r2`` their squared length, inf where j = i (no self pair). ``TooManyPairsError`` if one body's row of pairs
+    passes ``PAIR_BYTES``."""
+    n, b = x.shape[0], num_bodies(x)
+    per_row = _BLOCK_ARRAYS * n * b * x.element_size()
+    if per_row > PAIR_BYTES:
+        raise TooManyPairsError(
+            f"{n} states of {b} bodies need about {per_row / 2 ** 30:.3g} GiB for one body's pairs in one gravity "
+            f"call (limit hnn.models.pair.PAIR_BYTES = {PAIR_BYTES / 2 ** 30:.3g} GiB): evaluate fewer states at once")
+    size = int(min(b, max(1, BLOCK_BYTES // per_row)))
+    qx, qy = x[:, :b], x[:, b:2 * b]
+    for start in range(0, b, size):
+        rows = slice(start, min(b, start + size))
+        dx = qx[:, None, :] - qx[:, rows, None]                             # (n, c, B): x_j - x_i
+        dy = qy[:, None, :] - qy[:, rows, None]
+        r2 = dx * dx + dy * dy
+        own = torch.arange(rows.start, rows.stop, device=x.device)
+        r2[:, own - rows.start, own] = math.inf                              # no body pulls itself
+        yield rows, dx, dy, r2
+
+
 def _field(x: torch.Tensor, softening: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
-    """dx/dt of ``(n, 4B)`` states, and the squared pair distances ``(n, pairs)``.
+    """dx/dt of ``(n, 4B)`` states, and each state's smallest squared pair distance ``(n,)`` (inf for one body).
 
     a_i = sum_{j != i} (q_j - q_i) / (|q_j - q_i|^2 + softening^2)^(3/2) (G = 1, unit masses; the tasks'
     softening is 0, the original's); a few whole-batch operations, since the batched integrator calls this
     once per stage.
     """
     n, b = x.shape[0], num_bodies(x)
+    if b > DENSE_BODIES:
+        return _blocked_field(x, softening)
     d, minus_dt = _incidence(b, x.dtype, x.device)
     diff = x[:, :2 * b].reshape(n, 2, b) @ d               # (n, 2, pairs)
     r2 = (diff * diff).sum(1)                              # (n, pairs)
     soft = r2 + softening ** 2 if softening else r2        # exactly the unsoftened arithmetic at 0
     accel = (diff * soft.pow(-1.5).unsqueeze(1)) @ minus_dt  # (n, 2, B): [ax_1..ax_B], [ay_1..ay_B]
-    return torch.cat([x[:, 2 * b:], accel.reshape(n, 2 * b)], dim=1), r2
+    nearest = r2.amin(dim=1) if r2.shape[1] else torch.full((n,), math.inf, dtype=x.dtype, device=x.device)
+    return torch.cat([x[:, 2 * b:], accel.reshape(n, 2 * b)], dim=1), nearest
+
+
+def _blocked_field(x: torch.Tensor, softening: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """``_field`` past ``DENSE_BODIES``, block by block of bodies (``_blocks``): O(B^2) work, a block's memory."""
+    n, b = x.shape[0], num_bodies(x)
+    accel = x.new_empty(n, 2, b)
+    nearest = torch.full((n,), math.inf, dtype=x.dtype, device=x.device)
+    for rows, dx, dy, r2 in _blocks(x):
+        nearest = torch.minimum(nearest, r2.amin(dim=(1, 2)))
+        inverse = (r2 + softening ** 2 if softening else r2).rsqrt_()        # the self term: 1 / sqrt(inf) = 0
+        cube = inverse.mul_(inverse * inverse)
+        accel[:, 0, rows], accel[:, 1, rows] = (dx * cube).sum(-1), (dy * cube).sum(-1)
+    return torch.cat([x[:, 2 * b:], accel.reshape(n, 2 * b)], dim=1), nearest
 
 
 def dynamics(x: torch.Tensor, softening: float = 0.0) -> torch.Tensor:
@@ -113,6 +166,11 @@ def kinetic_energy(x: torch.Tensor) -> torch.Tensor:
 def potential_energy(x: torch.Tensor, softening: float = 0.0) -> torch.Tensor:
     """-sum over all pairs i < j of 1 / |q_i - q_j| (1 / sqrt(|q_i - q_j|^2 + softening^2) where softened),
     shape ``(...)`` (correct for any B, unlike the original 2-body file, which added only the last pair)."""
+    if num_bodies(x) > DENSE_BODIES:
+        flat = x.reshape(-1, x.shape[-1])
+        # each pair twice (i's row and j's), halved; the self terms are 1 / sqrt(inf) = 0
+        total = sum((r2 + softening ** 2).rsqrt().sum(dim=(1, 2)) for *_, r2 in _blocks(flat))
+        return -(total / 2).reshape(x.shape[:-1])
     if softening:
         return -(_pair_differences(x).pow(2).sum(-2) + softening ** 2).rsqrt().sum(-1)
     return -(1.0 / _pair_distances(x)).sum(-1)
@@ -138,6 +196,10 @@ def min_separation(x: torch.Tensor) -> torch.Tensor:
     """The smallest distance between two bodies, shape ``(...)`` (inf for one body)."""
     if num_bodies(x) < 2:
         return torch.full(x.shape[:-1], math.inf, dtype=x.dtype, device=x.device)
+    if num_bodies(x) > DENSE_BODIES:
+        flat = x.reshape(-1, x.shape[-1])
+        nearest = torch.stack([r2.amin(dim=(1, 2)) for *_, r2 in _blocks(flat)]).amin(dim=0)
+        return nearest.sqrt().reshape(x.shape[:-1])
     return _pair_distances(x).amin(dim=-1)
 
 
@@ -197,10 +259,10 @@ class _Guard:
 
     def __call__(self, state: torch.Tensor) -> torch.Tensor:
         x, ids = state[:, :-1], state[:, -1].long()
-        dxdt, r2 = _field(x)
+        dxdt, nearest = _field(x)
         frozen = self.frozen[ids]
-        if r2.shape[1]:
-            nearest = r2.amin(dim=1).to(torch.float64)
+        if x.shape[1] > 4:      # two bodies or more: a pair to watch
+            nearest = nearest.to(torch.float64)
             closest = self.closest2[ids]
             self.closest2[ids] = torch.minimum(closest, nearest)   # NaN sticks, and counts as close
             frozen |= ~(nearest >= self.threshold2)

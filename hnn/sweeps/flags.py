@@ -8,7 +8,7 @@ analysis command's parser and checked there, then passed to ``hnn.sweeps.sweep.t
 """
 from __future__ import annotations
 
-from .. import cli, names
+from .. import names, settings
 
 # torch-free: a command's parser takes these flags before torch loads (its input errors answer at once);
 # check_backend imports the backends, and Ray, only when asked for it
@@ -16,7 +16,7 @@ from .. import cli, names
 
 def add_device_flag(parser) -> None:
     """Add ``--device`` (every run's torch device) to an analysis command's ``parser``."""
-    parser.add_argument("--device", type=cli.device, default=None,
+    parser.add_argument("--device", type=settings.device, default=None,
                         help="torch device every run trains on (cpu, cuda, cuda:1); default: each run's own, the "
                              "cpu. Not part of a run's identity: a run saved on one device is reused on another")
 

@@ -33,6 +33,7 @@ from ..models.hamiltonian import FIELD_ROWS, HNN
 from ..models.mlp import MLP
 from ..models.structured import SeparableHNN
 from ..models.tanh_mlp import closed_form_input_gradient, fast_tanh
+from ..settings import RunSettings
 from .group_loop import GroupedRunFailed, WeightStack, group_loop, group_settings, group_stats
 from .loop import adam_optimizer
 from .rows import GroupRows, check_data
@@ -82,8 +83,9 @@ def _field(weights, x: torch.Tensor, baseline: bool, rows: tuple[int, ...] | Non
 
 
 def train_closed_form(models: list[HNN], data: list[tuple], tests: list[tuple] | None = None, *, seeds: list[int],
-              total_steps: int = 2000, learn_rate: float = 1e-3, weight_decay: float = 1e-4,
-              batch_size: int | None = None, print_every: int = 200, test_every: int | None = None,
+              total_steps: int = RunSettings.total_steps, learn_rate: float = RunSettings.learn_rate,
+              weight_decay: float = RunSettings.weight_decay, batch_size: int | None = RunSettings.batch_size,
+              print_every: int = RunSettings.print_every, test_every: int | None = None,
               input_noise: float = 0.0, names: list[str] | None = None, after_step=None,
               progress: bool = False, checkpoint=None,
               checkpoint_every: float | None = None) -> tuple[list[dict | None], dict[int, GroupedRunFailed]]:

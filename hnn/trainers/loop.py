@@ -17,6 +17,7 @@ import torch
 from .. import names
 from ..errors import DivergenceError
 from ..progress import Ticker
+from ..settings import RunSettings
 from ..threads import torch_threads
 from . import checkpoint as checkpoints
 from .rows import minibatch
@@ -125,10 +126,12 @@ def _say_when(err: DivergenceError, when: str) -> None:
 
 
 def run_loop(model, loss: Callable, x: torch.Tensor, y: torch.Tensor, test_x: torch.Tensor | None = None,
-             test_y: torch.Tensor | None = None, *, total_steps: int = 2000, learn_rate: float = 1e-3,
-             weight_decay: float = 1e-4, batch_size: int | None = None, seed: int = 0, print_every: int = 200,
-             verbose: bool = False, test_every: int | None = None, input_noise: float = 0.0,
-             optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
+             test_y: torch.Tensor | None = None, *, total_steps: int = RunSettings.total_steps,
+             learn_rate: float = RunSettings.learn_rate, weight_decay: float = RunSettings.weight_decay,
+             batch_size: int | None = RunSettings.batch_size, seed: int = RunSettings.seed,
+             print_every: int = RunSettings.print_every, verbose: bool = RunSettings.verbose,
+             test_every: int | None = None, input_noise: float = 0.0, optimizer: str = RunSettings.optimizer,
+             schedule: str = RunSettings.schedule, clip_grad: float = RunSettings.clip_grad,
              checkpoint: str | Path | None = None, checkpoint_every: float | None = None, generators: tuple = (),
              threads: int | None = 1, progress: bool | None = None, on_step: Callable[[int, int], None] | None = None,
              resolved: dict | None = None) -> dict:

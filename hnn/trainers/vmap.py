@@ -26,6 +26,7 @@ from torch.func import functional_call, stack_module_state, vmap
 
 from ..integrators.groups import shared_buffers
 from ..modes import model_axis
+from ..settings import RunSettings
 from .group_loop import WeightStack, group_loop, group_settings, group_stats
 from .loop import adam_optimizer
 from .rows import GroupRows, check_data
@@ -43,10 +44,12 @@ class _Loss(nn.Module):
 
 
 def train_vmap(models: list[nn.Module], data: list[tuple], tests: list[tuple] | None = None, *,
-                loss_of: Callable[[nn.Module], Callable], seeds: list[int], total_steps: int = 2000,
-                learn_rate: float = 1e-3, weight_decay: float = 1e-4, batch_size: int | None = None,
-                print_every: int = 200, test_every: int | None = None, input_noise: float = 0.0,
-                optimizer: str = "adam", schedule: str = "constant", clip_grad: float = 0.0,
+                loss_of: Callable[[nn.Module], Callable], seeds: list[int],
+                total_steps: int = RunSettings.total_steps, learn_rate: float = RunSettings.learn_rate,
+                weight_decay: float = RunSettings.weight_decay, batch_size: int | None = RunSettings.batch_size,
+                print_every: int = RunSettings.print_every, test_every: int | None = None, input_noise: float = 0.0,
+                optimizer: str = RunSettings.optimizer, schedule: str = RunSettings.schedule,
+                clip_grad: float = RunSettings.clip_grad,
                 names: list[str] | None = None, progress: bool = False, checkpoint=None,
                 checkpoint_every: float | None = None) -> tuple[list[dict | None], dict]:
     """Train ``models`` (one class and shape, the same structure) together, as ``hnn.train`` trains each
