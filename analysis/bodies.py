@@ -14,7 +14,7 @@ springs, or experiment-gravity, a softened rotating disk: 8 bodies, the default 
 batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
 leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``),
-and the reference: DOP853 at rtol 1e-10.
+and the reference: DOP853 at rtol 1e-10 (gravity: yoshida4 on the true forces at a quarter of the step).
 
 Per N and fit:
 - **energy error per body**: max over t of |H(x(t)) - H(x(0))| / N along the model's path, H the true energy
