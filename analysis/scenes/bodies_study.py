@@ -24,11 +24,13 @@ QUICK_SIZES = (8, 32, 128, 256)
 # Gravity's pulls reach every body, so a step at N = 4096 costs N^2 pairs (seconds), and its bodies speed up with N
 # (the disk keeps its density): a shorter horizon at a finer step than the chain's, and its reference yoshida4 on
 # the true forces at a quarter of the step (error ~ 4^-4 of a yoshida4 step's; DOP853 at rtol 1e-10 took thousands
-# of calls at N = 512, hours at 4096) where the chain's is DOP853
+# of calls at N = 512, hours at 4096) where the chain's is DOP853. Its sizes stop at 512: the true forces reach 4096
+# (0.9 s a call of 2 states), but Adam's pair field took 11 s a call at N = 1024 (V's autograd over a million pairs;
+# about 3 minutes at 4096, hours a rollout) and the sampled fit's call at 4096 needs 17.7 GB (TooManyPairsError)
 SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "section": "bodies",
-                      "dt": 0.05, "horizon": 10.0, "starts": 4, "reference_divisions": None},
+                      "dt": 0.05, "horizon": 10.0, "starts": 4, "reference_divisions": None, "sizes": FULL_SIZES},
           "gravity": {"bodies": "{n} bodies under softened gravity (a rotating disk)", "section": "bodies-gravity",
-                      "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4}}
+                      "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4, "sizes": (8, 64, 512)}}
 FITS = ("library", "swim", "adam")
 QUICK_FITS = ("library", "swim")
 REPEATS = 5             # timed rollouts per N (the median counts)
