@@ -14,7 +14,7 @@ springs, or experiment-gravity, a softened rotating disk: 8 bodies, the default 
 batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
 leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``),
-and the reference: DOP853 at rtol 1e-10.
+and the reference: DOP853 at rtol 1e-10 (gravity: yoshida4 on the true forces at a quarter of the step).
 
 Per N and fit:
 - **energy error per body**: max over t of |H(x(t)) - H(x(0))| / N along the model's path, H the true energy
@@ -50,7 +50,8 @@ def main(argv=None) -> dict:
     add_flags(p, quick=f"N = {', '.join(map(str, QUICK_SIZES))} and the least-squares fits only (no Adam)",
               out="folder for bodies.json and bodies.md", out_default=DEFAULT_OUT,
               update_docs="write the bodies section of docs/bodies.md")
-    p.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths N (default {FULL_SIZES}; --quick {QUICK_SIZES})")
+    p.add_argument("--sizes", type=int, nargs="+", help=f"body counts N (default: the scene's, lattice {FULL_SIZES}, "
+                                                        f"gravity {SCENES['gravity']['sizes']}; --quick {QUICK_SIZES})")
     p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted (default {FITS}; --quick "
                                                           f"{QUICK_FITS})")
     p.add_argument("--scene", choices=SCENES, default="lattice",
@@ -75,7 +76,7 @@ def main(argv=None) -> dict:
     scene = SCENES[args.scene]
     args.starts, args.dt, args.horizon = (scene[name] if value is None else value for name, value in
                                           (("starts", args.starts), ("dt", args.dt), ("horizon", args.horizon)))
-    sizes = tuple(args.sizes or (QUICK_SIZES if args.quick else FULL_SIZES))
+    sizes = tuple(args.sizes or (QUICK_SIZES if args.quick else scene["sizes"]))
     fits = tuple(args.fits or (QUICK_FITS if args.quick else FITS))
     for value, name in ((args.starts, "--starts"), (args.dt, "--dt"), (args.horizon, "--horizon")):
         if not value > 0:

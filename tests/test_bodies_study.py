@@ -98,3 +98,16 @@ def test_gravity_runs_zero_shot_and_a_diverged_model_is_a_row_that_says_so():
     text = bodies.table(results)
     assert "| 64 | diverged: leapfrog (dt=0.01): 1 trajectories diverged | 1.00e-03 | | 1.00e-04 | 2.000 |" in text
     assert "softened gravity" in text
+
+
+def test_a_model_past_memory_is_a_row_that_says_how_much_it_needs(monkeypatch):
+    from hnn.models import pair
+
+    # 16 MB: the fit's 3200 states of 28 pairs (20 numbers each: 14 MB) fit, one state of 600 bodies' 179700 do not
+    monkeypatch.setattr(pair, "PAIR_BYTES", 2 ** 24)
+    results = bodies.study(sizes=(8, 600), fits=("swim",), seed=0, starts=1, dt=0.01, horizon=0.02, adam_steps=0,
+                           hidden=8, scene="gravity")
+    big = results["rows"][1]["swim"]
+    assert "too many pairs" in big["diverged"] and "GiB" in big["diverged"] and big["seconds_per_step"] is None
+    results["meta"] = {"command": "python analysis/bodies.py", "cores": 2, "cpu": "test"}
+    assert "| n/a | " in bodies.table(results)

@@ -305,3 +305,31 @@ class _True(hnn.Model):
 
     def time_derivative(self, x, t=None):
         return self.system.dynamics(x)
+
+
+@pytest.mark.parametrize("method", ["dopri5", "dop853"])
+def test_one_trajectory_takes_the_steps_it_takes_in_a_batch(method):
+    """One state steps through hnn.integrators.one_row (its bookkeeping in Python floats): the same
+    bits, calls, rejected steps and blow-up times as the same row beside another in the general driver,
+    forward and backward, with several output times in a step and with none in most."""
+    def duffing(x):                     # stiffening with the amplitude: rejected steps at loose tolerances
+        return torch.stack([x[:, 1], -x[:, 0] - 4 * x[:, 0] ** 3], dim=1)
+    x0 = torch.tensor([[1.3, -0.4], [0.2, 0.1]], dtype=torch.float64)
+    rejected = 0
+    for t in (np.linspace(0, 6, 301), np.linspace(0, -6, 4), np.array([0.0, 6.0])):
+        for rtol in (1e-3, 1e-9):
+            stats = {}
+            alone = hnn.rollout(duffing, x0[:1], t, method=method, rtol=rtol, atol=rtol, stats=stats)
+            both = hnn.rollout(duffing, x0, t, method=method, rtol=rtol, atol=rtol, drop_finished=False)
+            assert torch.equal(alone[0], both[0])
+            alone_again = hnn.rollout(duffing, x0[1:], t, method=method, rtol=rtol, atol=rtol)
+            assert torch.equal(alone_again[0], both[1])
+            rejected += stats["rejected"]
+    assert rejected > 0         # the rejected-step branch was taken
+    # a blow-up (dx/dt = x^2 reaches infinity at t = 1/x0): the row is named at the same time
+    times = []
+    for x in (x0[:1].abs() + 1, (x0.abs() + 1)):
+        with pytest.raises(hnn.DivergenceError) as caught:
+            hnn.rollout(lambda x: x * x, x, np.linspace(0, 2, 5), method=method, rtol=1e-6, atol=1e-8)
+        times.append(str(caught.value).split("#0 at t=")[1].split(",")[0].split(".")[0:2])
+    assert times[0] == times[1]

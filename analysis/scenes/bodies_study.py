@@ -12,6 +12,7 @@ import torch
 
 import hnn
 from hnn.interface import SplitField
+from hnn.models.pair import TooManyPairsError
 from hnn.threads import torch_threads
 from hnn_analysis import pages
 from hnn_analysis.provenance import machine
@@ -21,11 +22,15 @@ QUICK_SIZES = (8, 32, 128, 256)
 # scene (its task) -> its bodies in the page's sentence, its section of docs/bodies.md and its rollouts' defaults;
 # every scene's task declares the same functions of any N: dynamics, hamiltonian, potential_gradient, random_config.
 # Gravity's pulls reach every body, so a step at N = 4096 costs N^2 pairs (seconds), and its bodies speed up with N
-# (the disk keeps its density): a shorter horizon at a finer step than the chain's
+# (the disk keeps its density): a shorter horizon at a finer step than the chain's, and its reference yoshida4 on
+# the true forces at a quarter of the step (error ~ 4^-4 of a yoshida4 step's; DOP853 at rtol 1e-10 took thousands
+# of calls at N = 512, hours at 4096) where the chain's is DOP853. Its sizes stop at 512: the true forces reach 4096
+# (0.9 s a call of 2 states), but Adam's pair field took 11 s a call at N = 1024 (V's autograd over a million pairs;
+# about 3 minutes at 4096, hours a rollout) and the sampled fit's call at 4096 needs 17.7 GB (TooManyPairsError)
 SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "section": "bodies",
-                      "dt": 0.05, "horizon": 10.0, "starts": 4},
+                      "dt": 0.05, "horizon": 10.0, "starts": 4, "reference_divisions": None, "sizes": FULL_SIZES},
           "gravity": {"bodies": "{n} bodies under softened gravity (a rotating disk)", "section": "bodies-gravity",
-                      "dt": 0.01, "horizon": 0.5, "starts": 2}}
+                      "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4, "sizes": (8, 64, 512)}}
 FITS = ("library", "swim", "adam")
 QUICK_FITS = ("library", "swim")
 REPEATS = 5             # timed rollouts per N (the median counts)
@@ -89,6 +94,7 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
         print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
         models[fit + ":meta"] = {"seconds": seconds, "what": what}
     truth = _true_field(data_module)
+    divisions = SCENES[scene]["reference_divisions"]
     t = np.linspace(0.0, horizon, int(round(horizon / dt)) + 1)
     rows = []
     with torch_threads(1):
@@ -96,8 +102,11 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
             rng = np.random.RandomState(seed + 1000)
             x0 = torch.tensor(np.stack([data_module.random_config(rng, count) for _ in range(starts)]))
             with torch.no_grad():
-                reference = hnn.rollout(data_module.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
-                                        atol=REFERENCE_RTOL)
+                if divisions:
+                    reference = hnn.rollout(truth, x0, t, method="yoshida4", dt=dt / divisions)
+                else:
+                    reference = hnn.rollout(data_module.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
+                                            atol=REFERENCE_RTOL)
                 true_path = hnn.rollout(truth, x0, t, method="leapfrog", dt=dt)
             row = {"N": count, "true": {**_errors(true_path, reference, data_module.hamiltonian, count),
                                         "seconds_per_step": _seconds_per_step(truth, x0, dt)}}
@@ -109,6 +118,9 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                     row[fit] = {"diverged": str(err).split(". ")[0],
                                 "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
                     continue
+                except TooManyPairsError as err:        # more pairs than its field call may hold: what it needs
+                    row[fit] = {"diverged": f"too many pairs: {str(err).split(':')[0]}", "seconds_per_step": None}
+                    continue
                 row[fit] = {**_errors(path, reference, data_module.hamiltonian, count),
                             "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
             rows.append(row)
@@ -117,6 +129,7 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
             "settings": {"scene": scene, "sizes": list(sizes), "fits": list(fits), "seed": seed, "starts": starts,
                          "dt": dt, "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
                          "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
+                         "reference_divisions": divisions,
                          "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1}}
 
 
@@ -125,7 +138,7 @@ def _row_line(row: dict, fits) -> str:
                               f"err {row['true']['rollout']:.2e} {row['true']['seconds_per_step'] * 1e3:.3f} ms"]
     cells += [f"{fit}: " + (f"diverged ({row[fit]['diverged']})" if "diverged" in row[fit] else
                             f"E/N {row[fit]['energy_per_body']:.2e} err {row[fit]['rollout']:.2e}")
-              + f" {row[fit]['seconds_per_step'] * 1e3:.3f} ms" for fit in fits]
+              + f" {_ms(row[fit]['seconds_per_step'])} ms" for fit in fits]
     return " | ".join(cells)
 
 
@@ -135,13 +148,24 @@ def _bodies(settings: dict, count: int) -> str:
     return SCENES[settings.get("scene", "lattice")]["bodies"].format(n=count)
 
 
+def _ms(seconds: float | None) -> str:
+    """Milliseconds of a step, or ``n/a`` where none was timed (a field call past memory)."""
+    return "n/a" if seconds is None else f"{seconds * 1e3:.3f}"
+
+
+def _reference(settings: dict) -> str:
+    if settings.get("reference_divisions"):
+        return (f"yoshida4 on the true forces at dt = {settings['dt'] / settings['reference_divisions']:g}")
+    return f"DOP853 at rtol {settings['reference_rtol']:g}"
+
+
 def table(results: dict) -> str:
     """The page's section: how each fit was found, then one table per fit against N with the true forces beside."""
     meta, settings = results["meta"], results["settings"]
     lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta.get('torch', '?')}, one thread") + ".", "",
              f"Fitted on {_bodies(settings, settings['trained_on'])} (seed {settings['seed']}); each N rolled out from "
              f"{settings['starts']} starts by leapfrog at dt = {settings['dt']:g} to t = {settings['horizon']:g}, "
-             f"float64; reference DOP853 at rtol {settings['reference_rtol']:g}.", ""]
+             f"float64; reference {_reference(settings)}.", ""]
     for fit, how in results["fits"].items():
         lines.append(f"- `{fit}` ({how['seconds']:.2f} s to fit): {how['what']}")
     for fit in settings["fits"]:
@@ -153,7 +177,7 @@ def table(results: dict) -> str:
             errors = (f"diverged: {mine['diverged']} | {true['energy_per_body']:.2e} | | {true['rollout']:.2e}"
                       if "diverged" in mine else f"{mine['energy_per_body']:.2e} | {true['energy_per_body']:.2e} | "
                                                  f"{mine['rollout']:.2e} | {true['rollout']:.2e}")
-            lines.append(f"| {row['N']} | {errors} | {mine['seconds_per_step'] * 1e3:.3f} | "
-                         f"{true['seconds_per_step'] * 1e3:.3f} | "
-                         f"{mine['seconds_per_step'] / true['seconds_per_step']:.1f}x |")
+            ratio = "" if mine["seconds_per_step"] is None else f"{mine['seconds_per_step'] / true['seconds_per_step']:.1f}x"
+            lines.append(f"| {row['N']} | {errors} | {_ms(mine['seconds_per_step'])} | "
+                         f"{_ms(true['seconds_per_step'])} | {ratio} |")
     return "\n".join(lines) + "\n"

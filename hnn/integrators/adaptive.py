@@ -16,6 +16,7 @@ from scipy.integrate import solve_ivp
 from .dop853 import DOP853, Stages, rk_stages, tableau_rows
 from ..errors import DivergenceError, divergence_error
 from .fixed_step import Field
+from .one_row import one_row
 
 DEFAULT_SCIPY_METHOD = "RK45"    # solve_ivp's own default; reports name the integrator by it
 
@@ -253,6 +254,11 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     prop = np.minimum(100 * h0, h1)                      # proposed |step| per row
     out = np.empty((batch, num_t, dim), dtype=dtype)
     out[:, 0] = y
+    if batch == 1:      # one trajectory: the same iteration with its bookkeeping in Python floats (same bits)
+        calls, rejected, bad = one_row(scheme, field, y, k1, t, float(prop[0]), out[0], rtol, atol, max_norm,
+                                       max_iterations, name)
+        return _finish(name, out, x0.device, nfev + calls, rejected, np.array([np.nan if bad is None else bad]),
+                       stats, rtol, atol, max_norm)
     nxt = np.ones(batch, dtype=np.int64)
     t_next = np.full(batch, t[min(1, num_t - 1)])          # t[nxt] (the last time once past it), kept as nxt moves
     done = np.zeros(batch, dtype=bool)
@@ -389,10 +395,17 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         prop = size * factor
     else:
         raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")
+    return _finish(name, out, x0.device, nfev, rejected, bad_time, stats, rtol, atol, max_norm)
+
+
+def _finish(name, out: np.ndarray, device, nfev: int, rejected: int, bad_time: np.ndarray, stats, rtol, atol,
+            max_norm) -> torch.Tensor:
+    """The rollout ``out`` as a tensor on ``device``, ``stats`` filled; a ``DivergenceError`` naming every row
+    with a time in ``bad_time`` (NaN: the row finished)."""
     if stats is not None:
         stats.update(nfev=nfev, rejected=rejected)
     diverged = np.flatnonzero(~np.isnan(bad_time)).tolist()
     if diverged:
         raise divergence_error(f"{name} (rtol={rtol}, atol={atol}, max_norm={max_norm})", diverged,
                                bad_time[diverged].tolist())
-    return torch.from_numpy(out).to(x0.device)
+    return torch.from_numpy(out).to(device)
