@@ -72,7 +72,11 @@ def test_the_wheel_alone_imports_trains_rolls_out_and_saves_runs_as_the_checkout
         shutil.copytree(REPO / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(REPO / name, src / name)
-    isolation = [] if importlib.util.find_spec("setuptools") is None else ["--no-build-isolation"]
+    # build with the environment's setuptools where it can make a wheel (setuptools >= 70.1, or the wheel
+    # package beside it); otherwise pip fetches a build backend into an isolated environment
+    can_build = importlib.util.find_spec("setuptools") is not None and (
+        importlib.util.find_spec("wheel") is not None or importlib.util.find_spec("setuptools.command.bdist_wheel"))
+    isolation = ["--no-build-isolation"] if can_build else []
     built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", *isolation, "-w",
                             str(tmp_path / "dist"), str(src)], capture_output=True, text=True, timeout=600)
     assert built.returncode == 0, built.stderr[-3000:]
@@ -86,7 +90,9 @@ def test_the_wheel_alone_imports_trains_rolls_out_and_saves_runs_as_the_checkout
     (tmp_path / "elsewhere").mkdir()
     alone = _run(tmp_path / "elsewhere", str(site))
     assert Path(alone["file"]).is_relative_to(site)
-    checkout = _run(tmp_path / "elsewhere", None)
+    # the checkout under test by its path: the installed `hnn` may be another checkout's editable install (a
+    # clone tested beside the developer's own, as quick_budgets.py does)
+    checkout = _run(tmp_path / "elsewhere", str(REPO))
     assert Path(checkout["file"]).is_relative_to(REPO)
     for key in ("losses", "rk4_error", "run_test_loss"):
         assert alone[key] == checkout[key], key          # the same code: the same bits at one thread
