@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from scipy.integrate import solve_ivp
 
-from .dop853 import DOP853, Stages, rk_stages, tableau_rows
+from .dop853 import DOP853, Stages, ToleranceScale, rk_stages, tableau_rows
 from ..errors import DivergenceError, divergence_error
 from .fixed_step import Field
 from .one_row import one_row
@@ -271,15 +271,7 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
     forward = direction * t                                         # the output times, ascending
     # a state is blown up past this (max_norm None: past the largest finite value, i.e. inf; NaN fails both)
     bound = max_norm if max_norm is not None else float(np.finfo(np.float64).max)
-    abs_new = None                          # |y_new| of the last attempt, kept by scale_tol for the blow-up test
-
-    def scale_tol(y, y_new):
-        nonlocal abs_new
-        abs_new = np.abs(y_new)
-        scale = np.maximum(np.abs(y), abs_new)
-        scale *= rtol
-        scale += atol
-        return scale
+    scale_tol = ToleranceScale(rtol, atol)  # keeps |y_new| of the last attempt for the blow-up test
 
     # Each iteration's own work is some forty numpy calls on arrays of a few elements, each costing its
     # dispatch, not its arithmetic: the common iteration (no row finished, none rejected or blown up)
@@ -314,9 +306,9 @@ def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, m
         # a NaN or inf in y_new makes its row's max NaN or inf, one in a stage the error norm: every row
         # passes both tests when the largest of each does (NaN fails a comparison). The ufuncs' own reduce and
         # count_nonzero below, not the methods max and any: the same answers without their Python wrappers
-        calm = not finished and float(_largest(abs_new, None)) <= bound and float(_largest(err_norm)) <= 1.0
+        calm = not finished and float(_largest(scale_tol.abs_new, None)) <= bound and float(_largest(err_norm)) <= 1.0
         if not calm:
-            largest = _largest(abs_new, 1)
+            largest = _largest(scale_tol.abs_new, 1)
             finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) & np.isfinite(err_norm)
             over = err_norm > 1
         if not calm and (over.any() or not finite.all()):          # else no row blew up or stalled: skip the masks

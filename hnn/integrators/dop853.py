@@ -106,6 +106,22 @@ def _dense(coefficients: dict, length: int, dtype: torch.dtype) -> torch.Tensor:
     return row
 
 
+class ToleranceScale:
+    """The error's scale ``atol + rtol * max(|y|, |y_new|)`` of an attempted step (arrays of the state's shape),
+    keeping ``abs_new = |y_new|`` of the last attempt for the drivers' blow-up test."""
+    __slots__ = ("rtol", "atol", "abs_new")
+
+    def __init__(self, rtol: float, atol: float):
+        self.rtol, self.atol, self.abs_new = rtol, atol, None
+
+    def __call__(self, y: np.ndarray, y_new: np.ndarray) -> np.ndarray:
+        self.abs_new = np.abs(y_new)
+        scale = np.maximum(np.abs(y), self.abs_new)
+        scale *= self.rtol
+        scale += self.atol
+        return scale
+
+
 class Stages:
     """The stage derivatives ``K`` ``(stages, rows, dim)`` of one explicit Runge-Kutta step of every row,
     with what the stage products run on: ``flat`` (``K``'s memory as ``(stages, rows * dim)`` in torch),

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dop853 import Stages
+from .dop853 import Stages, ToleranceScale
 from ..errors import DivergenceError
 
 _largest = np.maximum.reduce       # a.max() as its ufunc computes it (NaN wins), without the method's wrapper
@@ -42,15 +42,7 @@ def one_row(scheme, field, y: np.ndarray, k1: np.ndarray, t: np.ndarray, prop: f
     work = Stages.empty(scheme.stages, 1, dim, dtype)
     K = work.K
     nfev = rejected = 0
-    abs_new = None
-
-    def scale_tol(y, y_new):
-        nonlocal abs_new
-        abs_new = np.abs(y_new)
-        scale = np.maximum(np.abs(y), abs_new)
-        scale *= rtol
-        scale += atol
-        return scale
+    scale_tol = ToleranceScale(rtol, atol)
 
     for _ in range(max_iterations):
         if nxt >= num_t:
@@ -64,7 +56,7 @@ def one_row(scheme, field, y: np.ndarray, k1: np.ndarray, t: np.ndarray, prop: f
         y_new, err_norm, calls = scheme.attempt(field, y, hx, work, scale_tol)
         nfev += calls
         err = float(err_norm[0])
-        largest = float(_largest(abs_new, None))
+        largest = float(_largest(scale_tol.abs_new, None))
         accept = largest <= bound and err <= 1.0
         if not accept:
             finite = (largest <= max_norm if max_norm is not None else np.isfinite(largest)) and np.isfinite(err)
