@@ -88,18 +88,9 @@ def _builds(task: str, fields: dict) -> bool:
 
 
 def plan(tasks, seeds: list[int], runs_dir: Path, quick: bool) -> list[sweep.Job]:
-    """Every task's rungs at every seed (a quick run: the task's quick settings and ``study.QUICK_STEPS``)."""
-    jobs = []
-    for task in tasks:
-        spec = hnn.task_spec(task)
-        for label, fields in rungs(task).items():
-            solved = fields.get("fit", "adam") != "adam"
-            for seed in seeds:
-                values = {**spec.settings, **(spec.quick if quick else {}), **fields, "seed": seed,
-                          "save_dir": str(runs_dir), **({"total_steps": study.QUICK_STEPS} if quick and not solved else {})}
-                jobs.append(sweep.Job(f"{task}/{label}/seed{seed}", task, hnn.tasks.task_config(task, values),
-                                      expected_seconds=1.0 if solved else None))
-    return jobs
+    """Every task's rungs at every seed (``study.rung_jobs``; a quick run: the task's quick settings and
+    ``study.QUICK_STEPS``)."""
+    return study.rung_jobs(tasks, seeds, runs_dir, quick, rungs)
 
 
 def _chain_energy(task: str, models: dict) -> dict:

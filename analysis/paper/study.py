@@ -129,6 +129,24 @@ def plan(rows: list[dict], seeds: list[int], runs_dir: Path, steps: int | None,
     return jobs
 
 
+def rung_jobs(tasks, seeds: list[int], runs_dir: Path, quick: bool, rungs) -> list[sweep.Job]:
+    """The run of every rung of every task at every seed: ``rungs(task)`` gives ``{label: fields}``; a quick run
+    takes the task's quick settings and, where Adam trains it, ``QUICK_STEPS``. A least-squares rung is planned at
+    a second (its solve), a trained one at its measured rate."""
+    from hnn.sweeps import sweep
+    jobs = []
+    for task in tasks:
+        spec = hnn.task_spec(task)
+        for label, fields in rungs(task).items():
+            solved = fields.get("fit", "adam") != "adam"
+            for seed in seeds:
+                values = {**spec.settings, **(spec.quick if quick else {}), **fields, "seed": seed,
+                          "save_dir": str(runs_dir), **({"total_steps": QUICK_STEPS} if quick and not solved else {})}
+                jobs.append(sweep.Job(f"{task}/{label}/seed{seed}", task, hnn.tasks.task_config(task, values),
+                                      expected_seconds=1.0 if solved else None))
+    return jobs
+
+
 def _stage_seconds(keys: dict, per_seed: dict, run_seconds: dict) -> dict:
     """One row's seconds: dataset, training per model (summed over seeds), evaluation, figures."""
     stage = {"data": None, "train": {}, "evaluate": 0.0, "figures": 0.0}

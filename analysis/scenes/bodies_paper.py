@@ -40,18 +40,9 @@ SAMPLING_HNNS = {"2body": (1.15e-4, 26.0), "3body": (8.2e-3, 58.0)}
 
 
 def plan(tasks, seeds, runs_dir: Path, quick: bool) -> list[sweep.Job]:
-    """Every task's ``RUNGS`` at every seed (a quick run: the task's quick settings, ``study.QUICK_STEPS`` of Adam)."""
-    jobs = []
-    for task in tasks:
-        spec = hnn.task_spec(task)
-        for label, fields in RUNGS.items():
-            solved = "fit" in fields
-            for seed in seeds:
-                values = {**spec.settings, **(spec.quick if quick else {}), **fields, "seed": seed,
-                          "save_dir": str(runs_dir), **({"total_steps": study.QUICK_STEPS} if quick and not solved else {})}
-                jobs.append(sweep.Job(f"{task}/{label}/seed{seed}", task, hnn.tasks.task_config(task, values),
-                                      expected_seconds=1.0 if solved else None))
-    return jobs
+    """Every task's ``RUNGS`` at every seed (``study.rung_jobs``; a quick run: the task's quick settings,
+    ``study.QUICK_STEPS`` of Adam)."""
+    return study.rung_jobs(tasks, seeds, runs_dir, quick, lambda task: RUNGS)
 
 
 def h_error(model, x_test: torch.Tensor, x_anchor: torch.Tensor, hamiltonian) -> float:
