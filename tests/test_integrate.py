@@ -333,3 +333,48 @@ def test_one_trajectory_takes_the_steps_it_takes_in_a_batch(method):
             hnn.rollout(lambda x: x * x, x, np.linspace(0, 2, 5), method=method, rtol=1e-6, atol=1e-8)
         times.append(str(caught.value).split("#0 at t=")[1].split(",")[0].split(".")[0:2])
     assert times[0] == times[1]
+
+
+def test_shared_steps_step_the_batch_as_scipy_steps_it(pend):
+    """steps='shared': the batch as one system, one step size and one error norm over every component, as
+    solve_ivp steps its flattened batch. dopri5's formulas and step rule are RK45's but for one clause
+    (scipy lets no step grow right after a rejection; on this path no rejected step is followed by a
+    growing one): the same calls and, to round-off, the same states, against scipy called directly on the
+    flattened batch."""
+    rng = np.random.RandomState(3)
+    x0 = rng.uniform(-2.0, 2.0, size=(8, 2))
+    t = np.linspace(0, 6, 25)
+    stats = {}
+    ours = hnn.rollout(pend.dynamics, torch.as_tensor(x0), t, method="dopri5", rtol=1e-7, atol=1e-9,
+                       steps="shared", stats=stats).numpy()
+
+    def f(_, y):
+        q, p = y.reshape(8, 2).T
+        return np.stack([2 * p, -3 * np.sin(q)], 1).reshape(-1)
+    theirs = solve_ivp(f, (0, 6), x0.reshape(-1), t_eval=t, method="RK45", rtol=1e-7, atol=1e-9)
+    assert stats["rejected"] > 0                 # the rejection branch was met, and still the same calls
+    # the same decisions: an error norm within round-off of 1 could flip one step (6 calls) on another box
+    assert abs(stats["nfev"] - theirs.nfev) <= 6
+    # the same states: round-off of the same sums, or one tolerance's worth (1e-7 of states of size ~3) if a
+    # step flipped
+    np.testing.assert_allclose(ours, theirs.y.T.reshape(len(t), 8, 2).transpose(1, 0, 2), rtol=0, atol=3e-6)
+    per_row = hnn.rollout(pend.dynamics, torch.as_tensor(x0), t, method="dopri5", rtol=1e-7, atol=1e-9).numpy()
+    assert not np.array_equal(ours, per_row)        # the option took effect: another step sequence
+
+
+@pytest.mark.parametrize("method", ["dopri5", "dop853"])
+def test_shared_steps_converge_name_every_row_and_leave_one_state_alone(method, spring):
+    x0 = torch.tensor([[1.0, 0.0], [0.2, 0.9], [-0.5, 0.3]], dtype=torch.float64)
+    t = np.linspace(0, 20, 41)
+    exact = spring_solution(x0.numpy(), t)
+    errors = [np.abs(hnn.rollout(spring.dynamics, x0, t, method=method, rtol=r, atol=r, steps="shared").numpy()
+                     - exact).max() for r in (1e-5, 1e-9)]
+    assert errors[1] < errors[0] / 100 and errors[1] < 1e-7      # 4 decades of tolerance: at least 2 of error
+    one = hnn.rollout(spring.dynamics, x0[:1], t, method=method, rtol=1e-6, atol=1e-6, steps="shared")
+    assert torch.equal(one, hnn.rollout(spring.dynamics, x0[:1], t, method=method, rtol=1e-6, atol=1e-6))
+    with pytest.raises(hnn.DivergenceError) as caught:      # dx/dt = x^2 blows up at t = 1/x0: the batch stops
+        hnn.rollout(lambda x: x * x, x0.abs() + 1, np.linspace(0, 2, 5), method=method, rtol=1e-6, atol=1e-8,
+                    steps="shared")
+    assert caught.value.trajectories == [0, 1, 2] and len(caught.value.times) == 3
+    with pytest.raises(ValueError, match="'row', 'shared'"):
+        hnn.rollout(spring.dynamics, x0, t, method=method, steps="batch")

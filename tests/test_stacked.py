@@ -136,6 +136,21 @@ def test_a_group_rolls_out_as_each_of_its_models(kind, method):
         assert stats["nfev"] <= max(c["nfev"] for c in calls) + 2 < sum(c["nfev"] for c in calls)
 
 
+def test_a_group_with_shared_steps_rolls_out_each_model_on_its_own_steps():
+    """steps='shared' ties a batch to one step size: a group's models must not share one (each model's rows
+    would then be stepped by the others' errors)."""
+    args = {**hnn.tasks.task_config("spring", {"hidden_dim": 16}).to_dict(), "kind": "hnn"}
+    models = []
+    for seed in range(2):
+        torch.manual_seed(seed)
+        models.append(hnn.kinds.model_from_args(args).double())
+    x0 = torch.randn(2, 3, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    t_eval = np.linspace(0.0, 1.0, 5)
+    together = hnn.integrators.groups.rollout_group(models, x0, t_eval, method="dopri5", rtol=1e-6, steps="shared")
+    for g, model in enumerate(models):
+        assert torch.equal(together[g], hnn.rollout(model, x0[g], t_eval, method="dopri5", rtol=1e-6, steps="shared"))
+
+
 def test_a_sweep_groups_every_kind_on_a_gpu_and_the_closed_form_kinds_on_the_cpu():
     from hnn.sweeps import sweep
     Spring = hnn.load_task("spring", "train").Config

@@ -174,7 +174,7 @@ def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
 
 def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL, atol: float = ATOL,
                    max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
-                   stats: dict | None = None, drop_finished: bool = True) -> torch.Tensor:
+                   stats: dict | None = None, drop_finished: bool = True, steps: str = "row") -> torch.Tensor:
     """RK45 (Dormand-Prince) with one adaptive step size per trajectory.
 
     Each row is controlled by its own error norm, exactly the norm of one scipy ``solve_ivp``
@@ -190,22 +190,28 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
     scale, a group's stacked field (``hnn.integrators.groups.group_field``); each row's path is the same either
     way. The stepping runs in numpy on the states' dtype (on a few states an operation
     costs several times less there than in torch: docs/speed.md, "Why the fast paths"), ``f`` on tensors sharing the arrays' memory.
+
+    ``steps='shared'`` steps the batch as one system instead, as ``'solve_ivp'`` does: one step size for
+    every row, set by the RMS of the error over the whole batch (``SHARED_STEPS``).
     """
-    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
+    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished,
+                           steps)
 
 
 def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL, atol: float = ATOL,
                    max_norm: float | None = 1e6, max_iterations: int = 1_000_000,
-                   stats: dict | None = None, drop_finished: bool = True) -> torch.Tensor:
+                   stats: dict | None = None, drop_finished: bool = True, steps: str = "row") -> torch.Tensor:
     """Dormand-Prince 8(5,3) (Hairer's DOP853, ``hnn.integrators.dop853``) with one step size per trajectory.
 
     As ``dopri5_rollout`` in all else (rows controlled alone, finished rows dropped unless
     ``drop_finished=False``, ``f`` must
     treat rows independently), with the method's 7th-order dense output at ``t_eval``: 12 field
     calls a step, 3 more on the rows that have an output time inside it. Order 8: at tight
-    tolerances it takes several times fewer steps than dopri5 for the same error.
+    tolerances it takes several times fewer steps than dopri5 for the same error. ``steps='shared'``: one step
+    size for the batch, as ``dopri5_rollout``'s.
     """
-    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
+    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished,
+                           steps)
 
 
 _largest = np.maximum.reduce       # a.max() as its ufunc computes it (NaN wins), without the method's wrapper
@@ -218,14 +224,48 @@ def _built(scheme, dtype: torch.dtype):
     return scheme(dtype)
 
 
+# ``steps=`` of the per-row methods. 'row': one step size per row, each row's path its own (the default: a
+# row's answer does not depend on the batch it came in). 'shared': the batch as one system of batch * dim
+# components, one step size and one error norm (the RMS over every component), as scipy's solve_ivp and
+# torchdiffeq step a batch. On a batch of alike trajectories the shared step is set by the RMS, under the
+# hardest row's error: it makes about the calls scipy makes at a given tolerance, each on every row, with
+# the one-row driver's bookkeeping (docs/integrators.md, "work-precision").
+SHARED_STEPS = ("row", "shared")
+
+
 def per_row_rollout(scheme, name: str, f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float, atol: float,
                     max_norm: float | None, max_iterations: int, stats: dict | None,
-                    drop_finished: bool = True) -> torch.Tensor:
+                    drop_finished: bool = True, steps: str = "row") -> torch.Tensor:
     """An embedded Runge-Kutta ``scheme`` (a class like ``hnn.integrators.dop853.DOP853``, built for the dtype)
-    with one step size per row: the driver of ``dopri5_rollout`` and ``dop853_rollout``."""
+    with one step size per row (``steps='shared'``: one for the batch): the driver of ``dopri5_rollout`` and
+    ``dop853_rollout``."""
+    if steps not in SHARED_STEPS:
+        raise ValueError(f"{name}: steps={steps!r} is not one of {SHARED_STEPS}: 'row' gives each trajectory its "
+                         "own step size, 'shared' one for the whole batch (as solve_ivp)")
+    built, field = _built(scheme, x0.dtype), _numpy_field(f, x0.dtype, x0.device)
     with np.errstate(all="ignore"):     # a blown-up row is reported by name below, not by numpy warnings
-        return _per_row(_built(scheme, x0.dtype), name, _numpy_field(f, x0.dtype, x0.device), x0, t, rtol, atol,
-                        max_norm, max_iterations, stats, drop_finished)
+        if steps == "shared" and len(x0) > 1:
+            return _shared(built, name, field, x0, t, rtol, atol, max_norm, max_iterations, stats)
+        return _per_row(built, name, field, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished)
+
+
+def _shared(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations,
+            stats) -> torch.Tensor:
+    """The batch ``x0`` ``(batch, dim)`` stepped as one row of ``batch * dim`` components (``SHARED_STEPS``);
+    a blow-up stops every row, so a ``DivergenceError`` names them all."""
+    batch, dim = x0.shape
+
+    def flat_field(y: np.ndarray) -> np.ndarray:
+        return field(y.reshape(batch, dim)).reshape(1, batch * dim)
+    try:
+        out = _per_row(scheme, name, flat_field, x0.reshape(1, batch * dim), t, rtol, atol, max_norm,
+                       max_iterations, stats, True)
+    except DivergenceError as err:
+        if not err.times:
+            raise
+        raise divergence_error(f"{name} (steps='shared', rtol={rtol}, atol={atol}, max_norm={max_norm})",
+                               range(batch), err.times * batch) from None
+    return out.reshape(len(t), batch, dim).transpose(0, 1).contiguous()
 
 
 def _per_row(scheme, name, field, x0: torch.Tensor, t: np.ndarray, rtol, atol, max_norm, max_iterations,

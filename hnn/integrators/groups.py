@@ -92,7 +92,8 @@ def rollout_group(models: list[nn.Module], x0: torch.Tensor, t_eval, method: str
         raise ValueError(f"x0 must be (G, batch, dim) with G = {len(models)} models, or (batch, dim); got "
                          f"{tuple(x0.shape)}")
     if not get_solver(method).vmap:
-        if not get_solver(method).row_wise:
+        # steps='shared' ties every row to one step size: each model then needs its own integration
+        if not get_solver(method).row_wise or options.get("steps") == "shared":
             return torch.stack([rollout(m, x, t_eval, method=method, threads=None, **options) for m, x in zip(models, x0)])
         paths = rollout(group_field(models), x0.reshape(-1, x0.shape[-1]), t_eval, method=method, threads=None,
                         **options, **group_options(method))
