@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import hnn
-from hnn.settings import setting
+from hnn.settings import setting, task_setting
 
 HERE = Path(__file__).resolve().parent
 
@@ -22,8 +22,9 @@ class Config(hnn.RunConfig):
     name: str = "gravity"
     input_dim: int = 32
     save_dir: str = str(HERE)
-    softening: float = setting(0.1, "Plummer softening length e of V = -1 / sqrt(r^2 + e^2); 0 is Newton's (close "
-                                    "encounters are then redrawn)", parse=hnn.settings.nonnegative_float)
+    # the shared task setting (stage model): the data's V and the radial library's softened term read this one e
+    softening: float = task_setting("softening", default=0.1, help="Plummer softening length e of V = -1 / "
+                                    "sqrt(r^2 + e^2); 0 is Newton's (close encounters are then redrawn)")
     # the bodies' columns differ in size by where each body sits in the disk, not by unit: the scene is in units
     # near 1 already, and scales per column would bend the pair kind's distances (hnn.units refuses them for it)
     units: str = setting("off", "train in the canonical units of the data (hnn.units): off (the default here: the scene "

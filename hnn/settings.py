@@ -294,6 +294,10 @@ TASK_SETTINGS: dict[str, dict[str, Any]] = {
     # the measured task's names the angle columns (a string); ModelSpec reads any of them as a bool
     "periodic": dict(type="bool", default=False, stage="model",
                      help="the mechanical and second-order networks see (cos q, sin q): q are angles"),
+    # the gravity task's Plummer length: its data's V and the pair kind's radial library read the same e (0, every
+    # other task's: no softened term, the library as it was)
+    "softening": dict(type="float", default=0.0, stage="model", parse=nonnegative_float,
+                      help="Plummer softening length e of V = -1 / sqrt(r^2 + e^2); 0 is Newton's"),
 }
 
 

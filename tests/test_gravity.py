@@ -1,16 +1,20 @@
 """Gravity of N bodies (experiment-gravity, hnn.orbits.nbody's softening): the softened field is the symplectic
 gradient of the softened H, softening converges to Newton's at second order, the pair kind with the exact softened
-V gives the same field at any N, and without softening close encounters are redrawn."""
+V gives the same field at any N, the radial library (at the task's softening) recovers the softened V and the masses
+from dx/dt, a sampled pair fit's field call gives the same numbers in chunks as in one piece, and without softening
+close encounters are redrawn."""
 import numpy as np
 import pytest
 import torch
 
 import hnn
 from hnn.bodies import Bodies
+from hnn.fits.radial import RADIAL_TERMS, RadialLibrary
+from hnn.kinds import model_from_args
 from hnn.models.pair import PairHNN
 from hnn.orbits import nbody
 from hnn.orbits.encounters import MIN_SEPARATION
-from hnn.tasks import load_task
+from hnn.tasks import load_task, task_config
 
 EPS = torch.finfo(torch.float64).eps
 
@@ -59,6 +63,64 @@ def test_the_pair_kind_with_the_softened_potential_is_the_softened_field(count):
     x = _states(count, 4, seed=2)
     assert torch.allclose(model.time_derivative(x), nbody.dynamics(x, 0.1), rtol=0, atol=64 * EPS * count / 0.1 ** 2)
     assert torch.allclose(model.hamiltonian(x), nbody.hamiltonian(x, 0.1), rtol=64 * EPS * count ** 2, atol=0)
+
+
+def _pair_fit(fit, **settings):
+    """The pair kind of the gravity task's config (its softening) fitted by ``fit``, untrained."""
+    config = task_config("gravity", {"seed": 0, **settings})
+    return model_from_args({**config.to_dict(), "kind": "pairwise", "fit": fit, "hidden_dim": 32})
+
+
+def test_the_radial_library_recovers_the_softened_potential_and_the_masses():
+    count, softening = 8, load_task("gravity").SOFTENING
+    x = _states(count, 100, seed=3)
+    model = _pair_fit("library")        # the task's default softening, which its data are drawn at
+    stats = hnn.fits.solve(model, x, nbody.dynamics(x, softening), fit="library")
+    names = model.features.names()
+    kept = {names[k]: float(c) for k, c in enumerate(model.coef) if c != 0}
+    # one term survives the threshold, and the mass 1: the refit after thresholding is one column's ratio to the
+    # data, each entry of both a sum of count - 1 pair terms of a few operations each (the factor 16)
+    assert set(kept) == {"1/sqrt(r^2 + 0.1^2)"}
+    assert kept["1/sqrt(r^2 + 0.1^2)"] == pytest.approx(-1.0, rel=16 * count * EPS)
+    assert float(model.masses()[0]) == pytest.approx(1.0, rel=16 * count * EPS)
+    assert stats["fit"]["equation"] == "H = sum p^2/(2 m) - 1 sum 1/sqrt(r^2 + 0.1^2), m = 1"
+    # fitted on 8 bodies, the softened field of 40 (pulls up to 39 / 0.1^2 at worst, each pair's to a few eps)
+    wide = _states(40, 3, seed=4)
+    assert torch.allclose(model.time_derivative(wide), nbody.dynamics(wide, softening), rtol=0,
+                          atol=64 * EPS * 39 / softening ** 2)
+
+
+def test_without_softening_the_radial_library_is_the_unsoftened_one():
+    # the 2-body and 3-body tasks' library, term by term, and the gravity task's at --softening 0
+    assert RadialLibrary().names() == RadialLibrary(0.0).names() == list(RADIAL_TERMS)
+    assert _pair_fit("library", softening=0.0).features.names() == list(RADIAL_TERMS)
+    three = model_from_args({**task_config("3body").to_dict(), "kind": "pairwise", "fit": "library"})
+    assert three.features.names() == list(RADIAL_TERMS)
+    with pytest.raises(ValueError, match="softening"):
+        RadialLibrary(-0.1)
+
+
+def test_a_sampled_pair_field_in_chunks_is_the_field_in_one_piece(monkeypatch):
+    x8 = _states(8, 40, seed=5)
+    model = _pair_fit("swim")
+    hnn.fits.solve(model, x8, nbody.dynamics(x8, 0.1), fit="swim", seed=0)
+    x = _states(30, 3, seed=6)
+    whole_field, whole_energy = model.time_derivative(x), model.hamiltonian(x)
+    # a field call holds a few numbers a pair, not the features' width: exactly what it needs passes
+    pairs = 30 * 29 // 2
+    monkeypatch.setattr(hnn.models.pair, "PAIR_BYTES", len(x) * pairs * (3 + 3 * 2) * x.element_size())
+    # chunks of 7 pair rows (the last one short): the features' rows cut where one call would not cut them
+    monkeypatch.setattr(hnn.fits.radial, "CHUNK_BYTES", 7 * 3 * model.features.width * x.element_size())
+    field, energy = model.time_derivative(x), model.hamiltonian(x)
+    # V'(r) (or V) of each pair is a dot product over the width: its sum may be reordered in another chunk's
+    # product, by up to width eps times the sum of its terms' sizes; a body's pull sums 29 of them in one order
+    _, r = hnn.models.pair.separations(Bodies(30, 2).bodywise(x[:, :60]), *hnn.models.pair.pair_index(30))
+    z = r.reshape(-1, 1)
+    slope_terms = float((model.features.jacobian(z)[:, :, 0] * model.coef).abs().sum(dim=1).max())
+    value_terms = float((model.features(z) * model.coef).abs().sum(dim=1).max())
+    width = model.features.width
+    assert torch.allclose(field, whole_field, rtol=0, atol=29 * width * EPS * slope_terms)
+    assert torch.allclose(energy, whole_energy, rtol=0, atol=pairs * width * EPS * value_terms)
 
 
 def test_without_softening_close_encounters_are_redrawn(tmp_path):

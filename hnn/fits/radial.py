@@ -6,21 +6,27 @@ linear in the inverse masses a, and dp_i/dt = -sum_k c_k sum_j phi_k'(r_ij) (q_i
 two problems, as the separable fit's T and V. The features:
 
 - ``RadialLibrary``: terms written out (``RADIAL_TERMS``: r^k and r^-k for k = 1..3, exp(-r), the
-  Lennard-Jones r^-6 and r^-12), thresholded as the library fit is, so V prints as an equation of r;
+  Lennard-Jones r^-6 and r^-12; and where the scene is Plummer-softened, its softening e > 0 the task's
+  ``softening`` setting, ``1/sqrt(r^2 + e^2)`` for that e), thresholded as the library fit is, so V prints as an
+  equation of r;
 - sampled radial neurons, tanh(w r + b) (``hnn.fits.features.TanhFeatures`` on one input, r), drawn by
   SWIM from pairs of observed distances or by ELM (``--fit swim``, ``--fit elm``).
 
 The pair geometry is the pair kind's (``hnn.models.pair``); the layout the task's (``hnn.bodies.Bodies``).
-States ``(rows, 2 N dim)``, float64.
+A field call runs the features over the pairs in chunks (``CHUNK_BYTES``, as the pair kind's network does), so
+its memory grows with the pairs' few numbers each, not with the features' width: a sampled fit of 64 neurons
+rolls out gravity at N = 4096 (8.4 million pairs a state). States ``(rows, 2 N dim)``, float64.
 """
 from __future__ import annotations
+
+import math
 
 import torch
 from torch import nn
 
 from ..bodies import Bodies
 from ..interface import Model
-from ..models.pair import check_pair_memory, pair_gradient, pair_index, separations
+from ..models.pair import CHUNK_BYTES, check_pair_memory, pair_gradient, pair_index, separations
 from .base import Features
 from .models import Part
 
@@ -36,32 +42,57 @@ RADIAL_TERMS = {
     "1/r^6": (lambda r: r ** -6, lambda r: -6 * r ** -7),
     "1/r^12": (lambda r: r ** -12, lambda r: -12 * r ** -13),
 }
+# numbers a pair and state holds at once in a field call: r, V'(r) (or V), and d, its gathered ends' and the push
+# (per dimension); the features' own width lives only a chunk at a time (``FittedPair._chunked``)
+_FIELD_NUMBERS = 3
+_FIELD_NUMBERS_PER_DIM = 3
+# features' numbers a pair row holds in a chunk: their values, their slopes and a temporary (tanh's w r + b)
+_CHUNK_WIDTHS = 3
+
+
+def softened_term(softening: float) -> tuple[str, tuple]:
+    """``(name, (value, d/dr))`` of Plummer's softened inverse distance 1/sqrt(r^2 + e^2) at e = ``softening``
+    (> 0): the term whose coefficient -G m_i m_j is a softened gravity's pair potential."""
+    e2 = softening ** 2
+    return (f"1/sqrt(r^2 + {softening:g}^2)",
+            (lambda r: (r * r + e2).rsqrt(), lambda r: -r * (r * r + e2) ** -1.5))
 
 
 class RadialLibrary(Features):
-    """The radial terms ``RADIAL_TERMS``: values and d/dr ``(rows, terms)`` at distances ``r`` ``(rows, 1)``; the
-    ``library`` fit's features of the ``radial`` form (a pair potential V(r)), printed as its formula."""
+    """The radial terms ``RADIAL_TERMS``, then, at a ``softening`` e > 0 (a Plummer-softened scene's length, the
+    units of r), the softened inverse distance 1/sqrt(r^2 + e^2) (``softened_term``): values and d/dr
+    ``(rows, terms)`` at distances ``r`` ``(rows, 1)``; the ``library`` fit's features of the ``radial`` form (a
+    pair potential V(r)), printed as its formula. At e = 0 the terms are ``RADIAL_TERMS`` alone, in their order."""
     forms = ("radial",)
     formula = True
 
-    def __init__(self):
+    def __init__(self, softening: float = 0.0):
         super().__init__()
-        self.width, self.in_dim = len(RADIAL_TERMS), 1
+        if not (isinstance(softening, (int, float)) and math.isfinite(softening) and softening >= 0):
+            raise ValueError(f"the radial library's softening is a Plummer length e >= 0 (0: none), got {softening!r}: "
+                             "pass the scene's --softening")
+        self.softening = float(softening)
+        self.terms = dict(RADIAL_TERMS)
+        if self.softening > 0:
+            name, term = softened_term(self.softening)
+            self.terms[name] = term
+        self.width, self.in_dim = len(self.terms), 1
 
     @classmethod
     def make(cls, spec, form: str, in_dim: int) -> RadialLibrary:
-        """Every term of ``RADIAL_TERMS`` (the library is fixed: no setting of ``spec`` changes it)."""
-        return cls()
+        """Every term of ``RADIAL_TERMS``, and the softened one at the scene's softening (``spec.softening``, the
+        task's setting: 0 where the task declares none)."""
+        return cls(spec.softening)
 
     def forward(self, r: torch.Tensor) -> torch.Tensor:
-        return torch.cat([value(r) for value, _ in RADIAL_TERMS.values()], dim=1)
+        return torch.cat([value(r) for value, _ in self.terms.values()], dim=1)
 
     def jacobian(self, r: torch.Tensor) -> torch.Tensor:
         """d phi_k / dr ``(rows, terms, 1)``."""
-        return torch.cat([slope(r) for _, slope in RADIAL_TERMS.values()], dim=1)[:, :, None]
+        return torch.cat([slope(r) for _, slope in self.terms.values()], dim=1)[:, :, None]
 
     def names(self, columns: list[str] | None = None) -> list[str]:
-        return list(RADIAL_TERMS)
+        return list(self.terms)
 
 
 def _derivative(features: Features, r: torch.Tensor) -> torch.Tensor:
@@ -103,19 +134,37 @@ class FittedPair(Model):
                              "hnn.fit_least_squares takes it as bodies=hnn.bodies.Bodies(count=N, dim=d)")
         return cls(spec.bodies, features("radial", 1))
 
-    def _geometry(self, q_half: torch.Tensor):
+    def _geometry(self, q_half: torch.Tensor, design: bool = False):
+        """``(q, i, j, d, r)`` of positions ``q_half``; refused (``TooManyPairsError``) past ``PAIR_BYTES`` of a field
+        call's per-pair numbers, or, for a fit's ``design``, of its columns (every feature's slope at every pair)."""
         q = self.bodies.bodywise(q_half)
         i, j = pair_index(q.shape[1], self.bodies.pairs, q.device)
-        check_pair_memory(len(q), len(i), 2 * self.features.width + 2 * self.bodies.dim, q.element_size())
+        per_pair = (2 * self.features.width + 2 * self.bodies.dim if design else
+                    _FIELD_NUMBERS + _FIELD_NUMBERS_PER_DIM * self.bodies.dim)
+        check_pair_memory(len(q), len(i), per_pair, q.element_size())
         d, r = separations(q, i, j)
         return q, i, j, d, r
 
     def _inverse_masses(self, count: int) -> torch.Tensor:
         return self.inverse_mass[torch.tensor(self.bodies.labels(count))]
 
+    def _chunked(self, r: torch.Tensor, column) -> torch.Tensor:
+        """``column(z)`` ``(rows,)`` of distances ``z`` ``(rows, 1)`` at every entry of ``r`` (any shape), the same
+        shape, over chunks of entries whose features (``_CHUNK_WIDTHS`` x width numbers each) stay within
+        ``CHUNK_BYTES``: one chunk where they fit (the lattice's published rollouts are one chunk)."""
+        flat = r.reshape(-1, 1)
+        size = max(1, CHUNK_BYTES // (_CHUNK_WIDTHS * self.features.width * flat.element_size()))
+        if size >= len(flat):
+            return column(flat).reshape(r.shape)
+        return torch.cat([column(flat[k:k + size]) for k in range(0, len(flat), size)]).reshape(r.shape)
+
     def radial(self, r: torch.Tensor) -> torch.Tensor:
         """V(r) of distances ``r`` (any shape), the same shape (without the constant)."""
-        return (self.features(r.reshape(-1, 1)) @ self.coef).reshape(r.shape)
+        return self._chunked(r, lambda z: self.features(z) @ self.coef)
+
+    def radial_slope(self, r: torch.Tensor) -> torch.Tensor:
+        """V'(r) of distances ``r`` (any shape), the same shape."""
+        return self._chunked(r, lambda z: _derivative(self.features, z) @ self.coef)
 
     def kinetic(self, p_half: torch.Tensor) -> torch.Tensor:
         p = self.bodies.bodywise(p_half)
@@ -136,8 +185,7 @@ class FittedPair(Model):
 
     def potential_gradient(self, q_half: torch.Tensor) -> torch.Tensor:
         q, i, j, d, r = self._geometry(q_half)
-        dVdr = (_derivative(self.features, r.reshape(-1, 1)) @ self.coef).reshape(r.shape)
-        return self.bodies.flat(pair_gradient(dVdr, d, r, i, j, q.shape[1]))
+        return self.bodies.flat(pair_gradient(self.radial_slope(r), d, r, i, j, q.shape[1]))
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         self.bodies.count_of(x.shape[1])
@@ -158,7 +206,7 @@ class FittedPair(Model):
 
     def _potential_design(self, x, y, weights):
         half = x.shape[1] // 2
-        q, i, j, d, r = self._geometry(x[:, :half])
+        q, i, j, d, r = self._geometry(x[:, :half], design=True)
         slopes = _derivative(self.features, r.reshape(-1, 1)).reshape(*r.shape, -1)        # (rows, P, K)
         columns = [-self.bodies.flat(pair_gradient(slopes[..., k], d, r, i, j, q.shape[1]))
                    for k in range(slopes.shape[-1])]
@@ -168,7 +216,7 @@ class FittedPair(Model):
 
     def _distances(self, x: torch.Tensor) -> torch.Tensor:
         """Every pair's distance in ``x`` ``(rows * P, 1)``: what sampled radial neurons are drawn from."""
-        return self._geometry(x[:, :x.shape[1] // 2])[4].reshape(-1, 1)
+        return self._geometry(x[:, :x.shape[1] // 2], design=True)[4].reshape(-1, 1)
 
     def _assign(self, target):
         def assign(solution):
