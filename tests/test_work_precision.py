@@ -10,7 +10,7 @@ import torch
 
 import hnn
 from hnn_analysis.integrator_study import peer_solvers, work_precision, work_precision_measure
-from hnn_analysis.integrator_study.work_precision_report import LEVELS, at_error, comparisons, pareto_front
+from hnn_analysis.integrator_study.work_precision_report import LEVELS, at_error, comparisons, pareto_front, summary_table
 
 OMEGA = 2.0
 
@@ -109,6 +109,20 @@ def test_the_equal_error_interpolation_is_exact_on_a_power_law():
     assert at_error(front, 1e-9) is None and at_error(front, 0.1) is None       # never extrapolated
 
 
+def test_the_best_of_ours_is_the_fastest_of_ours_at_each_level():
+    rows = []
+    # ours: dopri5 1.5x and dop853 0.5x scipy's seconds at every level: the best of ours is dop853, 2x faster
+    for solver, scale in (("hnn dopri5", 1.5), ("hnn dop853", 0.5), ("scipy RK45", 1.0)):
+        for error in (1e-3, 1e-9):
+            rows.append({"task": "spring", "model": "hnn", "batch": 64, "solver": solver, "status": "ok",
+                         "error": error, "seconds": scale * error ** -0.2, "field_s": 0.1, "calls": 10, "rows": 640})
+    lines = summary_table({"rows": rows})
+    best = [line for line in lines if "best of ours" in line]
+    n = sum(1e-9 <= lv <= 1e-3 for lv in LEVELS)            # the half decades both curves reach
+    assert len(best) == 1 and f"2.00x ({n}/{n} level or faster)" in best[0]
+    assert any(f"| dopri5 | 0.67x (0/{n}) |" in line for line in lines)
+
+
 def test_comparisons_give_the_ratio_at_every_shared_level():
     rows = []
     for solver, scale, errors in (("hnn dopri5", 1.0, (1e-3, 1e-9)), ("scipy RK45", 3.0, (1e-5, 1e-11))):
@@ -139,10 +153,11 @@ def test_the_quick_path_writes_the_work_precision_rows(tmp_path, monkeypatch):
     monkeypatch.setattr(work_precision, "QUICK_RTOLS", (1e-4, 1e-7))
     _untrained_spring_hnn(tmp_path / "runs")
     results = work_precision.main(["--quick", "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
-    solvers = set(work_precision_measure.solvers())
     rows = results["rows"]
     assert {(r["solver"], r["batch"], r["rtol"]) for r in rows} == \
-        {(s, b, rtol) for s in solvers for b in work_precision_measure.BATCHES for rtol in (1e-4, 1e-7)}
+        {(s, b, rtol) for b in work_precision_measure.BATCHES for s in work_precision_measure.solvers(batch=b)
+         for rtol in (1e-4, 1e-7)}
+    assert {"hnn dopri5 shared", "hnn dop853 shared"} <= {r["solver"] for r in rows if r["batch"] > 1}
     for r in rows:
         assert r["status"] == "ok" and r["error"] > 0 and 0 < r["field_s"] < r["seconds"] and r["call_us"] > 0
         assert r["rows"] == r["calls"] * r["batch"] or r["solver"].startswith("hnn")   # ours drop finished rows
@@ -150,6 +165,7 @@ def test_the_quick_path_writes_the_work_precision_rows(tmp_path, monkeypatch):
     assert saved["meta"]["peers"]["scipy"] and len(saved["rows"]) == len(rows)
     text = (tmp_path / "out" / "work_precision.md").read_text()
     assert "Seconds at equal error" in text and "| spring | hnn | 64 | dop853 |" in text
+    assert "| spring | hnn | 64 | dopri5 shared |" in text and "| spring | hnn | 64 | **best of ours** |" in text
     assert "seconds at each error level" in text and "every error level and pair" in text
     assert (tmp_path / "out" / "work-precision-spring.png").stat().st_size > 10_000
     assert (tmp_path / "out" / "work-precision.png").stat().st_size > 10_000

@@ -48,10 +48,14 @@ class Counted:
         return out
 
 
-def solvers(peer_names=None) -> dict:
-    """``{name: run(field, x0, t, rtol, atol) -> (batch, len(t), dim)}``: ours, then the installed peers."""
+def solvers(peer_names=None, batch: int = 2) -> dict:
+    """``{name: run(field, x0, t, rtol, atol) -> (batch, len(t), dim)}``: ours (on a ``batch`` of several states
+    also with ``steps='shared'``; on one state those are the same steps), then the installed peers."""
     ours = {f"hnn {m}": (lambda f, x0, t, rtol, atol, m=m: hnn.rollout(f, x0, t, method=m, rtol=rtol, atol=atol))
             for m in OURS}
+    if batch > 1:
+        ours.update({f"hnn {m} shared": (lambda f, x0, t, rtol, atol, m=m: hnn.rollout(
+            f, x0, t, method=m, rtol=rtol, atol=atol, steps="shared")) for m in OURS})
     return {**ours, **{peer.name: peer.run for peer in peer_solvers.available(peer_names)}}
 
 
@@ -130,7 +134,7 @@ def measure_task(task: str, runs: Path, rtols, repeats: int, notes: list, models
         for batch in BATCHES:
             x0 = starts[:batch]
             tic = time.perf_counter()
-            rows = measure(model.field, x0, t, rtols, repeats, solvers(peer_names))
+            rows = measure(model.field, x0, t, rtols, repeats, solvers(peer_names, batch))
             call_us = call_seconds(model.field, x0) * 1e6
             for row in rows:
                 row.update(task=task, model=label, batch=batch, call_us=call_us, span=float(t[-1]))
