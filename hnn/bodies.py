@@ -13,7 +13,11 @@ A task of several bodies declares its ``Bodies`` (its config's ``BODIES``, saved
 (Hamilton's [q, p], as every kind reads it). ``species``: one label per body of the declared count
 (bodies of one label are identical: they share a mass and may be exchanged), None for bodies that are
 all alike (the orbit tasks' unit masses). ``pairs``: which pairs interact, ``'all'`` (gravity: N(N-1)/2
-pairs, O(N^2) a step) or ``'neighbours'`` (body i with body i + 1 only: a chain of springs, O(N) a step).
+pairs, O(N^2) a step), ``'neighbours'`` (body i with body i + 1 only: a chain of springs, O(N) a step) or
+``'cutoff'`` (the pairs closer than ``cutoff``, found at each call by a cell list, ``hnn.cells``: a short-range
+scene such as a Lennard-Jones cluster, O(N) a step at a fixed density). ``cutoff``: that distance r_c, in the
+positions' units, given with ``pairs='cutoff'`` only; a pair model then reads V(r) - V(r_c) below r_c and 0
+beyond (the truncated and shifted potential: H stays continuous, its force jumps by V'(r_c) at r_c).
 ``external``: the scene has a one-body field U(q_i) as well (breaks translation and rotation invariance).
 
 Torch-free: a ``train.py``'s ``--help`` reads a config's declaration before torch loads; ``split`` and
@@ -21,11 +25,12 @@ Torch-free: a ``train.py``'s ``--help`` reads a config's declaration before torc
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 ORDERS = ("coordinate", "body")
-PAIRS = ("all", "neighbours")
+PAIRS = ("all", "neighbours", "cutoff")
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,7 @@ class Bodies:
     species: tuple[int, ...] | None = None
     pairs: str = "all"
     external: bool = False
+    cutoff: float | None = None
 
     def __post_init__(self):
         if not isinstance(self.count, int) or self.count < 1:
@@ -48,6 +54,16 @@ class Bodies:
             raise ValueError(f"Bodies.order={self.order!r}: choose one of {', '.join(ORDERS)}")
         if self.pairs not in PAIRS:
             raise ValueError(f"Bodies.pairs={self.pairs!r}: choose one of {', '.join(PAIRS)}")
+        if self.pairs == "cutoff":
+            if isinstance(self.cutoff, bool) or not isinstance(self.cutoff, (int, float)) \
+                    or not math.isfinite(self.cutoff) or self.cutoff <= 0:
+                raise ValueError(f"Bodies(pairs='cutoff') interacts the pairs closer than cutoff, a finite distance "
+                                 f"> 0: got cutoff={self.cutoff!r}; give one, e.g. Bodies(..., pairs='cutoff', "
+                                 "cutoff=2.5)")
+            object.__setattr__(self, "cutoff", float(self.cutoff))
+        elif self.cutoff is not None:
+            raise ValueError(f"Bodies(cutoff={self.cutoff!r}) with pairs={self.pairs!r}: a cutoff belongs to "
+                             "pairs='cutoff' (declare that), or leave cutoff=None")
         if self.species is not None:
             species = tuple(int(s) for s in self.species)
             if len(species) != self.count or min(species) < 0:
@@ -113,6 +129,8 @@ class Bodies:
         """JSON-ready (args.json): ``from_dict`` reads it back."""
         out = asdict(self)
         out["species"] = None if self.species is None else list(self.species)
+        if self.cutoff is None:     # the layouts without one are saved as they were before cutoffs existed
+            del out["cutoff"]
         return out
 
     @classmethod
@@ -128,7 +146,8 @@ class Bodies:
     def describe(self) -> str:
         """One line for a reader: ``'3 bodies in 2-D, coordinate order, all pairs'``."""
         kinds = "alike" if self.species is None else f"of {self.num_species} species"
-        return (f"{self.count} bodies in {self.dim}-D ({kinds}), {self.order} order, "
-                f"{'all pairs' if self.pairs == 'all' else 'neighbours i, i + 1'}"
+        pairs = {"all": "all pairs", "neighbours": "neighbours i, i + 1",
+                 "cutoff": f"pairs closer than {self.cutoff:g} (a cell list)"}[self.pairs]
+        return (f"{self.count} bodies in {self.dim}-D ({kinds}), {self.order} order, {pairs}"
                 + (", an external field" if self.external else ""))
 

@@ -1,11 +1,19 @@
 """The Lennard-Jones cluster (experiment-lj): its field is the symplectic gradient of its H, a pair inside the wall
-is a WallError (never an overflow), and the radial library recovers 4 (r^-12 - r^-6) from dx/dt to round-off."""
+is a WallError (never an overflow), and the radial library recovers 4 (r^-12 - r^-6) from dx/dt to round-off.
+With a cutoff: H is the truncated and shifted sum written out over every pair, continuous at r_c; the pair kind
+with the exact V reads the same pairs; leapfrog's energy error at a crossing of r_c is the first-order jump the
+force's discontinuity predicts."""
+import dataclasses
+import functools
+
 import numpy as np
 import pytest
 import torch
 
 import hnn
+from hnn.bodies import Bodies
 from hnn.kinds import model_from_args
+from hnn.models.pair import PairHNN
 from hnn.tasks import load_task, task_config
 
 EPS = torch.finfo(torch.float64).eps
@@ -17,15 +25,118 @@ def _states(count, rows, seed=0):
     return torch.tensor(np.stack([data.random_config(rng, count) for _ in range(rows)]))
 
 
+@pytest.mark.parametrize("cutoff", [None, 2.5])
 @pytest.mark.parametrize("count", [2, 8, 19])
-def test_the_field_is_the_symplectic_gradient_of_h(count):
+def test_the_field_is_the_symplectic_gradient_of_h(count, cutoff):
     data = load_task("lj")
     x = _states(count, 8)
-    grad = hnn.interface.gradient_of(data.hamiltonian, x)
+    grad = hnn.interface.gradient_of(functools.partial(data.hamiltonian, cutoff=cutoff), x)
     n = x.shape[1] // 2
     # forces of size up to 24 (2 r^-13 - r^-7) at r >= 1.0: about 24 each, count - 1 pairs a body
-    assert torch.allclose(data.dynamics(x), torch.cat([grad[:, n:], -grad[:, :n]], dim=1), rtol=0,
+    assert torch.allclose(data.dynamics(x, cutoff), torch.cat([grad[:, n:], -grad[:, :n]], dim=1), rtol=0,
                           atol=64 * EPS * 24 * count)
+
+
+def _lennard_jones(r):
+    return 4 * (r ** -12 - r ** -6)
+
+
+def test_the_cutoff_h_is_the_shifted_sum_over_every_pair_and_continuous_at_the_cutoff():
+    data = load_task("lj")
+    cutoff = 2.5
+    x = _states(40, 4, seed=3)
+    q, p = data.layout(40).split(x)
+    i, j = torch.triu_indices(40, 40, offset=1)
+    r = torch.linalg.vector_norm(q[:, i] - q[:, j], dim=-1)
+    inside = r < cutoff
+    assert inside.any() and not inside.all()        # the check can fail: the cluster spans several cutoffs
+    written = (p * p).sum(dim=(1, 2)) / 2 + torch.where(inside, _lennard_jones(r) - _lennard_jones(cutoff), 0).sum(1)
+    # |V| <= 1 a pair in the cluster, up to 780 pairs: a few eps each
+    assert torch.allclose(data.hamiltonian(x, cutoff), written, rtol=0, atol=64 * EPS * 780)
+    # two bodies a hair either side of r_c: H moves by V'(r_c) times the hair, not by V(r_c) (no jump)
+    hair = 1e-7
+    sides = [data.hamiltonian(torch.tensor([[0.0, cutoff + s, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]], dtype=torch.float64),
+                              cutoff) for s in (-hair, hair)]
+    slope = abs(4 * (-12 * cutoff ** -13 + 6 * cutoff ** -7))
+    assert abs(float(sides[0] - sides[1])) <= slope * hair * (1 + 1e-6) + 16 * EPS
+    assert abs(_lennard_jones(cutoff)) > 1e4 * slope * hair      # the shift's size: a jump would show
+
+
+class _ExactLennardJones(torch.nn.Module):
+    """V = 4 (r^-12 - r^-6) exactly, on the pair model's inputs (r, 1/r)."""
+
+    def forward(self, features):
+        inverse = features[:, 1:2]
+        return 4 * (inverse ** 12 - inverse ** 6)
+
+
+def test_the_pair_kind_with_the_exact_potential_reads_the_same_pairs_as_the_true_forces():
+    data = load_task("lj")
+    cutoff = 2.5
+    x = _states(64, 3, seed=4)
+    model = PairHNN(Bodies(8, 2, pairs="cutoff", cutoff=cutoff), hidden_dim=8).double()
+    model.radial_net = _ExactLennardJones()
+    with torch.no_grad():
+        model.log_mass.zero_()
+    # forces and energies of size ~ 24 a pair, up to 63 pairs a body and 2016 pairs a state: a few eps each
+    assert torch.allclose(model.time_derivative(x), data.dynamics(x, cutoff), rtol=0, atol=64 * EPS * 24 * 63)
+    assert torch.allclose(model.hamiltonian(x), data.hamiltonian(x, cutoff), rtol=0, atol=64 * EPS * 2016)
+
+
+def test_leapfrog_across_the_cutoff_makes_the_first_order_error_of_the_force_jump():
+    # two bodies head on, each at speed v, cross r_c inside a step at fraction theta of it. KDK kicks with the force
+    # at the step's ends, so where the exact motion takes the impulse V'(r_c) (1 - theta) dt, leapfrog takes
+    # V'(r_c) dt / 2: an energy error J |dr/dt| dt (theta - 1/2), J = |V'(r_c)|, first order in dt; the rest of the
+    # error is leapfrog's own, second order. Written out at 64 phases theta and two steps:
+    data = load_task("lj")
+    cutoff, v = 2.5, 0.5
+    jump = abs(4 * (-12 * cutoff ** -13 + 6 * cutoff ** -7))
+    theta = (torch.arange(64, dtype=torch.float64) + 0.5) / 64
+    residual, mean = [], []
+    for dt in (0.02, 0.01):
+        start = cutoff + 2 * v * dt * (3 + theta)        # crossing in the fourth step, at fraction theta
+        zero = torch.zeros_like(theta)
+        x0 = torch.stack([-start / 2, start / 2, zero, zero, zero + v, zero - v, zero, zero], dim=1)
+        path = hnn.rollout(functools.partial(data.dynamics, cutoff=cutoff), x0, np.arange(7) * dt, method="leapfrog")
+        error = data.hamiltonian(path[:, -1], cutoff) - data.hamiltonian(x0, cutoff)
+        predicted = jump * 2 * v * dt * (theta - 0.5)
+        residual.append(float((error - predicted).abs().max()))
+        mean.append(float(error.abs().mean()) / (jump * 2 * v * dt))
+        # the phases' mean of |theta - 1/2| is 1/4 exactly (the midpoint rule on each linear half)
+        assert abs(mean[-1] - 0.25) <= residual[-1] / (jump * 2 * v * dt)
+    # the residual is second order: halving dt divides it by 4 (4.2 measured; O(dt) more or less at these steps)
+    assert 3 < residual[0] / residual[1] < 5.5
+    # and the first-order term dominates it: without the cutoff's jump the error would be of the residual's size
+    assert residual[1] < 0.05 * jump * 2 * v * 0.01 * 0.25
+
+
+def test_the_cutoff_is_a_setting_of_the_task_whose_default_is_every_pair():
+    config = task_config("lj")
+    assert config.cutoff == 0 and "cutoff" not in config.identity()
+    assert config.model_facts()["bodies"] == Bodies(8, 2).to_dict()
+    cut = dataclasses.replace(config, cutoff=2.5)
+    assert "cutoff" in cut.identity() and cut.key() != config.key()
+    model = model_from_args({**cut.to_dict(), "kind": "pairwise"})
+    assert model.bodies == Bodies(8, 2, pairs="cutoff", cutoff=2.5)
+    data = load_task("lj")
+    with pytest.raises(ValueError, match="wall"):
+        data.get_dataset(cutoff=0.5)
+
+
+def test_the_radial_library_recovers_lennard_jones_from_the_cutoff_field_where_every_pair_is_inside():
+    # the library reads every pair (its layout has no cutoff): on the task's clusters of 8, whose pairs all lie within
+    # r_c = 4, the cutoff's field is Lennard-Jones' and its shift one constant, so the same two terms come back
+    data = load_task("lj")
+    x = _states(8, 150, seed=1)
+    q, _ = data.layout(8).split(x)
+    assert float(torch.cdist(q, q).max()) < 4.0
+    model = model_from_args({**task_config("lj").to_dict(), "kind": "pairwise", "fit": "library"})
+    hnn.fits.solve(model, x, data.dynamics(x, 4.0), fit="library")
+    names = model.features.names()
+    kept = {names[k]: float(c) for k, c in enumerate(model.coef) if c != 0}
+    # as the all-pairs test below: two nearly collinear columns, condition ~1e3
+    assert set(kept) == {"1/r^6", "1/r^12"}
+    assert kept["1/r^6"] == pytest.approx(-4.0, rel=1e4 * EPS) and kept["1/r^12"] == pytest.approx(4.0, rel=1e4 * EPS)
 
 
 def test_a_pair_inside_the_wall_is_a_named_error():
@@ -38,6 +149,8 @@ def test_a_pair_inside_the_wall_is_a_named_error():
     for f in (data.dynamics, data.hamiltonian):
         with pytest.raises(data.WallError):
             f(close)
+        with pytest.raises(data.WallError):       # the cell list finds the pair inside the wall too
+            f(close, 2.5)
     q[1, 2] = q[1, 0]       # two bodies at one point: r = 0, whose r^-12 would be inf
     with pytest.raises(data.WallError):
         data.dynamics(bodies.join(q, p))

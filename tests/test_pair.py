@@ -114,6 +114,43 @@ def test_chain_pairs_are_neighbours_only():
                           rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_cutoff_model_sums_the_shifted_pairs_inside_and_keeps_its_symmetries(dim):
+    cutoff = 2.5
+    model = _model(6, dim, pairs="cutoff", cutoff=cutoff)
+    layout = model.bodies
+    q, p = _states(6, dim)
+    x = layout.join(q, p)
+    H = model.hamiltonian(x).detach()
+    # written out over every pair: V(r) - V(r_c) closer than r_c, nothing beyond (the model's own shift)
+    shift = model.radial(torch.tensor([cutoff], dtype=torch.float64))
+    r = torch.stack([torch.linalg.vector_norm(q[:, a] - q[:, b], dim=1) for a in range(6) for b in range(a + 1, 6)], 1)
+    inside = r < cutoff
+    assert inside.any() and not inside.all()        # the check can fail: pairs on both sides of the cutoff
+    pairs = torch.where(inside, model.radial(r) - shift, 0).sum(dim=1)
+    kinetic = (p * p).sum(dim=(1, 2)) / (2 * 1.7)
+    assert torch.allclose(H, (kinetic + pairs).detach(), rtol=64 * EPS * 15, atol=0)
+    # the field is -grad H: autograd of H against the pair sum's scatter, which reads V' only inside
+    grad = hnn.interface.gradient_of(model.hamiltonian, x)
+    n = x.shape[1] // 2
+    assert torch.allclose(model.time_derivative(x), torch.cat([grad[:, n:], -grad[:, :n]], dim=1), rtol=1e-12,
+                          atol=1e-12)
+    # a rotation, a translation and a permutation change the cells the bodies fall in, not H: a pair the round-off
+    # moves across r_c changes H by V'(r_c) times that round-off (H is continuous there), within the bound
+    tol = _tolerance(model, x, 4).detach()
+    R = _rotation(dim)
+    shift_q = torch.tensor([0.7, -1.3, 0.4][:dim], dtype=torch.float64)
+    order = torch.tensor([2, 0, 5, 3, 1, 4])
+    for moved in (layout.join(q @ R.T, p @ R.T), layout.join(q + shift_q, p), layout.join(q[:, order], p[:, order])):
+        other = model.hamiltonian(moved).detach()
+        assert ((other - H).abs() <= tol).all(), (other - H).abs().max()
+
+
+def test_a_cutoffs_pairs_need_the_positions():
+    with pytest.raises(ValueError, match="find_pairs"):
+        hnn.models.pair.pair_index(5, "cutoff")
+
+
 def test_too_many_pairs_say_how_much_they_need(monkeypatch):
     monkeypatch.setattr(hnn.models.pair, "PAIR_BYTES", 2 ** 20)
     model = _model(3, 2)

@@ -6,9 +6,15 @@ bodies N (the state's width 2 N dim tells N; ``hnn.bodies.Bodies`` tells the ord
 per species (one for bodies that are all alike). H is separable, T(p) + V(q): explicit leapfrog and
 yoshida4 are symplectic for the learned model.
 
-The pair geometry (``pair_index``, ``separations``, ``pair_gradient``) is public: the least-squares pair fit
-(``hnn.fits.radial``) and the scenes' true forces read the same. A step costs O(pairs): N(N-1)/2 for
-``pairs='all'`` (gravity), N - 1 for ``pairs='neighbours'`` (neighbours along a chain of springs).
+The pair geometry (``pair_index``, ``find_pairs``, ``inside_cutoff``, ``separations``, ``pair_gradient``) is
+public: the least-squares pair fit (``hnn.fits.radial``) and the scenes' true forces read the same. A step costs
+O(pairs): N(N-1)/2 for ``pairs='all'`` (gravity), N - 1 for ``pairs='neighbours'`` (neighbours along a chain of
+springs), the pairs closer than r_c for ``pairs='cutoff'`` (a Lennard-Jones cluster), found at each call by a
+cell list (``hnn.cells``) in O(N) at a fixed density.
+
+With a cutoff the model assumes, as the scene's truth does, the truncated and shifted potential: each pair
+adds V(r) - V(r_c) below r_c and nothing beyond, so H is continuous in the positions and its force jumps by
+V'(r_c) where a pair crosses r_c. The learned V itself is not asked to vanish at r_c: the shift is the model's.
 
 Shapes: states ``(batch, 2 N dim)``; positions and momenta per body ``(batch, N, dim)``; per-pair arrays
 ``(batch, P)``; H ``(batch,)``.
@@ -21,6 +27,7 @@ import torch
 from torch import nn
 
 from ..bodies import Bodies
+from ..cells import pairs_within
 from ..interface import Model, gradient_of
 from ..settings import RunSettings
 from .mlp import MLP
@@ -46,8 +53,31 @@ def _index(count: int, pairs: str) -> tuple[torch.Tensor, torch.Tensor]:
 
 def pair_index(count: int, pairs: str = "all", device=None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(i, j)`` ``(P,)`` each, i < j: every pair of ``count`` bodies (``'all'``) or neighbours along the index (``'neighbours'``)."""
+    if pairs == "cutoff":
+        raise ValueError("the pairs of Bodies(pairs='cutoff') depend on the positions, not only on the count: find "
+                         "them with hnn.models.pair.find_pairs(q, bodies), and weigh each by inside_cutoff(r, bodies)")
     i, j = _index(count, pairs)
     return i.to(device), j.to(device)
+
+
+def find_pairs(q: torch.Tensor, bodies: Bodies) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(i, j)`` ``(P,)`` each, i < j: the pairs of positions ``q`` ``(batch, N, dim)`` that ``bodies`` interacts.
+    ``pair_index``'s for ``'all'`` and ``'neighbours'``; for ``'cutoff'``, the pairs closer than the cutoff in at
+    least one state of the batch, by a cell list (``hnn.cells.pairs_within``): a state reads each pair through
+    ``inside_cutoff``, which drops the ones beyond the cutoff there."""
+    if bodies.pairs == "cutoff":
+        i, j = pairs_within(q, bodies.cutoff)
+        return i.to(q.device), j.to(q.device)
+    return pair_index(q.shape[1], bodies.pairs, q.device)
+
+
+def inside_cutoff(r: torch.Tensor, bodies: Bodies) -> torch.Tensor | None:
+    """Which pairs of distances ``r`` ``(batch, P)`` interact in their own state ``(batch, P)`` bool: r < the cutoff
+    (a NaN distance counts as inside, so that it reaches H as it does without a cutoff); None for a layout without
+    a cutoff (every listed pair interacts)."""
+    if bodies.pairs != "cutoff":
+        return None
+    return ~(r >= bodies.cutoff)
 
 
 def check_pair_memory(batch: int, pairs: int, per_pair: int, itemsize: int) -> None:
@@ -57,7 +87,8 @@ def check_pair_memory(batch: int, pairs: int, per_pair: int, itemsize: int) -> N
         raise TooManyPairsError(
             f"{batch} states of {pairs} interacting pairs need about {need / 2 ** 30:.1f} GiB for one field call "
             f"(limit hnn.models.pair.PAIR_BYTES = {PAIR_BYTES / 2 ** 30:.0f} GiB): evaluate fewer states at once "
-            "(a smaller batch), or declare a short-range scene's neighbours (Bodies(pairs='neighbours'))")
+            "(a smaller batch), or declare a short-range scene's neighbours (Bodies(pairs='neighbours')) or cutoff "
+            "(Bodies(pairs='cutoff', cutoff=r_c))")
 
 
 def separations(q: torch.Tensor, i: torch.Tensor, j: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -111,18 +142,26 @@ class PairHNN(Model):
         return [slice(k, k + size) for k in range(0, r.shape[1], size)]
 
     def _pair_energy(self, r: torch.Tensor) -> torch.Tensor:
-        """sum over pairs of V(r) ``(batch,)`` of distances ``r`` ``(batch, P)``, chunk by chunk."""
-        return sum(self.radial(r[:, chunk]).sum(dim=1) for chunk in self._chunks(r))
+        """sum over pairs of V(r) ``(batch,)`` of distances ``r`` ``(batch, P)``, chunk by chunk; with a cutoff,
+        V(r) - V(r_c) over the pairs inside it."""
+        inside = inside_cutoff(r, self.bodies)
+        if inside is None:
+            return sum(self.radial(r[:, chunk]).sum(dim=1) for chunk in self._chunks(r))
+        shift = self.radial(r.new_full((1,), self.bodies.cutoff))
+        return sum(torch.where(inside[:, chunk], self.radial(r[:, chunk]) - shift, 0).sum(dim=1)
+                   for chunk in self._chunks(r))
 
     def _pair_slope(self, r: torch.Tensor) -> torch.Tensor:
-        """V'(r) ``(batch, P)`` by autograd, chunk by chunk (the graph of one chunk at a time outside training)."""
+        """V'(r) ``(batch, P)`` by autograd, chunk by chunk (the graph of one chunk at a time outside training);
+        0 for a pair beyond the cutoff."""
         chunks = self._chunks(r)
         slopes = [gradient_of(lambda rr: self.radial(rr).sum(dim=1), r[:, chunk]) for chunk in chunks]
-        return slopes[0] if len(slopes) == 1 else torch.cat(slopes, dim=1)
+        slope = slopes[0] if len(slopes) == 1 else torch.cat(slopes, dim=1)
+        inside = inside_cutoff(r, self.bodies)
+        return slope if inside is None else torch.where(inside, slope, 0)
 
     def _pairs(self, q: torch.Tensor):
-        count = q.shape[1]
-        i, j = pair_index(count, self.bodies.pairs, q.device)
+        i, j = find_pairs(q, self.bodies)
         # the numbers a pair and state holds at once: r, 1/r and V'(r), and d, its gathered ends' and the push
         check_pair_memory(len(q), len(i), 3 + 3 * self.bodies.dim, q.element_size())
         return i, j
