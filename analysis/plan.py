@@ -52,9 +52,11 @@ BURSTS, BURST_SECONDS = 1, 0.05
 # The reference box of the quick budgets (tests/test_plan.py: a quick mode's plan within its budget there), from
 # declared costs alone: a quiet 2-core box on which a task's training step costs its ``TaskSpec.cost`` (a
 # full run's seconds) over its default steps, a run REFERENCE_RUN_SECONDS beside its steps (its data read, its model
-# built, its losses and folder), and a least-squares fit REFERENCE_FIT_ROW_SECONDS a training row (the dearest
-# fit's: the 3-body library, 90 s over its 100000 rows, issue 79)
-REFERENCE_RUN_SECONDS = 0.5
+# built, its losses and folder: reproduce.py --quick's 12 runs took 6.5 s, 4.4 s of it their steps, and the quick
+# scene study's 34 runs 8 s, on a quiet 2-core box at 643e3a4; at 0.5 s a run the reference planned reproduce's
+# training at 2.2x its time), and a least-squares fit REFERENCE_FIT_ROW_SECONDS a training row (the dearest fit's:
+# the 3-body library, 90 s over its 100000 rows, issue 79)
+REFERENCE_RUN_SECONDS = 0.2
 REFERENCE_FIT_ROW_SECONDS = 0.9e-3
 # ... and a model's field call in a rollout REFERENCE_FIELD_CALL_SECONDS, the dearest field of a quick study's (the
 # 3-body library's on 2-5 states, the solver's work between calls included: 0.9 ms a call on a 2-core box at load 2;

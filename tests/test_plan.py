@@ -101,10 +101,13 @@ def test_the_quick_paper_reproduction_plans_within_its_budget_on_the_reference_b
     stages = study.reference_plan(tasks)
     assert [s.what for s in stages] == ["train", "build", "evaluate"] and all(s.seconds > 0 for s in stages)
     assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["reproduce"]
-    # the rows' evaluation is each row's declared cost: the 3-body's variant row (no figures) at its task's
+    # the rows' evaluation is each task's row at its declared cost; a variant row (the 3-body's cleaned orbits)
+    # draws no figure and is priced at none: it took 0.0 s of the six rows' 17 s on a quiet box
     rows = study.table_rows(tasks, True, [0])
+    variants = [row for row in rows if row["row"] != row["task"]]
+    assert [row["row"] for row in variants] == ["3body-clean"]
     assert stages[2].count == len(rows) and stages[2].seconds == pytest.approx(
-        sum(hnn.task_spec(row["task"]).evaluate_cost for row in rows))
+        sum(hnn.task_spec(task).evaluate_cost for task in tasks))
     with_pixels = study.reference_plan([*tasks, "pixels"])
     assert sum(s.seconds for s in with_pixels) > sum(s.seconds for s in stages) + hnn.task_spec("pixels").data_cost
 
@@ -117,11 +120,53 @@ def test_the_quick_peers_table_plans_within_its_budget_on_the_reference_box():
     from hnn_analysis.chains import peer_plan
     stages = peer_plan.reference_plan()
     assert [s.what for s in stages] == ["build", "train", "measure", "time"] and all(s.seconds > 0 for s in stages)
-    assert stages[1].count == len(peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, Path("runs")))
+    jobs = peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, Path("runs"))
+    assert stages[1].count == len(jobs)
     assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["peers"]
+    # a dataset a CHNN row: the LNN protocol's states are drawn with their derivatives (no rollout to build)
+    assert stages[0].count == len(peer_plan.QUICK["bobs"])
+    assert stages[0].seconds == pytest.approx(stages[0].count * hnn.task_spec("chain").data_cost)
     # the declared costs move the plan as they should: more bobs, dearer runs and measuring
     more = peer_plan.reference_plan({**peer_plan.QUICK, "bobs": (1, 2, 3)})
     assert more[1].seconds > stages[1].seconds and more[2].seconds > stages[2].seconds
+
+
+def test_a_quick_peers_run_is_priced_by_its_kind_and_bobs_and_an_lnn_run_by_its_own():
+    """peer_plan.quick_training / quick_measuring: a CHNN-row run its fixed part and its kind's steps a bob (the
+    Lagrangian kinds' Hessians grow with the bobs; a kind without a per-bob cost is a fixed run), its measuring a
+    bob's rollouts; an LNN-protocol run its own declared training and measuring, whatever its kind."""
+    from hnn_analysis.chains import peer_plan
+    costs = peer_plan.QUICK_COSTS
+    jobs = {job.key: job for job in peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, Path("runs"))}
+    lagrangian, baseline = jobs["chain2/lagrangian/seed0"], jobs["chain1/baseline/seed0"]
+    assert peer_plan.quick_training(lagrangian) == pytest.approx(costs["train_run"]
+                                                                 + 2 * costs["train_bob"]["lagrangian"])
+    assert peer_plan.quick_training(baseline) == pytest.approx(costs["train_run"])
+    assert peer_plan.quick_measuring(lagrangian) == pytest.approx(2 * costs["measure_bob"])
+    lnn = jobs["lnn/lagrangian/seed0"]
+    assert lnn.config.bobs == 2 and peer_plan.quick_training(lnn) == pytest.approx(costs["train_lnn"])
+    assert peer_plan.quick_measuring(lnn) == pytest.approx(costs["measure_lnn"])
+    stages = peer_plan.reference_plan()
+    assert stages[1].seconds == pytest.approx(sum(map(peer_plan.quick_training, jobs.values())))
+    assert stages[2].seconds == pytest.approx(sum(map(peer_plan.quick_measuring, jobs.values())))
+
+
+def test_a_fresh_quick_peers_sitting_prices_its_measuring_and_timing_before_it_starts(tmp_path, capsys):
+    """peers.py --quick with nothing recorded: its plan prices the measuring of every run at its declared cost and
+    the table's timing of the kinds (the plan of another sitting: from the record, or timed as it runs)."""
+    from hnn_analysis.chains import peer_plan, peer_record
+    settings = {"kinds": peer_plan.kinds(), **peer_plan.QUICK}
+    jobs = peer_plan.plan(settings, tmp_path)
+    record = peer_record.load(tmp_path / "peers-runs.json", settings)
+    peer_record.plan_sitting(record, [], jobs, {}, settings, tmp_path, range(1), 1, quick=True)
+    lines = capsys.readouterr().out.splitlines()
+    measure = sum(map(peer_plan.quick_measuring, jobs))
+    assert lines[2] == (f"  measure {len(jobs)} runs' rollouts (each as it finishes training): about "
+                        f"{measure:.0f} s (each run's declared measuring by its bobs)"), lines
+    assert lines[3].startswith(f"  time {len(settings['kinds'])} kinds: about 8 s"), lines
+    peer_record.plan_sitting(record, [], jobs, {}, settings, tmp_path, range(1), 1, quick=False, table=False)
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[2].endswith("timed as it runs, from its first units") and not lines[3].startswith("  time"), lines
 
 
 def test_the_quick_scene_study_plans_within_its_budget_on_the_reference_box():

@@ -21,14 +21,18 @@ QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 6
          "test_starts": 10, "lnn_starts": 2, "lnn_fields": {"n_train": 2000, "n_test": 200, "hidden_dim": 64,
                                                            "total_steps": 100},
          "lnn_kind_fields": {"lagrangian": {"derivative_loss": "l1"}}, "lnn_horizon": 10.0}
-# --quick's declared costs on the reference box (hnn_analysis.plan; reference_plan), in seconds, from peers.py --quick
-# on a 2-core box at load 2 (147 s in all; a run's wall time, its data read and model built included): a CHNN-row
-# run's training a bob by kind (the Lagrangian kinds' Hessians: lagrangian 7.5 s at N = 1, 13.7 at N = 2; the
-# chain's TaskSpec.cost is a mean kind's), else a run's; an LNN-protocol run's training (0.1-0.9 s); a run's
-# measuring, a bob on the CHNN rows (1.3-2.5 s at N = 1, 3.2-5.6 at N = 2) and an LNN run's (2.6-5.3 s: its truth
-# to T = lnn_horizon at rtol 1e-10); the table's one-thread timing of the kinds (10 s)
-QUICK_COSTS = {"train_bob": {"lagrangian": 7.0, "mechanical": 3.5, "constrained": 2.2, "constrained_lagrangian": 1.5},
-               "train_run": 1.2, "train_lnn": 1.0, "measure_bob": 2.8, "measure_lnn": 5.5, "timing": 10.0}
+# --quick's declared costs on the reference box (hnn_analysis.plan; reference_plan), in seconds, each run's own
+# from peers.py --quick on a quiet 2-core box (quick_budgets.py at 643e3a4, load 1.0 with it: 106 s in all): a
+# CHNN-row run's training, its data read and model built (train_run: the hnn, second_order and baseline kinds'
+# 0.6-0.9 s at N = 1 and 2) and a bob's steps by kind, where they grow with the bobs (the Lagrangian kinds' Hessians:
+# lagrangian 5.8 s at N = 1, 10.4 at N = 2; mechanical 3.2, 3.7; constrained 2.6, 2.4; constrained_lagrangian
+# 1.6, 2.4); an LNN-protocol run's training (0.1-0.6 s: 1.7 s for its 7 runs); a run's measuring, a bob on the
+# CHNN rows (9 s over the 7 runs of N = 1, 20 s over the 14 bobs of N = 2) and an LNN run's (17 s for 7: its truth
+# to T = lnn_horizon at rtol 1e-10); the table's one-thread timing of the kinds (8 s). The costs of 36c2ac2 came
+# from a box at load 2 and planned 172 s for these 106 (measuring 97 s for 48): a stage's estimate is held within
+# 1.5x of its time on a quiet box (docs/speed.md, "Quick modes and their budgets")
+QUICK_COSTS = {"train_bob": {"lagrangian": 5.0, "mechanical": 2.0, "constrained": 1.4, "constrained_lagrangian": 0.95},
+               "train_run": 0.7, "train_lnn": 0.25, "measure_bob": 1.4, "measure_lnn": 2.4, "timing": 8.0}
 # CHNN's budget: 8000 steps of batch 200, their 2000 epochs of 4 batches, on FULL_SEEDS seeds (#45: a verdict
 # on several seeds). One seed of it for every kind is about 7.8 hours of one thread (each kind's one-thread
 # rate, docs/peers.md; the LNN's chain rows, which train from lnn_convex, and its 60000 protocol steps
@@ -135,24 +139,33 @@ def quick_cuts(quick: dict = QUICK, full: dict = FULL) -> list[str]:
     return cuts
 
 
+def quick_training(job, costs: dict = QUICK_COSTS) -> float:
+    """A --quick run's declared training seconds on the reference box (``QUICK_COSTS``): an LNN-protocol run's, or
+    a CHNN-row run's (its data read, its model built) and its kind's steps a bob."""
+    if job.key.startswith("lnn/"):
+        return costs["train_lnn"]
+    return costs["train_run"] + costs["train_bob"].get(job.config.model, 0.0) * job.config.bobs
+
+
+def quick_measuring(job, costs: dict = QUICK_COSTS) -> float:
+    """A --quick run's declared measuring seconds on the reference box (``QUICK_COSTS``): an LNN-protocol run's
+    energy error, or a CHNN-row run's rollouts at its bobs."""
+    return costs["measure_lnn"] if job.key.startswith("lnn/") else costs["measure_bob"] * job.config.bobs
+
+
 def reference_plan(settings: dict | None = None, costs: dict = QUICK_COSTS) -> list:
     """``peers.py --quick``'s plan on the quick budgets' reference box (``hnn_analysis.plan``: declared costs,
-    nothing built): its datasets (one a row, the chain's ``TaskSpec.data_cost``), its training and measuring (each
-    run's ``QUICK_COSTS``) and the table's timing of the kinds."""
+    nothing built): its datasets (one a CHNN row, the chain's ``TaskSpec.data_cost``: the LNN protocol's states
+    are drawn with their derivatives, no rollout, 0.0 s), its training and measuring (each run's ``quick_training``
+    and ``quick_measuring``) and the table's timing of the kinds."""
     from hnn_analysis import plan as plans
     settings = {"kinds": kinds(), **(settings or QUICK)}
     jobs = plan(settings, Path("runs"))
-    chnn = [job for job in jobs if not job.key.startswith("lnn/")]
-    lnn = [job for job in jobs if job.key.startswith("lnn/")]
-
-    def trained(job) -> float:
-        per_bob = costs["train_bob"].get(job.config.model)
-        return costs["train_run"] if per_bob is None else per_bob * job.config.bobs
-    rows = len(settings["bobs"]) + bool(lnn)
+    rows = len(settings["bobs"])
     return [plans.Stage("build", rows, "datasets", rows * hnn.task_spec("chain").data_cost,
-                        "the chain's declared build a row, on the reference box"),
-            plans.Stage("train", len(jobs), "runs", sum(map(trained, chnn)) + costs["train_lnn"] * len(lnn),
+                        "the chain's declared build a CHNN row, on the reference box"),
+            plans.Stage("train", len(jobs), "runs", sum(quick_training(job, costs) for job in jobs),
                         "each run's declared cost by kind and bobs"),
-            plans.Stage("measure", len(jobs), "runs' rollouts", costs["measure_bob"] * sum(job.config.bobs for job in chnn)
-                        + costs["measure_lnn"] * len(lnn), "each run's declared measuring"),
+            plans.Stage("measure", len(jobs), "runs' rollouts", sum(quick_measuring(job, costs) for job in jobs),
+                        "each run's declared measuring"),
             plans.Stage("time", len(settings["kinds"]), "kinds", costs["timing"], "the table's one-thread rates")]

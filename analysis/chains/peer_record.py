@@ -25,7 +25,7 @@ from hnn_analysis import plan
 from hnn.io import atomic_write
 from hnn.threads import torch_threads
 from hnn_analysis.chains.peer_measure import diverged_entry, measure, one_thread
-from hnn_analysis.chains.peer_plan import FULL_SEEDS, plan_seeds
+from hnn_analysis.chains.peer_plan import FULL_SEEDS, QUICK_COSTS, plan_seeds, quick_measuring
 
 RECORD = Path("docs") / "peers-runs.json"
 # what a run's numbers depend on beyond its config: a record measured with other settings is another table
@@ -236,17 +236,24 @@ def measuring_seconds(record: dict, jobs: list[sweep.Job]) -> float:
 
 
 def plan_sitting(record: dict, todo: list[sweep.Job], fresh: list[sweep.Job], runs: dict, settings: dict, out,
-                 seeds: range, workers: int) -> list[sweep.Job]:
+                 seeds: range, workers: int, quick: bool = False, table: bool = True) -> list[sweep.Job]:
     """``todo`` timed, longest first by the recorded runs of each kind at every seed of the plan
     (``with_expected_seconds``), the rest measured now (``analysis/plan.py``), after printing the sitting's plan:
     training them on ``workers``, then measuring the ``fresh`` runs that did not fail (``runs``) at the record's
-    per-run costs of their kinds."""
+    per-run costs of their kinds, and timing the kinds for the ``table`` (not with --train-only); ``quick``
+    (``--quick``'s own settings): a measuring that the record cannot price, and the timing, at their declared
+    costs (``peer_plan.QUICK_COSTS``)."""
     known = plan_seeds(settings, out, range(max(FULL_SEEDS, seeds.stop)))
     todo = plan.timed(with_expected_seconds(record, todo, known))
     measured = [job for job in fresh if not isinstance(runs.get(job.key), sweep.RunFailed)]
+    measuring, how = expected_measuring(record, measured, known), "the record's median a run of its kind"
+    if measuring is None and quick:     # a fresh --quick: no run of its kinds recorded yet
+        measuring, how = sum(map(quick_measuring, measured)), "each run's declared measuring by its bobs"
+    timing = [plan.Stage("time", len(settings["kinds"]), "kinds", QUICK_COSTS["timing"] if quick else None,
+                         "the table's one-thread rates, declared")] if table else []
     plan.say("peers", [plan.training(todo, workers),
                        plan.Stage("measure", len(measured), "runs' rollouts (each as it finishes training)",
-                                  expected_measuring(record, measured, known), "the record's median a run of its kind")])
+                                  measuring, how), *timing])
     return todo
 
 

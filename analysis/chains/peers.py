@@ -84,6 +84,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
         parser.error("--only trains part of the table: add --train-only (the table is built from the whole record)")
     sweep_flags.check_backend(parser, args)
     full = settings is None and not args.quick
+    declared = settings is None and args.quick      # --quick's own settings: its declared costs hold (peer_plan)
     settings = {"kinds": kinds(), **(settings or (QUICK if args.quick else FULL))}
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results") / "peers"
     cuts = quick_cuts(settings) if args.quick and not full else []
@@ -105,7 +106,8 @@ def main(argv=None, settings: dict | None = None) -> dict:
     sweep.say_reused("peers", runs, todo)
     record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
     # longest first by the recorded runs of each kind, at every seed of the plan
-    todo = peer_record.plan_sitting(record, todo, fresh, runs, settings, out, seeds, args.jobs)     # timed; the plan said
+    todo = peer_record.plan_sitting(record, todo, fresh, runs, settings, out, seeds, args.jobs, declared,
+                                    not (args.train_only or args.record_only))     # timed; the plan said
     trained, seconds = ({}, {"training": 0.0}) if args.record_only else sweep.train_jobs(
         todo, args.jobs, out / "logs", args.backend, args.ray_address, device=args.device,
         on_done=peer_record.keeper(jobs, settings, path))
