@@ -58,6 +58,11 @@ BURSTS, BURST_SECONDS = 1, 0.05
 # the 3-body library, 90 s over its 100000 rows, issue 79)
 REFERENCE_RUN_SECONDS = 0.2
 REFERENCE_FIT_ROW_SECONDS = 0.9e-3
+# ... and a plan's own measuring (``timed``) REFERENCE_TIMING_SECONDS a config (its burst of steps, or a fit's solves
+# on its probe rows) and a run beside its steps a task (``overhead``'s one-step run): reproduce.py --quick's plan
+# took 3.4 s for its 12 configs of 6 tasks (its datasets' 1.6 s aside), the quick scene study's about 5 s for 34
+# configs of 5 tasks, 18 of them fits (quiet 2-core box, 643e3a4)
+REFERENCE_TIMING_SECONDS = 0.15
 # ... and a model's field call in a rollout REFERENCE_FIELD_CALL_SECONDS, the dearest field of a quick study's (the
 # 3-body library's on 2-5 states, the solver's work between calls included: 0.9 ms a call on a 2-core box at load 2;
 # an MLP's 0.1-0.5 ms): a quick study's rollout budget in field calls is its seconds at this rate, so the same
@@ -75,6 +80,16 @@ def reference_seconds(job, fit_rows: int | None = None) -> float:
         return REFERENCE_RUN_SECONDS + REFERENCE_FIT_ROW_SECONDS * fit_rows
     per_step = hnn.task_spec(job.task).cost / hnn.tasks.task_config(job.task, {}).total_steps
     return REFERENCE_RUN_SECONDS + per_step * (config.total_steps + 1)
+
+
+def reference_timing(jobs: list) -> Stage:
+    """A plan's own measuring of ``jobs`` (``timed``: once a config, a one-step run once a task trained by steps) on
+    the reference box: ``REFERENCE_TIMING_SECONDS`` a config, ``REFERENCE_RUN_SECONDS`` a task."""
+    configs = {_config_key(job) for job in jobs}
+    tasks = {job.task for job in jobs if job.config.fit == "adam"}
+    return Stage("plan", len(configs), "configs timed", REFERENCE_TIMING_SECONDS * len(configs)
+                 + REFERENCE_RUN_SECONDS * len(tasks), "a short burst of each config's steps (a fit: its solves on "
+                 "its probe rows) and a one-step run of each task, on the reference box")
 
 
 def reference_data_seconds(tasks) -> float:
@@ -144,11 +159,10 @@ def timed(jobs: list, cost=None, overhead_of=None) -> list:
     measured, overheads, out = {}, {}, []
     for job in jobs:
         if job.expected_seconds is None:
-            args = {**job.config.to_dict(), "seed": 0}
-            key = (job.task, tuple(sorted((k, repr(v)) for k, v in args.items() if k != "save_dir")))
+            key = _config_key(job)
             if key not in measured:
                 try:
-                    measured[key] = cost(job.task, args)["seconds"]
+                    measured[key] = cost(job.task, {**job.config.to_dict(), "seed": 0})["seconds"]
                 except Exception:       # a config whose first steps fail: its run fails (and says why) in the sweep
                     measured[key] = None
             fit = job.config.fit != "adam"
@@ -158,6 +172,12 @@ def timed(jobs: list, cost=None, overhead_of=None) -> list:
             job = dataclasses.replace(job, expected_seconds=seconds)
         out.append(job)
     return out
+
+
+def _config_key(job) -> tuple:
+    """What a plan measures once: ``job``'s task and config, its seed and folder aside."""
+    args = {**job.config.to_dict(), "seed": 0}
+    return job.task, tuple(sorted((k, repr(v)) for k, v in args.items() if k != "save_dir"))
 
 
 def overhead(job) -> float:

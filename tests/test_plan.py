@@ -88,6 +88,14 @@ def test_the_reference_box_prices_a_run_by_its_tasks_declared_cost_and_a_fit_by_
                                                               + 1000 * plan.REFERENCE_FIT_ROW_SECONDS)
     with pytest.raises(ValueError, match="fit_rows"):
         plan.reference_seconds(fit)
+    # the plan's own measuring, as plan.timed measures: once a config whatever its seed, a one-step run once a task
+    # trained by steps (a fit's estimate is its own solves)
+    seeds = [sweep.Job(f"s{seed}", "spring", hnn.tasks.task_config("spring", {"total_steps": 99, "seed": seed}))
+             for seed in (0, 1, 2)]
+    pend_fit = sweep.Job("p", "pend", hnn.tasks.task_config("pend", {"fit": "library"}))
+    stage = plan.reference_timing([*seeds, fit, pend_fit])
+    assert stage.what == "plan" and stage.count == 3
+    assert stage.seconds == pytest.approx(3 * plan.REFERENCE_TIMING_SECONDS + plan.REFERENCE_RUN_SECONDS)
 
 
 def test_the_quick_paper_reproduction_plans_within_its_budget_on_the_reference_box():
@@ -99,14 +107,14 @@ def test_the_quick_paper_reproduction_plans_within_its_budget_on_the_reference_b
     tasks = study.quick_tasks(hnn.tasks.paper_tasks())
     assert "pixels" not in tasks and "spring" in tasks
     stages = study.reference_plan(tasks)
-    assert [s.what for s in stages] == ["train", "build", "evaluate"] and all(s.seconds > 0 for s in stages)
+    assert [s.what for s in stages] == ["plan", "train", "build", "evaluate"] and all(s.seconds > 0 for s in stages)
     assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["reproduce"]
     # the rows' evaluation is each task's row at its declared cost; a variant row (the 3-body's cleaned orbits)
     # draws no figure and is priced at none: it took 0.0 s of the six rows' 17 s on a quiet box
     rows = study.table_rows(tasks, True, [0])
     variants = [row for row in rows if row["row"] != row["task"]]
     assert [row["row"] for row in variants] == ["3body-clean"]
-    assert stages[2].count == len(rows) and stages[2].seconds == pytest.approx(
+    assert stages[3].count == len(rows) and stages[3].seconds == pytest.approx(
         sum(hnn.task_spec(task).evaluate_cost for task in tasks))
     with_pixels = study.reference_plan([*tasks, "pixels"])
     assert sum(s.seconds for s in with_pixels) > sum(s.seconds for s in stages) + hnn.task_spec("pixels").data_cost
@@ -119,16 +127,17 @@ def test_the_quick_peers_table_plans_within_its_budget_on_the_reference_box():
     from hnn_analysis import commands
     from hnn_analysis.chains import peer_plan
     stages = peer_plan.reference_plan()
-    assert [s.what for s in stages] == ["build", "train", "measure", "time"] and all(s.seconds > 0 for s in stages)
+    assert [s.what for s in stages] == ["plan", "build", "train", "measure", "time"] and all(s.seconds > 0
+                                                                                          for s in stages)
     jobs = peer_plan.plan({"kinds": peer_plan.kinds(), **peer_plan.QUICK}, Path("runs"))
-    assert stages[1].count == len(jobs)
+    assert stages[2].count == len(jobs) == stages[0].count      # one seed: a config a run, each timed once
     assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["peers"]
     # a dataset a CHNN row: the LNN protocol's states are drawn with their derivatives (no rollout to build)
-    assert stages[0].count == len(peer_plan.QUICK["bobs"])
-    assert stages[0].seconds == pytest.approx(stages[0].count * hnn.task_spec("chain").data_cost)
+    assert stages[1].count == len(peer_plan.QUICK["bobs"])
+    assert stages[1].seconds == pytest.approx(stages[1].count * hnn.task_spec("chain").data_cost)
     # the declared costs move the plan as they should: more bobs, dearer runs and measuring
     more = peer_plan.reference_plan({**peer_plan.QUICK, "bobs": (1, 2, 3)})
-    assert more[1].seconds > stages[1].seconds and more[2].seconds > stages[2].seconds
+    assert more[2].seconds > stages[2].seconds and more[3].seconds > stages[3].seconds
 
 
 def test_a_quick_peers_run_is_priced_by_its_kind_and_bobs_and_an_lnn_run_by_its_own():
@@ -147,8 +156,8 @@ def test_a_quick_peers_run_is_priced_by_its_kind_and_bobs_and_an_lnn_run_by_its_
     assert lnn.config.bobs == 2 and peer_plan.quick_training(lnn) == pytest.approx(costs["train_lnn"])
     assert peer_plan.quick_measuring(lnn) == pytest.approx(costs["measure_lnn"])
     stages = peer_plan.reference_plan()
-    assert stages[1].seconds == pytest.approx(sum(map(peer_plan.quick_training, jobs.values())))
-    assert stages[2].seconds == pytest.approx(sum(map(peer_plan.quick_measuring, jobs.values())))
+    assert stages[2].seconds == pytest.approx(sum(map(peer_plan.quick_training, jobs.values())))
+    assert stages[3].seconds == pytest.approx(sum(map(peer_plan.quick_measuring, jobs.values())))
 
 
 def test_a_fresh_quick_peers_sitting_prices_its_measuring_and_timing_before_it_starts(tmp_path, capsys):
@@ -176,7 +185,7 @@ def test_the_quick_scene_study_plans_within_its_budget_on_the_reference_box():
     from hnn_analysis import commands
     from hnn_analysis.scenes import scene_stages
     stages = scene_stages.reference_plan()
-    assert [s.what for s in stages] == ["train", "build", "measure"]
+    assert [s.what for s in stages] == ["plan", "train", "build", "measure"]
     assert not [s.what for s in stages if s.over]
     assert sum(s.seconds for s in stages) <= commands.QUICK_BUDGETS["scene_study"]
     # the shares are of the budget: they leave the start and the cards a part of it
@@ -214,3 +223,26 @@ def test_a_quick_rollout_budget_is_in_field_calls_so_the_same_rollouts_stop_on_e
     with pytest.raises(ValueError, match="positive whole number"):
         with hnn.evaluation.rollout_budget(calls=0):
             pass
+
+
+def test_quick_budgets_sets_each_stage_of_a_plan_beside_the_seconds_its_run_recorded(tmp_path):
+    """quick_budgets.py reads the stages' seconds a quick mode wrote (reproduce's results.json, peers.json's meta;
+    numbers only, a record without them read as none) and sets each of its plan's stages beside them: peers.py
+    measures each run inside the training's wall time, so its training is that wall less the measuring."""
+    import json
+    from hnn_analysis.benchmarks import quick_budgets, timed_commands
+    (tmp_path / "peers.json").write_text(json.dumps({"meta": {"seconds": {"training": 90.0, "measuring": 50.0,
+                                                                          "timing": 8.0}}}))
+    (tmp_path / "peers-runs.json").write_text(json.dumps({"measuring": {"rtol": 1e-7}, "runs": {}}))
+    (tmp_path / "broken.json").write_text("{")
+    seconds = timed_commands.recorded_seconds(tmp_path)
+    assert seconds == {"training": 90.0, "measuring": 50.0, "timing": 8.0}
+    plan_seconds = {"build": 5.0, "train": 60.0, "measure": 50.0, "time": 4.0}
+    rows = quick_budgets.stage_ratios("peers", plan_seconds, seconds)
+    assert [(r["stages"], r["plan"], r["measured"], r["ratio"]) for r in rows] == [
+        (["train"], 60.0, 40.0, 1.5), (["measure"], 50.0, 50.0, 1.0), (["time"], 4.0, 8.0, 0.5)]
+    # reproduce: its datasets built and configs timed are what its total leaves beside the training and evaluation
+    rows = quick_budgets.stage_ratios("reproduce", {"plan": 1.0, "build": 1.0, "train": 10.0, "evaluate": 20.0},
+                                      {"training": 5.0, "evaluation": 16.0, "total": 25.0, "jobs": 1})
+    assert [(r["measured"], r["ratio"]) for r in rows] == [(4.0, 0.5), (5.0, 2.0), (16.0, 1.25)]
+    assert quick_budgets.stage_ratios("peers", plan_seconds, {}) == []

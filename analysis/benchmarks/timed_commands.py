@@ -2,6 +2,7 @@
 table it writes: an analysis command's ``--quick``, ``pytest`` and its first check, or the Python of a page."""
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -77,9 +78,25 @@ def run_one(name: str, root: Path, log_dir: Path) -> dict:
                                   stderr=subprocess.STDOUT, cwd=clone if COMMANDS[name][0] == "-m" else tmp)
         wall = time.perf_counter() - start
         load_after = os.getloadavg()
+        seconds = recorded_seconds(Path(tmp) / "out")     # read before the folder goes
     return {"command": name, "argv": COMMANDS[name], "budget": commands.QUICK_BUDGETS[name], "size": _size(log),
             "wall": wall, "returncode": done.returncode, "others_before": others,
-            "load_before": list(load_before), "load_after": list(load_after), "log": str(log)}
+            "load_before": list(load_before), "load_after": list(load_after), "log": str(log), "seconds": seconds}
+
+
+def recorded_seconds(out: Path) -> dict:
+    """``{stage: seconds}`` that a command recorded in the JSON it wrote at the top of ``out`` (its ``"seconds"``,
+    or its meta's: reproduce's results.json, the scene study's, peers.json), numbers only; {} where none."""
+    found = {}
+    for path in sorted(out.glob("*.json")):
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):       # not a result of the command's: its seconds are elsewhere or none
+            continue
+        seconds = data.get("seconds") or data.get("meta", {}).get("seconds") if isinstance(data, dict) else None
+        if isinstance(seconds, dict):
+            found.update({k: v for k, v in seconds.items() if isinstance(v, (int, float)) and not isinstance(v, bool)})
+    return found
 
 
 def verdict(row: dict) -> str:

@@ -155,14 +155,15 @@ def quick_measuring(job, costs: dict = QUICK_COSTS) -> float:
 
 def reference_plan(settings: dict | None = None, costs: dict = QUICK_COSTS) -> list:
     """``peers.py --quick``'s plan on the quick budgets' reference box (``hnn_analysis.plan``: declared costs,
-    nothing built): its datasets (one a CHNN row, the chain's ``TaskSpec.data_cost``: the LNN protocol's states
-    are drawn with their derivatives, no rollout, 0.0 s), its training and measuring (each run's ``quick_training``
-    and ``quick_measuring``) and the table's timing of the kinds."""
+    nothing built): the plan's own timing of its configs (``plans.reference_timing``), its datasets (one a CHNN
+    row, the chain's ``TaskSpec.data_cost``: the LNN protocol's states are drawn with their derivatives, no
+    rollout, 0.0 s), its training and measuring (each run's ``quick_training`` and ``quick_measuring``) and the
+    table's timing of the kinds."""
     from hnn_analysis import plan as plans
     settings = {"kinds": kinds(), **(settings or QUICK)}
     jobs = plan(settings, Path("runs"))
     rows = len(settings["bobs"])
-    return [plans.Stage("build", rows, "datasets", rows * hnn.task_spec("chain").data_cost,
+    return [plans.reference_timing(jobs), plans.Stage("build", rows, "datasets", rows * hnn.task_spec("chain").data_cost,
                         "the chain's declared build a CHNN row, on the reference box"),
             plans.Stage("train", len(jobs), "runs", sum(quick_training(job, costs) for job in jobs),
                         "each run's declared cost by kind and bobs"),

@@ -229,14 +229,15 @@ def quick_tasks(tasks: list[str]) -> list[str]:
 
 def reference_plan(tasks: list[str], steps: int = QUICK_STEPS) -> list:
     """``reproduce.py --quick``'s plan of ``tasks`` on the quick budgets' reference box (``hnn_analysis.plan``:
-    declared costs, nothing built): its training (``plan.reference_seconds``), its datasets (each task's
-    ``TaskSpec.data_cost``) and its evaluation (``evaluation_stage``)."""
+    declared costs, nothing built): the plan's own timing of its configs (``plan.reference_timing``), its training
+    (``plan.reference_seconds``), its datasets (each task's ``TaskSpec.data_cost``) and its evaluation
+    (``evaluation_stage``)."""
     from hnn_analysis import plan as plans
     rows = table_rows(tasks, True, [0])
     jobs = plan(rows, [0], Path("runs"), steps)
     training = plans.Stage("train", len(jobs), "runs", sum(plans.reference_seconds(job) for job in jobs),
                            "each run's declared cost on the reference box")
-    return [training, data_stage(tasks), evaluation_stage(rows)]
+    return [plans.reference_timing(jobs), training, data_stage(tasks), evaluation_stage(rows)]
 
 
 def data_stage(tasks: list[str]):

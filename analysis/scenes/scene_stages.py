@@ -393,8 +393,9 @@ def measure_stage(units: dict, models: int, quick: bool, dhnn_models: int = 0) -
 
 def reference_plan(studied=None) -> list[plan.Stage]:
     """A quick study's plan on the reference box (``plan.reference_seconds``: declared costs, no data built):
-    its training (every fit at its ``QUICK_FIT_ROWS``), its datasets (``data_stage``) and its measuring
-    (``measure_stage``); ``studied`` default: the quick study's own scenes (``quick_scenes``)."""
+    the plan's own timing of its configs (``plan.reference_timing``), its training (every fit at its
+    ``QUICK_FIT_ROWS``), its datasets (``data_stage``) and its measuring (``measure_stage``); ``studied`` default:
+    the quick study's own scenes (``quick_scenes``)."""
     studied = studied or quick_scenes(scene_common.scenes())
     rows = [{k: v for k, v in row.items() if k != "fit_rows"} for row in plan_rows(studied, True)]
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
@@ -412,7 +413,8 @@ def reference_plan(studied=None) -> list[plan.Stage]:
     jobs = [dataclasses.replace(job, expected_seconds=plan.reference_seconds(job, QUICK_FIT_ROWS)) for job in jobs]
     will = {job.key: Path("runs") for job in jobs}
     units = measure_units(studied, will, [0], grid_rows, [0], QUICK_SPEED_KINDS, speed_scenes(studied))
-    return [plan.training(jobs, 1, QUICK_SHARES["train"], "each run's declared cost on the reference box"),
+    return [plan.reference_timing(jobs), plan.training(jobs, 1, QUICK_SHARES["train"],
+                                                       "each run's declared cost on the reference box"),
             data_stage(studied, True), measure_stage(units, len(jobs), True, len(dhnn_rows) and len(DHNN_MODELS))]
 
 
