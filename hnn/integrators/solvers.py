@@ -133,7 +133,7 @@ SOLVERS: dict[str, Solver] = {solver.name: solver for solver in (
     Solver("solve_ivp", 5, symplectic=False, needs_separable=False, adaptive=True, run=scipy_rollout,
            label=_scipy_label),
     # one step size per row (solve_ivp's is shared by the batch, the implicit methods' iterations too);
-    # steps='shared' runs them on solve_ivp's terms (row_wise then no longer holds: hnn.rollout_group knows)
+    # steps='shared' runs them on solve_ivp's terms (row_wise then no longer holds: groups.rollout_group knows)
     Solver("dopri5", 5, symplectic=False, needs_separable=False, adaptive=True, run=dopri5_rollout, row_wise=True),
     Solver("dop853", 8, symplectic=False, needs_separable=False, adaptive=True, run=dop853_rollout, row_wise=True),
     fixed_step_solver("rk4", RK4, order=4, row_wise=True, stability_limit=RK4_LIMIT, vmap=True),
