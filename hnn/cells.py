@@ -51,21 +51,24 @@ def pairs_within(q: torch.Tensor, cutoff: float) -> tuple[torch.Tensor, torch.Te
     around = cell.reshape(-1, dim)[body][:, None, :] + shifts                     # (bodies, 3^dim, dim)
     inside = ((around >= 0) & (around < cells)).all(dim=2)
     wanted = (body // count)[:, None] * cells.prod() + _number(around.clamp(min=0), cells)
-    start = torch.searchsorted(sorted_key, wanted)
-    end = torch.searchsorted(sorted_key, wanted, right=True)
-    sizes = torch.where(inside, end - start, 0).reshape(-1)
-    # every (body, partner) of those ranges, flat: the partner's place in the sorted order
-    first = start.reshape(-1).repeat_interleave(sizes)
-    begin = torch.cumsum(sizes, 0) - sizes
-    place = first + torch.arange(int(sizes.sum()), device=q.device) - begin.repeat_interleave(sizes)
-    mine = body.repeat_interleave(shifts.shape[0]).repeat_interleave(sizes)
+    start = torch.searchsorted(sorted_key, wanted).reshape(-1)
+    sizes = torch.where(inside.reshape(-1), torch.searchsorted(sorted_key, wanted, right=True).reshape(-1) - start, 0)
+    # every (body, partner) of those ranges, flat: the partner's place in the sorted order is its range's start
+    # plus its rank within the range
+    total = int(sizes.sum())
+    place = torch.arange(total, device=q.device) + (start - (torch.cumsum(sizes, 0) - sizes)).repeat_interleave(
+        sizes, output_size=total)
+    mine = body.repeat_interleave(shifts.shape[0]).repeat_interleave(sizes, output_size=total)
     other = order[place]
-    i, j = mine % count, other % count
-    keep = i < j
-    b, i, j = (mine // count)[keep], i[keep], j[keep]
-    r = torch.linalg.vector_norm(q[b, i] - q[b, j], dim=-1)
-    close = r < cutoff
-    found = i[close] * count + j[close]
+    # both ends in one state (the key holds it), so i < j is their flat indices' order; the distance as
+    # hnn.models.pair.separations takes it
+    # (one nonzero and index_select per filter: a boolean index would find the kept places once per array)
+    keep = torch.nonzero(mine < other).squeeze(1)
+    mine, other = mine.index_select(0, keep), other.index_select(0, keep)
+    flat = q.reshape(-1, dim)
+    r = torch.linalg.vector_norm(flat.index_select(0, mine) - flat.index_select(0, other), dim=-1)
+    close = torch.nonzero(r < cutoff).squeeze(1)
+    found = (mine.index_select(0, close) % count) * count + other.index_select(0, close) % count
     found = torch.cat([found, _stray_pairs(finite, count)])
     found = torch.unique(found)                                                     # sorted: triu_indices' order
     return found // count, found % count
