@@ -154,3 +154,30 @@ def test_a_missing_rebound_names_the_extra(monkeypatch):
     with pytest.raises(ImportError, match="nbody"):
         rebound_truth.rollout(_scene(), [0.0, 0.01], "ias15", softening=SOFTENING)
     assert rebound_truth.version() is None
+
+
+def test_the_benchmark_measures_every_method_at_every_n(rebound, tmp_path):
+    """analysis/benchmarks/nbody_truth.py end to end on a tiny budget: each method's row at each N, IAS15's energy
+    error at round-off's scale and the leapfrogs' at their step's, the JSON and the table written."""
+    from hnn_analysis.benchmarks import nbody_truth
+    results = nbody_truth.main(["--sizes", "3", "8", "--horizon", "0.04", "--repeats", "1", "--out", str(tmp_path)])
+    assert [row["N"] for row in results["rows"]] == [3, 8]
+    for row in results["rows"]:
+        methods = row["methods"]
+        assert set(methods) == set(nbody_truth.METHODS)
+        assert all(m["ms_per_step"] > 0 for m in methods.values()) and row["floor_ms"] > 0
+        assert methods["REBOUND IAS15"]["error_at_T"] == 0.0            # the reference against itself
+        # IAS15 keeps H to round-off: eps times the terms' scale (under 60 for 8 bodies of this disk) times the 36
+        # terms of H's sum, per body, is under 1e-13; the leapfrogs at dt = 0.01 to order dt^2, their paths too
+        assert methods["REBOUND IAS15"]["energy_per_body"] < 1e-12
+        for label in ("ours leapfrog", "REBOUND leapfrog"):
+            assert 1e-8 < methods[label]["energy_per_body"] < 1e-1 and methods[label]["error_at_T"] < 1e-1
+    assert (tmp_path / "nbody_truth.json").exists() and "REBOUND WHFast" in (tmp_path / "nbody_truth.md").read_text()
+
+
+def test_the_benchmark_refuses_a_quick_page():
+    from hnn_analysis.benchmarks import nbody_truth
+    with pytest.raises(SystemExit, match="drop --quick"):
+        nbody_truth.main(["--quick", "--update-docs"])
+    with pytest.raises(SystemExit, match="not a whole number of steps"):
+        nbody_truth.main(["--horizon", "0.015", "--sizes", "3"])
