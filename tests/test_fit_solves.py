@@ -186,3 +186,52 @@ def test_a_librarys_values_are_its_terms_written_out(form):
     for subset, expected in ((None, truth), (keep, truth[:, keep.numpy()])):
         got = library(torch.as_tensor(x), subset).numpy()
         assert np.abs(got - expected).max() <= 1e-14 * np.abs(expected).max()
+    # the design's build on the transposed layout (a fit's): the same values, (terms, rows)
+    transposed = library.transposed(torch.as_tensor(x)).numpy()
+    assert transposed.shape == (library.width, 50)
+    assert np.abs(transposed.T - truth).max() <= 1e-14 * np.abs(truth).max()
+
+
+def test_a_baseline_library_fit_is_stlsq_on_lstsq_of_its_values(monkeypatch):
+    """The baseline's library fit (one design, dx/dt's columns its right-hand sides, built in pieces of a few
+    states each and folded in one QR) against numpy: lstsq of the terms' values written out on every column,
+    thresholded as SINDy's STLSQ on the rows, each column its own terms."""
+    x, dxdt = _pendulum()
+    model = hnn.fits.build(ModelSpec(kind="baseline", input_dim=2, fit="library", library_degree=2,
+                                     library_frequencies=1))
+    # pieces of 45 states: 9 of them, copied one below the other into the QR's operand
+    monkeypatch.setattr(hnn.fits.fitting, "DESIGN_BYTES", 8 * model.features.width * 45)
+    hnn.fits.solve(model, x, dxdt, fit="library", rcond=0.0, threshold=0.05, progress=False)
+    library = model.features
+    powers, trig = library.powers.numpy(), library.trig.numpy()
+    angle = x[:, trig[:, 1]] * trig[:, 2]
+    A = np.prod(x[:, None, :] ** powers[None], axis=2) * np.where(trig[:, 0] == 1, np.sin(angle),
+                                                                  np.where(trig[:, 0] == 2, np.cos(angle), 1.0))
+    for j in range(2):
+        keep = np.ones(library.width, dtype=bool)
+        for _ in range(lstsq.MAX_STLSQ_ITERATIONS):
+            coef = np.zeros(library.width)
+            coef[keep] = np.linalg.lstsq(A[:, keep], dxdt[:, j], rcond=None)[0]
+            if not (np.abs(coef[keep]) < 0.05).any():
+                break
+            keep &= np.abs(coef) >= 0.05
+        got = model.coef[:, j].numpy()
+        assert 0 < (coef != 0).sum() < library.width          # the threshold dropped terms and kept some
+        assert np.array_equal(got != 0, coef != 0)
+        assert np.abs(got - coef).max() <= AGREE * np.abs(coef).max()
+
+
+@pytest.mark.parametrize("states, columns, rhs, per_state", [(20000, 10000, 4, 1), (80000, 427, 12, 1),
+                                                             (70000, 3000, 1, 1), (9000, 1000, 1, 4)])
+def test_a_streamed_qr_chunks_every_state_once_and_its_first_operand_is_no_larger_than_a_later_one(
+        states, columns, rhs, per_state):
+    """``chunks`` tiles the states in order; a later update stacks ``chunk_rows`` rows under the factor's
+    columns + rhs, so the first chunk (no factor yet) takes that many rows more at the same peak memory, and a
+    problem that fits in it is one QR (the double pendulum at width 10000: 20000 states, one chunk)."""
+    bounds = lstsq.chunks(states, columns, rhs, per_state)
+    assert bounds[0][0] == 0 and bounds[-1][1] == states
+    assert all(a[1] == b[0] and a[0] < a[1] for a, b in zip(bounds, bounds[1:]))
+    step, width = lstsq.chunk_rows(columns, rhs), columns + rhs
+    operands = [(stop - start) * per_state + (width if i else 0) for i, (start, stop) in enumerate(bounds)]
+    assert max(operands) <= step + width
+    assert (len(bounds) == 1) == (states * per_state <= step + width)

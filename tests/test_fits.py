@@ -191,6 +191,12 @@ def test_the_streaming_qr_agrees_with_one_lstsq_whatever_the_chunks():
             solver.add(torch.as_tensor(A[i:i + chunk]), torch.as_tensor(Y[i:i + chunk]))
         assert np.abs(solver.solve().numpy() - truth).max() < 1e-12
         assert solver.residual().numpy() == pytest.approx(((A @ truth - Y) ** 2).sum(0), rel=1e-10)
+    # blocks of rows folded in one QR: the same problem, each block taken from the caller's list
+    solver = lstsq.StreamingQR(30, 2, torch.as_tensor(np.linalg.norm(A, axis=0)), 1e-15)
+    blocks = [(torch.as_tensor(A[i:i + 97]), torch.as_tensor(Y[i:i + 97])) for i in range(0, 500, 97)]
+    solver.add_blocks(blocks)
+    assert not blocks and solver.rows == 500
+    assert np.abs(solver.solve().numpy() - truth).max() < 1e-12
 
 
 def test_cross_validation_keeps_exact_data_exact_and_stops_noisy_data_from_being_interpolated():

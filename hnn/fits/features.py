@@ -158,6 +158,12 @@ class Library(Features):
         # derived from ``powers``, so not saved: index in_dim is the column of ones
         self.register_buffer("slots", torch.tensor([s + [in_dim] * (degree - len(s)) for s in slots],
                                                    dtype=torch.int64).reshape(-1, degree), persistent=False)
+        # ``transposed``'s rows: x^T, ones, then each distinct trig factor once (kind, column, frequency); each term's
+        # trig factor is a row of them (in_dim: the ones)
+        distinct = sorted({tuple(t[1]) for t in term_list if t[1][0] != NONE})
+        self.register_buffer("angles", torch.tensor(distinct, dtype=torch.int64).reshape(-1, 3), persistent=False)
+        self.register_buffer("trig_rows", torch.tensor([in_dim if t[1][0] == NONE else in_dim + 1 + distinct.index(tuple(t[1]))
+                                                        for t in term_list], dtype=torch.int64), persistent=False)
 
     @classmethod
     def make(cls, spec, form: str, in_dim: int) -> Library:
@@ -197,6 +203,26 @@ class Library(Features):
         # the same products as ever, elementwise (the bits do not depend on the layout); row-major out, as before,
         # for the products a caller takes of it
         return (self._product(factors) * t).contiguous()
+
+    def transposed(self, x: torch.Tensor) -> torch.Tensor:
+        """theta^T ``(terms, rows)`` at ``x`` ``(rows, in_dim)``, contiguous: ``forward``'s values and products in its
+        order (the monomial's factors, then the trig factor), built in place on the transposed layout, where a
+        factor is a gather of whole rows of x^T and the trig factors' sines and cosines are taken once per
+        distinct angle (the 3-body's field library: 12 rows, not 336 terms' worth). Its ``.T`` is the
+        column-major ``(rows, terms)`` a least-squares solve's QR reads (``hnn.fits.models.FittedField``)."""
+        n, angles = self.in_dim, self.angles
+        rows = x.new_empty(n + 1 + len(angles), len(x))
+        rows[:n] = x.T
+        rows[n] = 1.0
+        for kind in (SIN, COS):
+            pick = (angles[:, 0] == kind).nonzero()[:, 0]
+            if len(pick):
+                angle = x.T[angles[pick, 1]] * angles[pick, 2, None].to(x.dtype)
+                rows[n + 1 + pick] = torch.sin(angle) if kind == SIN else torch.cos(angle)
+        out = rows[self.slots[:, 0]]
+        for s in range(1, self.slots.shape[1]):
+            out.mul_(rows[self.slots[:, s]])
+        return out.mul_(rows[self.trig_rows])
 
     def _rows_at_once(self, terms: int) -> int:
         """Rows of ``x`` whose ``(rows, terms)`` intermediates of a gradient (about degree + 4 of them) stay
@@ -277,7 +303,7 @@ class Library(Features):
                 for value, term_powers, term_trig in parts:
                     m = index.setdefault((term_powers, term_trig), len(index))
                     entries.append((m, k, i, float(value)))
-        # the basis ordered plain monomials, then sin, then cos terms: each kind's columns one slice
+        # the basis ordered plain monomials, then sin, then cos terms (the order of the factor's columns: round-off)
         keys = sorted(index, key=lambda key: key[1][0])
         position = torch.tensor([keys.index(key) for key in index])
         C = torch.zeros(len(index), self.width, self.in_dim, dtype=torch.float64)
@@ -285,24 +311,12 @@ class Library(Features):
             m, k, i, value = zip(*entries)
             C.index_put_((position[list(m)], torch.tensor(k), torch.tensor(i)),
                          torch.tensor(value, dtype=torch.float64), accumulate=True)
-        slots = Library([(list(p), list(t)) for p, t in keys], self.in_dim).slots.to(self.powers.device)
-        trig = torch.tensor([t for _, t in keys], dtype=torch.int64, device=self.powers.device).reshape(-1, 3)
-        kinds = trig[:, 0].tolist()
-        spans = {kind: slice(kinds.index(kind), len(kinds) - kinds[::-1].index(kind)) for kind in (SIN, COS)
-                 if kind in kinds}
+        basis = Library([(list(p), list(t)) for p, t in keys], self.in_dim).to(self.powers.device)
 
         def values(x: torch.Tensor) -> torch.Tensor:
-            # forward's product, written in place on the transposed (M, rows): a factor is a gather of whole rows
-            # of x^T and one multiply a slot, sin and cos of the trig terms alone (a gather of columns of
-            # (rows, in_dim) and forward's trig factor and slope of every term cost 3-10x as much)
-            padded = torch.cat([x.T, x.new_ones(1, len(x))])
-            out = padded[slots[:, 0]]
-            for s in range(1, slots.shape[1]):
-                out.mul_(padded[slots[:, s]])
-            for kind, span in spans.items():
-                angle = padded[trig[span, 1]] * trig[span, 2, None].to(x.dtype)
-                out[span].mul_(torch.sin(angle) if kind == SIN else torch.cos(angle))
-            return out.T
+            # built in place on the transposed (M, rows) (``transposed``): a gather of columns of (rows, in_dim) and
+            # forward's trig factor and slope of every term cost 3-10x as much
+            return basis.transposed(x).T
         return values, C
 
     def names(self, columns: list[str]) -> list[str]:

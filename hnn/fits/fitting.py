@@ -26,7 +26,7 @@ from ..settings import RunSettings
 from ..specs import ModelSpec
 from ..trainers.rows import check_data
 from ..units import Rescaled, UnitScales, in_canonical_units, refusal, units_reason
-from .lstsq import RIDGES, StreamingQR, chunk_rows
+from .lstsq import RIDGES, StreamingQR, chunk_rows, chunks
 from .registry import build, fitted_model, get_fit
 
 DESIGN_BYTES = 2 ** 27  # the design rows built at once (a library's intermediate arrays are a few times this)
@@ -49,19 +49,13 @@ def _stream(part, x: torch.Tensor, y: torch.Tensor, weights, rcond: float, bar) 
     if factored is not None:
         return _stream_factored(*factored, x, y, weights, rcond, bar)
     per_state = _rows_per_state(part, x, y)
-    states = max(1, chunk_rows(part.columns, part.rhs) // per_state)
     # the design of a few states at a time: a library's terms build (states, terms, dim) arrays several times over
     step = max(1, DESIGN_BYTES // (8 * part.columns * per_state))
     plain = StreamingQR(part.columns, part.rhs)
-    for start in range(0, len(x), states):
-        stop = min(start + states, len(x))
-        pieces = [part.design(x[i:min(i + step, stop)], y[i:min(i + step, stop)], weights)
-                  for i in range(start, stop, step)]
-        if len(pieces) == 1:
-            plain.add(*pieces[0])
-        else:
-            plain.add(torch.cat([a for a, _ in pieces]), torch.cat([b for _, b in pieces]))
-        del pieces
+    for start, stop in chunks(len(x), part.columns, part.rhs, per_state):
+        # each piece copied into the QR's operand and freed there (no joined copy of the chunk's design)
+        plain.add_blocks([part.design(x[i:min(i + step, stop)], y[i:min(i + step, stop)], weights)
+                          for i in range(start, stop, step)])
         bar.advance(stop - start)
     R = plain.factor
     solver = StreamingQR(part.columns, part.rhs, R[:, :part.columns].norm(dim=0), rcond)
@@ -86,10 +80,9 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
         torch.as_tensor(weights, dtype=torch.float64)[targets]
     Y = y[:, targets]
     stage = StreamingQR(M, m)
-    step = max(1, chunk_rows(M, m))
-    for i in range(0, len(x), step):
-        stage.add(slopes(x[i:i + step]), Y[i:i + step])
-        bar.advance(len(x[i:i + step]))
+    for start, stop in chunks(len(x), M, m):
+        stage.add(slopes(x[start:stop]), Y[start:stop])
+        bar.advance(stop - start)
     R = stage.factor
     Rs, Z, tail = R[:M, :M], R[:M, M:], R[M:, M:]
     if dense:

@@ -37,6 +37,20 @@ def chunk_rows(columns: int, rhs: int = 1) -> int:
     return max(1024, width, BLOCK_BYTES // (8 * width) - width)
 
 
+def chunks(states: int, columns: int, rhs: int = 1, per_state: int = 1) -> list[tuple[int, int]]:
+    """``(start, stop)`` of each chunk of ``states`` (``per_state`` design rows each) a QR factor is streamed in:
+    ``chunk_rows`` rows at a time, the first chunk ``columns + rhs`` rows more, since the factor that every later
+    update stacks its rows under is not there yet (the first QR's operand no larger than a later one's: the
+    same peak memory); all at once where they fit in that. The double pendulum at width 10000 (20000 states):
+    one QR of 20000 x 10004 (3.3e12 flops) in place of one of 10004 rows and one of 20008 (4.7e12)."""
+    step = max(1, chunk_rows(columns, rhs) // per_state)
+    size, start, out = max(1, (chunk_rows(columns, rhs) + columns + rhs) // per_state), 0, []
+    while start < states:
+        out.append((start, min(states, start + size)))
+        start, size = start + size, step
+    return out
+
+
 class StreamingQR:
     """min_C |A C - Y|^2 + rcond^2 |diag(scale) C|^2 over rows added in chunks (``add``), for ``columns``
     unknowns and ``rhs`` right-hand sides. ``scale`` ``(columns,)``: the columns' norms (their RMS over the
@@ -58,13 +72,27 @@ class StreamingQR:
     def add(self, A: torch.Tensor, Y: torch.Tensor, rows: int | None = None) -> None:
         """Fold the rows ``A`` ``(rows, columns)``, ``Y`` ``(rows, rhs)`` into the factor (``rows``: how many rows of
         the original problem they stand for, where they are a reduction of more)."""
-        stacked = torch.empty(len(self.factor) + len(A), self.columns + self.rhs, dtype=torch.float64)
-        stacked[:len(self.factor)] = self.factor
-        torch.div(A, self.scale, out=stacked[len(self.factor):, :self.columns])
-        stacked[len(self.factor):, self.columns:] = Y
-        del A
+        blocks = [(A, Y)]
+        del A, Y            # the list holds the only references here: a temporary design is freed once copied
+        self.add_blocks(blocks, rows)
+
+    def add_blocks(self, blocks: list, rows: int | None = None) -> None:
+        """Fold the rows of every ``(A, Y)`` of ``blocks`` (as ``add``'s, one below the other) in one QR: each block
+        is copied straight into the QR's operand and dropped from the list (which ends empty), never joined first.
+        The operand is column-major, the layout LAPACK reads, so torch's QR copies it as it is (the same numbers,
+        the same factor bits) rather than transposed."""
+        count = sum(len(A) for A, _ in blocks)
+        top = len(self.factor)
+        stacked = torch.empty(self.columns + self.rhs, top + count, dtype=torch.float64).T
+        stacked[:top] = self.factor
+        while blocks:
+            A, Y = blocks.pop(0)
+            torch.div(A, self.scale, out=stacked[top:top + len(A), :self.columns])
+            stacked[top:top + len(A), self.columns:] = Y.reshape(len(A), self.rhs)
+            top += len(A)
+            del A, Y
         self.factor = torch.linalg.qr(stacked, mode="r").R[:self.columns + self.rhs]
-        self.rows += len(Y) if rows is None else rows
+        self.rows += count if rows is None else rows
 
     def add_triangular(self, T: torch.Tensor, Y: torch.Tensor) -> None:
         """Fold the rows of an upper triangular ``T`` ``(columns, columns)`` and its ``Y`` ``(columns, rhs)`` into the

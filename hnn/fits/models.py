@@ -245,7 +245,9 @@ class FittedField(Model):
         return self.features(x) @ self.coef + self.bias
 
     def _design(self, x, y, weights):
-        phi = self.features(x)
+        # a library's values built on the transposed layout (its bits are forward's): the column-major (rows, terms)
+        # the QR reads, at a fraction of forward's gathers and trig factors
+        phi = self.features.transposed(x).T if isinstance(self.features, Library) else self.features(x)
         if self.has_bias:
             phi = torch.cat([phi, torch.ones_like(phi[:, :1])], dim=1)
         return phi, y     # the components are separate problems of one design: their weights change nothing
