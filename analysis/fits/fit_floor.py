@@ -2,7 +2,7 @@
 
     python analysis/fits/fit_floor.py                   # the table; results/fit_floor/fit_floor.json
     python analysis/fits/fit_floor.py --update-docs     # and docs/speed.md's section fit-floor
-    python analysis/fits/fit_floor.py --double          # with the double pendulum at widths 5000 and 10000
+    python analysis/fits/fit_floor.py --quick           # without the fits of minutes (the double pendulum, 10000)
 
 What is timed and how the floor is made: ``hnn_analysis.fits.floor``.
 """
@@ -24,8 +24,8 @@ def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     p = hnn.cli.Parser(prog="fit_floor.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeats", type=hnn.settings.int_at_least(1), default=3, help="fits timed per row (default 3)")
-    p.add_argument("--double", action="store_true", help="also the double pendulum at widths 5000 and 10000 "
-                   "(minutes each on 2 cores)")
+    p.add_argument("--quick", action="store_true", help="skip the fits of minutes (the double pendulum at width "
+                   "10000: about 5 minutes on 2 cores, 6 GiB; not with --update-docs)")
     p.add_argument("--only", nargs="+", type=hnn.settings.int_at_least(0), default=None, metavar="ROW",
                    help=f"these rows of the table only (0-{len(FITS) - 1}; not with --update-docs)")
     p.add_argument("--data-dir", type=Path, default=None,
@@ -34,9 +34,9 @@ def main(argv=None) -> dict:
     p.add_argument("--update-docs", dest="update_docs", action="store_true",
                    help=f"write docs/speed.md's section {SECTION}")
     args = p.parse_args(argv)
-    if args.update_docs and args.only:
-        p.error("--update-docs writes every row; drop --only")
-    cases = [case for i, case in enumerate(FITS) if (args.only is None or i in args.only) and (args.double or not case.slow)]
+    if args.update_docs and (args.only or args.quick):
+        p.error("--update-docs writes every row; drop --only and --quick")
+    cases = [case for i, case in enumerate(FITS) if (args.only is None or i in args.only) and not (args.quick and case.slow)]
     if hnn.fits.sindy.version() is None:
         cases = [case for case in cases if case.fit != "sindy"]
     out = args.out or hnn.tasks.repo_root() / "results" / "fit_floor"

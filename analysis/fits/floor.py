@@ -5,7 +5,8 @@ Sampling-HNNs protocols, ``hnn_analysis.fits.sampling_protocols``, at their sett
 tasks' library, sampled and SINDy fits on one thread, as ``train.py`` runs them) runs ``--repeats`` times
 through ``hnn.fits.solve`` (the fit's own ``seconds``: the sampling, the factors, the solve and the
 thresholding). One more run under a dispatch recorder lists every LAPACK and BLAS call the fit makes (QR,
-SVD, triangular solve, matrix product, dtpqrt's folds: shapes and flops; QR of m x n: 2mn^2 - 2n^3/3, SVD of
+SVD, triangular solve, matrix product, dtpqrt's folds: shapes and flops; a fit of minutes, ``Fit.once``, is
+timed by that run alone, its floor's calls once after it; QR of m x n: 2mn^2 - 2n^3/3, SVD of
 n x n: 22n^3, product m x k x n: 2mkn, a fold of an n x n triangle 2n^3/3); the floor is each of those calls timed alone on fresh operands of its shape at
 the same thread count, plus the features' build (rows x columns x input width flops at the matrix-multiply
 rate). ``ratio`` = the fit's median / the floor; ``gemm floor``: every flop at the float64 matrix-multiply
@@ -16,6 +17,7 @@ must solve at least once). Times on a shared box move with its load: the fit and
 
 from __future__ import annotations
 
+import resource
 import statistics
 import time
 from dataclasses import dataclass, field
@@ -48,7 +50,8 @@ class Fit:
     threads: int
     spec: dict = field(default_factory=dict)
     solve: dict = field(default_factory=dict)
-    slow: bool = False          # minutes: run with --double only
+    slow: bool = False          # minutes a fit: skipped by --quick
+    once: bool = False          # timed once, under the recorder that lists its calls (a fit of minutes: no repeats)
 
 
 FITS = [
@@ -56,10 +59,6 @@ FITS = [
         {"hidden_dim": 1000}, {"rcond": protocols.RCOND}),
     Fit("single pendulum, SWIM width 1000, ridge by cross-validation", "single", "hnn", "swim", 2,
         {"hidden_dim": 1000}, {"rcond": "auto"}),
-    Fit("double pendulum, SWIM width 5000 (Sampling-HNNs)", "double", "hnn", "swim", 2, {"hidden_dim": 5000},
-        {"rcond": protocols.RCOND}, slow=True),
-    Fit("double pendulum, SWIM width 10000 (Sampling-HNNs)", "double", "hnn", "swim", 2, {"hidden_dim": 10000},
-        {"rcond": protocols.RCOND}, slow=True),
     Fit("pend task, HNN SWIM width 1000", "pend", "hnn", "swim", 1, {"hidden_dim": 1000}),
     Fit("pend task, HNN library", "pend", "hnn", "library", 1, {"library_degree": 3, "library_frequencies": 1}),
     Fit("3-body task, HNN library (cubic, 790 terms)", "3body", "hnn", "library", 1,
@@ -67,6 +66,9 @@ FITS = [
     Fit("3-body task, baseline library (dx/dt's terms)", "3body", "baseline", "library", 1,
         {"library_degree": 2, "library_frequencies": 1}),
     Fit("3-body task, SINDy (pysindy)", "3body", "baseline", "sindy", 1, {"library_degree": 2, "library_frequencies": 1}),
+    # their 121 s on 64 threads (docs/fits.md, fits-sampling); last, so that the peak memory column is its own
+    Fit("double pendulum, SWIM width 10000 (Sampling-HNNs, rcond 1e-13)", "double", "hnn", "swim", 2,
+        {"hidden_dim": 10000}, {"rcond": protocols.RCOND}, slow=True, once=True),
 ]
 
 
@@ -212,10 +214,9 @@ def _measure(case: Fit, data: dict, repeats: int, rates: dict) -> dict:
         loss, hnn.fits.fitting.derivative_mse = hnn.fits.fitting.derivative_mse, lambda *a, **k: [float("nan")]
         try:
             with recorder:
-                hnn.fits.solve(model, x, dxdt, **kwargs)
+                return hnn.fits.solve(model, x, dxdt, **kwargs)["seconds"]
         finally:
             hnn.fits.fitting.derivative_mse = loss
-        return 0.0
 
     if case.fit == "sindy":
         library = _model(case, x.shape[1]).features.width
@@ -223,12 +224,15 @@ def _measure(case: Fit, data: dict, repeats: int, rates: dict) -> dict:
         feature_flops = 0.0
     else:
         recorder = _Calls()
-        run(recorder)
+        recorded = run(recorder)
         calls, feature_flops = recorder.calls, _features_flops(_model(case, x.shape[1]), len(x))
     alone = {key: None for key in calls}
-    seconds, floors = [], []
-    for _ in range(repeats):        # the fit and its floor alternate: the box's load hits both alike
-        seconds.append(run())
+    # a fit of minutes (``once``) is timed by its recorded run: the recorder's Python per torch call is
+    # milliseconds of its minutes
+    seconds, floors = ([recorded], []) if case.once else ([], [])
+    for _ in range(1 if case.once else repeats):    # the fit and its floor alternate: the load hits both alike
+        if not case.once:
+            seconds.append(run())
         for key in alone:
             alone[key] = _alone(*key, repeats=1)
         floors.append(sum(alone[key] for key in calls) + feature_flops / rate)
@@ -238,7 +242,8 @@ def _measure(case: Fit, data: dict, repeats: int, rates: dict) -> dict:
             "each": seconds, "floor": statistics.median(floors), "gflop": total / 1e9, "gemm_floor": total / rate,
             "gemm_gflops": rate / 1e9, "ratio": statistics.median(seconds) / statistics.median(floors),
             "calls": len(calls), "main": [f"{op} {'x'.join(map(str, shape))} ({calls.count((op, shape))}x)"
-                                          for op, shape in big]}
+                                          for op, shape in big],
+            "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20}
 
 
 def section(results: dict) -> str:
@@ -249,16 +254,18 @@ def section(results: dict) -> str:
              + (f". Measured on a loaded box (load average {results['load'][0]:.1f} on {meta['cores']} cores "
                 "before, {:.1f} after): the seconds are inflated, fit and floor alike; rerun the command on a "
                 "quiet box".format(results['load'][1]) if results["load"][0] > 0.5 * meta["cores"] else "") + ".",
-             "", "| fit | threads | rows | seconds | floor (s) | ratio | GFLOP | at the gemm rate (s) | "
-                 "the floor's largest calls |",
-             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+             "", "| fit | threads | rows | fits timed | seconds | floor (s) | ratio | GFLOP | at the gemm rate (s) | "
+                 "the floor's largest calls | peak GiB so far |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: |"]
     for row in results["rows"]:
-        lines.append(f"| {row['label']} | {row['threads']} | {row['rows']} | {row['seconds']:.3g} | {row['floor']:.3g} "
-                     f"| {row['ratio']:.2f} | {row['gflop']:.3g} | {row['gemm_floor']:.3g} | "
-                     f"{'; '.join(row['main'])} |")
+        lines.append(f"| {row['label']} | {row['threads']} | {row['rows']} | {len(row['each'])} | {row['seconds']:.3g} "
+                     f"| {row['floor']:.3g} | {row['ratio']:.2f} | {row['gflop']:.3g} | {row['gemm_floor']:.3g} | "
+                     f"{'; '.join(row['main'])} | {row['peak_gib']:.1f} |")
     rates = ", ".join(f"{t} thread(s) {g:.3g}" for t, g in sorted(results["gemm_gflops"].items()))
     lines += ["", f"Floor: every QR, SVD, triangular solve, product and dtpqrt fold the fit makes, each timed alone on fresh "
               f"operands of its shape, plus its features' build (rows x columns x input width at the matrix-multiply "
               f"rate); ratio = seconds / floor. The float64 matrix-multiply rate here, GFLOP/s: {rates}. SINDy's "
-              "floor is one QR of its library's columns beside dx/dt."]
+              "floor is one QR of its library's columns beside dx/dt. A row of one fit timed is a fit of minutes: "
+              "that fit ran under the recorder that lists its calls, the floor's calls timed once after it. Peak GiB "
+              "so far: the process's peak resident memory once the row ran (rows run in this order)."]
     return "\n".join(lines) + "\n"
