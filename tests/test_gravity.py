@@ -123,6 +123,30 @@ def test_a_sampled_pair_field_in_chunks_is_the_field_in_one_piece(monkeypatch):
     assert torch.allclose(energy, whole_energy, rtol=0, atol=pairs * width * EPS * value_terms)
 
 
+@pytest.mark.parametrize("block_bytes", [None, 1])
+def test_past_the_pair_list_the_field_in_blocks_of_bodies_is_the_pair_sum(monkeypatch, block_bytes):
+    # N = 70 > PAIR_LIST_BODIES: blocks of bodies against every body (the default's of 24 rows, the last short,
+    # or one body a block), against the pair list's scatter of the same pairs
+    if block_bytes is not None:
+        monkeypatch.setattr(hnn.fits.radial, "BLOCK_BYTES", block_bytes)
+    count = 70
+    assert count > hnn.fits.radial.PAIR_LIST_BODIES
+    x8, x = _states(8, 40, seed=5), _states(count, 3, seed=7)
+    library, sampled = _pair_fit("library"), _pair_fit("swim")
+    hnn.fits.solve(library, x8, nbody.dynamics(x8, 0.1), fit="library")
+    hnn.fits.solve(sampled, x8, nbody.dynamics(x8, 0.1), fit="swim", seed=0)
+    # the library's softened term is the true field: each of 69 pulls (up to 1 / 0.1^2) to a few eps
+    assert torch.allclose(library.time_derivative(x), nbody.dynamics(x, 0.1), rtol=0, atol=64 * EPS * 69 / 0.1 ** 2)
+    blocked = sampled.time_derivative(x)
+    monkeypatch.setattr(hnn.fits.radial, "PAIR_LIST_BODIES", count)
+    listed = sampled.time_derivative(x)
+    # each pull V'(r) (q_i - q_j) / r (|(q_i - q_j) / r| <= 1), V' a width-long dot product, summed over 69 bodies in
+    # another order: (69 + width) eps times the largest |V'| term sum, per body
+    _, r = hnn.models.pair.separations(Bodies(count, 2).bodywise(x[:, :2 * count]), *hnn.models.pair.pair_index(count))
+    slope_terms = float((sampled.features.jacobian(r.reshape(-1, 1))[:, :, 0] * sampled.coef).abs().sum(dim=1).max())
+    assert torch.allclose(blocked, listed, rtol=0, atol=69 * (69 + sampled.features.width) * EPS * slope_terms)
+
+
 def test_without_softening_close_encounters_are_redrawn(tmp_path):
     data = load_task("gravity")
     # a tenth of a time unit: some of the disk's starts meet closer than MIN_SEPARATION, most do not

@@ -14,8 +14,10 @@ two problems, as the separable fit's T and V. The features:
 
 The pair geometry is the pair kind's (``hnn.models.pair``); the layout the task's (``hnn.bodies.Bodies``).
 A field call runs the features over the pairs in chunks (``CHUNK_BYTES``, as the pair kind's network does), so
-its memory grows with the pairs' few numbers each, not with the features' width: a sampled fit of 64 neurons
-rolls out gravity at N = 4096 (8.4 million pairs a state). States ``(rows, 2 N dim)``, float64.
+its memory grows with the pairs' few numbers each, not with the features' width; past ``PAIR_LIST_BODIES`` bodies
+every pair interacting, it runs block by block of bodies against every body (``BLOCK_BYTES`` a block, as the true
+gravity of ``hnn.orbits.nbody`` does: no per-pair index gathers and scatters), so a fit rolls out gravity at
+N = 4096 (8.4 million pairs a state). States ``(rows, 2 N dim)``, float64.
 """
 from __future__ import annotations
 
@@ -48,6 +50,13 @@ _FIELD_NUMBERS = 3
 _FIELD_NUMBERS_PER_DIM = 3
 # features' numbers a pair row holds in a chunk: their values, their slopes and a temporary (tanh's w r + b)
 _CHUNK_WIDTHS = 3
+# up to this many bodies a field call of every pair sums over the pair list (every published fit's scene: 2, 3 and
+# 8 bodies, and a lattice's neighbours at any N); past it, over blocks of bodies against every body, each pair twice
+# but with no index scatter: gravity at N = 4096, library, 2 states, one thread: 1.2 s a call against 7.5 s over the
+# pair list (loaded 2-core box)
+PAIR_LIST_BODIES = 64
+# a block's arrays stay within this (4 MB: in cache, hnn.orbits.nbody's BLOCK_BYTES measured the same)
+BLOCK_BYTES = 2 ** 22
 
 
 def softened_term(softening: float) -> tuple[str, tuple]:
@@ -65,6 +74,7 @@ class RadialLibrary(Features):
     pair potential V(r)), printed as its formula. At e = 0 the terms are ``RADIAL_TERMS`` alone, in their order."""
     forms = ("radial",)
     formula = True
+    subset = True
 
     def __init__(self, softening: float = 0.0):
         super().__init__()
@@ -84,12 +94,26 @@ class RadialLibrary(Features):
         task's setting: 0 where the task declares none)."""
         return cls(spec.softening)
 
-    def forward(self, r: torch.Tensor) -> torch.Tensor:
-        return torch.cat([value(r) for value, _ in self.terms.values()], dim=1)
+    def forward(self, r: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
+        """phi ``(rows, terms)`` at ``r`` ``(rows, 1)`` (``keep``: a boolean mask of the terms, only those)."""
+        terms = list(self.terms.values())
+        if keep is not None:
+            terms = [term for term, kept in zip(terms, keep.tolist()) if kept]
+        return torch.cat([value(r) for value, _ in terms], dim=1) if terms else r.new_zeros(len(r), 0)
 
     def jacobian(self, r: torch.Tensor) -> torch.Tensor:
         """d phi_k / dr ``(rows, terms, 1)``."""
         return torch.cat([slope(r) for _, slope in self.terms.values()], dim=1)[:, :, None]
+
+    def gradient(self, r: torch.Tensor, coef: torch.Tensor) -> torch.Tensor:
+        """d/dr of phi(r) . coef ``(rows, 1)``: the terms of nonzero ``coef`` alone, in order (a thresholded fit
+        keeps one or two of ten: a field call at N = 4096 then costs what the true forces' do, and a far term
+        that overflows, 1/r^12 at a close pair, never meets its zero as inf * 0)."""
+        out = torch.zeros_like(r)
+        for c, (_, slope) in zip(coef.tolist(), self.terms.values()):
+            if c != 0:
+                out = out + c * slope(r)
+        return out
 
     def names(self, columns: list[str] | None = None) -> list[str]:
         return list(self.terms)
@@ -159,11 +183,18 @@ class FittedPair(Model):
         return torch.cat([column(flat[k:k + size]) for k in range(0, len(flat), size)]).reshape(r.shape)
 
     def radial(self, r: torch.Tensor) -> torch.Tensor:
-        """V(r) of distances ``r`` (any shape), the same shape (without the constant)."""
+        """V(r) of distances ``r`` (any shape), the same shape (without the constant); a library's nonzero terms
+        alone (``Features.subset``)."""
+        if self.features.subset:
+            keep = self.coef != 0
+            return self._chunked(r, lambda z: self.features(z, keep) @ self.coef[keep])
         return self._chunked(r, lambda z: self.features(z) @ self.coef)
 
     def radial_slope(self, r: torch.Tensor) -> torch.Tensor:
-        """V'(r) of distances ``r`` (any shape), the same shape."""
+        """V'(r) of distances ``r`` (any shape), the same shape; a library's nonzero terms alone (its ``gradient``),
+        sampled neurons' through their Jacobian, as the fit's design reads them."""
+        if self.features.subset:
+            return self._chunked(r, lambda z: self.features.gradient(z, self.coef)[:, 0])
         return self._chunked(r, lambda z: _derivative(self.features, z) @ self.coef)
 
     def kinetic(self, p_half: torch.Tensor) -> torch.Tensor:
@@ -184,8 +215,34 @@ class FittedPair(Model):
         return self.bodies.flat(p * self._inverse_masses(p.shape[1])[:, None])
 
     def potential_gradient(self, q_half: torch.Tensor) -> torch.Tensor:
+        if self.bodies.pairs == "all" and q_half.shape[1] // self.bodies.dim > PAIR_LIST_BODIES:
+            return self.bodies.flat(self._blocked_gradient(self.bodies.bodywise(q_half)))
         q, i, j, d, r = self._geometry(q_half)
         return self.bodies.flat(pair_gradient(self.radial_slope(r), d, r, i, j, q.shape[1]))
+
+    def _blocked_gradient(self, q: torch.Tensor) -> torch.Tensor:
+        """dV/dq ``(batch, N, dim)`` of positions ``q`` ``(batch, N, dim)``, every pair interacting: for each block
+        of bodies i, sum_j V'(r_ij) (q_i - q_j) / r_ij over every body j != i, blocks within ``BLOCK_BYTES``."""
+        batch, count, dim = q.shape
+        # a body's row against every body holds d, r, V'(r) / r, a product and the features' chunk: refused (by
+        # TooManyPairsError) where one row passes PAIR_BYTES
+        numbers = _FIELD_NUMBERS + 2 * dim + _CHUNK_WIDTHS * self.features.width
+        check_pair_memory(batch, count, numbers, q.element_size())
+        size = int(min(count, max(1, BLOCK_BYTES // (batch * count * numbers * q.element_size()))))
+        # components first, (batch, dim, N): a block's sums over the dimension are then sums of whole arrays (a norm
+        # over a last axis of 2 was 10x slower than the rest of a block)
+        axes = q.transpose(1, 2)
+        out = q.new_empty(batch, dim, count)
+        for start in range(0, count, size):
+            rows = slice(start, min(count, start + size))
+            own = torch.arange(rows.start, rows.stop, device=q.device)
+            d = axes[:, :, rows, None] - axes[:, :, None, :]                     # (batch, dim, c, N): q_i - q_j
+            r = (d * d).sum(dim=1).sqrt_()                                       # (batch, c, N)
+            r[:, own - start, own] = 1.0            # a body and itself: any distance in V's domain, its pull zeroed
+            pull = self.radial_slope(r) / r
+            pull[:, own - start, own] = 0.0
+            out[:, :, rows] = (pull[:, None] * d).sum(dim=3)
+        return out.transpose(1, 2)
 
     def time_derivative(self, x: torch.Tensor, t=None) -> torch.Tensor:
         self.bodies.count_of(x.shape[1])
