@@ -104,8 +104,10 @@ class HNN(Model):
         """
         if not torch.is_grad_enabled():
             kernel = self._evaluation_kernel()
-            if kernel is not None and kernel.serves(x):
-                return kernel(x)
+            if kernel is not None:
+                dxdt = kernel.evaluate(x)
+                if dxdt is not None:
+                    return dxdt
         self._check_input(x)
         if self.baseline:
             return self.differentiable_model(x)

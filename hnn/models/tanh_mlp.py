@@ -179,7 +179,9 @@ class EvaluationKernel:
     ``kernel(x)`` maps ``(batch, input_dim)`` CPU states of the weights' dtype to ``(batch, out_dim)``
     (a new tensor). The kernel holds a copy of the weights: it serves only inside ``frozen_weights``
     (a rollout), where they cannot change; an optimizer step need not bump a parameter's version
-    counter (torch's fused Adam does not), so no cheap test could tell a stale kernel outside.
+    counter (torch's fused Adam does not), so no cheap test could tell a stale kernel outside. It
+    works in arrays of its own kept across calls (only the answer is new), so it serves one caller at
+    a time: a ``frozen_weights`` context, and so its kernels, belong to one thread.
     """
 
     def __init__(self, weights: tuple, rows: tuple[int, ...] | None, fold: torch.Tensor | None = None):
@@ -187,11 +189,20 @@ class EvaluationKernel:
             W1, b1, W2, b2, W3 = (p.detach().clone() for p in weights)
             self.dtype, self.input_dim = W1.dtype, W1.shape[1]
             self._W1T = W1.T.contiguous().numpy()
+            # the numpy dtype a served state has (None for a dtype the kernel does not serve): ``evaluate``
+            # compares an array's dtype by identity, numpy's dtypes of float32 and float64 being singletons
+            self._np_dtype = self._W1T.dtype if W1.dtype in _SMALL_BATCH_DTYPES else None
             self._b1 = b1.numpy()
             self._W2T = W2.T.contiguous()
             self._b2 = b2
             self._W2T_np, self._b2_np = self._W2T.numpy(), b2.numpy()
+            self._one = np.ones((), self._b1.dtype)      # 1 - tanh^2's 1: a ufunc converts a Python 1 at every call
             self._rows = rows
+            self._one_row = rows is not None and len(rows) == 1
+            hidden = W1.shape[0]
+            # the working arrays' widths: h1, h2 and dF_k/dh1 for every k read (``_work_for``)
+            self._widths = (hidden, hidden, 0 if rows is None else hidden * len(rows))
+            self._work, self._work_rows, self._arena = {}, 0, []
             if rows is None:
                 self._W3T = W3.T.contiguous().numpy()
                 return
@@ -204,29 +215,64 @@ class EvaluationKernel:
 
     def numpy(self, x: np.ndarray) -> np.ndarray:
         """dx/dt of ``x`` ``(batch, input_dim)`` (numpy, the kernel's dtype) as a new numpy array."""
-        h1 = x @ self._W1T
-        h1 += self._b1
+        rows = len(x)
+        work = self._work.get(rows)
+        if work is None:
+            work = self._work_for(rows)
+        h1, h2, g, h1_t, h2_t, g_t = work
+        # np.dot with out=: the products and passes of ``x @ W1T`` and the rest, in the same BLAS calls (the
+        # same bits), without matmul's ufunc dispatch or a new array per pass (docs/speed.md)
+        np.dot(x, self._W1T, out=h1)
+        np.add(h1, self._b1, out=h1)
         np.tanh(h1, out=h1)
-        few = len(x) <= _NUMPY_PRODUCT_ROWS
+        few = rows <= _NUMPY_PRODUCT_ROWS
         if few:
-            h2 = h1 @ self._W2T_np
-            h2 += self._b2_np
+            np.dot(h1, self._W2T_np, out=h2)
+            np.add(h2, self._b2_np, out=h2)
         else:
-            h2 = torch.addmm(self._b2, torch.from_numpy(h1), self._W2T).numpy()
+            torch.addmm(self._b2, h1_t, self._W2T, out=h2_t)
         np.tanh(h2, out=h2)
         if self._rows is None:
-            return h2 @ self._W3T
-        s2 = np.subtract(1, np.multiply(h2, h2, out=h2), out=h2)
-        s1 = np.subtract(1, np.multiply(h1, h1, out=h1), out=h1)
-        g = s2 @ self._W2w_np if few else torch.mm(torch.from_numpy(s2), self._W2w).numpy()   # dF_k/dh1, (batch, K H)
-        if len(self._rows) == 1:
-            g *= s1                                                          # dF/da1
+            return np.dot(h2, self._W3T)
+        s2 = np.subtract(self._one, np.multiply(h2, h2, out=h2), out=h2)
+        s1 = np.subtract(self._one, np.multiply(h1, h1, out=h1), out=h1)
+        if few:                                                              # dF_k/dh1, (batch, K H)
+            np.dot(s2, self._W2w_np, out=g)
         else:
-            g.reshape(len(x), len(self._rows), -1)[...] *= s1[:, None, :]
-        return g @ self._out
+            torch.mm(h2_t, self._W2w, out=g_t)
+        if self._one_row:
+            np.multiply(g, s1, out=g)                                        # dF/da1
+        else:
+            g.reshape(rows, len(self._rows), -1)[...] *= s1[:, None, :]
+        return np.dot(g, self._out)
+
+    def _work_for(self, rows: int) -> tuple:
+        """The arrays a call on ``rows`` states works in (h1, h2, dF/dh1, and torch views of the three):
+        views of one allocation for the most rows seen, kept per batch size (an adaptive rollout's batch
+        shrinks as its rows finish)."""
+        if rows > self._work_rows:
+            self._work_rows, self._work = rows, {}
+            # torch's allocation (64-byte aligned), as the torch products' results had before
+            self._arena = [torch.empty((rows, width), dtype=self.dtype, device="cpu") for width in self._widths]
+        tensors = [a[:rows] for a in self._arena]
+        work = self._work[rows] = (*(t.numpy() for t in tensors), *tensors)
+        return work
 
     def __call__(self, x: torch.Tensor) -> torch.Tensor:
         return torch.from_numpy(self.numpy((x.detach() if x.requires_grad else x).numpy()))
+
+    def evaluate(self, x: torch.Tensor) -> torch.Tensor | None:
+        """dx/dt of ``x`` as a new tensor if this kernel serves it (as ``serves`` says), else None: the
+        test and the call in one, read from the state's numpy view (a rollout's field call on one state
+        costs a few tensor attribute reads and conversions more than its products, docs/speed.md)."""
+        try:
+            a = (x.detach() if x.requires_grad else x).numpy()
+        except (RuntimeError, TypeError):       # not on the CPU, or a view numpy cannot share: not served
+            return None
+        shape = a.shape
+        if len(shape) != 2 or shape[0] > KERNEL_MAX_ROWS or shape[1] != self.input_dim or a.dtype is not self._np_dtype:
+            return None
+        return torch.from_numpy(self.numpy(a))
 
     def serves(self, x: torch.Tensor) -> bool:
         """Whether this kernel evaluates ``x``: ``(rows, input_dim)`` with at most ``KERNEL_MAX_ROWS``
