@@ -29,6 +29,7 @@ from torch import nn
 from ..bodies import Bodies
 from ..cells import pairs_within
 from ..interface import Model, gradient_of
+from ..modes import in_model_axis
 from ..settings import RunSettings
 from .mlp import MLP
 
@@ -151,11 +152,31 @@ class PairHNN(Model):
         return sum(torch.where(inside[:, chunk], self.radial(r[:, chunk]) - shift, 0).sum(dim=1)
                    for chunk in self._chunks(r))
 
+    def _closed_form_slope(self) -> bool:
+        """Whether V' can come from the tanh MLP's closed-form input gradient (``MLP.input_gradient``): V is this
+        model's own ``radial`` of its ``radial_net``, a plain tanh ``MLP``, outside vmap over models (where the
+        closed form has no batching rule). Else autograd of ``radial``, which any network takes."""
+        net = self.radial_net
+        return ("radial" not in vars(self) and type(net) is MLP and net.nonlinearity_name == "tanh"
+                and not in_model_axis())
+
+    def _radial_slope(self, r: torch.Tensor) -> torch.Tensor:
+        """V'(r) of distances ``r`` ``(batch, P)``, the same shape. V reads (r, 1/r), so V' = dV/dr + dV/d(1/r)
+        (-1/r^2). In closed form where it applies: training then backpropagates once through the hand-written
+        backward (``hnn.models.tanh_mlp``) where autograd's double backward took three times the pairs' rows
+        of a state's work (docs/bodies.md); the same numbers to round-off."""
+        if not self._closed_form_slope():
+            return gradient_of(lambda rr: self.radial(rr).sum(dim=1), r)
+        flat = r.reshape(-1, 1)
+        inverse = 1 / flat
+        grad = self.radial_net.input_gradient(torch.cat([flat, inverse], dim=1), 0, torch.is_grad_enabled())
+        return (grad[:, :1] - grad[:, 1:] * (inverse * inverse)).reshape(r.shape)
+
     def _pair_slope(self, r: torch.Tensor) -> torch.Tensor:
-        """V'(r) ``(batch, P)`` by autograd, chunk by chunk (the graph of one chunk at a time outside training);
-        0 for a pair beyond the cutoff."""
+        """V'(r) ``(batch, P)``, chunk by chunk (the graph of one chunk at a time outside training); 0 for a
+        pair beyond the cutoff."""
         chunks = self._chunks(r)
-        slopes = [gradient_of(lambda rr: self.radial(rr).sum(dim=1), r[:, chunk]) for chunk in chunks]
+        slopes = [self._radial_slope(r[:, chunk]) for chunk in chunks]
         slope = slopes[0] if len(slopes) == 1 else torch.cat(slopes, dim=1)
         inside = inside_cutoff(r, self.bodies)
         return slope if inside is None else torch.where(inside, slope, 0)
