@@ -3,7 +3,8 @@ and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols 
 
     python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits (about a minute)
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
-    python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity; section bodies-gravity
+    python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity to N = 4096 (about 20
+                                                              # minutes, one thread); section bodies-gravity
     python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
     python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
 
@@ -14,14 +15,18 @@ springs, or experiment-gravity, a softened rotating disk: 8 bodies, the default 
 batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
 leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``),
-and the reference: DOP853 at rtol 1e-10 (gravity: yoshida4 on the true forces at a quarter of the step).
+and the reference: DOP853 at rtol 1e-10 (gravity: yoshida4 on the true forces at a quarter of the step). A scene
+may roll a fit out only to a smaller N by default (its ``largest``: gravity's sampled and Adam fits stop at 512,
+their field calls at 4096 taking a minute or more); its rows past that say so, and ``--sizes`` runs every fit at
+every size asked.
 
 Per N and fit:
 - **energy error per body**: max over t of |H(x(t)) - H(x(0))| / N along the model's path, H the true energy
   (mean over the starts); the same for the true-force leapfrog;
 - **rollout error**: |x(T) - x_ref(T)| / |x_ref(T)| at the horizon (mean over the starts), both integrators;
 - **seconds per step**: the median of ``REPEATS`` timed leapfrog rollouts of ``TIMED_STEPS`` steps of all
-  starts at once, divided by the steps, for the model and for the true forces, measured in one process.
+  starts at once, divided by the steps, for the model and for the true forces, measured in one process; where
+  those would pass ``TIMING_BUDGET`` seconds (a step of seconds), the measured rollout's own, marked ``*``.
 
 Prints a table, writes ``bodies.json`` and ``bodies.md`` under ``--out``, and with ``--update-docs`` the
 ``bodies`` section of docs/bodies.md. Numbers come from this command, never typed by hand.
@@ -83,8 +88,10 @@ def main(argv=None) -> dict:
             raise SystemExit(f"{name} {value}: must be > 0")
     if min(sizes) < 2:
         raise SystemExit(f"--sizes {min(sizes)}: a chain needs at least 2 bodies")
+    # the scene's default sizes roll each fit out as far as the scene says (its ``largest``); sizes asked, every fit
+    largest = None if args.sizes else scene.get("largest")
     results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim,
-                    args.scene)
+                    args.scene, largest)
     results["meta"] = {**provenance(), "command": portable_command(argv, "analysis/bodies.py")}
     text = table(results)
     stem = "bodies" if args.scene == "lattice" else f"bodies-{args.scene}"

@@ -103,8 +103,17 @@ def test_gravity_runs_zero_shot_and_a_diverged_model_is_a_row_that_says_so():
 def test_a_model_past_memory_is_a_row_that_says_how_much_it_needs(monkeypatch):
     from hnn.models import pair
 
-    # 16 MB: the fit's 3200 states of 28 pairs (20 numbers each: 14 MB) fit, one state of 600 bodies' 179700 do not
-    monkeypatch.setattr(pair, "PAIR_BYTES", 2 ** 24)
+    # the fit's design (3200 states of 28 pairs, 20 numbers each: 14 MB) at the full limit; then 64 kB, which 8
+    # bodies' field call (28 pairs, 9 numbers each) and the true forces' rows of 600 bodies (6 numbers a pair: 29 kB)
+    # fit, but not one of 600 bodies' rows against every body in the sampled fit's blocks (31 numbers a pair: 149 kB)
+    fit = bodies._fit
+
+    def fit_then_shrink(*args):
+        out = fit(*args)
+        monkeypatch.setattr(pair, "PAIR_BYTES", 2 ** 16)
+        return out
+
+    monkeypatch.setattr(bodies, "_fit", fit_then_shrink)
     results = bodies.study(sizes=(8, 600), fits=("swim",), seed=0, starts=1, dt=0.01, horizon=0.02, adam_steps=0,
                            hidden=8, scene="gravity")
     big = results["rows"][1]["swim"]

@@ -23,18 +23,29 @@ QUICK_SIZES = (8, 32, 128, 256)
 # every scene's task declares the same functions of any N: dynamics, hamiltonian, potential_gradient, random_config.
 # Gravity's pulls reach every body, so a step at N = 4096 costs N^2 pairs (seconds), and its bodies speed up with N
 # (the disk keeps its density): a shorter horizon at a finer step than the chain's, and its reference yoshida4 on
-# the true forces at a quarter of the step (error ~ 4^-4 of a yoshida4 step's; DOP853 at rtol 1e-10 took thousands
-# of calls at N = 512, hours at 4096) where the chain's is DOP853. Its sizes stop at 512: the true forces reach 4096
-# (0.9 s a call of 2 states), but Adam's pair field took 11 s a call at N = 1024 (V's autograd over a million pairs;
-# about 3 minutes at 4096, hours a rollout) and the sampled fit's call at 4096 needs 17.7 GB (TooManyPairsError)
+# the true forces at a quarter of the step (error ~ 4^-4 of a yoshida4 step's: the true leapfrog's rollout error
+# against it moves by 1e-3 of itself from a reference at an eighth, by 1e-2 at a half, N = 8 and 512; DOP853 at
+# rtol 1e-10 took thousands of calls at N = 512, hours at 4096) where the chain's is DOP853.
+# Gravity's sizes reach 4096 for the true forces and the radial library (its softened term alone: 2.6 s a call of 2
+# states against the true forces' 0.9 s, one thread, loaded 2-core box), 600 reference calls there being most of
+# the study's time; 2 starts keep the whole of it within about 20 minutes on that box. The sampled and Adam fits stop
+# at 512 by default (``largest``), by a row: their field calls at 4096 fit in memory (blocks and chunks) but take a
+# minute (64 tanh neurons over 17 million pair rows) and minutes (Adam's V: 11 s a call at N = 1024), so a rollout
+# would take an hour; ``--sizes`` runs every fit at every size asked
 SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "section": "bodies",
                       "dt": 0.05, "horizon": 10.0, "starts": 4, "reference_divisions": None, "sizes": FULL_SIZES},
           "gravity": {"bodies": "{n} bodies under softened gravity (a rotating disk)", "section": "bodies-gravity",
-                      "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4, "sizes": (8, 64, 512)}}
+                      "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4, "sizes": FULL_SIZES,
+                      "largest": {"swim": 512, "adam": 512},
+                      "largest_why": "its field call there takes a minute or more on one thread (--sizes runs it)"}}
 FITS = ("library", "swim", "adam")
 QUICK_FITS = ("library", "swim")
 REPEATS = 5             # timed rollouts per N (the median counts)
 TIMED_STEPS = 20        # leapfrog steps of each timed rollout
+# seconds the timed rollouts of one field at one N may take: past it (a step of seconds: gravity at N = 4096) the
+# step's time is the measured rollout's own, all its steps timed once (marked in the table); every lattice step
+# (0.1 s at most) is timed by the median of REPEATS
+TIMING_BUDGET = 30.0
 REFERENCE_RTOL = 1e-10
 
 
@@ -60,6 +71,22 @@ def _true_field(data_module) -> SplitField:
     return SplitField(data_module.dynamics, lambda p: p, data_module.potential_gradient)
 
 
+def _rollout(field, x0: torch.Tensor, t: np.ndarray, dt: float) -> tuple[torch.Tensor, float]:
+    """The leapfrog path ``(starts, len(t), width)`` of ``field`` from ``x0``, and its seconds per step."""
+    tic = time.perf_counter()
+    with torch.no_grad():
+        path = hnn.rollout(field, x0, t, method="leapfrog", dt=dt)
+    return path, (time.perf_counter() - tic) / int(round((t[-1] - t[0]) / dt))
+
+
+def _timed(field, x0: torch.Tensor, dt: float, measured: float) -> dict:
+    """``seconds_per_step``: the median of ``REPEATS`` timed rollouts, or ``measured`` (the rollout's own, with
+    ``timed: 'rollout'``) where those would pass ``TIMING_BUDGET``."""
+    if measured * REPEATS * TIMED_STEPS > TIMING_BUDGET:
+        return {"seconds_per_step": measured, "timed": "rollout"}
+    return {"seconds_per_step": _seconds_per_step(field, x0, dt)}
+
+
 def _seconds_per_step(field, x0: torch.Tensor, dt: float) -> float:
     t = np.arange(TIMED_STEPS + 1) * dt
     times = []
@@ -82,7 +109,10 @@ def _errors(path: torch.Tensor, reference: torch.Tensor, energy, count: int) -> 
 
 
 def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_steps: int, hidden: int,
-          scene: str = "lattice") -> dict:
+          scene: str = "lattice", largest: dict | None = None) -> dict:
+    """The rows of every N of ``sizes`` for each of ``fits``; ``largest``: fit -> the largest N it is rolled out at
+    (past it, a row saying so: the scene's ``largest_why``), None: every fit at every N."""
+    largest = largest or {}
     if scene not in SCENES:
         raise ValueError(f"scene {scene!r}: choose one of {', '.join(SCENES)}")
     data_module = hnn.load_task(scene)
@@ -107,13 +137,16 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                 else:
                     reference = hnn.rollout(data_module.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
                                             atol=REFERENCE_RTOL)
-                true_path = hnn.rollout(truth, x0, t, method="leapfrog", dt=dt)
+            true_path, measured = _rollout(truth, x0, t, dt)
             row = {"N": count, "true": {**_errors(true_path, reference, data_module.hamiltonian, count),
-                                        "seconds_per_step": _seconds_per_step(truth, x0, dt)}}
+                                        **_timed(truth, x0, dt, measured)}}
             for fit in fits:
+                if count > largest.get(fit, count):     # past where the scene rolls this fit out: said by a row
+                    row[fit] = {"not_run": f"past N = {largest[fit]}: {SCENES[scene]['largest_why']}",
+                                "seconds_per_step": None}
+                    continue
                 try:
-                    with torch.no_grad():
-                        path = hnn.rollout(models[fit].field, x0, t, method="leapfrog", dt=dt)
+                    path, measured = _rollout(models[fit].field, x0, t, dt)
                 except hnn.DivergenceError as err:      # a model whose paths leave where it was fitted: said, not hidden
                     row[fit] = {"diverged": str(err).split(". ")[0],
                                 "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
@@ -122,14 +155,14 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                     row[fit] = {"diverged": f"too many pairs: {str(err).split(':')[0]}", "seconds_per_step": None}
                     continue
                 row[fit] = {**_errors(path, reference, data_module.hamiltonian, count),
-                            "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
+                            **_timed(models[fit].field, x0, dt, measured)}
             rows.append(row)
             print(_row_line(row, fits), flush=True)
     return {"rows": rows, "fits": {fit: models[fit + ":meta"] for fit in fits},
             "settings": {"scene": scene, "sizes": list(sizes), "fits": list(fits), "seed": seed, "starts": starts,
                          "dt": dt, "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
                          "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
-                         "reference_divisions": divisions,
+                         "reference_divisions": divisions, "largest": largest, "timing_budget": TIMING_BUDGET,
                          "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1}}
 
 
@@ -137,6 +170,7 @@ def _row_line(row: dict, fits) -> str:
     cells = [f"N={row['N']}", f"true: E/N {row['true']['energy_per_body']:.2e} "
                               f"err {row['true']['rollout']:.2e} {row['true']['seconds_per_step'] * 1e3:.3f} ms"]
     cells += [f"{fit}: " + (f"diverged ({row[fit]['diverged']})" if "diverged" in row[fit] else
+                            f"not run ({row[fit]['not_run']})" if "not_run" in row[fit] else
                             f"E/N {row[fit]['energy_per_body']:.2e} err {row[fit]['rollout']:.2e}")
               + f" {_ms(row[fit]['seconds_per_step'])} ms" for fit in fits]
     return " | ".join(cells)
@@ -148,9 +182,10 @@ def _bodies(settings: dict, count: int) -> str:
     return SCENES[settings.get("scene", "lattice")]["bodies"].format(n=count)
 
 
-def _ms(seconds: float | None) -> str:
-    """Milliseconds of a step, or ``n/a`` where none was timed (a field call past memory)."""
-    return "n/a" if seconds is None else f"{seconds * 1e3:.3f}"
+def _ms(seconds: float | None, timed: str | None = None) -> str:
+    """Milliseconds of a step (``*``: timed by its one measured rollout, ``TIMING_BUDGET``), or ``n/a`` where none
+    was timed (a field call past memory, a fit not run)."""
+    return "n/a" if seconds is None else f"{seconds * 1e3:.3f}" + ("*" if timed == "rollout" else "")
 
 
 def _reference(settings: dict) -> str:
@@ -174,10 +209,15 @@ def table(results: dict) -> str:
                   "| ratio |", "|---|---|---|---|---|---|---|---|"]
         for row in results["rows"]:
             mine, true = row[fit], row["true"]
-            errors = (f"diverged: {mine['diverged']} | {true['energy_per_body']:.2e} | | {true['rollout']:.2e}"
-                      if "diverged" in mine else f"{mine['energy_per_body']:.2e} | {true['energy_per_body']:.2e} | "
-                                                 f"{mine['rollout']:.2e} | {true['rollout']:.2e}")
+            said = (f"diverged: {mine['diverged']}" if "diverged" in mine else
+                    f"not run: {mine['not_run']}" if "not_run" in mine else None)
+            errors = (f"{said} | {true['energy_per_body']:.2e} | | {true['rollout']:.2e}" if said else
+                      f"{mine['energy_per_body']:.2e} | {true['energy_per_body']:.2e} | "
+                      f"{mine['rollout']:.2e} | {true['rollout']:.2e}")
             ratio = "" if mine["seconds_per_step"] is None else f"{mine['seconds_per_step'] / true['seconds_per_step']:.1f}x"
-            lines.append(f"| {row['N']} | {errors} | {_ms(mine['seconds_per_step'])} | "
-                         f"{_ms(true['seconds_per_step'])} | {ratio} |")
+            lines.append(f"| {row['N']} | {errors} | {_ms(mine['seconds_per_step'], mine.get('timed'))} | "
+                         f"{_ms(true['seconds_per_step'], true.get('timed'))} | {ratio} |")
+    if any(cell.get("timed") == "rollout" for row in results["rows"] for cell in row.values() if isinstance(cell, dict)):
+        lines += ["", f"\\* timed by the rollout measured above, all its steps once: {settings['repeats']} timed "
+                      f"rollouts of {settings['timed_steps']} steps would pass {settings['timing_budget']:g} s"]
     return "\n".join(lines) + "\n"
