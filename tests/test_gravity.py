@@ -84,6 +84,11 @@ def test_the_radial_library_recovers_the_softened_potential_and_the_masses():
     assert kept["1/sqrt(r^2 + 0.1^2)"] == pytest.approx(-1.0, rel=16 * count * EPS)
     assert float(model.masses()[0]) == pytest.approx(1.0, rel=16 * count * EPS)
     assert stats["fit"]["equation"] == "H = sum p^2/(2 m) - 1 sum 1/sqrt(r^2 + 0.1^2), m = 1"
+    # a run's saved args (its config's, softening among them) rebuild the same terms, so its weights reload
+    args = {**task_config("gravity", {"seed": 0}).to_dict(), "kind": "pairwise", "fit": "library"}
+    again = model_from_args(args)
+    again.load_state_dict(model.state_dict())
+    assert torch.equal(again.time_derivative(x), model.time_derivative(x))
     # fitted on 8 bodies, the softened field of 40 (pulls up to 39 / 0.1^2 at worst, each pair's to a few eps)
     wide = _states(40, 3, seed=4)
     assert torch.allclose(model.time_derivative(wide), nbody.dynamics(wide, softening), rtol=0,
