@@ -71,14 +71,14 @@ class StreamingQR:
 
     def add(self, A: torch.Tensor, Y: torch.Tensor, rows: int | None = None) -> None:
         """Fold the rows ``A`` ``(rows, columns)``, ``Y`` ``(rows, rhs)`` into the factor (``rows``: how many rows of
-        the original problem they stand for, where they are a reduction of more)."""
-        blocks = [(A, Y)]
-        del A, Y            # the list holds the only references here: a temporary design is freed once copied
-        self.add_blocks(blocks, rows)
+        the original problem they stand for, where they are a reduction of more; the caller's ``A`` lives through
+        the QR: ``add_blocks`` frees what only its list holds)."""
+        self.add_blocks([(A, Y)], rows)
 
     def add_blocks(self, blocks: list, rows: int | None = None) -> None:
         """Fold the rows of every ``(A, Y)`` of ``blocks`` (as ``add``'s, one below the other) in one QR: each block
-        is copied straight into the QR's operand and dropped from the list (which ends empty), never joined first.
+        is copied straight into the QR's operand and dropped from the list (which ends empty: a block nothing else
+        holds is freed before the QR), never joined first.
         The operand is column-major, the layout LAPACK reads, so torch's QR copies it as it is (the same numbers,
         the same factor bits) rather than transposed."""
         count = sum(len(A) for A, _ in blocks)
