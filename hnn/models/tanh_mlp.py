@@ -202,7 +202,7 @@ class EvaluationKernel:
             hidden = W1.shape[0]
             # the working arrays' widths: h1, h2 and dF_k/dh1 for every k read (``_work_for``)
             self._widths = (hidden, hidden, 0 if rows is None else hidden * len(rows))
-            self._work, self._work_rows, self._arena = {}, 0, []
+            self._work, self._work_rows, self._arena, self._biases = {}, -1, [], []
             if rows is None:
                 self._W3T = W3.T.contiguous().numpy()
                 return
@@ -243,7 +243,7 @@ class EvaluationKernel:
         if self._one_row:
             np.multiply(g, s1, out=g)                                        # dF/da1
         else:
-            g.reshape(rows, len(self._rows), -1)[...] *= s1[:, None, :]
+            g.reshape(rows, len(self._rows), self._widths[0])[...] *= s1[:, None, :]   # (not -1: an empty batch)
         return np.dot(g, self._out)
 
     def _work_for(self, rows: int) -> tuple:
