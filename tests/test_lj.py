@@ -175,3 +175,66 @@ def test_the_radial_library_recovers_lennard_jones_and_runs_at_any_size():
 def test_the_scene_trains_in_its_own_units():
     # its columns' sizes spread by where each body sits; hnn.units' auto would refuse the pair kind there
     assert task_config("lj").units == "off" and task_config("lattice").units == "off"
+
+
+def _cutoff_fit(fit, x, cutoff, hidden_dim=16):
+    data = load_task("lj")
+    config = dataclasses.replace(task_config("lj"), cutoff=cutoff)
+    torch.manual_seed(0)
+    model = model_from_args({**config.to_dict(), "kind": "pairwise", "fit": fit, "hidden_dim": hidden_dim})
+    stats = hnn.fits.solve(model, x, data.dynamics(x, cutoff), fit=fit, seed=0)
+    return model, stats
+
+
+def test_the_radial_library_recovers_the_truncated_and_shifted_lennard_jones_under_a_cutoff():
+    # the task's clusters of 8, some of whose pairs lie beyond r_c = 2.5: the field there is the cut one, which no sum
+    # of the library's terms over every pair gives, so the two terms come back exactly only where the fit reads the
+    # cutoff
+    data = load_task("lj")
+    cutoff = 2.5
+    x = _states(8, 150, seed=1)
+    q, _ = data.layout(8).split(x)
+    i, j = torch.triu_indices(8, 8, offset=1)
+    r = torch.linalg.vector_norm(q[:, i] - q[:, j], dim=-1)
+    inside = r < cutoff
+    assert 0.05 < float((~inside).double().mean()) < 0.5
+    model, stats = _cutoff_fit("library", x, cutoff)
+    names = model.features.names()
+    kept = {names[k]: float(c) for k, c in enumerate(model.coef) if c != 0}
+    # as the all-pairs test: two nearly collinear columns (condition ~1e3), a few eps times that
+    assert set(kept) == {"1/r^6", "1/r^12"}
+    assert kept["1/r^6"] == pytest.approx(-4.0, rel=1e4 * EPS) and kept["1/r^12"] == pytest.approx(4.0, rel=1e4 * EPS)
+    assert float(model.inverse_mass[0]) == pytest.approx(1.0, rel=1e4 * EPS)
+    assert stats["fit"]["equation"] == ("H = sum p^2/(2 m) + sum over r < 2.5 of [V(r) - V(2.5)], "
+                                        "V = - 4 1/r^6 + 4 1/r^12, m = 1")
+    # H is the task's own cut H (the shift V(r_c) the model's, not a constant of the fit's): the coefficients' error
+    # (at most 4e4 eps each, above) times each term's sum over the pairs inside, plus a few eps a pair of summing
+    terms = torch.where(inside, r ** -6 + r ** -12, 0).sum(dim=1) + 2 * cutoff ** -6
+    bound = 4e4 * EPS * terms + 64 * EPS * inside.sum(dim=1) + 64 * EPS * (x[:, 16:] ** 2).sum(dim=1)
+    assert bool(((model.hamiltonian(x) - model.offset - data.hamiltonian(x, cutoff)).abs() <= bound).all())
+    # the same model on a cluster of 200 (the pairs by the cell list): the cut forces, each a sum of up to ~20 pairs'
+    # of size up to ~24 r^-13 at r >= 0.9, with 4e4 eps relative error in its coefficients
+    big = _states(200, 2, seed=2)
+    assert torch.allclose(model.time_derivative(big), data.dynamics(big, cutoff), rtol=0, atol=4e4 * EPS * 24 * 4 * 20)
+
+
+def test_a_sampled_pair_fit_under_a_cutoff_reads_no_pair_beyond_it():
+    data = load_task("lj")
+    cutoff = 2.5
+    x = _states(8, 150, seed=1)
+    model, _ = _cutoff_fit("swim", x, cutoff, hidden_dim=64)
+    # its neurons are drawn from distances inside the cutoff alone, and the fitted field is the cut one's to the
+    # neurons' accuracy: a relative error of 1.3e-5 measured at 64 neurons (2e-2 at 16), asserted at 1e-3, a
+    # fit's accuracy not round-off's
+    assert float(model._distances(x).max()) < cutoff
+    with torch.no_grad():
+        truth = data.dynamics(x, cutoff)
+        assert float((model.time_derivative(x) - truth).norm() / truth.norm()) < 1e-3
+    # two bodies beyond the cutoff: no energy (V(r) - V(r_c) is not read there) and no force, exactly; inside it,
+    # the energy is V(r) - V(r_c): zero at r_c itself
+    apart = torch.tensor([[0.0, cutoff + 0.1, 0.0, 0.0, 0.3, -0.3, 0.0, 0.0]], dtype=torch.float64)
+    with torch.no_grad():
+        assert float(model.potential(apart[:, :4])) == 0.0
+        assert torch.equal(model.potential_gradient(apart[:, :4]), torch.zeros(1, 4, dtype=torch.float64))
+        near = model.potential(torch.tensor([[0.0, cutoff * (1 - 1e-9), 0.0, 0.0]], dtype=torch.float64))
+        assert abs(float(near)) < 1e-6

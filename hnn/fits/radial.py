@@ -12,7 +12,11 @@ two problems, as the separable fit's T and V. The features:
 - sampled radial neurons, tanh(w r + b) (``hnn.fits.features.TanhFeatures`` on one input, r), drawn by
   SWIM from pairs of observed distances or by ELM (``--fit swim``, ``--fit elm``).
 
-The pair geometry is the pair kind's (``hnn.models.pair``); the layout the task's (``hnn.bodies.Bodies``).
+The pair geometry is the pair kind's (``hnn.models.pair``); the layout the task's (``hnn.bodies.Bodies``). With a
+cutoff (``Bodies(pairs='cutoff')``, a Lennard-Jones cluster's r_c) the fit reads what the pair kind and the scene's
+truth read: the pairs closer than r_c (a cell list at each call), each adding V(r) - V(r_c) and none beyond, so a
+pair outside r_c has no slope in the design, none in the field and no distance among those sampled neurons are
+drawn from; the library's coefficients are V's own, and its equation says the shift.
 A field call runs the features over the pairs in chunks (``CHUNK_BYTES``, as the pair kind's network does), so
 its memory grows with the pairs' few numbers each, not with the features' width; past ``PAIR_LIST_BODIES`` bodies
 every pair interacting, it runs block by block of bodies against every body (``BLOCK_BYTES`` a block, as the true
@@ -28,7 +32,7 @@ from torch import nn
 
 from ..bodies import Bodies
 from ..interface import Model
-from ..models.pair import CHUNK_BYTES, check_pair_memory, pair_gradient, pair_index, separations
+from ..models.pair import CHUNK_BYTES, check_pair_memory, find_pairs, inside_cutoff, pair_gradient, separations
 from .base import Features
 from .models import Part
 
@@ -159,15 +163,18 @@ class FittedPair(Model):
         return cls(spec.bodies, features("radial", 1))
 
     def _geometry(self, q_half: torch.Tensor, design: bool = False):
-        """``(q, i, j, d, r)`` of positions ``q_half``; refused (``TooManyPairsError``) past ``PAIR_BYTES`` of a field
-        call's per-pair numbers, or, for a fit's ``design``, of its columns (every feature's slope at every pair)."""
+        """``(q, i, j, d, r, inside)`` of positions ``q_half``: the interacting pairs (``find_pairs``: with a cutoff,
+        those closer than it in some state) and which of them are inside the cutoff in each state ``(batch, P)``
+        bool (None without a cutoff: every listed pair); refused (``TooManyPairsError``) past ``PAIR_BYTES`` of a
+        field call's per-pair numbers, or, for a fit's ``design``, of its columns (every feature's slope at every
+        pair)."""
         q = self.bodies.bodywise(q_half)
-        i, j = pair_index(q.shape[1], self.bodies.pairs, q.device)
+        i, j = find_pairs(q, self.bodies)
         per_pair = (2 * self.features.width + 2 * self.bodies.dim if design else
                     _FIELD_NUMBERS + _FIELD_NUMBERS_PER_DIM * self.bodies.dim)
         check_pair_memory(len(q), len(i), per_pair, q.element_size())
         d, r = separations(q, i, j)
-        return q, i, j, d, r
+        return q, i, j, d, r, inside_cutoff(r, self.bodies)
 
     def _inverse_masses(self, count: int) -> torch.Tensor:
         return self.inverse_mass[torch.tensor(self.bodies.labels(count))]
@@ -202,8 +209,12 @@ class FittedPair(Model):
         return ((p * p).sum(dim=2) * self._inverse_masses(p.shape[1]) / 2).sum(dim=1)
 
     def potential(self, q_half: torch.Tensor) -> torch.Tensor:
-        _, _, _, _, r = self._geometry(q_half)
-        return self.radial(r).sum(dim=1)
+        """sum over pairs of V(r) ``(batch,)``; with a cutoff, V(r) - V(r_c) over the pairs inside it."""
+        *_, r, inside = self._geometry(q_half)
+        if inside is None:
+            return self.radial(r).sum(dim=1)
+        shift = self.radial(r.new_full((1,), self.bodies.cutoff))
+        return torch.where(inside, self.radial(r) - shift, 0).sum(dim=1)
 
     def hamiltonian(self, x: torch.Tensor) -> torch.Tensor:
         """H ``(rows,)`` at ``x`` ``(rows, 2 N dim)``, any N."""
@@ -217,8 +228,11 @@ class FittedPair(Model):
     def potential_gradient(self, q_half: torch.Tensor) -> torch.Tensor:
         if self.bodies.pairs == "all" and q_half.shape[1] // self.bodies.dim > PAIR_LIST_BODIES:
             return self.bodies.flat(self._blocked_gradient(self.bodies.bodywise(q_half)))
-        q, i, j, d, r = self._geometry(q_half)
-        return self.bodies.flat(pair_gradient(self.radial_slope(r), d, r, i, j, q.shape[1]))
+        q, i, j, d, r, inside = self._geometry(q_half)
+        slope = self.radial_slope(r)
+        if inside is not None:      # a pair beyond the cutoff pulls nothing
+            slope = torch.where(inside, slope, 0)
+        return self.bodies.flat(pair_gradient(slope, d, r, i, j, q.shape[1]))
 
     def _blocked_gradient(self, q: torch.Tensor) -> torch.Tensor:
         """dV/dq ``(batch, N, dim)`` of positions ``q`` ``(batch, N, dim)``, every pair interacting: for each block
@@ -263,8 +277,10 @@ class FittedPair(Model):
 
     def _potential_design(self, x, y, weights):
         half = x.shape[1] // 2
-        q, i, j, d, r = self._geometry(x[:, :half], design=True)
+        q, i, j, d, r, inside = self._geometry(x[:, :half], design=True)
         slopes = _derivative(self.features, r.reshape(-1, 1)).reshape(*r.shape, -1)        # (rows, P, K)
+        if inside is not None:      # a pair beyond the cutoff adds no column's slope (the shift is a constant)
+            slopes = torch.where(inside[..., None], slopes, 0)
         columns = [-self.bodies.flat(pair_gradient(slopes[..., k], d, r, i, j, q.shape[1]))
                    for k in range(slopes.shape[-1])]
         A = torch.stack(columns, dim=2)                                                    # (rows, N dim, K)
@@ -272,8 +288,10 @@ class FittedPair(Model):
                          range(half, x.shape[1]), half)
 
     def _distances(self, x: torch.Tensor) -> torch.Tensor:
-        """Every pair's distance in ``x`` ``(rows * P, 1)``: what sampled radial neurons are drawn from."""
-        return self._geometry(x[:, :x.shape[1] // 2], design=True)[4].reshape(-1, 1)
+        """Every interacting pair's distance in ``x`` ``(pairs, 1)``: what sampled radial neurons are drawn from (with
+        a cutoff, those inside it alone: V beyond it is never read)."""
+        *_, r, inside = self._geometry(x[:, :x.shape[1] // 2], design=True)
+        return (r if inside is None else r[inside]).reshape(-1, 1)
 
     def _assign(self, target):
         def assign(solution):
@@ -299,13 +317,20 @@ class FittedPair(Model):
 
     def equation(self, digits: int = 4) -> str:
         """``'H = sum p^2/(2 m) - 1 sum 1/r, m = 1'``: the kinetic energy with its fitted masses, and the pair
-        sum of the library's nonzero terms (a sampled fit's neurons have no formula: their count)."""
+        sum of the library's nonzero terms (a sampled fit's neurons have no formula: their count). With a cutoff,
+        V's terms and the sum's range: ``'H = sum p^2/(2 m) + sum over r < 2.5 of [V(r) - V(2.5)],
+        V = - 4 1/r^6 + 4 1/r^12, m = 1'``."""
         masses = ", ".join(f"{float(m):.{digits}g}" for m in self.masses())
         ending = f", m = {masses}" + (f" by species {list(self.bodies.species)}" if self.bodies.species else "")
+        cut = self.bodies.cutoff
         if not self.features.formula:
-            return f"H = sum p^2/(2 m) + sum V(r), V a sum of {self.features.width} {self.features.describe('r')}" \
+            sum_v = "sum V(r)" if cut is None else f"sum over r < {cut:g} of [V(r) - V({cut:g})]"
+            return f"H = sum p^2/(2 m) + {sum_v}, V a sum of {self.features.width} {self.features.describe('r')}" \
                    f"{ending}"
         pairs = [(float(c), name) for c, name in zip(self.coef.tolist(), self.features.names(["r"])) if c != 0]
+        if cut is not None:
+            terms = "".join(f" {'-' if c < 0 else '+'} {abs(c):.{digits}g} {name}" for c, name in pairs) or " 0"
+            return f"H = sum p^2/(2 m) + sum over r < {cut:g} of [V(r) - V({cut:g})], V ={terms}{ending}"
         text = "".join(f" {'-' if c < 0 else '+'} {abs(c):.{digits}g} sum {name}" for c, name in pairs)
         return f"H = sum p^2/(2 m){text}{ending}"
 
