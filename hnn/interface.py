@@ -78,13 +78,15 @@ class EnergyField:
     ``(batch, dim) -> (batch,)``; ``structure``: the skew ``(dim, dim)`` S (None: the canonical
     [[0, I], [-I, 0]] of the state's width); ``discrete_gradient``: an exact discrete gradient
     ``(x0, x1) -> (batch, dim)`` in closed form where the model has one (None: the solver builds
-    Gonzalez's from ``hamiltonian``). Without ``hamiltonian`` it is a plain field.
+    Gonzalez's from ``hamiltonian``). Without ``hamiltonian`` it is a plain field. ``numpy``: the field
+    on numpy states ``(rows, dim)`` as a new array, or None for states it does not serve (a solver
+    stepping in numpy then calls the field): the same bits without the tensor conversions a call costs.
     """
 
     def __init__(self, whole: Callable, hamiltonian: Callable | None = None, structure: torch.Tensor | None = None,
-                 discrete_gradient: Callable | None = None):
+                 discrete_gradient: Callable | None = None, numpy: Callable | None = None):
         self.whole, self.hamiltonian, self.structure = whole, hamiltonian, structure
-        self.discrete_gradient = discrete_gradient
+        self.discrete_gradient, self.numpy = discrete_gradient, numpy
 
     def __call__(self, x: torch.Tensor, t=None) -> torch.Tensor:
         return self.whole(x)
@@ -181,6 +183,11 @@ class Model(nn.Module):
         (an energy-preserving solver then builds Gonzalez's from ``hamiltonian``)."""
         return None
 
+    def numpy_time_derivative(self) -> Callable | None:
+        """``dx/dt`` on numpy states as the model's ``EnergyField.numpy`` (a new array, or None where it does
+        not serve the states); None by default: solvers call ``time_derivative``."""
+        return None
+
     @property
     def field(self) -> Callable:
         """What an integrator steps: ``time_derivative``; an ``EnergyField`` carrying H when
@@ -191,7 +198,7 @@ class Model(nn.Module):
         if not self.conservative:
             return self.time_derivative
         energy = {"hamiltonian": self.hamiltonian, "structure": self.structure(),
-                  "discrete_gradient": self.exact_discrete_gradient()}
+                  "discrete_gradient": self.exact_discrete_gradient(), "numpy": self.numpy_time_derivative()}
         if self.separable:
             return SplitField(self.time_derivative, self.kinetic_gradient, self.potential_gradient, **energy)
         return EnergyField(self.time_derivative, **energy)

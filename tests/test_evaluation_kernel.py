@@ -71,3 +71,30 @@ def test_load_state_dict_between_rollouts_reaches_the_second():
     after = hnn.rollout(model.time_derivative, x0, t, method="dopri5", rtol=1e-9)
     assert torch.equal(after, hnn.rollout(other.time_derivative, x0, t, method="dopri5", rtol=1e-9))
     assert not torch.allclose(after, before)
+
+
+@pytest.mark.parametrize("method", ["dopri5", "dop853"])
+def test_a_solver_stepping_in_numpy_calls_the_kernel_directly_with_the_same_bits(method, monkeypatch):
+    """An HNN's field carries the kernel's numpy call (``EnergyField.numpy``): the per-row solvers call it on
+    their arrays, past the tensor conversions, and get the bits the tensor call gives; where the kernel does
+    not serve the states (more than KERNEL_MAX_ROWS rows) the solver calls the field itself."""
+    torch.manual_seed(0)
+    model = hnn.build_model(4, WIDTH).double()
+    t = np.linspace(0.0, 2.0, 9)
+    served = []
+    real = EvaluationKernel.serve
+
+    def counted(kernel, a):
+        out = real(kernel, a)
+        served.append(out is not None)
+        return out
+    monkeypatch.setattr(EvaluationKernel, "serve", counted)
+    for rows in (1, 15, KERNEL_MAX_ROWS + 1):
+        x0 = torch.randn(rows, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(rows))
+        served.clear()
+        direct = hnn.rollout(model, x0, t, method=method, rtol=1e-8, atol=1e-8)
+        # past KERNEL_MAX_ROWS the first calls are the field's own (later ones may be served: finished rows drop)
+        assert served and (all(served) if rows <= KERNEL_MAX_ROWS else not served[0])
+        field = model.field
+        field.numpy = None                  # the same field without the numpy call: the tensor path
+        assert torch.equal(direct, hnn.rollout(field, x0, t, method=method, rtol=1e-8, atol=1e-8))

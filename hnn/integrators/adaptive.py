@@ -156,10 +156,16 @@ class _Dopri5:
 
 
 def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
-    """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU."""
+    """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU. A field that
+    takes numpy states itself (``hnn.interface.EnergyField.numpy``) is called so where it serves them."""
     on_cpu = device.type == "cpu"
+    direct = getattr(f, "numpy", None) if on_cpu else None
 
     def field(y: np.ndarray) -> np.ndarray:
+        if direct is not None:
+            dxdt = direct(y)
+            if dxdt is not None:
+                return dxdt
         x = torch.from_numpy(y)
         if not on_cpu:
             x = x.to(device)

@@ -173,7 +173,9 @@ def rollout(f: Field, x0, t_eval, method: str = "solve_ivp", differentiable: boo
     if isinstance(f, Model):
         f = f.field
     if type(f) is EnergyField and not solver.needs_hamiltonian:
-        f = f.whole         # a solver that reads no H steps the plain field: one call less per evaluation
+        # a solver that reads no H steps the plain field: one call less per evaluation; an adaptive one keeps
+        # the field's numpy call (it steps in numpy), and calls the field itself only where that does not serve
+        f = EnergyField(f.whole, numpy=f.numpy) if solver.adaptive and f.numpy is not None else f.whole
     if differentiable and solver.adaptive:
         raise ValueError(f"{method} chooses its steps outside autograd and cannot give a differentiable rollout; "
                          "use a fixed-step method (rk4, leapfrog, midpoint, yoshida4) with differentiable=True")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -124,6 +125,16 @@ class HNN(Model):
             return solenoidal
         return conservative if solenoidal is None else conservative + solenoidal
 
+
+    def numpy_time_derivative(self):
+        """``dx/dt`` of numpy states by the evaluation kernel (``EnergyField.numpy``), where ``time_derivative``
+        would take it: grad mode off, inside a rollout's frozen weights, the paper's tanh MLP; else None."""
+        def call(y: np.ndarray) -> np.ndarray | None:
+            if torch.is_grad_enabled():
+                return None
+            kernel = self._evaluation_kernel()
+            return None if kernel is None else kernel.serve(y)
+        return call
 
     def _evaluation_kernel(self):
         """The field as one ``hnn.models.tanh_mlp.EvaluationKernel`` (the evaluation path for a few states), or

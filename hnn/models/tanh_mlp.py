@@ -271,10 +271,16 @@ class EvaluationKernel:
             a = (x.detach() if x.requires_grad else x).numpy()
         except (RuntimeError, TypeError):       # not on the CPU, or a view numpy cannot share: not served
             return None
+        dxdt = self.serve(a)
+        return None if dxdt is None else torch.from_numpy(dxdt)
+
+    def serve(self, a: np.ndarray) -> np.ndarray | None:
+        """dx/dt of the numpy states ``a`` as a new array if this kernel serves them (``serves``' rule), else
+        None: the call a solver stepping in numpy makes (``hnn.interface.EnergyField.numpy``)."""
         shape = a.shape
         if len(shape) != 2 or shape[0] > KERNEL_MAX_ROWS or shape[1] != self.input_dim or a.dtype is not self._np_dtype:
             return None
-        return torch.from_numpy(self.numpy(a))
+        return self.numpy(a)
 
     def serves(self, x: torch.Tensor) -> bool:
         """Whether this kernel evaluates ``x``: ``(rows, input_dim)`` with at most ``KERNEL_MAX_ROWS``
