@@ -5,17 +5,21 @@ and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols 
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
     python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity to N = 4096 (about 20
                                                               # minutes, one thread); section bodies-gravity
+    python analysis/bodies.py --scene lj --update-docs    # the Lennard-Jones cluster cut off at 2.5, to N = 4096 in
+                                                          # O(N) (about 7 minutes, one thread); section bodies-lj
     python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
     python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
 
 The pair kind (``--model pairwise``) is fitted once on the ``--scene`` task's data (experiment-lattice, a chain of
-springs, or experiment-gravity, a softened rotating disk: 8 bodies, the default dataset of ``--seed``) by each of
+springs, experiment-gravity, a softened rotating disk, or experiment-lj, a Lennard-Jones cluster at the scene's
+task settings, its cutoff 2.5: 8 bodies, the dataset of ``--seed``) by each of
 ``--fits``: ``library`` (the radial library, one solve),
 ``swim`` (sampled radial neurons, one solve) and ``adam`` (an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of
 batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
-leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``),
-and the reference: DOP853 at rtol 1e-10 (gravity: yoshida4 on the true forces at a quarter of the step). A scene
+leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``,
+the cluster's pairs within the cutoff by a cell list), and the reference: DOP853 at rtol 1e-10 (gravity and the
+cluster: yoshida4 on the true forces at a quarter of the step). A scene
 may roll a fit out only to a smaller N by default (its ``largest``: gravity's sampled and Adam fits stop at 512,
 their field calls at 4096 taking a minute or more); its rows past that say so, and ``--sizes`` runs every fit at
 every size asked.
@@ -45,7 +49,7 @@ from pathlib import Path
 
 from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import provenance
-from hnn_analysis.scenes.bodies_study import FITS, FULL_SIZES, QUICK_FITS, QUICK_SIZES, SCENES, study, table
+from hnn_analysis.scenes.bodies_study import FITS, QUICK_FITS, QUICK_SIZES, SCENES, study, table
 
 DEFAULT_OUT = Path("results/bodies")
 
@@ -55,17 +59,20 @@ def main(argv=None) -> dict:
     add_flags(p, quick=f"N = {', '.join(map(str, QUICK_SIZES))} and the least-squares fits only (no Adam)",
               out="folder for bodies.json and bodies.md", out_default=DEFAULT_OUT,
               update_docs="write the bodies section of docs/bodies.md")
-    p.add_argument("--sizes", type=int, nargs="+", help=f"body counts N (default: the scene's, lattice {FULL_SIZES}, "
-                                                        f"gravity {SCENES['gravity']['sizes']}; --quick {QUICK_SIZES})")
+    p.add_argument("--sizes", type=int, nargs="+",
+                   help="body counts N (default: the scene's, " + ", ".join(f"{name} {scene['sizes']}" for name, scene
+                                                                          in SCENES.items()) + f"; --quick {QUICK_SIZES})")
     p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted (default {FITS}; --quick "
                                                           f"{QUICK_FITS})")
     p.add_argument("--scene", choices=SCENES, default="lattice",
-                   help="the scene (its task): the chain of springs, or gravity (default lattice)")
+                   help="the scene (its task): the chain of springs, gravity, or the Lennard-Jones cluster cut off "
+                        "at 2.5 (default lattice)")
     p.add_argument("--seed", type=int, default=0, help="the training data's seed and the fits' (default 0)")
-    p.add_argument("--starts", type=int, default=None, help="start states per N (default: the scene's, 4 or 2)")
-    p.add_argument("--dt", type=float, default=None, help="the leapfrog's step (default: the scene's, 0.05 or 0.01)")
+    p.add_argument("--starts", type=int, default=None, help="start states per N (default: the scene's, 4, 2, 2)")
+    p.add_argument("--dt", type=float, default=None,
+                   help="the leapfrog's step (default: the scene's, 0.05, 0.01, 0.01)")
     p.add_argument("--horizon", type=float, default=None,
-                   help="the rollouts' length in time units (default: the scene's, 10 or 0.5)")
+                   help="the rollouts' length in time units (default: the scene's, 10, 0.5, 2)")
     p.add_argument("--adam-steps", dest="adam_steps", type=int, default=2000, help="Adam's steps (default 2000)")
     p.add_argument("--hidden-dim", dest="hidden_dim", type=int, default=64,
                    help="the MLP's width (adam) and the sampled neurons (swim) (default 64)")

@@ -32,7 +32,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "ray-full": "docs/sweeps.md",
          "many-models": "docs/speed.md", "fit-floor": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          "fits-sampling": "docs/fits.md", "fits-tasks": "docs/fits.md", "fits-library": "docs/fits.md",
-         "bodies": "docs/bodies.md", "bodies-paper": "docs/bodies.md", "bodies-gravity": "docs/bodies.md", "bodies-rebound": "docs/bodies.md",
+         "bodies": "docs/bodies.md", "bodies-paper": "docs/bodies.md", "bodies-gravity": "docs/bodies.md", "bodies-lj": "docs/bodies.md", "bodies-rebound": "docs/bodies.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")},
          **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS},
          **{f"maps-{protocol}": "docs/maps.md" for protocol in MAP_PROTOCOLS}}
@@ -81,6 +81,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "bodies": "python analysis/bodies.py --update-docs",
            "bodies-paper": "python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs",
            "bodies-gravity": "python analysis/bodies.py --scene gravity --update-docs",
+           "bodies-lj": "python analysis/bodies.py --scene lj --update-docs",
            "bodies-rebound": "python analysis/benchmarks/nbody_truth.py --update-docs",
 
            **{f"maps-{protocol}": f"python analysis/benchmarks/maps.py --protocols {protocol} --update-docs"

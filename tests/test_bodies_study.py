@@ -120,3 +120,62 @@ def test_a_model_past_memory_is_a_row_that_says_how_much_it_needs(monkeypatch):
     assert "too many pairs" in big["diverged"] and "GiB" in big["diverged"] and big["seconds_per_step"] is None
     results["meta"] = {"command": "python analysis/bodies.py", "cores": 2, "cpu": "test"}
     assert "| n/a | " in bodies.table(results)
+
+
+def test_the_lennard_jones_scene_runs_with_its_cutoff_and_the_library_follows_the_true_forces():
+    import numpy as np
+    import torch
+
+    import hnn
+
+    # the scene's declared task settings reach its config (the cut dataset) and its true functions alike
+    assert bodies.SCENES["lj"]["settings"] == {"cutoff": 2.5}
+    results = bodies.study(sizes=(8, 40), fits=("library",), seed=0, starts=1, dt=0.01, horizon=0.1, adam_steps=0,
+                           hidden=8, scene="lj")
+    assert [row["N"] for row in results["rows"]] == [8, 40]
+    assert results["settings"]["task_settings"] == {"cutoff": 2.5}
+    # the library recovers the shifted Lennard-Jones to round-off (tests/test_lj.py), so its paths are the true cut
+    # forces' leapfrog paths to that precision, at 8 bodies and at 40 (pairs beyond r_c: a cell list). The task's data
+    # are float32: the coefficients carry its eps (6e-8) times the two columns' condition (~1e3), 6e-5 relative at
+    # most (4e-8 measured), and the errors below move by no more than that part of themselves
+    assert "sum over r < 2.5 of [V(r) - V(2.5)], V = - 4 1/r^6 + 4 1/r^12" in results["fits"]["library"]["what"]
+    for row in results["rows"]:
+        mine, true = row["library"], row["true"]
+        assert true["rollout"] > 1e-6 and true["energy_per_body"] > 1e-6
+        assert mine["rollout"] == pytest.approx(true["rollout"], rel=1e-4)
+        assert mine["energy_per_body"] == pytest.approx(true["energy_per_body"], rel=1e-4)
+    results["meta"] = {"command": "python analysis/bodies.py --scene lj", "cores": 2, "cpu": "test"}
+    text = bodies.table(results)
+    assert "Lennard-Jones cluster of 8 bodies (seed 0, task settings: cutoff 2.5)" in text and "| 40 |" in text
+    # a larger cluster keeps the training's density: the start law's nearest neighbours sit at one spacing at any N
+    data = hnn.load_task("lj")
+    rng = np.random.RandomState(0)
+    nearest = []
+    for count in (8, 1024):
+        q, _ = data.layout(count).split(torch.tensor(data.random_config(rng, count))[None])
+        gaps = torch.cdist(q[0], q[0]) + torch.eye(count, dtype=torch.float64) * 1e9
+        nearest.append(float(gaps.min(dim=1).values.mean()))
+    # the lattice's spacing 2^(1/6) less a jitter of 0.03 per coordinate: the means agree to a few jitters / sqrt(N)
+    assert nearest[1] == pytest.approx(nearest[0], rel=0.05) and nearest[1] == pytest.approx(data.SPACING, rel=0.05)
+
+
+def test_a_model_whose_paths_reach_the_lennard_jones_wall_is_a_row_that_says_so(monkeypatch):
+    import torch
+
+    # the library with its signs flipped: V = 4 (r^-6 - r^-12) pulls every close pair together, into the wall
+    fit = bodies._fit
+
+    def flipped(*args):
+        model, seconds, what = fit(*args)
+        with torch.no_grad():
+            model.coef.neg_()
+        return model, seconds, what
+
+    monkeypatch.setattr(bodies, "_fit", flipped)
+    results = bodies.study(sizes=(8,), fits=("library",), seed=0, starts=1, dt=0.01, horizon=1.0, adam_steps=0,
+                           hidden=8, scene="lj")
+    row = results["rows"][0]
+    # the pull grows smoothly as a pair closes, so the pair passes the wall's range 0.7 (a WallError from the true H
+    # along the path) long before the step blows up
+    assert "wall's range" in row["library"]["diverged"] and row["library"]["seconds_per_step"] > 0
+    assert row["true"]["energy_per_body"] < 1e-2

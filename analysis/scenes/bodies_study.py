@@ -1,9 +1,11 @@
 """The bodies study's machinery (``analysis/bodies.py`` is its command): the pair kind fitted on a scene of 8 bodies
-(``SCENES``: the chain of springs of experiment-lattice, or the softened gravity of experiment-gravity), the same
+(``SCENES``: the chain of springs of experiment-lattice, the softened gravity of experiment-gravity, or the
+Lennard-Jones cluster of experiment-lj cut off at 2.5), the same
 model rolled out on the scene at N bodies beside the true forces' leapfrog, and the tables of docs/bodies.md. See
 the command's docstring for the metrics."""
 from __future__ import annotations
 
+import functools
 import statistics
 import time
 
@@ -37,7 +39,18 @@ SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "sect
           "gravity": {"bodies": "{n} bodies under softened gravity (a rotating disk)", "section": "bodies-gravity",
                       "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4, "sizes": FULL_SIZES,
                       "largest": {"swim": 512, "adam": 512},
-                      "largest_why": "its field call there takes a minute or more on one thread (--sizes runs it)"}}
+                      "largest_why": "its field call there takes a minute or more on one thread (--sizes runs it)"},
+          # the cluster cut off at r_c = 2.5 (``settings``: the task's own settings, given to its config and to its true
+          # functions alike), so a step is O(N) by a cell list: every fit runs to N = 4096. The task's start law fills
+          # a patch of its triangular lattice at one spacing whatever N, so a cluster of 4096 has the training's
+          # density. A field call at N = 4096 of 2 states takes 57 ms (true forces), 63 (library), 210 (64 sampled
+          # neurons) and 340 (Adam's V) on one thread of the loaded 2-core box; the reference, yoshida4 at a quarter
+          # of the step (DOP853 would stop at every crossing of r_c, where the force jumps), takes 2400 of the true
+          # forces' calls over a horizon of 2: 2.3 minutes at 4096, the whole study about 7 minutes on a quiet box.
+          # The horizon 2 (200 steps) lets the cut pairs cross r_c many times in a rollout; 2 starts keep it short
+          "lj": {"bodies": "a Lennard-Jones cluster of {n} bodies", "section": "bodies-lj", "dt": 0.01,
+                 "horizon": 2.0, "starts": 2, "reference_divisions": 4, "sizes": FULL_SIZES,
+                 "settings": {"cutoff": 2.5}}}
 FITS = ("library", "swim", "adam")
 QUICK_FITS = ("library", "swim")
 REPEATS = 5             # timed rollouts per N (the median counts)
@@ -49,9 +62,14 @@ TIMING_BUDGET = 30.0
 REFERENCE_RTOL = 1e-10
 
 
+def _settings(scene: str) -> dict:
+    """The task settings a scene runs at (its ``settings``: the lj cluster's cutoff), none where it declares none."""
+    return dict(SCENES[scene].get("settings", {}))
+
+
 def _fit(scene: str, fit: str, data: dict, seed: int, adam_steps: int, hidden: int):
     """``(model, seconds, what)`` of the pair kind fitted on the ``scene`` task's data by ``fit`` (float64)."""
-    config = hnn.tasks.task_config(scene, {"seed": seed})
+    config = hnn.tasks.task_config(scene, {"seed": seed, **_settings(scene)})
     args = {**config.to_dict(), "kind": "pairwise", "fit": fit, "hidden_dim": hidden, "dtype": "float64"}
     torch.manual_seed(seed)
     model = hnn.kinds.model_from_args(args)
@@ -66,9 +84,24 @@ def _fit(scene: str, fit: str, data: dict, seed: int, adam_steps: int, hidden: i
     return model.eval(), stats["seconds"], f"{what}; train loss {stats['train_loss'][0]:.2e}"
 
 
-def _true_field(data_module) -> SplitField:
+class _Truth:
+    """A scene task's true functions of any N at the scene's settings: ``dynamics``, ``hamiltonian``,
+    ``potential_gradient`` (each the task's, given ``settings``), and the task's ``random_config``."""
+
+    def __init__(self, data_module, settings: dict):
+        self.dynamics, self.hamiltonian, self.potential_gradient = (
+            functools.partial(getattr(data_module, name), **settings)
+            for name in ("dynamics", "hamiltonian", "potential_gradient"))
+        self.random_config = data_module.random_config
+        # a model's path that leaves where it was fitted: diverged (hnn.DivergenceError), or into the scene's wall
+        # (the Lennard-Jones task's WallError, from its H); each a row that says so
+        wall = getattr(data_module, "WallError", None)
+        self.left = (hnn.DivergenceError,) + ((wall,) if wall else ())
+
+
+def _true_field(truth: _Truth) -> SplitField:
     """The scene's true field, split as a leapfrog reads it (dT/dp = p: unit masses; dV/dq the task's)."""
-    return SplitField(data_module.dynamics, lambda p: p, data_module.potential_gradient)
+    return SplitField(truth.dynamics, lambda p: p, truth.potential_gradient)
 
 
 def _rollout(field, x0: torch.Tensor, t: np.ndarray, dt: float) -> tuple[torch.Tensor, float]:
@@ -115,30 +148,32 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
     largest = largest or {}
     if scene not in SCENES:
         raise ValueError(f"scene {scene!r}: choose one of {', '.join(SCENES)}")
+    settings = _settings(scene)
     data_module = hnn.load_task(scene)
-    data = hnn.tasks.task_config(scene, {"seed": seed}).dataset()
+    scene_truth = _Truth(data_module, settings)
+    data = hnn.tasks.task_config(scene, {"seed": seed, **settings}).dataset()
     models = {}
     for fit in fits:
         model, seconds, what = _fit(scene, fit, data, seed, adam_steps, hidden)
         models[fit] = model
         print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
         models[fit + ":meta"] = {"seconds": seconds, "what": what}
-    truth = _true_field(data_module)
+    truth = _true_field(scene_truth)
     divisions = SCENES[scene]["reference_divisions"]
     t = np.linspace(0.0, horizon, int(round(horizon / dt)) + 1)
     rows = []
     with torch_threads(1):
         for count in sizes:
             rng = np.random.RandomState(seed + 1000)
-            x0 = torch.tensor(np.stack([data_module.random_config(rng, count) for _ in range(starts)]))
+            x0 = torch.tensor(np.stack([scene_truth.random_config(rng, count) for _ in range(starts)]))
             with torch.no_grad():
                 if divisions:
                     reference = hnn.rollout(truth, x0, t, method="yoshida4", dt=dt / divisions)
                 else:
-                    reference = hnn.rollout(data_module.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
+                    reference = hnn.rollout(scene_truth.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
                                             atol=REFERENCE_RTOL)
             true_path, measured = _rollout(truth, x0, t, dt)
-            row = {"N": count, "true": {**_errors(true_path, reference, data_module.hamiltonian, count),
+            row = {"N": count, "true": {**_errors(true_path, reference, scene_truth.hamiltonian, count),
                                         **_timed(truth, x0, dt, measured)}}
             for fit in fits:
                 if count > largest.get(fit, count):     # past where the scene rolls this fit out: said by a row
@@ -147,15 +182,15 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                     continue
                 try:
                     path, measured = _rollout(models[fit].field, x0, t, dt)
-                except hnn.DivergenceError as err:      # a model whose paths leave where it was fitted: said, not hidden
+                    errors = _errors(path, reference, scene_truth.hamiltonian, count)
+                except scene_truth.left as err:         # a model whose paths leave where it was fitted: said
                     row[fit] = {"diverged": str(err).split(". ")[0],
                                 "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
                     continue
                 except TooManyPairsError as err:        # more pairs than its field call may hold: what it needs
                     row[fit] = {"diverged": f"too many pairs: {str(err).split(':')[0]}", "seconds_per_step": None}
                     continue
-                row[fit] = {**_errors(path, reference, data_module.hamiltonian, count),
-                            **_timed(models[fit].field, x0, dt, measured)}
+                row[fit] = {**errors, **_timed(models[fit].field, x0, dt, measured)}
             rows.append(row)
             print(_row_line(row, fits), flush=True)
     return {"rows": rows, "fits": {fit: models[fit + ":meta"] for fit in fits},
@@ -163,7 +198,7 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                          "dt": dt, "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
                          "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
                          "reference_divisions": divisions, "largest": largest, "timing_budget": TIMING_BUDGET,
-                         "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1}}
+                         "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1, "task_settings": settings}}
 
 
 def _row_line(row: dict, fits) -> str:
@@ -182,6 +217,12 @@ def _bodies(settings: dict, count: int) -> str:
     return SCENES[settings.get("scene", "lattice")]["bodies"].format(n=count)
 
 
+def _task_settings(settings: dict) -> str:
+    """``', task settings: cutoff 2.5'``: the task settings the scene ran at, where it declares any."""
+    given = settings.get("task_settings") or {}
+    return f", task settings: {', '.join(f'{name} {value:g}' for name, value in given.items())}" if given else ""
+
+
 def _ms(seconds: float | None, timed: str | None = None) -> str:
     """Milliseconds of a step (``*``: timed by its one measured rollout, ``TIMING_BUDGET``), or ``n/a`` where none
     was timed (a field call past memory, a fit not run)."""
@@ -198,7 +239,8 @@ def table(results: dict) -> str:
     """The page's section: how each fit was found, then one table per fit against N with the true forces beside."""
     meta, settings = results["meta"], results["settings"]
     lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta.get('torch', '?')}, one thread") + ".", "",
-             f"Fitted on {_bodies(settings, settings['trained_on'])} (seed {settings['seed']}); each N rolled out from "
+             f"Fitted on {_bodies(settings, settings['trained_on'])} (seed {settings['seed']}{_task_settings(settings)}); "
+             f"each N rolled out from "
              f"{settings['starts']} starts by leapfrog at dt = {settings['dt']:g} to t = {settings['horizon']:g}, "
              f"float64; reference {_reference(settings)}.", ""]
     for fit, how in results["fits"].items():
