@@ -164,3 +164,21 @@ def test_without_softening_close_encounters_are_redrawn(tmp_path):
     # over a whole time unit nearly every unsoftened path meets another body: the generator gives up, by name
     with pytest.raises(RuntimeError, match="redrawing"):
         data.get_dataset(seed=0, save_dir=tmp_path, num_trials=10, num_points=5, t_span=[0.0, 1.0], softening=0.0)
+
+
+def test_fit_least_squares_at_the_scenes_softening_is_the_commands_fit():
+    """Every path one answer: hnn.fit_least_squares given the task's softening and layout fits the softened V
+    the command's library fit finds (the same terms and coefficients); without it, no softened term exists."""
+    count, softening = 8, load_task("gravity").SOFTENING
+    x = _states(count, 60, seed=5)
+    dxdt = nbody.dynamics(x, softening)
+    layout = task_config("gravity").BODIES
+    model, stats = hnn.fit_least_squares("pairwise", x, dxdt, fit="library", bodies=layout, softening=softening,
+                                         units="off", progress=False)
+    command = _pair_fit("library")
+    hnn.fits.solve(command, x, dxdt, fit="library", progress=False)
+    assert stats["fit"]["equation"] == "H = sum p^2/(2 m) - 1 sum 1/sqrt(r^2 + 0.1^2), m = 1"
+    inner = getattr(model, "model", model)
+    assert torch.equal(inner.coef, command.coef)
+    plain, _ = hnn.fit_least_squares("pairwise", x, dxdt, fit="library", bodies=layout, units="off", progress=False)
+    assert not any("sqrt" in name for name in getattr(plain, "model", plain).features.names())

@@ -183,7 +183,7 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
                       frequencies: int = RunSettings.library_frequencies, seed: int = RunSettings.seed,
                       rcond=RunSettings.fit_rcond, threshold: float = RunSettings.library_threshold,
                       loss_weights=None, values=None, anchor=None, units: str = RunSettings.units,
-                      bodies=None, progress: bool | None = None):
+                      bodies=None, softening: float = 0.0, progress: bool | None = None):
     """``(model, stats)``: a model of ``dxdt`` at ``x`` ``(rows, 2n)`` found by one least-squares solve.
 
     ``model``: a kind (``'hnn'``, ``'separable'``, ``'baseline'``, ``'pairwise'``; ``hnn.fits.FITS[fit].kinds``),
@@ -193,6 +193,8 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
     ``bodies``: the pair kind's layout of ``x``'s columns (an ``hnn.bodies.Bodies`` or its dict: count, dimension,
     order), which it needs; a task's is its Config's ``BODIES``. The pair kind reads distances, which no
     scale per column keeps: it fits the data as they are, and refuses data the units rule would rescale.
+    ``softening``: a Plummer-softened scene's length e (the gravity task's ``--softening``, in x's units of
+    length): the radial library then holds 1/sqrt(r^2 + e^2), as the command's fit of that task does.
 
     ``units``: ``hnn.train``'s rule, by the same function (``hnn.units.in_canonical_units``): ``'auto'`` fits a
     kind named here in the canonical units of ``x``, ``dxdt`` where their sizes lie far from 1 (or their
@@ -215,7 +217,7 @@ def fit_least_squares(model, x, dxdt, test_x=None, test_dxdt=None, *, fit: str =
         x = check_data("x", x, dtype=torch.float64)
         kind = model
         model = build(ModelSpec(kind=kind, input_dim=x.shape[1], hidden_dim=width, fit=fit, library_degree=degree,
-                                library_frequencies=frequencies, bodies=_layout(kind, bodies)))
+                                library_frequencies=frequencies, bodies=_layout(kind, bodies), softening=softening))
         why = refusal(model)
         if why is None:
             model = Rescaled(model)
