@@ -6,7 +6,7 @@ and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols 
     python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity to N = 4096 (about 20
                                                               # minutes, one thread); section bodies-gravity
     python analysis/bodies.py --scene lj --update-docs    # the Lennard-Jones cluster cut off at 2.5, to N = 4096 in
-                                                          # O(N) (about 7 minutes, one thread); section bodies-lj
+                                                          # O(N) (about 6 minutes, one thread); section bodies-lj
     python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
     python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
 
