@@ -51,7 +51,7 @@ _LIGHT_NAMES = {"RunConfig": "config", "TaskSpec": "tasks"}     # name -> its li
 # "models", may not import each other
 _LAYERS = {
     "base": ("errors", "names", "settings", "io", "interface", "modes", "kind_docs", "metrics", "specs", "cache",
-             "gifs", "threads", "progress", "bodies"),
+             "gifs", "threads", "progress", "bodies", "cells"),
     "integrators": ("integrators",),
     "models": ("models",),
     "training": ("balance", "units", "training", "trainers", "objectives", "kinds", "evaluation", "datasets",

@@ -101,8 +101,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
     if len(fresh) < len(jobs):
         count = len(jobs) - len(fresh)
         print(f"peers: {count} run{'' if count == 1 else 's'} recorded in {path}", flush=True)
-    # a model that failed in training is its cell: not retrained
-    runs, todo = sweep.reuse(fresh, diverged=True)
+    runs, todo = sweep.reuse(fresh, diverged=True)        # a model that failed in training is its cell: not retrained
     sweep.say_reused("peers", runs, todo)
     record = peer_record.record_runs(runs, jobs, settings, path, args.jobs)    # saved by an unrecorded sitting
     # longest first by the recorded runs of each kind, at every seed of the plan
@@ -132,8 +131,7 @@ def main(argv=None, settings: dict | None = None) -> dict:
             target = hnn.tasks.repo_root() / "docs" / "figures" / "peers-curves.png"
             atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
     results = {"meta": {**provenance(), "command": portable_command(argv, "analysis/peers.py"),
-                        "quick": not full,     # --quick or a test's settings: not the table
-                        "quick_cuts": cuts, "lnn_horizon": settings.get("lnn_horizon"),
+                        "quick": not full, "quick_cuts": cuts, "lnn_horizon": settings.get("lnn_horizon"),
                         "reused": len(jobs) - len(todo), "trained": len(todo),
                         "kinds": list(settings["kinds"]), "seeds": list(seeds),
                         "steps": jobs[0].config.total_steps if jobs else None,
