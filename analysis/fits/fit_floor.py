@@ -17,7 +17,7 @@ import hnn
 from hnn.io import write_json
 from hnn_analysis import commands, pages
 from hnn_analysis.fits.floor import FITS, SECTION, dataset, measure, section
-from hnn_analysis.provenance import provenance
+from hnn_analysis.provenance import cpu_snapshot, others_load, provenance
 
 
 def main(argv=None) -> dict:
@@ -41,7 +41,7 @@ def main(argv=None) -> dict:
         cases = [case for case in cases if case.fit != "sindy"]
     out = args.out or hnn.tasks.repo_root() / "results" / "fit_floor"
     meta = {**provenance(), "command": commands.portable_command(argv, "analysis/fits/fit_floor.py")}
-    load_before, rows, rates, datasets = os.getloadavg()[0], [], {}, {}
+    load_before, start, rows, rates, datasets = os.getloadavg()[0], cpu_snapshot(), [], {}, {}
     for case in cases:
         if case.data not in datasets:
             datasets[case.data] = dataset(case.data, args.data_dir)
@@ -49,6 +49,7 @@ def main(argv=None) -> dict:
         rows.append(row)
         print(f"{row['label']}: {row['seconds']:.3g} s, floor {row['floor']:.3g} s, ratio {row['ratio']:.2f}", flush=True)
     results = {"meta": meta, "repeats": args.repeats, "rows": rows, "load": [load_before, os.getloadavg()[0]],
+               "others": others_load(start, cpu_snapshot()),
                "gemm_gflops": {t: r / 1e9 for t, r in rates.items()}}
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "fit_floor.json", results)

@@ -246,14 +246,27 @@ def _measure(case: Fit, data: dict, repeats: int, rates: dict) -> dict:
             "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20}
 
 
+def _load_note(results: dict, cores: int) -> str:
+    """The box's load during the run: the cores other processes kept busy (``others``; the load average, which
+    counts this command's own threads and the job before it, where a saved run lacks it)."""
+    others = results.get("others")
+    if others is None:
+        busy = results["load"][0] > 0.5 * cores
+        return (f". Measured on a loaded box (load average {results['load'][0]:.1f} on {cores} cores before, "
+                f"{results['load'][1]:.1f} after): the seconds are inflated, fit and floor alike; rerun the command on "
+                "a quiet box") if busy else ""
+    if others > 0.5:
+        return (f". Measured on a loaded box (other processes kept {others:.1f} of {cores} cores busy): the seconds "
+                "are inflated, fit and floor alike; rerun the command on a quiet box")
+    return f"; other processes kept {others:.1f} cores busy"
+
+
 def section(results: dict) -> str:
     """The fit-floor section: one row a fit."""
     meta = results["meta"]
     lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta['torch']}; median of {results['repeats']} "
                                       "fits, the floor's calls timed between them")
-             + (f". Measured on a loaded box (load average {results['load'][0]:.1f} on {meta['cores']} cores "
-                "before, {:.1f} after): the seconds are inflated, fit and floor alike; rerun the command on a "
-                "quiet box".format(results['load'][1]) if results["load"][0] > 0.5 * meta["cores"] else "") + ".",
+             + _load_note(results, meta["cores"]) + ".",
              "", "| fit | threads | rows | fits timed | seconds | floor (s) | ratio | GFLOP | at the gemm rate (s) | "
                  "the floor's largest calls | peak GiB so far |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: |"]
