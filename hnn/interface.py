@@ -190,13 +190,14 @@ class Model(nn.Module):
 
     @property
     def field(self) -> Callable:
-        """What an integrator steps: ``time_derivative``; an ``EnergyField`` carrying H when
-        ``conservative``, a ``SplitField`` (an ``EnergyField`` too) when ``separable``; a learned map's
-        ``StepMap`` when it ``steps``."""
+        """What an integrator steps: ``time_derivative`` (an ``EnergyField`` without H where the model has a
+        numpy call, ``numpy_time_derivative``); an ``EnergyField`` carrying H when ``conservative``, a
+        ``SplitField`` (an ``EnergyField`` too) when ``separable``; a learned map's ``StepMap`` when it ``steps``."""
         if self.steps:
             return StepMap(self.step, self.dt, self.inverse)
-        if not self.conservative:
-            return self.time_derivative
+        if not self.conservative:       # a plain field; with its numpy call where it has one (solvers in numpy)
+            numpy = self.numpy_time_derivative()
+            return self.time_derivative if numpy is None else EnergyField(self.time_derivative, numpy=numpy)
         energy = {"hamiltonian": self.hamiltonian, "structure": self.structure(),
                   "discrete_gradient": self.exact_discrete_gradient(), "numpy": self.numpy_time_derivative()}
         if self.separable:

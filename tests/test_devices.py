@@ -69,7 +69,7 @@ def _case_id(case):
 
 def _solvers(model) -> list[str]:
     """The registered methods that can step ``model``'s field."""
-    carries_h = isinstance(hnn.interface.declared(model).field, hnn.interface.EnergyField)
+    carries_h = getattr(hnn.interface.declared(model).field, "hamiltonian", None) is not None
     return [name for name, solver in hnn.SOLVERS.items() if carries_h or not solver.needs_hamiltonian]
 
 

@@ -73,13 +73,14 @@ def test_load_state_dict_between_rollouts_reaches_the_second():
     assert not torch.allclose(after, before)
 
 
+@pytest.mark.parametrize("kind", ["hnn", "baseline"])
 @pytest.mark.parametrize("method", ["dopri5", "dop853"])
-def test_a_solver_stepping_in_numpy_calls_the_kernel_directly_with_the_same_bits(method, monkeypatch):
+def test_a_solver_stepping_in_numpy_calls_the_kernel_directly_with_the_same_bits(method, kind, monkeypatch):
     """An HNN's field carries the kernel's numpy call (``EnergyField.numpy``): the per-row solvers call it on
     their arrays, past the tensor conversions, and get the bits the tensor call gives; where the kernel does
     not serve the states (more than KERNEL_MAX_ROWS rows) the solver calls the field itself."""
     torch.manual_seed(0)
-    model = hnn.build_model(4, WIDTH).double()
+    model = _KINDS[kind]().double()         # the baseline's field is plain (no H) and carries the call too
     t = np.linspace(0.0, 2.0, 9)
     served = []
     real = EvaluationKernel.serve
