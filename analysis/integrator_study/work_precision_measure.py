@@ -31,7 +31,7 @@ OUTPUTS = 51                                    # output times over the horizon,
 
 class Counted:
     """A field that counts its calls, the rows it was given and the seconds spent inside it; with the field's
-    numpy call where it has one (``hnn.interface.EnergyField.numpy``), counted alike, as our solvers make it."""
+    numpy call where it has one (the ``numpy`` of an ``hnn.interface.EnergyField``), counted alike, as our solvers make it."""
 
     def __init__(self, field):
         self.field = field

@@ -157,7 +157,7 @@ class _Dopri5:
 
 def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
     """``f`` on numpy states ``(rows, dim)``: the tensors share the arrays' memory on the CPU. A field that
-    takes numpy states itself (``hnn.interface.EnergyField.numpy``) is called so where it serves them."""
+    takes numpy states itself (the ``numpy`` of an ``hnn.interface.EnergyField``) is called so where it serves them."""
     on_cpu = device.type == "cpu"
     direct = getattr(f, "numpy", None) if on_cpu else None
 

@@ -276,7 +276,7 @@ class EvaluationKernel:
 
     def serve(self, a: np.ndarray) -> np.ndarray | None:
         """dx/dt of the numpy states ``a`` as a new array if this kernel serves them (``serves``' rule), else
-        None: the call a solver stepping in numpy makes (``hnn.interface.EnergyField.numpy``)."""
+        None: the call a solver stepping in numpy makes (the ``numpy`` of an ``hnn.interface.EnergyField``)."""
         shape = a.shape
         if len(shape) != 2 or shape[0] > KERNEL_MAX_ROWS or shape[1] != self.input_dim or a.dtype is not self._np_dtype:
             return None
