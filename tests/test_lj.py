@@ -41,13 +41,18 @@ def _lennard_jones(r):
     return 4 * (r ** -12 - r ** -6)
 
 
+def _every_distance(q):
+    """|q_i - q_j| of every pair i < j, ``(batch, N (N - 1) / 2)``, of positions ``(batch, N, dim)``."""
+    i, j = torch.triu_indices(q.shape[1], q.shape[1], offset=1)
+    return torch.linalg.vector_norm(q[:, i] - q[:, j], dim=-1)
+
+
 def test_the_cutoff_h_is_the_shifted_sum_over_every_pair_and_continuous_at_the_cutoff():
     data = load_task("lj")
     cutoff = 2.5
     x = _states(40, 4, seed=3)
     q, p = data.layout(40).split(x)
-    i, j = torch.triu_indices(40, 40, offset=1)
-    r = torch.linalg.vector_norm(q[:, i] - q[:, j], dim=-1)
+    r = _every_distance(q)
     inside = r < cutoff
     assert inside.any() and not inside.all()        # the check can fail: the cluster spans several cutoffs
     written = (p * p).sum(dim=(1, 2)) / 2 + torch.where(inside, _lennard_jones(r) - _lennard_jones(cutoff), 0).sum(1)
@@ -194,8 +199,7 @@ def test_the_radial_library_recovers_the_truncated_and_shifted_lennard_jones_und
     cutoff = 2.5
     x = _states(8, 150, seed=1)
     q, _ = data.layout(8).split(x)
-    i, j = torch.triu_indices(8, 8, offset=1)
-    r = torch.linalg.vector_norm(q[:, i] - q[:, j], dim=-1)
+    r = _every_distance(q)
     inside = r < cutoff
     assert 0.05 < float((~inside).double().mean()) < 0.5
     model, stats = _cutoff_fit("library", x, cutoff)
