@@ -51,13 +51,16 @@ class Stage:
 BURSTS, BURST_SECONDS = 1, 0.05
 # The reference box of the quick budgets (tests/test_plan.py: a quick mode's plan within its budget there), from
 # declared costs alone: a quiet 2-core box on which a task's training step costs its ``TaskSpec.cost`` (a
-# full run's seconds) over its default steps, a run REFERENCE_RUN_SECONDS beside its steps (its data read, its model
-# built, its losses and folder: reproduce.py --quick's 12 runs took 6.5 s, 4.4 s of it their steps, and the quick
-# scene study's 34 runs 8 s, on a quiet 2-core box at 643e3a4; at 0.5 s a run the reference planned reproduce's
-# training at 2.2x its time), and a least-squares fit REFERENCE_FIT_ROW_SECONDS a training row (the dearest fit's:
-# the 3-body library, 90 s over its 100000 rows, issue 79)
-REFERENCE_RUN_SECONDS = 0.2
-REFERENCE_FIT_ROW_SECONDS = 0.9e-3
+# full run's seconds) over its default steps (a narrower network's step in proportion to its width: mostly the
+# step's fixed work, width 16 took 0.10-0.27 of width 200's step on spring, pend and 2body; a wider one's by the
+# square, its products), a run REFERENCE_RUN_SECONDS beside its steps (its data read, its model built, its losses
+# and folder: the quick scene study's 34 runs took 7.3 s, 3.7 s of it their steps and solves, at 1.2 load on the
+# 2-core box, 2026-12-06; reproduce.py --quick's 12 runs 6.5 s, 4.4 s of them steps, at 643e3a4), and a
+# least-squares fit REFERENCE_FIT_ROW_SECONDS a training row (the quick scene study's 18 fits solved their 8308
+# rows in 1.19 s, 1.4e-4 s a row, the 3-body library's 500 rows 0.71 s of it: a plan prices the fits it holds,
+# not each at the dearest's)
+REFERENCE_RUN_SECONDS = 0.12
+REFERENCE_FIT_ROW_SECONDS = 1.5e-4
 # ... and a plan's own measuring (``timed``) REFERENCE_TIMING_SECONDS a config (its burst of steps, or a fit's solves
 # on its probe rows) and a run beside its steps a task (``overhead``'s one-step run): reproduce.py --quick's plan
 # took 3.4 s for its 12 configs of 6 tasks (its datasets' 1.6 s aside), the quick scene study's about 5 s for 34
@@ -72,13 +75,16 @@ REFERENCE_FIELD_CALL_SECONDS = 0.5e-3
 
 def reference_seconds(job, fit_rows: int | None = None) -> float:
     """A run's seconds on the reference box (``REFERENCE_RUN_SECONDS``...): its steps at its task's declared
-    rate, or a fit's ``fit_rows`` training rows (a quick study's cap: its rows at most)."""
+    rate (scaled by its width against the task's), or a fit's ``fit_rows`` training rows (a quick study's cap:
+    its rows at most)."""
     config = job.config
     if config.fit != "adam":
         if fit_rows is None:
             raise ValueError(f"{job.key}: a fit's reference seconds need its training rows (fit_rows)")
         return REFERENCE_RUN_SECONDS + REFERENCE_FIT_ROW_SECONDS * fit_rows
-    per_step = hnn.task_spec(job.task).cost / hnn.tasks.task_config(job.task, {}).total_steps
+    default = hnn.tasks.task_config(job.task, {})
+    width = config.hidden_dim / default.hidden_dim
+    per_step = hnn.task_spec(job.task).cost / default.total_steps * (width if width <= 1 else width * width)
     return REFERENCE_RUN_SECONDS + per_step * (config.total_steps + 1)
 
 

@@ -245,4 +245,8 @@ def test_quick_budgets_sets_each_stage_of_a_plan_beside_the_seconds_its_run_reco
     rows = quick_budgets.stage_ratios("reproduce", {"plan": 1.0, "build": 1.0, "train": 10.0, "evaluate": 20.0},
                                       {"training": 5.0, "evaluation": 16.0, "total": 25.0, "jobs": 1})
     assert [(r["measured"], r["ratio"]) for r in rows] == [(4.0, 0.5), (5.0, 2.0), (16.0, 1.25)]
+    # the scene study: its training's wall holds its datasets, its configs' timing and the runs' sweep
+    rows = quick_budgets.stage_ratios("scene_study", {"plan": 2.0, "build": 1.0, "train": 12.0, "measure": 10.0},
+                                      {"training": 9.0, "sweep": 6.0, "measure": 20.0})
+    assert [(r["measured"], r["ratio"]) for r in rows] == [(3.0, 1.0), (6.0, 2.0), (20.0, 0.5)]
     assert quick_budgets.stage_ratios("peers", plan_seconds, {}) == []

@@ -333,6 +333,12 @@ def test_a_tiny_scene_study_end_to_end(tmp_path, monkeypatch):
     assert entry["card"] is not None and entry["card"]["cheapest"] is not None
     assert all("train_cost" in m for m in entry["grid"].values())
     assert set(entry["speed"]) == set(scene_stages.QUICK_SPEED_KINDS) and entry["speed"]["hnn"]["fastest"] is not None
+    # every unit's measuring seconds, by kind and grid, what the plan's declared costs are set from
+    units = results["seconds"]["units"]
+    assert set(units) == {f"kind spring {k}" for k in entry["kinds"]} | {f"cells spring {k}" for k in
+                                                                          set(grid_rungs) & set(entry["kinds"])}
+    assert all(0 < s <= results["seconds"]["measure"] for s in units.values())
+    assert 0 < results["seconds"]["sweep"] < results["seconds"]["training"]
     saved = json.loads((tmp_path / "scene_study.json").read_text())
     assert saved["scenes"]["spring"]["card"] == json.loads(json.dumps(entry["card"]))
     text = (tmp_path / "scene_study.md").read_text()

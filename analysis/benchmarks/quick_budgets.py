@@ -52,8 +52,9 @@ STAGES = {
                    lambda s: s["total"] - s["training"] - s["evaluation"]),
                   (("train",), "the training", lambda s: s["training"]),
                   (("evaluate",), "the evaluation and figures", lambda s: s["evaluation"])],
-    "scene_study": [(("plan", "build", "train"), "its datasets built, its configs timed and the training",
-                     lambda s: s["training"]),
+    "scene_study": [(("plan", "build"), "its datasets built and its configs timed, before the training",
+                     lambda s: s["training"] - s["sweep"]),
+                    (("train",), "the training", lambda s: s["sweep"]),
                     (("measure",), "the measuring", lambda s: s["measure"])],
     # peers.py measures each run as it finishes training, inside the training's wall time
     "peers": [(("train",), "the training", lambda s: s["training"] - s["measuring"]),

@@ -1,6 +1,6 @@
 """The scene study's measuring, as units of work that run here or in ``--jobs`` worker processes.
 
-    measured = scene_measure.run(units, jobs=2)      # {unit key: result}, as the units finish
+    measured, states, seconds = scene_measure.run(units, jobs=2)      # {unit key: result}, as the units finish
 
 A unit is plain data (it crosses process boundaries): ``("kind", task, kind, {seed: run folder},
 seed of the speed study or None)`` or ``("cells", task, {cell key: (kind, run folder)})``.
@@ -121,14 +121,17 @@ def rollouts(unit: tuple) -> int:
 
 
 def run_unit(unit: tuple, quick: bool, state: dict | None = None,
-             rollout_calls: int | None = None) -> tuple[dict, dict | None]:
-    """``(result, the scene's state)`` of one unit (see the module's docstring), on one thread; each model's
-    rollouts within ``rollout_calls`` field calls each where given (``hnn.evaluation.rollout_budget``)."""
+             rollout_calls: int | None = None) -> tuple[dict, dict | None, float]:
+    """``(result, the scene's state, seconds)`` of one unit (see the module's docstring), on one thread; each
+    model's rollouts within ``rollout_calls`` field calls each where given (``hnn.evaluation.rollout_budget``);
+    ``seconds``: its wall time in the process that measured it (what a plan's declared costs are set from)."""
+    tic = time.perf_counter()
     # rollouts of 4-15 states: a second thread only adds contention; the caller's count back after
     with torch_threads(1), (contextlib.nullcontext() if rollout_calls is None else hnn.evaluation.rollout_budget(
             calls=rollout_calls, why=f"the quick study's {QUICK_ROLLOUT_SECONDS:g} s of a model's rollout at the "
                                      "reference box's rate")):
-        return _run_unit(unit, quick, state)
+        result, state = _run_unit(unit, quick, state)
+    return result, state, time.perf_counter() - tic
 
 
 def _run_unit(unit: tuple, quick: bool, state: dict | None) -> tuple[dict, dict | None]:
@@ -152,13 +155,15 @@ def _run_unit(unit: tuple, quick: bool, state: dict | None) -> tuple[dict, dict 
 # (spring, measured: about 30 s against about 1.5 s)
 SPEED_WEIGHT = 20
 # a quick study's measuring, on a quiet 2-core box, for its plan: a model's seconds (its run loaded, its losses,
-# its training cost's one short burst, its rollouts when healthy: 0.3-2.6 s a model on a 2-core box at load 8,
-# whose rollouts were stopped at 0.09 s), a quick speed study's (its ladder timed once, three drift runs of
-# scene_common.QUICK's drift_budget) and a scene's truth (its first unit: 20 s for the 3-body at load 8);
-# a fit's training cost is the solve its run recorded (nothing solved again)
+# its training cost's one short burst, its rollouts when healthy), a quick speed study's (its ladder timed once,
+# three drift runs of scene_common.QUICK's drift_budget) and a scene's truth (built by its first unit). Measured
+# (``scene_study.json``'s units, the quick study at 1.2 load on the 2-core box, 2026-12-06): a unit of one model
+# 0.06-1.2 s, median 0.4 (the 3-body library's 7.5 s, its rollouts stopped at their budget); the spring's speed study
+# about 0.7 s beside its model's; a scene's first unit 0-1.7 s over a model's (the 3-body's the dearest). A fit's
+# training cost is the solve its run recorded (nothing solved again)
 MODEL_SECONDS = 0.5
-QUICK_SPEED_SECONDS = 6.0
-TRUTH_SECONDS = 3.0
+QUICK_SPEED_SECONDS = 2.0
+TRUTH_SECONDS = 1.0
 # a quick study's budget of each model rollout (under each energy protocol, and for its rollout error), in seconds
 # on the reference box and so in field calls (QUICK_ROLLOUT_CALLS, the same on every box): the 3-body library's,
 # stiff off the orbits, passed 20000 calls on one trial of 15 and ran 350 s; of the healthy models of a quick study
@@ -189,6 +194,12 @@ def _weight(unit: tuple) -> float:
     return len(unit[2])
 
 
+def _named(unit: tuple) -> str:
+    """A unit's name in the study's JSON: ``'kind spring hnn'`` or ``'cells spring hnn+swim'``."""
+    kind = unit[2] if unit[0] == "kind" else next(iter(unit[2].values()))[0] if unit[2] else ""
+    return f"{unit[0]} {unit[1]} {kind}"
+
+
 def _describe(unit: tuple) -> str:
     """A unit in a progress line: ``'spring  hnn'`` or ``'spring  hnn at 3 grid runs (cells x seeds)'``."""
     if unit[0] == "kind":
@@ -197,11 +208,11 @@ def _describe(unit: tuple) -> str:
     return f"{unit[1]:7s} {kind} at {len(unit[2])} grid run{'s' if len(unit[2]) != 1 else ''} (cells x seeds)"
 
 
-def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = None) -> tuple[dict, dict]:
-    """``({key: result}, {task: the scene's state})`` of ``units`` (``{key: unit}``): here (``jobs``
-    1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
+def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = None) -> tuple[dict, dict, dict]:
+    """``({key: result}, {task: the scene's state}, {unit named: its seconds})`` of ``units`` (``{key: unit}``):
+    here (``jobs`` 1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
     which the others reuse); each model's rollouts within ``rollout_calls`` where given (``run_unit``)."""
-    results, states, progress = {}, {}, sweep.Progress(len(units))
+    results, states, seconds, progress = {}, {}, {}, sweep.Progress(len(units))
     # the time left by the units' weights: a model a model, a kind's speed study SPEED_WEIGHT models; with a
     # budget, each unit's seconds at most (quick_estimate), so that no unit's stop can swell the time left
     weights = {key: _weight(unit) if rollout_calls is None else quick_estimate({key: unit})[1]
@@ -214,9 +225,9 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = Non
     print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
-            results[key], states[unit[1]] = run_unit(unit, quick, None, rollout_calls)
+            results[key], states[unit[1]], seconds[_named(unit)] = run_unit(unit, quick, None, rollout_calls)
             print(said(key), flush=True)
-        return results, states
+        return results, states, seconds
     by_task: dict[str, list] = {}
     for key, unit in units.items():
         by_task.setdefault(unit[1], []).append(key)
@@ -231,7 +242,7 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = Non
             for future in finished:
                 key = running.pop(future)
                 try:
-                    results[key], state = future.result()
+                    results[key], state, seconds[_named(units[key])] = future.result()
                 except Exception as err:      # name the unit now, not after the other workers' units end
                     pool.shutdown(wait=False, cancel_futures=True)
                     raise RuntimeError(f"measuring {_describe(units[key])} failed: {type(err).__name__}: {err}") from err
@@ -241,4 +252,4 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = Non
                     states[task] = state
                     for other in waiting.pop(task, []):
                         running[pool.submit(run_unit, units[other], quick, state, rollout_calls)] = other
-    return results, states
+    return results, states, seconds

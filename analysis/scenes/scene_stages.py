@@ -297,11 +297,13 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
         units = measure_units(studied, will, seeds, grid_rows, grid_seeds, speed_kinds, speed)
         return [data_stage(studied, args.quick), measure_stage(units, models, args.quick, len(dhnn_rows) and
                                                                  len(DHNN_MODELS))]
-    runs, _ = train([(default_rows, seeds, steps, rungs), (grid_rows, grid_seeds, steps, grid_rungs),
-                     # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
-                     (dhnn_rows, [0], steps, DHNN_MODELS)], out, args, then=measuring,
-                    share=QUICK_SHARES["train"] if args.quick else None)
+    runs, trained = train([(default_rows, seeds, steps, rungs), (grid_rows, grid_seeds, steps, grid_rungs),
+                           # the D-HNN protocol's own 5000 steps (DHNN_FIELDS), or a quick run's
+                           (dhnn_rows, [0], steps, DHNN_MODELS)], out, args, then=measuring,
+                          share=QUICK_SHARES["train"] if args.quick else None)
+    # the training's wall time, its datasets built and its configs timed included; "sweep" the runs' alone
     results["seconds"]["training"] = time.perf_counter() - tic
+    results["seconds"]["sweep"] = trained["training"]
 
     # 2. measure, one thread per process (scene_measure): the rollouts here are batches of 4-15
     # states, which a second thread does not speed up; --jobs processes share the units
@@ -310,8 +312,8 @@ def run(args, argv: list[str], out: Path, studied: list[str], cuts: list[str]) -
     rollout_calls = scene_measure.QUICK_ROLLOUT_CALLS if args.quick else None
     results["meta"]["rollout_seconds"] = scene_measure.QUICK_ROLLOUT_SECONDS if args.quick else None
     results["meta"]["rollout_calls"] = rollout_calls
-    measured, states = scene_measure.run(units, args.quick, args.jobs if args.backend == "local" else 1,
-                                         rollout_calls)
+    measured, states, results["seconds"]["units"] = scene_measure.run(
+        units, args.quick, args.jobs if args.backend == "local" else 1, rollout_calls)
     cells_by_scene = {}
     for task in studied:
         entry = {"divergence": (states.get(task) or {}).get("divergence"), "kinds": {}, "grid": {}, "grid_seeds": {},
