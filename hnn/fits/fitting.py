@@ -85,6 +85,10 @@ def _stream_factored(slopes, V: torch.Tensor, targets: list[int], x: torch.Tenso
         stage.add_blocks([(slopes(x[start:stop]), Y[start:stop])])
         bar.advance(stop - start)
     R = stage.factor
+    if not dense and len(R) < M + m:
+        # fewer states than the slopes' columns: R is trapezoidal, and its missing rows are zero rows of the same
+        # problem, which make R_s the square triangle that add_triangular folds
+        R = torch.cat([R, R.new_zeros(M + m - len(R), M + m)])
     Rs, Z, tail = R[:M, :M], R[:M, M:], R[M:, M:]
     if dense:
         V = torch.stack([Rs @ V[:, :, j] for j in range(m)], dim=2)        # R_s C_j: the rows, (M, K, m)
