@@ -172,7 +172,8 @@ def test_a_fresh_quick_peers_sitting_prices_its_measuring_and_timing_before_it_s
     measure = sum(map(peer_plan.quick_measuring, jobs))
     assert lines[2] == (f"  measure {len(jobs)} runs' rollouts (each as it finishes training): about "
                         f"{measure:.0f} s (each run's declared measuring by its bobs)"), lines
-    assert lines[3].startswith(f"  time {len(settings['kinds'])} kinds: about 8 s"), lines
+    assert lines[3].startswith(f"  time {len(settings['kinds'])} kinds: about "
+                               f"{peer_plan.QUICK_COSTS['timing']:.0f} s"), lines
     peer_record.plan_sitting(record, [], jobs, {}, settings, tmp_path, range(1), 1, quick=False, table=False)
     lines = capsys.readouterr().out.splitlines()
     assert lines[2].endswith("timed as it runs, from its first units") and not lines[3].startswith("  time"), lines

@@ -30,9 +30,12 @@ QUICK = {"bobs": (1, 2), "fields": {"n_train": 50, "n_test": 10, "hidden_dim": 6
 # CHNN rows (9 s over the 7 runs of N = 1, 20 s over the 14 bobs of N = 2) and an LNN run's (17 s for 7: its truth
 # to T = lnn_horizon at rtol 1e-10); the table's one-thread timing of the kinds (8 s). The costs of 36c2ac2 came
 # from a box at load 2 and planned 172 s for these 106 (measuring 97 s for 48): a stage's estimate is held within
-# 1.5x of its time on a quiet box (docs/speed.md, "Quick modes and their budgets")
+# 1.5x of its time on a quiet box (docs/speed.md, "Quick modes and their budgets"). A run is measured in the sitting
+# that trains the next one beside it, so its seconds depend on what the other worker trains meanwhile: at 7b4a1a2
+# (quiet box, 2026-12-06) the same measuring took 11 s for N = 1, 29 s for N = 2's 14 bobs and 41 s for the 7 LNN
+# runs (83 s in all, against 55 s at 4f8f65b), and the timing 11.4 s (9.3): the costs sit between the runs seen
 QUICK_COSTS = {"train_bob": {"lagrangian": 5.0, "mechanical": 2.0, "constrained": 1.4, "constrained_lagrangian": 0.95},
-               "train_run": 0.7, "train_lnn": 0.25, "measure_bob": 1.4, "measure_lnn": 2.4, "timing": 8.0}
+               "train_run": 0.7, "train_lnn": 0.25, "measure_bob": 1.7, "measure_lnn": 4.0, "timing": 10.0}
 # CHNN's budget: 8000 steps of batch 200, their 2000 epochs of 4 batches, on FULL_SEEDS seeds (#45: a verdict
 # on several seeds). One seed of it for every kind is about 7.8 hours of one thread (each kind's one-thread
 # rate, docs/peers.md; the LNN's chain rows, which train from lnn_convex, and its 60000 protocol steps
