@@ -194,12 +194,6 @@ def _weight(unit: tuple) -> float:
     return len(unit[2])
 
 
-def _named(unit: tuple) -> str:
-    """A unit's name in the study's JSON: ``'kind spring hnn'`` or ``'cells spring hnn+swim'``."""
-    kind = unit[2] if unit[0] == "kind" else next(iter(unit[2].values()))[0] if unit[2] else ""
-    return f"{unit[0]} {unit[1]} {kind}"
-
-
 def _describe(unit: tuple) -> str:
     """A unit in a progress line: ``'spring  hnn'`` or ``'spring  hnn at 3 grid runs (cells x seeds)'``."""
     if unit[0] == "kind":
@@ -209,7 +203,8 @@ def _describe(unit: tuple) -> str:
 
 
 def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = None) -> tuple[dict, dict, dict]:
-    """``({key: result}, {task: the scene's state}, {unit named: its seconds})`` of ``units`` (``{key: unit}``):
+    """``({key: result}, {task: the scene's state}, {"kind spring hnn": its seconds})`` of ``units`` (``{key: unit}``,
+    keys ``(unit type, task, kind)``):
     here (``jobs`` 1) or in ``jobs`` worker processes, each scene's first unit first (it builds the scene's truth,
     which the others reuse); each model's rollouts within ``rollout_calls`` where given (``run_unit``)."""
     results, states, seconds, progress = {}, {}, {}, sweep.Progress(len(units))
@@ -225,7 +220,7 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = Non
     print(f"  {progress.tag()} measuring {len(units)} unit{'s' if len(units) != 1 else ''} of models", flush=True)
     if jobs <= 1:
         for key, unit in units.items():
-            results[key], states[unit[1]], seconds[_named(unit)] = run_unit(unit, quick, None, rollout_calls)
+            results[key], states[unit[1]], seconds[" ".join(key)] = run_unit(unit, quick, None, rollout_calls)
             print(said(key), flush=True)
         return results, states, seconds
     by_task: dict[str, list] = {}
@@ -242,7 +237,7 @@ def run(units: dict, quick: bool, jobs: int = 1, rollout_calls: int | None = Non
             for future in finished:
                 key = running.pop(future)
                 try:
-                    results[key], state, seconds[_named(units[key])] = future.result()
+                    results[key], state, seconds[" ".join(key)] = future.result()
                 except Exception as err:      # name the unit now, not after the other workers' units end
                     pool.shutdown(wait=False, cancel_futures=True)
                     raise RuntimeError(f"measuring {_describe(units[key])} failed: {type(err).__name__}: {err}") from err
