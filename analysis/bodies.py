@@ -47,6 +47,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from hnn.models.pair import RADIAL_WIDTH
 from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import provenance
 from hnn_analysis.scenes.bodies_study import FITS, QUICK_FITS, QUICK_SIZES, SCENES, study, table
@@ -74,8 +75,8 @@ def main(argv=None) -> dict:
     p.add_argument("--horizon", type=float, default=None,
                    help="the rollouts' length in time units (default: the scene's, 10, 0.5, 2)")
     p.add_argument("--adam-steps", dest="adam_steps", type=int, default=2000, help="Adam's steps (default 2000)")
-    p.add_argument("--hidden-dim", dest="hidden_dim", type=int, default=64,
-                   help="the MLP's width (adam) and the sampled neurons (swim) (default 64)")
+    p.add_argument("--hidden-dim", dest="hidden_dim", type=int, default=RADIAL_WIDTH,
+                   help=f"the MLP's width (adam) and the sampled neurons (swim) (default {RADIAL_WIDTH})")
     p.add_argument("--paper", action="store_true", help="the paper's 2-body and 3-body protocols instead (see above)")
     add_flags(p, seeds="--paper: seeds of every rung (default 5; --quick 1)", seeds_default=None,
               jobs="--paper: training processes (one thread each past one)")

@@ -324,8 +324,10 @@ MODEL_KINDS: dict[str, ModelKind] = {
         coordinates="canonical x = [q, p] of the bodies the task declares (hnn.bodies.Bodies: count, dimension, "
                     "order); it reads a state of any N in that layout",
         integrator="`leapfrog` or `yoshida4` (its H is T(p) + V(q)); `dopri5` for short accurate paths",
-        when="scenes of many bodies: fit on a few, roll out on many (docs/bodies.md); `--fit library` prints "
-             "V as an equation of r, `--fit swim` or `elm` fits sampled radial neurons")),
+        when="scenes of many bodies: fit on a few, roll out on many (docs/bodies.md); by Adam at `--hidden_dim "
+             "64`, as the studies train it (V reads one distance: the 2-body and 3-body tasks' width of 200 "
+             "trained it hundreds of times worse on the 3-body, docs/bodies.md); `--fit library` prints V as an equation of r, "
+             "`--fit swim` or `elm` fits sampled radial neurons")),
     # the pixel objective draws its own noise per model: the seeds train one at a time
     "pixel-hnn": ModelKind(".models.pixel:PixelHNN", _pixel, _PIXEL_OBJECTIVE, color="tab:blue", family="pixel",
                            grouping="alone", doc=KindDoc(

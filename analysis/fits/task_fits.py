@@ -6,7 +6,8 @@ our library against SINDy and the networks). ``analysis/fits/fit_tasks.py`` is i
 A rung is a model kind and how its weights are found: ``hnn`` and ``baseline`` by Adam (each task's own
 settings, the paper's runs), ``hnn+swim`` (a sampled layer of ``SWIM_WIDTH`` neurons, the last layer by
 least squares), ``hnn+library`` (H as a sparse sum of terms) and ``baseline+sindy`` (pysindy's SINDy, where
-it is installed); on a task that declares its bodies (2body, 3body), the pair kind by Adam (``pairwise``), by
+it is installed); on a task that declares its bodies (2body, 3body), the pair kind by Adam (``pairwise``, V at
+``RADIAL_WIDTH``), by
 the task's width of sampled radial neurons (``pairwise+swim``) and by the radial library (``pairwise+library``).
 Measured per seed: the test loss (the saved run's), the energy MSE of every protocol of the task (``registry.evaluate``: the paper's and the corrected; the chain: along CHNN's 3 s rollouts,
 below) and the training seconds on one thread (``hnn_analysis.training_cost``: Adam's steps at their
@@ -23,6 +24,7 @@ import numpy as np
 import torch
 
 import hnn
+from hnn.models.pair import RADIAL_WIDTH
 from hnn.sweeps import sweep
 from hnn_analysis.paper import study
 from hnn_analysis.training_cost import training_cost
@@ -31,14 +33,14 @@ from hnn_analysis.pages import generated_by
 TASKS = ("spring", "pend", "real", "2body", "3body", "chain")
 SWIM_WIDTH = 1000          # a sampled layer needs more neurons than a trained one; its solve stays seconds
 # label -> the run's fields: Adam's kinds at the task's own settings, then the fits; the pair kind's three where
-# the task declares its bodies (2body, 3body: ``rungs``); its sampled neurons read one distance, at the task's width
-# (200 fit the 3-body's H to a relative error of 1.9e-3 in 23 s, 1000 to 6.3e-4 in 137 s and 5 GB; seed 0, one
-# thread, 2-core box at load 2), the runs analysis/bodies.py --paper and the scene study train
+# the task declares its bodies (2body, 3body: ``rungs``): Adam's V at the pair kind's RADIAL_WIDTH; its sampled
+# neurons read one distance, at the task's width (200 fit the 3-body's H to a relative error of 1.9e-3 in 23 s, 1000
+# to 6.3e-4 in 137 s and 5 GB; seed 0, one thread, 2-core box at load 2), the runs analysis/bodies.py --paper trains
 RUNGS = {"hnn": {"model": "hnn"}, "baseline": {"model": "baseline"},
          "hnn+swim": {"model": "hnn", "fit": "swim", "hidden_dim": SWIM_WIDTH},
          "hnn+library": {"model": "hnn", "fit": "library"},
          "baseline+sindy": {"model": "baseline", "fit": "sindy"},
-         "pairwise": {"model": "pairwise"},
+         "pairwise": {"model": "pairwise", "hidden_dim": RADIAL_WIDTH},
          "pairwise+swim": {"model": "pairwise", "fit": "swim"},
          "pairwise+library": {"model": "pairwise", "fit": "library"}}
 ADAM = ("hnn", "baseline")
