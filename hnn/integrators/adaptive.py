@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from scipy.integrate import solve_ivp
 
-from .dop853 import DOP853, Stages, ToleranceScale, rk_stages, tableau_rows
+from .dop853 import DOP853, ScipyDOP853, Stages, ToleranceScale, rk_stages, tableau_rows
 from ..errors import DivergenceError, divergence_error
 from .fixed_step import Field
 from .one_row import one_row
@@ -118,6 +118,7 @@ class _Dopri5:
     fsal = 6
     dense_stages = 0        # the dense output reads the step's own stages: no further calls of f
     safety, min_factor, max_factor, beta = 0.9, 0.2, 10.0, 0.0
+    hold_after_reject = False   # scipy's clause, left out here: docs/speed.md, "Tried and not kept"
 
     def __init__(self, dtype: torch.dtype):
         cpu = dict(dtype=dtype, device="cpu")        # the stepping runs in numpy, on any device's states
@@ -141,18 +142,29 @@ class _Dopri5:
         # broadcast them over runs of dim, several times slower on a few states; the same products)
         Q = torch.mm(self.PT, work.flat).numpy().reshape(4, *y.shape).transpose(0, 2, 1)
 
+        one = len(y) == 1       # one row (one state, or a shared step's batch): j is all its own, and broadcasting
+        #                         its arrays over the outputs gives the same products as gathering them
+
         def evaluate(sigma, j):
-            q = Q.take(j, 2)            # (4, dim, n); take, not q[..., j]: the same rows without the indexing's overhead
+            # (4, dim, n); take, not q[..., j]: the same rows without the indexing's overhead
+            q = Q if one else Q.take(j, 2)
             # sum_m sigma^(m+1) Q[m] in the order numpy's sum over the powers took (np.stack's, several times the sum)
             value = sigma * q[0]
             value += sigma ** 2 * q[1]
             value += sigma ** 3 * q[2]
             value += sigma ** 4 * q[3]
             value = value.T
-            value *= hx.take(j, 0)
-            value += y.take(j, 0)
+            value *= hx if one else hx.take(j, 0)
+            value += y if one else y.take(j, 0)
             return value
         return evaluate, 0
+
+
+class _ScipyDopri5(_Dopri5):
+    """RK45 on scipy's terms, the scheme of ``steps='shared'``: with scipy's clause that no step grows right
+    after a rejection, so a batch stepped as one system makes scipy's calls on the flattened batch (the
+    one-step-per-row scheme leaves the clause out: it moves every path that rejects a step, the datasets')."""
+    hold_after_reject = True
 
 
 def _numpy_field(f: Field, dtype: torch.dtype, device: torch.device):
@@ -198,10 +210,11 @@ def dopri5_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
     costs several times less there than in torch: docs/speed.md, "Why the fast paths"), ``f`` on tensors sharing the arrays' memory.
 
     ``steps='shared'`` steps the batch as one system instead, as ``'solve_ivp'`` does: one step size for
-    every row, set by the RMS of the error over the whole batch (``SHARED_STEPS``).
+    every row, set by the RMS of the error over the whole batch (``SHARED_STEPS``), under scipy's whole rule,
+    its clause too (``_ScipyDopri5``): the calls of scipy's RK45 on the flattened batch.
     """
-    return per_row_rollout(_Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished,
-                           steps)
+    return per_row_rollout(_ScipyDopri5 if steps == "shared" else _Dopri5, "dopri5", f, x0, t, rtol, atol, max_norm,
+                           max_iterations, stats, drop_finished, steps)
 
 
 def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL, atol: float = ATOL,
@@ -214,10 +227,10 @@ def dop853_rollout(f: Field, x0: torch.Tensor, t: np.ndarray, rtol: float = RTOL
     treat rows independently), with the method's 7th-order dense output at ``t_eval``: 12 field
     calls a step, 3 more on the rows that have an output time inside it. Order 8: at tight
     tolerances it takes several times fewer steps than dopri5 for the same error. ``steps='shared'``: one step
-    size for the batch, as ``dopri5_rollout``'s.
+    size for the batch, as ``dopri5_rollout``'s, under scipy's DOP853 step rule (``ScipyDOP853``).
     """
-    return per_row_rollout(DOP853, "dop853", f, x0, t, rtol, atol, max_norm, max_iterations, stats, drop_finished,
-                           steps)
+    return per_row_rollout(ScipyDOP853 if steps == "shared" else DOP853, "dop853", f, x0, t, rtol, atol, max_norm,
+                           max_iterations, stats, drop_finished, steps)
 
 
 _largest = np.maximum.reduce       # a.max() as its ufunc computes it (NaN wins), without the method's wrapper

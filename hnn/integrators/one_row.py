@@ -42,6 +42,7 @@ def one_row(scheme, field, y: np.ndarray, k1: np.ndarray, t: np.ndarray, prop: f
     work = Stages.empty(scheme.stages, 1, dim, dtype)
     K = work.K
     nfev = rejected = 0
+    held = False        # a step was just rejected: under scipy's clause (``hold_after_reject``) the next may not grow
     scale_tol = ToleranceScale(rtol, atol)
 
     for _ in range(max_iterations):
@@ -63,6 +64,7 @@ def one_row(scheme, field, y: np.ndarray, k1: np.ndarray, t: np.ndarray, prop: f
             if not finite or (err > 1 and abs(h) <= 10 * _EPS * max(abs(tc), 1.0)):
                 return nfev, rejected, tc
             rejected += 1
+            held = scheme.hold_after_reject
         else:
             t_new = t_end if clipped else tc + h
             if (t_next - t_new) * direction <= near:
@@ -83,6 +85,8 @@ def one_row(scheme, field, y: np.ndarray, k1: np.ndarray, t: np.ndarray, prop: f
             factor *= err_old ** scheme.beta
             if accept:
                 err_old = np.maximum(err_norm, 1e-4)
-        factor = float(factor[0])
-        prop = size * min(max(factor, scheme.min_factor), scheme.max_factor)
+        factor = min(max(float(factor[0]), scheme.min_factor), scheme.max_factor)
+        if held and accept:
+            factor, held = min(factor, 1.0), False
+        prop = size * factor
     raise DivergenceError(f"{name} did not finish in {max_iterations} iterations")
