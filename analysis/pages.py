@@ -33,6 +33,7 @@ PAGES = {"headline": "README.md", "results": "docs/results.md", "full-run": "doc
          "many-models": "docs/speed.md", "fit-floor": "docs/speed.md", "thread-spread": "docs/testing.md", "many-models-gpu": "docs/gpu.md", "gpu-check": "docs/gpu.md",
          "fits-sampling": "docs/fits.md", "fits-tasks": "docs/fits.md", "fits-library": "docs/fits.md",
          "bodies": "docs/bodies.md", "bodies-paper": "docs/bodies.md", "bodies-gravity": "docs/bodies.md", "bodies-lj": "docs/bodies.md", "bodies-rebound": "docs/bodies.md",
+         "bodies-scenes": "docs/bodies.md",
          **{f"dgnet-{task}": "docs/dgnet.md" for task in ("spring", "pend", "real", "2body")},
          **{f"dgnet-init-{task}": "docs/dgnet.md" for task in DGNET_INIT_TASKS},
          **{f"maps-{protocol}": "docs/maps.md" for protocol in MAP_PROTOCOLS}}
@@ -83,6 +84,7 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "bodies-gravity": "python analysis/bodies.py --scene gravity --update-docs",
            "bodies-lj": "python analysis/bodies.py --scene lj --update-docs",
            "bodies-rebound": "python analysis/benchmarks/nbody_truth.py --update-docs",
+           "bodies-scenes": "python analysis/scene_study.py --scenes gravity lattice lj --jobs 2 --update-docs",
 
            **{f"maps-{protocol}": f"python analysis/benchmarks/maps.py --protocols {protocol} --update-docs"
               for protocol in MAP_PROTOCOLS}}
@@ -92,7 +94,7 @@ DECLARED = {"kinds": "README.md", "kinds-python": "docs/python.md"}
 # they rest on in docs/seeds.json when written, and one resting on fewer than MIN_SEEDS says why
 VERDICTS = ("headline", "results", "scenes", "model-guide", "measured-guide", "peers", "stress", "lnn-start",
             "units-scan", "lnn-pinv", "arm-balance", "arm-balance-long", "fits-sampling", "fits-tasks", "fits-library",
-            "bodies-paper", *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
+            "bodies-paper", "bodies-scenes", *(f"dgnet-{task}" for task in ("spring", "pend", "real", "2body")),
             *(f"dgnet-init-{task}" for task in DGNET_INIT_TASKS), *(f"maps-{protocol}" for protocol in MAP_PROTOCOLS))
 MIN_SEEDS = 3
 SEEDS_FILE = "docs/seeds.json"

@@ -42,9 +42,9 @@ def _springs(x: torch.Tensor):
 
 
 def hamiltonian(x: torch.Tensor) -> torch.Tensor:
-    """H ``(batch,)`` of states ``(batch, 4N)``."""
-    _, p, _, r = _springs(x)
-    return (p * p).sum(dim=(1, 2)) / 2 + (SPRING * (r - REST) ** 2 / 2).sum(dim=1)
+    """H ``(...)`` of states ``(..., 4N)`` (a batch, or trials x times as an energy protocol's paths)."""
+    _, p, _, r = _springs(x.reshape(-1, x.shape[-1]))
+    return ((p * p).sum(dim=(1, 2)) / 2 + (SPRING * (r - REST) ** 2 / 2).sum(dim=1)).reshape(x.shape[:-1])
 
 
 def _force(q: torch.Tensor) -> torch.Tensor:

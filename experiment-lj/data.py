@@ -43,8 +43,10 @@ DEFAULTS = {"num_trials": 200, "num_points": 20, "t_span": [0.0, 5.0], "test_spl
 DATASET_VERSION = 1
 
 
-class WallError(ValueError):
-    """A pair of bodies closer than the wall's range ``WALL``: the message names the pair, its distance and the fix."""
+class WallError(hnn.DivergenceError, ValueError):
+    """A pair of bodies closer than the wall's range ``WALL``: the message names the pair, its distance and the fix.
+    Also a ``DivergenceError``: a learned path that brings two bodies inside the wall has failed as one that blew
+    up has, and an energy protocol scores it so (no energy MSE, and why), where the true H cannot be read."""
 
 
 def layout(count: int, cutoff: float | None = None) -> Bodies:
@@ -77,11 +79,12 @@ def _potential(r: torch.Tensor) -> torch.Tensor:
 
 
 def hamiltonian(x: torch.Tensor, cutoff: float | None = None) -> torch.Tensor:
-    """H ``(batch,)`` of states ``(batch, 4N)``; with ``cutoff``, each pair's V(r) - V(cutoff) below it, 0 beyond."""
-    q, p = layout(x.shape[-1] // 4).split(x)
+    """H ``(...)`` of states ``(..., 4N)`` (a batch, or trials x times as an energy protocol's paths); with
+    ``cutoff``, each pair's V(r) - V(cutoff) below it, 0 beyond."""
+    q, p = layout(x.shape[-1] // 4).split(x.reshape(-1, x.shape[-1]))
     _, _, _, r, inside = _pairs(q, cutoff)
     pairs = _potential(r) if inside is None else torch.where(inside, _potential(r) - _potential(r.new_tensor(cutoff)), 0)
-    return (p * p).sum(dim=(1, 2)) / 2 + pairs.sum(dim=1)
+    return ((p * p).sum(dim=(1, 2)) / 2 + pairs.sum(dim=1)).reshape(x.shape[:-1])
 
 
 def _force(q: torch.Tensor, cutoff: float | None = None) -> torch.Tensor:

@@ -43,9 +43,23 @@ def seeds_overlap(a: tuple[float, float, float], b: tuple[float, float, float]) 
     return a[1] <= b[2] and b[1] <= a[2]
 
 
-def scenes() -> list[str]:
-    """The study's scenes: the tasks of this checkout whose ``TaskSpec`` declares ``scene_study``."""
-    return [task for task in hnn.available_tasks() if hnn.task_spec(task).scene_study is not None]
+# the pages of the scene cards, by the ``page`` each scene declares (``TaskSpec.scene_study``; absent: "scenes"): a
+# page shows one study of its scenes, whole: the sections ``--update-docs`` writes, and the names of its results
+# (``<out>/<stem>.json``) and of its Pareto figure, so that one page's study never overwrites another's
+PAGES = {"scenes": {"sections": ("scenes", "model-guide"), "stem": "scene_study", "figure": "scenes-pareto.png"},
+         "bodies": {"sections": ("bodies-scenes",), "stem": "scene_study_bodies", "figure": "bodies-pareto.png"}}
+
+
+def scenes(page: str | None = "scenes") -> list[str]:
+    """The tasks of this checkout whose ``TaskSpec`` declares ``scene_study`` and whose ``page`` is ``page``
+    (default the paper's scenes, docs/scenes.md; None: every page's)."""
+    return [task for task in hnn.available_tasks() if hnn.task_spec(task).scene_study is not None
+            and (page is None or page_of(task) == page)]
+
+
+def page_of(task: str) -> str:
+    """The page (``PAGES``) of ``task``'s scene card."""
+    return (hnn.task_spec(task).scene_study or {}).get("page", "scenes")
 
 
 def scene_settings(task: str) -> dict:

@@ -1,7 +1,8 @@
 """The scene study's outputs, built from its results dict (``scene_study.json``), never typed:
 ``scene_study.md`` (every table: ``scene_tables``), ``figures/scenes-pareto.png`` (``scene_figure``) and,
 with ``--update-docs``, docs/scenes.md (section ``scenes``), the README's model guide (section
-``model-guide``) and docs/figures/scenes-pareto.png.
+``model-guide``) and docs/figures/scenes-pareto.png; a study of the scenes of many bodies (page ``bodies``) writes
+``scene_study_bodies.*``, docs/bodies.md's section ``bodies-scenes`` and docs/figures/bodies-pareto.png.
 """
 from __future__ import annotations
 
@@ -11,17 +12,21 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
+from hnn_analysis.scenes.scene_common import PAGES
 from hnn_analysis.scenes.scene_figure import pareto_figure
 from hnn_analysis.scenes.scene_tables import guide, markdown
 
 
-def write(results: dict, out: Path, update_docs: bool) -> None:
-    text = markdown(results)
-    commands.publish(out, "scene_study", results, text,
-                     {"scenes": text, "model-guide": guide(results)} if update_docs else {}, seeds_of(results))
-    figure = out / "figures" / "scenes-pareto.png"
+def write(results: dict, out: Path, update_docs: bool, page: str = "scenes") -> None:
+    """The outputs of a study of one page's scenes (``scene_common.PAGES``: its files' names, its sections)."""
+    text, names = markdown(results), PAGES[page]
+    results["meta"]["page"] = page
+    texts = {"scenes": text, "model-guide": guide(results) if page == "scenes" else None, "bodies-scenes": text}
+    commands.publish(out, names["stem"], results, text,
+                     {name: texts[name] for name in names["sections"]} if update_docs else {}, seeds_of(results))
+    figure = out / "figures" / names["figure"]
     pareto_figure(results, figure)
-    print(f"wrote {out / 'scene_study.json'}, {out / 'scene_study.md'}, {figure}")
+    print(f"wrote {out / (names['stem'] + '.json')}, {out / (names['stem'] + '.md')}, {figure}")
     if update_docs and figure.exists():
         target = hnn.tasks.repo_root() / "docs" / "figures" / figure.name
         atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
@@ -54,7 +59,7 @@ def main(argv=None) -> None:
     results = json.loads(args.results.read_text())
     if args.update_docs and results["meta"]["quick"]:
         p.error("that study was a --quick smoke run: docs/ show full-settings studies only")
-    write(results, args.results.parent, args.update_docs)
+    write(results, args.results.parent, args.update_docs, results["meta"].get("page", "scenes"))
 
 
 if __name__ == "__main__":

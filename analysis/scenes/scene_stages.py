@@ -398,7 +398,7 @@ def reference_plan(studied=None) -> list[plan.Stage]:
     the plan's own timing of its configs (``plan.reference_timing``), its training (every fit at its
     ``QUICK_FIT_ROWS``), its datasets (``data_stage``) and its measuring (``measure_stage``); ``studied`` default:
     the quick study's own scenes (``quick_scenes``)."""
-    studied = studied or quick_scenes(scene_common.scenes())
+    studied = studied or quick_scenes(scene_common.scenes())  # the paper's page
     rows = [{k: v for k, v in row.items() if k != "fit_rows"} for row in plan_rows(studied, True)]
     default_rows = [r for r in rows if r["cell"] == DEFAULT_CELL]
     grid_rows = [r for r in rows if r["cell"] != DEFAULT_CELL]

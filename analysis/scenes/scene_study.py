@@ -28,8 +28,12 @@ has its latent baseline and HNN. For every scene (spring, pend, real, 2body, 3bo
 Training goes through each task's ``train.py`` (as ``reproduce.py``, whose runs in ``<out>/runs``
 are reused when the args match), in one sweep; the measuring is shared out over ``--jobs``
 processes (``scene_measure``). Training seconds are each model's controlled cost
-(``hnn_analysis.training_cost``), not the runs' recorded wall times. Writes ``<out>/scene_study.json`` (every number), 
+(``hnn_analysis.training_cost``), not the runs' recorded wall times. Writes ``<out>/scene_study.json`` (every number),
 ``<out>/scene_study.md`` and ``<out>/figures/scenes-pareto.png``.
+
+The scenes of many bodies (gravity, lattice, lj: each declares the page ``bodies``) are a study of their own,
+``--scenes gravity lattice lj``: the same stages (no grid, no long drift run), their cards in docs/bodies.md,
+their files ``scene_study_bodies.*`` and ``figures/bodies-pareto.png``.
 """
 from __future__ import annotations
 
@@ -49,8 +53,9 @@ def _parser() -> argparse.ArgumentParser:
     from hnn_analysis.scenes.scene_common import SEEDS, scenes
 
     p = hnn.cli.Parser(prog="scene_study.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenes", nargs="+", default=None, choices=scenes(),
-                   help="scenes to study (default: every task that declares scene_study)")
+    p.add_argument("--scenes", nargs="+", default=None, choices=scenes(None),
+                   help="scenes to study (default: the paper's, every task that declares scene_study without a page of "
+                        "its own; `--scenes gravity lattice lj`: the scenes of many bodies, docs/bodies.md)")
     quick = scene_stages.QUICK_STEPS, scene_stages.QUICK_WIDTHS, scene_stages.QUICK_FRACTIONS
     commands.add_flags(p, quick=f"smoke run: {quick[0]} steps per model (with --data: {study.QUICK_STEPS}, one width), "
                                 f"widths {quick[1]} x fractions {quick[2]}, one seed unless --seeds, short drift runs (the run prints "
@@ -66,8 +71,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="seeds of every width x fraction cell, the cards' candidates (default: --seeds; 1 trains "
                         "the grid at seed 0 alone, a third of the cost, and the page says the cards rest on one seed)")
     sweep_flags.add_backend_flags(p)
-    commands.add_flags(p, update_docs="write docs/scenes.md and the README's model guide (full settings only); with "
-                                      "--data, the README's row of that file")
+    commands.add_flags(p, update_docs="write docs/scenes.md and the README's model guide (full settings only; with "
+                                      "--scenes gravity lattice lj, docs/bodies.md's scene cards: a page's scenes whole); "
+                                      "with --data, the README's row of that file")
     measured_inputs.add_flags(p)
     return p
 
@@ -78,24 +84,34 @@ def main(argv=None) -> dict:
     parser = _parser()
     from hnn.sweeps import flags as sweep_flags, sweep
     from hnn_analysis.scenes import measured_study, scene_report, scene_stages
-    from hnn_analysis.scenes.scene_common import SEEDS, scenes
+    from hnn_analysis.scenes.scene_common import SEEDS, page_of, scenes
 
     args = parser.parse_args(argv)
     if args.update_docs and args.quick:
         parser.error("--update-docs writes full-settings results into docs/ and README.md; drop --quick")
+    pages = sorted({page_of(task) for task in args.scenes or ()} or {"scenes"})
+    if len(pages) > 1:
+        parser.error(f"--scenes {' '.join(args.scenes)} mixes the scenes of the pages {', '.join(pages)}; a study "
+                     "writes one page's cards: study " + " and ".join(
+                         f"--scenes {' '.join(t for t in args.scenes if page_of(t) == page)}" for page in pages)
+                     + " apart")
+    page = pages[0]
+    if args.update_docs and not args.data and args.scenes and set(args.scenes) != set(scenes(page)):
+        parser.error(f"--update-docs writes a page's cards whole, and --scenes {' '.join(args.scenes)} is not all of "
+                     f"that page's scenes ({' '.join(scenes(page))}): name them all, or drop --update-docs")
     sweep_flags.check_backend(parser, args)
     given = args.seeds
     args.seeds = args.seeds or (1 if args.quick else SEEDS)
     if args.data:
         return measured_study.run(args, argv, parser, inputs)
     out = args.out or hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    studied = args.scenes or (scene_stages.quick_scenes(scenes()) if args.quick else scenes())
-    left_out = [task for task in scenes() if task not in studied] if args.quick and not args.scenes else []
+    studied = args.scenes or (scene_stages.quick_scenes(scenes(page)) if args.quick else scenes(page))
+    left_out = [task for task in scenes(page) if task not in studied] if args.quick and not args.scenes else []
     cuts = scene_stages.quick_cuts(studied, SEEDS, given or 1, left_out) if args.quick else []
     if cuts:
         commands.say_quick("scene_study", cuts)
     results, runs = scene_stages.run(args, argv, out, studied, cuts)
-    scene_report.write(results, out, args.update_docs)
+    scene_report.write(results, out, args.update_docs, page)
     sweep.exit_if_failed(runs)
     return results
 

@@ -187,12 +187,14 @@ def card_name(card: dict) -> str:
 
 def card_table(results: dict) -> list[str]:
     grid = results["meta"].get("grid_seeds", [0])
+    gridded = [task for task, entry in results["scenes"].items() if entry.get("grid")]
     lines = ["**Scene cards**: the smallest model (fewest parameters, then the least data, then the cheapest to "
              "train) whose energy MSE (corrected protocol, else the paper's) and rollout error, each the mean over its seeds, both come "
-             "within 2x of the best mean of its scene, over every kind and fit (the rungs of docs/fits.md) and (spring, pend, "
-             "2body) every width and "
-             f"training fraction, the grid trained at seed{'s' if len(grid) > 1 else ''} {', '.join(map(str, grid))} "
-             "(where none does, the model nearest both bests: the smallest larger ratio, which the row gives). "
+             "within 2x of the best mean of its scene, over every kind and fit (the rungs of docs/fits.md)"
+             + (f" and ({', '.join(gridded)}) every width and training fraction, the grid trained at "
+                f"seed{'s' if len(grid) > 1 else ''} {', '.join(map(str, grid))}" if gridded else
+                " at width 200 and all the data (no scene here has a width x data grid)")
+             + " (where none does, the model nearest both bests: the smallest larger ratio, which the row gives). "
              "*Seeds cannot separate*: the smaller models whose mean is not within 2x of both bests but whose "
              "lowest seed on each error is, and whether the pick's highest seed on either error is over 2x; with one "
              "seed the card tests neither. Train s, here and "

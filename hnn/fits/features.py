@@ -15,6 +15,7 @@ float64.
 from __future__ import annotations
 
 import itertools
+import math
 
 import torch
 from torch import nn
@@ -26,6 +27,14 @@ from .base import FORMS, Features
 # the trig factor of a library term: none, sin(f q_i) or cos(f q_i)
 NONE, SIN, COS = 0, 1, 2
 ROW_BYTES = 2 ** 27     # a library's gradient is built a few rows at a time, its arrays within this
+# a library's solve holds at least one (terms, terms) float64 matrix: a library whose matrix passes this (4 GiB,
+# 23170 terms) is refused when it is made, by name, not by the allocator hours or gigabytes later (H's cubic
+# library on the 32 columns of 8 bodies in the plane has 63800 terms: 30 GiB, and its gradient factors 187 GB)
+LIBRARY_BYTES = 2 ** 32
+
+
+class LibraryTooLargeError(ValueError):
+    """A library whose solve cannot fit ``LIBRARY_BYTES``: the message says its terms, the memory and the fix."""
 
 
 def _frozen(*shape) -> nn.Parameter:
@@ -133,6 +142,19 @@ def terms(width: int, form: str, degree: int, frequencies: int, products: bool =
     return out
 
 
+def term_count(width: int, form: str, degree: int, frequencies: int, products: bool = True) -> int:
+    """``len(terms(width, form, degree, frequencies, products))``, counted without listing them."""
+    def monomials(dim: int, low: int, high: int) -> int:
+        return sum(math.comb(dim + d - 1, d) for d in range(low, high + 1))
+    halves = form in ("kinetic", "potential")
+    n = width if halves else width // 2
+    count = monomials(width, 0, degree) if form == "field" else monomials(width, 1, degree + 1)
+    if form == "kinetic":
+        return count
+    trig = 2 * frequencies * n
+    return count + trig + (trig * monomials(width - n, 1, 2) if products and not halves else 0)
+
+
 class Library(Features):
     """Terms theta_k(x) = x^powers_k * trig_k(x), fixed by ``terms(...)``: ``powers`` ``(terms, in_dim)``
     and ``trig`` ``(terms, 3)`` (kind, column, frequency), buffers. ``make``: the terms of a form (``terms``)
@@ -167,7 +189,16 @@ class Library(Features):
 
     @classmethod
     def make(cls, spec, form: str, in_dim: int) -> Library:
-        """The ``form``'s terms on ``in_dim`` columns to ``spec.library_degree`` and ``spec.library_frequencies``."""
+        """The ``form``'s terms on ``in_dim`` columns to ``spec.library_degree`` and ``spec.library_frequencies``;
+        a ``LibraryTooLargeError`` where their solve would not fit ``LIBRARY_BYTES``."""
+        count = term_count(in_dim, form, spec.library_degree, spec.library_frequencies, products=cls.products)
+        if 8 * count ** 2 > LIBRARY_BYTES:
+            raise LibraryTooLargeError(
+                f"a library of {form} terms of degree {spec.library_degree} and {spec.library_frequencies} "
+                f"frequencies on {in_dim} columns has {count} terms: its solve would hold a {count} x {count} "
+                f"matrix, {8 * count ** 2 / 2 ** 30:.0f} GiB (limit hnn.fits.features.LIBRARY_BYTES = "
+                f"{LIBRARY_BYTES / 2 ** 30:.0f} GiB); ask for a lower --library_degree or --library_frequencies 0, "
+                "or, on a scene of bodies, --model pairwise --fit library (a library of one distance)")
         return cls(terms(in_dim, form, spec.library_degree, spec.library_frequencies, products=cls.products), in_dim)
 
     def _parts(self, x: torch.Tensor, keep: torch.Tensor | None, slopes: bool = True):
