@@ -8,7 +8,7 @@ import hnn
 TASK = hnn.TaskSpec(
     order=22,
     protocols={"corrected": hnn.EnergyProtocol("corrected", x0="seeds", t_span=(0.0, 2.0), num_points=200,
-                                               rtol=1e-9)},
+                                               rtol=1e-10, atol=1e-10)},    # the data's tolerances,
     in_paper=False,
     cost=20,    # a rough full-settings training time of one Adam model, seconds on 2 cores
     # T: the data's span (the disk turns about a third of a turn); no long drift run (the disk has no period)
