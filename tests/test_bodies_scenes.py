@@ -42,6 +42,9 @@ def test_each_scene_of_bodies_has_the_pair_rungs_and_not_hs_library(task):
     rungs = scene_common.task_rungs(task)
     assert {"pairwise", "pairwise+swim", "pairwise+library", "hnn", "baseline"} <= set(rungs)
     assert "hnn+library" not in rungs
+    # the page leaves SINDy's 6545 terms out, and says why where it writes its cards
+    assert "baseline+sindy" not in rungs and "baseline+sindy" in scene_common.PAGES["bodies"]["left_out"]
+    assert "baseline+sindy" in scene_common.task_rungs("3body")        # the paper's page keeps it
     config = hnn.tasks.task_config(task, {"model": "hnn", "fit": "library"})
     with pytest.raises(features.LibraryTooLargeError, match=r"63800 terms.*--model pairwise --fit library"):
         hnn.kinds.model_from_spec(hnn.specs.run_specs(config).model)

@@ -134,7 +134,10 @@ def test_protocols_and_paper_numbers_are_read_only_views_of_the_task_files():
     assert hnn.PROTOCOLS["spring"]["paper"] is spec.protocols["paper"] is hnn.tasks.get_protocol("spring")
     assert hnn.tasks.PAPER["spring"]["test_loss"]["hnn"] == (3.5928e-02, 1.8328e-03)
     assert list(hnn.tasks.PAPER) == hnn.tasks.paper_tasks()
-    assert set(hnn.PROTOCOLS) == set(hnn.tasks.paper_tasks())
+    # the paper's tasks, and the scenes of bodies with their one protocol of their own (no paper numbers)
+    assert set(hnn.PROTOCOLS) == set(hnn.tasks.paper_tasks()) | {"gravity", "lattice", "lj"}
+    assert all(set(hnn.PROTOCOLS[task]) == {"corrected"} and task not in hnn.tasks.PAPER
+               for task in ("gravity", "lattice", "lj"))
     # the chain is a task (it trains and loads) but not the paper's: reproduce.py leaves it out
     assert "chain" in hnn.available_tasks() and "chain" not in hnn.tasks.paper_tasks()
     with pytest.raises(TypeError):

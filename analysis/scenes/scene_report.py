@@ -19,8 +19,8 @@ from hnn_analysis.scenes.scene_tables import guide, markdown
 
 def write(results: dict, out: Path, update_docs: bool, page: str = "scenes") -> None:
     """The outputs of a study of one page's scenes (``scene_common.PAGES``: its files' names, its sections)."""
-    text, names = markdown(results), PAGES[page]
     results["meta"]["page"] = page
+    text, names = markdown(results), PAGES[page]
     texts = {"scenes": text, "model-guide": guide(results) if page == "scenes" else None, "bodies-scenes": text}
     commands.publish(out, names["stem"], results, text,
                      {name: texts[name] for name in names["sections"]} if update_docs else {}, seeds_of(results))

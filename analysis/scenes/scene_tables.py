@@ -215,6 +215,8 @@ def card_table(results: dict) -> list[str]:
         lines.append(f"| {task} | {card_name(card)} | {card['params']} | {_g(card['energy'])} ({_g(card['best_energy'])}) | "
                      f"{_g(card['rollout'])} ({_g(card['best_rollout'])}) | {_g(card['train_seconds'])} | {over} | "
                      f"{unsettled(card)} | {cheapest_words(card)} | {library_words(card)} |")
+    page = scene_common.PAGES[results["meta"].get("page", "scenes")]
+    lines += [f"\nNot studied here: `{rung}`, {why}." for rung, why in page["left_out"].items()]
     return lines + ["", "*Cheapest to train that is enough*: of the models within 2x of both bests (the seeds' means), "
                     "the one whose seeds' median training seconds is least, Adam's kinds and the least-squares fits "
                     "(`--fit`: `+swim` a sampled layer, `+library` H as a sum of terms, `+sindy` pysindy's SINDy; "
