@@ -80,16 +80,24 @@ def stopped_lines(results: dict) -> list[str]:
 
 
 def not_applicable_lines(results: dict) -> list[str]:
-    """The energy protocols that do not apply to a model (a learned map: one that rescales time), and why."""
+    """The energy protocols that do not apply to a model (a learned map: one that rescales time), or whose rollout
+    failed, and why: one line per reason, or per model where each seed's words differ (the state a rollout failed
+    at), with its first seed's words and the count of seeds."""
     seen = {}
     for task, entry in results["scenes"].items():
         for kind, measured in entry["kinds"].items():
+            whys = {}
             for m in measured["per_seed"].values():
                 for name, why in (m.get("energy_not_applicable") or {}).items():
-                    seen.setdefault((task, name, why), []).append(kind)
+                    whys.setdefault(name, []).append(why)
+            for name, found in whys.items():
+                if len(set(found)) == 1:
+                    seen.setdefault((task, name, found[0]), []).append(kind)
+                else:
+                    seen[(task, name, f"{found[0]} (the first of {len(found)} seeds)")] = [kind]
     if not seen:
         return []
-    return ["", "Energy protocols that do not apply (n/a above):", ""] + [
+    return ["", "Energy protocols that do not apply, or whose rollout failed (n/a above):", ""] + [
         f"- {task}, {name} protocol, {', '.join(dict.fromkeys(kinds))}: {why}" for (task, name, why), kinds in seen.items()]
 
 
@@ -261,7 +269,7 @@ def rollout_card_table(results: dict) -> list[str]:
              "| seeds cannot separate |", "| --- | --- | --- | --- | --- |"]
     for task, c in rows:
         tied = ("one seed: not tested" if c["tied"] is None else ", ".join(c["tied"]) or "no other model")
-        lines.append(f"| {task} | {c['kind']}, width {c['width']}, {c['fraction']:g} of the data | "
+        lines.append(f"| {task} | {scene_rungs.describe(c['kind'], c['width'], c['fraction'])} | "
                      f"{_g(c['rollout_seconds'])} ({_g(c['seconds_range'][0])}-{_g(c['seconds_range'][1])}, "
                      f"{c['n_seeds']} seed{'s' if c['n_seeds'] > 1 else ''}) | {_g(c['energy'])} / {_g(c['rollout'])} | "
                      f"{tied} |")
