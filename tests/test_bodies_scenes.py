@@ -102,3 +102,16 @@ def test_a_learned_path_inside_the_lennard_jones_wall_is_a_failed_rollout_not_a_
     # scored as a path that blew up is: no energy MSE, and why (the pair, inside the wall), never an overflow
     assert result["toward"]["mse"] is None
     assert "bodies 0 and 1" in result["toward"]["why"] and "wall" in result["toward"]["why"]
+
+
+def test_failed_rollouts_read_as_one_line_a_model_and_a_shared_reason_as_one_line():
+    from hnn_analysis.scenes import scene_tables
+
+    def seeds(*whys):
+        return {"per_seed": {str(i): {"energy_not_applicable": {"corrected": why}} for i, why in enumerate(whys)}}
+    results = {"scenes": {"lj": {"kinds": {
+        "hnn": seeds("bodies 2 and 4 of state 9 are 0.5 apart", "bodies 1 and 3 of state 7 are 0.1 apart"),
+        "g_sympnet": seeds("a map", "a map"), "henon": seeds("a map")}}}}
+    lines = [line for line in scene_tables.not_applicable_lines(results) if line.startswith("- ")]
+    assert lines == ["- lj, corrected protocol, hnn: bodies 2 and 4 of state 9 are 0.5 apart (the first of 2 seeds)",
+                     "- lj, corrected protocol, g_sympnet, henon: a map"]
