@@ -110,8 +110,10 @@ def test_a_shared_task_setting_keeps_its_stage_where_a_task_changes_its_default(
 
 # the folders of runs saved before the settings were declared here (read off hnn.RunConfig.key() at
 # a80657f): a saved run's folder name is <name>-<model>-seed<seed>-<key>, so a moved key is a lost run
+# gravity, lattice and lj re-keyed once, on purpose, when their default batch became 200 states (2026-12-06: no page
+# held a run of their full batch, and at it the pair kind took 29 minutes a run)
 SAVED_KEYS = {"2body": "1ed19181", "3body": "d131f9e4", "arm": "b30fa4a9", "chain": "0f41cb99",
-              "gravity": "4f17d938", "lattice": "a893b0ca", "lj": "7689ae58", "measured": "d94cfc26",
+              "gravity": "ffa261eb", "lattice": "a03af811", "lj": "e6f34d6a", "measured": "d94cfc26",
               "pend": "e58d9133", "pixels": "46661b6d", "real": "5d5e1b2f", "spring": "cbac7a2b"}
 SAVED_VARIANTS = [({"hidden_dim": 64}, "81ed33ad"), ({"nonlinearity": "relu"}, "25bbdd93"),
                   ({"balance": "rms"}, "8962ee8a"), ({"units": "on"}, "a3055a70"),
