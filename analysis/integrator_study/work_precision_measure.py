@@ -59,14 +59,14 @@ class Counted:
         return out
 
 
-def solvers(peer_names=None, batch: int = 2) -> dict:
-    """``{name: run(field, x0, t, rtol, atol) -> (batch, len(t), dim)}``: ours (on a ``batch`` of several states
-    also with ``steps='shared'``; on one state those are the same steps), then the installed peers."""
+def solvers(peer_names=None) -> dict:
+    """``{name: run(field, x0, t, rtol, atol) -> (batch, len(t), dim)}``: ours, with one step size per row and
+    with ``steps='shared'`` (scipy's step rule on the batch as one system; on one state, scipy's rule on that
+    row, where the default steps under the PI rule), then the installed peers."""
     ours = {f"hnn {m}": (lambda f, x0, t, rtol, atol, m=m: hnn.rollout(f, x0, t, method=m, rtol=rtol, atol=atol))
             for m in OURS}
-    if batch > 1:
-        ours.update({f"hnn {m} shared": (lambda f, x0, t, rtol, atol, m=m: hnn.rollout(
-            f, x0, t, method=m, rtol=rtol, atol=atol, steps="shared")) for m in OURS})
+    ours.update({f"hnn {m} shared": (lambda f, x0, t, rtol, atol, m=m: hnn.rollout(
+        f, x0, t, method=m, rtol=rtol, atol=atol, steps="shared")) for m in OURS})
     return {**ours, **{peer.name: peer.run for peer in peer_solvers.available(peer_names)}}
 
 
@@ -97,9 +97,11 @@ def measure(field, x0: torch.Tensor, t: np.ndarray, rtols, repeats: int, runners
             run(counted, x0, t, rtols[0], rtols[0])
         except hnn.DivergenceError:
             pass                                # the rounds say so, at each tolerance
-    for _ in range(repeats):                    # rounds: load from other processes hits every solver alike
-        for name, run in runners.items():
-            for rtol in rtols:
+    # rounds, and in each the solvers one after another at each tolerance: a drift in the box's load then
+    # meets the solvers compared at one error level within a fraction of a second of each other
+    for _ in range(repeats):
+        for rtol in rtols:
+            for name, run in runners.items():
                 if runs.get((name, rtol), {}).get("status", "ok") != "ok":
                     continue                    # diverged in an earlier round: the same again (deterministic)
                 counted.reset()
@@ -145,7 +147,7 @@ def measure_task(task: str, runs: Path, rtols, repeats: int, notes: list, models
         for batch in BATCHES:
             x0 = starts[:batch]
             tic = time.perf_counter()
-            rows = measure(model.field, x0, t, rtols, repeats, solvers(peer_names, batch))
+            rows = measure(model.field, x0, t, rtols, repeats, solvers(peer_names))
             call_us = call_seconds(model.field, x0) * 1e6
             for row in rows:
                 row.update(task=task, model=label, batch=batch, call_us=call_us, span=float(t[-1]))

@@ -21,8 +21,8 @@ from hnn_analysis.provenance import machine
 
 LEVELS = tuple(10.0 ** (-k / 2) for k in range(4, 21))      # error levels: 1e-2 .. 1e-10, half decades
 GOAL = 2.0                                                   # the goal: ours at least 2x faster
-# ours: one step size per row (the default), and steps='shared' (one for the batch, solve_ivp's terms; on one
-# state the same steps, so measured on batches only)
+# ours: one step size per row under the PI rule (the default), and steps='shared' (one for the batch under
+# scipy's step rule, solve_ivp's terms; on one state, scipy's rule on that row)
 OURS = ("hnn dopri5", "hnn dop853", "hnn dopri5 shared", "hnn dop853 shared")
 BEST = "best of ours"
 
