@@ -12,7 +12,7 @@ TASK = hnn.TaskSpec(
         "energy_mse": {"baseline": (6.3276e-02, 3.36e-02), "hnn": (3.8751e-05, 5.04e-06)},
     },
     figures=("energy", "orbits"),
-    cost=60,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    cost=25,    # measured full-settings training time of its HNN, seconds on one thread (26.8 s, docs/speed.md full run)
     data_cost=0.3,    # seconds of one build of its --quick dataset (1000 orbits: 0.2 s on a 2-core box at load 2, 1.1 s at 5)
     evaluate_cost=3.5,    # seconds of its --quick evaluation of a row (0.1 s its energy protocols, 3.1 s its 2 figures (the orbits 2.6); 2-core box at load 3)
     scene_study={"T": 20.0, "dts": (0.5, 0.2, 0.1, 0.05, 0.02, 0.01), "period": None, "periods": 100,

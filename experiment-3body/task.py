@@ -21,7 +21,7 @@ TASK = hnn.TaskSpec(
         "energy_mse": {"baseline": (1.0906e+02, 7.74e+01), "hnn": (4.1926e-02, 3.39e-02)},
     },
     figures=("energy", "orbits"),
-    cost=90,    # measured full-settings training time of one model, in seconds on 2 cores (rounded)
+    cost=60,    # measured full-settings training time of its HNN, seconds on one thread (60.6 s, docs/speed.md full run)
     data_cost=1,    # seconds of one build of its --quick dataset (5000 orbits: 0.8 s on a 2-core box at load 2, 4.4 s at 5)
     evaluate_cost=5,    # seconds of its --quick evaluation of a row (0.1 s its energy protocols, 4.9 s its 2 figures (the orbits 4.0); 2-core box at load 3)
     variants=CLEAN_ORBITS,
