@@ -9,6 +9,8 @@ and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols 
                                                           # O(N) (about 6 minutes, one thread); section bodies-lj
     python analysis/bodies.py --paper --seeds 5 --jobs 2 --update-docs   # the protocols; section bodies-paper
     python analysis/bodies.py --paper --quick             # one seed, 60 Adam steps: a smoke run
+    python analysis/bodies.py --scene gravity --sizes 8 64 512 4096 --backend ray --ray-address HEAD:6379
+                                                          # each N a Ray task on a cluster (every fit at every N)
 
 The pair kind (``--model pairwise``) is fitted once on the ``--scene`` task's data (experiment-lattice, a chain of
 springs, experiment-gravity, a softened rotating disk, or experiment-lj, a Lennard-Jones cluster at the scene's
@@ -32,6 +34,12 @@ Per N and fit:
   starts at once, divided by the steps, for the model and for the true forces, measured in one process; where
   those would pass ``TIMING_BUDGET`` seconds (a step of seconds), the measured rollout's own, marked ``*``.
 
+The fits run in the command's process; each N is then a cell of its own, measured one after another (the
+default: every step timed alone), in ``--jobs`` processes, or as Ray tasks (``--backend ray``, on this machine or
+the cluster at ``--ray-address``), one thread each. The rows are the same whichever way (the same starts, fits
+and arithmetic); only the seconds per step of cells measured side by side share the machine, and the page's
+first line says how they ran.
+
 Prints a table, writes ``bodies.json`` and ``bodies.md`` under ``--out``, and with ``--update-docs`` the
 ``bodies`` section of docs/bodies.md. Numbers come from this command, never typed by hand.
 
@@ -48,6 +56,7 @@ import sys
 from pathlib import Path
 
 from hnn.models.pair import RADIAL_WIDTH
+from hnn.sweeps import flags
 from hnn_analysis.commands import add_flags, portable_command, publish
 from hnn_analysis.provenance import provenance
 from hnn_analysis.scenes.bodies_study import FITS, QUICK_FITS, QUICK_SIZES, SCENES, study, table
@@ -79,10 +88,16 @@ def main(argv=None) -> dict:
                    help=f"the MLP's width (adam) and the sampled neurons (swim) (default {RADIAL_WIDTH})")
     p.add_argument("--paper", action="store_true", help="the paper's 2-body and 3-body protocols instead (see above)")
     add_flags(p, seeds="--paper: seeds of every rung (default 5; --quick 1)", seeds_default=None,
-              jobs="--paper: training processes (one thread each past one)")
+              jobs="--paper: training processes (one thread each past one); else the sizes N measured at once, "
+                   "one process of one thread each (default 1: seconds per step measured alone)")
+    flags.add_backend_flags(p)
     p.add_argument("--runs", type=Path, default=None,
                    help="--paper: the runs folder (default results/runs, results-quick/runs with --quick)")
     args = p.parse_args(argv)
+    flags.check_backend(p, args)
+    if not args.paper and (args.device is not None or args.group != "auto"):
+        p.error("--device and --group set how --paper's runs train; the sizes' rollouts run on the CPU, one "
+                "process each: drop them, or add --paper")
     argv = list(sys.argv[1:] if argv is None else argv)
     if args.paper:
         return _paper(args, argv)
@@ -99,7 +114,7 @@ def main(argv=None) -> dict:
     # the scene's default sizes roll each fit out as far as the scene says (its ``largest``); sizes asked, every fit
     largest = None if args.sizes else scene.get("largest")
     results = study(sizes, fits, args.seed, args.starts, args.dt, args.horizon, args.adam_steps, args.hidden_dim,
-                    args.scene, largest)
+                    args.scene, largest, args.jobs, args.backend, args.ray_address)
     results["meta"] = {**provenance(), "command": portable_command(argv, "analysis/bodies.py")}
     text = table(results)
     stem = "bodies" if args.scene == "lattice" else f"bodies-{args.scene}"
@@ -121,7 +136,8 @@ def _paper(args, argv: list[str]) -> dict:
     runs_dir = args.runs or root / "runs"
     runs, todo = sweep.reuse(bodies_paper.plan(bodies_paper.TASKS, seeds, runs_dir, args.quick))
     print(f"bodies --paper: {len(runs)} runs reused, {len(todo)} to train", flush=True)
-    trained, _ = sweep.train_jobs(todo, args.jobs, runs_dir.parent / "logs")
+    trained, _ = sweep.train_jobs(todo, args.jobs, runs_dir.parent / "logs", args.backend, args.ray_address,
+                                  args.group, args.device)
     runs.update(trained)
     results = {"meta": {**provenance(), "seeds": seeds, "quick": args.quick,
                         "command": portable_command(argv, "analysis/bodies.py")}, "tasks": {}}

@@ -23,6 +23,23 @@ def test_the_exact_library_runs_zero_shot_as_the_true_forces_do():
     assert "| 20 |" in text and "**library**" in text
 
 
+def test_the_sizes_measured_in_worker_processes_give_the_rows_measured_here():
+    """Each N is a cell (the fits rebuilt from their args and weights in the worker): two processes give the
+    rows one process gives, bit for bit but the seconds, and the page says the sizes shared the machine."""
+    kwargs = dict(sizes=(8, 12), fits=("library", "swim"), seed=0, starts=1, dt=0.1, horizon=0.5, adam_steps=0,
+                  hidden=8)
+    here, workers = bodies.study(**kwargs), bodies.study(**kwargs, jobs=2)
+
+    def numbers(results):
+        return [{part: {k: v for k, v in cell.items() if k not in ("seconds_per_step", "timed")}
+                 for part, cell in row.items() if isinstance(cell, dict)} for row in results["rows"]]
+    assert [row["N"] for row in workers["rows"]] == [8, 12]
+    assert numbers(workers) == numbers(here)
+    assert workers["settings"]["jobs"] == 2 and here["settings"]["jobs"] == 1
+    workers["meta"] = here["meta"] = {"command": "python analysis/bodies.py", "cores": 2, "cpu": "test"}
+    assert "measured 2 at a time" in bodies.table(workers) and "at a time" not in bodies.table(here)
+
+
 def test_the_paper_protocols_plan_the_pair_rungs_and_judge_them_against_the_targets(tmp_path):
     import math
 
@@ -166,10 +183,10 @@ def test_a_model_whose_paths_reach_the_lennard_jones_wall_is_a_row_that_says_so(
     fit = bodies._fit
 
     def flipped(*args):
-        model, seconds, what = fit(*args)
+        model, seconds, what, saved = fit(*args)
         with torch.no_grad():
-            model.coef.neg_()
-        return model, seconds, what
+            model.coef.neg_()           # in its state_dict: the size's cell rebuilds it flipped
+        return model, seconds, what, saved
 
     monkeypatch.setattr(bodies, "_fit", flipped)
     results = bodies.study(sizes=(8,), fits=("library",), seed=0, starts=1, dt=0.01, horizon=1.0, adam_steps=0,

@@ -532,3 +532,20 @@ def test_a_run_that_failed_in_training_is_recorded_and_a_table_reuses_its_failur
     # an unreadable record is named and the run trained again
     record.write_text("{not json")
     assert sweep.reuse([bad], diverged=True)[1] == [bad] and "cannot be read" in capsys.readouterr().out
+
+
+
+@pytest.mark.parametrize("backend,jobs", [("local", 1), ("local", 2), pytest.param("ray", 1, marks=needs_ray)])
+def test_map_cells_gives_each_cell_its_result_or_its_exception(backend, jobs):
+    """The measuring's map: every cell's result by its index, whatever the backend; a cell that raises is its
+    exception in its place, not the end of the map (math.sqrt: a function every worker imports by name)."""
+    import math
+
+    from hnn.sweeps.backends import map_cells
+    got = dict(map_cells(math.sqrt, [9.0, -1.0, 25.0], jobs, backend))
+    assert got[0] == 3.0 and got[2] == 5.0
+    assert isinstance(got[1], ValueError) and "math domain error" in str(got[1])
+    with pytest.raises(ValueError, match="backend 'dask': choose one of local, ray"):
+        list(map_cells(math.sqrt, [1.0], 1, "dask"))
+    with pytest.raises(ValueError, match="jobs=0"):
+        list(map_cells(math.sqrt, [1.0], 0))

@@ -15,6 +15,7 @@ import torch
 import hnn
 from hnn.interface import SplitField
 from hnn.models.pair import TooManyPairsError
+from hnn.sweeps import backends
 from hnn.threads import torch_threads
 from hnn_analysis import pages
 from hnn_analysis.provenance import machine
@@ -73,7 +74,8 @@ def _settings(scene: str) -> dict:
 
 
 def _fit(scene: str, fit: str, data: dict, seed: int, adam_steps: int, hidden: int):
-    """``(model, seconds, what)`` of the pair kind fitted on the ``scene`` task's data by ``fit`` (float64)."""
+    """``(model, seconds, what, args)`` of the pair kind fitted on the ``scene`` task's data by ``fit`` (float64);
+    ``args`` rebuild it (``hnn.kinds.model_from_args``, then its ``state_dict``), as a saved run's do."""
     config = hnn.tasks.task_config(scene, {"seed": seed, **_settings(scene)})
     args = {**config.to_dict(), "kind": "pairwise", "fit": fit, "hidden_dim": hidden, "dtype": "float64"}
     torch.manual_seed(seed)
@@ -83,10 +85,11 @@ def _fit(scene: str, fit: str, data: dict, seed: int, adam_steps: int, hidden: i
         if fit == "adam":
             stats = hnn.train(model, x, dxdt, total_steps=adam_steps, batch_size=200, seed=seed, weight_decay=0.0,
                               balance="off", units="off", progress=False)
-            return model.eval(), stats["seconds"], f"{adam_steps + 1} Adam steps, final loss {stats['train_loss'][-1]:.2e}"
+            return (model.eval(), stats["seconds"],
+                    f"{adam_steps + 1} Adam steps, final loss {stats['train_loss'][-1]:.2e}", args)
         stats = hnn.fits.solve(model, x, dxdt, fit=fit, seed=seed, progress=False)
     what = stats["fit"].get("equation") or f"{hidden} sampled radial neurons"
-    return model.eval(), stats["seconds"], f"{what}; train loss {stats['train_loss'][0]:.2e}"
+    return model.eval(), stats["seconds"], f"{what}; train loss {stats['train_loss'][0]:.2e}", args
 
 
 class _Truth:
@@ -147,63 +150,86 @@ def _errors(path: torch.Tensor, reference: torch.Tensor, energy, count: int) -> 
 
 
 def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_steps: int, hidden: int,
-          scene: str = "lattice", largest: dict | None = None) -> dict:
+          scene: str = "lattice", largest: dict | None = None, jobs: int = 1, backend: str = "local",
+          address: str | None = None) -> dict:
     """The rows of every N of ``sizes`` for each of ``fits``; ``largest``: fit -> the largest N it is rolled out at
-    (past it, a row saying so: the scene's ``largest_why``), None: every fit at every N."""
+    (past it, a row saying so: the scene's ``largest_why``), None: every fit at every N. The fits run here; each N
+    is a cell of its own (``_measure_size``), measured one after another (``jobs`` 1), in ``jobs`` worker
+    processes, or as Ray tasks (``backend='ray'``, ``address``: a cluster), one thread each: the same rows but
+    their seconds, which cells measured side by side share with each other."""
     largest = largest or {}
     if scene not in SCENES:
         raise ValueError(f"scene {scene!r}: choose one of {', '.join(SCENES)}")
     settings = _settings(scene)
     data_module = hnn.load_task(scene)
-    scene_truth = _Truth(data_module, settings)
     data = hnn.tasks.task_config(scene, {"seed": seed, **settings}).dataset()
-    models = {}
+    fitted, meta = {}, {}
     for fit in fits:
-        model, seconds, what = _fit(scene, fit, data, seed, adam_steps, hidden)
-        models[fit] = model
+        model, seconds, what, args = _fit(scene, fit, data, seed, adam_steps, hidden)
+        fitted[fit] = (args, {k: v.detach() if torch.is_tensor(v) else v for k, v in model.state_dict().items()})
         print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
-        models[fit + ":meta"] = {"seconds": seconds, "what": what}
-    truth = _true_field(scene_truth)
-    divisions = SCENES[scene]["reference_divisions"]
-    t = np.linspace(0.0, horizon, int(round(horizon / dt)) + 1)
-    rows = []
-    with torch_threads(1):
-        for count in sizes:
-            rng = np.random.RandomState(seed + 1000)
-            x0 = torch.tensor(np.stack([scene_truth.random_config(rng, count) for _ in range(starts)]))
-            with torch.no_grad():
-                if divisions:
-                    reference = hnn.rollout(truth, x0, t, method="yoshida4", dt=dt / divisions)
-                else:
-                    reference = hnn.rollout(scene_truth.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
-                                            atol=REFERENCE_RTOL)
-            true_path, measured = _rollout(truth, x0, t, dt)
-            row = {"N": count, "true": {**_errors(true_path, reference, scene_truth.hamiltonian, count),
-                                        **_timed(truth, x0, dt, measured)}}
-            for fit in fits:
-                if count > largest.get(fit, count):     # past where the scene rolls this fit out: said by a row
-                    row[fit] = {"not_run": f"past N = {largest[fit]}: {SCENES[scene]['largest_why']}",
-                                "seconds_per_step": None}
-                    continue
-                try:
-                    path, measured = _rollout(models[fit].field, x0, t, dt)
-                    errors = _errors(path, reference, scene_truth.hamiltonian, count)
-                except scene_truth.left as err:         # a model whose paths leave where it was fitted: said
-                    row[fit] = {"diverged": str(err).split(". ")[0],
-                                "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
-                    continue
-                except TooManyPairsError as err:        # more pairs than its field call may hold: what it needs
-                    row[fit] = {"diverged": f"too many pairs: {str(err).split(':')[0]}", "seconds_per_step": None}
-                    continue
-                row[fit] = {**errors, **_timed(models[fit].field, x0, dt, measured)}
-            rows.append(row)
-            print(_row_line(row, fits), flush=True)
-    return {"rows": rows, "fits": {fit: models[fit + ":meta"] for fit in fits},
+        meta[fit] = {"seconds": seconds, "what": what}
+    common = {"scene": scene, "seed": seed, "starts": starts, "dt": dt, "horizon": horizon, "fits": list(fits),
+              "largest": largest, "models": fitted}
+    # the largest N first: with several workers the longest cells start at once, and the last to finish is short
+    cells = [{**common, "count": count} for count in sorted(sizes, reverse=True)]
+    rows, tic = [], time.perf_counter()
+    for done, (index, row) in enumerate(backends.map_cells(_measure_size, cells, jobs, backend, address), 1):
+        if isinstance(row, BaseException):
+            raise RuntimeError(f"N = {cells[index]['count']}: {type(row).__name__}: {row}") from row
+        rows.append(row)
+        print(f"[{done}/{len(cells)}, {time.perf_counter() - tic:.0f} s] {_row_line(row, fits)}", flush=True)
+    rows.sort(key=lambda row: row["N"])
+    return {"rows": rows, "fits": meta,
             "settings": {"scene": scene, "sizes": list(sizes), "fits": list(fits), "seed": seed, "starts": starts,
                          "dt": dt, "horizon": horizon, "adam_steps": adam_steps, "hidden_dim": hidden,
                          "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
-                         "reference_divisions": divisions, "largest": largest, "timing_budget": TIMING_BUDGET,
-                         "repeats": REPEATS, "timed_steps": TIMED_STEPS, "threads": 1, "task_settings": settings}}
+                         "reference_divisions": SCENES[scene]["reference_divisions"], "largest": largest,
+                         "timing_budget": TIMING_BUDGET, "repeats": REPEATS, "timed_steps": TIMED_STEPS,
+                         "threads": 1, "jobs": jobs, "backend": backend, "task_settings": settings}}
+
+
+def _measure_size(cell: dict) -> dict:
+    """One N's row (``study``'s cell): the true forces' and each fit's energy and rollout errors against the
+    reference, and their seconds per step; each fit rebuilt from its ``(args, state_dict)``."""
+    scene, count, fits, largest = cell["scene"], cell["count"], cell["fits"], cell["largest"]
+    scene_truth = _Truth(hnn.load_task(scene), _settings(scene))
+    truth = _true_field(scene_truth)
+    models = {}
+    for fit, (args, state) in cell["models"].items():
+        model = hnn.kinds.model_from_args(args)
+        model.load_state_dict(state)
+        models[fit] = model.eval()
+    dt, divisions = cell["dt"], SCENES[scene]["reference_divisions"]
+    t = np.linspace(0.0, cell["horizon"], int(round(cell["horizon"] / dt)) + 1)
+    rng = np.random.RandomState(cell["seed"] + 1000)
+    x0 = torch.tensor(np.stack([scene_truth.random_config(rng, count) for _ in range(cell["starts"])]))
+    with torch.no_grad():
+        if divisions:
+            reference = hnn.rollout(truth, x0, t, method="yoshida4", dt=dt / divisions)
+        else:
+            reference = hnn.rollout(scene_truth.dynamics, x0, t, method="dop853", rtol=REFERENCE_RTOL,
+                                    atol=REFERENCE_RTOL)
+    true_path, measured = _rollout(truth, x0, t, dt)
+    row = {"N": count, "true": {**_errors(true_path, reference, scene_truth.hamiltonian, count),
+                                **_timed(truth, x0, dt, measured)}}
+    for fit in fits:
+        if count > largest.get(fit, count):     # past where the scene rolls this fit out: said by a row
+            row[fit] = {"not_run": f"past N = {largest[fit]}: {SCENES[scene]['largest_why']}",
+                        "seconds_per_step": None}
+            continue
+        try:
+            path, measured = _rollout(models[fit].field, x0, t, dt)
+            errors = _errors(path, reference, scene_truth.hamiltonian, count)
+        except scene_truth.left as err:         # a model whose paths leave where it was fitted: said
+            row[fit] = {"diverged": str(err).split(". ")[0],
+                        "seconds_per_step": _seconds_per_step(models[fit].field, x0, dt)}
+            continue
+        except TooManyPairsError as err:        # more pairs than its field call may hold: what it needs
+            row[fit] = {"diverged": f"too many pairs: {str(err).split(':')[0]}", "seconds_per_step": None}
+            continue
+        row[fit] = {**errors, **_timed(models[fit].field, x0, dt, measured)}
+    return row
 
 
 def _row_line(row: dict, fits) -> str:
@@ -243,7 +269,11 @@ def _reference(settings: dict) -> str:
 def table(results: dict) -> str:
     """The page's section: how each fit was found, then one table per fit against N with the true forces beside."""
     meta, settings = results["meta"], results["settings"]
-    lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta.get('torch', '?')}, one thread") + ".", "",
+    jobs = settings.get("jobs", 1)
+    side = "" if jobs == 1 and settings.get("backend", "local") == "local" else (
+        f", the sizes measured {jobs} at a time" if settings.get("backend", "local") == "local" else
+        ", each size a Ray task")
+    lines = [pages.generated_by(meta, f"{machine(meta)}, torch {meta.get('torch', '?')}, one thread{side}") + ".", "",
              f"Fitted on {_bodies(settings, settings['trained_on'])} (seed {settings['seed']}{_task_settings(settings)}); "
              f"each N rolled out from "
              f"{settings['starts']} starts by leapfrog at dt = {settings['dt']:g} to t = {settings['horizon']:g}, "

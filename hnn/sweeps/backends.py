@@ -10,6 +10,7 @@ cancelled and the workers stopped (``hnn.sweeps.stopping``). Ray is optional and
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import multiprocessing
 import os
 import socket
@@ -22,7 +23,7 @@ from .group_runs import run_group_task, train_group
 from ..runs import COMPLETE, run_experiment
 from ..tasks import repo_root, run_task
 from .stopping import in_worker, stop_pool, worker_start
-from ..threads import cores
+from ..threads import cores, torch_threads
 from .. import progress as progress_lines
 
 BACKENDS = names.BACKENDS
@@ -124,6 +125,26 @@ def train_in_pool(units: list[list], n_jobs: int, threads: int):
 def train_on_ray(units: list[list], threads: int, address: str | None):
     """Yield ``(job, folder or exception)`` as Ray tasks of ``threads`` CPUs each finish them; a run
     whose node dies is retried once elsewhere, then reported."""
+    with _ray_session(threads, address) as (ray, options):
+        remotes = {}
+        refs = {}
+        for unit in units:
+            function, *arguments = _submit(unit)
+            gpus = 1 if unit[0].config.device.startswith("cuda") else 0     # a group is one program: one GPU
+            remote = remotes.setdefault((function, gpus), ray.remote(function).options(**options, num_gpus=gpus))
+            refs[remote.remote(*arguments, threads)] = unit
+        for unit, result in _ray_results(ray, refs):
+            for job, folder in _unit_results(unit, result):
+                if isinstance(folder, Path) and not (folder / COMPLETE).is_file():
+                    folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
+                                          "here: put --out on storage that every node sees at the same path")
+                yield job, folder
+
+
+@contextlib.contextmanager
+def _ray_session(threads: int, address: str | None):
+    """``(ray, task options)``: Ray joined at ``address`` (None: started here with this machine's cores, and shut
+    down after), checked to have a node of ``threads`` CPUs; each task ``threads`` CPUs, retried once."""
     ray = import_ray()
     started = not ray.is_initialized()
     if started:
@@ -134,40 +155,77 @@ def train_on_ray(units: list[list], threads: int, address: str | None):
     try:
         biggest = max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node["Alive"]), default=0)
         if biggest < threads:      # Ray would queue such a task forever
-            raise ValueError(f"each run asks Ray for {threads} CPUs ({cores()} cores here // --jobs), but the "
-                             f"largest Ray node has {biggest:g}; raise --jobs so each run takes fewer threads")
+            raise ValueError(f"each task asks Ray for {threads} CPUs ({cores()} cores here // --jobs), but the "
+                             f"largest Ray node has {biggest:g}; raise --jobs so each task takes fewer threads")
         # the workers import this checkout's hnn, at the same path on every node (docs/sweeps.md)
         root = str(Path(__file__).resolve().parent.parent)
         env = {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
                "HNN_REPO": str(repo_root()), "OMP_NUM_THREADS": str(threads)}
-        options = dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
-        remotes = {}
-        refs = {}
-        for unit in units:
-            function, *arguments = _submit(unit)
-            gpus = 1 if unit[0].config.device.startswith("cuda") else 0     # a group is one program: one GPU
-            remote = remotes.setdefault((function, gpus), ray.remote(function).options(**options, num_gpus=gpus))
-            refs[remote.remote(*arguments, threads)] = unit
-        while refs:
-            [ref], _ = ray.wait(list(refs), num_returns=1)
-            unit = refs.pop(ref)
-            try:
-                result = ray.get(ref)
-            except ray.exceptions.RayError as err:
-                # the run's own exception when it raised (its remote traceback as a note, for the
-                # log); Ray's when the worker or its node died
-                cause = getattr(err, "cause", None)
-                if isinstance(cause, Exception):
-                    cause.add_note(str(err))
-                result = cause if isinstance(cause, Exception) else err
-            for job, folder in _unit_results(unit, result):
-                if isinstance(folder, Path) and not (folder / COMPLETE).is_file():
-                    folder = RuntimeError(f"its run folder {folder}, written on another node, is not complete "
-                                          "here: put --out on storage that every node sees at the same path")
-                yield job, folder
+        yield ray, dict(num_cpus=threads, max_retries=1, runtime_env={"env_vars": env})
     finally:
         if started:
             ray.shutdown()
+
+
+def _ray_results(ray, refs: dict):
+    """Yield ``(refs' value, result or exception)`` as each Ray task of ``refs`` finishes: the task's own
+    exception where it raised (its remote traceback as a note), Ray's where its worker or node died."""
+    while refs:
+        [ref], _ = ray.wait(list(refs), num_returns=1)
+        owner = refs.pop(ref)
+        try:
+            result = ray.get(ref)
+        except ray.exceptions.RayError as err:
+            cause = getattr(err, "cause", None)
+            if isinstance(cause, Exception):
+                cause.add_note(str(err))
+            result = cause if isinstance(cause, Exception) else err
+        yield owner, result
+
+
+def _call(function, cell, threads: int):
+    """``function(cell)`` on ``threads`` torch threads (a worker's or Ray task's body)."""
+    with torch_threads(threads):
+        return function(cell)
+
+
+def map_cells(function, cells: list, jobs: int = 1, backend: str = "local", address: str | None = None,
+              threads: int = 1):
+    """Yield ``(index, result or exception)`` of ``function(cell)`` for each of ``cells`` as it finishes, on
+    ``threads`` torch threads: here, one after another (``jobs`` 1); in ``jobs`` worker processes here; or, with
+    ``backend='ray'``, as Ray tasks of ``threads`` CPUs each (on this machine, or the cluster at ``address``).
+    The generic map of a study's measuring, where ``train_jobs`` is its training's: ``function`` must be a
+    module's function and each cell picklable. A cell's exception is yielded in its place; an interrupt cancels
+    the cells not started and stops the workers."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend {backend!r}: choose one of {', '.join(BACKENDS)}")
+    if not isinstance(jobs, int) or jobs < 1:
+        raise ValueError(f"jobs={jobs!r}: the worker processes, an integer >= 1")
+    if backend == "ray":
+        with _ray_session(threads, address) as (ray, options):
+            remote = ray.remote(_call).options(**options)
+            yield from _ray_results(ray, {remote.remote(function, cell, threads): i for i, cell in enumerate(cells)})
+        return
+    if jobs == 1:
+        for i, cell in enumerate(cells):
+            try:
+                result = _call(function, cell, threads)
+            except Exception as err:        # one bad cell must not end the map (KeyboardInterrupt still does)
+                result = err
+            yield i, result
+        return
+    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
+    pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context, initializer=worker_start,
+                                                  initargs=(os.getpid(),))
+    try:
+        futures = {pool.submit(in_worker, _call, function, cell, threads): i for i, cell in enumerate(cells)}
+        for future in concurrent.futures.as_completed(futures):
+            error = future.exception()
+            yield futures[future], error if error is not None else future.result()
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
 def import_ray():
