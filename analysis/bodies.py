@@ -133,22 +133,10 @@ def _paper(args, argv: list[str]) -> dict:
         raise SystemExit("--update-docs writes the protocols' settings into docs/bodies.md; drop --quick")
     seeds = list(range(args.seeds or (1 if args.quick else 5)))
     root = hnn.tasks.repo_root() / ("results-quick" if args.quick else "results")
-    runs_dir = args.runs or root / "runs"
-    runs, todo = sweep.reuse(bodies_paper.plan(bodies_paper.TASKS, seeds, runs_dir, args.quick))
-    print(f"bodies --paper: {len(runs)} runs reused, {len(todo)} to train", flush=True)
-    trained, _ = sweep.train_jobs(todo, args.jobs, runs_dir.parent / "logs", args.backend, args.ray_address,
-                                  args.group, args.device)
-    runs.update(trained)
+    tasks, runs = bodies_paper.train_and_measure(seeds, args.runs or root / "runs", args.quick, args.jobs, {
+        "backend": args.backend, "ray_address": args.ray_address, "group": args.group, "device": args.device})
     results = {"meta": {**provenance(), "seeds": seeds, "quick": args.quick,
-                        "command": portable_command(argv, "analysis/bodies.py")}, "tasks": {}}
-    for task in bodies_paper.TASKS:
-        by_seed = {seed: {label: runs[key] for label in bodies_paper.RUNGS
-                          if isinstance(runs.get(key := f"{task}/{label}/seed{seed}"), Path)} for seed in seeds}
-        by_seed = {seed: found for seed, found in by_seed.items() if found}
-        if by_seed:
-            results["tasks"][task] = {"rungs": bodies_paper.measure(task, by_seed, args.quick),
-                                      "reference": bodies_paper.reference(task, runs_dir, args.quick)}
-            print(f"  {task} measured", flush=True)
+                        "command": portable_command(argv, "analysis/bodies.py")}, "tasks": tasks}
     text = bodies_paper.table(results)
     out = args.out if args.out != DEFAULT_OUT else root / "bodies"
     publish(out, "bodies_paper", results, text, {"bodies-paper": text} if args.update_docs else None,

@@ -50,6 +50,25 @@ def plan(tasks, seeds, runs_dir: Path, quick: bool) -> list[sweep.Job]:
     return study.rung_jobs(tasks, seeds, runs_dir, quick, lambda task: RUNGS)
 
 
+def train_and_measure(seeds: list[int], runs_dir: Path, quick: bool, jobs: int, sweep_flags: dict) -> tuple[dict, dict]:
+    """Train what ``runs_dir`` lacks of every task's rungs at ``seeds``, in one sweep of ``jobs`` processes
+    (``sweep_flags``: ``train_jobs``' backend, ray_address, group and device), then measure each task's seeds:
+    ``({task: {"rungs", "reference"}}, the sweep's runs)``."""
+    runs, todo = sweep.reuse(plan(TASKS, seeds, runs_dir, quick))
+    print(f"bodies --paper: {len(runs)} runs reused, {len(todo)} to train", flush=True)
+    trained, _ = sweep.train_jobs(todo, jobs, runs_dir.parent / "logs", **sweep_flags)
+    runs.update(trained)
+    tasks = {}
+    for task in TASKS:
+        by_seed = {seed: {label: runs[key] for label in RUNGS
+                          if isinstance(runs.get(key := f"{task}/{label}/seed{seed}"), Path)} for seed in seeds}
+        by_seed = {seed: found for seed, found in by_seed.items() if found}
+        if by_seed:
+            tasks[task] = {"rungs": measure(task, by_seed, quick), "reference": reference(task, runs_dir, quick)}
+            print(f"  {task} measured", flush=True)
+    return tasks, runs
+
+
 def h_error(model, x_test: torch.Tensor, x_anchor: torch.Tensor, hamiltonian) -> float:
     """Sampling-HNNs' relative L2 error of the learned H on states ``x_test`` ``(rows, 2 N dim)``, its constant fixed
     by the true ``hamiltonian`` at ``x_anchor`` ``(1, 2 N dim)``."""
