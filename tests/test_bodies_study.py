@@ -196,3 +196,35 @@ def test_a_model_whose_paths_reach_the_lennard_jones_wall_is_a_row_that_says_so(
     # along the path) long before the step blows up
     assert "wall's range" in row["library"]["diverged"] and row["library"]["seconds_per_step"] > 0
     assert row["true"]["energy_per_body"] < 1e-2
+
+
+def test_the_distances_read_are_the_interacting_pairs_block_by_block(monkeypatch):
+    """Every pair once (blocks of 3 bodies against all: torch.pdist's distances), a chain's neighbours, a cutoff's
+    pairs closer than it; and the shares outside a fitted range count each pair once."""
+    import torch
+
+    from hnn.bodies import Bodies
+    monkeypatch.setattr(bodies, "DISTANCE_BLOCK", 3)
+    x = torch.randn(2, 4 * 8, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    q, _ = Bodies(8, 2).split(x)
+    every = torch.cat([torch.pdist(q[b]) for b in range(2)])
+    got = bodies._distances(x, Bodies(8, 2))
+    assert torch.allclose(got.sort().values, every.sort().values, rtol=0, atol=1e-14)
+    chain = torch.linalg.vector_norm(q[:, 1:] - q[:, :-1], dim=-1).reshape(-1)
+    assert torch.equal(bodies._distances(x, Bodies(8, 2, pairs="neighbours")).sort().values, chain.sort().values)
+    near = bodies._distances(x, Bodies(8, 2, pairs="cutoff", cutoff=1.5))
+    assert torch.allclose(near.sort().values, every[every < 1.5].sort().values, rtol=0, atol=1e-14)
+    reach = bodies._reach(torch.tensor([0.5, 1.0, 2.0, 4.0]), (0.8, 3.0))
+    assert reach == {"closest": 0.5, "farthest": 4.0, "below": 0.25, "beyond": 0.25}
+
+
+def test_gravity_past_its_training_disk_has_pairs_farther_than_any_fitted():
+    """The disk grows with N at the training's density: at N = 8 every start pair lies within the distances the
+    fit saw, at 64 still, and at 512 a share of the pairs lies beyond them (read by extrapolation)."""
+    results = bodies.study(sizes=(8, 512), fits=("library",), seed=0, starts=1, dt=0.01, horizon=0.01, adam_steps=0,
+                           hidden=8, scene="gravity")
+    small, large = (row["starts"] for row in results["rows"])
+    assert small["beyond"] == 0.0 and small["below"] == 0.0
+    assert large["beyond"] > 0.1 and large["farthest"] > results["settings"]["fitted_distances"][1]
+    results["meta"] = {"command": "python analysis/bodies.py --scene gravity", "cores": 2, "cpu": "test"}
+    assert "**Distances at the starts**" in bodies.table(results)

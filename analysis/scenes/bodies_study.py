@@ -14,7 +14,7 @@ import torch
 
 import hnn
 from hnn.interface import SplitField
-from hnn.models.pair import TooManyPairsError
+from hnn.models.pair import TooManyPairsError, find_pairs, inside_cutoff, separations
 from hnn.sweeps import backends
 from hnn.threads import torch_threads
 from hnn_analysis import pages
@@ -101,6 +101,7 @@ class _Truth:
             functools.partial(getattr(data_module, name), **settings)
             for name in ("dynamics", "hamiltonian", "potential_gradient"))
         self.random_config = data_module.random_config
+        self.layout = functools.partial(data_module.layout, **settings)
         # a model's path that leaves where it was fitted: diverged (hnn.DivergenceError), or into the scene's wall
         # (the Lennard-Jones task's WallError, from its H); each a row that says so
         wall = getattr(data_module, "WallError", None)
@@ -140,6 +141,33 @@ def _seconds_per_step(field, x0: torch.Tensor, dt: float) -> float:
     return statistics.median(times) / TIMED_STEPS
 
 
+# bodies whose distances to every body one block of ``torch.cdist`` holds (gravity at N = 4096: 2 states x 256 x 4096)
+DISTANCE_BLOCK = 256
+
+
+def _distances(x: torch.Tensor, bodies) -> torch.Tensor:
+    """The distances ``(pairs,)`` of the pairs that ``bodies`` interacts, over all states ``x`` ``(batch, width)``
+    (every pair block by block of bodies; a cutoff's pairs closer than it)."""
+    q, _ = bodies.split(x)
+    if bodies.pairs != "all":
+        i, j = find_pairs(q, bodies)
+        _, r = separations(q, i, j)
+        inside = inside_cutoff(r, bodies)
+        return (r if inside is None else r[inside]).reshape(-1)
+    count, parts = q.shape[1], []
+    for start in range(0, count, DISTANCE_BLOCK):
+        rows = torch.arange(start, min(start + DISTANCE_BLOCK, count))
+        later = rows[:, None] < torch.arange(count)[None, :]        # each pair once, i < j
+        parts.append(torch.cdist(q[:, rows], q)[:, later].reshape(-1))
+    return torch.cat(parts)
+
+
+def _reach(r: torch.Tensor, fitted: tuple[float, float]) -> dict:
+    """The closest and farthest pair of ``r`` and the shares of its pairs outside the ``fitted`` distances."""
+    return {"closest": float(r.min()), "farthest": float(r.max()), "below": float((r < fitted[0]).double().mean()),
+            "beyond": float((r > fitted[1]).double().mean())}
+
+
 def _errors(path: torch.Tensor, reference: torch.Tensor, energy, count: int) -> dict:
     """Energy error per body (max over t, mean over starts) and the rollout error at the horizon."""
     H = torch.cat([energy(rows) for rows in path.reshape(-1, path.shape[-1]).split(ENERGY_ROWS)]).reshape(path.shape[:2])
@@ -163,6 +191,10 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
     settings = _settings(scene)
     data_module = hnn.load_task(scene)
     data = hnn.tasks.task_config(scene, {"seed": seed, **settings}).dataset()
+    # the distances the fits saw: their interacting pairs over every training state
+    seen = _distances(torch.as_tensor(data["x"], dtype=torch.float64),
+                      _Truth(data_module, settings).layout(data_module.NUM_BODIES))
+    fitted_distances = (float(seen.min()), float(seen.max()))
     fitted, meta = {}, {}
     for fit in fits:
         model, seconds, what, args = _fit(scene, fit, data, seed, adam_steps, hidden)
@@ -170,7 +202,7 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
         print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
         meta[fit] = {"seconds": seconds, "what": what}
     common = {"scene": scene, "seed": seed, "starts": starts, "dt": dt, "horizon": horizon, "fits": list(fits),
-              "largest": largest, "models": fitted}
+              "largest": largest, "models": fitted, "fitted_distances": fitted_distances}
     # the largest N first: with several workers the longest cells start at once, and the last to finish is short
     cells = [{**common, "count": count} for count in sorted(sizes, reverse=True)]
     rows, tic = [], time.perf_counter()
@@ -186,7 +218,8 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                          "trained_on": data_module.NUM_BODIES, "method": "leapfrog", "reference_rtol": REFERENCE_RTOL,
                          "reference_divisions": SCENES[scene]["reference_divisions"], "largest": largest,
                          "timing_budget": TIMING_BUDGET, "repeats": REPEATS, "timed_steps": TIMED_STEPS,
-                         "threads": 1, "jobs": jobs, "backend": backend, "task_settings": settings}}
+                         "threads": 1, "jobs": jobs, "backend": backend, "task_settings": settings,
+                         "fitted_distances": list(fitted_distances)}}
 
 
 def _measure_size(cell: dict) -> dict:
@@ -212,7 +245,8 @@ def _measure_size(cell: dict) -> dict:
                                     atol=REFERENCE_RTOL)
     true_path, measured = _rollout(truth, x0, t, dt)
     row = {"N": count, "true": {**_errors(true_path, reference, scene_truth.hamiltonian, count),
-                                **_timed(truth, x0, dt, measured)}}
+                                **_timed(truth, x0, dt, measured)},
+           "starts": _reach(_distances(x0, scene_truth.layout(count)), cell["fitted_distances"])}
     for fit in fits:
         if count > largest.get(fit, count):     # past where the scene rolls this fit out: said by a row
             row[fit] = {"not_run": f"past N = {largest[fit]}: {SCENES[scene]['largest_why']}",
@@ -294,7 +328,17 @@ def table(results: dict) -> str:
             ratio = "" if mine["seconds_per_step"] is None else f"{mine['seconds_per_step'] / true['seconds_per_step']:.1f}x"
             lines.append(f"| {row['N']} | {errors} | {_ms(mine['seconds_per_step'], mine.get('timed'))} | "
                          f"{_ms(true['seconds_per_step'], true.get('timed'))} | {ratio} |")
-    if any(cell.get("timed") == "rollout" for row in results["rows"] for cell in row.values() if isinstance(cell, dict)):
+    if all("starts" in row for row in results["rows"]):
+        lo, hi = settings["fitted_distances"]
+        lines += ["", f"**Distances at the starts** against the fits' ({lo:.3g} to {hi:.3g}: every interacting pair of "
+                      "the training states): a fit reads a pair outside them by extrapolation, and a path that "
+                      "diverges at some N had many there", "",
+                  "| N | closest pair | farthest pair | pairs closer than fitted | pairs farther than fitted |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {row['N']} | {row['starts']['closest']:.3g} | {row['starts']['farthest']:.3g} | "
+                  f"{row['starts']['below']:.1%} | {row['starts']['beyond']:.1%} |" for row in results["rows"]]
+    if any(cell.get("timed") == "rollout" for row in results["rows"] for cell in row.values()
+           if isinstance(cell, dict) and "seconds_per_step" in cell):
         lines += ["", f"\\* timed by the rollout measured above, all its steps once: {settings['repeats']} timed "
                       f"rollouts of {settings['timed_steps']} steps would pass {settings['timing_budget']:g} s"]
     return "\n".join(lines) + "\n"
