@@ -3,6 +3,7 @@ same field agree with an exact solution to their tolerance, the equal-error inte
 synthetic curve, and the --quick path produces the rows, tables and plot."""
 import json
 import math
+import statistics
 
 import numpy as np
 import pytest
@@ -135,6 +136,32 @@ def test_comparisons_give_the_ratio_at_every_shared_level():
     assert levels == [lv for lv in LEVELS if 1e-9 <= lv <= 1e-5]            # only where both curves reach
     assert all(c["ratio"] == pytest.approx(3.0) and c["bound"] == pytest.approx(6.0) for c in found)
     assert all(math.isclose(c["peer_calls"], c["ours_calls"]) for c in found)
+
+
+def test_the_ratio_pairs_the_solvers_round_by_round():
+    """Three rounds: quiet, loaded, then the load on ours alone. Each solver's median seconds put ours at 0.55x
+    the peer's speed; round by round the peer took 1.1x ours twice, so the paired median says 1.1x, and the best
+    of ours takes the fastest of ours within each round before the median."""
+    rows = []
+    per_round = {"hnn dopri5": (1.0, 2.0, 2.0), "hnn dop853": (1.5, 3.0, 1.2), "scipy RK45": (1.1, 2.2, 1.05)}
+    for solver, seconds in per_round.items():
+        for error in (1e-3, 1e-9):
+            scale = error ** -0.2
+            rows.append({"task": "spring", "model": "hnn", "batch": 64, "solver": solver, "status": "ok",
+                         "error": error, "round_seconds": [t * scale for t in seconds],
+                         "seconds": statistics.median(seconds) * scale, "field_s": 0.5 * scale, "calls": 100 * scale,
+                         "rows": 6400 * scale})
+    found = [c for c in comparisons(rows) if c["ours"] == "hnn dopri5"]
+    assert found and all(c["peer_s"] / c["ours_s"] == pytest.approx(0.55) for c in found)
+    assert all(c["ratio"] == pytest.approx(1.1) and len(c["round_ratios"]) == 3 for c in found)
+    lines = summary_table({"rows": rows})
+    best = next(line for line in lines if "best of ours" in line)
+    # per round the best of ours: 1.1 / 1.0, 2.2 / 2.0, 1.05 / 1.2 -> 1.1, 1.1, 0.875: median 1.1
+    n = sum(1e-9 <= lv <= 1e-3 for lv in LEVELS)
+    assert f"1.10x ({n}/{n} level or faster)" in best
+    for row in rows:                                # saved without the rounds: the medians' ratio, as before
+        del row["round_seconds"]
+    assert all(c["ratio"] == pytest.approx(0.55) for c in comparisons(rows) if c["ours"] == "hnn dopri5")
 
 
 def _untrained_spring_hnn(runs):

@@ -119,7 +119,8 @@ def measure(field, x0: torch.Tensor, t: np.ndarray, rtols, repeats: int, runners
     rows = []
     for (name, rtol), got in runs.items():
         row = {"solver": name, "rtol": rtol, **got}
-        if got["status"] == "ok":
+        if got["status"] == "ok":     # each round's seconds too: the report pairs the solvers round by round
+            row["round_seconds"] = got["seconds"]
             row["seconds"], row["field_s"] = statistics.median(got["seconds"]), statistics.median(got["field_s"])
         rows.append(row)
     return rows
