@@ -216,6 +216,8 @@ def test_the_distances_read_are_the_interacting_pairs_block_by_block(monkeypatch
     assert torch.allclose(near.sort().values, every[every < 1.5].sort().values, rtol=0, atol=1e-14)
     reach = bodies._reach(torch.tensor([0.5, 1.0, 2.0, 4.0]), (0.8, 3.0))
     assert reach == {"closest": 0.5, "farthest": 4.0, "below": 0.25, "beyond": 0.25}
+    # a few pairs of millions are said, not rounded away
+    assert [bodies._share(v) for v in (0.0, 3e-6, 0.0005, 0.25)] == ["0.0%", "<0.1%", "0.1%", "25.0%"]
 
 
 def test_gravity_past_its_training_disk_has_pairs_farther_than_any_fitted():

@@ -294,6 +294,11 @@ def _ms(seconds: float | None, timed: str | None = None) -> str:
     return "n/a" if seconds is None else f"{seconds * 1e3:.3f}" + ("*" if timed == "rollout" else "")
 
 
+def _share(value: float) -> str:
+    """A share of pairs as a percentage; a few pairs of millions, which one decimal would print as 0.0%, as <0.1%."""
+    return "<0.1%" if 0 < value < 0.0005 else f"{value:.1%}"
+
+
 def _reference(settings: dict) -> str:
     if settings.get("reference_divisions"):
         return (f"yoshida4 on the true forces at dt = {settings['dt'] / settings['reference_divisions']:g}")
@@ -336,7 +341,7 @@ def table(results: dict) -> str:
                   "| N | closest pair | farthest pair | pairs closer than fitted | pairs farther than fitted |",
                   "|---|---|---|---|---|"]
         lines += [f"| {row['N']} | {row['starts']['closest']:.3g} | {row['starts']['farthest']:.3g} | "
-                  f"{row['starts']['below']:.1%} | {row['starts']['beyond']:.1%} |" for row in results["rows"]]
+                  f"{_share(row['starts']['below'])} | {_share(row['starts']['beyond'])} |" for row in results["rows"]]
     if any(cell.get("timed") == "rollout" for row in results["rows"] for cell in row.values()
            if isinstance(cell, dict) and "seconds_per_step" in cell):
         lines += ["", f"\\* timed by the rollout measured above, all its steps once: {settings['repeats']} timed "
