@@ -108,14 +108,22 @@ def train_in_pool(units: list[list], n_jobs: int, threads: int):
     """Yield ``(job, folder or exception)`` as ``n_jobs`` worker processes of ``threads`` threads
     finish them; on an interrupt (or any exception) the runs not started are cancelled and the
     workers stopped, not waited for."""
+    for unit, result in _pool_results([(unit, *_submit(unit), threads) for unit in units], n_jobs):
+        yield from _unit_results(unit, result)
+
+
+def _pool_results(calls: list[tuple], n_jobs: int):
+    """Yield ``(owner, result or exception)`` as ``n_jobs`` worker processes finish each ``(owner, function,
+    *arguments)`` of ``calls``; on an interrupt (or any exception) the calls not started are cancelled and the
+    workers stopped (``hnn.sweeps.stopping``), not waited for."""
     context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
     pool = concurrent.futures.ProcessPoolExecutor(n_jobs, mp_context=context, initializer=worker_start,
                                                   initargs=(os.getpid(),))
     try:
-        futures = {pool.submit(in_worker, *_submit(unit), threads): unit for unit in units}
+        futures = {pool.submit(in_worker, *call): owner for owner, *call in calls}
         for future in concurrent.futures.as_completed(futures):
             error = future.exception()
-            yield from _unit_results(futures[future], error if error is not None else future.result())
+            yield futures[future], error if error is not None else future.result()
     except BaseException:
         stop_pool(pool)
         raise
@@ -214,18 +222,7 @@ def map_cells(function, cells: list, jobs: int = 1, backend: str = "local", addr
                 result = err
             yield i, result
         return
-    context = multiprocessing.get_context("spawn")     # a fresh interpreter: no torch state copied by fork
-    pool = concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context, initializer=worker_start,
-                                                  initargs=(os.getpid(),))
-    try:
-        futures = {pool.submit(in_worker, _call, function, cell, threads): i for i, cell in enumerate(cells)}
-        for future in concurrent.futures.as_completed(futures):
-            error = future.exception()
-            yield futures[future], error if error is not None else future.result()
-    except BaseException:
-        stop_pool(pool)
-        raise
-    pool.shutdown()
+    yield from _pool_results([(i, _call, function, cell, threads) for i, cell in enumerate(cells)], jobs)
 
 
 def import_ray():
