@@ -164,6 +164,25 @@ def test_the_ratio_pairs_the_solvers_round_by_round():
     assert all(c["ratio"] == pytest.approx(0.55) for c in comparisons(rows) if c["ours"] == "hnn dopri5")
 
 
+def test_the_best_of_ours_says_which_slower_levels_the_rounds_cannot_separate():
+    """Three rounds at two error curves: ours behind scipy at the median (0.95x) but ahead in one round, so that
+    level is one the rounds cannot separate; at 0.9x in every round it is slower, and no bracket says otherwise."""
+    def rows_for(peer_rounds):
+        rows = []
+        for solver, seconds in (("hnn dopri5", (1.0, 1.0, 1.0)), ("scipy RK45", peer_rounds)):
+            for error in (1e-3, 1e-9):
+                scale = error ** -0.2
+                rows.append({"task": "spring", "model": "hnn", "batch": 64, "solver": solver, "status": "ok",
+                             "error": error, "round_seconds": [t * scale for t in seconds],
+                             "seconds": statistics.median(seconds) * scale, "field_s": 0.5 * scale,
+                             "calls": 100 * scale, "rows": 6400 * scale})
+        return next(line for line in summary_table({"rows": rows}) if "best of ours" in line)
+
+    n = sum(1e-9 <= lv <= 1e-3 for lv in LEVELS)
+    assert f"0.95x (0/{n} level or faster; {n} the rounds cannot separate)" in rows_for((0.95, 1.05, 0.9))
+    assert f"0.90x (0/{n} level or faster)" in rows_for((0.9, 0.9, 0.9))
+
+
 def _untrained_spring_hnn(runs):
     config = hnn.tasks.task_config("spring", {"model": "hnn", "seed": 0, "save_dir": str(runs)})
     saved = {**config.to_dict(), "kind": config.kind, "dataset_cache_key": None}

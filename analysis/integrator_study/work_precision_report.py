@@ -138,7 +138,9 @@ def summary_table(results: dict) -> list[str]:
 
 
 def _best_row(comps: list[dict], peers: list[str], task: str, model: str, batch: int) -> str:
-    """At each level, the fastest of ours there against each peer (``BEST``): the user's pick of ours."""
+    """At each level, the fastest of ours there against each peer (``BEST``): the user's pick of ours, with how
+    many levels it is level or faster at (the rounds' median ratio >= 1) and, of the others, how many the rounds
+    cannot separate from level (some round >= 1): only the rest are slower in every round."""
     cells = []
     for peer in peers:
         by_level: dict = {}
@@ -146,18 +148,23 @@ def _best_row(comps: list[dict], peers: list[str], task: str, model: str, batch:
             if (c["task"], c["model"], c["batch"], c["peer"]) == (task, model, batch, peer):
                 by_level.setdefault(c["level"], []).append(c)
         best = {level: _best(found) for level, found in by_level.items()}
-        level_up = sum(r >= 1.0 for r in best.values())
-        cells.append(f"{_span(list(best.values()))} ({level_up}/{len(best)} level or faster)" if best else "-")
+        level_up = sum(median >= 1.0 for median, _ in best.values())
+        split = sum(median < 1.0 <= top for median, top in best.values())
+        words = f"{level_up}/{len(best)} level or faster" + (f"; {split} the rounds cannot separate" if split else "")
+        cells.append(f"{_span([median for median, _ in best.values()])} ({words})" if best else "-")
     return f"| {task} | {model} | {batch} | **{BEST}** | " + " | ".join(cells) + " |"
 
 
-def _best(found: list[dict]) -> float:
+def _best(found: list[dict]) -> tuple[float, float]:
     """The fastest of ours at one level against one peer: in each round the largest ratio of ours that round,
-    then their median (a user who times each of ours picks the fastest); without rounds, the largest ratio."""
+    then ``(their median, their largest)`` (a user who times each of ours picks the fastest); without rounds,
+    the largest ratio, twice."""
     counts = {len(c["round_ratios"]) for c in found}
     if len(counts) != 1 or not counts.pop():
-        return max(c["ratio"] for c in found)
-    return statistics.median(max(per) for per in zip(*(c["round_ratios"] for c in found)))
+        top = max(c["ratio"] for c in found)
+        return top, top
+    per_round = [max(per) for per in zip(*(c["round_ratios"] for c in found))]
+    return statistics.median(per_round), max(per_round)
 
 
 def _ours(solver: str) -> str:
@@ -242,7 +249,8 @@ def markdown(results: dict, detail: bool = True) -> str:
               "another at each tolerance; " if rounds(results["rows"]) else "")
     lines = [header(results), "", f"**Seconds at equal error, peer / ours** ({paired}min-max over the error levels both "
              f"reach; in brackets, the levels where ours is at least {GOAL:g}x faster; {BEST}: at each level the fastest of "
-             "ours there, in brackets the levels where it is at least as fast as the peer)", "", *summary_table(results)]
+             "ours there, in brackets the levels where it is at least as fast as the peer and, of the rest, those where "
+             "the rounds cannot separate it from level: some rounds faster, some slower)", "", *summary_table(results)]
     fields = list(dict.fromkeys((r["task"], r["model"]) for r in results["rows"]))
     for task, model in (fields if detail else [f for f in fields if f == ("spring", "hnn")]):
         lines += ["", f"**{task} {model}: seconds at each error level** (each solver on its own curve; the last "
