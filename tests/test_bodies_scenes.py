@@ -26,15 +26,10 @@ def test_the_scenes_of_bodies_are_a_page_of_their_own_and_the_paper_study_is_unc
     assert len(set(sections)) == len(sections)
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--scenes", "gravity", "spring"], "mixes the scenes of the pages"),
-    (["--scenes", "gravity", "lattice", "--update-docs"], "not all of that page's scenes"),
-    (["--scenes", "spring", "--update-docs"], "not all of that page's scenes"),
-])
-def test_a_study_writes_one_pages_cards_whole_or_says_the_fix(argv, words, capsys):
+def test_a_study_writes_one_pages_cards_or_says_the_fix(capsys):
     with pytest.raises(SystemExit):
-        scene_study.main(argv)
-    assert words in capsys.readouterr().err
+        scene_study.main(["--scenes", "gravity", "spring"])
+    assert "mixes the scenes of the pages" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("task", BODY_SCENES)

@@ -12,24 +12,43 @@ from pathlib import Path
 import hnn
 from hnn.io import atomic_write
 from hnn_analysis import commands, pages
+from hnn_analysis.scenes import scene_record
 from hnn_analysis.scenes.scene_common import PAGES
 from hnn_analysis.scenes.scene_figure import pareto_figure
 from hnn_analysis.scenes.scene_tables import guide, markdown
 
 
-def write(results: dict, out: Path, update_docs: bool, page: str = "scenes") -> None:
-    """The outputs of a study of one page's scenes (``scene_common.PAGES``: its files' names, its sections)."""
+def write(results: dict, out: Path, update_docs: bool, page: str = "scenes", record_path: Path | None = None) -> None:
+    """The outputs of a study of one page's scenes (``scene_common.PAGES``: its files' names, its sections); with
+    ``update_docs``, the sitting's scenes go into the page's record (``scene_record``, at ``record_path``: default
+    docs/) and the page is written from the record once it holds every scene of the page."""
     results["meta"]["page"] = page
-    text, names = markdown(results), PAGES[page]
-    texts = {"scenes": text, "model-guide": guide(results) if page == "scenes" else None, "bodies-scenes": text}
-    commands.publish(out, names["stem"], results, text,
-                     {name: texts[name] for name in names["sections"]} if update_docs else {}, seeds_of(results))
+    names = PAGES[page]
+    page_results = None
+    if update_docs:
+        record = scene_record.load(page, record_path)
+        page_results = scene_record.merge(record, results)
+        print(f"recorded {', '.join(results['scenes'])} in {scene_record.save(page, record, record_path)}")
+        left = scene_record.missing(record)
+        if left:
+            print(f"not writing the {page} page yet: the record has no numbers of {', '.join(left)}; study them "
+                  f"(python analysis/scene_study.py --scenes {' '.join(left)} --jobs 2 --update-docs) and the page "
+                  "is written from the record")
+            page_results = None
+    commands.publish(out, names["stem"], results, markdown(results))
+    if page_results is not None:
+        texts = {"scenes": markdown(page_results), "model-guide": guide(page_results) if page == "scenes" else None,
+                 "bodies-scenes": markdown(page_results)}
+        for name in names["sections"]:
+            print(f"updated the {name} section of {pages.update_section(name, texts[name], seeds_of(page_results))}")
     figure = out / "figures" / names["figure"]
     pareto_figure(results, figure)
     print(f"wrote {out / (names['stem'] + '.json')}, {out / (names['stem'] + '.md')}, {figure}")
-    if update_docs and figure.exists():
+    if page_results is not None:       # the page's figure: every scene of the record, drawn here, then copied whole
+        drawn = out / "figures" / f"page-{figure.name}"
+        pareto_figure(page_results, drawn)
         target = hnn.tasks.repo_root() / "docs" / "figures" / figure.name
-        atomic_write(target, lambda tmp: shutil.copyfile(figure, tmp))
+        atomic_write(target, lambda tmp: shutil.copyfile(drawn, tmp))
         print(f"updated {target}")
 
 
