@@ -1,7 +1,7 @@
 """The scene study's record: each scene's measured numbers, kept over sittings, so that a page's cards can be
 regenerated a few scenes at a time.
 
-    record = load("scenes")               # docs/scene_study-record.json (committed), or an empty record
+    record = load("scenes")               # its file in docs/ (path(page), committed), or an empty record
     page = merge(record, results)         # the sitting's scenes replace theirs; the results of the whole page
     save("scenes", record)
 

@@ -38,7 +38,7 @@ their files ``scene_study_bodies.*`` and ``figures/bodies-pareto.png``.
 
 A page's whole study is longer than a sitting (docs/scenes.md: over two hours of training and one of measuring on
 2 cores), so ``--update-docs`` keeps each scene's numbers in the page's record (``scene_record``,
-docs/scene_study-record.json, committed) and writes the page from it once every scene is there: study a page a
+its file in docs/, committed) and writes the page from it once every scene is there: study a page a
 few scenes at a time, and its stamp names each sitting.
 """
 from __future__ import annotations
@@ -79,7 +79,7 @@ def _parser() -> argparse.ArgumentParser:
     sweep_flags.add_backend_flags(p)
     commands.add_flags(p, update_docs="write docs/scenes.md and the README's model guide (full settings only; with "
                                       "--scenes gravity lattice lj, docs/bodies.md's scene cards); with part of a page's "
-                                      "scenes, put them in its record (docs/scene_study-record.json: each scene's last "
+                                      "scenes, put them in its record (a file in docs/, committed: each scene's last "
                                       "sitting) and write the page from the record once it holds them all; with --data, "
                                       "the README's row of that file")
     measured_inputs.add_flags(p)
