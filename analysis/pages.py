@@ -49,8 +49,9 @@ REFRESH = {"headline": "python analysis/reproduce.py --seeds 5 --jobs 2 --update
            "energy-drift": "python analysis/integrator_study/energy_drift.py --update-docs",
            "default-tolerances": "python analysis/integrator_study/tolerances.py --update-docs",
            "work-precision": "python analysis/integrator_study/work_precision.py --update-docs",
-           "scenes": "python analysis/scene_study.py --jobs 2 --update-docs",
-           "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs",
+           "scenes": "python analysis/scene_study.py --jobs 2 --update-docs (or a few scenes a sitting, --scenes ...: "
+                     "docs/scene_study-record.json keeps the others')",
+           "model-guide": "python analysis/scene_study.py --jobs 2 --update-docs (or a few scenes a sitting, --scenes ...)",
            "measured-guide": "python analysis/scene_study.py --data FILE ... --jobs 2 --update-docs (docs/measured.md)",
            "peers": "python analysis/peers.py --jobs 2 --update-docs",
            "stress": "python analysis/stress.py --update-docs",

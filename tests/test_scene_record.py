@@ -18,7 +18,7 @@ def _sitting(scenes, commit, date, **changed):
             "scenes": {task: {"card": {"n_seeds": 3}, "commit": commit} for task in scenes}}
 
 
-def test_two_sittings_make_one_page_in_its_order_with_each_sitting_named_oldest_first():
+def test_two_sittings_make_one_page_in_its_order_with_each_sitting_named_oldest_first(tmp_path):
     record = scene_record.load("scenes", scene_record.path("scenes").with_name("no-such-record.json"))
     later, first = PAGE[:2], PAGE[2:]
     scene_record.merge(record, _sitting(first, "aaaaaaa", "2026-12-07"))
@@ -30,8 +30,10 @@ def test_two_sittings_make_one_page_in_its_order_with_each_sitting_named_oldest_
     # the stale-page check reads the first commit a stamp names: the oldest sitting's
     assert text.index("commit aaaaaaa") < text.index("commit bbbbbbb")
     assert f": {', '.join(later)}. Wall time" in text and "over 2 sittings" in text
-    # the saved record reads back as the same page
-    assert scene_record.page_results(json.loads(json.dumps(record)))["scenes"] == json.loads(json.dumps(page["scenes"]))
+    # the saved record (a compact line per sitting and per scene) reads back as the same record and page
+    saved = scene_record.load("scenes", scene_record.save("scenes", record, tmp_path / "record.json"))
+    assert saved == json.loads(json.dumps(record))
+    assert scene_record.page_results(saved)["scenes"] == json.loads(json.dumps(page["scenes"]))
 
 
 def test_a_scene_studied_again_replaces_its_numbers_and_a_sitting_left_with_none_is_dropped():

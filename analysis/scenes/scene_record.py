@@ -19,7 +19,7 @@ import json
 from pathlib import Path
 
 import hnn
-from hnn.io import write_json
+from hnn.io import atomic_write
 from hnn_analysis.scenes.scene_common import PAGES, scenes
 
 # what every sitting of one page must share: the cards and the tables compare scenes on them
@@ -40,8 +40,16 @@ def load(page: str, where: Path | None = None) -> dict:
 
 
 def save(page: str, record: dict, where: Path | None = None) -> Path:
+    """Write ``record`` atomically: a line per sitting and per scene, each compact (half the bytes of indented
+    JSON, and a sitting's diff touches its scenes' lines alone)."""
     where = where or path(page)
-    write_json(where, record)
+
+    def compact(value) -> str:
+        return json.dumps(value, separators=(",", ":"))
+    lines = ["{", f'"page": {compact(record["page"])},', f'"dhnn": {compact(record.get("dhnn"))},', '"sittings": [',
+             ",\n".join(compact(s) for s in record["sittings"]), '],', '"scenes": {',
+             ",\n".join(f"{compact(task)}: {compact(entry)}" for task, entry in record["scenes"].items()), "}}"]
+    atomic_write(where, lambda tmp: Path(tmp).write_text("\n".join(lines) + "\n"))
     return where
 
 
