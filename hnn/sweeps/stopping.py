@@ -97,8 +97,8 @@ class interruptible:
     """While a sweep trains: SIGTERM interrupts it as Ctrl-C does, and either ends the command with
     one line (what finished and stays, what was not kept) and exit code 128 + the signal."""
 
-    def __init__(self, runs: dict, total: int):
-        self.runs, self.total, self.previous = runs, total, None
+    def __init__(self, runs: dict, total: int, jobs=()):
+        self.runs, self.total, self.jobs, self.previous = runs, total, jobs, None
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -110,6 +110,12 @@ class interruptible:
             signal.signal(signal.SIGTERM, self.previous)
         if kind is KeyboardInterrupt or kind is Interrupted:
             signum = err.signum if kind is Interrupted else signal.SIGINT
+            from ..runs import find_run     # here: the sweep's modules import this one
+            # the workers are stopped by now: a run one of them finished after the last result came back is on
+            # disk whole (a run folder is written atomically) and counts as kept
+            for job in self.jobs:
+                if job.key not in self.runs and (found := find_run(job.config)) is not None:
+                    self.runs[job.key] = found
             kept = sum(isinstance(run, Path) for run in self.runs.values())
             print(f"\ninterrupted ({signal.Signals(signum).name}): kept the {kept} finished run"
                   f"{'' if kept == 1 else 's'}; the {self.total - len(self.runs)} not finished were cancelled or "
