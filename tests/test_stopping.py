@@ -104,3 +104,22 @@ def test_workers_stop_when_the_sweep_is_killed_outright(tmp_path):
         time.sleep(0.2)
     assert not any(_alive(pid) for pid in workers), "an orphaned worker trains on"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "a half-written folder was left"
+
+
+def test_an_interrupt_counts_a_run_a_worker_finished_as_it_was_stopped(tmp_path, monkeypatch, capsys):
+    """A worker can finish its run between the sweep's last result and its stop: the folder is whole on disk, so
+    the interrupt's line counts it as kept and not among the runs that left no folder."""
+    from types import SimpleNamespace
+
+    import hnn.runs
+    from hnn.sweeps.stopping import interruptible
+    folder = tmp_path / "finished-as-stopped"
+    folder.mkdir()
+    jobs = [SimpleNamespace(key="a", config="A"), SimpleNamespace(key="b", config="B")]
+    monkeypatch.setattr(hnn.runs, "find_run", lambda config: folder if config == "B" else None)
+    runs = {}
+    with pytest.raises(SystemExit):
+        with interruptible(runs, len(jobs), jobs):
+            raise KeyboardInterrupt
+    assert runs == {"b": folder}
+    assert "kept the 1 finished run; the 1 not finished" in capsys.readouterr().err
