@@ -119,7 +119,7 @@ def test_an_interrupt_counts_a_run_a_worker_finished_as_it_was_stopped(tmp_path,
     monkeypatch.setattr(hnn.runs, "find_run", lambda config: folder if config == "B" else None)
     runs = {}
     with pytest.raises(SystemExit):
-        with interruptible(runs, len(jobs), jobs):
+        with interruptible(runs, jobs):
             raise KeyboardInterrupt
     assert runs == {"b": folder}
     assert "kept the 1 finished run; the 1 not finished" in capsys.readouterr().err

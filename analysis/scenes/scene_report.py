@@ -37,8 +37,10 @@ def write(results: dict, out: Path, update_docs: bool, page: str = "scenes", rec
             page_results = None
     commands.publish(out, names["stem"], results, markdown(results))
     if page_results is not None:
-        texts = {"scenes": markdown(page_results), "model-guide": guide(page_results) if page == "scenes" else None,
-                 "bodies-scenes": markdown(page_results)}
+        table = markdown(page_results)
+        texts = {"scenes": table, "bodies-scenes": table}
+        if "model-guide" in names["sections"]:
+            texts["model-guide"] = guide(page_results)
         for name in names["sections"]:
             print(f"updated the {name} section of {pages.update_section(name, texts[name], seeds_of(page_results))}")
     figure = out / "figures" / names["figure"]

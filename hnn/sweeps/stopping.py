@@ -97,8 +97,8 @@ class interruptible:
     """While a sweep trains: SIGTERM interrupts it as Ctrl-C does, and either ends the command with
     one line (what finished and stays, what was not kept) and exit code 128 + the signal."""
 
-    def __init__(self, runs: dict, total: int, jobs=()):
-        self.runs, self.total, self.jobs, self.previous = runs, total, jobs, None
+    def __init__(self, runs: dict, jobs):
+        self.runs, self.jobs, self.previous = runs, jobs, None
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -118,7 +118,7 @@ class interruptible:
                     self.runs[job.key] = found
             kept = sum(isinstance(run, Path) for run in self.runs.values())
             print(f"\ninterrupted ({signal.Signals(signum).name}): kept the {kept} finished run"
-                  f"{'' if kept == 1 else 's'}; the {self.total - len(self.runs)} not finished were cancelled or "
+                  f"{'' if kept == 1 else 's'}; the {len(self.jobs) - len(self.runs)} not finished were cancelled or "
                   "stopped, leaving no run folder (rerunning the same command trains only those, each run that "
                   "was in progress from its last training checkpoint)", file=sys.stderr, flush=True)
             raise SystemExit(128 + signum)

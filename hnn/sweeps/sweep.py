@@ -281,7 +281,7 @@ def train_jobs(jobs: list[Job], n_jobs: int, log_dir: Path, backend: str = "loca
     if group not in GROUP_MODES:
         raise ValueError(f"group {group!r}: choose one of {', '.join(GROUP_MODES)}")
     # one bar of the sweep's steps where someone watches (hnn.progress.Ticker); its runs say their own lines
-    with torch_threads(threads if in_process else None), interruptible(done, len(jobs), jobs), \
+    with torch_threads(threads if in_process else None), interruptible(done, jobs), \
             Ticker(sum(job.steps for job in jobs), "sweep", lines=False) as tick:
         data, data_seconds, skipped = _build_datasets(jobs, tick)
         done.update({job.key: skipped[job.task] for job in jobs if job.task in skipped})
