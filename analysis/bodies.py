@@ -1,7 +1,8 @@
 """Fitted on a few, run on many: the pair kind fitted on a chain of 8 springs, rolled out on chains of N = 8 ... 4096;
 and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols over seeds.
 
-    python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits (about a minute)
+    python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits, the sampled
+                                                          # fit's table (about a minute)
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
     python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity to N = 4096 (about 20
                                                               # minutes, one thread); section bodies-gravity
@@ -17,7 +18,9 @@ springs, experiment-gravity, a softened rotating disk, or experiment-lj, a Lenna
 task settings, its cutoff 2.5: 8 bodies, the dataset of ``--seed``) by each of
 ``--fits``: ``library`` (the radial library, one solve),
 ``swim`` (sampled radial neurons, one solve) and ``adam`` (an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of
-batch 200). The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
+batch 200); ``swim+table`` and ``adam+table`` are those fits' models with V tabulated
+(``hnn.models.pair_table.TabulatedPair`` over the fitted distances' closest pair to twice their farthest, slope
+error 1e-7 of the network's): the same paths to that error at about the true forces' cost a step. The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
 states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
 leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``,
 the cluster's pairs within the cutoff by a cell list), and the reference: DOP853 at rtol 1e-10 (gravity and the
@@ -72,8 +75,8 @@ def main(argv=None) -> dict:
     p.add_argument("--sizes", type=int, nargs="+",
                    help="body counts N (default: the scene's, " + ", ".join(f"{name} {scene['sizes']}" for name, scene
                                                                           in SCENES.items()) + f"; --quick {QUICK_SIZES})")
-    p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted (default {FITS}; --quick "
-                                                          f"{QUICK_FITS})")
+    p.add_argument("--fits", nargs="+", choices=FITS, help=f"how the pair kind is fitted, X+table: fit X's model "
+                   f"tabulated (default {FITS}; --quick {QUICK_FITS})")
     p.add_argument("--scene", choices=SCENES, default="lattice",
                    help="the scene (its task): the chain of springs, gravity, or the Lennard-Jones cluster cut off "
                         "at 2.5 (default lattice)")

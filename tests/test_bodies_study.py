@@ -230,3 +230,21 @@ def test_gravity_past_its_training_disk_has_pairs_farther_than_any_fitted():
     assert large["beyond"] > 0.1 and large["farthest"] > results["settings"]["fitted_distances"][1]
     results["meta"] = {"command": "python analysis/bodies.py --scene gravity", "cores": 2, "cpu": "test"}
     assert "**Distances at the starts**" in bodies.table(results)
+
+
+def test_a_fits_table_rolls_out_the_fits_paths_and_says_how_it_was_made():
+    results = bodies.study(sizes=(8, 16), fits=("swim", "swim+table"), seed=0, starts=2, dt=0.1, horizon=1.0,
+                           adam_steps=0, hidden=16)
+    for row in results["rows"]:
+        network, table = row["swim"], row["swim+table"]
+        # the table's slopes are within TABLE_TOL (1e-7) of the network's: over 10 leapfrog steps the two paths part
+        # by about that much of their size, far below the leapfrog's own error at dt = 0.1 that both errors carry
+        assert table["rollout"] == pytest.approx(network["rollout"], rel=1e-4)
+        assert table["energy_per_body"] == pytest.approx(network["energy_per_body"], rel=1e-4)
+        assert table["seconds_per_step"] > 0
+    made = results["fits"]["swim+table"]
+    assert "as a table of" in made["what"] and made["max_error"] <= bodies.TABLE_TOL
+    results["meta"] = {"command": "python analysis/bodies.py --quick", "cores": 2, "cpu": "test"}
+    assert "**swim+table**" in bodies.table(results) and "s to tabulate)" in bodies.table(results)
+    with pytest.raises(ValueError, match=r"tabulates the swim fit's model: study swim too"):
+        bodies.study(sizes=(8,), fits=("swim+table",), seed=0, starts=1, dt=0.1, horizon=0.5, adam_steps=0, hidden=8)

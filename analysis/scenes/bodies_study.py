@@ -15,6 +15,7 @@ import torch
 import hnn
 from hnn.interface import SplitField
 from hnn.models.pair import TooManyPairsError, find_pairs, inside_cutoff, separations
+from hnn.models.pair_table import TabulatedPair
 from hnn.sweeps import backends
 from hnn.threads import torch_threads
 from hnn_analysis import pages
@@ -39,8 +40,9 @@ SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "sect
                       "dt": 0.05, "horizon": 10.0, "starts": 4, "reference_divisions": None, "sizes": FULL_SIZES},
           "gravity": {"bodies": "{n} bodies under softened gravity (a rotating disk)", "section": "bodies-gravity",
                       "dt": 0.01, "horizon": 0.5, "starts": 2, "reference_divisions": 4, "sizes": FULL_SIZES,
-                      "largest": {"swim": 512, "adam": 512},
-                      "largest_why": "its field call there takes a minute or more on one thread (--sizes runs it)"},
+                      "largest": {"swim": 512, "adam": 512, "swim+table": 512, "adam+table": 512},
+                      "largest_why": "its field call there takes a minute or more on one thread (a table's too: 90% "
+                                     "of the pairs lie past its range, where it reads the network; --sizes runs it)"},
           # the cluster cut off at r_c = 2.5 (``settings``: the task's own settings, given to its config and to its true
           # functions alike), so a step is O(N) by a cell list: every fit runs to N = 4096. The task's start law fills
           # a patch of its triangular lattice at one spacing whatever N, so a cluster of 4096 has the training's
@@ -54,8 +56,16 @@ SCENES = {"lattice": {"bodies": "a chain of {n} bodies joined by springs", "sect
           "lj": {"bodies": "a Lennard-Jones cluster of {n} bodies", "section": "bodies-lj", "dt": 0.01,
                  "horizon": 2.0, "starts": 2, "reference_divisions": 4, "sizes": FULL_SIZES,
                  "settings": {"cutoff": 2.5}}}
-FITS = ("library", "swim", "adam")
-QUICK_FITS = ("library", "swim")
+FITS = ("library", "swim", "adam", "swim+table", "adam+table")
+QUICK_FITS = ("library", "swim", "swim+table")
+# a fit "X+table" is fit X's model with its V(r) tabulated (hnn.models.pair_table.TabulatedPair): no fit of its own.
+# Its range: the fitted distances' closest pair to TABLE_REACH times their farthest, a pair outside it reading the
+# network itself. Not farther: past the fitted distances sampled tanh neurons saturate, V' tends to 0 there, and a
+# table mostly of that tail would hold its slope error to the tail's tiny median slope (hnn.models.pair_table), which
+# the rounding of V over the knots cannot reach. Its slope error TABLE_TOL, far below the fits' own errors against
+# the true forces (1e-4 and up)
+TABLE_REACH = 2.0
+TABLE_TOL = 1e-7
 REPEATS = 5             # timed rollouts per N (the median counts)
 TIMED_STEPS = 20        # leapfrog steps of each timed rollout
 # seconds the timed rollouts of one field at one N may take: past it (a step of seconds: gravity at N = 4096) the
@@ -195,12 +205,22 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
     seen = _distances(torch.as_tensor(data["x"], dtype=torch.float64),
                       _Truth(data_module, settings).layout(data_module.NUM_BODIES))
     fitted_distances = (float(seen.min()), float(seen.max()))
-    fitted, meta = {}, {}
+    fitted, meta, models = {}, {}, {}
     for fit in fits:
+        if fit.endswith("+table"):
+            source = fit.removesuffix("+table")
+            if source not in fits:
+                raise ValueError(f"fit {fit!r} tabulates the {source} fit's model: study {source} too (--fits ... "
+                                 f"{source} {fit})")
+            continue
         model, seconds, what, args = _fit(scene, fit, data, seed, adam_steps, hidden)
         fitted[fit] = (args, {k: v.detach() if torch.is_tensor(v) else v for k, v in model.state_dict().items()})
+        models[fit] = model
         print(f"fitted {fit} on N = {data_module.NUM_BODIES} in {seconds:.2f} s: {what}", flush=True)
         meta[fit] = {"seconds": seconds, "what": what}
+    for fit in (f for f in fits if f.endswith("+table")):
+        meta[fit] = _table_meta(models[fit.removesuffix("+table")], fitted_distances)
+        print(f"{fit}: {meta[fit]['what']}", flush=True)
     common = {"scene": scene, "seed": seed, "starts": starts, "dt": dt, "horizon": horizon, "fits": list(fits),
               "largest": largest, "models": fitted, "fitted_distances": fitted_distances}
     # the largest N first: with several workers the longest cells start at once, and the last to finish is short
@@ -222,6 +242,25 @@ def study(sizes, fits, seed: int, starts: int, dt: float, horizon: float, adam_s
                          "fitted_distances": list(fitted_distances)}}
 
 
+def _table(model, fitted_distances) -> TabulatedPair:
+    """``model``'s V tabulated over the fitted distances' closest pair to ``TABLE_REACH`` times their farthest."""
+    lo, hi = fitted_distances
+    return TabulatedPair(model, (lo, TABLE_REACH * hi), tol=TABLE_TOL)
+
+
+def _table_meta(model, fitted_distances) -> dict:
+    """How a fit's table was made (its seconds to build, knots, range and slope error), or why it was refused."""
+    tic = time.perf_counter()
+    try:
+        made = _table(model, fitted_distances)
+    except ValueError as err:
+        return {"seconds": time.perf_counter() - tic, "what": f"refused: {err}", "refused": str(err)}
+    lo, hi = made.r_range
+    return {"seconds": time.perf_counter() - tic, "knots": made.knots, "max_error": made.max_error,
+            "what": f"its V(r) as a table of {made.knots} knots over r = {lo:.3g} to {hi:.3g}, cubic in log r; "
+                    f"slope error at most {made.max_error:.1e} of the network's (tol {TABLE_TOL:g})"}
+
+
 def _measure_size(cell: dict) -> dict:
     """One N's row (``study``'s cell): the true forces' and each fit's energy and rollout errors against the
     reference, and their seconds per step; each fit rebuilt from its ``(args, state_dict)``."""
@@ -233,6 +272,12 @@ def _measure_size(cell: dict) -> dict:
         model = hnn.kinds.model_from_args(args)
         model.load_state_dict(state)
         models[fit] = model.eval()
+    tables = {}
+    for fit in (f for f in fits if f.endswith("+table")):
+        try:
+            models[fit] = _table(models[fit.removesuffix("+table")], cell["fitted_distances"])
+        except ValueError as err:
+            tables[fit] = str(err)
     dt, divisions = cell["dt"], SCENES[scene]["reference_divisions"]
     t = np.linspace(0.0, cell["horizon"], int(round(cell["horizon"] / dt)) + 1)
     rng = np.random.RandomState(cell["seed"] + 1000)
@@ -251,6 +296,9 @@ def _measure_size(cell: dict) -> dict:
         if count > largest.get(fit, count):     # past where the scene rolls this fit out: said by a row
             row[fit] = {"not_run": f"past N = {largest[fit]}: {SCENES[scene]['largest_why']}",
                         "seconds_per_step": None}
+            continue
+        if fit in tables:                       # a table its tolerance refused: the reason
+            row[fit] = {"not_run": f"no table: {tables[fit]}", "seconds_per_step": None}
             continue
         try:
             path, measured = _rollout(models[fit].field, x0, t, dt)
@@ -318,7 +366,8 @@ def table(results: dict) -> str:
              f"{settings['starts']} starts by leapfrog at dt = {settings['dt']:g} to t = {settings['horizon']:g}, "
              f"float64; reference {_reference(settings)}.", ""]
     for fit, how in results["fits"].items():
-        lines.append(f"- `{fit}` ({how['seconds']:.2f} s to fit): {how['what']}")
+        made = "to tabulate" if fit.endswith("+table") else "to fit"
+        lines.append(f"- `{fit}` ({how['seconds']:.2f} s {made}): {how['what']}")
     for fit in settings["fits"]:
         lines += ["", f"**{fit}**", "",
                   "| N | energy error / body | true forces' | rollout error | true forces' | ms / step | true forces' "

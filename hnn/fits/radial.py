@@ -177,6 +177,8 @@ class FittedPair(Model):
         return q, i, j, d, r, inside_cutoff(r, self.bodies)
 
     def _inverse_masses(self, count: int) -> torch.Tensor:
+        if self.bodies.species is None:     # all alike: one mass, no labels to build at every field call
+            return self.inverse_mass.expand(count)
         return self.inverse_mass[torch.tensor(self.bodies.labels(count))]
 
     def _chunked(self, r: torch.Tensor, column) -> torch.Tensor:

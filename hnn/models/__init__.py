@@ -2,7 +2,8 @@
 the paper's HNN and baseline (``hamiltonian``), the pixel autoencoder (``pixel``), the structured
 kinds (``structured``: separable, dissipative; ``mechanical``: M^-1 and V, the second-order NODE;
 ``constrained``: CHNN and CLNN on a ``ConstraintGraph``; ``lagrangian``: the LNN; ``maps``: learned
-symplectic maps, G- and LA-SympNets and HenonNets, which step themselves). They know no
+symplectic maps, G- and LA-SympNets and HenonNets, which step themselves; ``pair``: the pair kind of bodies,
+and ``pair_table``, its fitted V as a table for rollouts). They know no
 solver and no objective: each declares what it can do through ``hnn.interface``."""
 from .constrained import ConstrainedHNN, ConstrainedLNN, ConstraintGraph
 from .hamiltonian import FIELD_TYPES, HNN, Baseline, build_model, permutation_tensor

@@ -12,6 +12,9 @@ O(pairs): N(N-1)/2 for ``pairs='all'`` (gravity), N - 1 for ``pairs='neighbours'
 springs), the pairs closer than r_c for ``pairs='cutoff'`` (a Lennard-Jones cluster), found at each call by a
 cell list (``hnn.cells``) in O(N) at a fixed density.
 
+``radial_slope`` (V' of distances) is public too: ``hnn.models.pair_table.TabulatedPair`` tabulates a fitted V
+from it, for rollouts at about the true forces' cost a step.
+
 With a cutoff the model assumes, as the scene's truth does, the truncated and shifted potential: each pair
 adds V(r) - V(r_c) below r_c and nothing beyond, so H is continuous in the positions and its force jumps by
 V'(r_c) where a pair crosses r_c. The learned V itself is not asked to vanish at r_c: the shift is the model's.
@@ -131,6 +134,8 @@ class PairHNN(Model):
 
     def masses(self, count: int) -> torch.Tensor:
         """The mass of each of ``count`` bodies ``(count,)``, by its species."""
+        if self.bodies.species is None:     # all alike: one mass, no labels to build at every field call
+            return self.log_mass.exp().expand(count)
         labels = torch.tensor(self.bodies.labels(count), device=self.log_mass.device)
         return self.log_mass.exp()[labels]
 
@@ -165,7 +170,7 @@ class PairHNN(Model):
         return ("radial" not in vars(self) and type(net) is MLP and net.nonlinearity_name == "tanh"
                 and not in_model_axis())
 
-    def _radial_slope(self, r: torch.Tensor) -> torch.Tensor:
+    def radial_slope(self, r: torch.Tensor) -> torch.Tensor:
         """V'(r) of distances ``r`` ``(batch, P)``, the same shape. V reads (r, 1/r), so V' = dV/dr + dV/d(1/r)
         (-1/r^2). In closed form where it applies: training then backpropagates once through the hand-written
         backward (``hnn.models.tanh_mlp``) where autograd's double backward took three times the pairs' rows
@@ -181,7 +186,7 @@ class PairHNN(Model):
         """V'(r) ``(batch, P)``, chunk by chunk (the graph of one chunk at a time outside training); 0 for a
         pair beyond the cutoff."""
         chunks = self._chunks(r)
-        slopes = [self._radial_slope(r[:, chunk]) for chunk in chunks]
+        slopes = [self.radial_slope(r[:, chunk]) for chunk in chunks]
         slope = slopes[0] if len(slopes) == 1 else torch.cat(slopes, dim=1)
         inside = inside_cutoff(r, self.bodies)
         return slope if inside is None else torch.where(inside, slope, 0)
