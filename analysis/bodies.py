@@ -1,8 +1,7 @@
 """Fitted on a few, run on many: the pair kind fitted on a chain of 8 springs, rolled out on chains of N = 8 ... 4096;
 and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols over seeds.
 
-    python analysis/bodies.py --quick                     # N = 8 ... 256, library and sampled fits, the sampled
-                                                          # fit's table (about a minute)
+    python analysis/bodies.py --quick                     # N = 8 ... 256, library, sampled fit, its table (1 min)
     python analysis/bodies.py --update-docs               # N = 8 ... 4096, and Adam; docs/bodies.md's section
     python analysis/bodies.py --scene gravity --update-docs   # the same on softened gravity to N = 4096 (about 20
                                                               # minutes, one thread); section bodies-gravity
@@ -16,15 +15,14 @@ and, with ``--paper``, the pair kind on the paper's 2-body and 3-body protocols 
 The pair kind (``--model pairwise``) is fitted once on the ``--scene`` task's data (experiment-lattice, a chain of
 springs, experiment-gravity, a softened rotating disk, or experiment-lj, a Lennard-Jones cluster at the scene's
 task settings, its cutoff 2.5: 8 bodies, the dataset of ``--seed``) by each of
-``--fits``: ``library`` (the radial library, one solve),
-``swim`` (sampled radial neurons, one solve) and ``adam`` (an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of
-batch 200); ``swim+table`` and ``adam+table`` are those fits' models with V tabulated
-(``hnn.models.pair_table.TabulatedPair`` over the fitted distances' closest pair to twice their farthest, slope
-error 1e-7 of the network's): the same paths to that error at about the true forces' cost a step. The same model, unchanged, then rolls out chains of each N of ``--sizes`` from ``--starts`` start
-states of the task's start law, by leapfrog at step ``--dt`` over ``--horizon``, float64. Beside it, the same
-leapfrog on the true forces (the task's: the chain's O(N), gravity's every pair in blocks, ``hnn.orbits.nbody``,
-the cluster's pairs within the cutoff by a cell list), and the reference: DOP853 at rtol 1e-10 (gravity and the
-cluster: yoshida4 on the true forces at a quarter of the step). A scene
+``--fits``: ``library`` (the radial library, one solve), ``swim`` (sampled radial neurons, one solve) and ``adam``
+(an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of batch 200); ``swim+table``, ``adam+table``: those models' V
+as a table (``hnn.models.pair_table``; the fitted distances' closest pair to twice their farthest, slope error
+1e-7): their paths near the true forces' cost. The same model, unchanged, then rolls out chains of each N of
+``--sizes`` from ``--starts`` start states of the task's start law, by leapfrog at step ``--dt`` over
+``--horizon``, float64. Beside it, the same leapfrog on the true forces (the task's: the chain's O(N), gravity's
+every pair in blocks, ``hnn.orbits.nbody``, the cluster's pairs within the cutoff by a cell list), and the
+reference: DOP853 at rtol 1e-10 (gravity and the cluster: yoshida4 on the true forces at a quarter of the step). A scene
 may roll a fit out only to a smaller N by default (its ``largest``: gravity's sampled and Adam fits stop at 512,
 their field calls at 4096 taking a minute or more); its rows past that say so, and ``--sizes`` runs every fit at
 every size asked.
