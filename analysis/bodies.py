@@ -18,7 +18,7 @@ task settings, its cutoff 2.5: 8 bodies, the dataset of ``--seed``) by each of
 ``--fits``: ``library`` (the radial library, one solve), ``swim`` (sampled radial neurons, one solve) and ``adam``
 (an MLP of (r, 1/r) by Adam, ``--adam-steps`` steps of batch 200); ``swim+table``, ``adam+table``: those models' V
 as a table (``hnn.models.pair_table``; the fitted distances' closest pair to twice their farthest, slope error
-1e-7): their paths near the true forces' cost. The same model, unchanged, then rolls out chains of each N of
+1e-5): their paths near the true forces' cost. The same model, unchanged, then rolls out chains of each N of
 ``--sizes`` from ``--starts`` start states of the task's start law, by leapfrog at step ``--dt`` over
 ``--horizon``, float64. Beside it, the same leapfrog on the true forces (the task's: the chain's O(N), gravity's
 every pair in blocks, ``hnn.orbits.nbody``, the cluster's pairs within the cutoff by a cell list), and the

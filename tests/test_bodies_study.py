@@ -237,10 +237,10 @@ def test_a_fits_table_rolls_out_the_fits_paths_and_says_how_it_was_made():
                            adam_steps=0, hidden=16)
     for row in results["rows"]:
         network, table = row["swim"], row["swim+table"]
-        # the table's slopes are within TABLE_TOL (1e-7) of the network's: over 10 leapfrog steps the two paths part
+        # the table's slopes are within TABLE_TOL (1e-5) of the network's: over 10 leapfrog steps the two paths part
         # by about that much of their size, far below the leapfrog's own error at dt = 0.1 that both errors carry
-        assert table["rollout"] == pytest.approx(network["rollout"], rel=1e-4)
-        assert table["energy_per_body"] == pytest.approx(network["energy_per_body"], rel=1e-4)
+        assert table["rollout"] == pytest.approx(network["rollout"], rel=1e-3)
+        assert table["energy_per_body"] == pytest.approx(network["energy_per_body"], rel=1e-3)
         assert table["seconds_per_step"] > 0
     made = results["fits"]["swim+table"]
     assert "as a table of" in made["what"] and made["max_error"] <= bodies.TABLE_TOL

@@ -1,5 +1,5 @@
 """A pair model's V(r) as a table (hnn.models.pair_table.TabulatedPair), against independent truths: the cubic
-Hermite interpolant's error bound on a known potential (Lennard-Jones), the model it tabulates (its field, its H,
+interpolant's error bound on a known potential (Lennard-Jones), the model it tabulates (its field, its H,
 and its own numbers outside the table's range), and the refusals that name their fix."""
 import math
 
@@ -37,22 +37,24 @@ def _states(count: int, batch: int = 8, seed: int = 1, spread: float = 1.5) -> t
     return Bodies(count, 2).join(q, p)
 
 
-def test_the_tables_slope_of_lennard_jones_keeps_the_hermite_bound():
+def test_the_tables_slope_of_lennard_jones_keeps_the_interpolation_bound():
     lo, hi = 0.8, 3.0
     table = TabulatedPair(_lennard_jones(Bodies(4, 2)), (lo, hi), tol=1e-9)
     assert table.max_error <= 1e-9
     r = torch.exp(torch.linspace(math.log(lo), math.log(hi), 10007, dtype=torch.float64))[None]
     exact_slope = 4 * (-12 * r ** -13 + 6 * r ** -7)
-    # in s = log r the table is cubic Hermite of f(s) = 4 (e^-12s - e^-6s); Birkhoff and Priver's bound on the
-    # derivative, |f' - p'| <= sqrt(3)/216 h^3 max|f''''|, with max|f''''| at s = log lo; V' = f'(s) / r. Round-off:
-    # each piece's slope reads knot values of size |V| <= 4 lo^-12 over h, a few eps each
-    h = table.h
-    f4 = 4 * (12 ** 4 * lo ** -12 + 6 ** 4 * lo ** -6)
-    bound = (math.sqrt(3) / 216 * h ** 3 * f4 + 16 * EPS * 4 * lo ** -12 / h) / r
-    assert ((table.radial_slope(r) - exact_slope).abs() <= bound).all()
-    # and V itself: |f - p| <= h^4 / 384 max|f''''|
+    # in s = log r the table's dV/ds is cubic Hermite of f(s) = 4 (-12 e^-12s + 6 e^-6s), its end derivatives by
+    # second-order differences (each within h^2 / 3 max|f3| of f's, f3 the third derivative: the one-sided bound).
+    # So |f - p| is at most the exact-derivative Hermite error h^4 / 384 max|f4| plus twice the basis' largest
+    # weight on a derivative (4/27 h) times that error; V' = f / r. Round-off: f to a few eps of |f| <= 48 lo^-12
+    h, top = table.h, lo ** -12
+    f3 = 4 * (12 ** 4 * top + 6 ** 4 * lo ** -6)          # max|f3| and max|f4| at s = log lo
+    f4 = 4 * (12 ** 5 * top + 6 ** 5 * lo ** -6)
+    bound_f = h ** 4 / 384 * f4 + 2 * 4 / 27 * h * h ** 2 / 3 * f3 + 64 * EPS * 48 * top
+    assert ((table.radial_slope(r) - exact_slope).abs() <= bound_f / r).all()
+    # its V is the integral of its dV/ds from the model's V at r_hi: off by at most the slope's bound over log(hi/lo)
     exact = 4 * (r ** -12 - r ** -6)
-    assert ((table.radial(r) - exact).abs() <= h ** 4 / 384 * f4 + 16 * EPS * 4 * lo ** -12).all()
+    assert ((table.radial(r) - exact).abs() <= bound_f * math.log(hi / lo) + 64 * EPS * 4 * top).all()
 
 
 def test_a_table_is_its_networks_field_and_h_to_its_tolerance():
@@ -105,7 +107,7 @@ def test_a_leapfrog_path_on_the_table_follows_the_models():
     layout = Bodies(4, 2)
     model = _network(layout, seed=4)
     x0 = _states(4, batch=2, seed=5, spread=1.0)
-    table = TabulatedPair(model, (0.2, 20.0), tol=1e-10)
+    table = TabulatedPair(model, (0.05, 20.0), tol=1e-10)
     t = torch.linspace(0, 1, 11, dtype=torch.float64).numpy()
     with torch.no_grad():
         a = hnn.rollout(model.field, x0, t, method="leapfrog", dt=0.01)
@@ -126,10 +128,11 @@ def test_a_table_refuses_bad_input_naming_the_fix(monkeypatch):
         TabulatedPair(_network(Bodies(3, 2, pairs="cutoff", cutoff=2.5)), (3.0, 4.0))
     with pytest.raises(ValueError, match=r"one-body field U\(q_i\)"):
         TabulatedPair(_network(Bodies(3, 2, external=True)), (0.5, 2.0))
-    # V's rounding over the knots' spacing: 1/r = 20 at r = 0.05 makes a floor near 1e-9, which doubling only raises
+    # the model's own V' rounds at about 1e-16 of its terms: no table reaches a tenth of that, and doubling the
+    # knots stops where the error no longer falls
     with pytest.raises(ValueError, match=r"relative error of .* knots where more knots no longer reduce it .* "
-                                         r"above tol=1e-10: narrow r_range"):
-        TabulatedPair(_network(Bodies(3, 2), seed=4), (0.05, 20.0), tol=1e-10)
+                                         r"above tol=1e-17: narrow r_range"):
+        TabulatedPair(model, (0.5, 2.0), tol=1e-17)
     monkeypatch.setattr(pair_table, "MAX_KNOTS", pair_table.START_KNOTS)
     with pytest.raises(ValueError, match=r"relative error of .* at 1025 knots \(at most 1025\), above tol=1e-15"):
         TabulatedPair(model, (0.5, 2.0), tol=1e-15)

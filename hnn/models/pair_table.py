@@ -3,16 +3,18 @@
 A pair model (``PairHNN`` trained by Adam, or the least-squares ``hnn.fits.radial.FittedPair``) spends its field
 call on V'(r) at every pair: at width 64, two 64 x 64 products a pair, where a scene's true force is a few
 operations. V is a function of one distance, so a table answers the same question with a gather and a cubic, as
-molecular dynamics codes run a potential given by numbers. ``TabulatedPair`` samples the model's V and V' at
-knots uniform in s = log r over ``r_range`` and joins them by cubic Hermite pieces: its V is C^1 and its V' is the
-exact derivative of its V, so a split integrator conserves the table's H as it does the model's. Log spacing
-resolves a steep wall near the closest distances and a slow tail far out with the same knots.
+molecular dynamics codes run a potential given by numbers. ``TabulatedPair`` samples the model's V' at knots
+uniform in s = log r over ``r_range``, joins dV/ds by cubic Hermite pieces (their ends' derivatives by second-order
+differences) and takes V as their integral, anchored at the model's V at r_hi: the table's V' is the exact
+derivative of its V, so a split integrator conserves the table's H as it does the model's. Built from V' alone, the
+slope never reads the rounding of V divided by the knots' spacing (a sampled fit's V is a sum of large cancelling
+terms). Log spacing resolves a steep wall near the closest distances and a slow tail far out with the same knots.
 
 The knots double from ``START_KNOTS`` until V' at the pieces' quarter points, midpoints and three-quarter points
 is within ``tol`` of the model's, relative to |V'| there plus its median size over the check points (V' crosses
 zero at a potential's minimum, and a wall's steep slopes would make a mean lax everywhere else); ``max_error`` is
-what was reached. Past ``MAX_KNOTS``, or where doubling the knots makes the error grow (the rounding of V's values
-over a fine spacing), it is refused, naming the error reached. A pair outside ``r_range`` (or a NaN distance)
+what was reached. Past ``MAX_KNOTS``, or where doubling the knots makes the error grow (the rounding of the
+model's own V'), it is refused, naming the error reached. A pair outside ``r_range`` (or a NaN distance)
 reads the model itself, so the table never extrapolates.
 
 For evaluation (rollouts, energies): the table holds numbers, not the model's parameters; train the model, then
@@ -67,35 +69,31 @@ class TabulatedPair(Model):
         with torch.no_grad():
             self._build(dtype)
 
-    def _model_v(self, r: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The model's V and V' at distances ``r`` ``(K,)``, a block of rows at a time."""
-        values, slopes = [], []
-        for k in range(0, len(r), _BUILD_ROWS):
-            block = r[None, k:k + _BUILD_ROWS]
-            values.append(self.model.radial(block)[0])
-            slopes.append(self.model.radial_slope(block)[0])
-        return torch.cat(values), torch.cat(slopes)
+    def _model_slope(self, r: torch.Tensor) -> torch.Tensor:
+        """The model's V' at distances ``r`` ``(K,)``, a block of rows at a time."""
+        return torch.cat([self.model.radial_slope(r[None, k:k + _BUILD_ROWS])[0]
+                          for k in range(0, len(r), _BUILD_ROWS)])
 
     def _build(self, dtype: torch.dtype) -> None:
         """Knots doubled until the slope error at the check points is within ``tol``; the pieces' coefficients."""
         lo, hi = (math.log(v) for v in self.r_range)
+        top = float(self.model.radial(torch.tensor([[self.r_range[1]]], dtype=dtype))[0, 0])
         knots, previous = START_KNOTS, math.inf
         while True:
             s = torch.linspace(lo, hi, knots, dtype=dtype)
-            values, slopes = self._model_v(s.exp())
-            self._set_pieces(s, values, slopes)
+            self._set_pieces(s, self._model_slope(s.exp()) * s.exp(), top)
             h = float(s[1] - s[0])
             checks = (s[:-1, None] + h * torch.tensor([0.25, 0.5, 0.75], dtype=dtype)).reshape(-1).exp()
-            _, truth = self._model_v(checks)
+            truth = self._model_slope(checks)
             scale = truth.abs() + truth.abs().median()
             self.max_error = float(((self.radial_slope(checks[None])[0] - truth).abs() / scale).max())
             if self.max_error <= self.tol:
                 break
-            # halving h cuts a cubic Hermite slope's error 8x once the pieces resolve V; where it grows instead, the
-            # rounding of V's knot values over h dominates and more knots only add to it
+            # halving h cuts the pieces' error 8x once they resolve V'; where it grows instead, the rounding of the
+            # model's own V' dominates and more knots cannot help
             stalled = self.max_error >= previous
             if stalled or knots >= MAX_KNOTS:
-                why = "where more knots no longer reduce it (the rounding of V over the knots' spacing)" if stalled \
+                why = "where more knots no longer reduce it (the rounding of the model's V')" if stalled \
                     else f"(at most {MAX_KNOTS})"
                 raise ValueError(f"V' of this model over r_range={self.r_range} reached a relative error of "
                                  f"{self.max_error:.2g} at {knots} knots {why}, above tol={self.tol:g}: narrow "
@@ -103,18 +101,27 @@ class TabulatedPair(Model):
             previous, knots = self.max_error, 2 * knots - 1
         self.knots = knots
 
-    def _set_pieces(self, s: torch.Tensor, values: torch.Tensor, slopes: torch.Tensor) -> None:
-        """Each piece's V = a + b t + c t^2 + d t^3, t = (log r - s_k) / h, from V and dV/ds = r V' at its ends;
-        kept as (a, b, c, d) for V and (b, 2 c, 3 d) / h for dV/ds."""
+    def _set_pieces(self, s: torch.Tensor, f: torch.Tensor, top: float) -> None:
+        """Each piece's f = dV/ds = a + b t + c t^2 + d t^3, t = (log r - s_k) / h: cubic Hermite from f at its
+        ends and df/ds by differences of f (second order: central inside, three points at the ends); and V its
+        integral, V_k + h (a t + b t^2 / 2 + c t^3 / 3 + d t^4 / 4), V at the top knot ``top`` (the model's). From
+        V' alone, so the rounding of the model's V (a sampled fit's large cancelling coefficients) never enters
+        the slope divided by h."""
         h = s[1] - s[0]
-        m = slopes * s.exp() * h                                   # dV/dt at the knots
-        y0, y1, m0, m1 = values[:-1], values[1:], m[:-1], m[1:]
-        c = 3 * (y1 - y0) - 2 * m0 - m1
-        d = 2 * (y0 - y1) + m0 + m1
+        m = torch.empty_like(f)                                    # df/ds at the knots, times h
+        m[1:-1] = (f[2:] - f[:-2]) / 2
+        m[0] = (-3 * f[0] + 4 * f[1] - f[2]) / 2
+        m[-1] = (3 * f[-1] - 4 * f[-2] + f[-3]) / 2
+        a, f1, m0, m1 = f[:-1], f[1:], m[:-1], m[1:]
+        c = 3 * (f1 - a) - 2 * m0 - m1
+        d = 2 * (a - f1) + m0 + m1
+        rise = h * (a + m0 / 2 + c / 3 + d / 4)                    # V over each piece
+        start = top - rise.flip(0).cumsum(0).flip(0)               # V at each piece's start
         self.s_lo, self.h, self.pieces = float(s[0]), float(h), len(s) - 1
         # buffers: they follow the model's .to(device) (not saved: a table is rebuilt from its model)
-        self.register_buffer("value_coef", torch.stack([y0, m0, c, d], dim=1), persistent=False)
-        self.register_buffer("slope_coef", torch.stack([m0, 2 * c, 3 * d], dim=1) / h, persistent=False)
+        self.register_buffer("value_coef", torch.stack([start, h * a, h * m0 / 2, h * c / 3, h * d / 4], dim=1),
+                             persistent=False)
+        self.register_buffer("slope_coef", torch.stack([a, m0, c, d], dim=1), persistent=False)
 
     def _locate(self, r: torch.Tensor):
         """``(inside, k, t)``: which distances the table covers, each one's piece and its place t in [0, 1]
@@ -137,14 +144,14 @@ class TabulatedPair(Model):
     def radial(self, r: torch.Tensor) -> torch.Tensor:
         """V(r) ``(batch, P)`` of distances ``r`` ``(batch, P)``: the table's, the model's outside ``r_range``."""
         covered, k, t = self._locate(r)
-        a, b, c, d = self.value_coef[k].unbind(-1)
-        return self._outside(r, covered, a + t * (b + t * (c + t * d)), self.model.radial)
+        v, a, b, c, d = self.value_coef[k].unbind(-1)
+        return self._outside(r, covered, v + t * (a + t * (b + t * (c + t * d))), self.model.radial)
 
     def radial_slope(self, r: torch.Tensor) -> torch.Tensor:
         """V'(r) ``(batch, P)`` of distances ``r`` ``(batch, P)``: the table's, the model's outside ``r_range``."""
         covered, k, t = self._locate(r)
-        b, c2, d3 = self.slope_coef[k].unbind(-1)
-        return self._outside(r, covered, (b + t * (c2 + t * d3)) / r, self.model.radial_slope)
+        a, b, c, d = self.slope_coef[k].unbind(-1)
+        return self._outside(r, covered, (a + t * (b + t * (c + t * d))) / r, self.model.radial_slope)
 
     def _pairs(self, q_half: torch.Tensor):
         q = self.bodies.bodywise(q_half)
