@@ -255,7 +255,7 @@ def _table_meta(model, fitted_distances) -> dict:
     try:
         made = _table(model, fitted_distances)
     except ValueError as err:
-        return {"seconds": time.perf_counter() - tic, "what": f"refused: {err}", "refused": str(err)}
+        return {"seconds": time.perf_counter() - tic, "what": f"refused: {err}"}
     lo, hi = made.r_range
     return {"seconds": time.perf_counter() - tic, "knots": made.knots, "max_error": made.max_error,
             "what": f"its V(r) as a table of {made.knots} knots over r = {lo:.3g} to {hi:.3g}, cubic in log r; "
@@ -273,12 +273,12 @@ def _measure_size(cell: dict) -> dict:
         model = hnn.kinds.model_from_args(args)
         model.load_state_dict(state)
         models[fit] = model.eval()
-    tables = {}
+    refused = {}                                # fit -> why its table was refused
     for fit in (f for f in fits if f.endswith("+table")):
         try:
             models[fit] = _table(models[fit.removesuffix("+table")], cell["fitted_distances"])
         except ValueError as err:
-            tables[fit] = str(err)
+            refused[fit] = str(err)
     dt, divisions = cell["dt"], SCENES[scene]["reference_divisions"]
     t = np.linspace(0.0, cell["horizon"], int(round(cell["horizon"] / dt)) + 1)
     rng = np.random.RandomState(cell["seed"] + 1000)
@@ -298,8 +298,8 @@ def _measure_size(cell: dict) -> dict:
             row[fit] = {"not_run": f"past N = {largest[fit]}: {SCENES[scene]['largest_why']}",
                         "seconds_per_step": None}
             continue
-        if fit in tables:                       # a table its tolerance refused: the reason
-            row[fit] = {"not_run": f"no table: {tables[fit]}", "seconds_per_step": None}
+        if fit in refused:                      # a table its tolerance refused: the reason
+            row[fit] = {"not_run": f"no table: {refused[fit]}", "seconds_per_step": None}
             continue
         try:
             path, measured = _rollout(models[fit].field, x0, t, dt)
